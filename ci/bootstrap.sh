@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Set up everything wrinklepipe needs on a fresh Debian machine, then run a job.
+#   bash ci/bootstrap.sh demo   # set up, then convert + validate the built-in demo character
+#   bash ci/bootstrap.sh test   # set up, then lint, format check and the test suite
+#   bash ci/bootstrap.sh setup  # set up only
+# A rerun with nothing changed skips every install step (stamp files under .venv/).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+mode=${1:-setup}
+shift || true
+
+log() { printf '\033[1m[wrinklepipe setup]\033[0m %s\n' "$*" >&2; }
+
+# 1. Debian packages for headless OpenGL (EGL + Mesa llvmpipe) and Node.js for gltf-validator.
+APT_PKGS="libegl1 libgl1 libgl1-mesa-dri"
+command -v npm >/dev/null 2>&1 || APT_PKGS="$APT_PKGS nodejs npm"
+command -v python3 >/dev/null 2>&1 || APT_PKGS="$APT_PKGS python3 python3-venv"
+missing=""
+for p in $APT_PKGS; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"
+done
+if [ -n "$missing" ]; then
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+  log "installing Debian packages:$missing"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $missing >/dev/null
+fi
+
+# 2. The venv with the package and its test extras (reinstalled only when pyproject.toml changes).
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  log "creating .venv"
+  "$PY" -m venv .venv
+fi
+stamp=.venv/.wrinklepipe-installed
+want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  log "installing wrinklepipe and its test extras into .venv"
+  .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+  .venv/bin/python -m pip install -q -e ".[test]"
+  echo "$want" > "$stamp"
+fi
+
+# 3. The Khronos glTF-Validator from npm, in a project-local folder.
+if [ ! -x tools/node/node_modules/.bin/gltf-validator ]; then
+  log "installing npm gltf-validator into tools/node"
+  mkdir -p tools/node
+  npm install --silent --no-audit --no-fund --prefix tools/node gltf-validator >/dev/null
+fi
+export PATH="$ROOT/.venv/bin:$ROOT/tools/node/node_modules/.bin:$PATH"
+
+case "$mode" in
+  setup) log "ready: source .venv/bin/activate" ;;
+  demo) exec wrinklepipe demo "$@" ;;
+  test)
+    ruff check .
+    ruff format --check .
+    exec python -m pytest -q -n 2 "$@"
+    ;;
+  *) echo "usage: bash ci/bootstrap.sh [setup|demo|test]" >&2; exit 2 ;;
+esac

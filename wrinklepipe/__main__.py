@@ -1,0 +1,3 @@
+from wrinklepipe.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,57 @@
+"""Errors a user can act on: every one names the file (and key, texel or vertex) and what is wrong.
+
+The CLI turns :class:`InputError` into one clear message per problem and exit code 2, never a
+traceback. Stages raise them; they never print.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong with an input: where (file, key/pointer) and what."""
+
+    file: str
+    message: str
+    key: str = ""
+
+    def __str__(self) -> str:
+        where = f"{self.file}" + (f" [{self.key}]" if self.key else "")
+        return f"{where}: {self.message}"
+
+
+class InputError(Exception):
+    """A bad input. Carries one or more :class:`Problem` so all of them are reported at once."""
+
+    def __init__(self, problems: list[Problem] | Problem | str, file: str | Path = "") -> None:
+        if isinstance(problems, str):
+            problems = [Problem(str(file), problems)]
+        elif isinstance(problems, Problem):
+            problems = [problems]
+        self.problems: list[Problem] = list(problems)
+        super().__init__("\n".join(str(p) for p in self.problems))
+
+
+def input_error(file: str | Path, message: str, key: str = "") -> InputError:
+    """Shorthand for a single-problem :class:`InputError`."""
+    return InputError([Problem(str(file), message, key)])
+
+
+@dataclass
+class ProblemList:
+    """Collects problems while checking an input, then raises them all together."""
+
+    problems: list[Problem] = field(default_factory=list)
+
+    def add(self, file: str | Path, message: str, key: str = "") -> None:
+        self.problems.append(Problem(str(file), message, key))
+
+    def __bool__(self) -> bool:
+        return bool(self.problems)
+
+    def raise_if_any(self) -> None:
+        if self.problems:
+            raise InputError(self.problems)

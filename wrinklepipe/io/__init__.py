@@ -1,0 +1,1 @@
+"""File I/O, kept apart from the maths: images, meshes, scenes."""

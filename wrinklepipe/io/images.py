@@ -1,0 +1,156 @@
+"""Raster I/O through OpenImageIO: float32 arrays in, quantised files out, atomically.
+
+Reading checks the header before allocating (``max_pixels``), so a file that claims to be
+100000 x 100000 is refused without touching its pixels. Values come back as float32 in [0, 1]
+for integer formats (0..255 or 0..65535 mapped exactly), as stored for float formats.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from wrinklepipe.atomic import check_not_input
+from wrinklepipe.errors import input_error
+
+#: Default cap on width x height for any image read (64 Mpx, e.g. 8192 x 8192).
+DEFAULT_MAX_PIXELS = 8192 * 8192
+
+_BITS_TO_TYPE = {8: oiio.UINT8, 16: oiio.UINT16, 32: oiio.FLOAT, "half": oiio.HALF}
+
+
+@dataclass(frozen=True)
+class ImageInfo:
+    """What the header said: size, channels, storage and colour space."""
+
+    path: str
+    width: int
+    height: int
+    channels: int
+    format: str  # e.g. "uint8", "uint16", "half", "float"
+    colorspace: str
+    file_format: str  # e.g. "png", "tiff", "openexr"
+
+
+def read_header(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> ImageInfo:
+    """Open an image's header only; refuse missing, unreadable or oversized files."""
+    path = Path(path)
+    if not path.exists():
+        raise input_error(path, "file not found")
+    if path.is_dir():
+        raise input_error(path, "is a folder, expected an image file")
+    if path.stat().st_size == 0:
+        raise input_error(path, "file is empty")
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        msg = oiio.geterror() or "unrecognised or truncated image"
+        raise input_error(path, f"cannot read image: {msg.strip()}")
+    try:
+        spec = inp.spec()
+        info = ImageInfo(
+            path=str(path),
+            width=int(spec.width),
+            height=int(spec.height),
+            channels=int(spec.nchannels),
+            format=str(spec.format),
+            colorspace=str(spec.get_string_attribute("oiio:ColorSpace", "")),
+            file_format=str(inp.format_name()),
+        )
+    finally:
+        inp.close()
+    if info.width <= 0 or info.height <= 0:
+        raise input_error(path, f"invalid size {info.width} x {info.height}")
+    if info.width * info.height > max_pixels:
+        raise input_error(
+            path,
+            f"image is {info.width} x {info.height} = {info.width * info.height} pixels, over the "
+            f"cap of {max_pixels} (raise it with --max-pixels if this is intended)",
+        )
+    return info
+
+
+def read_image(
+    path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS
+) -> tuple[np.ndarray, ImageInfo]:
+    """Read an image as float32 ``[H, W, C]`` (integers scaled to [0, 1]) and its header."""
+    info = read_header(path, max_pixels)
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise input_error(path, f"cannot read image: {oiio.geterror().strip()}")
+    try:
+        data = inp.read_image(0, 0, 0, info.channels, oiio.FLOAT)
+        err = inp.geterror()
+    finally:
+        inp.close()
+    if data is None or (err and not isinstance(data, np.ndarray)):
+        raise input_error(path, f"cannot decode pixels (truncated or corrupt?): {err.strip()}")
+    arr = np.asarray(data, dtype=np.float32)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    arr = arr.reshape(info.height, info.width, info.channels)
+    return np.ascontiguousarray(arr), info
+
+
+def quantize(values: np.ndarray, bits: int) -> np.ndarray:
+    """Round [0, 1] floats to unsigned integers of ``bits`` (8 or 16), clipping outside values."""
+    top = (1 << bits) - 1
+    dtype = np.uint8 if bits == 8 else np.uint16
+    return np.clip(np.rint(np.asarray(values, np.float64) * top), 0, top).astype(dtype)
+
+
+def write_image(
+    path: str | Path,
+    values: np.ndarray,
+    bits: int | str = 8,
+    inputs: tuple[str | Path, ...] = (),
+) -> Path:
+    """Write ``[H, W]`` or ``[H, W, C]`` values in [0, 1] (or floats for EXR) atomically.
+
+    ``bits`` is 8 or 16 (quantised with round-to-nearest), ``"half"`` or 32 (float, EXR/TIFF).
+    Colour space is tagged linear (normals and masks are data, never sRGB); alpha is written
+    unassociated (OpenImageIO would otherwise premultiply PNG alpha). Deterministic bytes: no
+    timestamps or software tags.
+    """
+    path = Path(path)
+    check_not_input(path, inputs)
+    arr = np.asarray(values)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    h, w, c = arr.shape
+    if bits in (8, 16):
+        pixels = quantize(arr, int(bits))
+    else:
+        pixels = np.asarray(arr, dtype=np.float32)
+    spec = oiio.ImageSpec(w, h, c, _BITS_TO_TYPE[bits])
+    spec.attribute("oiio:ColorSpace", "Linear")
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    spec.attribute("Software", "")
+    if path.suffix.lower() in (".tif", ".tiff"):
+        spec.attribute("compression", "zip")
+        spec.attribute("DateTime", "")
+    if path.suffix.lower() == ".exr":
+        spec.attribute("compression", "zip")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        out = oiio.ImageOutput.create(tmp)
+        if out is None:
+            raise input_error(path, f"no writer for this extension: {oiio.geterror().strip()}")
+        ok = out.open(tmp, spec) and out.write_image(np.ascontiguousarray(pixels))
+        msg = out.geterror()
+        out.close()
+        if not ok:
+            raise OSError(f"{path}: write failed: {msg}")
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    return path
