@@ -1,0 +1,100 @@
+"""The in-memory asset: plain dataclasses of numpy arrays that every stage reads and returns.
+
+Conventions (DESIGN.md section 4): float32 unit normals with OpenGL green (+Y), UV origin at the
+top-left (glTF), masks in [0, 1] channels-first ``[R, H, W]``. Conversions happen at ingest and
+export only, and are recorded in ``provenance``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class Mesh:
+    """A triangulated render mesh (vertices split where UVs or normals are discontinuous)."""
+
+    positions: np.ndarray  # [V, 3] float32
+    indices: np.ndarray  # [T, 3] uint32
+    uvs: np.ndarray | None = None  # [V, 2] float32, glTF convention (v = 0 at the top)
+    normals: np.ndarray | None = None  # [V, 3] float32
+    tangents: np.ndarray | None = None  # [V, 4] float32, w = handedness +-1 (MikkTSpace)
+    morph_names: tuple[str, ...] = ()
+    morph_deltas: np.ndarray | None = None  # [M, V, 3] float32 position deltas
+    joints: np.ndarray | None = None  # [V, 4] int joint indices into ``joint_names``
+    skin_weights: np.ndarray | None = None  # [V, 4] float32
+    joint_names: tuple[str, ...] = ()
+    inverse_bind: np.ndarray | None = None  # [J, 4, 4] float32
+    vertex_ids: np.ndarray | None = None  # [V] int64 spatial-hash IDs (Oat)
+    colors: np.ndarray | None = None  # [V, 4] float32 (rest-pose wrinkle bias lives here)
+    name: str = "mesh"
+    notes: list[str] = field(default_factory=list)  # what ingest did (triangulated, xatlas UVs...)
+
+    @property
+    def vertex_count(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def triangle_count(self) -> int:
+        return int(self.indices.shape[0])
+
+
+@dataclass
+class Region:
+    """A facial region: a mask and the states it drives."""
+
+    name: str
+    side: str = "center"  # "left" | "right" | "center" (the character's sides)
+    states: tuple[str, ...] = ()  # state names this region activates (empty: all)
+
+
+@dataclass
+class WrinkleAsset:
+    """Everything one character's wrinkle setup holds.
+
+    ``states`` are the normal maps of the face in each wrinkled pose, *including* the base
+    detail (what an artist sculpts), as unit normals; the encodings derive what they store
+    from these and ``base`` (:mod:`wrinklepipe.model`).
+    """
+
+    name: str
+    base: np.ndarray  # [H, W, 3] float32 unit normals
+    states: np.ndarray  # [K, Hs, Ws, 3] float32 unit normals (wrinkled face)
+    state_names: tuple[str, ...]
+    masks: np.ndarray  # [R, Hm, Wm] float32 in [0, 1]
+    regions: tuple[Region, ...]
+    expressions: dict[str, dict[str, float]] = field(default_factory=dict)
+    encoding: str = "pd"
+    policy: str = "clamp01"
+    pd_scale: float = 1.0
+    mesh: Mesh | None = None
+    drivers: list[dict[str, Any]] = field(default_factory=list)
+    budget: dict[str, float] = field(default_factory=dict)
+    resolution: dict[str, int] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def region_names(self) -> tuple[str, ...]:
+        return tuple(r.name for r in self.regions)
+
+    def region_state_matrix(self) -> np.ndarray:
+        """``[R, K]`` 1.0 where region r drives state k (a region with no states drives all)."""
+        out = np.zeros((len(self.regions), len(self.state_names)), dtype=np.float32)
+        for i, r in enumerate(self.regions):
+            for k, s in enumerate(self.state_names):
+                if not r.states or s in r.states:
+                    out[i, k] = 1.0
+        return out
+
+    def expression_weights(self, expression_weights: dict[str, float]) -> np.ndarray:
+        """Region x state weights ``[R, K]`` for a mix of expressions (before the policy)."""
+        per_region = np.zeros(len(self.regions), dtype=np.float32)
+        names = self.region_names
+        for expr, amount in expression_weights.items():
+            row = self.expressions[expr]
+            for region, w in row.items():
+                per_region[names.index(region)] += np.float32(amount * w)
+        return per_region[:, None] * self.region_state_matrix()

@@ -1,0 +1,106 @@
+"""Named benchmarks for ``wrinklepipe bench``: medians and ratios against a same-run baseline.
+
+Each module in this package registers functions with :func:`benchmark`. A benchmark function takes
+``quick: bool`` (smaller sizes, for the test suite's smoke run) and returns a :class:`BenchResult`
+whose rows are timed steps; one row is the baseline and every row reports ``ratio`` to it, so the
+numbers compare across machines. ``limits`` are the ratios the issue asks for, checked and shown.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class BenchRow:
+    step: str
+    median_s: float
+    ratio: float = float("nan")  # median / baseline median
+    mpix_per_s: float | None = None
+    note: str = ""
+
+
+@dataclass
+class BenchResult:
+    name: str
+    description: str
+    baseline: str
+    rows: list[BenchRow] = field(default_factory=list)
+    limits: dict[str, float] = field(default_factory=dict)  # step -> max ratio (or max seconds)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def finish(self) -> BenchResult:
+        base = next((r.median_s for r in self.rows if r.step == self.baseline), None)
+        for r in self.rows:
+            if base:
+                r.ratio = r.median_s / base
+        return self
+
+    def failures(self) -> list[str]:
+        out = []
+        for step, limit in self.limits.items():
+            row = next((r for r in self.rows if r.step == step), None)
+            if row is not None and not row.ratio <= limit:
+                out.append(f"{self.name}: {step} ratio {row.ratio:.2f} > {limit}")
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "description": self.description,
+            "baseline": self.baseline,
+            "rows": [
+                {
+                    "step": r.step,
+                    "median_s": r.median_s,
+                    "ratio": r.ratio,
+                    "mpix_per_s": r.mpix_per_s,
+                    "note": r.note,
+                }
+                for r in self.rows
+            ],
+            "limits": self.limits,
+            "failures": self.failures(),
+            "extra": self.extra,
+        }
+
+
+BenchFn = Callable[[bool], BenchResult]
+BENCHMARKS: dict[str, tuple[str, BenchFn]] = {}
+
+
+def benchmark(name: str, description: str) -> Callable[[BenchFn], BenchFn]:
+    """Register a benchmark under ``name``."""
+
+    def wrap(fn: BenchFn) -> BenchFn:
+        BENCHMARKS[name] = (description, fn)
+        return fn
+
+    return wrap
+
+
+def median_time(fn: Callable[[], Any], repeat: int = 5, warmup: int = 1) -> float:
+    """Median wall time of ``fn()`` over ``repeat`` runs after ``warmup`` runs."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def load_all() -> dict[str, tuple[str, BenchFn]]:
+    """Import every benchmark module so they register, then return the registry."""
+    for info in pkgutil.iter_modules(__path__):
+        if not info.name.startswith("_"):
+            importlib.import_module(f"{__name__}.{info.name}")
+    return BENCHMARKS
