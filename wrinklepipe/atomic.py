@@ -31,6 +31,13 @@ def check_not_input(target: str | Path, inputs: Iterable[str | Path] = ()) -> No
             raise input_error(target, f"output folder contains the input {raw}; choose another")
 
 
+def default_mode() -> int:
+    """Permissions of a new file under the current umask (mkstemp would give 0600)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def write_bytes(path: str | Path, data: bytes, inputs: Iterable[str | Path] = ()) -> Path:
     """Write ``data`` to ``path`` atomically (temp file in the same folder + ``os.replace``)."""
     path = Path(path)
@@ -40,6 +47,7 @@ def write_bytes(path: str | Path, data: bytes, inputs: Iterable[str | Path] = ()
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, default_mode())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):

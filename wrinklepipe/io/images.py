@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from wrinklepipe.atomic import check_not_input
+from wrinklepipe.atomic import check_not_input, default_mode
 from wrinklepipe.errors import input_error
 
 #: Default cap on width x height for any image read (64 Mpx, e.g. 8192 x 8192).
@@ -148,6 +148,7 @@ def write_image(
         out.close()
         if not ok:
             raise OSError(f"{path}: write failed: {msg}")
+        os.chmod(tmp, default_mode())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
