@@ -80,7 +80,10 @@ def read_image(
 ) -> tuple[np.ndarray, ImageInfo]:
     """Read an image as float32 ``[H, W, C]`` (integers scaled to [0, 1]) and its header."""
     info = read_header(path, max_pixels)
-    inp = oiio.ImageInput.open(str(path))
+    # Keep alpha unassociated: masks and data textures must not be premultiplied on read.
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
         raise input_error(path, f"cannot read image: {oiio.geterror().strip()}")
     try:
