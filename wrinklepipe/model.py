@@ -203,6 +203,14 @@ def combine(
     a = np.asarray(act, dtype=np.float32)
     if st.shape[0] != a.shape[0]:
         raise ValueError(f"{st.shape[0]} states but {a.shape[0]} activations")
+    out = _combine(b, st, a, encoding)
+    # Where no state is active the base comes back bit for bit (the neutral face is untouched).
+    idle = ~np.any(a != 0, axis=0)
+    out[idle] = b[idle]
+    return out
+
+
+def _combine(b: np.ndarray, st: np.ndarray, a: np.ndarray, encoding: str) -> np.ndarray:
     if encoding == "pd":
         acc = normal_to_pd(b) + np.einsum("k...,k...c->...c", a, st)
         return pd_to_normal(acc)
