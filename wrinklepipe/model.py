@@ -111,15 +111,24 @@ def height_slopes(height: np.ndarray, texel_size: float = 1.0) -> tuple[np.ndarr
 def normal_to_pd(n: np.ndarray) -> np.ndarray:
     """Partial-derivative encoding ``(x/z, y/z)`` (Jimenez et al., no minus sign). ``z > 0``."""
     n = np.asarray(n, dtype=np.float32)
-    z = np.maximum(n[..., 2], _EPS)
-    return n[..., :2] / z[..., None]
+    inv_z = np.reciprocal(np.maximum(n[..., 2], _EPS))
+    return n[..., :2] * inv_z[..., None]
 
 
 def pd_to_normal(d: np.ndarray) -> np.ndarray:
     """Decode PD slopes: ``normalize(d.x, d.y, 1)``."""
     d = np.asarray(d, dtype=np.float32)
-    ones = np.ones(d.shape[:-1] + (1,), dtype=np.float32)
-    return normalize(np.concatenate([d, ones], axis=-1))
+    x, y = d[..., 0], d[..., 1]
+    inv = np.asarray(x * x)  # 0-d stays an array so the in-place ops below work
+    inv += y * y
+    inv += np.float32(1.0)
+    np.sqrt(inv, out=inv)
+    np.reciprocal(inv, out=inv)
+    out = np.empty(d.shape[:-1] + (3,), dtype=np.float32)
+    np.multiply(x, inv, out=out[..., 0])
+    np.multiply(y, inv, out=out[..., 1])
+    out[..., 2] = inv
+    return out
 
 
 def normal_to_diff(wrinkled: np.ndarray, base: np.ndarray) -> np.ndarray:
@@ -206,7 +215,7 @@ def combine(
     out = _combine(b, st, a, encoding)
     # Where no state is active the base comes back bit for bit (the neutral face is untouched).
     idle = ~np.any(a != 0, axis=0)
-    out[idle] = b[idle]
+    np.copyto(out, b, where=idle[..., None])
     return out
 
 

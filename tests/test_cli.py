@@ -1,0 +1,52 @@
+"""The command line: every subcommand explains itself; errors exit 2 without a traceback."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from wrinklepipe.cli import COMMAND_ORDER, build_parser, main
+
+
+def _subcommands() -> dict:
+    parser = build_parser()
+    action = next(a for a in parser._actions if a.dest == "command")
+    return dict(action.choices)
+
+
+def test_every_command_has_help(capsys):
+    for name, sub in _subcommands().items():
+        text = sub.format_help()
+        assert len(sub.description or "") > 20, name
+        assert "usage: wrinklepipe " + name in text
+
+
+def test_help_exits_zero(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["--help"])
+    assert info.value.code == 0
+    assert "bench" in capsys.readouterr().out
+
+
+def test_no_command_prints_help_and_exits_2(capsys):
+    assert main([]) == 2
+
+
+def test_bench_lists_and_runs_quick(capsys):
+    assert main(["bench", "--list"]) == 0
+    assert "model-metahuman" in capsys.readouterr().out
+    assert main(["bench", "model-metahuman", "--quick", "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    rows = payload["results"][0]["rows"]
+    assert rows[0]["step"] == "einsum over mask stack" and rows[0]["ratio"] == 1.0
+    assert all(r["median_s"] > 0 for r in rows)
+
+
+def test_bench_unknown_name_exits_2(capsys):
+    assert main(["bench", "nope"]) == 2
+    assert "unknown benchmark" in capsys.readouterr().err
+
+
+def test_command_order_lists_only_known_names():
+    assert set(_subcommands()) <= set(COMMAND_ORDER)
