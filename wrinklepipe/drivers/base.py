@@ -1,0 +1,206 @@
+"""What every driver shares: the context it reads, the result it returns, and the registry.
+
+A driver turns an animation (keys, blend-shape weights, bone positions, a deforming mesh) into
+**linear** weights ``[frames, regions, states]`` float32: what the shader receives, before the
+per-texel policy of :func:`wrinklepipe.model.activations`. Under the ``signed`` policy the states
+axis has length 1 (Oat's single weight in [-1, 1]). Per-vertex drivers (``bones``, ``dynamic``)
+return ``[frames, vertices, states]`` with ``per_vertex = True``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.asset import Mesh, WrinkleAsset
+from wrinklepipe.errors import InputError, Problem
+from wrinklepipe.model import POLICIES
+
+#: Default sampling rate when neither the call nor the driver spec gives one.
+DEFAULT_FPS = 30.0
+
+
+@dataclass
+class DriverContext:
+    """Everything a driver may read besides its own spec.
+
+    ``region_states`` ``[R, K]`` is 1 where region r drives state k (see
+    :meth:`WrinkleAsset.region_state_matrix`). ``expressions`` is ``{expression: {region: w}}``.
+    ``root`` resolves relative file names in a spec. ``source`` names the spec in messages.
+    """
+
+    regions: tuple[str, ...]
+    states: tuple[str, ...]
+    region_states: np.ndarray | None = None
+    policy: str = "clamp01"
+    expressions: dict[str, dict[str, float]] = field(default_factory=dict)
+    mesh: Mesh | None = None
+    root: Path = Path(".")
+    fps: float = DEFAULT_FPS
+    source: str = "<driver>"
+
+    def __post_init__(self) -> None:
+        self.regions = tuple(str(r) for r in self.regions)
+        self.states = tuple(str(s) for s in self.states)
+        if self.policy not in POLICIES:
+            raise InputError(f"unknown policy {self.policy!r}", self.source)
+        if self.region_states is None:
+            self.region_states = np.ones((len(self.regions), len(self.states)), np.float32)
+        self.region_states = np.asarray(self.region_states, np.float32)
+        self.root = Path(self.root)
+
+    @property
+    def weight_states(self) -> int:
+        """Length of the states axis of the weights (1 under ``signed``)."""
+        return 1 if self.policy == "signed" else len(self.states)
+
+    def spread(self, per_region: np.ndarray) -> np.ndarray:
+        """``[F, R]`` region weights -> ``[F, R, K]`` over the states each region drives."""
+        w = np.asarray(per_region, np.float32)
+        if self.policy == "signed":
+            return w[..., None].astype(np.float32)
+        return (w[..., None] * self.region_states[None]).astype(np.float32)
+
+    @classmethod
+    def from_asset(
+        cls, asset: WrinkleAsset, root: str | Path = ".", fps: float = DEFAULT_FPS
+    ) -> DriverContext:
+        return cls(
+            regions=asset.region_names,
+            states=asset.state_names,
+            region_states=asset.region_state_matrix(),
+            policy=asset.policy,
+            expressions=dict(asset.expressions),
+            mesh=asset.mesh,
+            root=Path(root),
+            fps=fps,
+        )
+
+    @classmethod
+    def from_manifest(cls, manifest: Any, mesh: Mesh | None = None) -> DriverContext:
+        """From a :class:`wrinklepipe.manifest.Manifest` (the mesh is loaded by the caller)."""
+        states = tuple(s.name for s in manifest.states)
+        rs = np.zeros((len(manifest.regions), len(states)), np.float32)
+        for i, r in enumerate(manifest.regions):
+            for k, s in enumerate(states):
+                rs[i, k] = 1.0 if (not r.states or s in r.states) else 0.0
+        expressions = manifest.expressions
+        if isinstance(expressions, str):
+            from wrinklepipe.presets import jimenez
+
+            expressions = jimenez.expression_table() if expressions == "jimenez" else {}
+        return cls(
+            regions=tuple(r.name for r in manifest.regions),
+            states=states,
+            region_states=rs,
+            policy=manifest.policy,
+            expressions=dict(expressions),
+            mesh=mesh,
+            root=manifest.root,
+            source=str(manifest.path),
+        )
+
+
+@dataclass
+class DriverResult:
+    """Weights over time. ``weights`` ``[F, R, K]`` float32 (linear, before the policy)."""
+
+    kind: str
+    times: np.ndarray  # [F] seconds
+    weights: np.ndarray  # [F, R, K]
+    regions: tuple[str, ...]  # labels of axis 1 (vertex indices "0".."V-1" when per_vertex)
+    states: tuple[str, ...]  # labels of axis 2
+    per_vertex: bool = False
+    notes: list[str] = field(default_factory=list)
+
+    def to_json(self, digits: int = 6) -> dict[str, Any]:
+        """Deterministic JSON: ``weights[frame][region][state]`` rounded to ``digits``."""
+        w = np.round(self.weights.astype(np.float64), digits) + 0.0  # no -0.0
+        return {
+            "kind": self.kind,
+            "times": [round(float(t), 9) for t in self.times],
+            "regions": list(self.regions),
+            "states": list(self.states),
+            "per_vertex": self.per_vertex,
+            "weights": w.tolist(),
+            "notes": list(self.notes),
+        }
+
+
+DriverFn = Callable[[DriverContext, Mapping[str, Any], "np.ndarray | None"], DriverResult]
+
+#: kind -> driver function ``fn(ctx, spec, times) -> DriverResult``.
+DRIVERS: dict[str, DriverFn] = {}
+
+
+def register(kind: str) -> Callable[[DriverFn], DriverFn]:
+    """Register a driver under ``kind`` (later registrations replace earlier ones)."""
+
+    def deco(fn: DriverFn) -> DriverFn:
+        DRIVERS[kind] = fn
+        return fn
+
+    return deco
+
+
+def evaluate(
+    kind: str,
+    ctx: DriverContext,
+    spec: Mapping[str, Any] | None = None,
+    times: Sequence[float] | np.ndarray | None = None,
+) -> DriverResult:
+    """Run the driver ``kind`` on ``spec`` (a manifest ``[[drivers]]`` table) at ``times``."""
+    if kind not in DRIVERS:
+        raise InputError(
+            f"unknown driver {kind!r}; expected one of {', '.join(sorted(DRIVERS))}", ctx.source
+        )
+    t = None if times is None else np.asarray(times, np.float64).reshape(-1)
+    res = DRIVERS[kind](ctx, dict(spec or {}), t)
+    if res.weights.ndim != 3 or res.weights.shape[0] != res.times.shape[0]:
+        raise RuntimeError(f"driver {kind!r} returned weights of shape {res.weights.shape}")
+    return res
+
+
+def frame_times(t0: float, t1: float, fps: float) -> np.ndarray:
+    """Sample times ``t0, t0 + 1/fps, ...`` up to and including ``t1`` (and ``t1`` itself)."""
+    if t1 < t0:
+        t0, t1 = t1, t0
+    n = int(np.floor((t1 - t0) * fps + 1e-9)) + 1
+    t = t0 + np.arange(n, dtype=np.float64) / fps
+    if t[-1] < t1 - 1e-9:
+        t = np.append(t, t1)
+    return t
+
+
+def policy_weights(weights: np.ndarray, policy: str) -> np.ndarray:
+    """The activation a texel gets whose mask is 1 in one region and 0 in the others.
+
+    ``weights`` ``[..., R, K]``. ``clamp01``/``renormalize``: ``clip(w, 0, 1)``; ``additive``:
+    ``w``; ``signed``: ``clip(w, -1, 1)`` (``K = 1``); ``lerp``: clip then convex over K. Where
+    masks overlap the per-texel policy (:func:`wrinklepipe.model.activations`) is what counts.
+    """
+    w = np.asarray(weights, np.float32)
+    if policy in ("clamp01", "renormalize"):
+        return np.clip(w, 0.0, 1.0)
+    if policy == "additive":
+        return w.copy()
+    if policy == "signed":
+        return np.clip(w, -1.0, 1.0)
+    if policy == "lerp":
+        a = np.clip(w, 0.0, 1.0)
+        return (a / np.maximum(a.sum(axis=-1, keepdims=True), 1.0)).astype(np.float32)
+    raise ValueError(f"unknown policy {policy!r}")
+
+
+def spec_problem(ctx: DriverContext, message: str, key: str = "") -> InputError:
+    """An :class:`InputError` naming the driver spec's source and key."""
+    return InputError([Problem(ctx.source, message, key)])
+
+
+def resolve(ctx: DriverContext, name: str) -> Path:
+    p = Path(name)
+    return p if p.is_absolute() else ctx.root / p

@@ -1,0 +1,100 @@
+"""``dynamic``: weights from the mesh's own stretch (Oat), implemented by the geometry module.
+
+This driver is only the plug: the maths lives in :mod:`wrinklepipe.geometry.dynamic`. When that
+module defines ``driver(ctx, spec, times)`` it is called as is (it returns a
+:class:`DriverResult` or per-vertex weights ``[F, V]`` / ``[F, V, K]``). Otherwise the documented
+building blocks are used: the mesh is posed per frame from blend-shape weights (``keys``,
+``morphs`` or a glTF morph animation in ``file``) with ``morph_pose``, and
+``DynamicWeights.build(rest, indices, vertex_ids).frame(deformed)`` gives one signed weight per
+vertex (negative = stretched, positive = compressed), i.e. ``[F, V, 1]`` under state ``signed``.
+Without the geometry module the driver refuses with a clear message.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.drivers.base import (
+    DriverContext,
+    DriverResult,
+    frame_times,
+    register,
+    resolve,
+    spec_problem,
+)
+
+
+def _geometry() -> Any:
+    try:
+        return importlib.import_module("wrinklepipe.geometry.dynamic")
+    except ModuleNotFoundError:
+        return None
+
+
+def _morph_frames(
+    ctx: DriverContext, spec: Mapping[str, Any], times: np.ndarray | None
+) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
+    from wrinklepipe.drivers.curves import (
+        keys_range,
+        load_keys,
+        read_gltf_morph_animation,
+        sample_keys,
+    )
+
+    fps = float(spec.get("fps", ctx.fps))
+    file = spec.get("file")
+    if file is not None and Path(str(file)).suffix.lower() in (".gltf", ".glb"):
+        return read_gltf_morph_animation(resolve(ctx, str(file)), times, fps)
+    if "morphs" in spec and "keys" not in spec:
+        names = tuple(str(k) for k in spec["morphs"])
+        t = np.zeros(1) if times is None else times
+        return t, names, np.array([[float(spec["morphs"][n]) for n in names]] * len(t))
+    keys, interp, _ = load_keys(ctx, spec)
+    if not keys:
+        raise spec_problem(ctx, "dynamic driver needs blend-shape keys, morphs or a file", "keys")
+    names = tuple(keys)
+    t = frame_times(*keys_range(keys), fps) if times is None else times
+    return t, names, sample_keys(keys, names, t, interp)
+
+
+@register("dynamic")
+def dynamic_driver(
+    ctx: DriverContext, spec: Mapping[str, Any], times: np.ndarray | None
+) -> DriverResult:
+    geo = _geometry()
+    if geo is None:
+        raise spec_problem(
+            ctx,
+            "the 'dynamic' driver needs wrinklepipe.geometry.dynamic, which this build lacks",
+            "kind",
+        )
+    hook = getattr(geo, "driver", None)
+    if hook is not None:
+        res = hook(ctx, spec, times)
+        if isinstance(res, DriverResult):
+            return res
+        w = np.asarray(res, np.float32)
+        if w.ndim == 2:
+            w = w[..., None]
+        t = np.arange(w.shape[0]) / ctx.fps if times is None else np.asarray(times)
+        states = ("signed",) if w.shape[2] == 1 else ctx.states
+        return DriverResult("dynamic", t, w, (), states, per_vertex=True)
+    mesh = ctx.mesh
+    if mesh is None or mesh.morph_deltas is None:
+        raise spec_problem(ctx, "the 'dynamic' driver needs a mesh with morph targets", "kind")
+    t, names, x = _morph_frames(ctx, spec, times)
+    unknown = [n for n in names if n not in mesh.morph_names]
+    if unknown:
+        raise spec_problem(ctx, f"unknown blend shape(s) {unknown}", "keys")
+    op = geo.DynamicWeights.build(mesh.positions, mesh.indices, vertex_ids=mesh.vertex_ids)
+    frames = [
+        np.asarray(op.frame(geo.morph_pose(mesh, dict(zip(names, map(float, row))))), np.float32)
+        for row in x
+    ]
+    w = np.stack(frames)[..., None]
+    return DriverResult("dynamic", np.asarray(t), w, (), ("signed",), per_vertex=True)
