@@ -1,0 +1,175 @@
+"""Spatial-hash vertex IDs: seam twins share IDs, distinct positions differ, jitter and order don't
+matter. Expectations come from exact position equality (np.unique), never from the code itself."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wrinklepipe.demo.character import generate
+from wrinklepipe.errors import InputError
+from wrinklepipe.geometry.primitives import uv_sphere
+from wrinklepipe.geometry.vertex_ids import VertexIdOptions, compute_vertex_ids
+
+
+def same_partition(a: np.ndarray, b: np.ndarray) -> bool:
+    """True when labels a and b group the elements identically."""
+    pairs = np.unique(np.stack([a, b], axis=1), axis=0)
+    return len(pairs) == len(np.unique(a)) == len(np.unique(b))
+
+
+def exact_groups(p: np.ndarray) -> np.ndarray:
+    return np.unique(p + 0.0, axis=0, return_inverse=True)[1].reshape(-1)
+
+
+@pytest.fixture(scope="module")
+def head():
+    return generate(64).mesh
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return uv_sphere(48, 24)
+
+
+def test_sphere_ids_equal_distinct_positions(sphere):
+    ids = compute_vertex_ids(sphere.positions)
+    assert ids.dtype == np.int64
+    expected = exact_groups(sphere.positions)
+    # 48 * 23 ring positions + 2 poles.
+    assert ids.max() + 1 == len(np.unique(expected)) == 48 * 23 + 2
+    assert same_partition(ids, expected)
+
+
+def test_sphere_seam_twins_and_poles_share_ids(sphere):
+    ids = compute_vertex_ids(sphere.positions).reshape(25, 49)
+    np.testing.assert_array_equal(ids[:, 0], ids[:, -1])  # seam column
+    assert len(np.unique(ids[0])) == 1 and len(np.unique(ids[-1])) == 1  # poles
+    assert len(np.unique(ids[5, :-1])) == 48  # a ring: all different
+
+
+def test_head_ids_equal_distinct_positions(head):
+    ids = compute_vertex_ids(head.positions)
+    # The head's seam twins differ by ~1e-16 (sin(-pi) vs sin(pi)): rounding to 0.1 um is the
+    # independent notion of "same position" here.
+    p = np.round(head.positions.astype(np.float64), 7)
+    assert same_partition(ids, exact_groups(p))
+    assert ids.max() + 1 == 63 * 96 + 2
+    # The seam: first and last column of every ring are bit-identical twins.
+    n_lon = 96
+    ring = ids[: 63 * (n_lon + 1)].reshape(63, n_lon + 1)
+    np.testing.assert_array_equal(ring[:, 0], ring[:, -1])
+    assert len(np.unique(ids)) < len(ids)
+
+
+def test_first_appearance_numbering_and_rerun(head):
+    ids = compute_vertex_ids(head.positions)
+    first_seen = np.maximum.accumulate(ids)
+    assert ids[0] == 0
+    # Each new ID is exactly one more than the largest seen before it.
+    assert np.all(ids <= np.concatenate([[0], first_seen[:-1] + 1]))
+    np.testing.assert_array_equal(ids, compute_vertex_ids(head.positions.copy()))
+
+
+@pytest.mark.parametrize("mesh_name", ["sphere", "head"])
+def test_jitter_below_tenth_of_tolerance_changes_nothing(mesh_name, sphere, head):
+    mesh = sphere if mesh_name == "sphere" else head
+    p = mesh.positions.astype(np.float64)
+    tol = 1e-4 * float(np.linalg.norm(p.max(0) - p.min(0)))
+    ids = compute_vertex_ids(p, tolerance=tol)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        jit = p + rng.uniform(-tol / 10, tol / 10, size=p.shape)
+        np.testing.assert_array_equal(compute_vertex_ids(jit, tolerance=tol), ids)
+
+
+@pytest.mark.parametrize("mesh_name", ["sphere", "head"])
+def test_permutation_gives_same_partition(mesh_name, sphere, head):
+    mesh = sphere if mesh_name == "sphere" else head
+    ids = compute_vertex_ids(mesh.positions)
+    perm = np.random.default_rng(5).permutation(len(ids))
+    ids_perm = compute_vertex_ids(mesh.positions[perm])
+    assert same_partition(ids_perm, ids[perm])
+
+
+def test_pair_straddling_a_cell_border_shares_an_id():
+    tol = 1e-3
+    cell = 16 * tol  # coarse_factor 16 below
+    opts = VertexIdOptions(tolerance=tol, coarse_factor=16)
+    base = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])  # fixes the grid origin at 0
+    for axis in range(3):
+        for gap in (0.05 * tol, 0.5 * tol, 0.9 * tol):
+            border = np.full(3, 0.3)
+            border[axis] = 7 * cell  # exactly on a cell face
+            a = border.copy()
+            b = border.copy()
+            a[axis] -= gap / 2
+            b[axis] += gap / 2
+            ids = compute_vertex_ids(np.vstack([base, a, b]), options=opts)
+            assert ids[2] == ids[3], (axis, gap)
+            assert len(np.unique(ids)) == 3
+    # Diagonal straddle of a cell corner.
+    corner = np.full(3, 7 * cell)
+    pts = np.vstack([base, corner - 0.3 * tol, corner + 0.3 * tol])
+    ids = compute_vertex_ids(pts, options=opts)
+    assert ids[2] == ids[3]
+    # Far apart (> 3 tol): different IDs.
+    pts = np.vstack([base, corner - 2 * tol, corner + 2 * tol])
+    assert len(np.unique(compute_vertex_ids(pts, options=opts))) == 4
+
+
+def test_dense_cells_are_refined():
+    # Many distinct positions inside one coarse cell (spacing 5 tol) plus twins of each.
+    tol = 1e-3
+    g = np.stack(np.meshgrid(*[np.arange(6) * 5 * tol] * 3, indexing="ij"), -1).reshape(-1, 3)
+    pts = np.vstack([g, g + 0.2 * tol])
+    ids = compute_vertex_ids(pts, options=VertexIdOptions(tolerance=tol, coarse_factor=1024))
+    assert ids.max() + 1 == len(g)
+    np.testing.assert_array_equal(ids[: len(g)], ids[len(g) :])
+
+
+def test_negative_zero_equals_zero():
+    p = np.array([[0.0, -0.0, 0.0], [-0.0, 0.0, -0.0], [1.0, 1.0, 1.0]], dtype=np.float32)
+    assert compute_vertex_ids(p).tolist() == [0, 0, 1]
+    assert compute_vertex_ids(p, tolerance=0.0).tolist() == [0, 0, 1]
+
+
+def test_bad_inputs_raise_input_errors():
+    p = np.zeros((4, 3), dtype=np.float32)
+    p[2, 1] = np.nan
+    with pytest.raises(InputError, match="NaN or infinite.*vertex 2"):
+        compute_vertex_ids(p, source="head.glb")
+    with pytest.raises(InputError, match=r"\[V, 3\]"):
+        compute_vertex_ids(np.zeros((4, 2)))
+    with pytest.raises(InputError, match="tolerance"):
+        compute_vertex_ids(np.zeros((4, 3)), tolerance=-1.0)
+    assert compute_vertex_ids(np.zeros((0, 3))).shape == (0,)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(2, 60),
+    offset=st.floats(-10, 10),
+    scale=st.floats(0.01, 100),
+    seed=st.integers(0, 2**16),
+)
+def test_property_twins_share_and_separated_differ(n, offset, scale, seed):
+    rng = np.random.default_rng(seed)
+    tol = 1e-3 * scale
+    # Distinct points on a lattice of 8 tol (so no two are within 3 tol), random origin.
+    lattice = rng.choice(20**3, size=n, replace=False)
+    base = np.stack(np.unravel_index(lattice, (20, 20, 20)), -1) * 8 * tol + offset
+    copies = rng.integers(0, n, size=2 * n)
+    twins = base[copies] + rng.uniform(-tol / 10, tol / 10, size=(2 * n, 3))
+    pts = np.vstack([base, twins])
+    order = rng.permutation(len(pts))
+    ids = compute_vertex_ids(pts[order], tolerance=tol)
+    truth = np.concatenate([np.arange(n), copies])[order]
+    assert same_partition(ids, truth)
+    # First-appearance numbering: relabelling truth the same way gives identical arrays.
+    _, first_idx = np.unique(truth, return_index=True)
+    rank = np.empty(n, dtype=np.int64)
+    rank[np.argsort(first_idx)] = np.arange(n)
+    np.testing.assert_array_equal(ids, rank[truth])
