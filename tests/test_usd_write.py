@@ -1,0 +1,202 @@
+"""USD writer/reader: UsdValidation, codeless WrinkleMapsAPI, V flip, time samples, round trip."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wrinklepipe.errors import InputError
+from wrinklepipe.io.gltf_read import read_gltf
+from wrinklepipe.io.gltf_write import write_gltf
+from wrinklepipe.io.usd_read import read_usd
+from wrinklepipe.io.usd_write import API_NAME, register_schema, write_usd
+from wrinklepipe.pipeline import demo_package
+
+pxr = pytest.importorskip("pxr")
+from pxr import Sdf, Usd, UsdShade, UsdValidation  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def pkg():
+    return demo_package(256)
+
+
+@pytest.fixture(scope="module")
+def usda(pkg, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("usd")
+    write_usd(pkg, folder / "demo.usda")
+    return folder / "demo.usda"
+
+
+def _validate(path):
+    register_schema()
+    stage = Usd.Stage.Open(str(path))
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    assert len(validators) > 20
+    errors = UsdValidation.ValidationContext(validators).Validate(stage)
+    return [e for e in errors if e.GetType() == UsdValidation.ValidationErrorType.Error], errors
+
+
+@pytest.mark.parametrize("suffix", [".usda", ".usdc", ".usdz"])
+def test_usd_validation_clean(pkg, tmp_path, suffix):
+    path = tmp_path / f"demo{suffix}"
+    write_usd(pkg, path)
+    errors, _ = _validate(path)
+    assert errors == [], [(e.GetName(), e.GetMessage()) for e in errors]
+
+
+def test_usd_validation_detects_problems(tmp_path):
+    # the same validators do report a stage without upAxis / metersPerUnit / defaultPrim
+    stage = Usd.Stage.CreateNew(str(tmp_path / "bad.usda"))
+    stage.DefinePrim("/a", "Xform")
+    stage.Save()
+    errors, _ = _validate(tmp_path / "bad.usda")
+    names = {e.GetName() for e in errors}
+    assert {"MissingDefaultPrim", "MissingUpAxisMetadata"} <= names
+
+
+def test_wrinkle_maps_api_is_applied_and_typed(usda):
+    register_schema()
+    stage = Usd.Stage.Open(str(usda))
+    mat = stage.GetPrimAtPath("/demo/Looks/skin")
+    api_type = Usd.SchemaRegistry.GetTypeFromSchemaTypeName(API_NAME)
+    assert api_type  # the codeless schema is registered through schemas/usd/plugInfo.json
+    assert mat.HasAPI(api_type)
+    assert API_NAME in mat.GetAppliedSchemas()
+    expected = {
+        "wrinkle:encoding": "token",
+        "wrinkle:scale": "double",
+        "wrinkle:policy": "token",
+        "wrinkle:stateNames": "token[]",
+        "wrinkle:regionNames": "token[]",
+        "wrinkle:maskTexture": "int[]",
+        "wrinkle:maskChannel": "token[]",
+        "wrinkle:expressionWeights": "double[]",
+        "wrinkle:weights": "float[]",
+    }
+    definition = Usd.SchemaRegistry().FindAppliedAPIPrimDefinition(API_NAME)
+    for name, type_name in expected.items():
+        assert str(definition.GetAttributeDefinition(name).GetTypeName()) == type_name, name
+        assert str(mat.GetAttribute(name).GetTypeName()) == type_name, name
+    assert mat.GetAttribute("wrinkle:encoding").Get() == "pd"
+    assert list(mat.GetAttribute("wrinkle:regionNames").Get())[6] == "glabella"
+    # Jimenez Table 1.1 anger row, regions in order (Red..Gray)
+    names = list(mat.GetAttribute("wrinkle:expressionNames").Get())
+    table = np.asarray(mat.GetAttribute("wrinkle:expressionWeights").Get()).reshape(len(names), 8)
+    assert table[names.index("anger")].tolist() == [-0.6, -0.6, -0.8, -0.8, 0.8, 0.8, 1.0, 0.0]
+
+
+def test_material_network(usda):
+    stage = Usd.Stage.Open(str(usda))
+    mat = UsdShade.Material(stage.GetPrimAtPath("/demo/Looks/skin"))
+    base = UsdShade.Shader(stage.GetPrimAtPath("/demo/Looks/skin/base_normal"))
+    assert base.GetIdAttr().Get() == "UsdUVTexture"
+    assert base.GetInput("sourceColorSpace").Get() == "raw"
+    assert tuple(base.GetInput("scale").Get()) == (2, 2, 2, 1)
+    assert tuple(base.GetInput("bias").Get()) == (-1, -1, -1, 0)
+    surf = UsdShade.Shader(stage.GetPrimAtPath("/demo/Looks/skin/Surface"))
+    src = surf.GetInput("normal").GetConnectedSources()[0][0]
+    assert src.source.GetPath() == base.GetPath() and src.sourceName == "rgb"
+    # wrinkle states and masks: UsdUVTexture whose file comes from the material's wrinkle inputs
+    stretch = UsdShade.Shader(stage.GetPrimAtPath("/demo/Looks/skin/wrinkle_stretch"))
+    src = stretch.GetInput("file").GetConnectedSources()[0][0]
+    assert src.source.GetPath() == mat.GetPath()
+    assert src.sourceName == "wrinkle:state:stretch"
+    assert mat.GetInput("wrinkle:state:stretch").Get().path == "./textures/wrinkle_stretch.png"
+    assert mat.GetInput("wrinkle:mask:mask_1").Get().path == "./textures/mask_1.png"
+    # pd scale 1: the texture output is the slope: 2 s v - s
+    assert tuple(stretch.GetInput("scale").Get())[:2] == (2, 2)
+    assert tuple(stretch.GetInput("bias").Get())[:2] == (-1, -1)
+
+
+def test_v_flip_and_vertex_ids(usda, pkg):
+    stage = Usd.Stage.Open(str(usda))
+    mesh = stage.GetPrimAtPath("/demo/demo_head")
+    st_ = np.asarray(mesh.GetAttribute("primvars:st").Get())
+    uv = pkg.mesh.uvs
+    assert np.array_equal(st_[:, 0], uv[:, 0])
+    assert np.array_equal(st_[:, 1], (np.float32(1.0) - uv[:, 1]).astype(np.float32))
+    # the top row of the image (glTF v near 0) is the top in USD too (t near 1)
+    top = np.argmin(uv[:, 1])
+    assert uv[top, 1] == 0.0 and st_[top, 1] == 1.0
+    vid = mesh.GetAttribute("primvars:wrinkle:vertexId")
+    assert str(vid.GetTypeName()) == "int[]"
+    assert np.array_equal(np.asarray(vid.Get()), pkg.mesh.vertex_ids)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(0.0, 1.0, width=32))
+def test_v_flip_round_trip_within_one_ulp_of_one(v):
+    # USD t = 1 - v in float32, read back v' = 1 - t: exact for v >= 0.5, else within 2^-24
+    v32 = np.float32(v)
+    t = np.float32(1.0) - v32
+    back = np.float32(1.0) - t
+    assert abs(float(back) - float(v32)) <= 2.0**-24
+
+
+def test_weights_are_time_samples(usda, pkg):
+    stage = Usd.Stage.Open(str(usda))
+    attr = stage.GetPrimAtPath("/demo/Looks/skin").GetAttribute("wrinkle:weights")
+    fps = stage.GetTimeCodesPerSecond()
+    curve = pkg.curves[0]
+    assert attr.GetTimeSamples() == [float(t) * fps for t in curve.times]
+    # at t = 1 s the expression cycle shows the table's first expression fully on
+    row = np.asarray(attr.Get(Usd.TimeCode(1.0 * fps)))
+    assert np.array_equal(row, curve.values[1])
+    # halfway between keys USD interpolates linearly, like the glTF LINEAR sampler
+    mid = np.asarray(attr.Get(Usd.TimeCode(1.5 * fps)))
+    assert np.allclose(mid, 0.5 * (curve.values[1] + curve.values[2]))
+
+
+def test_blend_shapes(usda, pkg):
+    from pxr import UsdSkel
+
+    stage = Usd.Stage.Open(str(usda))
+    binding = UsdSkel.BindingAPI(stage.GetPrimAtPath("/demo/demo_head"))
+    assert list(binding.GetBlendShapesAttr().Get()) == list(pkg.mesh.morph_names)
+    target = binding.GetBlendShapeTargetsRel().GetTargets()[2]
+    offsets = np.asarray(UsdSkel.BlendShape(stage.GetPrimAtPath(target)).GetOffsetsAttr().Get())
+    assert np.array_equal(offsets, pkg.mesh.morph_deltas[2])
+
+
+@pytest.mark.parametrize("suffix", [".usda", ".usdc", ".usdz"])
+def test_gltf_usd_gltf_round_trip(pkg, tmp_path, suffix):
+    write_gltf(pkg, tmp_path / "a", "demo")
+    first = read_gltf(tmp_path / "a" / "demo.gltf")
+    write_usd(first, tmp_path / "u" / f"demo{suffix}")
+    via_usd = read_usd(tmp_path / "u" / f"demo{suffix}")
+    assert via_usd.meta == first.meta  # channel tables, expressions, drivers, weights, encoding
+    for t in first.textures:
+        assert np.array_equal(via_usd.texture(t.name).pixels, t.pixels), t.name
+    for f in ("positions", "indices", "uvs", "normals", "tangents", "vertex_ids", "morph_deltas"):
+        assert np.array_equal(getattr(via_usd.mesh, f), getattr(first.mesh, f)), f
+    assert np.array_equal(via_usd.curves[0].times, first.curves[0].times)
+    assert np.array_equal(via_usd.curves[0].values, first.curves[0].values)
+    write_gltf(via_usd, tmp_path / "b", "demo")
+    for rel in ("demo.gltf", "demo.bin", "textures/wrinkle_compress.png", "textures/mask_0.png"):
+        assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
+
+
+def test_usda_is_deterministic(pkg, tmp_path):
+    write_usd(pkg, tmp_path / "a" / "x.usda")
+    write_usd(pkg, tmp_path / "b" / "x.usda")
+    assert (tmp_path / "a/x.usda").read_bytes() == (tmp_path / "b/x.usda").read_bytes()
+
+
+def test_reader_refuses_escaping_texture_paths(usda, tmp_path):
+    layer = Sdf.Layer.FindOrOpen(str(usda))
+    text = layer.ExportToString().replace("@./textures/mask_0.png@", "@../../etc/mask_0.png@")
+    bad = usda.parent / "bad.usda"
+    bad.write_text(text)
+    with pytest.raises(InputError, match="must be relative and inside"):
+        read_usd(bad)
+
+
+def test_reader_refuses_non_wrinkle_stage(tmp_path):
+    stage = Usd.Stage.CreateNew(str(tmp_path / "plain.usda"))
+    stage.DefinePrim("/a", "Xform")
+    stage.Save()
+    with pytest.raises(InputError, match="not a wrinklepipe asset"):
+        read_usd(tmp_path / "plain.usda")

@@ -1,0 +1,399 @@
+"""Read a wrinklepipe glTF/GLB (one written by :mod:`wrinklepipe.io.gltf_write`) into a package.
+
+The reader is defensive, because a glTF names other files: every URI must be relative and stay
+inside the asset's folder (no ``..``, no absolute paths, no schemes other than ``data:``); data
+URIs are capped in size; buffers, views and accessors are bounds-checked; image sizes are read
+from the PNG header and capped before any pixel is decoded. Every problem is an
+:class:`~wrinklepipe.errors.InputError` naming the file and the JSON pointer.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import struct
+import urllib.parse
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.asset import Mesh
+from wrinklepipe.errors import input_error
+from wrinklepipe.io.package import (
+    EXTENSION,
+    PackedTexture,
+    WeightCurves,
+    WrinklePackage,
+    png_pixels,
+)
+
+_COMPONENTS = {
+    5120: np.int8,
+    5121: np.uint8,
+    5122: np.int16,
+    5123: np.uint16,
+    5125: np.uint32,
+    5126: np.float32,
+}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+
+
+@dataclass(frozen=True)
+class GltfReadOptions:
+    """Reader limits: ``max_data_uri_bytes`` (decoded size of one data URI), ``max_pixels`` per
+    image, ``max_file_bytes`` for any external file."""
+
+    max_data_uri_bytes: int = 16 * 1024 * 1024
+    max_pixels: int = 8192 * 8192
+    max_file_bytes: int = 2 * 1024**3
+
+
+def safe_uri_path(folder: Path, uri: str, file: str, key: str) -> Path:
+    """Resolve a relative glTF URI inside ``folder``; refuse absolute paths, ``..`` and schemes."""
+    raw = urllib.parse.unquote(uri)
+    if raw.startswith(("/", "\\")) or (len(raw) > 1 and raw[1] == ":"):
+        raise input_error(
+            file, f"URI {uri!r} is an absolute path; only relative URIs are read", key
+        )
+    parsed = urllib.parse.urlparse(uri)
+    if parsed.scheme or parsed.netloc:
+        raise input_error(file, f"URI {uri!r} is not a relative path (scheme not allowed)", key)
+    parts = PurePosixPath(raw.replace("\\", "/")).parts
+    if ".." in parts:
+        raise input_error(file, f"URI {uri!r} leaves the asset folder ('..' not allowed)", key)
+    path = (folder / Path(*parts)).resolve() if parts else folder
+    if folder.resolve() not in path.parents:
+        raise input_error(file, f"URI {uri!r} resolves outside the asset folder", key)
+    return path
+
+
+class _Reader:
+    def __init__(self, path: Path, options: GltfReadOptions) -> None:
+        self.path = path
+        self.file = str(path)
+        self.opt = options
+        self.folder = path.parent
+        self.glb_bin: bytes | None = None
+        self.doc = self._load()
+        self._buffers: dict[int, bytes] = {}
+
+    def err(self, message: str, key: str = "") -> Exception:
+        return input_error(self.file, message, key)
+
+    # -- container -------------------------------------------------------------------------
+    def _load(self) -> dict[str, Any]:
+        if not self.path.is_file():
+            raise self.err("file not found")
+        data = self.path.read_bytes()
+        if data[:4] == b"glTF":
+            if len(data) < 20:
+                raise self.err("GLB header truncated")
+            _, version, total = struct.unpack_from("<III", data, 0)
+            if version != 2:
+                raise self.err(f"GLB version {version}, expected 2")
+            if total != len(data):
+                raise self.err(f"GLB length field {total} != file size {len(data)}")
+            off, chunks = 12, []
+            while off + 8 <= len(data):
+                n, kind = struct.unpack_from("<II", data, off)
+                if off + 8 + n > len(data):
+                    raise self.err(f"GLB chunk at byte {off} runs past the end of the file")
+                chunks.append((kind, data[off + 8 : off + 8 + n]))
+                off += 8 + n
+            if not chunks or chunks[0][0] != 0x4E4F534A:
+                raise self.err("GLB has no JSON chunk first")
+            text = chunks[0][1]
+            bins = [c for k, c in chunks[1:] if k == 0x004E4942]
+            self.glb_bin = bins[0] if bins else None
+        else:
+            text = data
+        try:
+            doc = json.loads(text.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise self.err(f"not valid glTF JSON: {exc}") from None
+        if not isinstance(doc, dict) or str(doc.get("asset", {}).get("version")) != "2.0":
+            raise self.err("not a glTF 2.0 document (asset.version must be '2.0')", "/asset")
+        return doc
+
+    def _uri_bytes(self, uri: str, key: str) -> bytes:
+        if uri.startswith("data:"):
+            head, _, payload = uri.partition(",")
+            est = len(payload) * 3 // 4
+            if est > self.opt.max_data_uri_bytes:
+                raise self.err(
+                    f"data URI of ~{est} bytes is over the cap of {self.opt.max_data_uri_bytes}",
+                    key,
+                )
+            if not head.endswith(";base64"):
+                raise self.err("data URI is not base64", key)
+            try:
+                return base64.b64decode(payload, validate=True)
+            except ValueError:
+                raise self.err("data URI is not valid base64", key) from None
+        p = safe_uri_path(self.folder, uri, self.file, key)
+        if not p.is_file():
+            raise self.err(f"referenced file {uri!r} not found", key)
+        if p.stat().st_size > self.opt.max_file_bytes:
+            raise self.err(f"referenced file {uri!r} is over {self.opt.max_file_bytes} bytes", key)
+        return p.read_bytes()
+
+    def buffer(self, i: int) -> bytes:
+        if i not in self._buffers:
+            bufs = self.doc.get("buffers", [])
+            if not 0 <= i < len(bufs):
+                raise self.err(f"buffer {i} does not exist", "/buffers")
+            b = bufs[i]
+            key = f"/buffers/{i}"
+            if "uri" in b:
+                data = self._uri_bytes(b["uri"], key + "/uri")
+            elif i == 0 and self.glb_bin is not None:
+                data = self.glb_bin
+            else:
+                raise self.err("buffer has no uri and there is no GLB binary chunk", key)
+            if len(data) < int(b.get("byteLength", 0)):
+                raise self.err(
+                    f"buffer holds {len(data)} bytes, byteLength says {b['byteLength']}", key
+                )
+            self._buffers[i] = data
+        return self._buffers[i]
+
+    def view(self, i: int) -> tuple[bytes, int]:
+        views = self.doc.get("bufferViews", [])
+        if not 0 <= i < len(views):
+            raise self.err(f"bufferView {i} does not exist", "/bufferViews")
+        v = views[i]
+        data = self.buffer(int(v.get("buffer", 0)))
+        off, n = int(v.get("byteOffset", 0)), int(v["byteLength"])
+        if off < 0 or off + n > len(data):
+            raise self.err("bufferView runs past the end of its buffer", f"/bufferViews/{i}")
+        return data[off : off + n], int(v.get("byteStride", 0))
+
+    def accessor(self, i: int) -> np.ndarray:
+        accs = self.doc.get("accessors", [])
+        key = f"/accessors/{i}"
+        if not isinstance(i, int) or not 0 <= i < len(accs):
+            raise self.err(f"accessor {i} does not exist", "/accessors")
+        a = accs[i]
+        if "sparse" in a:
+            raise self.err("sparse accessors are not supported", key)
+        dtype = np.dtype(_COMPONENTS[a["componentType"]]).newbyteorder("<")
+        width, count = _WIDTH[a["type"]], int(a["count"])
+        if "bufferView" not in a:
+            return np.zeros((count, width), dtype).squeeze(-1 if width == 1 else ())
+        data, stride = self.view(int(a["bufferView"]))
+        off = int(a.get("byteOffset", 0))
+        elem = dtype.itemsize * width
+        stride = stride or elem
+        need = off + (count - 1) * stride + elem if count else 0
+        if need > len(data):
+            raise self.err(f"accessor needs {need} bytes, its bufferView has {len(data)}", key)
+        raw = np.frombuffer(data, np.uint8, count=need - off, offset=off) if count else None
+        if raw is None:
+            return np.zeros((0, width), dtype)
+        rows = np.lib.stride_tricks.as_strided(raw, (count, elem), (stride, 1))
+        arr = np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+        if a.get("normalized") and dtype.kind in "iu":
+            arr = arr.astype(np.float32) / np.float32(np.iinfo(dtype).max)
+        return arr[:, 0] if width == 1 else arr
+
+    def image(self, i: int) -> tuple[str, np.ndarray]:
+        imgs = self.doc.get("images", [])
+        key = f"/images/{i}"
+        if not 0 <= i < len(imgs):
+            raise self.err(f"image {i} does not exist", "/images")
+        img = imgs[i]
+        if "uri" in img:
+            data = self._uri_bytes(img["uri"], key + "/uri")
+        elif "bufferView" in img:
+            data, _ = self.view(int(img["bufferView"]))
+        else:
+            raise self.err("image has neither uri nor bufferView", key)
+        if data[:8] != b"\x89PNG\r\n\x1a\n" or len(data) < 24:
+            raise self.err("image is not a PNG (only PNG textures are read)", key)
+        w, h = struct.unpack(">II", data[16:24])
+        if w * h > self.opt.max_pixels:
+            raise self.err(f"image is {w} x {h}, over the cap of {self.opt.max_pixels} pixels", key)
+        name = str(img.get("name") or f"image_{i}")
+        return name, png_pixels(data, f"{self.file} {key}")
+
+
+def _texture_image(r: _Reader, tex_index: int, key: str) -> int:
+    texs = r.doc.get("textures", [])
+    if not isinstance(tex_index, int) or not 0 <= tex_index < len(texs):
+        raise r.err(f"texture {tex_index} does not exist", key)
+    src = texs[tex_index].get("source")
+    if src is None:
+        raise r.err(f"texture {tex_index} has no source image", key)
+    return int(src)
+
+
+def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> WrinklePackage:
+    """Load a wrinklepipe .gltf/.glb as a :class:`WrinklePackage` (mesh, stored textures, meta)."""
+    r = _Reader(Path(path), options or GltfReadOptions())
+    doc = r.doc
+    mats = doc.get("materials", [])
+    if not mats or EXTENSION not in mats[0].get("extensions", {}):
+        raise r.err(
+            f"no {EXTENSION} extension on materials[0]: not a wrinklepipe asset", "/materials/0"
+        )
+    ext = mats[0]["extensions"][EXTENSION]
+    pkey = f"/materials/0/extensions/{EXTENSION}"
+
+    # -- mesh -------------------------------------------------------------------------------
+    meshes = doc.get("meshes", [])
+    if not meshes or not meshes[0].get("primitives"):
+        raise r.err("no mesh primitive", "/meshes/0")
+    gm = meshes[0]
+    prim = gm["primitives"][0]
+    attrs = prim.get("attributes", {})
+    for need in (
+        "POSITION",
+        "NORMAL",
+        "TANGENT",
+        "TEXCOORD_0",
+        ext.get("vertexIdAttribute", "_WRINKLE_VERTEX_ID"),
+    ):
+        if need not in attrs:
+            raise r.err(f"primitive has no {need} attribute", "/meshes/0/primitives/0/attributes")
+    positions = r.accessor(attrs["POSITION"]).astype(np.float32)
+    nv = positions.shape[0]
+    ids_f = r.accessor(attrs[ext.get("vertexIdAttribute", "_WRINKLE_VERTEX_ID")]).astype(np.float64)
+    if np.any(ids_f != np.rint(ids_f)) or np.any(ids_f < 0):
+        raise r.err("vertex IDs must be non-negative integers", "/meshes/0/primitives/0/attributes")
+    if "indices" in prim:
+        indices = r.accessor(prim["indices"]).astype(np.int64)
+    else:
+        indices = np.arange(nv, dtype=np.int64)
+    if indices.size % 3 or (indices.size and (indices.min() < 0 or indices.max() >= nv)):
+        raise r.err(
+            "indices are not triangles over existing vertices", "/meshes/0/primitives/0/indices"
+        )
+    names = tuple(gm.get("extras", {}).get("targetNames", ()))
+    targets = prim.get("targets", [])
+    deltas = None
+    if targets:
+        deltas = np.stack([r.accessor(t["POSITION"]).astype(np.float32) for t in targets])
+        if len(names) != len(targets):
+            names = tuple(f"target_{i}" for i in range(len(targets)))
+    mesh = Mesh(
+        positions=positions,
+        indices=indices.reshape(-1, 3).astype(np.uint32),
+        uvs=r.accessor(attrs["TEXCOORD_0"]).astype(np.float32),
+        normals=r.accessor(attrs["NORMAL"]).astype(np.float32),
+        tangents=r.accessor(attrs["TANGENT"]).astype(np.float32),
+        morph_names=names,
+        morph_deltas=deltas,
+        vertex_ids=ids_f.astype(np.int64),
+        colors=r.accessor(attrs["_WRINKLE_BIAS"]).astype(np.float32)
+        if "_WRINKLE_BIAS" in attrs
+        else None,
+        name=str(gm.get("name", "mesh")),
+    )
+    for a in (mesh.uvs, mesh.normals, mesh.tangents, mesh.colors):
+        if a is not None and a.shape[0] != nv:
+            raise r.err(
+                "attribute counts differ from POSITION", "/meshes/0/primitives/0/attributes"
+            )
+
+    # -- textures ---------------------------------------------------------------------------
+    textures: list[PackedTexture] = []
+    by_image: dict[int, str] = {}
+
+    def tex(info: Any, key: str, role: str) -> str:
+        if not isinstance(info, dict) or "index" not in info:
+            raise r.err("expected a textureInfo object with 'index'", key)
+        src = _texture_image(r, info["index"], key)
+        if src not in by_image:
+            name, px = r.image(src)
+            if any(t.name == name for t in textures):
+                name = f"{name}_{src}"
+            textures.append(PackedTexture(name, px, role))
+            by_image[src] = name
+        return by_image[src]
+
+    if "normalTexture" not in mats[0]:
+        raise r.err("material has no normalTexture (the base normal map)", "/materials/0")
+    base_name = tex(mats[0]["normalTexture"], "/materials/0/normalTexture", "base_normal")
+    if base_name != "base_normal":
+        textures[-1].name = "base_normal"
+        by_image = {k: ("base_normal" if v == base_name else v) for k, v in by_image.items()}
+    try:
+        states = [
+            {"name": s["name"], "texture": tex(s["texture"], f"{pkey}/states/{i}", "state")}
+            for i, s in enumerate(ext["states"])
+        ]
+        masks = ext["masks"]
+        mask_names = [
+            tex(t, f"{pkey}/masks/textures/{i}", "mask") for i, t in enumerate(masks["textures"])
+        ]
+        regions = [
+            {
+                "name": g["name"],
+                "side": g.get("side", "center"),
+                "states": list(g.get("states", [])),
+            }
+            for g in ext["regions"]
+        ]
+        region_names = [g["name"] for g in regions]
+        expressions = {}
+        for e in ext.get("expressions", []):
+            if len(e["weights"]) != len(region_names):
+                raise r.err(
+                    f"expression {e['name']!r} has {len(e['weights'])} weights for "
+                    f"{len(region_names)} regions",
+                    f"{pkey}/expressions",
+                )
+            expressions[e["name"]] = {rn: float(w) for rn, w in zip(region_names, e["weights"])}
+        meta: dict[str, Any] = {
+            "encoding": ext["encoding"],
+            "scale": float(ext.get("scale", 1.0)),
+            "policy": ext["policy"],
+            "states": states,
+            "masks": {
+                "layout": masks["layout"],
+                "textures": mask_names,
+                "table": [dict(e) for e in masks["table"]],
+            },
+            "regions": regions,
+            "expressions": {k: dict(sorted(v.items())) for k, v in sorted(expressions.items())},
+            "drivers": [dict(d) for d in ext.get("drivers", [])],
+            "weights": [float(w) for w in ext.get("weights", [0.0] * len(regions))],
+        }
+    except (KeyError, TypeError) as exc:
+        raise r.err(f"extension block is missing or has a malformed key: {exc}", pkey) from None
+    for i, e in enumerate(meta["masks"]["table"]):
+        t = e.get("layer", e.get("texture"))
+        if not isinstance(t, int) or not 0 <= t < len(mask_names):
+            raise r.err(
+                f"channel table entry {i} points at mask texture {t!r}, which does not exist",
+                f"{pkey}/masks/table/{i}",
+            )
+
+    # -- weight curves ----------------------------------------------------------------------
+    curves = []
+    anims = doc.get("animations", [])
+    for i, wc in enumerate(ext.get("weightCurves", [])):
+        ai = wc.get("animation")
+        if not isinstance(ai, int) or not 0 <= ai < len(anims):
+            raise r.err(f"animation {ai!r} does not exist", f"{pkey}/weightCurves/{i}")
+        s = anims[ai]["samplers"][anims[ai]["channels"][0]["sampler"]]
+        times = r.accessor(s["input"]).astype(np.float32)
+        vals = r.accessor(s["output"]).astype(np.float32).reshape(-1)
+        if vals.size != times.size * len(regions):
+            raise r.err(
+                f"animation output has {vals.size} values, expected {times.size} x {len(regions)}",
+                f"/animations/{ai}",
+            )
+        curves.append(
+            WeightCurves(
+                str(wc.get("name", f"curve_{i}")), times, vals.reshape(times.size, len(regions))
+            )
+        )
+    name = str(
+        doc.get("scenes", [{}])[doc.get("scene", 0)].get("name")
+        or doc.get("nodes", [{}])[0].get("name")
+        or Path(path).stem
+    )
+    return WrinklePackage(name, mesh, textures, meta, curves)

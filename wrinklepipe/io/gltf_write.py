@@ -1,0 +1,309 @@
+"""glTF 2.0 / GLB writer for a :class:`~wrinklepipe.io.package.WrinklePackage`.
+
+What is written (DESIGN.md section 4):
+
+- one mesh primitive with POSITION, NORMAL, explicit TANGENT (always), TEXCOORD_0, and
+  application-specific per-vertex data as FLOAT accessors: ``_WRINKLE_VERTEX_ID`` (spatial-hash
+  vertex IDs, exact in float32 below 2^24) and ``_WRINKLE_BIAS`` (rest-pose bias, from
+  ``mesh.colors``) when present; morph targets (POSITION deltas) named in
+  ``mesh.extras.targetNames``;
+- a material whose core ``normalTexture`` is the base normal map (so plain viewers render the
+  neutral face), carrying the vendor extension ``WRINKLEPIPE_wrinkle_maps`` (listed in
+  ``extensionsUsed`` only, never ``extensionsRequired``): wrinkle states as textureInfo, masks with
+  their channel table or array layout, encoding, scale, policy, regions, expressions, drivers and
+  the region weights;
+- region-weight curves as animations through ``KHR_animation_pointer`` targeting
+  ``/materials/0/extensions/WRINKLEPIPE_wrinkle_maps/weights`` (the extension declares the
+  property animatable), indexed from the extension's ``weightCurves``.
+
+Output is deterministic: fixed buffer layout, sorted JSON keys, minimal PNGs.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.atomic import dumps_json, write_bytes
+from wrinklepipe.errors import input_error
+from wrinklepipe.io.package import EXTENSION, MAX_FLOAT_ID, WrinklePackage, png_bytes
+
+POINTER_EXTENSION = "KHR_animation_pointer"
+WEIGHTS_POINTER = f"/materials/0/extensions/{EXTENSION}/weights"
+VERTEX_ID_ATTRIBUTE = "_WRINKLE_VERTEX_ID"
+BIAS_ATTRIBUTE = "_WRINKLE_BIAS"
+
+_FLOAT = 5126
+_UINT = 5125
+_USHORT = 5123
+_ARRAY_BUFFER = 34962
+_ELEMENT_ARRAY_BUFFER = 34963
+_TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
+
+
+@dataclass(frozen=True)
+class GltfOptions:
+    """Writer options.
+
+    ``texture_dir``: folder (relative to the .gltf) holding the PNGs; ``generator``: the
+    ``asset.generator`` string (no version timestamps, so reruns are byte-identical).
+    """
+
+    texture_dir: str = "textures"
+    generator: str = "wrinklepipe"
+
+
+class _Buffer:
+    """Accumulates 4-byte aligned bufferViews into one binary buffer."""
+
+    def __init__(self) -> None:
+        self.chunks: list[bytes] = []
+        self.length = 0
+        self.views: list[dict[str, Any]] = []
+        self.accessors: list[dict[str, Any]] = []
+
+    def view(self, data: bytes, target: int | None = None) -> int:
+        pad = (-self.length) % 4
+        if pad:
+            self.chunks.append(b"\0" * pad)
+            self.length += pad
+        v: dict[str, Any] = {"buffer": 0, "byteOffset": self.length, "byteLength": len(data)}
+        if target is not None:
+            v["target"] = target
+        self.chunks.append(data)
+        self.length += len(data)
+        self.views.append(v)
+        return len(self.views) - 1
+
+    def accessor(self, array: np.ndarray, target: int | None = None, minmax: bool = False) -> int:
+        a = np.ascontiguousarray(array)
+        width = 1 if a.ndim == 1 else int(np.prod(a.shape[1:]))
+        if a.dtype == np.uint32:
+            comp, a = _UINT, a.astype("<u4")
+        elif a.dtype == np.uint16:
+            comp, a = _USHORT, a.astype("<u2")
+        else:
+            comp, a = _FLOAT, a.astype("<f4")
+        acc: dict[str, Any] = {
+            "bufferView": self.view(a.tobytes(), target),
+            "componentType": comp,
+            "count": int(a.shape[0]),
+            "type": _TYPES[width],
+        }
+        if minmax:
+            flat = a.reshape(a.shape[0], width)
+            if comp == _FLOAT:
+                acc["min"] = [float(x) for x in flat.min(axis=0)]
+                acc["max"] = [float(x) for x in flat.max(axis=0)]
+            else:
+                acc["min"] = [int(x) for x in flat.min(axis=0)]
+                acc["max"] = [int(x) for x in flat.max(axis=0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+    def data(self) -> bytes:
+        return b"".join(self.chunks)
+
+
+def _check_mesh(pkg: WrinklePackage) -> None:
+    m = pkg.mesh
+    where = f"{pkg.name} mesh {m.name!r}"
+    if m.uvs is None or m.normals is None or m.tangents is None:
+        raise input_error(where, "glTF output needs UVs, normals and tangents (run the stages)")
+    if m.vertex_ids is None:
+        raise input_error(where, "glTF output needs vertex IDs (run the vertex-ids stage)")
+    if int(np.max(m.vertex_ids, initial=0)) >= MAX_FLOAT_ID or int(np.min(m.vertex_ids)) < 0:
+        raise input_error(where, f"vertex IDs must lie in [0, {MAX_FLOAT_ID}) to be exact as FLOAT")
+
+
+def gltf_document(
+    pkg: WrinklePackage, options: GltfOptions | None = None, embed_images: bool = False
+) -> tuple[dict[str, Any], bytes, dict[str, bytes]]:
+    """Build the glTF JSON, its binary buffer and the image files ``{uri: png bytes}``.
+
+    With ``embed_images`` the PNGs go into the buffer as bufferViews (GLB) and the returned dict
+    is empty. The buffer's ``uri`` is left for the caller to set (absent for GLB).
+    """
+    opt = options or GltfOptions()
+    _check_mesh(pkg)
+    m = pkg.mesh
+    buf = _Buffer()
+    attrs = {
+        "POSITION": buf.accessor(m.positions.astype(np.float32), _ARRAY_BUFFER, minmax=True),
+        "NORMAL": buf.accessor(m.normals.astype(np.float32), _ARRAY_BUFFER),
+        "TANGENT": buf.accessor(m.tangents.astype(np.float32), _ARRAY_BUFFER),
+        "TEXCOORD_0": buf.accessor(m.uvs.astype(np.float32), _ARRAY_BUFFER),
+        VERTEX_ID_ATTRIBUTE: buf.accessor(m.vertex_ids.astype(np.float32), _ARRAY_BUFFER),
+    }
+    if m.colors is not None:
+        attrs[BIAS_ATTRIBUTE] = buf.accessor(m.colors.astype(np.float32), _ARRAY_BUFFER)
+    idx = m.indices.reshape(-1)
+    idx_arr = idx.astype(np.uint16 if m.vertex_count < 65535 else np.uint32)
+    prim: dict[str, Any] = {
+        "attributes": attrs,
+        "indices": buf.accessor(idx_arr, _ELEMENT_ARRAY_BUFFER, minmax=False),
+        "material": 0,
+        "mode": 4,
+    }
+    mesh: dict[str, Any] = {"name": m.name, "primitives": [prim]}
+    if m.morph_deltas is not None and len(m.morph_names):
+        prim["targets"] = [
+            {"POSITION": buf.accessor(d.astype(np.float32), _ARRAY_BUFFER, minmax=True)}
+            for d in m.morph_deltas
+        ]
+        mesh["weights"] = [0.0] * len(m.morph_names)
+        mesh["extras"] = {"targetNames": list(m.morph_names)}
+
+    images, textures, files = [], [], {}
+    tex_index: dict[str, int] = {}
+    for t in pkg.textures:
+        data = png_bytes(t.pixels)
+        img: dict[str, Any] = {"name": t.name}
+        if embed_images:
+            img["bufferView"] = buf.view(data)
+            img["mimeType"] = "image/png"
+        else:
+            uri = f"{opt.texture_dir}/{t.name}.png" if opt.texture_dir else f"{t.name}.png"
+            img["uri"] = uri
+            files[uri] = data
+        images.append(img)
+        textures.append({"sampler": 0, "source": len(images) - 1, "name": t.name})
+        tex_index[t.name] = len(textures) - 1
+
+    meta = pkg.meta
+    region_names = [r["name"] for r in meta["regions"]]
+    ext: dict[str, Any] = {
+        "encoding": meta["encoding"],
+        "scale": float(meta["scale"]),
+        "policy": meta["policy"],
+        "states": [
+            {"name": s["name"], "texture": {"index": tex_index[s["texture"]]}}
+            for s in meta["states"]
+        ],
+        "masks": {
+            "layout": meta["masks"]["layout"],
+            "textures": [{"index": tex_index[n]} for n in meta["masks"]["textures"]],
+            "table": [dict(e) for e in meta["masks"]["table"]],
+        },
+        "regions": [
+            {
+                "name": r["name"],
+                "side": r.get("side", "center"),
+                "states": list(r.get("states", [])),
+            }
+            for r in meta["regions"]
+        ],
+        "expressions": [
+            {
+                "name": e,
+                "weights": [float(row.get(rn, 0.0)) for rn in region_names],
+            }
+            for e, row in meta.get("expressions", {}).items()
+        ],
+        "drivers": list(meta.get("drivers", [])),
+        "weights": [float(w) for w in meta["weights"]],
+        "vertexIdAttribute": VERTEX_ID_ATTRIBUTE,
+    }
+    animations = []
+    for c in pkg.curves:
+        times = np.asarray(c.times, np.float32)
+        values = np.asarray(c.values, np.float32)
+        if values.shape != (times.shape[0], len(region_names)):
+            raise input_error(
+                pkg.name,
+                f"weight curve {c.name!r}: values {values.shape} do not match "
+                f"{times.shape[0]} keys x {len(region_names)} regions",
+            )
+        sampler = {
+            "input": buf.accessor(times, minmax=True),
+            "output": buf.accessor(values.reshape(-1)),
+            "interpolation": "LINEAR",
+        }
+        channel = {
+            "sampler": 0,
+            "target": {
+                "path": "pointer",
+                "extensions": {POINTER_EXTENSION: {"pointer": WEIGHTS_POINTER}},
+            },
+        }
+        animations.append({"name": c.name, "samplers": [sampler], "channels": [channel]})
+    if animations:
+        ext["weightCurves"] = [{"name": c.name, "animation": i} for i, c in enumerate(pkg.curves)]
+
+    material = {
+        "name": f"{pkg.name}_skin",
+        "normalTexture": {"index": tex_index["base_normal"]},
+        "pbrMetallicRoughness": {
+            "baseColorFactor": [0.8, 0.62, 0.52, 1.0],
+            "metallicFactor": 0.0,
+            "roughnessFactor": 0.55,
+        },
+        "extensions": {EXTENSION: ext},
+    }
+    used = [EXTENSION] + ([POINTER_EXTENSION] if animations else [])
+    doc: dict[str, Any] = {
+        "asset": {"version": "2.0", "generator": opt.generator},
+        "extensionsUsed": sorted(used),
+        "scene": 0,
+        "scenes": [{"name": pkg.name, "nodes": [0]}],
+        "nodes": [{"name": pkg.name, "mesh": 0}],
+        "meshes": [mesh],
+        "materials": [material],
+        "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}],
+        "images": images,
+        "textures": textures,
+        "accessors": buf.accessors,
+        "bufferViews": buf.views,
+        "buffers": [{"byteLength": 0}],
+    }
+    if animations:
+        doc["animations"] = animations
+    data = buf.data()
+    data += b"\0" * ((-len(data)) % 4)
+    doc["buffers"][0]["byteLength"] = len(data)
+    return doc, data, files
+
+
+def glb_bytes(doc: dict[str, Any], data: bytes) -> bytes:
+    """Pack a glTF JSON and its binary buffer into a GLB container (deterministic)."""
+    js = dumps_json(doc).encode("utf-8")
+    js += b" " * ((-len(js)) % 4)
+    binc = data + b"\0" * ((-len(data)) % 4)
+    total = 12 + 8 + len(js) + 8 + len(binc)
+    return (
+        struct.pack("<III", 0x46546C67, 2, total)
+        + struct.pack("<II", len(js), 0x4E4F534A)
+        + js
+        + struct.pack("<II", len(binc), 0x004E4942)
+        + binc
+    )
+
+
+def write_gltf(
+    pkg: WrinklePackage,
+    folder: str | Path,
+    stem: str | None = None,
+    options: GltfOptions | None = None,
+) -> list[Path]:
+    """Write ``STEM.gltf`` + ``STEM.bin`` + ``textures/*.png`` into ``folder``; return the paths."""
+    folder = Path(folder)
+    stem = stem or pkg.name
+    doc, data, files = gltf_document(pkg, options)
+    doc["buffers"][0]["uri"] = f"{stem}.bin"
+    written = [
+        write_bytes(folder / f"{stem}.bin", data),
+        write_bytes(folder / f"{stem}.gltf", dumps_json(doc).encode("utf-8")),
+    ]
+    for uri, png in files.items():
+        written.append(write_bytes(folder / uri, png))
+    return written
+
+
+def write_glb(pkg: WrinklePackage, path: str | Path, options: GltfOptions | None = None) -> Path:
+    """Write a self-contained GLB (images embedded as bufferViews)."""
+    doc, data, _ = gltf_document(pkg, options, embed_images=True)
+    return write_bytes(path, glb_bytes(doc, data))

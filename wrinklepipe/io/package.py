@@ -1,0 +1,332 @@
+"""The packaged (encoded) form of a wrinkle asset: what the glTF/USD writers write, readers read.
+
+A :class:`WrinklePackage` holds the mesh, the textures *as stored* (integer pixels, row 0 at the
+top of the image, i.e. glTF's v = 0) and a format-neutral description of the wrinkle setup
+(``meta``) in which textures are named, not indexed. Both writers serialise the same package, so a
+glTF -> USD -> glTF round trip compares packages field by field and pixel by pixel.
+
+:func:`package_from_asset` encodes an in-memory :class:`~wrinklepipe.asset.WrinkleAsset` (float
+unit normals, float masks); :func:`asset_from_package` decodes a package back into one (what the
+validator works on). The per-texel encodings are those of :mod:`wrinklepipe.model`.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe import model
+from wrinklepipe.asset import Mesh, Region, WrinkleAsset
+from wrinklepipe.errors import input_error
+
+EXTENSION = "WRINKLEPIPE_wrinkle_maps"
+CHANNELS = "rgba"
+#: Largest integer a float32 holds exactly: vertex IDs are stored as FLOAT accessors.
+MAX_FLOAT_ID = 1 << 24
+
+
+@dataclass
+class PackedTexture:
+    """One stored texture: integer pixels ``[H, W, C]`` (uint8/uint16), row 0 = top (glTF v=0)."""
+
+    name: str  # stable identifier and file stem: "base_normal", "wrinkle_stretch", "mask_0"
+    pixels: np.ndarray
+    role: str  # "base_normal" | "state" | "mask"
+
+    @property
+    def bits(self) -> int:
+        return 16 if self.pixels.dtype == np.uint16 else 8
+
+
+@dataclass
+class WeightCurves:
+    """Region weights keyed over time: ``times`` [T] seconds, ``values`` [T, R] (float32)."""
+
+    name: str
+    times: np.ndarray
+    values: np.ndarray
+
+
+@dataclass
+class WrinklePackage:
+    """Mesh + stored textures + wrinkle description (``meta``, texture references by name)."""
+
+    name: str
+    mesh: Mesh
+    textures: list[PackedTexture]
+    meta: dict[str, Any]
+    curves: list[WeightCurves] = field(default_factory=list)
+
+    def texture(self, name: str) -> PackedTexture:
+        for t in self.textures:
+            if t.name == name:
+                return t
+        raise KeyError(name)
+
+
+@dataclass(frozen=True)
+class PackOptions:
+    """How :func:`package_from_asset` stores maps.
+
+    ``bits``: 8 or 16 per channel for the base and state maps (masks are always 8-bit).
+    ``mask_layout``: a layout of :mod:`wrinklepipe.masks` (docs/regions.md): ``"rgba"`` packs
+    four masks per RGBA texture (Jimenez), ``"array"`` stores one single-channel texture per
+    region (Reis' texture array), ``"lr-split"``, ``"jimenez8"``, ``"metahuman"``.
+    """
+
+    bits: int = 8
+    mask_layout: str = "rgba"
+
+
+# ------------------------------------------------------------------------------------------------
+# encoding: the formulas of wrinklepipe.model / docs/normals.md (values01 = what 8/16-bit stores)
+
+
+def _q(values01: np.ndarray, bits: int) -> np.ndarray:
+    """Round values in [0, 1] to uint8/uint16 (round to nearest, clipped)."""
+    top = np.float32((1 << bits) - 1)
+    v = np.clip(np.asarray(values01, np.float32) * top, 0.0, top)
+    return np.rint(v).astype(np.uint8 if bits == 8 else np.uint16)
+
+
+def _dq(q: np.ndarray) -> np.ndarray:
+    """Integer texels back to values01 (float32)."""
+    top = np.float32(65535.0 if q.dtype == np.uint16 else 255.0)
+    return (q.astype(np.float32) * (np.float32(1.0) / top)).astype(np.float32)
+
+
+def _full(n: np.ndarray) -> np.ndarray:
+    return np.clip(np.float32(0.5) + np.float32(0.5) * np.asarray(n, np.float32), 0.0, 1.0)
+
+
+def encode_state(base: np.ndarray, state: np.ndarray, encoding: str, scale: float) -> np.ndarray:
+    """Stored values01 ``[H, W, 3]`` of one wrinkled-face normal map ``state`` over ``base``.
+
+    pd: wrinkle-only slopes ``pd(W) - pd(B)`` in ``[-scale, scale]`` -> R, G (B unused, 0);
+    diff: ``0.5 + 0.5 scale (W - B)`` (scale = gain); full: ``0.5 + 0.5 W``; composite: the
+    wrinkle-only normal ``normalize(pd(W) - pd(B), 1)`` as ``0.5 + 0.5 n``.
+    """
+    if encoding in ("pd", "composite"):
+        d = model.normal_to_pd(state) - model.normal_to_pd(base)
+        if encoding == "composite":
+            return _full(model.pd_to_normal(d))
+        rg = np.clip(np.float32(0.5) + d * np.float32(0.5 / scale), 0.0, 1.0)
+        return np.concatenate([rg, np.zeros(rg.shape[:-1] + (1,), np.float32)], axis=-1)
+    if encoding == "diff":
+        w, b = np.asarray(state, np.float32), np.asarray(base, np.float32)
+        return np.clip(np.float32(0.5) + (w - b) * np.float32(0.5 * scale), 0.0, 1.0)
+    if encoding == "full":
+        return _full(state)
+    raise ValueError(f"unknown encoding {encoding!r}")
+
+
+def decode_state(base: np.ndarray, stored: np.ndarray, encoding: str, scale: float) -> np.ndarray:
+    """Inverse of :func:`encode_state`: the wrinkled-face unit normal ``[H, W, 3]``."""
+    v = np.asarray(stored, np.float32)
+    if encoding == "pd":
+        d = (v[..., :2] * np.float32(2.0) - np.float32(1.0)) * np.float32(scale)
+        return model.pd_to_normal(model.normal_to_pd(base) + d)
+    if encoding == "diff":
+        return model.normalize(base + (v[..., :3] * np.float32(2.0) - 1.0) / np.float32(scale))
+    if encoding == "full":
+        return model.normalize(v[..., :3] * np.float32(2.0) - 1.0)
+    if encoding == "composite":
+        d = model.normal_to_pd(model.normalize(v[..., :3] * np.float32(2.0) - 1.0))
+        return model.pd_to_normal(model.normal_to_pd(base) + d)
+    raise ValueError(f"unknown encoding {encoding!r}")
+
+
+def _resize_nearest(img: np.ndarray, h: int, w: int) -> np.ndarray:
+    if img.shape[0] == h and img.shape[1] == w:
+        return img
+    rows = (np.arange(h) * img.shape[0]) // h
+    cols = (np.arange(w) * img.shape[1]) // w
+    return img[rows][:, cols]
+
+
+def pack_masks(
+    masks: np.ndarray, names: list[str], layout: str, sides: list[str] | None = None
+) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+    """Masks ``[R, H, W]`` -> (textures as values01 ``[H, W, C]``, channel table).
+
+    :func:`wrinklepipe.masks.pack` does the packing (docs/regions.md); ``array`` layers become
+    single-channel textures, the others RGBA textures.
+    """
+    from wrinklepipe import masks as wm
+
+    p = wm.pack(masks, names, layout=layout, sides=sides)
+    tex = np.asarray(p.textures, np.float32)
+    if tex.ndim == 3:
+        return [t[..., None] for t in tex], [dict(e) for e in p.table]
+    return list(tex), [dict(e) for e in p.table]
+
+
+def unpack_masks(textures: list[np.ndarray], table: list[dict[str, Any]]) -> np.ndarray:
+    """Channel table + textures (values01 ``[H, W, C]``) -> masks ``[R, H, W]`` in table order."""
+    from wrinklepipe import masks as wm
+
+    if not table:
+        return np.zeros((0, 1, 1), np.float32)
+    if all("layer" in e for e in table):
+        stack = np.stack([t[..., 0] for t in textures])
+    else:
+        stack = np.stack([t if t.shape[-1] == 4 else _rgba(t) for t in textures])
+    return wm.unpack(stack, table)[1]
+
+
+def _rgba(t: np.ndarray) -> np.ndarray:
+    out = np.zeros(t.shape[:2] + (4,), np.float32)
+    out[..., : t.shape[-1]] = t
+    return out
+
+
+def package_from_asset(
+    asset: WrinkleAsset,
+    options: PackOptions | None = None,
+    curves: list[WeightCurves] | None = None,
+) -> WrinklePackage:
+    """Encode an in-memory asset into stored textures and a wrinkle description.
+
+    The maps are stored at the asset's own sizes (resampling is a stage of its own, before this).
+    """
+    opt = options or PackOptions()
+    if asset.mesh is None:
+        raise input_error(asset.name, "the asset has no mesh; glTF and USD output need one")
+    scale = float(asset.pd_scale) if asset.encoding in ("pd", "diff") else 1.0
+    base = model.normalize(asset.base)
+    textures = [PackedTexture("base_normal", _q(0.5 + 0.5 * base, opt.bits), "base_normal")]
+    states_meta = []
+    for k, name in enumerate(asset.state_names):
+        st = model.normalize(asset.states[k])
+        b = base
+        if b.shape[:2] != st.shape[:2]:
+            b = model.normalize(_resize_nearest(base, st.shape[0], st.shape[1]))
+        tex = PackedTexture(
+            f"wrinkle_{name}", _q(encode_state(b, st, asset.encoding, scale), opt.bits), "state"
+        )
+        textures.append(tex)
+        states_meta.append({"name": name, "texture": tex.name})
+    masks = np.clip(np.asarray(asset.masks, np.float32), 0.0, 1.0)
+    names = [r.name for r in asset.regions]
+    mask_tex, table = pack_masks(masks, names, opt.mask_layout, [r.side for r in asset.regions])
+    mask_names = []
+    for i, t in enumerate(mask_tex):
+        mask_names.append(f"mask_{i}")
+        textures.append(PackedTexture(mask_names[-1], _q(t, 8), "mask"))
+    meta: dict[str, Any] = {
+        "encoding": asset.encoding,
+        "scale": scale,
+        "policy": asset.policy,
+        "states": states_meta,
+        "masks": {"layout": opt.mask_layout, "textures": mask_names, "table": table},
+        "regions": [
+            {"name": r.name, "side": r.side, "states": list(r.states)} for r in asset.regions
+        ],
+        "expressions": {
+            e: {r: float(w) for r, w in sorted(row.items())}
+            for e, row in sorted(asset.expressions.items())
+        },
+        "drivers": [dict(d) for d in asset.drivers],
+        "weights": [0.0] * len(names),  # float32 values (they are animated as FLOAT)
+    }
+    return WrinklePackage(asset.name, asset.mesh, textures, meta, list(curves or []))
+
+
+def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
+    """Decode a package into float maps and masks (what validation and rendering work on)."""
+    meta = pkg.meta
+    enc, scale = str(meta["encoding"]), float(meta["scale"])
+    base = model.normalize(2.0 * _dq(pkg.texture("base_normal").pixels)[..., :3] - 1.0)
+    states = []
+    for s in meta["states"]:
+        stored = _dq(pkg.texture(s["texture"]).pixels)
+        b = base
+        if b.shape[:2] != stored.shape[:2]:
+            b = model.normalize(_resize_nearest(base, stored.shape[0], stored.shape[1]))
+        states.append(decode_state(b, stored, enc, scale))
+    mask_tex = [_dq(pkg.texture(n).pixels) for n in meta["masks"]["textures"]]
+    masks = unpack_masks(mask_tex, meta["masks"]["table"])
+    regions = tuple(
+        Region(r["name"], r.get("side", "center"), tuple(r.get("states", ())))
+        for r in meta["regions"]
+    )
+    return WrinkleAsset(
+        name=pkg.name,
+        base=base,
+        states=np.stack(states) if states else np.zeros((0,) + base.shape, np.float32),
+        state_names=tuple(s["name"] for s in meta["states"]),
+        masks=masks,
+        regions=regions,
+        expressions={e: dict(row) for e, row in meta.get("expressions", {}).items()},
+        encoding=enc,
+        policy=str(meta["policy"]),
+        pd_scale=scale,
+        mesh=pkg.mesh,
+        drivers=[dict(d) for d in meta.get("drivers", [])],
+    )
+
+
+# ------------------------------------------------------------------------------------------------
+# deterministic PNG (no gAMA/eXIf/time chunks: the Khronos validator flags colour-space chunks)
+
+
+def png_bytes(pixels: np.ndarray) -> bytes:
+    """Encode ``[H, W, C]`` uint8/uint16 (C = 1..4) as a minimal PNG: IHDR, IDAT, IEND only.
+
+    Rows use the Up filter (vectorised); zlib level 9. Same pixels -> same bytes.
+    """
+    px = np.asarray(pixels)
+    if px.ndim == 2:
+        px = px[..., None]
+    h, w, c = px.shape
+    color_type = {1: 0, 2: 4, 3: 2, 4: 6}[c]
+    depth = 16 if px.dtype == np.uint16 else 8
+    raw = px.astype(">u2").view(np.uint8) if depth == 16 else px.astype(np.uint8)
+    rows = raw.reshape(h, -1)
+    up = rows.copy()
+    up[1:] = rows[1:] - rows[:-1]  # uint8 wraps mod 256 as PNG requires
+    body = np.concatenate([np.full((h, 1), 2, np.uint8), up], axis=1)
+    data = zlib.compress(body.tobytes(), 9)
+
+    def chunk(tag: bytes, payload: bytes) -> bytes:
+        crc = zlib.crc32(tag + payload) & 0xFFFFFFFF
+        return struct.pack(">I", len(payload)) + tag + payload + struct.pack(">I", crc)
+
+    ihdr = struct.pack(">IIBBBBB", w, h, depth, color_type, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b"")
+
+
+def png_pixels(data: bytes, file: str = "") -> np.ndarray:
+    """Decode a PNG's pixels as stored (uint8/uint16 ``[H, W, C]``) via OpenImageIO."""
+    import os
+    import tempfile
+
+    import OpenImageIO as oiio
+
+    fd, tmp = tempfile.mkstemp(suffix=".png")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        config = oiio.ImageSpec()
+        config.attribute("oiio:UnassociatedAlpha", 1)
+        inp = oiio.ImageInput.open(tmp, config)
+        if inp is None:
+            raise input_error(file, f"cannot decode image: {oiio.geterror().strip()}")
+        try:
+            spec = inp.spec()
+            fmt = oiio.UINT16 if spec.format == oiio.UINT16 else oiio.UINT8
+            arr = inp.read_image(0, 0, 0, spec.nchannels, fmt)
+        finally:
+            inp.close()
+    finally:
+        os.unlink(tmp)
+    if arr is None:
+        raise input_error(file, "cannot decode image pixels (truncated or corrupt?)")
+    arr = np.asarray(arr)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    return np.ascontiguousarray(arr.reshape(spec.height, spec.width, spec.nchannels))

@@ -1,0 +1,284 @@
+"""Read a wrinklepipe USD (.usda/.usdc/.usdz written by :mod:`wrinklepipe.io.usd_write`).
+
+Finds the Material with ``WrinkleMapsAPI`` and the Mesh bound to it, undoes the V flip
+(``uv = (s, 1 - t)``), reads the textures through Ar (so files inside a .usdz work) and returns the
+same :class:`~wrinklepipe.io.package.WrinklePackage` the glTF reader returns. Texture paths must be
+relative and stay inside the layer's folder or package.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.asset import Mesh
+from wrinklepipe.errors import input_error
+from wrinklepipe.io.package import PackedTexture, WeightCurves, WrinklePackage, png_pixels
+from wrinklepipe.io.usd_write import API_NAME, register_schema
+
+
+@dataclass(frozen=True)
+class UsdReadOptions:
+    """Reader limits: ``max_pixels`` per texture, ``max_texture_bytes`` per texture file."""
+
+    max_pixels: int = 8192 * 8192
+    max_texture_bytes: int = 512 * 1024 * 1024
+
+
+def _asset_bytes(layer_path: Path, asset: Any, file: str, key: str, opt: UsdReadOptions) -> bytes:
+    from pxr import Ar
+
+    raw = asset.path if hasattr(asset, "path") else str(asset)
+    if not raw:
+        raise input_error(file, "empty texture path", key)
+    parts = PurePosixPath(raw.replace("\\", "/")).parts
+    if raw.startswith(("/", "\\")) or (len(raw) > 1 and raw[1] == ":") or ".." in parts:
+        raise input_error(
+            file, f"texture path {raw!r} must be relative and inside the asset folder", key
+        )
+    resolved = asset.resolvedPath if hasattr(asset, "resolvedPath") else ""
+    if not resolved:
+        raise input_error(file, f"texture {raw!r} not found", key)
+    handle = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
+    if handle is None:
+        raise input_error(file, f"texture {raw!r} cannot be opened", key)
+    size = handle.GetSize()
+    if size > opt.max_texture_bytes:
+        raise input_error(file, f"texture {raw!r} is {size} bytes, over the cap", key)
+    data = bytes(handle.GetBuffer())
+    if data[:8] != b"\x89PNG\r\n\x1a\n" or len(data) < 24:
+        raise input_error(file, f"texture {raw!r} is not a PNG", key)
+    w, h = struct.unpack(">II", data[16:24])
+    if w * h > opt.max_pixels:
+        raise input_error(file, f"texture {raw!r} is {w} x {h}, over the pixel cap", key)
+    return data
+
+
+def _stem(asset: Any) -> str:
+    return PurePosixPath(asset.path.replace("\\", "/")).stem
+
+
+def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> WrinklePackage:
+    """Load a wrinklepipe USD stage as a :class:`WrinklePackage`."""
+    from pxr import Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel
+
+    opt = options or UsdReadOptions()
+    path = Path(path)
+    file = str(path)
+    if not path.is_file():
+        raise input_error(file, "file not found")
+    register_schema()
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Tf.ErrorException as exc:
+        raise input_error(file, f"cannot open USD: {str(exc).strip()}") from None
+    if stage is None:
+        raise input_error(file, "cannot open USD stage")
+    mat_prim = None
+    for prim in stage.Traverse():
+        if prim.IsA(UsdShade.Material) and API_NAME in prim.GetAppliedSchemas():
+            mat_prim = prim
+            break
+    if mat_prim is None:
+        raise input_error(file, f"no Material with {API_NAME}: not a wrinklepipe asset")
+    mat = UsdShade.Material(mat_prim)
+    mesh_prim = None
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.Mesh):
+            bound, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+            if bound and bound.GetPath() == mat_prim.GetPath():
+                mesh_prim = prim
+                break
+    if mesh_prim is None:
+        raise input_error(file, f"no Mesh bound to {mat_prim.GetPath()}")
+    mkey = str(mesh_prim.GetPath())
+    gm = UsdGeom.Mesh(mesh_prim)
+    counts = np.asarray(gm.GetFaceVertexCountsAttr().Get() or [], np.int64)
+    if counts.size == 0 or np.any(counts != 3):
+        raise input_error(file, "mesh must be triangles (faceVertexCounts all 3)", mkey)
+    positions = np.asarray(gm.GetPointsAttr().Get(), np.float32)
+    nv = positions.shape[0]
+    indices = np.asarray(gm.GetFaceVertexIndicesAttr().Get(), np.int64)
+    if indices.min() < 0 or indices.max() >= nv:
+        raise input_error(file, "faceVertexIndices out of range", mkey)
+    pv = UsdGeom.PrimvarsAPI(gm)
+
+    def primvar(name: str, required: bool = True) -> np.ndarray | None:
+        p = pv.GetPrimvar(name)
+        if not p or not p.HasValue():
+            if required:
+                raise input_error(file, f"primvars:{name} missing", mkey)
+            return None
+        if p.GetInterpolation() != UsdGeom.Tokens.vertex:
+            raise input_error(file, f"primvars:{name} must have vertex interpolation", mkey)
+        arr = np.asarray(p.Get())
+        if arr.shape[0] != nv:
+            raise input_error(
+                file, f"primvars:{name} has {arr.shape[0]} values for {nv} points", mkey
+            )
+        return arr
+
+    st = primvar("st").astype(np.float32)
+    uvs = np.stack([st[:, 0], np.float32(1.0) - st[:, 1]], -1).astype(np.float32)
+    normals = np.asarray(gm.GetNormalsAttr().Get(), np.float32)
+    bias = primvar("wrinkle:bias", required=False)
+    morph_names: tuple[str, ...] = ()
+    deltas = None
+    if mesh_prim.HasAPI(UsdSkel.BindingAPI):
+        binding = UsdSkel.BindingAPI(mesh_prim)
+        names_attr = binding.GetBlendShapesAttr().Get()
+        targets = binding.GetBlendShapeTargetsRel().GetTargets()
+        if names_attr:
+            morph_names = tuple(str(n) for n in names_attr)
+            deltas = np.stack(
+                [
+                    np.asarray(
+                        UsdSkel.BlendShape(stage.GetPrimAtPath(t)).GetOffsetsAttr().Get(),
+                        np.float32,
+                    )
+                    for t in targets
+                ]
+            )
+    mesh = Mesh(
+        positions=positions,
+        indices=indices.reshape(-1, 3).astype(np.uint32),
+        uvs=uvs,
+        normals=normals,
+        tangents=primvar("wrinkle:tangent").astype(np.float32),
+        morph_names=morph_names,
+        morph_deltas=deltas,
+        vertex_ids=primvar("wrinkle:vertexId").astype(np.int64),
+        colors=None if bias is None else bias.astype(np.float32),
+        name=mesh_prim.GetName(),
+    )
+
+    # -- textures ----------------------------------------------------------------------------
+    textures: list[PackedTexture] = []
+
+    def add_texture(asset: Any, key: str, role: str, name: str | None = None) -> str:
+        name = name or _stem(asset)
+        if not any(t.name == name for t in textures):
+            data = _asset_bytes(path, asset, file, key, opt)
+            textures.append(PackedTexture(name, png_pixels(data, f"{file} {key}"), role))
+        return name
+
+    base_shader = UsdShade.Shader(mat_prim.GetChild("base_normal"))
+    if not base_shader:
+        raise input_error(
+            file, "material has no base_normal texture shader", str(mat_prim.GetPath())
+        )
+    base_file = base_shader.GetInput("file").Get()
+    add_texture(base_file, f"{base_shader.GetPath()}.inputs:file", "base_normal", "base_normal")
+
+    def api(name: str) -> Any:
+        a = mat_prim.GetAttribute(f"wrinkle:{name}")
+        if not a or not a.HasAuthoredValue():
+            raise input_error(file, f"wrinkle:{name} missing", str(mat_prim.GetPath()))
+        return a.Get()
+
+    state_names = [str(s) for s in api("stateNames")]
+    states = []
+    for s in state_names:
+        inp = mat.GetInput(f"wrinkle:state:{Tf.MakeValidIdentifier(s)}")
+        if not inp:
+            raise input_error(file, f"inputs:wrinkle:state:{s} missing", str(mat_prim.GetPath()))
+        states.append(
+            {
+                "name": s,
+                "texture": add_texture(inp.Get(), inp.GetAttr().GetPath().pathString, "state"),
+            }
+        )
+    mask_names = []
+    for n in api("maskNames"):
+        inp = mat.GetInput(f"wrinkle:mask:{n}")
+        if not inp:
+            raise input_error(file, f"inputs:wrinkle:mask:{n} missing", str(mat_prim.GetPath()))
+        mask_names.append(add_texture(inp.Get(), inp.GetAttr().GetPath().pathString, "mask"))
+
+    region_names = [str(n) for n in api("regionNames")]
+    sides = [str(n) for n in api("regionSides")]
+    rstates = [str(n) for n in api("regionStates")]
+    layout = str(api("maskLayout"))
+    mtex = list(api("maskTexture"))
+    mch = [str(c) for c in api("maskChannel")]
+    stex = list(api("splitTexture"))
+    sch = [str(c) for c in api("splitChannel")]
+    r = len(region_names)
+    if not (len(sides) == len(rstates) == len(mtex) == len(mch) == len(stex) == len(sch) == r):
+        raise input_error(
+            file, "per-region arrays of WrinkleMapsAPI differ in length", str(mat_prim.GetPath())
+        )
+    table: list[dict[str, Any]] = []
+    for i, name in enumerate(region_names):
+        if layout == "array":
+            e: dict[str, Any] = {"region": name, "layer": int(mtex[i])}
+        else:
+            e = {"region": name, "texture": int(mtex[i]), "channel": mch[i]}
+            if layout == "lr-split":
+                e["side"] = sides[i]
+            if int(stex[i]) >= 0:
+                e["split"] = {"texture": int(stex[i]), "channel": sch[i]}
+        table.append(e)
+    expr_names = [str(n) for n in api("expressionNames")]
+    ew = (
+        np.asarray(api("expressionWeights"), np.float64).reshape(len(expr_names), r)
+        if expr_names
+        else np.zeros((0, r), np.float64)
+    )
+    expressions = {
+        e: {rn: float(w) for rn, w in sorted(zip(region_names, row))}
+        for e, row in sorted(zip(expr_names, ew))
+    }
+    try:
+        drivers = json.loads(str(api("drivers")))
+    except json.JSONDecodeError as exc:
+        raise input_error(
+            file, f"wrinkle:drivers is not JSON: {exc}", str(mat_prim.GetPath())
+        ) from None
+    weights_attr = mat_prim.GetAttribute("wrinkle:weights")
+    default = weights_attr.Get(Usd.TimeCode.Default())
+    meta: dict[str, Any] = {
+        "encoding": str(api("encoding")),
+        "scale": float(api("scale")),
+        "policy": str(api("policy")),
+        "states": states,
+        "masks": {"layout": layout, "textures": mask_names, "table": table},
+        "regions": [
+            {"name": n, "side": sides[i], "states": [x for x in rstates[i].split(",") if x]}
+            for i, n in enumerate(region_names)
+        ],
+        "expressions": expressions,
+        "drivers": drivers,
+        "weights": [float(w) for w in (default if default is not None else [0.0] * r)],
+    }
+    fps = stage.GetTimeCodesPerSecond()
+
+    def curve(attr: Any, name: str) -> WeightCurves | None:
+        codes = attr.GetTimeSamples()
+        if not codes:
+            return None
+        times = np.array([c / fps for c in codes], np.float32)
+        values = np.stack([np.asarray(attr.Get(Usd.TimeCode(c)), np.float32) for c in codes])
+        if values.shape[1] != r:
+            raise input_error(file, f"{attr.GetPath()}: {values.shape[1]} weights for {r} regions")
+        return WeightCurves(name, times, values)
+
+    curves = []
+    first = curve(
+        weights_attr, str(mat_prim.GetAttribute("wrinkle:weightCurve").Get() or "weights")
+    )
+    if first is not None:
+        curves.append(first)
+    for attr in sorted(mat_prim.GetAttributes(), key=lambda a: a.GetName()):
+        if attr.GetName().startswith("wrinkle:curves:"):
+            c = curve(attr, attr.GetName().split(":", 2)[2])
+            if c is not None:
+                curves.append(c)
+    del Sdf
+    name = stage.GetDefaultPrim().GetName() if stage.GetDefaultPrim() else path.stem
+    return WrinklePackage(name, mesh, textures, meta, curves)

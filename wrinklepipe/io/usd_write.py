@@ -1,0 +1,328 @@
+"""USD writer for a :class:`~wrinklepipe.io.package.WrinklePackage` (usd-core).
+
+Layout of the stage (``defaultPrim`` = the asset name, Y up, metres)::
+
+    /NAME                    SkelRoot (Xform when the mesh has no morph targets)
+      Skel                   Skeleton (one root joint) + Anim (SkelAnimation: blend-shape names)
+      MESH                   Mesh: points, triangles, normals, primvars:st (v up),
+                             primvars:wrinkle:vertexId (int), primvars:wrinkle:tangent (float4),
+                             primvars:wrinkle:bias; SkelBindingAPI with one BlendShape per morph
+      Looks/skin             Material + WrinkleMapsAPI (schemas/usd, codeless)
+        Surface              UsdPreviewSurface; normal <- base_normal (raw, scale 2, bias -1)
+        StReader             UsdPrimvarReader_float2 "st"
+        base_normal          UsdUVTexture
+        wrinkle_<state>      UsdUVTexture, inputs:file <- Material inputs:wrinkle:state:<state>
+        mask_<i>             UsdUVTexture, inputs:file <- Material inputs:wrinkle:mask:mask_<i>
+
+V flip: glTF's ``uv`` has v = 0 at the top of the image; USD's ``st`` has t = 0 at the bottom,
+so ``st = (u, 1 - v)`` over the very same image files. Region weights go to ``wrinkle:weights``,
+as time samples when there is a weight curve (time code = seconds x ``timeCodesPerSecond``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wrinklepipe.atomic import check_not_input, write_bytes
+from wrinklepipe.errors import input_error
+from wrinklepipe.io.package import MAX_FLOAT_ID, WrinklePackage, png_bytes
+from wrinklepipe.paths import SCHEMAS_DIR
+
+API_NAME = "WrinkleMapsAPI"
+USD_SCHEMA_DIR = SCHEMAS_DIR / "usd"
+
+
+def register_schema() -> None:
+    """Register the codeless ``WrinkleMapsAPI`` (``schemas/usd/plugInfo.json``); idempotent."""
+    from pxr import Plug
+
+    Plug.Registry().RegisterPlugins(str(USD_SCHEMA_DIR))
+
+
+@dataclass(frozen=True)
+class UsdOptions:
+    """``texture_dir``: folder (relative to the layer) of the PNGs; ``fps``: timeCodesPerSecond."""
+
+    texture_dir: str = "textures"
+    fps: float = 24.0
+
+
+def _ident(name: str) -> str:
+    from pxr import Tf
+
+    return Tf.MakeValidIdentifier(name)
+
+
+def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None):  # noqa: ANN201
+    """Build an in-memory ``Usd.Stage`` for the package (textures referenced, not written)."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
+
+    opt = options or UsdOptions()
+    register_schema()
+    m = pkg.mesh
+    if m.uvs is None or m.normals is None or m.tangents is None or m.vertex_ids is None:
+        raise input_error(pkg.name, "USD output needs UVs, normals, tangents and vertex IDs")
+    if int(np.max(m.vertex_ids, initial=0)) >= MAX_FLOAT_ID:
+        raise input_error(pkg.name, f"vertex IDs must lie below {MAX_FLOAT_ID}")
+    stage = Usd.Stage.CreateInMemory()
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    stage.SetTimeCodesPerSecond(opt.fps)
+    stage.SetFramesPerSecond(opt.fps)
+    root_name = _ident(pkg.name)
+    root_path = Sdf.Path("/" + root_name)
+    has_morphs = m.morph_deltas is not None and len(m.morph_names) > 0
+    if has_morphs:
+        root = UsdSkel.Root.Define(stage, root_path).GetPrim()
+    else:
+        root = UsdGeom.Xform.Define(stage, root_path).GetPrim()
+    stage.SetDefaultPrim(root)
+    Usd.ModelAPI(root).SetKind("component")
+
+    # -- mesh --------------------------------------------------------------------------------
+    mesh = UsdGeom.Mesh.Define(stage, root_path.AppendChild(_ident(m.name)))
+    pts = np.ascontiguousarray(m.positions, np.float32)
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(m.triangle_count, 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(
+        Vt.IntArray.FromNumpy(np.ascontiguousarray(m.indices.reshape(-1), np.int32))
+    )
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateExtentAttr(
+        Vt.Vec3fArray([Gf.Vec3f(*pts.min(0).tolist()), Gf.Vec3f(*pts.max(0).tolist())])
+    )
+    mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(m.normals, np.float32)))
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    pv = UsdGeom.PrimvarsAPI(mesh)
+    st = np.ascontiguousarray(np.stack([m.uvs[:, 0], 1.0 - m.uvs[:, 1]], -1).astype(np.float32))
+    pv.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(
+        Vt.Vec2fArray.FromNumpy(st)
+    )
+    pv.CreatePrimvar("wrinkle:vertexId", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex).Set(
+        Vt.IntArray.FromNumpy(np.ascontiguousarray(m.vertex_ids, np.int32))
+    )
+    pv.CreatePrimvar("wrinkle:tangent", Sdf.ValueTypeNames.Float4Array, UsdGeom.Tokens.vertex).Set(
+        Vt.Vec4fArray.FromNumpy(np.ascontiguousarray(m.tangents, np.float32))
+    )
+    if m.colors is not None:
+        pv.CreatePrimvar("wrinkle:bias", Sdf.ValueTypeNames.Float4Array, UsdGeom.Tokens.vertex).Set(
+            Vt.Vec4fArray.FromNumpy(np.ascontiguousarray(m.colors, np.float32))
+        )
+
+    # -- blend shapes (UsdSkel) ----------------------------------------------------------------
+    if has_morphs:
+        skel = UsdSkel.Skeleton.Define(stage, root_path.AppendChild("Skel"))
+        skel.CreateJointsAttr(Vt.TokenArray(["root"]))
+        ident = Gf.Matrix4d(1.0)
+        skel.CreateBindTransformsAttr(Vt.Matrix4dArray([ident]))
+        skel.CreateRestTransformsAttr(Vt.Matrix4dArray([ident]))
+        anim = UsdSkel.Animation.Define(stage, skel.GetPath().AppendChild("Anim"))
+        shape_names = [_ident(n) for n in m.morph_names]
+        anim.CreateBlendShapesAttr(Vt.TokenArray(shape_names))
+        anim.CreateBlendShapeWeightsAttr(Vt.FloatArray([0.0] * len(shape_names)))
+        anim.CreateJointsAttr(Vt.TokenArray(["root"]))
+        anim.CreateTranslationsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 0, 0)]))
+        anim.CreateRotationsAttr(Vt.QuatfArray([Gf.Quatf(1, 0, 0, 0)]))
+        anim.CreateScalesAttr(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)]))
+        UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
+            [anim.GetPath()]
+        )
+        binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+        binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+        binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
+        binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+        binding.CreateGeomBindTransformAttr(ident)
+        binding.CreateBlendShapesAttr(Vt.TokenArray(shape_names))
+        targets = []
+        for name, delta in zip(shape_names, m.morph_deltas):
+            bs = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
+            bs.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(delta, np.float32)))
+            targets.append(bs.GetPath())
+        binding.CreateBlendShapeTargetsRel().SetTargets(targets)
+
+    # -- material --------------------------------------------------------------------------------
+    looks = UsdGeom.Scope.Define(stage, root_path.AppendChild("Looks"))
+    mat = UsdShade.Material.Define(stage, looks.GetPath().AppendChild("skin"))
+    surf = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("Surface"))
+    surf.CreateIdAttr("UsdPreviewSurface")
+    surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.8, 0.62, 0.52))
+    surf.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.55)
+    surf.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+    mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
+    reader = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("StReader"))
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    tdir = f"./{opt.texture_dir}/" if opt.texture_dir else "./"
+
+    def texture(name: str, scale: tuple, bias: tuple):  # noqa: ANN202
+        tex = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild(_ident(name)))
+        tex.CreateIdAttr("UsdUVTexture")
+        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+            reader.ConnectableAPI(), "result"
+        )
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
+        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("clamp")
+        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("clamp")
+        tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*scale))
+        tex.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*bias))
+        tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+        tex.CreateOutput("rgba", Sdf.ValueTypeNames.Float4)
+        return tex
+
+    base = texture("base_normal", (2, 2, 2, 1), (-1, -1, -1, 0))
+    base.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"{tdir}base_normal.png"))
+    surf.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(
+        base.ConnectableAPI(), "rgb"
+    )
+    meta = pkg.meta
+    enc, scale = str(meta["encoding"]), float(meta["scale"])
+    if enc == "pd":  # texture output = slopes in [-s, s]
+        s_scale, s_bias = (2 * scale, 2 * scale, 1, 1), (-scale, -scale, 0, 0)
+    elif enc == "diff":  # texture output = W - B
+        s_scale, s_bias = (2 / scale,) * 3 + (1,), (-1 / scale,) * 3 + (0,)
+    else:  # full / composite: unit normals
+        s_scale, s_bias = (2, 2, 2, 1), (-1, -1, -1, 0)
+
+    def interface_texture(kind: str, key: str, name: str, sc: tuple, bi: tuple) -> None:
+        inp = mat.CreateInput(f"wrinkle:{kind}:{key}", Sdf.ValueTypeNames.Asset)
+        inp.Set(Sdf.AssetPath(f"{tdir}{name}.png"))
+        tex = texture(name, sc, bi)
+        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).ConnectToSource(inp)
+
+    for s in meta["states"]:
+        interface_texture("state", _ident(s["name"]), s["texture"], s_scale, s_bias)
+    for name in meta["masks"]["textures"]:
+        interface_texture("mask", _ident(name), name, (1, 1, 1, 1), (0, 0, 0, 0))
+
+    prim = mat.GetPrim()
+    prim.ApplyAPI(API_NAME)
+    table = meta["masks"]["table"]
+    regions = meta["regions"]
+    names = [r["name"] for r in regions]
+    expr_names = list(meta.get("expressions", {}))
+    expr = np.array(
+        [[meta["expressions"][e].get(n, 0.0) for n in names] for e in expr_names], np.float64
+    ).reshape(-1)
+    values = {
+        "wrinkle:encoding": enc,
+        "wrinkle:scale": scale,
+        "wrinkle:policy": str(meta["policy"]),
+        "wrinkle:stateNames": Vt.TokenArray([s["name"] for s in meta["states"]]),
+        "wrinkle:maskLayout": str(meta["masks"]["layout"]),
+        "wrinkle:maskNames": Vt.TokenArray([_ident(n) for n in meta["masks"]["textures"]]),
+        "wrinkle:regionNames": Vt.TokenArray(names),
+        "wrinkle:regionSides": Vt.TokenArray([r.get("side", "center") for r in regions]),
+        "wrinkle:regionStates": Vt.StringArray([",".join(r.get("states", [])) for r in regions]),
+        "wrinkle:maskTexture": Vt.IntArray(
+            [int(e.get("layer", e.get("texture", -1))) for e in table]
+        ),
+        "wrinkle:maskChannel": Vt.TokenArray([str(e.get("channel", "")) for e in table]),
+        "wrinkle:splitTexture": Vt.IntArray(
+            [int(e["split"]["texture"]) if e.get("split") else -1 for e in table]
+        ),
+        "wrinkle:splitChannel": Vt.TokenArray(
+            [str(e["split"]["channel"]) if e.get("split") else "" for e in table]
+        ),
+        "wrinkle:expressionNames": Vt.TokenArray(expr_names),
+        "wrinkle:expressionWeights": Vt.DoubleArray.FromNumpy(expr),
+        "wrinkle:drivers": json.dumps(meta.get("drivers", []), sort_keys=True),
+    }
+    for attr_name, value in values.items():
+        prim.GetAttribute(attr_name).Set(value)
+    if [str(e.get("region")) for e in table] != names:
+        raise input_error(pkg.name, "channel table must list the regions in region order")
+    weights = prim.GetAttribute("wrinkle:weights")
+    weights.Set(Vt.FloatArray([float(w) for w in meta["weights"]]))
+    if pkg.curves:
+        c = pkg.curves[0]
+        prim.GetAttribute("wrinkle:weightCurve").Set(c.name)
+        for t, row in zip(np.asarray(c.times, np.float32), np.asarray(c.values, np.float32)):
+            weights.Set(Vt.FloatArray.FromNumpy(row), Usd.TimeCode(float(t) * opt.fps))
+        stage.SetStartTimeCode(float(c.times[0]) * opt.fps)
+        stage.SetEndTimeCode(float(c.times[-1]) * opt.fps)
+        for extra in pkg.curves[1:]:
+            a = prim.CreateAttribute(
+                f"wrinkle:curves:{_ident(extra.name)}", Sdf.ValueTypeNames.FloatArray
+            )
+            a.SetCustom(True)
+            for t, row in zip(
+                np.asarray(extra.times, np.float32), np.asarray(extra.values, np.float32)
+            ):
+                a.Set(Vt.FloatArray.FromNumpy(row), Usd.TimeCode(float(t) * opt.fps))
+
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
+    return stage
+
+
+def write_usd(
+    pkg: WrinklePackage,
+    path: str | Path,
+    options: UsdOptions | None = None,
+    write_textures: bool = True,
+) -> list[Path]:
+    """Write ``.usda`` / ``.usdc`` (+ the PNGs beside it), or a self-contained ``.usdz``."""
+    opt = options or UsdOptions()
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".usda", ".usdc", ".usd", ".usdz"):
+        raise input_error(path, "USD output must end in .usda, .usdc, .usd or .usdz")
+    check_not_input(path)
+    stage = build_stage(pkg, opt)
+    written: list[Path] = []
+    if suffix == ".usda":
+        text = stage.GetRootLayer().ExportToString()
+        written.append(write_bytes(path, text.encode("utf-8")))
+    elif suffix in (".usdc", ".usd"):
+        written.append(_export_via_temp(stage.GetRootLayer(), path, "usdc"))
+    if suffix != ".usdz" and write_textures:
+        tdir = path.parent / opt.texture_dir if opt.texture_dir else path.parent
+        for t in pkg.textures:
+            written.append(write_bytes(tdir / f"{t.name}.png", png_bytes(t.pixels)))
+    if suffix == ".usdz":
+        written.append(_write_usdz(stage, pkg, path, opt))
+    return written
+
+
+def _export_via_temp(layer, path: Path, fmt: str) -> Path:  # noqa: ANN001
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".{fmt}", dir=path.parent)
+    os.close(fd)
+    try:
+        if not layer.Export(tmp):
+            raise OSError(f"{path}: USD export failed")
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def _write_usdz(stage, pkg: WrinklePackage, path: Path, opt: UsdOptions) -> Path:  # noqa: ANN001
+    """A usdz (uncompressed zip, 64-byte aligned entries) holding a usdc layer and the PNGs."""
+    from pxr import Sdf, UsdUtils
+
+    with tempfile.TemporaryDirectory(prefix="wrinklepipe-usdz-") as work:
+        w = Path(work)
+        layer_path = w / f"{path.stem}.usdc"
+        stage.GetRootLayer().Export(str(layer_path))
+        tdir = w / opt.texture_dir if opt.texture_dir else w
+        tdir.mkdir(parents=True, exist_ok=True)
+        for t in pkg.textures:
+            (tdir / f"{t.name}.png").write_bytes(png_bytes(t.pixels))
+        tmp_z = w / path.name
+        with Sdf.ZipFileWriter.CreateNew(str(tmp_z)) as zw:
+            zw.AddFile(str(layer_path), layer_path.name)
+            for t in pkg.textures:
+                rel = f"{opt.texture_dir}/{t.name}.png" if opt.texture_dir else f"{t.name}.png"
+                zw.AddFile(str(w / rel), rel)
+        del UsdUtils
+        return write_bytes(path, tmp_z.read_bytes())
