@@ -68,7 +68,9 @@ def dense_skin(joints: np.ndarray, weights: np.ndarray, n_joints: int) -> np.nda
 def vertex_influence(alpha: np.ndarray, skin: np.ndarray, combine: str = "clamp") -> np.ndarray:
     """beta ``[F, V, P]`` from alpha ``[F, P, J]`` and dense skin weights ``[V, J]``."""
     lam = (np.asarray(skin, np.float64) > 0).astype(np.float64)
-    beta = np.einsum("vj,fpj->fvp", lam, theta(alpha))
+    t = theta(alpha)  # [F, P, J]
+    f, p, j = t.shape
+    beta = (lam @ t.reshape(f * p, j).T).reshape(-1, f, p).transpose(1, 0, 2)  # BLAS matmul
     if combine == "clamp":
         return np.clip(beta, 0.0, 1.0)
     if combine == "sum":

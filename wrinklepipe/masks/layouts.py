@@ -112,9 +112,10 @@ def _slot(entry: dict[str, Any]) -> int:
 
 def _fill_rgba(masks: np.ndarray, slots: np.ndarray, n_textures: int) -> np.ndarray:
     r, h, w = masks.shape
-    buf = np.zeros((n_textures * 4, h, w), dtype=np.float32)
-    buf[slots] = masks
-    return np.ascontiguousarray(buf.reshape(n_textures, 4, h, w).transpose(0, 2, 3, 1))
+    out = np.zeros((n_textures, h * w, 4), dtype=np.float32)
+    # one strided scatter: region i -> texture slots[i] // 4, channel slots[i] % 4
+    out[slots // 4, :, slots % 4] = masks.reshape(r, h * w)
+    return out.reshape(n_textures, h, w, 4)
 
 
 def _preset_slots(names: Sequence[str], preset: dict[str, int], layout: str) -> np.ndarray | None:
@@ -261,12 +262,16 @@ def _pack_lr_split(
         )
     n_tex = math.ceil((n_slots + 1) / 4)
     h, w = m.shape[1:]
-    buf = np.zeros((n_tex * 4, h, w), dtype=np.float32)
-    # Within a slot at most one member is non-zero at any texel, so the sum is that member.
-    np.add.at(buf, np.array(region_slot), m)
+    # Within a slot at most one member is non-zero at any texel, so the sum is that member:
+    # first members are scattered, second members (the other side of a pair) added on top.
+    slots = np.array(region_slot, dtype=np.int64)
+    first = np.zeros(len(slots), bool)
+    first[np.unique(slots, return_index=True)[1]] = True
+    textures = _fill_rgba(m[first], slots[first], n_tex)
+    if (~first).any():
+        textures = textures + _fill_rgba(m[~first], slots[~first], n_tex)
     split_slot = n_tex * 4 - 1
-    buf[split_slot] = left_any.astype(np.float32)
-    textures = np.ascontiguousarray(buf.reshape(n_tex, 4, h, w).transpose(0, 2, 3, 1))
+    textures[split_slot // 4, ..., split_slot % 4] = left_any.astype(np.float32)
     split_ref = {"texture": split_slot // 4, "channel": CHANNELS[split_slot % 4]}
     table: list[dict[str, Any]] = []
     for n, side, s in zip(names, sides, region_slot):
@@ -350,13 +355,14 @@ def unpack(
     if tex.ndim == 3:
         return names, np.ascontiguousarray(tex[np.array([int(e["layer"]) for e in table], int)])
     n_tex, h, w, _ = tex.shape
-    chans = tex.transpose(0, 3, 1, 2).reshape(n_tex * 4, h, w)
+    flat = tex.reshape(n_tex, h * w, 4)
     slots = np.array([_slot(e) for e in table], dtype=np.int64)
-    out = chans[slots]
+    out = flat[slots // 4, :, slots % 4]  # one gather -> [R, H*W]
     sided = [i for i, e in enumerate(table) if e.get("side", "center") != "center"]
     if sided:
-        split = chans[np.array([_slot(table[i]["split"]) for i in sided], dtype=np.int64)]
-        left = np.array([table[i]["side"] == "left" for i in sided])[:, None, None]
-        factor = np.where(left, split, np.float32(1.0) - split)
-        out[np.array(sided)] = out[np.array(sided)] * factor
-    return names, np.ascontiguousarray(out, dtype=np.float32)
+        split_slots = {_slot(table[i]["split"]) for i in sided}
+        split = {s: flat[s // 4, :, s % 4] for s in split_slots}
+        for i in sided:  # per region (<= 256), each a vectorised product
+            s = split[_slot(table[i]["split"])]
+            out[i] *= s if table[i]["side"] == "left" else np.float32(1.0) - s
+    return names, out.reshape(len(table), h, w)
