@@ -86,3 +86,32 @@ def test_policy_weights():
 
 def test_dynamic_is_registered():
     assert set(wd.KINDS) <= set(wd.DRIVERS)
+
+
+def test_dynamic_driver_plugs_in_the_geometry_module():
+    """A grid shrunk uniformly by s has every triangle's area times s^2: weight 1 - s^2."""
+    pytest.importorskip("wrinklepipe.geometry.dynamic")
+    from wrinklepipe.asset import Mesh
+
+    n = 4
+    y, x = np.mgrid[0:n, 0:n].astype(np.float32)
+    pos = np.stack([x.ravel(), y.ravel(), np.zeros(n * n, np.float32)], axis=1)
+    quads = np.array(
+        [[r * n + c, r * n + c + 1, (r + 1) * n + c] for r in range(n - 1) for c in range(n - 1)]
+    )
+    quads2 = np.array(
+        [
+            [r * n + c + 1, (r + 1) * n + c + 1, (r + 1) * n + c]
+            for r in range(n - 1)
+            for c in range(n - 1)
+        ]
+    )
+    idx = np.concatenate([quads, quads2]).astype(np.uint32)
+    mesh = Mesh(pos, idx, morph_names=("shrink",), morph_deltas=(-0.1 * pos)[None])
+    ctx = wd.DriverContext(("face",), ("stretch", "compress"), mesh=mesh, policy="signed")
+    res = wd.evaluate("dynamic", ctx, {"keys": {"shrink": [[0, 0], [1, 1]]}}, times=[0, 0.5, 1])
+    assert res.per_vertex and res.weights.shape == (3, n * n, 1)
+    np.testing.assert_allclose(
+        res.weights[:, :, 0].mean(axis=1), [0, 1 - 0.95**2, 1 - 0.9**2], atol=1e-5
+    )
+    np.testing.assert_allclose(res.weights[2, :, 0], 0.19, atol=1e-5)
