@@ -155,3 +155,30 @@ chin_raise = [[0.0, 0.0], [1.0, 0.25]]
 def test_bake_missing_driver_kind(demo, tmp_path, capsys):
     msg = _one_error(capsys, ["bake", str(demo), "--driver", "bones", "-o", str(tmp_path / "o")])
     assert "no [[drivers]] of kind = 'bones'" in msg
+
+
+def test_bake_bones_per_vertex_from_the_manifest(demo, tmp_path, capsys):
+    bones = {
+        "times": [0.0, 1.0],
+        "bones": {"brow": [[0, 0, 0], [0, 0.5, 0]], "jaw": [[0, 0, 0], [0, 0, 0]]},
+        "skin": {"joints": ["brow", "jaw"], "weights": [[1, 0], [0, 1], [0.5, 0.5]]},
+    }
+    (demo.parent / "bones.json").write_text(json.dumps(bones))
+    text = """
+[[drivers]]
+kind = "bones"
+file = "bones.json"
+poses = [
+  {name = "neutral", bones = {brow = [0, 0, 0], jaw = [0, 0, 0]}},
+  {name = "compress", bones = {brow = [0, 1, 0], jaw = [0, -1, 0]}},
+]
+"""
+    m = _with_driver(demo, tmp_path, text)
+    out = tmp_path / "bones"
+    assert main(["bake", str(m), "-o", str(out)]) == 0
+    doc = json.loads((out / "weights.json").read_text())
+    assert doc["per_vertex"] and doc["states"] == ["compress"]
+    # t = 1: brow alpha 0.5 -> theta 0.5; jaw does not move -> 0
+    assert doc["weights"][1] == [[0.5], [0.0], [0.5]]
+    msg = _one_error(capsys, ["bake", str(m), "--maps", "-o", str(tmp_path / "m")])
+    assert "per-vertex weights" in msg
