@@ -18,16 +18,26 @@ byte-identical. Each stage is a plain function, usable on its own.
 
 from __future__ import annotations
 
-from dataclasses import replace
+import hashlib
+import html
+import json
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from wrinklepipe.asset import Mesh, WrinkleAsset
+from wrinklepipe import model
+from wrinklepipe.asset import Mesh, Region, WrinkleAsset
+from wrinklepipe.atomic import dumps_json, staged_folder, write_bytes
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.package import (
+    PackOptions,
     WeightCurves,
     WrinklePackage,
+    optional,
     package_from_asset,
+    resize_normals_pd,
 )
 
 # ------------------------------------------------------------------------------------------------
@@ -86,22 +96,20 @@ def prepare_mesh(mesh: Mesh) -> Mesh:
         mesh = replace(mesh, normals=vertex_normals(mesh.positions, mesh.indices))
         notes.append("computed area-weighted vertex normals")
     if mesh.tangents is None:
-        try:
-            from wrinklepipe.geometry.tangents import mikktspace_tangents
-
+        mikktspace_tangents = optional("wrinklepipe.geometry.tangents", "mikktspace_tangents")
+        if mikktspace_tangents is not None:
             tangents = mikktspace_tangents(mesh.positions, mesh.normals, mesh.uvs, mesh.indices)
             notes.append("computed MikkTSpace tangents")
-        except ImportError:
+        else:
             tangents = _fallback_tangents(mesh)
             notes.append("computed per-vertex UV tangents (MikkTSpace stage not installed)")
         mesh = replace(mesh, tangents=np.asarray(tangents, np.float32))
     if mesh.vertex_ids is None:
-        try:
-            from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
-
+        compute_vertex_ids = optional("wrinklepipe.geometry.vertex_ids", "compute_vertex_ids")
+        if compute_vertex_ids is not None:
             ids = compute_vertex_ids(mesh.positions)
             notes.append("computed spatial-hash vertex IDs")
-        except ImportError:
+        else:
             ids = _fallback_vertex_ids(mesh.positions)
             notes.append("computed vertex IDs by exact position (vertex-ids stage not installed)")
         mesh = replace(mesh, vertex_ids=np.asarray(ids, np.int64))
@@ -135,3 +143,584 @@ def demo_package(size: int = 256, encoding: str = "pd") -> WrinklePackage:
     asset = demo_asset(size, encoding=encoding)
     asset = replace(asset, mesh=prepare_mesh(asset.mesh))
     return package_from_asset(asset, curves=[expression_cycle(asset)])
+
+
+def curves_from_weights(
+    name: str, times: np.ndarray, weights: np.ndarray, region_states: np.ndarray
+) -> tuple[WeightCurves, float]:
+    """Driver weights ``[F, R, K]`` -> per-region curves ``[F, R]`` (+ the largest value lost).
+
+    The extension animates one weight per region (spread over the states the region drives, as
+    :meth:`DriverContext.spread` does); the value is read from the first state the region drives.
+    The second value returned is ``max |w[f, r, k] - w_r[f] * region_states[r, k]|``, 0 when the
+    driver's weights are of that form.
+    """
+    w = np.asarray(weights, np.float32)
+    rs = np.asarray(region_states, np.float32)
+    if w.shape[2] == 1:
+        per_region = w[:, :, 0]
+        lost = 0.0
+    else:
+        first = np.argmax(rs > 0, axis=1)
+        per_region = np.take_along_axis(w, first[None, :, None], axis=2)[:, :, 0]
+        lost = float(np.max(np.abs(w - per_region[:, :, None] * rs[None]), initial=0.0))
+    return WeightCurves(name, np.asarray(times, np.float32), per_region.astype(np.float32)), lost
+
+
+def evaluate_drivers(asset: WrinkleAsset, root: Path) -> tuple[list[WeightCurves], list[str]]:
+    """Weight curves for each driver of the asset (wrinklepipe.drivers); notes on what happened."""
+    notes: list[str] = []
+    if not asset.drivers:
+        return [expression_cycle(asset)] if asset.expressions else [], [
+            "no drivers: a curve visiting each expression of the table was written"
+        ]
+    from wrinklepipe import drivers as wd
+
+    ctx = wd.DriverContext.from_asset(asset, root)
+    curves: list[WeightCurves] = []
+    used: set[str] = set()
+    for i, spec in enumerate(asset.drivers):
+        kind = str(spec["kind"])
+        res = wd.evaluate(kind, ctx, spec)
+        if res.per_vertex:
+            notes.append(f"drivers[{i}] ({kind}) gives per-vertex weights; not written as a curve")
+            continue
+        name = str(spec.get("name") or kind)
+        while name in used:
+            name = f"{name}_{i}"
+        used.add(name)
+        curve, lost = curves_from_weights(name, res.times, res.weights, asset.region_state_matrix())
+        if lost > 1e-6:
+            notes.append(f"drivers[{i}] ({kind}): per-state weights differ by up to {lost:.3g}")
+        notes.extend(f"drivers[{i}] ({kind}): {n}" for n in res.notes)
+        curves.append(curve)
+    return curves, notes
+
+
+# ------------------------------------------------------------------------------------------------
+# ingest
+
+
+def _read_normals(path: Path, convention: str) -> tuple[np.ndarray, list[str]]:
+    """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes."""
+    read_normal_map = optional("wrinklepipe.normals.read", "read_normal_map")
+    read_options = optional("wrinklepipe.normals.read", "ReadOptions")
+    if read_normal_map is not None and read_options is not None:
+        nm = read_normal_map(path, read_options(convention=convention))
+        notes = [f"{path.name}: {nm.source_format}, convention {nm.convention}"]
+        return np.asarray(nm.normals, np.float32), notes
+    from wrinklepipe.io.images import read_image
+
+    values, info = read_image(path)
+    if values.shape[-1] < 2:
+        raise input_error(path, "a normal map needs at least two channels (RG or RGB)")
+    xy = values[..., :2] * np.float32(2.0) - np.float32(1.0)
+    if values.shape[-1] >= 3:
+        z = values[..., 2] * np.float32(2.0) - np.float32(1.0)
+    else:
+        z = np.sqrt(np.maximum(0.0, 1.0 - np.einsum("...c,...c->...", xy, xy)))
+    n = np.concatenate([xy, z[..., None]], axis=-1)
+    notes = [f"{path.name}: {info.file_format} {info.format}"]
+    if convention == "directx":
+        n[..., 1] *= -1.0
+        notes.append(f"{path.name}: DirectX green flipped to OpenGL")
+    bad = int(np.count_nonzero(n[..., 2] <= 0.0))
+    if bad:
+        notes.append(f"{path.name}: {bad} texels with z <= 0 (repaired to z = |z|)")
+        n[..., 2] = np.maximum(np.abs(n[..., 2]), 1e-6)
+    return model.normalize(n), notes
+
+
+def _load_mesh(path: Path) -> Mesh:
+    """The render mesh (wrinklepipe.io.mesh.load_mesh; a glTF-only reader until that lands)."""
+    load_mesh = optional("wrinklepipe.io.mesh", "load_mesh")
+    if load_mesh is not None:
+        return load_mesh(path)
+    if path.suffix.lower() not in (".gltf", ".glb"):
+        raise input_error(path, "only glTF/GLB meshes can be read (mesh ingest not installed)")
+    from wrinklepipe.io.gltf_read import GltfReadOptions, _Reader
+
+    r = _Reader(path, GltfReadOptions())
+    meshes = r.doc.get("meshes", [])
+    if not meshes:
+        raise r.err("no meshes", "/meshes")
+    gm = meshes[0]
+    prim = gm["primitives"][0]
+    attrs = prim.get("attributes", {})
+    if "POSITION" not in attrs or "TEXCOORD_0" not in attrs:
+        raise r.err("mesh needs POSITION and TEXCOORD_0", "/meshes/0/primitives/0")
+    pos = r.accessor(attrs["POSITION"]).astype(np.float32)
+    idx = (
+        r.accessor(prim["indices"]).astype(np.int64)
+        if "indices" in prim
+        else np.arange(len(pos), dtype=np.int64)
+    )
+    targets = prim.get("targets", [])
+    names = tuple(gm.get("extras", {}).get("targetNames", ()))
+    if len(names) != len(targets):
+        names = tuple(f"target_{i}" for i in range(len(targets)))
+    return Mesh(
+        positions=pos,
+        indices=idx.reshape(-1, 3).astype(np.uint32),
+        uvs=r.accessor(attrs["TEXCOORD_0"]).astype(np.float32),
+        normals=r.accessor(attrs["NORMAL"]).astype(np.float32) if "NORMAL" in attrs else None,
+        tangents=r.accessor(attrs["TANGENT"]).astype(np.float32) if "TANGENT" in attrs else None,
+        morph_names=names,
+        morph_deltas=(
+            np.stack([r.accessor(t["POSITION"]).astype(np.float32) for t in targets])
+            if targets
+            else None
+        ),
+        name=str(gm.get("name") or path.stem),
+    )
+
+
+def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
+    """Read every file a manifest names into a :class:`WrinkleAsset` (float maps, +Y)."""
+    from wrinklepipe import masks as wm
+
+    notes: list[str] = []
+    base, n = _read_normals(manifest.base, manifest.convention)
+    notes += n
+    states = []
+    for s in manifest.states:
+        st, n = _read_normals(s.map, manifest.convention)
+        notes += n
+        if st.shape != base.shape:
+            raise input_error(
+                s.map,
+                f"size {st.shape[1]}x{st.shape[0]} differs from the base map "
+                f"{base.shape[1]}x{base.shape[0]}",
+            )
+        if not manifest.states_include_base:  # wrinkle-only normals: add the base in PD space
+            st = model.pd_to_normal(model.normal_to_pd(base) + model.normal_to_pd(st))
+        states.append(st)
+    channels = [r.channel for r in manifest.regions]
+    if any(c is not None for c in channels):
+        masks = []
+        for r in manifest.regions:
+            m, _ = wm.read_mask(r.mask) if r.channel is None else (_mask_channel(r), None)
+            masks.append(m)
+        mask_arr = np.stack(masks).astype(np.float32)
+    else:
+        ms = wm.read_masks(
+            [r.mask for r in manifest.regions], names=[r.name for r in manifest.regions]
+        )
+        mask_arr = np.asarray(ms.masks, np.float32)
+    mesh = _load_mesh(manifest.mesh) if manifest.mesh is not None else None
+    if mesh is None:
+        raise input_error(
+            manifest.path, "the manifest names no mesh; glTF/USD output needs one", "mesh"
+        )
+    asset = WrinkleAsset(
+        name=manifest.name,
+        base=base,
+        states=np.stack(states),
+        state_names=tuple(s.name for s in manifest.states),
+        masks=mask_arr,
+        regions=tuple(Region(r.name, r.side, tuple(r.states)) for r in manifest.regions),
+        expressions={e: dict(row) for e, row in manifest.expressions.items()},
+        encoding=manifest.encoding,
+        policy=manifest.policy,
+        pd_scale=1.0 if manifest.pd_scale == "auto" else float(manifest.pd_scale),
+        mesh=mesh,
+        drivers=[dict(d) for d in manifest.drivers],
+        budget=dict(manifest.budget),
+        resolution={k: v for k, v in manifest.resolution.items() if isinstance(v, int)},
+        provenance={"manifest": manifest.path.name},
+    )
+    return asset, notes
+
+
+def _mask_channel(region: Any) -> np.ndarray:
+    from wrinklepipe.io.images import read_image
+
+    values, _ = read_image(region.mask)
+    return values[..., "rgba".index(region.channel)].astype(np.float32)
+
+
+# ------------------------------------------------------------------------------------------------
+# stages on the asset
+
+
+def _resize_normals(normals: np.ndarray, size: int) -> np.ndarray:
+    return resize_normals_pd(normals, size, size)
+
+
+def auto_pd_scale(slopes: np.ndarray, percentile: float = 99.9) -> float:
+    """Smallest power of two >= the ``percentile`` of ``max(|dx|, |dy|)``, within [1/16, 64]."""
+    _auto = optional("wrinklepipe.normals.encode", "auto_pd_scale")
+    if _auto is not None:
+        return float(_auto(slopes, percentile))
+    m = np.max(np.abs(slopes), axis=-1).ravel()
+    p = float(np.percentile(m, percentile)) if m.size else 0.0
+    if p <= 1.0 / 16:
+        return 1.0 / 16
+    return float(min(max(2.0 ** np.ceil(np.log2(p)), 1.0 / 16), 64.0))
+
+
+@dataclass
+class StageReport:
+    """What the stages did, for report.json."""
+
+    notes: list[str] = field(default_factory=list)
+    pd_scale: float | None = None
+    pd_scale_source: str = ""
+    clipped_texels: dict[str, int] = field(default_factory=dict)
+
+
+def run_stages(asset: WrinkleAsset, auto_scale: bool) -> tuple[WrinkleAsset, StageReport]:
+    """Resample to the target resolutions, prepare the mesh, choose the PD scale."""
+    rep = StageReport()
+    res = asset.resolution
+    base, states, masks = asset.base, asset.states, asset.masks
+    if "base" in res and res["base"] != base.shape[0]:
+        base = _resize_normals(base, int(res["base"]))
+        rep.notes.append(f"base resampled to {res['base']}")
+    if "wrinkle" in res and res["wrinkle"] != states.shape[1]:
+        states = np.stack([_resize_normals(s, int(res["wrinkle"])) for s in states])
+        rep.notes.append(f"wrinkle states resampled to {res['wrinkle']} (PD space)")
+    if "mask" in res and res["mask"] != masks.shape[1]:
+        from wrinklepipe import masks as wm
+
+        masks = np.asarray(wm.resample_masks(masks, int(res["mask"])), np.float32)
+        rep.notes.append(f"masks resampled to {res['mask']}")
+    mesh = prepare_mesh(asset.mesh)
+    rep.notes.extend(mesh.notes)
+    asset = replace(asset, base=base, states=states, masks=masks, mesh=mesh)
+    if asset.encoding == "pd":
+        b = base
+        if b.shape[:2] != states.shape[1:3]:
+            b = _resize_normals(base, states.shape[1])
+        slopes = model.normal_to_pd(states) - model.normal_to_pd(b)[None]
+        if auto_scale:
+            asset = replace(asset, pd_scale=auto_pd_scale(slopes))
+            rep.pd_scale_source = "auto (99.9th percentile of wrinkle slopes, power of two)"
+        else:
+            rep.pd_scale_source = "manifest"
+        rep.pd_scale = float(asset.pd_scale)
+        s = np.float32(asset.pd_scale)
+        for k, name in enumerate(asset.state_names):
+            rep.clipped_texels[name] = int(np.count_nonzero(np.any(np.abs(slopes[k]) > s, -1)))
+    return asset, rep
+
+
+# ------------------------------------------------------------------------------------------------
+# writing the folder
+
+
+@dataclass(frozen=True)
+class ConvertOptions:
+    """What ``convert`` writes.
+
+    ``glb``: also a self-contained ``NAME.glb``. ``usd_format``: ``"usda"`` (always written) plus
+    ``"usdc"`` or ``"usdz"`` on request. ``force``: replace a non-empty output folder.
+    ``compressed``: DDS + KTX2 textures when the compression stage is installed. ``validate``:
+    run :mod:`wrinklepipe.validate` on the written folder when it is installed. ``bits``: PNG
+    depth of the base and state maps. ``mask_layout``: None = the manifest's ``formats``.
+    """
+
+    glb: bool = False
+    usd_format: str = "usda"
+    force: bool = False
+    compressed: bool = True
+    validate: bool = True
+    bits: int = 8
+    mask_layout: str | None = None
+
+
+@dataclass
+class ConvertResult:
+    """What convert wrote and found: the folder, report (as written to report.json), exit code."""
+
+    output: Path
+    report: dict[str, Any]
+    exit_code: int
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _fmt(x: float) -> str:
+    return format(float(np.float32(x)), ".9g")
+
+
+def curve_files(curve: WeightCurves, regions: list[str]) -> dict[str, bytes]:
+    """A weight curve as ``curves/NAME.json`` and ``curves/NAME.csv`` (time, then the regions)."""
+    rows = ["time," + ",".join(regions)]
+    for t, row in zip(curve.times, curve.values):
+        rows.append(",".join([_fmt(t)] + [_fmt(v) for v in row]))
+    js = {
+        "name": curve.name,
+        "regions": regions,
+        "times": [float(np.float32(t)) for t in curve.times],
+        "weights": [[float(np.float32(v)) for v in row] for row in curve.values],
+        "interpolation": "linear",
+    }
+    return {
+        f"curves/{curve.name}.csv": ("\n".join(rows) + "\n").encode("utf-8"),
+        f"curves/{curve.name}.json": dumps_json(js).encode("utf-8"),
+    }
+
+
+def compressed_files(pkg: WrinklePackage) -> tuple[dict[str, bytes], list[str]]:
+    """BC-compressed copies of the base and state maps as DDS and KTX2 (BC5: X in R, Y in G)."""
+    pack_xy = optional("wrinklepipe.normals.compress", "pack_xy")
+    encode_bc = optional("wrinklepipe.normals.compress", "encode_bc")
+    dds_bytes = optional("wrinklepipe.normals.dds", "dds_bytes")
+    ktx2_bytes = optional("wrinklepipe.normals.ktx2", "ktx2_bytes")
+    if None in (pack_xy, encode_bc, dds_bytes, ktx2_bytes):
+        return {}, ["compressed textures skipped: wrinklepipe.normals compression not installed"]
+    files: dict[str, bytes] = {}
+    notes: list[str] = []
+    for t in pkg.textures:
+        if t.role not in ("base_normal", "state") or t.bits != 8:
+            continue
+        h, w = t.pixels.shape[:2]
+        if h % 4 or w % 4:
+            notes.append(f"{t.name}: {w}x{h} is not a multiple of 4, not compressed")
+            continue
+        xy = t.pixels[..., :2].astype(np.float32) / np.float32(255.0)
+        data = encode_bc(pack_xy(xy, "bc5"), "bc5")
+        files[f"compressed/{t.name}.dds"] = dds_bytes("bc5", w, h, [data])
+        files[f"compressed/{t.name}.ktx2"] = ktx2_bytes("bc5", w, h, [data])
+    return files, notes
+
+
+def decode_errors(asset: WrinkleAsset, pkg: WrinklePackage) -> dict[str, dict[str, float]]:
+    """Angular error (degrees) between each state as given and as decoded from what is stored."""
+    from wrinklepipe.io.package import asset_from_package
+
+    back = asset_from_package(pkg)
+    out = {}
+    for k, name in enumerate(asset.state_names):
+        e = model.angular_error_deg(asset.states[k], back.states[k]).ravel()
+        out[name] = {
+            "mean_deg": round(float(e.mean()), 6),
+            "p99_deg": round(float(np.percentile(e, 99)), 6),
+            "max_deg": round(float(e.max()), 6),
+        }
+    return out
+
+
+def _validate(folder: Path, gltf_name: str) -> dict[str, Any]:
+    """Run :mod:`wrinklepipe.validate` on the written glTF (when that stage is installed).
+
+    Only deterministic parts go into the report: counts and issues (no timings).
+    """
+    load_input = optional("wrinklepipe.validate", "load_input")
+    run = optional("wrinklepipe.validate", "validate")
+    if load_input is None or run is None:
+        return {"status": "skipped", "reason": "wrinklepipe.validate not installed"}
+    report = run(load_input(folder / gltf_name))
+    issues = [
+        {
+            "code": str(i.code),
+            "severity": str(i.severity),
+            "message": str(i.message),
+            "pointer": str(i.pointer).replace(str(folder), "."),
+        }
+        for i in report.issues
+    ]
+    counts = {k: int(v) for k, v in report.counts.items()}
+    return {"status": "ran", "counts": counts, "issues": issues}
+
+
+def report_html(report: dict[str, Any]) -> str:
+    """A static, self-contained HTML summary of report.json (textures linked, not embedded)."""
+    esc = html.escape
+
+    def table(rows: list[list[Any]], head: list[str]) -> str:
+        th = "".join(f"<th>{esc(h)}</th>" for h in head)
+        body = "".join(
+            "<tr>" + "".join(f"<td>{esc(str(c))}</td>" for c in r) + "</tr>" for r in rows
+        )
+        return f"<table><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>"
+
+    a = report["asset"]
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'>",
+        f"<title>wrinklepipe convert: {esc(report['name'])}</title>",
+        "<style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}"
+        "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}"
+        "img{width:128px;image-rendering:pixelated;margin:2px}</style></head><body>",
+        f"<h1>{esc(report['name'])}</h1>",
+        f"<p>encoding <b>{esc(a['encoding'])}</b>, scale {a['scale']}, policy "
+        f"<b>{esc(a['policy'])}</b>; {a['vertices']} vertices, {a['triangles']} triangles, "
+        f"{len(a['morph_targets'])} morph targets.</p>",
+        "<h2>Textures</h2><div>",
+        "".join(
+            f"<figure style='display:inline-block'><img src='{esc(o['file'])}' "
+            f"alt='{esc(o['file'])}'><figcaption>{esc(o['file'])}</figcaption></figure>"
+            for o in report["outputs"]
+            if o["file"].startswith("textures/")
+        ),
+        "</div><h2>Regions</h2>",
+        table(
+            [[r["name"], r["side"], json.dumps(r["mask"])] for r in a["regions"]],
+            ["region", "side", "channel table"],
+        ),
+        "<h2>Decode error of the stored states</h2>",
+        table(
+            [
+                [k, v["mean_deg"], v["p99_deg"], v["max_deg"]]
+                for k, v in report["decode_error"].items()
+            ],
+            ["state", "mean deg", "p99 deg", "max deg"],
+        ),
+        "<h2>Stages</h2><ul>",
+        "".join(f"<li>{esc(n)}</li>" for n in report["notes"]),
+        "</ul><h2>Validation</h2>",
+        f"<pre>{esc(json.dumps(report['validation'], indent=2, sort_keys=True))}</pre>",
+        "<h2>Outputs</h2>",
+        table(
+            [[o["file"], o["bytes"], o["sha256"][:16]] for o in report["outputs"]],
+            ["file", "bytes", "sha256"],
+        ),
+        "<h2>Inputs</h2>",
+        table(
+            [[i["file"], i["bytes"], i["sha256"][:16]] for i in report["inputs"]],
+            ["file", "bytes", "sha256"],
+        ),
+        "</body></html>\n",
+    ]
+    return "".join(parts)
+
+
+def build_outputs(
+    pkg: WrinklePackage, options: ConvertOptions
+) -> tuple[dict[str, bytes], list[str]]:
+    """Every output file as ``{relative path: bytes}`` (except USD, written by usd-core)."""
+    from wrinklepipe.io.gltf_write import glb_bytes, gltf_document
+    from wrinklepipe.io.package import png_bytes
+
+    name = pkg.name
+    files: dict[str, bytes] = {}
+    doc, data, images = gltf_document(pkg)
+    doc["buffers"][0]["uri"] = f"{name}.bin"
+    files[f"{name}.gltf"] = dumps_json(doc).encode("utf-8")
+    files[f"{name}.bin"] = data
+    files.update(images)
+    for t in pkg.textures:  # the same PNGs serve glTF and USD
+        files.setdefault(f"textures/{t.name}.png", png_bytes(t.pixels))
+    if options.glb:
+        gdoc, gdata, _ = gltf_document(pkg, embed_images=True)
+        files[f"{name}.glb"] = glb_bytes(gdoc, gdata)
+    notes: list[str] = []
+    if options.compressed:
+        comp, n = compressed_files(pkg)
+        files.update(comp)
+        notes += n
+    regions = [r["name"] for r in pkg.meta["regions"]]
+    for c in pkg.curves:
+        files.update(curve_files(c, regions))
+    return files, notes
+
+
+def convert(
+    manifest_path: str | Path, output: str | Path, options: ConvertOptions | None = None
+) -> ConvertResult:
+    """Run the whole pipeline on a manifest and write one output folder (atomically)."""
+    from wrinklepipe import __version__
+    from wrinklepipe.console import status
+    from wrinklepipe.io.usd_write import write_usd
+    from wrinklepipe.manifest import load_manifest
+
+    opt = options or ConvertOptions()
+    if opt.usd_format not in ("usda", "usdc", "usdz"):
+        raise ValueError(f"usd_format must be usda, usdc or usdz, got {opt.usd_format!r}")
+    output = Path(output)
+    manifest = load_manifest(manifest_path)
+    inputs = [manifest.root, *manifest.input_files]
+    with status("reading inputs"):
+        asset, notes = ingest(manifest)
+    with status("resampling, tangents, vertex IDs"):
+        asset, stage_rep = run_stages(asset, auto_scale=manifest.pd_scale == "auto")
+    notes += stage_rep.notes
+    with status("evaluating drivers"):
+        curves, n = evaluate_drivers(asset, manifest.root)
+    notes += n
+    layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
+    pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
+    with status("encoding and packing"):
+        files, n = build_outputs(pkg, opt)
+    notes += n
+    name = pkg.name
+    input_rows = []
+    for p in manifest.input_files:
+        data = p.read_bytes()
+        rel = p.relative_to(manifest.root).as_posix() if manifest.root in p.parents else p.name
+        input_rows.append({"file": rel, "bytes": len(data), "sha256": _sha256(data)})
+    try:
+        with staged_folder(output, force=opt.force, inputs=inputs) as tmp:
+            for rel, data in sorted(files.items()):
+                write_bytes(tmp / rel, data)
+            usd_names = [f"{name}.usda"] + (
+                [f"{name}.{opt.usd_format}"] if opt.usd_format != "usda" else []
+            )
+            for u in usd_names:
+                write_usd(pkg, tmp / u, write_textures=False)
+            with status("validating"):
+                validation = (
+                    _validate(tmp, f"{name}.gltf")
+                    if opt.validate
+                    else {"status": "skipped", "reason": "--no-validate"}
+                )
+            outputs = []
+            for p in sorted(tmp.rglob("*")):
+                if p.is_file():
+                    data = p.read_bytes()
+                    rel = p.relative_to(tmp).as_posix()
+                    outputs.append({"file": rel, "bytes": len(data), "sha256": _sha256(data)})
+            m = pkg.mesh
+            report = {
+                "tool": "wrinklepipe",
+                "version": __version__,
+                "name": name,
+                "manifest": manifest.path.name,
+                "inputs": input_rows,
+                "asset": {
+                    "encoding": pkg.meta["encoding"],
+                    "scale": pkg.meta["scale"],
+                    "policy": pkg.meta["policy"],
+                    "states": [s["name"] for s in pkg.meta["states"]],
+                    "regions": [
+                        {**r, "mask": e}
+                        for r, e in zip(pkg.meta["regions"], pkg.meta["masks"]["table"])
+                    ],
+                    "mask_layout": pkg.meta["masks"]["layout"],
+                    "sizes": {t.name: list(t.pixels.shape) for t in pkg.textures},
+                    "vertices": m.vertex_count,
+                    "triangles": m.triangle_count,
+                    "morph_targets": list(m.morph_names),
+                    "curves": [
+                        {
+                            "name": c.name,
+                            "keys": int(c.times.size),
+                            "duration_s": float(c.times[-1] - c.times[0]),
+                        }
+                        for c in pkg.curves
+                    ],
+                },
+                "pd_scale": {
+                    "value": stage_rep.pd_scale,
+                    "source": stage_rep.pd_scale_source,
+                    "clipped_texels": stage_rep.clipped_texels,
+                },
+                "decode_error": decode_errors(asset, pkg),
+                "notes": notes,
+                "outputs": outputs,
+                "validation": validation,
+            }
+            write_bytes(tmp / "report.json", dumps_json(report).encode("utf-8"))
+            write_bytes(tmp / "report.html", report_html(report).encode("utf-8"))
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise input_error(
+            output, f"could not write the output ({reason}); nothing was changed"
+        ) from None
+    errors = (
+        int(validation.get("summary", {}).get("errors", 0)) if isinstance(validation, dict) else 0
+    )
+    return ConvertResult(output, report, 1 if errors else 0)

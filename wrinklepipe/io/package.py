@@ -82,6 +82,20 @@ class PackOptions:
     mask_layout: str = "rgba"
 
 
+def optional(module: str, name: str) -> Any:
+    """``module.name`` if that stage is installed and importable, else None.
+
+    Stages built by other parts of the project are used when present; until then the pipeline
+    falls back to a simpler local implementation and says so in the report.
+    """
+    import importlib
+
+    try:
+        return getattr(importlib.import_module(module), name)
+    except Exception:  # noqa: BLE001 - an absent or half-installed stage means "not available"
+        return None
+
+
 # ------------------------------------------------------------------------------------------------
 # encoding: the formulas of wrinklepipe.model / docs/normals.md (values01 = what 8/16-bit stores)
 
@@ -140,12 +154,26 @@ def decode_state(base: np.ndarray, stored: np.ndarray, encoding: str, scale: flo
     raise ValueError(f"unknown encoding {encoding!r}")
 
 
-def _resize_nearest(img: np.ndarray, h: int, w: int) -> np.ndarray:
-    if img.shape[0] == h and img.shape[1] == w:
-        return img
-    rows = (np.arange(h) * img.shape[0]) // h
-    cols = (np.arange(w) * img.shape[1]) // w
-    return img[rows][:, cols]
+def resize_normals_pd(normals: np.ndarray, h: int, w: int) -> np.ndarray:
+    """Unit normals resampled to ``h`` x ``w`` in PD space (linear, so wrinkle slopes add up).
+
+    Uses :func:`wrinklepipe.normals.resample.resize_normals` when installed; otherwise a box
+    filter for whole-number reductions and nearest texel for anything else.
+    """
+    if normals.shape[0] == h and normals.shape[1] == w:
+        return normals
+    resize_normals = optional("wrinklepipe.normals.resample", "resize_normals")
+    if resize_normals is not None:
+        return np.asarray(resize_normals(normals, (h, w), space="pd"), np.float32)
+    sh, sw = normals.shape[:2]
+    d = model.normal_to_pd(normals)
+    if sh % h == 0 and sw % w == 0:
+        d = d.reshape(h, sh // h, w, sw // w, 2).mean(axis=(1, 3))
+    else:
+        d = d[((np.arange(h) + 0.5) * sh / h).astype(int)][
+            :, ((np.arange(w) + 0.5) * sw / w).astype(int)
+        ]
+    return model.pd_to_normal(d)
 
 
 def pack_masks(
@@ -204,7 +232,7 @@ def package_from_asset(
         st = model.normalize(asset.states[k])
         b = base
         if b.shape[:2] != st.shape[:2]:
-            b = model.normalize(_resize_nearest(base, st.shape[0], st.shape[1]))
+            b = resize_normals_pd(base, st.shape[0], st.shape[1])
         tex = PackedTexture(
             f"wrinkle_{name}", _q(encode_state(b, st, asset.encoding, scale), opt.bits), "state"
         )
@@ -246,7 +274,7 @@ def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
         stored = _dq(pkg.texture(s["texture"]).pixels)
         b = base
         if b.shape[:2] != stored.shape[:2]:
-            b = model.normalize(_resize_nearest(base, stored.shape[0], stored.shape[1]))
+            b = resize_normals_pd(base, stored.shape[0], stored.shape[1])
         states.append(decode_state(b, stored, enc, scale))
     mask_tex = [_dq(pkg.texture(n).pixels) for n in meta["masks"]["textures"]]
     masks = unpack_masks(mask_tex, meta["masks"]["table"])

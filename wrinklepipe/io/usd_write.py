@@ -306,23 +306,41 @@ def _export_via_temp(layer, path: Path, fmt: str) -> Path:  # noqa: ANN001
     return path
 
 
-def _write_usdz(stage, pkg: WrinklePackage, path: Path, opt: UsdOptions) -> Path:  # noqa: ANN001
-    """A usdz (uncompressed zip, 64-byte aligned entries) holding a usdc layer and the PNGs."""
-    from pxr import Sdf, UsdUtils
+def usdz_bytes(entries: list[tuple[str, bytes]]) -> bytes:
+    """A usdz archive: uncompressed zip, every file's data 64-byte aligned, fixed timestamps.
 
+    The first entry must be the root layer. Alignment uses a padding extra field (id 0x1986, as
+    USD's own writer does); the date is 1980-01-01 so the bytes never depend on the clock.
+    """
+    import io
+    import struct
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_STORED) as zf:
+        for name, data in entries:
+            info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_STORED
+            info.create_system = 3
+            info.external_attr = 0o644 << 16
+            start = buf.tell() + 30 + len(name.encode("utf-8"))
+            pad = (-start) % 64
+            if 0 < pad < 4:
+                pad += 64
+            if pad:
+                info.extra = struct.pack("<HH", 0x1986, pad - 4) + b"\0" * (pad - 4)
+            zf.writestr(info, data)
+    return buf.getvalue()
+
+
+def _write_usdz(stage, pkg: WrinklePackage, path: Path, opt: UsdOptions) -> Path:  # noqa: ANN001
+    """A usdz holding a usdc root layer and the PNGs it references."""
     with tempfile.TemporaryDirectory(prefix="wrinklepipe-usdz-") as work:
-        w = Path(work)
-        layer_path = w / f"{path.stem}.usdc"
-        stage.GetRootLayer().Export(str(layer_path))
-        tdir = w / opt.texture_dir if opt.texture_dir else w
-        tdir.mkdir(parents=True, exist_ok=True)
-        for t in pkg.textures:
-            (tdir / f"{t.name}.png").write_bytes(png_bytes(t.pixels))
-        tmp_z = w / path.name
-        with Sdf.ZipFileWriter.CreateNew(str(tmp_z)) as zw:
-            zw.AddFile(str(layer_path), layer_path.name)
-            for t in pkg.textures:
-                rel = f"{opt.texture_dir}/{t.name}.png" if opt.texture_dir else f"{t.name}.png"
-                zw.AddFile(str(w / rel), rel)
-        del UsdUtils
-        return write_bytes(path, tmp_z.read_bytes())
+        layer_path = Path(work) / f"{path.stem}.usdc"
+        if not stage.GetRootLayer().Export(str(layer_path)):
+            raise OSError(f"{path}: USD export failed")
+        entries = [(layer_path.name, layer_path.read_bytes())]
+    for t in pkg.textures:
+        rel = f"{opt.texture_dir}/{t.name}.png" if opt.texture_dir else f"{t.name}.png"
+        entries.append((rel, png_bytes(t.pixels)))
+    return write_bytes(path, usdz_bytes(entries))
