@@ -720,7 +720,5 @@ def convert(
         raise input_error(
             output, f"could not write the output ({reason}); nothing was changed"
         ) from None
-    errors = (
-        int(validation.get("summary", {}).get("errors", 0)) if isinstance(validation, dict) else 0
-    )
+    errors = int(validation.get("counts", {}).get("error", 0))
     return ConvertResult(output, report, 1 if errors else 0)

@@ -26,7 +26,7 @@ folder. Two runs on the same inputs give byte-identical folders.
 exit codes: 0 written and valid, 1 written but validation found errors, 2 could not run.
 
 examples:
-  wrinklepipe demo --source demo_src && wrinklepipe convert demo_src/manifest.toml -o out
+  wrinklepipe convert demo_src/manifest.toml -o out   # demo_src: demo.source.write_demo_source
   wrinklepipe convert head/manifest.toml -o build/head --glb --usdz --force
 """
 
