@@ -22,9 +22,11 @@ def make_morph_gltf(path, names, times, weights, interpolation="LINEAR"):
     t = np.asarray(times, np.float32)
     w = np.asarray(weights, np.float32).reshape(-1)
     chunks = [pos.tobytes(), delta.tobytes(), idx.tobytes() + b"\0\0", t.tobytes(), w.tobytes()]
+    targets = [pygltflib.ARRAY_BUFFER, pygltflib.ARRAY_BUFFER, pygltflib.ELEMENT_ARRAY_BUFFER]
     views, off = [], 0
-    for c in chunks:
-        views.append(pygltflib.BufferView(buffer=0, byteOffset=off, byteLength=len(c)))
+    for i, c in enumerate(chunks):
+        tgt = targets[i] if i < 3 else None
+        views.append(pygltflib.BufferView(buffer=0, byteOffset=off, byteLength=len(c), target=tgt))
         off += len(c)
     acc = [
         pygltflib.Accessor(
@@ -95,6 +97,16 @@ def make_morph_gltf(path, names, times, weights, interpolation="LINEAR"):
     return path
 
 
+def _assert_valid_gltf(path):
+    from wrinklepipe.io import khronos
+
+    if not khronos.available():
+        return
+    report = khronos.validate_gltf(path)
+    assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
+    assert report["issues"]["numWarnings"] == 0, report["issues"]["messages"]
+
+
 def test_rows_follow_riglogic_intervals_and_clamp():
     rows = [
         Row("smile", "fold", 0.0, 0.5, 0.5, 0.0),
@@ -142,7 +154,8 @@ def test_arkit_preset_on_a_gltf_drives_only_the_mapped_regions(tmp_path):
     assert len(arkit.NAMES) == 52 and len(set(arkit.NAMES)) == 52
     k0 = _arkit_pose(0.9, 0.2, 0.5)
     k1 = _arkit_pose(1.0, 0.1, 0.3)
-    make_morph_gltf(tmp_path / "arkit.glb", arkit.NAMES, [0.0, 1.0], np.stack([k0, k1]))
+    glb = make_morph_gltf(tmp_path / "arkit.glb", arkit.NAMES, [0.0, 1.0], np.stack([k0, k1]))
+    _assert_valid_gltf(glb)
     regions = (*jimenez.REGION_NAMES, *EXTRA)
     ctx = wd.DriverContext(regions, ("stretch", "compress"), root=tmp_path)
     res = wd.evaluate(

@@ -152,3 +152,32 @@ def test_bad_unknown_metahuman_region(tmp_path, capsys):
     p = _write_masks(tmp_path, ["brow"], [np.zeros((2, 2), np.float32)])
     msg = _run_bad(capsys, ["pack-masks", *p, "--layout", "metahuman", "-o", str(tmp_path / "o")])
     assert "'brow' is not a MetaHuman region" in msg
+
+
+def test_pack_masks_metahuman_files_and_json(tmp_path, capsys):
+    from wrinklepipe.presets import metahuman
+
+    names = ["head_wm2_browsDown_L", "head_wm13_lips_UR", "head_wm1_jawOpen"]
+    rng = np.random.default_rng(3)
+    masks = (rng.integers(0, 256, (3, 4, 6)) / 255).astype(np.float32)
+    paths = _write_masks(tmp_path / "src", names, masks)
+    out = tmp_path / "mh"
+    assert main(["pack-masks", *paths, "--layout", "metahuman", "-o", str(out), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["table"][1] == {"region": "head_wm13_lips_UR", "texture": 9, "channel": "a"}
+    assert doc["table"][0] == {"region": "head_wm2_browsDown_L", "texture": 4, "channel": "r"}
+    assert [r["name"] for r in doc["report"]["regions"]] == names
+    files = sorted(p.name for p in out.iterdir())
+    assert files == sorted(
+        ["channels.json", "masks_array.png"] + [f"masks_{t}.png" for t in range(10)]
+    )
+    p = read_packed(out)
+    assert p.textures.shape == (10, 4, 6, 4) and p.array is not None
+    for packed in (p, p.array):
+        got_names, got = unpack(packed.textures, packed.table)
+        assert list(got_names) == names
+        np.testing.assert_array_equal(quantize(got, 8), quantize(masks, 8))
+    assert metahuman.side_of("head_wm13_lips_UR") == "right"
+    assert (
+        metahuman.shader_parameter("head_wm1_jawOpen", "wm1") == "head_wm1_normal_head_wm1_jawOpen"
+    )
