@@ -35,6 +35,10 @@ def _bits_of(info: ImageInfo) -> int:
     return 8 if info.format == "uint8" else 16
 
 
+def _count(n: int) -> str:
+    return f"{n} texel" if n == 1 else f"{n} texels"
+
+
 def _texel(flat_index: int, width: int) -> str:
     y, x = divmod(int(flat_index), width)
     return f"texel (x={x}, y={y})"
@@ -62,7 +66,7 @@ def mask_from_pixels(pixels: np.ndarray, file: str | Path, invert: bool = False)
                 [
                     Problem(
                         str(file),
-                        f"RGB mask whose channels differ at {n} texels (first at {_texel(i, w)}: "
+                        f"RGB mask whose channels differ at {_count(n)} (first at {_texel(i, w)}: "
                         f"R={r:.4f} G={g:.4f} B={b:.4f}); a mask must be grey. Save it as "
                         "grayscale or split the channels into separate masks",
                     )
@@ -77,7 +81,7 @@ def mask_from_pixels(pixels: np.ndarray, file: str | Path, invert: bool = False)
             [
                 Problem(
                     str(file),
-                    f"mask has {what}: {int(out.sum())} texels outside [0, 1] (range {lo:.6g} .. "
+                    f"mask has {what}: {_count(int(out.sum()))} outside [0, 1] (range {lo:.6g} .. "
                     f"{hi:.6g}, worst at {_texel(i, w)}); masks must lie in [0, 1]",
                 )
             ]
