@@ -1,0 +1,360 @@
+"""The ``encode-normals`` job as a plain function: read -> encode -> resize -> store -> check.
+
+:func:`encode_normals` returns the output bytes and a JSON-ready report; it writes nothing
+(the command writes atomically), so ``convert`` can reuse it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.errors import input_error
+from wrinklepipe.io.images import DEFAULT_MAX_PIXELS
+from wrinklepipe.model import normal_to_pd, normalize, pd_to_normal
+from wrinklepipe.normals import compress as cmp
+from wrinklepipe.normals import dds as dds_mod
+from wrinklepipe.normals import encode as enc
+from wrinklepipe.normals import footprint as fp
+from wrinklepipe.normals import ktx2 as ktx2_mod
+from wrinklepipe.normals import resample
+from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
+
+_F = np.float32
+
+ENCODINGS = ("pd", "diff", "full")
+OUTPUT_FORMATS = ("bc5", "bc1", "bc3nm", "bc7", "png8", "png16", "exr", "auto")
+#: BC7 (bc7enc) is slow: above this many texels ``--format auto`` leaves it out.
+AUTO_BC7_MAX_TEXELS = 1 << 20
+
+
+@dataclass(frozen=True)
+class EncodeOptions:
+    """What ``encode-normals`` does; defaults match the command line.
+
+    encoding: "pd" (two channels, slopes), "diff" (three, needs ``base``), "full".
+    scale: PD slope scale s (float) or "auto" (smallest power of two >= p99.9 slope).
+    gain: diff gain (float) or "auto".
+    fmt: output format; None derives it from the output suffix (.dds/.ktx2 -> bc5,
+        .png -> png8, .exr -> exr); "auto" picks the smallest BC format within budget.
+    size: target side (int), None (keep) or "auto" (smallest power of two within budget).
+    mips: write a full mip chain into DDS/KTX2.
+    pad: pad BC inputs whose size is not a multiple of 4 (edge texels repeated) instead of
+        refusing them.
+    dx10: DDS header choice (None: DX10 for bc5/bc7, FourCC for bc1/bc3).
+    max_p99_deg / max_mean_deg: the error budget (None: no limit).
+    """
+
+    encoding: str = "pd"
+    scale: float | str = "auto"
+    gain: float | str = 1.0
+    fmt: str | None = None
+    size: int | str | None = None
+    convention: str = "auto"
+    repair: bool = False
+    max_pixels: int = DEFAULT_MAX_PIXELS
+    mips: bool = True
+    pad: bool = True
+    dx10: bool | None = None
+    max_p99_deg: float | None = 2.0
+    max_mean_deg: float | None = None
+
+
+@dataclass
+class EncodeResult:
+    """The output file's bytes, the report, and whether the budget held."""
+
+    data: bytes
+    report: dict[str, Any]
+    ok: bool = True
+    notes: list[str] = field(default_factory=list)
+
+
+def _container_for(path: Path) -> str:
+    suf = path.suffix.lower()
+    if suf in (".dds", ".ktx2", ".png", ".exr", ".tif", ".tiff"):
+        return suf[1:].replace("tiff", "tif")
+    raise input_error(path, f"unknown output type {suf!r} (use .dds, .ktx2, .png, .tif or .exr)")
+
+
+def _resolve_format(out: Path, fmt: str | None) -> tuple[str, str]:
+    container = _container_for(out)
+    if fmt is None:
+        fmt = {"dds": "bc5", "ktx2": "bc5", "png": "png8", "tif": "png16", "exr": "exr"}[container]
+    if fmt not in OUTPUT_FORMATS:
+        raise input_error(
+            out, f"unknown format {fmt!r}; expected one of {', '.join(OUTPUT_FORMATS)}"
+        )
+    block = fmt in cmp.FORMATS or fmt == "auto"
+    if block and container not in ("dds", "ktx2"):
+        raise input_error(
+            out, f"format {fmt} is block-compressed: write it to a .dds or .ktx2 file"
+        )
+    if not block and container in ("dds", "ktx2"):
+        raise input_error(out, f"format {fmt} is not block-compressed: write it to .png/.tif/.exr")
+    if fmt == "exr" and container != "exr":
+        raise input_error(out, "format exr needs a .exr output")
+    if fmt in ("png8", "png16") and container not in ("png", "tif"):
+        raise input_error(out, f"format {fmt} needs a .png or .tif output")
+    return fmt, container
+
+
+def _stored(
+    encoding: str, wrinkle: np.ndarray, base: np.ndarray | None, scale: float, gain: float | str
+) -> tuple[np.ndarray, dict[str, Any], np.ndarray]:
+    """values01 [H, W, C] of the map, the encoding parameters, and the normals that the
+    stored map must decode to (pd with a base: the wrinkle-only normal; else the map)."""
+    if encoding == "pd":
+        slopes = enc.normal_slopes(wrinkle)
+        if base is not None:
+            slopes = slopes - enc.normal_slopes(base)  # wrinkle-only slopes (PD is linear)
+        n_store = pd_to_normal(np.nan_to_num(slopes, posinf=1e6, neginf=-1e6))
+        r = enc.encode_pd(n_store, scale)
+        params = {"scale": r.scale, "clipped": r.clipped, "cone_deg": round(r.cone_deg, 6)}
+        return r.values01, params, n_store
+    if encoding == "diff":
+        d = enc.encode_diff(wrinkle, base, gain)
+        return d.values01, {"gain": d.gain, "clipped": d.clipped}, wrinkle
+    return enc.encode_full(wrinkle, 3), {}, wrinkle
+
+
+def _decoded_normals(
+    encoding: str, values01: np.ndarray, params: dict[str, Any], base: np.ndarray | None
+) -> np.ndarray:
+    """What the stored values decode to (comparable with ``_stored``'s third result)."""
+    if encoding == "pd":
+        return enc.decode_pd(values01, params["scale"])
+    if encoding == "diff":
+        return normalize(base + enc.decode_diff(values01, params["gain"]))
+    return enc.decode_full(values01)
+
+
+def _read(path: Path, o: EncodeOptions) -> NormalMap:
+    return read_normal_map(
+        path, ReadOptions(convention=o.convention, repair=o.repair, max_pixels=o.max_pixels)
+    )
+
+
+def encode_normals(
+    src: str | Path, out: str | Path, options: EncodeOptions, base_path: str | Path | None = None
+) -> EncodeResult:
+    """Run the whole job in memory. Raises :class:`InputError` for bad inputs or options."""
+    o = options
+    src, out = Path(src), Path(out)
+    if o.encoding not in ENCODINGS:
+        raise input_error(out, f"unknown encoding {o.encoding!r}; expected pd, diff or full")
+    fmt, container = _resolve_format(out, o.fmt)
+    if o.encoding == "diff" and base_path is None:
+        raise input_error(src, "encoding diff needs --base (the neutral face's normal map)")
+    if o.encoding == "diff" and fmt in ("bc5", "bc3nm"):
+        raise input_error(out, f"a diff map has three channels; {fmt} holds two (use bc1 or bc7)")
+    if isinstance(o.scale, float) and not (o.scale > 0 and math.isfinite(o.scale)):
+        raise input_error(src, f"--scale must be a positive number or auto, got {o.scale}")
+    nm = _read(src, o)
+    base_nm = _read(Path(base_path), o) if base_path is not None else None
+    w_n = nm.normals
+    b_n = base_nm.normals if base_nm is not None else None
+    if b_n is not None and b_n.shape != w_n.shape:
+        raise input_error(
+            base_path,
+            f"base is {b_n.shape[1]} x {b_n.shape[0]}, the map {w_n.shape[1]} x {w_n.shape[0]}",
+        )
+    notes: list[str] = list(nm.notes)
+    budget = cmp.Budget(o.max_mean_deg, o.max_p99_deg)
+    h0, w0 = w_n.shape[:2]
+
+    # --- resize (in PD space for pd, renormalised otherwise)
+    size_report: dict[str, Any] = {"source": [w0, h0]}
+    target = o.size
+    if target == "auto":
+        target, tried = _auto_size(w_n, b_n, o.encoding, budget)
+        size_report["auto"] = {str(k): v.to_json() for k, v in sorted(tried.items())}
+    if target is not None and int(target) != max(h0, w0):
+        t = int(target)
+        th, tw = (t, max(1, round(w0 * t / h0))) if h0 >= w0 else (max(1, round(h0 * t / w0)), t)
+        space = "pd" if o.encoding == "pd" else "normal"
+        w_n = resample.resize_normals(w_n, (th, tw), space=space)
+        if b_n is not None:
+            b_n = resample.resize_normals(b_n, (th, tw), space=space)
+    h, w = w_n.shape[:2]
+    size_report["output"] = [w, h]
+
+    scale = o.scale
+    if o.encoding == "pd" and scale == "auto":
+        slopes = enc.normal_slopes(w_n) - (enc.normal_slopes(b_n) if b_n is not None else 0)
+        scale = enc.auto_pd_scale(np.nan_to_num(slopes, posinf=1e6, neginf=-1e6))
+    values, params, truth = _stored(
+        o.encoding, w_n, b_n, float(scale) if scale != "auto" else 1.0, o.gain
+    )
+    report: dict[str, Any] = {
+        "input": nm.to_json(),
+        "base": base_nm.to_json() if base_nm else None,
+        "encoding": {"name": o.encoding, **params},
+        "size": size_report,
+        "budget": {"max_p99_deg": o.max_p99_deg, "max_mean_deg": o.max_mean_deg},
+    }
+    if params.get("clipped"):
+        notes.append(
+            f"{params['clipped']} texels were outside the encodable range and were clipped"
+        )
+
+    channels = 2 if o.encoding == "pd" else 3
+    if fmt in ("png8", "png16", "exr"):
+        data, err = _plain(values, channels, fmt, container, o.encoding, params, b_n, truth)
+        report["format"] = {"name": fmt, "error": err.to_json(), "bytes": len(data)}
+        ok = budget.ok(err)
+        report["verdict"] = "pass" if ok else "fail"
+        report["footprint"] = fp.footprint(
+            [(out.name, "rgb16" if fmt != "png8" else "rgb8", w, h, False)]
+        ).to_json()
+        report["notes"] = notes
+        return EncodeResult(data, report, ok, notes)
+
+    # --- block formats
+    if o.encoding == "full":
+        values = values[..., :2]  # x, y; z is rebuilt
+        channels = 2
+    padded = bool(h % 4 or w % 4)
+    if padded and not o.pad:
+        raise input_error(
+            src,
+            f"{w} x {h} is not a multiple of 4, which {fmt if fmt != 'auto' else 'BC formats'} "
+            "need; resize (--size) or allow padding (drop --no-pad)",
+        )
+    if padded:
+        notes.append(f"{w} x {h} padded to multiples of 4 by repeating the edge texels")
+    q = enc.quantize(values, 8)
+    dec = cmp.decoder_for(o.encoding, params.get("scale", 1.0), params.get("gain", 1.0), b_n)
+    blend = _blend_fn(o.encoding, params, b_n, truth)
+    candidates = (
+        [fmt]
+        if fmt != "auto"
+        else [f for f in cmp.FORMATS if channels == 2 or f in cmp.RGB_FORMATS]
+    )
+    if fmt == "auto" and h * w > AUTO_BC7_MAX_TEXELS and "bc7" in candidates:
+        candidates.remove("bc7")
+        notes.append("bc7 left out of --format auto: too slow above 1 Mpx")
+    checks = []
+    for f in candidates:
+        checks.append(
+            cmp.compress_and_check(
+                q, truth, f, dec, budget=budget, pad=True, blend=blend, keep_decoded=False
+            )
+        )
+    chosen = cmp.choose_format(checks, budget) if fmt == "auto" else checks[0]
+    if chosen is None:
+        chosen = min(checks, key=lambda c: c.error.p99_deg)
+        notes.append(f"no format meets the budget; wrote the best one ({chosen.format})")
+    levels = [chosen.data]
+    if o.mips:
+        levels += _mip_levels(o.encoding, values, params, chosen.format, b_n)
+    cfmt = dds_mod.container_format(chosen.format)
+    if container == "dds":
+        data = dds_mod.dds_bytes(cfmt, w, h, levels, dx10=o.dx10)
+    else:
+        data = ktx2_mod.ktx2_bytes(cfmt, w, h, levels)
+    ok = chosen.verdict == "pass"
+    report["format"] = {
+        "name": chosen.format,
+        "container": container,
+        "levels": len(levels),
+        "bytes": len(data),
+    }
+    report["checks"] = [c.to_json() for c in checks]
+    report["verdict"] = "pass" if ok else "fail"
+    report["footprint"] = fp.footprint([(out.name, chosen.format, w, h, o.mips)]).to_json()
+    report["notes"] = notes
+    return EncodeResult(data, report, ok, notes)
+
+
+def _blend_fn(encoding: str, params: dict[str, Any], base: np.ndarray | None, truth: np.ndarray):  # noqa: ANN202
+    """``f(decoded, weight) -> (blended, reference)`` at a uniform activation, or None."""
+    if base is None:
+        return None
+    if encoding == "pd":
+        bd = normal_to_pd(base)
+        wd = normal_to_pd(truth)  # exact wrinkle-only slopes
+
+        def f(decoded: np.ndarray, a: float) -> tuple[np.ndarray, np.ndarray]:
+            # decoded is the wrinkle-only normal: N = normalize(B_d + a W_d, 1)
+            return pd_to_normal(bd + _F(a) * normal_to_pd(decoded)), pd_to_normal(bd + _F(a) * wd)
+
+        return f
+
+    def g(decoded: np.ndarray, a: float) -> tuple[np.ndarray, np.ndarray]:
+        return normalize(base + _F(a) * (decoded - base)), normalize(base + _F(a) * (truth - base))
+
+    return g
+
+
+def _plain(
+    values: np.ndarray,
+    channels: int,
+    fmt: str,
+    container: str,
+    encoding: str,
+    params: dict[str, Any],
+    base: np.ndarray | None,
+    truth: np.ndarray,
+) -> tuple[bytes, cmp.ErrorStats]:
+    """Bytes of a PNG/TIFF/EXR file of the map and the error of its stored values."""
+    import tempfile
+
+    from wrinklepipe.io.images import write_image
+
+    v = values
+    if channels == 2:
+        v = np.concatenate([v, np.zeros(v.shape[:2] + (1,), _F)], axis=-1)  # x, y, 0
+    bits: int | str = {"png8": 8, "png16": 16, "exr": "half"}[fmt]
+    if fmt == "exr":
+        stored = v.astype(np.float16).astype(_F)
+    else:
+        stored = enc.dequantize(enc.quantize(v, int(bits)))
+    decoded = _decoded_normals(encoding, stored[..., :channels], params, base)
+    err = cmp.angular_error_stats(decoded, truth)
+    with tempfile.TemporaryDirectory() as tmp:
+        p = Path(tmp) / f"out.{container}"
+        write_image(p, v if fmt == "exr" else v, bits=bits)
+        return p.read_bytes(), err
+
+
+def _mip_levels(
+    encoding: str, values01: np.ndarray, params: dict[str, Any], fmt: str, base: np.ndarray | None
+) -> list[bytes]:
+    """Block data of mip levels 1.. (filtered in a linear space: PD slopes, diff values)."""
+    out = []
+    chain = resample.mip_chain(values01, min_size=1)[1:]
+    for lvl in chain:
+        v = lvl
+        if encoding == "full":  # renormalise the filtered vectors, store x, y
+            n = enc.decode_full(np.clip(lvl, 0.0, 1.0))
+            v = enc.encode_full(n, 2)
+        q = enc.quantize(np.clip(v, 0.0, 1.0), 8)
+        qp, _ = cmp.pad_to_blocks(q)
+        out.append(cmp.encode_bc(cmp.pack_rgba(qp, fmt), fmt))
+    return out
+
+
+def _auto_size(
+    w_n: np.ndarray, b_n: np.ndarray | None, encoding: str, budget: cmp.Budget
+) -> tuple[int, dict[int, cmp.ErrorStats]]:
+    """Smallest power-of-two side whose reduce-then-magnify error fits the budget."""
+    h, w = w_n.shape[:2]
+    full = max(h, w)
+    tried: dict[int, cmp.ErrorStats] = {}
+    s = 16
+    while s < full:
+        th, tw = (s, max(1, round(w * s / h))) if h >= w else (max(1, round(h * s / w)), s)
+        space = "pd" if encoding == "pd" else "normal"
+        small = resample.resize_normals(w_n, (th, tw), space=space)
+        back = resample.resize_normals(small, (h, w), space=space, filter="triangle")
+        e = cmp.angular_error_stats(back, w_n)
+        tried[s] = e
+        if budget.ok(e):
+            return s, tried
+        s *= 2
+    return full, tried

@@ -1,0 +1,304 @@
+"""Read normal maps into float32 unit normals (+Y, OpenGL tangent space).
+
+Inputs: PNG (8/16-bit), TIFF (8/16), EXR (half/float), JPEG through OpenImageIO; DDS (BC1, BC3,
+BC5, BC7) through :mod:`wrinklepipe.normals.dds` and texture2ddecoder. Layouts:
+
+``rgb``  x, y, z in R, G, B (alpha ignored).
+``rg``   x, y in R, G; z rebuilt as ``sqrt(1 - x^2 - y^2)`` (BC5 maps, two-channel PNGs).
+``ag``   DXT5nm: x in alpha, y in green, z rebuilt (R = 1 and B = 0 in such files).
+
+``auto`` picks ``rg`` for two channels and for BC5, ``ag`` when R is 1 and B is 0 everywhere
+with four channels, ``rg`` when B is 0 everywhere (x and y only), else ``rgb``.
+
+Integer texels map ``[0, 1] -> [-1, 1]``; float (EXR) texels are taken as signed when any value
+is negative, else as ``[0, 1]``-encoded. Texel problems are counted: NaN, zero length,
+non-unit (``| |n| - 1 | > unit_tolerance``) and ``z < 0``. NaN and zero-length texels stop the
+read unless ``repair`` (they become (0, 0, 1)); with ``repair``, ``z < 0`` is mirrored to
+``|z|``. Non-unit texels are always renormalised (that is what decoding a normal map means);
+the count says how many needed it beyond quantisation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wrinklepipe.errors import input_error
+from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image
+from wrinklepipe.normals import compress, dds
+from wrinklepipe.normals.convention import ConventionReport, detect_convention, flip_green
+
+_F = np.float32
+LAYOUTS: tuple[str, ...] = ("auto", "rgb", "rg", "ag")
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """How to read a normal map.
+
+    convention: "auto" (detect, fall back to opengl), "opengl" or "directx" (flipped to +Y).
+    layout: "auto", "rgb", "rg" or "ag" (see the module docstring).
+    repair: replace NaN / zero texels by (0, 0, 1) and mirror z < 0, instead of refusing.
+    max_pixels: refuse larger images before allocating.
+    unit_tolerance: how far from 1 a decoded length may be before it counts as non-unit
+        (8-bit rounding stays below ~0.01).
+    detect: run the convention detector even when the convention is given (to warn).
+    """
+
+    convention: str = "auto"
+    layout: str = "auto"
+    repair: bool = False
+    max_pixels: int = DEFAULT_MAX_PIXELS
+    unit_tolerance: float = 0.05
+    detect: bool = True
+
+
+@dataclass
+class NormalStats:
+    """Counts of problem texels found while decoding (before any repair)."""
+
+    texels: int = 0
+    nan: int = 0
+    zero: int = 0
+    non_unit: int = 0
+    z_negative: int = 0
+    repaired: bool = False
+    first_nan: tuple[int, int] | None = None  # (row, col)
+    first_zero: tuple[int, int] | None = None
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "texels": self.texels,
+            "nan": self.nan,
+            "zero": self.zero,
+            "non_unit": self.non_unit,
+            "z_negative": self.z_negative,
+            "repaired": self.repaired,
+        }
+
+
+@dataclass
+class NormalMap:
+    """A decoded normal map and how it was read."""
+
+    normals: np.ndarray  # [H, W, 3] float32, unit, +Y
+    stats: NormalStats
+    path: str
+    width: int
+    height: int
+    channels: int
+    layout: str
+    source_format: str  # "png", "tiff", "openexr", "jpeg", "dds:bc5", ...
+    convention: str  # the convention the file was read as (flipped to +Y when "directx")
+    detection: ConventionReport | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "path": self.path,
+            "width": self.width,
+            "height": self.height,
+            "channels": self.channels,
+            "layout": self.layout,
+            "source_format": self.source_format,
+            "convention": self.convention,
+            "detection": self.detection.to_json() if self.detection else None,
+            "stats": self.stats.to_json(),
+            "notes": list(self.notes),
+        }
+
+
+def _first(mask: np.ndarray) -> tuple[int, int] | None:
+    idx = np.flatnonzero(mask)
+    if idx.size == 0:
+        return None
+    r, c = divmod(int(idx[0]), mask.shape[1] if mask.ndim > 1 else 1)
+    return (r, c)
+
+
+def guess_layout(values: np.ndarray) -> str:
+    """The layout ``auto`` resolves to for texels [H, W, C] in [0, 1]."""
+    c = values.shape[-1]
+    if c == 2:
+        return "rg"
+    if c == 4 and np.all(values[..., 0] >= 254.5 / 255) and np.all(values[..., 2] <= 0.5 / 255):
+        return "ag"
+    if c >= 3 and np.all(values[..., 2] <= 0.5 / 255):
+        return "rg"
+    return "rgb"
+
+
+def decode_texels(
+    values: np.ndarray, layout: str = "auto", signed: bool = False, unit_tolerance: float = 0.05
+) -> tuple[np.ndarray, NormalStats]:
+    """Texel values [H, W, C] -> (vectors [H, W, 3] float32, :class:`NormalStats`).
+
+    The vectors are normalised where they can be (NaN and zero texels stay as they are; see
+    :func:`repair_normals`). ``signed``: values are already in [-1, 1].
+    """
+    v = np.asarray(values, dtype=_F)
+    if v.ndim == 2:
+        v = v[..., None]
+    c = v.shape[-1]
+    if c not in (2, 3, 4):
+        raise ValueError(
+            f"has {c} channel{'s' if c != 1 else ''}; a normal map needs 2 (RG), 3 (RGB) or 4 "
+            "(RGBA, or DXT5nm with x in alpha)"
+        )
+    lay = guess_layout(v) if layout == "auto" and not signed else layout
+    if lay == "auto":
+        lay = "rg" if c == 2 else "rgb"
+    if lay not in LAYOUTS[1:]:
+        raise ValueError(f"unknown layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
+    if lay == "rgb" and c < 3:
+        raise ValueError(f"layout 'rgb' needs 3 channels, the map has {c}")
+    if lay == "ag" and c < 4:
+        raise ValueError(f"layout 'ag' (DXT5nm) needs 4 channels, the map has {c}")
+
+    def sig(x: np.ndarray) -> np.ndarray:
+        return x if signed else x * _F(2.0) - _F(1.0)
+
+    if lay == "rgb":
+        n = sig(v[..., :3]).astype(_F, copy=True)
+    else:
+        x = sig(v[..., 3] if lay == "ag" else v[..., 0])
+        y = sig(v[..., 1])
+        n = np.stack([x, y, np.zeros_like(x)], axis=-1).astype(_F)
+        z2 = _F(1.0) - x * x - y * y
+        n[..., 2] = np.sqrt(np.maximum(z2, _F(0.0)))
+    nan = ~np.isfinite(n).all(axis=-1)
+    length = np.sqrt(np.einsum("...c,...c->...", np.where(nan[..., None], 0, n), n))
+    zero = ~nan & (length < 1e-6)
+    non_unit = ~nan & ~zero & (np.abs(length - 1.0) > unit_tolerance)
+    zneg = ~nan & (n[..., 2] < 0)
+    stats = NormalStats(
+        texels=int(nan.size),
+        nan=int(nan.sum()),
+        zero=int(zero.sum()),
+        non_unit=int(non_unit.sum()),
+        z_negative=int(zneg.sum()),
+        first_nan=_first(nan),
+        first_zero=_first(zero),
+    )
+    good = ~nan & ~zero
+    n[good] /= length[good][:, None]
+    return n, stats
+
+
+def repair_normals(normals: np.ndarray) -> np.ndarray:
+    """NaN / zero-length texels -> (0, 0, 1); z < 0 -> |z|; renormalise. Returns a copy."""
+    n = np.array(normals, dtype=_F, copy=True)
+    bad = ~np.isfinite(n).all(axis=-1)
+    n[bad] = 0.0
+    length = np.sqrt(np.einsum("...c,...c->...", n, n))
+    bad |= length < 1e-6
+    n[bad] = (0.0, 0.0, 1.0)
+    n[..., 2] = np.abs(n[..., 2])
+    length = np.sqrt(np.einsum("...c,...c->...", n, n))
+    return n / length[..., None]
+
+
+def _read_dds_values(path: Path, max_pixels: int) -> tuple[np.ndarray, str, int]:
+    img = dds.read_dds(path, max_pixels)
+    fmt = "bc3nm" if img.format == "bc3" else img.format
+    rgba = compress.decode_bc(img.levels[0], _pad4(img.width), _pad4(img.height), fmt)
+    rgba = rgba[: img.height, : img.width]
+    values = rgba.astype(_F) * _F(1.0 / 255.0)
+    if img.format == "bc5":
+        values = values[..., :2]
+    return values, f"dds:{img.format}", values.shape[-1]
+
+
+def _pad4(x: int) -> int:
+    return (x + 3) // 4 * 4
+
+
+def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> NormalMap:
+    """Read a normal map file into unit +Y normals. Raises :class:`InputError` on bad input."""
+    o = options or ReadOptions()
+    path = Path(path)
+    if o.convention not in ("auto", "opengl", "directx"):
+        raise input_error(path, f"unknown convention {o.convention!r} (auto, opengl, directx)")
+    signed = False
+    if path.suffix.lower() == ".dds":
+        values, source_format, channels = _read_dds_values(path, o.max_pixels)
+    else:
+        values, info = read_image(path, o.max_pixels)
+        channels = info.channels
+        source_format = info.file_format
+        if info.format in ("half", "float", "double"):
+            finite = values[np.isfinite(values)]
+            signed = bool(finite.size and finite.min() < -1e-3)
+    if channels not in (2, 3, 4):
+        raise input_error(
+            path,
+            f"has {channels} channel{'s' if channels != 1 else ''}; a normal map needs 2 (RG), "
+            "3 (RGB) or 4 (RGBA, or DXT5nm with x in alpha)",
+        )
+    try:
+        normals, stats = decode_texels(values, o.layout, signed, o.unit_tolerance)
+    except ValueError as exc:
+        raise input_error(path, str(exc)) from None
+    layout = o.layout if o.layout != "auto" else (guess_layout(values) if not signed else "rgb")
+    if signed and channels == 2:
+        layout = "rg"
+    notes: list[str] = []
+    if stats.nan or stats.zero:
+        if not o.repair:
+            where = []
+            if stats.nan:
+                where.append(
+                    f"{stats.nan} NaN texel(s), first at row {stats.first_nan[0]}, "
+                    f"col {stats.first_nan[1]}"
+                )
+            if stats.zero:
+                where.append(
+                    f"{stats.zero} zero-length texel(s), first at row "
+                    f"{stats.first_zero[0]}, col {stats.first_zero[1]}"
+                )
+            raise input_error(
+                path, "; ".join(where) + " (use --repair to replace them with (0, 0, 1))"
+            )
+    if o.repair and (stats.nan or stats.zero or stats.z_negative):
+        normals = repair_normals(normals)
+        stats.repaired = True
+        notes.append(
+            f"repaired {stats.nan} NaN, {stats.zero} zero-length and {stats.z_negative} z<0 texels"
+        )
+    if stats.non_unit:
+        notes.append(f"{stats.non_unit} texels were not unit length (renormalised)")
+    if stats.z_negative and not o.repair:
+        notes.append(f"{stats.z_negative} texels point below the surface (z < 0)")
+    detection = detect_convention(normals) if (o.detect or o.convention == "auto") else None
+    conv = o.convention
+    if conv == "auto":
+        conv = (
+            detection.convention
+            if detection and detection.convention != "undetermined"
+            else "opengl"
+        )
+        if detection is not None and detection.convention == "undetermined":
+            notes.append(f"convention undetermined ({detection.reason}); assumed opengl")
+    elif detection is not None and detection.convention not in ("undetermined", conv):
+        notes.append(
+            f"convention given as {conv} but the map looks like {detection.convention} "
+            f"(confidence {detection.confidence:.2f})"
+        )
+    if conv == "directx":
+        normals = flip_green(normals)
+    h, w = normals.shape[:2]
+    return NormalMap(
+        normals=np.ascontiguousarray(normals, dtype=_F),
+        stats=stats,
+        path=str(path),
+        width=w,
+        height=h,
+        channels=channels,
+        layout=layout,
+        source_format=source_format,
+        convention=conv,
+        detection=detection,
+        notes=notes,
+    )

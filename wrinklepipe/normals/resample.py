@@ -1,0 +1,167 @@
+"""Resample wrinkle maps and masks with a proper filter (OpenImageIO's resize), mip chains, and
+what a reduction costs in degrees.
+
+- PD slopes are linear in the height field, so they are filtered as they are (``space="pd"``);
+  unit normals are filtered then renormalised (``space="normal"``).
+- Masks are filtered and clipped to [0, 1].
+- :func:`reduction_error` measures the cost of storing wrinkle states at a smaller size: the
+  blended result at full resolution from the full-size states against the same blend from the
+  reduced states magnified back (bilinear, as a GPU samples), at representative weights.
+- :func:`auto_size` returns the smallest power-of-two size whose error is within budget.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import OpenImageIO as oiio
+
+from wrinklepipe.model import normal_to_pd, normalize, pd_to_normal
+from wrinklepipe.normals.compress import Budget, ErrorStats, angular_error_stats
+
+_F = np.float32
+
+#: Default minification filter (OpenImageIO name).
+DEFAULT_FILTER = "lanczos3"
+
+
+def resize(
+    values: np.ndarray, size: tuple[int, int] | int, filter: str = DEFAULT_FILTER
+) -> np.ndarray:
+    """Resize [H, W] or [H, W, C] float values to ``size`` = (h, w) (or a square side).
+
+    OpenImageIO's ``ImageBufAlgo.resize`` with the named filter (lanczos3, blackman-harris,
+    triangle, box, ...); magnification uses the same filter. Returns float32 [h, w(, C)].
+    """
+    a = np.asarray(values, dtype=_F)
+    squeeze = a.ndim == 2
+    if squeeze:
+        a = a[..., None]
+    h, w = (size, size) if isinstance(size, int) else size
+    if h <= 0 or w <= 0:
+        raise ValueError(f"invalid target size {w} x {h}")
+    if (h, w) == a.shape[:2]:
+        out = a.copy()
+    else:
+        src = oiio.ImageBuf(np.ascontiguousarray(a))
+        roi = oiio.ROI(0, w, 0, h, 0, 1, 0, a.shape[2])
+        dst = oiio.ImageBufAlgo.resize(src, filtername=filter, roi=roi)
+        if dst.has_error:
+            raise ValueError(f"resize failed: {dst.geterror()}")
+        out = np.asarray(dst.get_pixels(oiio.FLOAT), dtype=_F).reshape(h, w, a.shape[2])
+    return out[..., 0] if squeeze else out
+
+
+def resize_normals(
+    normals: np.ndarray,
+    size: tuple[int, int] | int,
+    space: str = "pd",
+    filter: str = DEFAULT_FILTER,
+) -> np.ndarray:
+    """Resize unit normals [H, W, 3]: filter PD slopes (linear) or the vectors, renormalise."""
+    n = np.asarray(normals, dtype=_F)
+    if space == "pd":
+        return pd_to_normal(resize(normal_to_pd(n), size, filter))
+    if space == "normal":
+        return normalize(resize(n, size, filter))
+    raise ValueError(f"space must be 'pd' or 'normal', got {space!r}")
+
+
+def resize_slopes(
+    slopes: np.ndarray, size: tuple[int, int] | int, filter: str = DEFAULT_FILTER
+) -> np.ndarray:
+    """Resize PD slopes [H, W, 2] (linear, so no renormalisation)."""
+    return resize(slopes, size, filter)
+
+
+def resize_masks(
+    masks: np.ndarray, size: tuple[int, int] | int, filter: str = DEFAULT_FILTER
+) -> np.ndarray:
+    """Resize masks [R, H, W] (channels-first) and clip to [0, 1]."""
+    m = np.asarray(masks, dtype=_F)
+    out = resize(np.moveaxis(m, 0, -1), size, filter)
+    if out.ndim == 2:
+        out = out[..., None]
+    return np.clip(np.moveaxis(out, -1, 0), 0.0, 1.0)
+
+
+def mip_chain(values: np.ndarray, min_size: int = 1, filter: str = "box") -> list[np.ndarray]:
+    """Level 0 (the input) and every halving down to ``min_size`` (box filter by default).
+
+    For PD maps pass slopes (filtering is linear there); for unit normals renormalise each
+    level afterwards (:func:`normal_mips`).
+    """
+    a = np.asarray(values, dtype=_F)
+    levels = [a]
+    h, w = a.shape[:2]
+    while max(h, w) > min_size and (h > 1 or w > 1):
+        h, w = max(1, h // 2), max(1, w // 2)
+        levels.append(resize(levels[-1], (h, w), filter))
+    return levels
+
+
+def normal_mips(normals: np.ndarray, min_size: int = 1) -> list[np.ndarray]:
+    """Mip chain of unit normals filtered in PD space (linear) and decoded per level."""
+    return [pd_to_normal(s) for s in mip_chain(normal_to_pd(np.asarray(normals, _F)), min_size)]
+
+
+def reduction_error(
+    base: np.ndarray,
+    states_pd: np.ndarray,
+    masks: np.ndarray,
+    weights: Sequence[np.ndarray],
+    size: int,
+    policy: str = "clamp01",
+    filter: str = DEFAULT_FILTER,
+) -> ErrorStats:
+    """Angular error of the blended face when the PD states are stored at ``size`` x ``size``.
+
+    base [H, W, 3] unit normals, states_pd [K, H, W, 2] PD slopes, masks [R, H, W], weights a
+    list of [R, K] matrices (representative expressions). The states are reduced with
+    ``filter`` and magnified back with a bilinear (triangle) filter; the worst texels over all
+    weights are pooled into one :class:`ErrorStats`.
+    """
+    from wrinklepipe.model import blend
+
+    st = np.asarray(states_pd, dtype=_F)
+    k, h, w = st.shape[:3]
+    back = np.stack([resize(resize(st[i], size, filter), (h, w), "triangle") for i in range(k)])
+    errs = []
+    for wt in weights:
+        ref = blend(base, st, masks, wt, "pd", policy)
+        got = blend(base, back, masks, wt, "pd", policy)
+        errs.append((ref, got))
+    ref = np.concatenate([e[0] for e in errs])
+    got = np.concatenate([e[1] for e in errs])
+    return angular_error_stats(got, ref)
+
+
+def auto_size(
+    base: np.ndarray,
+    states_pd: np.ndarray,
+    masks: np.ndarray,
+    weights: Sequence[np.ndarray],
+    budget: Budget,
+    min_size: int = 16,
+    policy: str = "clamp01",
+) -> tuple[int, dict[int, ErrorStats]]:
+    """The smallest power-of-two size (>= ``min_size``) whose reduction error meets ``budget``.
+
+    Returns ``(size, {size: ErrorStats})`` for every size tried (full size always fits).
+    """
+    full = int(np.asarray(states_pd).shape[1])
+    tried: dict[int, ErrorStats] = {}
+    sizes = []
+    s = full
+    while s >= min_size:
+        sizes.append(s)
+        s //= 2
+    best = full
+    for s in sorted(sizes):  # smallest first; stop at the first that fits
+        e = reduction_error(base, states_pd, masks, weights, s, policy)
+        tried[s] = e
+        if budget.ok(e):
+            best = s
+            break
+    return best, tried
