@@ -1,0 +1,161 @@
+"""``wrinklepipe capture`` end to end, and one clear message (exit 2) per bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wrinklepipe.cli import main
+from wrinklepipe.io.images import read_header, read_image, write_image
+from wrinklepipe.model import angular_error_deg, normalize
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("cap") / "session"
+    assert main(["capture", "--example", str(folder)]) == 0
+    return folder
+
+
+def _args(s: Path, out: Path) -> list[str]:
+    return [
+        "capture",
+        str(s / "neutral.png"),
+        str(s / "expression.png"),
+        "--neutral-landmarks",
+        str(s / "neutral.json"),
+        "--expression-landmarks",
+        str(s / "expression.csv"),
+        "--texture-landmarks",
+        str(s / "texture.json"),
+        "--size",
+        "128",
+        "--roi",
+        str(s / "roi.png"),
+        "--truth",
+        str(s / "truth_texture.png"),
+        "-o",
+        str(out),
+    ]
+
+
+def test_end_to_end_outputs_report_and_determinism(session, tmp_path, capsys):
+    out = tmp_path / "a"
+    assert main(_args(session, out) + ["--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    info = read_header(out / "capture.png")
+    assert (info.width, info.height, info.channels, info.format) == (128, 128, 3, "uint16")
+    # The written map, decoded, is far closer to the truth than a flat map.
+    n = normalize(2.0 * read_image(out / "capture.png")[0] - 1.0)
+    t = normalize(2.0 * read_image(session / "truth_texture.png")[0] - 1.0)
+    roi = read_image(out / "capture_roi.png")[0][..., 0] > 0.5
+    err = angular_error_deg(n, t)[roi].mean()
+    flat = np.degrees(np.arccos(np.clip(t[..., 2], -1, 1)))[roi].mean()
+    assert err < 0.5 * flat
+    # Report: residuals after each warp, clipped fractions, every method side by side.
+    assert report["method"] == "integrable"
+    w1, w2 = report["warps"]["expression_to_neutral"], report["warps"]["photo_to_texture"]
+    assert w1["count"] == w2["count"] == 36 and w1["fit_max_px"] < 0.02
+    assert 0.0 < w1["leave_one_out_max_px"] < 1.0
+    for key in ("fraction_dark", "fraction_clipped", "fraction_clipped_raw", "exposure_factor"):
+        assert key in report["ratio"]
+    assert report["ratio"]["exposure_factor"] == pytest.approx(0.93 / 0.9, abs=3e-3)
+    means = {m: report["orientation"][m]["truth"]["angular"]["mean"] for m in report["orientation"]}
+    assert set(means) == {"gradient", "furrow", "integrable"}
+    assert min(means, key=means.get) == "integrable"
+    # The HTML sheet references pictures that exist beside it; no network.
+    html = (out / "report.html").read_text()
+    pics = sorted(p.name for p in (out / "pictures").iterdir())
+    assert "ratio.png" in pics and "normal_texture_integrable.png" in pics
+    for name in pics:
+        assert f"pictures/{name}" in html
+    assert "http" not in html
+    snippet = (out / "manifest_snippet.toml").read_text()
+    assert 'map = "capture.png"' in snippet and "states_include_base = false" in snippet
+    # Byte-identical on rerun.
+    out2 = tmp_path / "b"
+    assert main(_args(session, out2)) == 0
+    for f in sorted(p for p in out.rglob("*") if p.is_file()):
+        assert f.read_bytes() == (out2 / f.relative_to(out)).read_bytes(), f.name
+
+
+def test_orientation_choice_and_photo_space(session, tmp_path):
+    args = _args(session, tmp_path / "g")
+    # Without texture landmarks the map stays in photo space (192 x 192 here).
+    i = args.index("--texture-landmarks")
+    del args[i : i + 4]
+    j = args.index("--truth")
+    del args[j : j + 2]
+    assert main(args + ["--orientation", "gradient"]) == 0
+    assert read_header(tmp_path / "g" / "capture.png").width == 192
+    report = json.loads((tmp_path / "g" / "report.json").read_text())
+    assert report["method"] == "gradient" and report["outputs"]["space"] == "photo"
+
+
+# --- bad inputs: one clear message each, exit code 2, nothing written -------------------------
+
+
+@pytest.fixture()
+def small(tmp_path) -> Path:
+    rng = np.random.default_rng(0)
+    write_image(tmp_path / "n.png", rng.uniform(0.3, 0.7, (64, 64)), bits=16)
+    write_image(tmp_path / "e.png", rng.uniform(0.3, 0.7, (64, 64)), bits=16)
+    write_image(tmp_path / "big.png", rng.uniform(0.3, 0.7, (64, 80)), bits=16)
+    write_image(tmp_path / "black.png", np.zeros((64, 64)), bits=16)
+    pts = [[10, 10], [50, 12], [30, 50], [12, 40]]
+    (tmp_path / "a.json").write_text(json.dumps(pts))
+    (tmp_path / "two.json").write_text(json.dumps(pts[:2]))
+    (tmp_path / "three.json").write_text(json.dumps(pts[:3]))
+    (tmp_path / "out.json").write_text(json.dumps([[10, 10], [70, 12], [30, 50], [12, 40]]))
+    (tmp_path / "b.csv").write_text("x,y\n11,10\n51,12\n31,50\n13,41\n")
+    return tmp_path
+
+
+def _bad(small: Path, capsys, neutral: str, expr: str, lm_n: str, lm_e: str) -> str:
+    code = main(
+        [
+            "capture",
+            str(small / neutral),
+            str(small / expr),
+            "--neutral-landmarks",
+            str(small / lm_n),
+            "--expression-landmarks",
+            str(small / lm_e),
+            "-o",
+            str(small / "result"),
+        ]
+    )
+    text = " ".join(capsys.readouterr().err.split())
+    assert code == 2
+    assert text.count("error:") == 1, text
+    assert "Traceback" not in text
+    assert not (small / "result").exists()
+    return text
+
+
+def test_photos_of_different_sizes(small, capsys):
+    msg = _bad(small, capsys, "n.png", "big.png", "a.json", "b.csv")
+    assert "big.png" in msg and "80 x 64" in msg and "64 x 64" in msg
+
+
+def test_fewer_than_three_landmarks(small, capsys):
+    msg = _bad(small, capsys, "n.png", "e.png", "two.json", "two.json")
+    assert "only 2 landmark" in msg and "at least 3" in msg
+
+
+def test_landmarks_outside_the_image(small, capsys):
+    msg = _bad(small, capsys, "n.png", "e.png", "out.json", "b.csv")
+    assert "out.json" in msg and "outside the neutral photo" in msg and "(70.0, 12.0)" in msg
+
+
+def test_mismatched_counts(small, capsys):
+    msg = _bad(small, capsys, "n.png", "e.png", "three.json", "b.csv")
+    assert "b.csv" in msg and "4 landmarks" in msg and "has 3" in msg
+
+
+def test_all_black_photo(small, capsys):
+    msg = _bad(small, capsys, "n.png", "black.png", "a.json", "b.csv")
+    assert "black.png" in msg and "all black" in msg

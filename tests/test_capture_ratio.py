@@ -1,0 +1,84 @@
+"""The ratio image: hand-computed values, guards and their reported fractions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wrinklepipe.capture.ratio import (
+    RatioOptions,
+    luminance,
+    ratio_image,
+    skin_level,
+    srgb_to_linear,
+)
+
+PLAIN = RatioOptions(normalize_exposure=False, blur_sigma=0.0, deadband=0.0)
+
+
+def test_ratio_is_the_cosine_ratio():
+    i0 = np.full((8, 8), 0.5)
+    i1 = np.full((8, 8), 0.4)
+    r = ratio_image(i0, i1, options=PLAIN)
+    assert np.allclose(r.ratio, 0.8) and np.allclose(r.nz, 0.8)
+    # With the neutral surface tilted (N_z = 0.9) the wrinkled N'_z is R N_z (equation 2).
+    r = ratio_image(i0, i1, nz_neutral=0.9, options=PLAIN)
+    assert np.allclose(r.nz, 0.72)
+
+
+def test_dark_pixels_are_not_divided_and_counted():
+    i0 = np.full((10, 10), 0.5)
+    i0[:2] = 0.01  # 20 dark pixels under the default 0.02 threshold
+    i1 = np.full((10, 10), 0.45)
+    r = ratio_image(i0, i1, options=PLAIN)
+    assert r.frac_dark == pytest.approx(0.2)
+    assert np.all(r.ratio[:2] == 1.0) and not r.valid[:2].any()
+    assert np.allclose(r.ratio[2:], 0.9)
+
+
+def test_outside_pixels_are_counted():
+    i0 = np.full((10, 10), 0.5)
+    inside = np.ones((10, 10), bool)
+    inside[:, :3] = False
+    r = ratio_image(i0, i0 * 0.9, inside=inside, options=PLAIN)
+    assert r.frac_outside == pytest.approx(0.3)
+    assert np.all(r.nz[:, :3] == 1.0)
+
+
+def test_brighter_expression_is_clipped_and_reported():
+    i0 = np.full((10, 10), 0.5)
+    i1 = np.full((10, 10), 0.5)
+    i1[:5] = 0.6  # R = 1.2 on half the image: not a cosine
+    r = ratio_image(i0, i1, options=PLAIN)
+    assert r.frac_clipped_raw == pytest.approx(0.5)
+    assert r.frac_clipped == pytest.approx(0.5)
+    assert np.all(r.nz <= 1.0) and np.allclose(r.nz[:5], 1.0)
+
+
+def test_exposure_difference_is_cancelled_by_the_skin_level():
+    rng = np.random.default_rng(0)
+    shading = np.ones((40, 40))
+    shading[:18] = 0.8  # 45 % of the ROI creased: the median would be biased, the mode is not
+    i0 = rng.uniform(0.3, 0.7, (40, 40))
+    i1 = 1.1 * i0 * shading
+    assert skin_level((i1 / i0).ravel()) == pytest.approx(1.1, abs=2e-3)
+    r = ratio_image(i0, i1, options=RatioOptions(blur_sigma=0.0, deadband=0.0))
+    assert r.exposure == pytest.approx(1.1, abs=2e-3)
+    assert np.allclose(r.nz[:18], 0.8, atol=2e-3) and np.allclose(r.nz[18:], 1.0, atol=2e-3)
+
+
+def test_roi_weights_the_statistics():
+    i0 = np.full((10, 10), 0.5)
+    i0[:, :5] = 0.0  # dark, but outside the ROI
+    roi = np.zeros((10, 10))
+    roi[:, 5:] = 1.0
+    r = ratio_image(i0, np.full((10, 10), 0.4), roi=roi, options=PLAIN)
+    assert r.frac_dark == 0.0
+
+
+def test_colour_helpers_hand_values():
+    assert float(srgb_to_linear(np.float32(0.5))) == pytest.approx(0.214041, abs=1e-5)
+    assert float(srgb_to_linear(np.float32(0.04))) == pytest.approx(0.04 / 12.92, abs=1e-7)
+    rgb = np.zeros((1, 1, 3), np.float32)
+    rgb[..., 0] = 1.0
+    assert float(luminance(rgb)[0, 0]) == pytest.approx(0.2126, abs=1e-6)

@@ -1,0 +1,335 @@
+"""The capture report: JSON (machine) and an HTML picture sheet with its images as files beside it.
+
+No network, no inline data: ``report.html`` references ``pictures/*.png`` by relative path, so
+the folder can be zipped or served as is. Every number in the sheet is also in ``report.json``.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.atomic import write_bytes
+from wrinklepipe.capture.pipeline import CaptureResult
+from wrinklepipe.io.images import write_image
+
+
+def _r(x: float | None, nd: int = 4) -> float | None:
+    return None if x is None else round(float(x), nd)
+
+
+def _round_tree(obj: Any, nd: int = 4) -> Any:
+    if isinstance(obj, dict):
+        return {k: _round_tree(v, nd) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_round_tree(v, nd) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return round(float(obj), nd)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def _tilt_stats(n: np.ndarray, mask: np.ndarray) -> dict[str, float]:
+    t = np.degrees(np.arccos(np.clip(n[..., 2][mask > 0.5], -1, 1)))
+    if t.size == 0:
+        return {"mean_deg": 0.0, "p95_deg": 0.0, "max_deg": 0.0}
+    return {
+        "mean_deg": float(t.mean()),
+        "p95_deg": float(np.percentile(t, 95)),
+        "max_deg": float(t.max()),
+    }
+
+
+def build_report(
+    result: CaptureResult,
+    inputs: dict[str, str],
+    options: dict[str, Any],
+    outputs: dict[str, str],
+    truth_errors: dict[str, dict] | None = None,
+) -> dict[str, Any]:
+    """The JSON report: inputs, options, warp residuals, clipping, per-method diagnostics."""
+    rr = result.ratio
+    methods: dict[str, Any] = {}
+    chosen = result.normal_photo[result.method]
+    roi_photo = result.ratio.valid.astype(np.float32)  # diagnostics over divided pixels
+    for m, n in result.normal_photo.items():
+        dot = np.einsum("...c,...c->...", n[..., :2], chosen[..., :2])
+        leaning = (np.hypot(n[..., 0], n[..., 1]) > 1e-3) & (roi_photo > 0.5)
+        methods[m] = {
+            "integrability_residual": result.integrability[m],
+            "agrees_with_chosen": float((dot[leaning] > 0).mean()) if leaning.any() else 1.0,
+            "tilt_texture": _tilt_stats(result.normal_texture[m], result.roi_texture),
+        }
+        if truth_errors and m in truth_errors:
+            methods[m]["truth"] = truth_errors[m]
+    report = {
+        "tool": "wrinklepipe capture",
+        "method": result.method,
+        "inputs": inputs,
+        "outputs": outputs,
+        "options": options,
+        "warps": {
+            "expression_to_neutral": result.warp_expression.summary(),
+            "photo_to_texture": result.warp_texture.summary(),
+            "expression_to_neutral_leave_one_out_px": [
+                _r(v, 3) for v in result.warp_expression.leave_one_out.tolist()
+            ],
+            "photo_to_texture_leave_one_out_px": [
+                _r(v, 3) for v in result.warp_texture.leave_one_out.tolist()
+            ],
+        },
+        "ratio": {
+            "exposure_factor": rr.exposure,
+            "noise_sigma": rr.noise,
+            "deadband": rr.deadband,
+            "fraction_dark": rr.frac_dark,
+            "fraction_outside_expression": rr.frac_outside,
+            "fraction_clipped_raw": rr.frac_clipped_raw,
+            "fraction_clipped": rr.frac_clipped,
+            "min": float(rr.ratio[rr.valid].min()) if rr.valid.any() else 1.0,
+        },
+        "texture": {
+            "fraction_outside_photo": float(1.0 - result.inside_texture.mean()),
+        },
+        "orientation": methods,
+    }
+    return _round_tree(report)
+
+
+def _grey(v: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    return np.clip((np.asarray(v, np.float64) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+
+
+def write_pictures(
+    folder: Path,
+    result: CaptureResult,
+    neutral: np.ndarray,
+    expression: np.ndarray,
+    roi: np.ndarray,
+) -> dict[str, str]:
+    """8-bit PNG pictures for the sheet; returns caption -> relative path."""
+    pics = folder / "pictures"
+    top = float(max(np.percentile(neutral, 99.5), 1e-6))
+    rr = result.ratio
+    r_lo = float(min(np.percentile(rr.ratio[rr.valid], 0.5), 0.99)) if rr.valid.any() else 0.5
+    ratio_rgb = np.repeat(_grey(rr.ratio, r_lo, 1.0)[..., None], 3, axis=-1)
+    ratio_rgb[~rr.valid] = (0.0, 0.0, 0.6)  # dark or outside: blue
+    ratio_rgb[rr.valid & (rr.nz >= 1.0) & (rr.ratio > 1.0 + rr.deadband)] = (0.9, 0.5, 0.0)
+    items: list[tuple[str, str, np.ndarray]] = [
+        ("neutral photo I", "neutral.png", _grey(neutral, 0.0, top)),
+        ("expression photo I'", "expression.png", _grey(expression, 0.0, top)),
+        (
+            "expression warped onto neutral I'_d",
+            "expression_warped.png",
+            _grey(result.expression_warped, 0.0, top),
+        ),
+        ("region of interest", "roi.png", np.clip(roi, 0, 1)),
+        (
+            f"ratio R = I'_d / I ({r_lo:.3f} black .. 1 white; blue: dark/outside; "
+            "orange: clipped)",
+            "ratio.png",
+            ratio_rgb,
+        ),
+    ]
+    for m in result.normal_photo:
+        items.append(
+            (
+                f"normals, photo space ({m})",
+                f"normal_photo_{m}.png",
+                0.5 + 0.5 * result.normal_photo[m],
+            )
+        )
+    for m in result.normal_texture:
+        items.append(
+            (
+                f"wrinkle normal map, texture space ({m})",
+                f"normal_texture_{m}.png",
+                0.5 + 0.5 * result.normal_texture[m],
+            )
+        )
+    out = {}
+    for caption, name, img in items:  # a dozen pictures
+        write_image(pics / name, img, bits=8)
+        out[caption] = f"pictures/{name}"
+    return out
+
+
+_CSS = """
+body{font:14px/1.45 system-ui,sans-serif;margin:24px;color:#1d1f21;background:#fafafa}
+h1{font-size:20px;margin:0 0 4px}h2{font-size:16px;margin:22px 0 8px;border-bottom:1px solid #ddd}
+table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #ddd;padding:3px 8px;
+text-align:right}th{background:#eee}td.l,th.l{text-align:left}
+.grid{display:flex;flex-wrap:wrap;gap:12px}figure{margin:0;width:260px}
+figure img{width:256px;image-rendering:pixelated;border:1px solid #ccc;background:#fff}
+figcaption{font-size:12px;color:#444}.best{font-weight:600;background:#e8f5e9}
+.muted{color:#777}
+"""
+
+
+def _table(header: list[str], rows: list[list[str]], best_row: int | None = None) -> str:
+    h = "".join(
+        f"<th{' class=l' if i == 0 else ''}>{html.escape(c)}</th>" for i, c in enumerate(header)
+    )
+    body = []
+    for k, r in enumerate(rows):
+        cls = " class=best" if k == best_row else ""
+        cells = "".join(
+            f"<td{' class=l' if i == 0 else ''}>{html.escape(str(c))}</td>" for i, c in enumerate(r)
+        )
+        body.append(f"<tr{cls}>{cells}</tr>")
+    return f"<table><tr>{h}</tr>{''.join(body)}</table>"
+
+
+def _f(x: Any, nd: int = 2) -> str:
+    return "-" if x is None else f"{float(x):.{nd}f}"
+
+
+def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
+    """The picture sheet (self-contained HTML; images by relative path)."""
+    w1 = report["warps"]["expression_to_neutral"]
+    w2 = report["warps"]["photo_to_texture"]
+    rt = report["ratio"]
+    parts = [
+        "<!doctype html><html><head><meta charset=utf-8><title>wrinklepipe capture</title>",
+        f"<style>{_CSS}</style></head><body>",
+        "<h1>wrinklepipe capture</h1>",
+        f"<p class=muted>orientation: <b>{html.escape(report['method'])}</b> &middot; output: "
+        f"{html.escape(str(report['outputs'].get('normal_map', '')))}</p>",
+        "<h2>Landmark residuals (pixels)</h2>",
+        _table(
+            [
+                "warp",
+                "landmarks",
+                "fit max",
+                "fit mean",
+                "leave-one-out max",
+                "leave-one-out mean",
+                "worst landmark",
+            ],
+            [
+                [
+                    "expression -> neutral",
+                    w1["count"],
+                    _f(w1["fit_max_px"], 4),
+                    _f(w1["fit_mean_px"], 4),
+                    _f(w1["leave_one_out_max_px"]),
+                    _f(w1["leave_one_out_mean_px"]),
+                    w1["leave_one_out_worst_index"],
+                ],
+                [
+                    "photo -> texture",
+                    w2["count"],
+                    _f(w2["fit_max_px"], 4),
+                    _f(w2["fit_mean_px"], 4),
+                    _f(w2["leave_one_out_max_px"]),
+                    _f(w2["leave_one_out_mean_px"]),
+                    w2["leave_one_out_worst_index"],
+                ],
+            ],
+        ),
+        "<p class=muted>fit: the evaluated warp at each landmark (0 up to the coarse-grid "
+        "approximation); leave-one-out: the warp fitted without that landmark, predicting it "
+        "(large values flag a misplaced landmark).</p>",
+        "<h2>Ratio image</h2>",
+        _table(
+            ["quantity", "value"],
+            [
+                ["exposure factor (R divided by)", _f(rt["exposure_factor"], 4)],
+                ["noise sigma of blurred R", _f(rt["noise_sigma"], 5)],
+                ["deadband", _f(rt["deadband"], 5)],
+                ["dark pixels (ROI share)", _f(rt["fraction_dark"], 4)],
+                [
+                    "outside the expression photo (ROI share)",
+                    _f(rt["fraction_outside_expression"], 4),
+                ],
+                ["R > 1 before the blur (ROI share)", _f(rt["fraction_clipped_raw"], 4)],
+                ["R N_z > 1 + deadband, clipped (ROI share)", _f(rt["fraction_clipped"], 4)],
+                ["texels outside the photo", _f(report["texture"]["fraction_outside_photo"], 4)],
+            ],
+        ),
+        "<h2>Orientation methods</h2>",
+    ]
+    methods = report["orientation"]
+    names = list(methods)
+    has_truth = all("truth" in methods[m] for m in names)
+    if has_truth:
+        rows = []
+        for m in names:
+            t = methods[m]["truth"]
+            rows.append(
+                [
+                    m,
+                    _f(t["tilt"]["mean"]),
+                    _f(t["angular"]["mean"]),
+                    _f(t["angular"]["median"]),
+                    _f(t["angular"]["p95"]),
+                    _f(t["crease_angular"]["mean"]),
+                    _f(t["orientation_correct"], 3),
+                    _f(t["flat"]["mean"]),
+                ]
+            )
+        best = int(np.argmin([methods[m]["truth"]["angular"]["mean"] for m in names]))
+        parts.append(
+            _table(
+                [
+                    "method",
+                    "tilt mean",
+                    "angular mean",
+                    "angular median",
+                    "angular p95",
+                    "crease angular mean",
+                    "orientation correct",
+                    "flat map error",
+                ],
+                rows,
+                best,
+            )
+        )
+        parts.append(
+            "<p class=muted>degrees, against the given truth inside the ROI; "
+            "crease: texels tilted more than 3 degrees.</p>"
+        )
+    rows = [
+        [
+            m,
+            _f(methods[m]["integrability_residual"], 3),
+            _f(methods[m]["agrees_with_chosen"], 3),
+            _f(methods[m]["tilt_texture"]["mean_deg"]),
+            _f(methods[m]["tilt_texture"]["p95_deg"]),
+        ]
+        for m in names
+    ]
+    parts.append(
+        _table(
+            [
+                "method",
+                "integrability residual",
+                "agrees with chosen",
+                "tilt mean (ROI)",
+                "tilt p95 (ROI)",
+            ],
+            rows,
+            names.index(report["method"]) if report["method"] in names else None,
+        )
+    )
+    parts.append("<h2>Pictures</h2><div class=grid>")
+    for caption, rel in pictures.items():
+        parts.append(
+            f"<figure><a href='{html.escape(rel)}'><img src='{html.escape(rel)}' "
+            f"alt='{html.escape(caption)}'></a><figcaption>{html.escape(caption)}"
+            "</figcaption></figure>"
+        )
+    parts.append("</div></body></html>\n")
+    return "\n".join(parts)
+
+
+def write_report(folder: Path, report: dict[str, Any], pictures: dict[str, str]) -> None:
+    """``report.json`` and ``report.html`` into ``folder`` (atomic, deterministic)."""
+    from wrinklepipe.atomic import dumps_json
+
+    write_bytes(folder / "report.json", dumps_json(report).encode("utf-8"))
+    write_bytes(folder / "report.html", render_html(report, pictures).encode("utf-8"))
