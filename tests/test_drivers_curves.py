@@ -115,3 +115,24 @@ def test_dynamic_driver_plugs_in_the_geometry_module():
         res.weights[:, :, 0].mean(axis=1), [0, 1 - 0.95**2, 1 - 0.9**2], atol=1e-5
     )
     np.testing.assert_allclose(res.weights[2, :, 0], 0.19, atol=1e-5)
+
+
+def test_gltf_with_external_buffer_and_broken_files(tmp_path):
+    import pygltflib
+
+    glb = make_morph_gltf(tmp_path / "a.glb", ["brow"], [0, 1], [[0], [1]])
+    g = pygltflib.GLTF2().load(str(glb))
+    g.convert_buffers(pygltflib.BufferFormat.BINFILE)
+    g.save(str(tmp_path / "ext.gltf"))
+    assert any(p.suffix == ".bin" for p in tmp_path.iterdir())
+    ctx = wd.DriverContext(REGIONS, STATES, root=tmp_path)
+    res = wd.evaluate("curves", ctx, {"file": "ext.gltf"}, times=[0.5])
+    assert res.weights[0, 0, 0] == pytest.approx(0.5)
+    # a truncated GLB and a buffer URI escaping the folder: clear messages, no traceback
+    (tmp_path / "cut.glb").write_bytes(glb.read_bytes()[:-40])
+    with pytest.raises(InputError):
+        wd.evaluate("curves", ctx, {"file": "cut.glb"})
+    g.buffers[0].uri = "../../etc/passwd"
+    g.save(str(tmp_path / "evil.gltf"))
+    with pytest.raises(InputError, match="outside the file's folder"):
+        wd.evaluate("curves", ctx, {"file": "evil.gltf"})

@@ -149,20 +149,29 @@ def read_gltf_morph_animation(
     for ci, ch in enumerate(anim.channels):
         if ch.target.path != "weights" or ch.target.node is None:
             continue
+        key = f"animations[{animation}].channels[{ci}]"
+        if not 0 <= ch.target.node < len(g.nodes) or not 0 <= ch.sampler < len(anim.samplers):
+            raise input_error(path, "channel names a missing node or sampler", key)
         node = g.nodes[ch.target.node]
-        if node.mesh is None:
-            raise input_error(
-                path, "weights channel targets a node without a mesh", f"channel {ci}"
-            )
+        if node.mesh is None or not 0 <= node.mesh < len(g.meshes):
+            raise input_error(path, "weights channel targets a node without a mesh", key)
         mesh = g.meshes[node.mesh]
         names = tuple((mesh.extras or {}).get("targetNames", ()))
         n_targets = len(mesh.primitives[0].targets or [])
         if len(names) != n_targets:
             names = tuple(f"target{i}" for i in range(n_targets))
         s = anim.samplers[ch.sampler]
-        kt = _accessor(g, s.input).reshape(-1).astype(np.float64)
-        kv = _accessor(g, s.output).reshape(-1).astype(np.float64)
-        tracks.append((names, kt, kv, s.interpolation or "LINEAR"))
+        kt = _accessor(g, s.input, path).reshape(-1)
+        kv = _accessor(g, s.output, path).reshape(-1)
+        interp = s.interpolation or "LINEAR"
+        per_key = len(names) * (3 if interp == "CUBICSPLINE" else 1)
+        if kt.size == 0 or kv.size != kt.size * per_key:
+            raise input_error(
+                path, f"{kv.size} weight values for {kt.size} keys x {per_key} per key", key
+            )
+        if np.any(np.diff(kt) <= 0):
+            raise input_error(path, "key times must increase strictly", key)
+        tracks.append((names, kt, kv, interp))
     if not tracks:
         raise input_error(path, "the animation drives no morph-target weights", "animations")
     if times is None:
@@ -187,28 +196,61 @@ def read_gltf_morph_animation(
     return np.asarray(times, np.float64), tuple(all_names), np.stack(cols, axis=1)
 
 
-def _accessor(g: Any, index: int) -> np.ndarray:
-    import pygltflib
+_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+# componentType -> (numpy dtype, divisor for normalized integers: glTF animation outputs)
+_TYPES = {
+    5126: ("<f4", None),
+    5120: ("<i1", 127.0),
+    5121: ("<u1", 255.0),
+    5122: ("<i2", 32767.0),
+    5123: ("<u2", 65535.0),
+}
 
-    acc = g.accessors[index]
-    view = g.bufferViews[acc.bufferView]
-    data = (
-        g.binary_blob()
-        if g.buffers[view.buffer].uri is None
-        else g.get_data_from_buffer_uri(g.buffers[view.buffer].uri)
-    )
-    ncomp = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}[acc.type]
-    if acc.componentType != pygltflib.FLOAT:
-        raise ValueError("only FLOAT animation accessors are supported")
-    start = (view.byteOffset or 0) + (acc.byteOffset or 0)
-    stride = view.byteStride or 4 * ncomp
-    raw = np.frombuffer(
-        data, dtype=np.uint8, count=stride * (acc.count - 1) + 4 * ncomp, offset=start
-    )
-    if stride == 4 * ncomp:
-        return raw.view(np.float32).reshape(acc.count, ncomp).copy()
-    idx = np.arange(acc.count)[:, None] * stride + np.arange(4 * ncomp)[None]
-    return raw[idx].copy().view(np.float32).reshape(acc.count, ncomp)
+
+def _buffer_bytes(g: Any, path: Path, i: int) -> bytes:
+    from urllib.parse import unquote
+
+    uri = g.buffers[i].uri
+    if uri is None:
+        return g.binary_blob() or b""
+    if uri.startswith("data:"):
+        return g.get_data_from_buffer_uri(uri)
+    folder = path.parent.resolve()
+    target = (folder / unquote(uri)).resolve()
+    if folder not in target.parents:
+        raise input_error(
+            path, f"buffer URI {uri!r} points outside the file's folder", f"buffers[{i}]"
+        )
+    if not target.is_file():
+        raise input_error(path, f"buffer file not found: {uri}", f"buffers[{i}]")
+    return target.read_bytes()
+
+
+def _accessor(g: Any, index: int, path: Path = Path("<gltf>")) -> np.ndarray:
+    """An accessor as float64 ``[count, components]`` (normalized integers scaled to [-1, 1])."""
+    try:
+        acc = g.accessors[index]
+        view = g.bufferViews[acc.bufferView]
+        data = _buffer_bytes(g, path, view.buffer)
+        ncomp = _COMPONENTS[acc.type]
+        dtype, div = _TYPES[acc.componentType]
+        size = np.dtype(dtype).itemsize * ncomp
+        start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+        stride = view.byteStride or size
+        if acc.count <= 0 or start + stride * (acc.count - 1) + size > len(data):
+            raise ValueError("accessor runs past the end of its buffer")
+        raw = np.frombuffer(data, np.uint8, count=stride * (acc.count - 1) + size, offset=start)
+        idx = np.arange(acc.count)[:, None] * stride + np.arange(size)[None]
+        out = raw[idx].copy().view(dtype).reshape(acc.count, ncomp).astype(np.float64)
+    except InputError:
+        raise
+    except (IndexError, KeyError, TypeError, ValueError) as exc:
+        raise input_error(path, f"bad accessor: {exc}", f"accessors[{index}]") from None
+    if div is not None:
+        out = np.maximum(out / div, -1.0)
+    if not np.isfinite(out).all():
+        raise input_error(path, "accessor holds non-finite values", f"accessors[{index}]")
+    return out
 
 
 def _hermite(
