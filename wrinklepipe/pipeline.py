@@ -722,3 +722,181 @@ def convert(
         ) from None
     errors = int(validation.get("counts", {}).get("error", 0))
     return ConvertResult(output, report, 1 if errors else 0)
+
+
+# ------------------------------------------------------------------------------------------------
+# engine export presets (a thin layer over the same package and writers)
+
+
+@dataclass(frozen=True)
+class EnginePreset:
+    """How one engine wants the data: green convention, normal-map container, extra files."""
+
+    name: str
+    convention: str  # "opengl" (+Y) | "directx" (-Y)
+    normal_format: str  # "png" | "bc5" (DDS, PNG if the compression stage is missing)
+    gltf: bool  # also ship the glTF (mesh + +Y maps) for the engine's glTF importer
+    shader: str  # "hlsl" | "glsl" | ""
+
+
+ENGINE_PRESETS: dict[str, EnginePreset] = {
+    "unreal": EnginePreset("unreal", "directx", "bc5", False, "hlsl"),
+    "unity": EnginePreset("unity", "opengl", "png", True, "hlsl"),
+    "godot": EnginePreset("godot", "opengl", "png", True, "glsl"),
+    "blender": EnginePreset("blender", "opengl", "png", True, ""),
+}
+
+_HLSL = """// wrinklepipe: base normal + PD wrinkle states (encoding "pd", policy "{policy}").
+// Inputs are the raw texture samples (values in [0, 1]); returns a unit tangent-space normal
+// in this engine's convention ({convention}). SCALE = {scale}.
+static const float SCALE = {scale};
+// z is rebuilt from x, y, so a two-channel (BC5) base works too.
+float3 WrinkleNormal(float2 baseSample, float2 stateSamples[{k}], float activation[{k}])
+{{
+    float2 bxy = baseSample * 2.0 - 1.0;
+    float bz = sqrt(saturate(1.0 - dot(bxy, bxy)));
+    float2 d = bxy / max(bz, 1e-6);
+    [unroll] for (int k = 0; k < {k}; ++k)
+        d += activation[k] * (stateSamples[k] * (2.0 * SCALE) - SCALE);
+    return normalize(float3(d, 1.0));
+}}
+"""
+
+_GLSL = """// wrinklepipe: base normal + PD wrinkle states (encoding "pd", policy "{policy}").
+// Inputs are raw texture samples in [0, 1]; returns a unit tangent-space normal (+Y).
+const float SCALE = {scale};
+vec3 wrinkle_normal(vec2 base_sample, vec2 state_samples[{k}], float activation[{k}]) {{
+    vec2 bxy = base_sample * 2.0 - 1.0;
+    float bz = sqrt(clamp(1.0 - dot(bxy, bxy), 0.0, 1.0));
+    vec2 d = bxy / max(bz, 1e-6);
+    for (int k = 0; k < {k}; ++k)
+        d += activation[k] * (state_samples[k] * (2.0 * SCALE) - SCALE);
+    return normalize(vec3(d, 1.0));
+}}
+"""
+
+
+def flip_green(pkg: WrinklePackage) -> WrinklePackage:
+    """OpenGL <-> DirectX: stored green ``q -> top - q`` on the base and state maps.
+
+    For every encoding this negates the tangent-space y: ``0.5 + 0.5 (-y) = 1 - (0.5 + 0.5 y)``
+    (base, ``full``, ``composite``), likewise the PD slope ``d.y`` and the ``diff`` delta's y.
+    Exact on integers, and its own inverse. Masks are unchanged.
+    """
+    out = []
+    for t in pkg.textures:
+        if t.role in ("base_normal", "state"):
+            px = t.pixels.copy()
+            top = np.iinfo(px.dtype).max
+            px[..., 1] = top - px[..., 1]
+            t = replace(t, pixels=px)
+        out.append(t)
+    return replace(pkg, textures=out)
+
+
+def export_files(pkg: WrinklePackage, engine: str) -> tuple[dict[str, bytes], list[str]]:
+    """The files of an engine export as ``{relative path: bytes}`` and notes."""
+    from wrinklepipe.io.gltf_write import gltf_document
+    from wrinklepipe.io.package import png_bytes
+
+    preset = ENGINE_PRESETS[engine]
+    notes: list[str] = []
+    files: dict[str, bytes] = {}
+    if preset.gltf:
+        doc, data, images = gltf_document(pkg)
+        doc["buffers"][0]["uri"] = f"{pkg.name}.bin"
+        files[f"{pkg.name}.gltf"] = dumps_json(doc).encode("utf-8")
+        files[f"{pkg.name}.bin"] = data
+        files.update(images)
+    shipped = flip_green(pkg) if preset.convention == "directx" else pkg
+    if preset.convention == "directx":
+        notes.append("normal maps converted to DirectX (-Y): stored green q -> 255 - q")
+    tex_files: dict[str, str] = {}
+    compressed: dict[str, bytes] = {}
+    if preset.normal_format == "bc5":
+        compressed, n = compressed_files(shipped)
+        notes += n
+    for t in shipped.textures:
+        dds = f"compressed/{t.name}.dds"
+        if dds in compressed:
+            rel = f"{engine}/{t.name}.dds"
+            files[rel] = compressed[dds]
+        else:
+            rel = f"{engine}/{t.name}.png"
+            files[rel] = png_bytes(t.pixels)
+        tex_files[t.name] = rel
+    meta = shipped.meta
+    regions = [r["name"] for r in meta["regions"]]
+    for c in pkg.curves:
+        for rel, data in curve_files(c, regions).items():
+            files[f"{engine}/{rel}"] = data
+    setup = {
+        "engine": engine,
+        "convention": preset.convention,
+        "encoding": meta["encoding"],
+        "scale": meta["scale"],
+        "policy": meta["policy"],
+        "base": tex_files["base_normal"],
+        "states": [{"name": s["name"], "file": tex_files[s["texture"]]} for s in meta["states"]],
+        "masks": {
+            "layout": meta["masks"]["layout"],
+            "files": [tex_files[n] for n in meta["masks"]["textures"]],
+            "table": meta["masks"]["table"],
+        },
+        "regions": meta["regions"],
+        "expressions": meta["expressions"],
+        "curves": [f"{engine}/curves/{c.name}.csv" for c in pkg.curves],
+        "notes": notes,
+    }
+    files[f"{engine}/wrinkle_setup.json"] = dumps_json(setup).encode("utf-8")
+    if preset.shader and meta["encoding"] == "pd":
+        template = _HLSL if preset.shader == "hlsl" else _GLSL
+        text = template.format(
+            policy=meta["policy"],
+            convention=preset.convention,
+            scale=_fmt(meta["scale"]),
+            k=len(meta["states"]),
+        )
+        files[f"{engine}/wrinkle.{preset.shader}"] = text.encode("utf-8")
+    return files, notes
+
+
+def read_package(path: str | Path) -> WrinklePackage:
+    """A written asset: a convert folder (its glTF), a .gltf/.glb or a .usda/.usdc/.usdz file."""
+    from wrinklepipe.io.gltf_read import read_gltf
+    from wrinklepipe.io.usd_read import read_usd
+
+    path = Path(path)
+    if path.is_dir():
+        found = sorted(path.glob("*.gltf")) or sorted(path.glob("*.glb"))
+        if not found:
+            raise input_error(path, "no .gltf or .glb in this folder (is it a convert output?)")
+        path = found[0]
+    suffix = path.suffix.lower()
+    if suffix in (".gltf", ".glb"):
+        return read_gltf(path)
+    if suffix in (".usda", ".usdc", ".usd", ".usdz"):
+        return read_usd(path)
+    raise input_error(path, "expected a convert folder, .gltf/.glb or .usda/.usdc/.usdz")
+
+
+def export(
+    source: str | Path, output: str | Path, engine: str, force: bool = False
+) -> tuple[dict[str, bytes], list[str]]:
+    """Export a written asset for one engine into ``output`` (atomically)."""
+    if engine not in ENGINE_PRESETS:
+        raise input_error(engine, f"unknown engine; expected one of {', '.join(ENGINE_PRESETS)}")
+    source = Path(source)
+    pkg = read_package(source)
+    files, notes = export_files(pkg, engine)
+    inputs = [source] if source.is_dir() else [source, source.parent]
+    try:
+        with staged_folder(output, force=force, inputs=inputs) as tmp:
+            for rel, data in sorted(files.items()):
+                write_bytes(tmp / rel, data)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise input_error(
+            output, f"could not write the export ({reason}); nothing was changed"
+        ) from None
+    return files, notes
