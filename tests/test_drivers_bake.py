@@ -182,3 +182,19 @@ poses = [
     assert doc["weights"][1] == [[0.5], [0.0], [0.5]]
     msg = _one_error(capsys, ["bake", str(m), "--maps", "-o", str(tmp_path / "m")])
     assert "per-vertex weights" in msg
+
+
+@pytest.mark.parametrize("encoding", ["full", "diff"])
+def test_bake_maps_other_encodings(demo, tmp_path, encoding):
+    """``full``/``diff``: N = normalize(B + sum_k a (W_k - B)), from the analytic demo normals."""
+    m = _with_driver(demo, tmp_path, CURVES)
+    m.write_text(m.read_text().replace('encoding = "pd"', f'encoding = "{encoding}"'))
+    out = tmp_path / encoding
+    assert main(["bake", str(m), "--maps", "--start", "1", "--end", "1", "-o", str(out)]) == 0
+    c = generate(SIZE)
+    a = resample_masks(read_mask(demo.parent / "masks" / "glabella.png")[0][None], SIZE)[0]
+    b = c.base_normal.astype(np.float64)
+    n = b + a[..., None] * sum(c.wrinkled_normal(k) - b for k in range(2))
+    expected = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    got = read_image(out / "maps" / "frame_00000.png")[0] * 2 - 1
+    assert float(angular_error_deg(got, expected).max()) < 0.01

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from wrinklepipe.atomic import staged_folder
-from wrinklepipe.console import emit_json, err
+from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.masks import (
     LAYOUTS,
     check_masks,
@@ -63,16 +63,20 @@ def run(args: argparse.Namespace) -> int:
     from wrinklepipe.errors import InputError
 
     names = [n.strip() for n in args.names.split(",")] if args.names else None
-    ms = read_masks(args.masks, names, invert=args.invert)
+    if args.size is not None and args.size <= 0:
+        raise InputError(f"--size must be positive, got {args.size}", "<arguments>")
+    with status(f"reading {len(args.masks)} masks"):
+        ms = read_masks(args.masks, names, invert=args.invert)
     masks = ms.masks
     if args.size is not None:
-        if args.size <= 0:
-            raise InputError(f"--size must be positive, got {args.size}", "<arguments>")
         masks = resample_masks(masks, args.size)
     report = check_masks(masks, ms.names)
     packed = pack(masks, ms.names, args.layout, lr_conflict=args.lr_conflict)
     bits = args.bits or ms.bits
-    with staged_folder(args.output, force=args.force, inputs=ms.files) as tmp:
+    with (
+        status("writing packed masks"),
+        staged_folder(args.output, force=args.force, inputs=ms.files) as tmp,
+    ):
         write_packed(tmp, packed, bits=bits, invert=args.invert, inputs=ms.files)
     if args.json:
         emit_json(
