@@ -112,3 +112,42 @@ def test_bones_driver_from_file(tmp_path):
     mid = wd.evaluate("bones", ctx, spec, times=[0.25])
     alpha = pose_influence(NEUTRAL, COMPRESS[None], FRAMES.mean(axis=0)[None])
     assert mid.weights[0, 0, 0] == pytest.approx(theta(alpha[0, 0, 0]), abs=1e-6)
+
+
+def test_bones_driver_takes_skin_from_the_mesh(tmp_path):
+    from wrinklepipe.asset import Mesh
+
+    names = ["b0", "b1", "b2"]
+    doc = {"times": [0.0], "bones": {n: FRAMES[:1, j].tolist() for j, n in enumerate(names)}}
+    (tmp_path / "bones.json").write_text(json.dumps(doc))
+    # glTF-style JOINTS_0 / WEIGHTS_0 (joint order differs from the sorted bone names)
+    mesh = Mesh(
+        np.zeros((2, 3), np.float32),
+        np.zeros((0, 3), np.uint32),
+        joints=np.array([[0, 1, 0, 0], [2, 0, 0, 0]]),
+        skin_weights=np.array([[0.5, 0.5, 0, 0], [1, 0, 0, 0]], np.float32),
+        joint_names=("b1", "b0", "b2"),
+    )
+    spec = {
+        "file": "bones.json",
+        "poses": [
+            {"name": "neutral", "bones": {n: NEUTRAL[j].tolist() for j, n in enumerate(names)}},
+            {"name": "compress", "bones": {n: COMPRESS[j].tolist() for j, n in enumerate(names)}},
+        ],
+    }
+    ctx = wd.DriverContext(["face"], ("compress",), root=tmp_path, mesh=mesh)
+    res = wd.evaluate("bones", ctx, spec)
+    # vertex 0: b1 (theta 1) + b0 (theta 0.5) -> 1.5 clamped to 1; vertex 1: b2 only -> 0
+    np.testing.assert_allclose(res.weights[0, :, 0], [1.0, 0.0])
+
+
+def test_dynamic_driver_uses_the_geometry_hook(monkeypatch):
+    import sys
+    import types
+
+    fake = types.ModuleType("wrinklepipe.geometry.dynamic")
+    fake.driver = lambda ctx, spec, times: np.full((len(times), 5), 0.25)
+    monkeypatch.setitem(sys.modules, "wrinklepipe.geometry.dynamic", fake)
+    ctx = wd.DriverContext(["face"], ("stretch", "compress"), policy="signed")
+    res = wd.evaluate("dynamic", ctx, {}, times=[0.0, 1.0])
+    assert res.per_vertex and res.weights.shape == (2, 5, 1) and res.states == ("signed",)
