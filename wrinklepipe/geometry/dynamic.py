@@ -254,7 +254,7 @@ def morph_pose(mesh: Mesh, weights: dict[str, float], source: str = "") -> np.nd
             f"morph deltas must be [{len(names)}, {len(p)}, 3] (one per target and vertex),"
             f" got {list(d.shape)}",
         )
-    unknown = [n for n in weights if n not in names]
+    unknown = [n for n in weights if n not in names or "@" in n]
     if unknown:
         raise input_error(
             src, f"unknown morph target(s) {unknown}; the mesh has {names}", key="--morph"
@@ -262,8 +262,36 @@ def morph_pose(mesh: Mesh, weights: dict[str, float], source: str = "") -> np.nd
     for name, w in weights.items():
         if not np.isfinite(w):
             raise input_error(src, f"morph weight for {name!r} is not finite", key="--morph")
-        p += float(w) * mesh.morph_deltas[names.index(name)].astype(np.float64)
+        p += _shape_offsets(names, d, name, float(w))
     return p
+
+
+def _shape_offsets(names: list[str], deltas: np.ndarray, name: str, w: float) -> np.ndarray:
+    """Offsets of shape ``name`` at weight ``w``, with UsdSkel-style inbetweens.
+
+    Inbetweens are targets named ``"<name>@<weight>"``. The knots (0: no offset, each inbetween,
+    1: the primary shape) are interpolated piecewise linearly; outside the knots the nearest
+    segment is extrapolated.
+    """
+    knots = [(0.0, None), (1.0, names.index(name))]
+    prefix = name + "@"
+    for i, n in enumerate(names):
+        if n.startswith(prefix):
+            try:
+                knots.append((float(n[len(prefix) :]), i))
+            except ValueError:
+                continue
+    if len(knots) == 2:
+        return w * deltas[names.index(name)].astype(np.float64)
+    knots.sort(key=lambda k: k[0])
+    ws = np.array([k[0] for k in knots])
+    j = int(np.clip(np.searchsorted(ws, w, side="right") - 1, 0, len(ws) - 2))
+    w0, i0 = knots[j]
+    w1, i1 = knots[j + 1]
+    a = (w - w0) / (w1 - w0)
+    d0 = 0.0 if i0 is None else deltas[i0].astype(np.float64)
+    d1 = 0.0 if i1 is None else deltas[i1].astype(np.float64)
+    return (1.0 - a) * d0 + a * d1
 
 
 def skinned_pose(mesh: Mesh, joint_matrices: np.ndarray, source: str = "") -> np.ndarray:

@@ -1,0 +1,496 @@
+"""glTF 2.0 / GLB mesh ingest: every triangle primitive -> :class:`wrinklepipe.asset.Mesh`.
+
+What is read: POSITION, NORMAL, TANGENT, TEXCOORD_0, COLOR_0, JOINTS_0/WEIGHTS_0, the
+``_WRINKLE_VERTEX_ID`` attribute, morph targets (POSITION deltas; names from
+``mesh.extras.targetNames``), the skin of the node that instances the mesh (joint names,
+inverse bind matrices) and that node's world transform.
+
+- Accessors: any component type, ``normalized`` integers decoded per the spec (signed:
+  ``max(c / MAX, -1)``), sparse accessors, byte strides. This makes ``KHR_mesh_quantization``
+  work (quantised attributes are plain accessors; the dequantising node transform is applied).
+- ``EXT_meshopt_compression``: the compressed views are not decoded (no well-kept PyPI decoder);
+  when the extension is *required* the file is refused with a message naming it, otherwise the
+  uncompressed fallback data is read. ``KHR_draco_mesh_compression`` required: refused likewise.
+- ``KHR_texture_basisu`` and other texture/material extensions: textures are not part of mesh
+  ingest, so they are ignored (noted).
+- Primitive modes TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN are read (strips and fans are
+  triangulated); POINTS and LINES primitives are skipped and counted in the notes.
+- Non-skinned instances are baked into world space (positions, normals, tangents, morph deltas)
+  when ``bake_transforms``; skinned meshes stay in their bind space, as the spec says the node
+  transform of a skinned mesh is ignored.
+
+Container, buffer and URI safety come from :mod:`wrinklepipe.io.gltf_read`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.asset import Mesh
+from wrinklepipe.errors import input_error
+from wrinklepipe.io.gltf_read import GltfReadOptions, _Reader
+
+_COMPONENTS = {
+    5120: np.int8,
+    5121: np.uint8,
+    5122: np.int16,
+    5123: np.uint16,
+    5125: np.uint32,
+    5126: np.float32,
+}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+
+#: Required extensions that do not change geometry (textures/materials/lights): ignored.
+_HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_")
+_SUPPORTED = {"KHR_mesh_quantization"}
+_REFUSED = {
+    "EXT_meshopt_compression": "meshopt-compressed buffer views (EXT_meshopt_compression) cannot"
+    " be decoded: no well-kept PyPI decoder; re-export without meshopt (gltfpack without -c)",
+    "KHR_meshopt_compression": "meshopt-compressed buffer views (KHR_meshopt_compression) cannot"
+    " be decoded: no well-kept PyPI decoder; re-export without meshopt",
+    "KHR_draco_mesh_compression": "Draco-compressed primitives (KHR_draco_mesh_compression) are"
+    " not decoded; re-export without Draco",
+}
+
+
+@dataclass(frozen=True)
+class GltfMeshOptions:
+    """Options of :func:`read_gltf_meshes`.
+
+    bake_transforms: apply each non-skinned instance's node world matrix (default True).
+    """
+
+    bake_transforms: bool = True
+
+
+class _MeshReader(_Reader):
+    """The safe container reader plus full accessor decoding (sparse, normalized, strides)."""
+
+    def typed(self, i: Any, key: str) -> np.ndarray:
+        """Accessor ``i`` as a 2-D array ``[count, width]`` (normalized ints -> float32)."""
+        accs = self.doc.get("accessors", [])
+        if not isinstance(i, int) or not 0 <= i < len(accs):
+            raise self.err(f"accessor {i!r} does not exist", key)
+        a = accs[i]
+        akey = f"/accessors/{i}"
+        try:
+            dtype = np.dtype(_COMPONENTS[a["componentType"]]).newbyteorder("<")
+            width = _WIDTH[a["type"]]
+            count = int(a["count"])
+        except (KeyError, TypeError, ValueError):
+            raise self.err("accessor has a bad componentType, type or count", akey) from None
+        if count < 0:
+            raise self.err("accessor count is negative", akey)
+        if "bufferView" in a:
+            arr = self._strided(
+                int(a["bufferView"]), int(a.get("byteOffset", 0)), dtype, width, count, akey
+            )
+        else:
+            arr = np.zeros((count, width), dtype)
+        if "sparse" in a:
+            arr = arr.copy()
+            sp = a["sparse"]
+            n = int(sp.get("count", 0))
+            si, sv = sp.get("indices", {}), sp.get("values", {})
+            try:
+                idt = np.dtype(_COMPONENTS[si["componentType"]]).newbyteorder("<")
+            except (KeyError, TypeError):
+                raise self.err(
+                    "sparse indices have a bad componentType", akey + "/sparse"
+                ) from None
+            idx = self._strided(
+                int(si["bufferView"]), int(si.get("byteOffset", 0)), idt, 1, n, akey + "/sparse"
+            )[:, 0].astype(np.int64)
+            vals = self._strided(
+                int(sv["bufferView"]),
+                int(sv.get("byteOffset", 0)),
+                dtype,
+                width,
+                n,
+                akey + "/sparse",
+            )
+            if n and (idx.min() < 0 or idx.max() >= count):
+                raise self.err("sparse indices out of range", akey + "/sparse/indices")
+            arr[idx] = vals
+        if a.get("normalized") and dtype.kind in "iu":
+            info = np.iinfo(dtype)
+            out = arr.astype(np.float32) / np.float32(info.max)
+            if dtype.kind == "i":
+                np.maximum(out, -1.0, out=out)
+            return out
+        return arr
+
+    def _strided(
+        self, view_i: int, off: int, dtype: np.dtype, width: int, count: int, key: str
+    ) -> np.ndarray:
+        views = self.doc.get("bufferViews", [])
+        if 0 <= view_i < len(views):
+            ext = views[view_i].get("extensions", {})
+            for name in ("EXT_meshopt_compression", "KHR_meshopt_compression"):
+                if name in ext and name in self.doc.get("extensionsRequired", []):
+                    raise self.err(_REFUSED[name], f"/bufferViews/{view_i}")
+        data, stride = self.view(view_i)
+        elem = dtype.itemsize * width
+        stride = stride or elem
+        if count == 0:
+            return np.zeros((0, width), dtype)
+        need = off + (count - 1) * stride + elem
+        if off < 0 or need > len(data):
+            raise self.err(f"accessor needs {need} bytes, its bufferView has {len(data)}", key)
+        raw = np.frombuffer(data, np.uint8, count=need - off, offset=off)
+        rows = np.lib.stride_tricks.as_strided(raw, (count, elem), (stride, 1))
+        return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+
+
+def _node_matrix(node: dict[str, Any]) -> np.ndarray:
+    if "matrix" in node:
+        return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major
+    t = np.asarray(node.get("translation", [0, 0, 0]), dtype=np.float64)
+    x, y, z, w = np.asarray(node.get("rotation", [0, 0, 0, 1]), dtype=np.float64)
+    s = np.asarray(node.get("scale", [1, 1, 1]), dtype=np.float64)
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    m = np.eye(4)
+    m[:3, :3] = r * s
+    m[:3, 3] = t
+    return m
+
+
+def world_matrices(doc: dict[str, Any]) -> dict[int, np.ndarray]:
+    """World matrix of every node reachable from the scenes (or all roots if no scenes)."""
+    nodes = doc.get("nodes", [])
+    children = {c for n in nodes for c in n.get("children", [])}
+    roots: list[int] = []
+    for sc in doc.get("scenes", []):
+        roots.extend(sc.get("nodes", []))
+    if not roots:
+        roots = [i for i in range(len(nodes)) if i not in children]
+    out: dict[int, np.ndarray] = {}
+    stack = [(int(r), np.eye(4)) for r in roots]
+    while stack:  # a walk over the node hierarchy (nodes, not vertices)
+        i, parent = stack.pop()
+        if i in out or not 0 <= i < len(nodes):
+            continue
+        out[i] = parent @ _node_matrix(nodes[i])
+        stack.extend((int(c), out[i]) for c in nodes[i].get("children", []))
+    return out
+
+
+def _triangles(mode: int, idx: np.ndarray) -> np.ndarray:
+    if mode == 4:
+        return idx[: len(idx) // 3 * 3].reshape(-1, 3)
+    if mode == 5:  # strip: (i, i+1, i+2), every other one flipped
+        n = len(idx) - 2
+        if n <= 0:
+            return np.zeros((0, 3), np.int64)
+        k = np.arange(n)
+        a, b, c = idx[k], idx[k + 1], idx[k + 2]
+        odd = k % 2 == 1
+        return np.stack([np.where(odd, b, a), np.where(odd, a, b), c], axis=1)
+    if mode == 6:  # fan
+        n = len(idx) - 2
+        if n <= 0:
+            return np.zeros((0, 3), np.int64)
+        k = np.arange(n)
+        return np.stack([np.full(n, idx[0]), idx[k + 1], idx[k + 2]], axis=1)
+    raise ValueError(mode)
+
+
+def check_extensions(r: _Reader) -> list[str]:
+    """Refuse required extensions that change geometry and are not decoded; note the rest."""
+    notes = []
+    for name in r.doc.get("extensionsRequired", []):
+        if name in _REFUSED:
+            raise r.err(_REFUSED[name], "/extensionsRequired")
+        if name in _SUPPORTED:
+            notes.append(f"decoded {name}")
+        elif name.startswith(_HARMLESS_PREFIXES):
+            notes.append(f"ignored {name} (textures and materials are not part of mesh ingest)")
+        else:
+            raise r.err(f"required extension {name} is not supported", "/extensionsRequired")
+    for name in r.doc.get("extensionsUsed", []):
+        if name in _REFUSED and name not in r.doc.get("extensionsRequired", []):
+            notes.append(f"{name} used but not required: read the uncompressed fallback data")
+    return notes
+
+
+def read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) -> list[Mesh]:
+    """One :class:`Mesh` per triangle primitive per instance (meshes no node uses: once, local).
+
+    Raises :class:`InputError` naming the file and JSON pointer for anything malformed.
+    """
+    opts = options or GltfMeshOptions()
+    r = _MeshReader(Path(path), GltfReadOptions())
+    doc = r.doc
+    file_notes = check_extensions(r)
+    meshes = doc.get("meshes", [])
+    nodes = doc.get("nodes", [])
+    worlds = world_matrices(doc)
+    instances: list[tuple[int, int | None]] = []  # (mesh index, node index)
+    used = set()
+    for ni in sorted(worlds):
+        if "mesh" in nodes[ni]:
+            instances.append((int(nodes[ni]["mesh"]), ni))
+            used.add(int(nodes[ni]["mesh"]))
+    instances += [(mi, None) for mi in range(len(meshes)) if mi not in used]
+    out: list[Mesh] = []
+    skipped_modes = 0
+    for mi, ni in instances:
+        if not 0 <= mi < len(meshes):
+            raise r.err(f"node uses mesh {mi}, which does not exist", f"/nodes/{ni}/mesh")
+        gm = meshes[mi]
+        names = list((gm.get("extras") or {}).get("targetNames", []))
+        node = nodes[ni] if ni is not None else {}
+        skin = _read_skin(r, int(node["skin"])) if "skin" in node else None
+        world = worlds.get(ni, np.eye(4)) if ni is not None else np.eye(4)
+        for pi, prim in enumerate(gm.get("primitives", [])):
+            mode = int(prim.get("mode", 4))
+            if mode not in (4, 5, 6):
+                skipped_modes += 1
+                continue
+            mesh = _read_primitive(r, mi, pi, prim, names, skin)
+            mesh.notes[:0] = file_notes
+            if skin is None and opts.bake_transforms and not np.allclose(world, np.eye(4)):
+                mesh = _bake(mesh, world)
+                mesh.notes.append(f"baked the world transform of node {ni}")
+            label = gm.get("name") or f"mesh{mi}"
+            mesh.name = f"{label}/{pi}" if len(gm.get("primitives", [])) > 1 else str(label)
+            out.append(mesh)
+    if skipped_modes and out:
+        out[0].notes.append(f"skipped {skipped_modes} point/line primitive(s)")
+    if not out:
+        raise r.err("no triangle primitives (the file has no faces)", "/meshes")
+    return out
+
+
+def _read_skin(r: _MeshReader, si: int) -> dict[str, Any]:
+    skins = r.doc.get("skins", [])
+    if not 0 <= si < len(skins):
+        raise r.err(f"skin {si} does not exist", "/skins")
+    s = skins[si]
+    nodes = r.doc.get("nodes", [])
+    joints = [int(j) for j in s.get("joints", [])]
+    names = tuple(
+        str(nodes[j].get("name") or f"joint{j}") if 0 <= j < len(nodes) else f"joint{j}"
+        for j in joints
+    )
+    ibm = None
+    if "inverseBindMatrices" in s:
+        m = r.typed(s["inverseBindMatrices"], f"/skins/{si}/inverseBindMatrices")
+        if m.shape != (len(joints), 16):
+            raise r.err("inverseBindMatrices count differs from joints", f"/skins/{si}")
+        ibm = m.reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float32)  # column-major
+    return {"names": names, "ibm": ibm, "nodes": joints, "index": si}
+
+
+def _read_primitive(
+    r: _MeshReader,
+    mi: int,
+    pi: int,
+    prim: dict[str, Any],
+    names: list[str],
+    skin: dict[str, Any] | None,
+) -> Mesh:
+    key = f"/meshes/{mi}/primitives/{pi}"
+    attrs = prim.get("attributes", {})
+    if "POSITION" not in attrs:
+        raise r.err("primitive has no POSITION attribute", key + "/attributes")
+    pos = r.typed(attrs["POSITION"], key + "/attributes/POSITION").astype(np.float32)
+    if pos.shape[1] != 3:
+        raise r.err("POSITION must be VEC3", key + "/attributes/POSITION")
+    nv = len(pos)
+    bad = ~np.isfinite(pos).all(axis=1)
+    if bad.any():
+        v = int(np.flatnonzero(bad)[0])
+        raise r.err(
+            f"{int(bad.sum())} position(s) are NaN or infinite (first: vertex {v})",
+            key + "/attributes/POSITION",
+        )
+    notes: list[str] = []
+
+    def attr(name: str, width: tuple[int, ...]) -> np.ndarray | None:
+        if name not in attrs:
+            return None
+        a = r.typed(attrs[name], f"{key}/attributes/{name}")
+        if len(a) != nv or a.shape[1] not in width:
+            raise r.err(
+                f"{name} has {len(a)} x {a.shape[1]} values, POSITION has {nv}",
+                f"{key}/attributes/{name}",
+            )
+        return a
+
+    if "indices" in prim:
+        idx = r.typed(prim["indices"], key + "/indices")[:, 0].astype(np.int64)
+    else:
+        idx = np.arange(nv, dtype=np.int64)
+    if len(idx) and (idx.min() < 0 or idx.max() >= nv):
+        raise r.err(f"indices out of range 0..{nv - 1} (max {int(idx.max())})", key + "/indices")
+    tris = _triangles(int(prim.get("mode", 4)), idx)
+    if int(prim.get("mode", 4)) != 4:
+        notes.append(f"triangulated a {'strip' if prim.get('mode') == 5 else 'fan'}")
+    if len(tris) == 0:
+        raise r.err("primitive has no triangles", key)
+    tris, n_degen = drop_degenerate(pos, tris)
+    if n_degen:
+        notes.append(f"skipped {n_degen} degenerate (zero-area or repeated-index) triangle(s)")
+    if len(tris) == 0:
+        raise r.err("every triangle of the primitive is degenerate", key)
+
+    normals = attr("NORMAL", (3,))
+    tangents = attr("TANGENT", (4,))
+    uvs = attr("TEXCOORD_0", (2,))
+    colors = attr("COLOR_0", (3, 4))
+    if colors is not None and colors.shape[1] == 3:
+        colors = np.concatenate([colors, np.ones((nv, 1), colors.dtype)], axis=1)
+    joints = attr("JOINTS_0", (4,))
+    weights = attr("WEIGHTS_0", (4,))
+    vid = attrs.get("_WRINKLE_VERTEX_ID")
+    vertex_ids = None
+    if vid is not None:
+        v = r.typed(vid, key + "/attributes/_WRINKLE_VERTEX_ID")[:, 0].astype(np.float64)
+        if len(v) == nv and np.all(v == np.rint(v)) and np.all(v >= 0):
+            vertex_ids = v.astype(np.int64)
+        else:
+            notes.append("ignored _WRINKLE_VERTEX_ID (not one non-negative integer per vertex)")
+
+    deltas = []
+    tnames = []
+    skipped_targets = 0
+    for ti, tgt in enumerate(prim.get("targets", [])):
+        tname = str(names[ti]) if ti < len(names) else f"target_{ti}"
+        if "POSITION" not in tgt:
+            d = np.zeros((nv, 3), np.float32)
+        else:
+            d = r.typed(tgt["POSITION"], f"{key}/targets/{ti}/POSITION").astype(np.float32)
+            if d.shape != (nv, 3) or not np.isfinite(d).all():
+                skipped_targets += 1
+                notes.append(
+                    f"skipped morph target {tname!r}: {d.shape[0]} x {d.shape[1]} deltas for"
+                    f" {nv} vertices" + ("" if np.isfinite(d).all() else " or non-finite values")
+                )
+                continue
+        deltas.append(d)
+        tnames.append(tname)
+    if names and len(names) != len(prim.get("targets", [])):
+        notes.append(
+            f"extras.targetNames has {len(names)} names for {len(prim.get('targets', []))} targets"
+        )
+
+    mesh = Mesh(
+        positions=pos,
+        indices=tris.astype(np.uint32),
+        uvs=None if uvs is None else uvs.astype(np.float32),
+        normals=None if normals is None else normals.astype(np.float32),
+        tangents=None if tangents is None else tangents.astype(np.float32),
+        morph_names=tuple(tnames),
+        morph_deltas=np.stack(deltas) if deltas else None,
+        vertex_ids=vertex_ids,
+        colors=None if colors is None else colors.astype(np.float32),
+        notes=notes,
+    )
+    if skin is not None and joints is not None and weights is not None:
+        j = joints.astype(np.int64)
+        if j.max(initial=0) >= len(skin["names"]):
+            raise r.err("JOINTS_0 index past the skin's joints", key + "/attributes/JOINTS_0")
+        mesh.joints = j
+        mesh.skin_weights = weights.astype(np.float32)
+        mesh.joint_names = skin["names"]
+        mesh.inverse_bind = skin["ibm"]
+        mesh.notes.append(f"skin {skin['index']}: {len(skin['names'])} joints")
+    return mesh
+
+
+def drop_degenerate(positions: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, int]:
+    """Remove triangles with repeated indices or zero area; return (kept, removed count)."""
+    p = np.asarray(positions, dtype=np.float64)
+    t = np.asarray(tris, dtype=np.int64)
+    rep = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
+    tri = p[t]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    keep = ~rep & (area2 > 0)
+    return t[keep], int((~keep).sum())
+
+
+def _bake(mesh: Mesh, m: np.ndarray) -> Mesh:
+    lin = m[:3, :3]
+    mesh.positions = (mesh.positions.astype(np.float64) @ lin.T + m[:3, 3]).astype(np.float32)
+    if mesh.morph_deltas is not None:
+        mesh.morph_deltas = (mesh.morph_deltas.astype(np.float64) @ lin.T).astype(np.float32)
+    nrm_m = np.linalg.inv(lin).T
+    if mesh.normals is not None:
+        n = mesh.normals.astype(np.float64) @ nrm_m.T
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+        mesh.normals = n.astype(np.float32)
+    if mesh.tangents is not None:
+        t = mesh.tangents[:, :3].astype(np.float64) @ lin.T
+        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-30)
+        w = mesh.tangents[:, 3:] * np.sign(np.linalg.det(lin) or 1.0)
+        mesh.tangents = np.concatenate([t, w], axis=1).astype(np.float32)
+    if np.linalg.det(lin) < 0:  # mirrored instance: keep counter-clockwise front faces
+        mesh.indices = mesh.indices[:, [0, 2, 1]].copy()
+    return mesh
+
+
+def gltf_joint_world_matrices(
+    path: str | Path, mesh: Mesh, time: float | None = None
+) -> np.ndarray:
+    """World matrices ``[J, 4, 4]`` of ``mesh``'s joints, at rest or at ``time`` (seconds) of
+    the file's first animation (LINEAR / STEP samplers; CUBICSPLINE uses the values only)."""
+    r = _MeshReader(Path(path), GltfReadOptions())
+    doc = r.doc
+    nodes = [dict(n) for n in doc.get("nodes", [])]
+    if time is not None and doc.get("animations"):
+        anim = doc["animations"][0]
+        for ci, ch in enumerate(anim.get("channels", [])):
+            tgt = ch.get("target", {})
+            path_ = tgt.get("path")
+            if path_ not in ("translation", "rotation", "scale") or "node" not in tgt:
+                continue
+            smp = anim["samplers"][ch["sampler"]]
+            key = f"/animations/0/channels/{ci}"
+            t_in = r.typed(smp["input"], key)[:, 0].astype(np.float64)
+            vals = r.typed(smp["output"], key).astype(np.float64)
+            interp = smp.get("interpolation", "LINEAR")
+            if interp == "CUBICSPLINE":
+                vals = vals.reshape(len(t_in), 3, -1)[:, 1]
+            nodes[int(tgt["node"])][path_] = _sample(
+                t_in, vals, float(time), interp, path_
+            ).tolist()
+            nodes[int(tgt["node"])].pop("matrix", None)
+    worlds = world_matrices({**doc, "nodes": nodes})
+    names_to_node = {}
+    for s in doc.get("skins", []):
+        for j in s.get("joints", []):
+            nm = str(nodes[j].get("name") or f"joint{j}")
+            names_to_node.setdefault(nm, j)
+    missing = [n for n in mesh.joint_names if n not in names_to_node]
+    if missing:
+        raise input_error(str(path), f"joints {missing} are not nodes of the file")
+    return np.stack([worlds.get(names_to_node[n], np.eye(4)) for n in mesh.joint_names])
+
+
+def _sample(t: np.ndarray, v: np.ndarray, time: float, interp: str, path: str) -> np.ndarray:
+    if time <= t[0]:
+        return v[0]
+    if time >= t[-1]:
+        return v[-1]
+    k = int(np.searchsorted(t, time, side="right")) - 1
+    if interp == "STEP":
+        return v[k]
+    a = (time - t[k]) / (t[k + 1] - t[k])
+    if path == "rotation":
+        q0, q1 = v[k], v[k + 1]
+        if np.dot(q0, q1) < 0:
+            q1 = -q1
+        q = (1 - a) * q0 + a * q1  # nlerp
+        return q / np.linalg.norm(q)
+    return (1 - a) * v[k] + a * v[k + 1]

@@ -1,0 +1,459 @@
+"""USD mesh ingest (usd-core): UsdGeom.Mesh + UsdSkel blend shapes and skinning -> Meshes.
+
+- Points at the requested time; ``faceVertexCounts``/``faceVertexIndices`` fan-triangulated
+  (``leftHanded`` orientation flips the winding); holes are not cut (noted when present).
+- UVs: the ``st`` primvar (else the first ``texCoord2f`` primvar), with ``vertex``,
+  ``faceVarying`` or ``uniform`` interpolation, indexed or not. USD's v points up: v is flipped
+  to the glTF convention (noted). Normals: ``primvars:normals`` or ``normals`` likewise.
+- Render vertices are the distinct (point, uv, normal) corner triples: the vertex split that UV
+  seams and hard edges need; ``Mesh.notes`` says how many.
+- UsdSkel blend shapes (``skel:blendShapes`` / ``skel:blendShapeTargets``): sparse
+  ``pointIndices`` are expanded; each inbetween becomes an extra target named
+  ``"<shape>@<weight>"`` (e.g. ``targetC@0.5``) that :func:`wrinklepipe.geometry.dynamic.morph_pose`
+  interpolates piecewise-linearly, as UsdSkel does.
+- UsdSkel skinning: joint influences (constant = rigid, or vertex; any ``elementSize``, the 4
+  largest kept and renormalised), joint order (``skel:joints`` or the Skeleton's), inverse bind
+  matrices from ``bindTransforms``; ``geomBindTransform`` is applied to the points. Matrices are
+  converted from USD's row-vector convention to column vectors.
+- Non-skinned meshes are baked to world space when ``bake_transforms``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.asset import Mesh
+from wrinklepipe.errors import input_error
+from wrinklepipe.io.mesh_gltf import drop_degenerate
+
+
+@dataclass(frozen=True)
+class UsdMeshOptions:
+    """Options of :func:`read_usd_meshes`.
+
+    bake_transforms: apply the local-to-world transform of non-skinned meshes (default True).
+    time: time code for points and transforms (default: the default time).
+    prim: only read meshes at or under this prim path (default: all).
+    """
+
+    bake_transforms: bool = True
+    time: float | None = None
+    prim: str | None = None
+
+
+def _open(path: Path) -> Any:
+    from pxr import Tf, Usd
+
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Tf.ErrorException as exc:
+        raise input_error(path, f"cannot open USD stage: {str(exc).strip()[:300]}") from None
+    if stage is None:
+        raise input_error(path, "cannot open USD stage")
+    return stage
+
+
+def read_usd_meshes(path: str | Path, options: UsdMeshOptions | None = None) -> list[Mesh]:
+    """One :class:`Mesh` per ``UsdGeom.Mesh`` prim with faces (named by prim path)."""
+    from pxr import Usd, UsdGeom
+
+    opts = options or UsdMeshOptions()
+    p = Path(path)
+    stage = _open(p)
+    time = Usd.TimeCode.Default() if opts.time is None else Usd.TimeCode(opts.time)
+    out: list[Mesh] = []
+    skipped: list[str] = []
+    for prim in stage.Traverse(Usd.TraverseInstanceProxies()):
+        if not prim.IsA(UsdGeom.Mesh):
+            continue
+        ppath = str(prim.GetPath())
+        if opts.prim and not (ppath == opts.prim or ppath.startswith(opts.prim.rstrip("/") + "/")):
+            continue
+        mesh = _read_mesh(p, prim, time, opts)
+        if mesh is None:
+            skipped.append(ppath)
+            continue
+        out.append(mesh)
+    if not out:
+        raise input_error(
+            p, "no UsdGeom.Mesh with faces" + (f" under {opts.prim}" if opts.prim else "")
+        )
+    if skipped:
+        out[0].notes.append(f"skipped {len(skipped)} mesh(es) without faces: {skipped[:5]}")
+    return out
+
+
+def _primvar_corners(
+    pv: Any, time: Any, counts: np.ndarray, fvi: np.ndarray, n_points: int, width: int
+) -> tuple[np.ndarray | None, str]:
+    """Per-corner values ``[C, width]`` of a primvar, or None if unusable (with the reason)."""
+    if not pv or not pv.HasValue():
+        return None, ""
+    vals = pv.ComputeFlattened(time)
+    if vals is None:
+        return None, ""
+    try:
+        a = np.asarray(vals, dtype=np.float64).reshape(-1, width)
+    except (TypeError, ValueError):
+        return None, f"{pv.GetName()}: values are not {width}-vectors"
+    interp = pv.GetInterpolation()
+    n_c = len(fvi)
+    if interp == "faceVarying":
+        if len(a) != n_c:
+            return None, f"{pv.GetName()}: {len(a)} faceVarying values for {n_c} corners"
+        return a, ""
+    if interp in ("vertex", "varying"):
+        if len(a) != n_points:
+            return None, f"{pv.GetName()}: {len(a)} vertex values for {n_points} points"
+        return a[fvi], ""
+    if interp == "uniform":
+        if len(a) != len(counts):
+            return None, f"{pv.GetName()}: {len(a)} uniform values for {len(counts)} faces"
+        return np.repeat(a, counts, axis=0), ""
+    if interp == "constant" and len(a):
+        return np.repeat(a[:1], n_c, axis=0), ""
+    return None, f"{pv.GetName()}: unknown interpolation {interp}"
+
+
+def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh | None:
+    from pxr import UsdGeom, UsdSkel
+
+    file = str(path)
+    ppath = str(prim.GetPath())
+    gm = UsdGeom.Mesh(prim)
+    pts_v = gm.GetPointsAttr().Get(time)
+    counts_v = gm.GetFaceVertexCountsAttr().Get(time)
+    fvi_v = gm.GetFaceVertexIndicesAttr().Get(time)
+    if pts_v is None or counts_v is None or fvi_v is None or len(counts_v) == 0:
+        return None
+    pts = np.asarray(pts_v, dtype=np.float64).reshape(-1, 3)
+    counts = np.asarray(counts_v, dtype=np.int64)
+    fvi = np.asarray(fvi_v, dtype=np.int64)
+    n_p = len(pts)
+    notes: list[str] = []
+    if counts.sum() != len(fvi) or (counts < 3).any():
+        raise input_error(file, "faceVertexCounts do not match faceVertexIndices (or a face has"
+                          " fewer than 3 corners)", key=f"{ppath}.faceVertexCounts")  # fmt: skip
+    if len(fvi) and (fvi.min() < 0 or fvi.max() >= n_p):
+        raise input_error(
+            file, f"faceVertexIndices out of range 0..{n_p - 1}", key=f"{ppath}.faceVertexIndices"
+        )
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        v = int(np.flatnonzero(bad)[0])
+        raise input_error(file, f"{int(bad.sum())} point(s) are NaN or infinite (first: {v})",
+                          key=f"{ppath}.points")  # fmt: skip
+    if gm.GetHoleIndicesAttr().Get(time):
+        notes.append("holeIndices ignored (holes are not cut)")
+
+    api = UsdGeom.PrimvarsAPI(prim)
+    st = api.GetPrimvar("st")
+    if not st or not st.HasValue():
+        st = next(
+            (
+                pv
+                for pv in api.GetPrimvarsWithValues()
+                if str(pv.GetTypeName().role) == "TextureCoordinate"
+                or pv.GetTypeName().cppTypeName.endswith("Vec2f>")
+                and pv.GetName().lower().startswith(("primvars:uv", "primvars:st"))
+            ),
+            None,
+        )
+    uv_c, why = _primvar_corners(st, time, counts, fvi, n_p, 2)
+    if why:
+        notes.append(f"ignored UVs ({why})")
+    nrm_pv = api.GetPrimvar("normals")
+    if nrm_pv and nrm_pv.HasValue():
+        n_c, why = _primvar_corners(nrm_pv, time, counts, fvi, n_p, 3)
+    else:
+        n_c, why = None, ""
+        nv = gm.GetNormalsAttr().Get(time)
+        try:
+            a = np.asarray(nv, dtype=np.float64).reshape(-1, 3) if nv is not None else None
+        except (TypeError, ValueError):
+            a, why = None, "normals: values are not 3-vectors"
+        if a is not None and len(a):
+            interp = gm.GetNormalsInterpolation()
+            if interp == "faceVarying" and len(a) == len(fvi):
+                n_c = a
+            elif interp in ("vertex", "varying") and len(a) == n_p:
+                n_c = a[fvi]
+            elif interp == "uniform" and len(a) == len(counts):
+                n_c = np.repeat(a, counts, axis=0)
+            else:
+                why = f"normals: {len(a)} values with interpolation {interp}"
+    if why:
+        notes.append(f"ignored normals ({why})")
+
+    # Render vertices: distinct (point, uv, normal) corners, numbered by first appearance.
+    cols = [fvi[:, None].astype(np.float64)]
+    if uv_c is not None:
+        cols.append(uv_c)
+    if n_c is not None:
+        cols.append(n_c)
+    key = np.concatenate(cols, axis=1) + 0.0
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inv = inv.reshape(-1)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty(len(order), np.int64)
+    rank[order] = np.arange(len(order))
+    corner_v = rank[inv]
+    src = first[order]  # a corner of each render vertex
+    vmap = fvi[src]  # render vertex -> USD point
+    if len(vmap) != n_p:
+        notes.append(f"{len(vmap)} render vertices from {n_p} points (split by UVs/normals)")
+
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    n_tri = counts - 2
+    poly = np.repeat(np.arange(len(counts)), n_tri)
+    k = np.arange(n_tri.sum()) - np.repeat(np.cumsum(n_tri) - n_tri, n_tri)
+    s = starts[poly]
+    tris = corner_v[np.stack([s, s + k + 1, s + k + 2], axis=1)]
+    if (counts > 3).any():
+        notes.append(f"fan-triangulated {int((counts > 3).sum())} polygon(s)")
+    if gm.GetOrientationAttr().Get(time) == UsdGeom.Tokens.leftHanded:
+        tris = tris[:, [0, 2, 1]]
+        notes.append("leftHanded orientation: winding flipped")
+
+    positions = pts[vmap]
+    uvs = None
+    if uv_c is not None:
+        uvs = uv_c[src].copy()
+        uvs[:, 1] = 1.0 - uvs[:, 1]
+        notes.append("flipped V (USD v up -> glTF v down)")
+    normals = None
+    if n_c is not None:
+        nn = n_c[src]
+        nn /= np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-30)
+        normals = nn
+
+    mesh = Mesh(
+        positions=positions.astype(np.float32),
+        indices=tris.astype(np.uint32),
+        uvs=None if uvs is None else uvs.astype(np.float32),
+        normals=None if normals is None else normals.astype(np.float32),
+        name=ppath,
+        notes=notes,
+    )
+
+    skinned = False
+    if prim.HasAPI(UsdSkel.BindingAPI):
+        binding = UsdSkel.BindingAPI(prim)
+        _blend_shapes(file, ppath, binding, mesh, vmap, n_p)
+        skinned = _skin(file, prim, mesh, vmap, n_p, time)
+    if not skinned and opts.bake_transforms:
+        m = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time)).T
+        if not np.allclose(m, np.eye(4)):
+            _apply(mesh, m)
+            mesh.notes.append("baked the local-to-world transform")
+
+    tris2, n_degen = drop_degenerate(mesh.positions, mesh.indices.astype(np.int64))
+    if n_degen:
+        mesh.indices = tris2.astype(np.uint32)
+        mesh.notes.append(f"skipped {n_degen} degenerate triangle(s)")
+    if len(mesh.indices) == 0:
+        raise input_error(file, "every triangle is degenerate", key=ppath)
+    return mesh
+
+
+def _apply(mesh: Mesh, m: np.ndarray) -> None:
+    lin = m[:3, :3]
+    mesh.positions = (mesh.positions.astype(np.float64) @ lin.T + m[:3, 3]).astype(np.float32)
+    if mesh.morph_deltas is not None:
+        mesh.morph_deltas = (mesh.morph_deltas.astype(np.float64) @ lin.T).astype(np.float32)
+    if mesh.normals is not None:
+        n = mesh.normals.astype(np.float64) @ np.linalg.inv(lin)
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+        mesh.normals = n.astype(np.float32)
+    if np.linalg.det(lin) < 0:
+        mesh.indices = mesh.indices[:, [0, 2, 1]].copy()
+
+
+def _blend_shapes(
+    file: str, ppath: str, binding: Any, mesh: Mesh, vmap: np.ndarray, n_p: int
+) -> None:
+    from pxr import UsdSkel
+
+    names_attr = binding.GetBlendShapesAttr().Get()
+    targets = binding.GetBlendShapeTargetsRel().GetTargets()
+    if not names_attr:
+        return
+    names = [str(n) for n in names_attr]
+    if len(targets) != len(names):
+        mesh.notes.append(f"skipped blend shapes: {len(names)} names for {len(targets)} targets")
+        return
+    stage = binding.GetPrim().GetStage()
+    out_names: list[str] = []
+    deltas: list[np.ndarray] = []
+    skipped = 0
+
+    def dense(offsets: Any, idx: np.ndarray | None, label: str) -> np.ndarray | None:
+        try:
+            o = np.asarray(offsets, dtype=np.float64).reshape(-1, 3)
+        except (TypeError, ValueError):
+            o = None
+        if offsets is None or o is None:
+            mesh.notes.append(f"skipped blend shape {label}: no offsets")
+            return None
+        full = np.zeros((n_p, 3))
+        if idx is None:
+            if len(o) != n_p:
+                mesh.notes.append(f"skipped blend shape {label}: {len(o)} offsets for {n_p} points")
+                return None
+            full[:] = o
+        else:
+            if len(o) != len(idx) or (len(idx) and (idx.min() < 0 or idx.max() >= n_p)):
+                mesh.notes.append(f"skipped blend shape {label}: pointIndices do not match offsets")
+                return None
+            full[idx] = o
+        return full[vmap].astype(np.float32)
+
+    for name, tpath in zip(names, targets):
+        bs = UsdSkel.BlendShape(stage.GetPrimAtPath(tpath))
+        if not bs:
+            skipped += 1
+            mesh.notes.append(f"skipped blend shape {name}: {tpath} is not a BlendShape")
+            continue
+        pi = bs.GetPointIndicesAttr().Get()
+        idx = None if pi is None or len(pi) == 0 else np.asarray(pi, dtype=np.int64)
+        d = dense(bs.GetOffsetsAttr().Get(), idx, name)
+        if d is None:
+            skipped += 1
+            continue
+        out_names.append(name)
+        deltas.append(d)
+        for ib in bs.GetInbetweens():
+            w = ib.GetWeight()
+            o = ib.GetOffsets()
+            label = f"{name}@{w:g}"
+            di = dense(o, idx, label) if o is not None else None
+            if di is not None:
+                out_names.append(label)
+                deltas.append(di)
+    if deltas:
+        mesh.morph_names = tuple(out_names)
+        mesh.morph_deltas = np.stack(deltas)
+        n_ib = sum("@" in n for n in out_names)
+        mesh.notes.append(
+            f"{len(out_names) - n_ib} blend shape(s)" + (f", {n_ib} inbetween(s)" if n_ib else "")
+        )
+
+
+def _skin(file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: Any) -> bool:
+    from pxr import Usd, UsdSkel
+
+    root = UsdSkel.Root.Find(prim)
+    if not root:
+        return False
+    cache = UsdSkel.Cache()
+    cache.Populate(root, Usd.TraverseInstanceProxies())
+    sq = cache.GetSkinningQuery(prim)
+    if not sq or not sq.HasJointInfluences():
+        return False
+    skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+    if not skel:
+        return False
+    skel_q = cache.GetSkelQuery(skel)
+    skel_joints = [str(j) for j in skel_q.GetJointOrder()]
+    order = sq.GetJointOrder()
+    joint_names = [str(j) for j in order] if order else skel_joints
+    missing = [j for j in joint_names if j not in skel_joints]
+    if missing:
+        mesh.notes.append(f"skin ignored: joints {missing[:3]} are not in the skeleton")
+        return False
+    inf = sq.ComputeJointInfluences(time)
+    if not inf:
+        return False
+    ji, jw = inf
+    k = sq.GetNumInfluencesPerComponent()
+    ji = np.asarray(ji, dtype=np.int64).reshape(-1, k)
+    jw = np.asarray(jw, dtype=np.float64).reshape(-1, k)
+    if sq.IsRigidlyDeformed():
+        ji = np.repeat(ji[:1], n_p, axis=0)
+        jw = np.repeat(jw[:1], n_p, axis=0)
+    if len(ji) != n_p:
+        mesh.notes.append(f"skin ignored: {len(ji)} influences for {n_p} points")
+        return False
+    if k > 4:
+        top = np.argsort(-jw, axis=1, kind="stable")[:, :4]
+        ji = np.take_along_axis(ji, top, 1)
+        jw = np.take_along_axis(jw, top, 1)
+        mesh.notes.append(f"kept the 4 largest of {k} joint influences per point")
+    elif k < 4:
+        ji = np.pad(ji, ((0, 0), (0, 4 - k)))
+        jw = np.pad(jw, ((0, 0), (0, 4 - k)))
+    total = jw.sum(axis=1, keepdims=True)
+    jw = np.where(total > 0, jw / np.where(total > 0, total, 1.0), 0.0)
+    if ji.max(initial=0) >= len(joint_names) or ji.min(initial=0) < 0:
+        raise input_error(file, "joint indices out of range", key=f"{prim.GetPath()}.skel")
+    bind = skel.GetBindTransformsAttr().Get()
+    if bind is None or len(bind) != len(skel_joints):
+        mesh.notes.append("skin ignored: Skeleton bindTransforms missing or wrong length")
+        return False
+    bind_col = np.asarray(bind, dtype=np.float64).transpose(0, 2, 1)  # row- to column-vector
+    ibm = np.linalg.inv(bind_col)[[skel_joints.index(j) for j in joint_names]]
+    geom = np.asarray(sq.GetGeomBindTransform(time), dtype=np.float64).T
+    if not np.allclose(geom, np.eye(4)):
+        _apply(mesh, geom)
+        mesh.notes.append("applied geomBindTransform")
+    mesh.joints = ji[vmap]
+    mesh.skin_weights = jw[vmap].astype(np.float32)
+    mesh.joint_names = tuple(joint_names)
+    mesh.inverse_bind = ibm.astype(np.float32)
+    mesh.notes.append(f"UsdSkel skin: {len(joint_names)} joints, {k} influence(s) per point")
+    return True
+
+
+def usd_joint_world_matrices(path: str | Path, mesh: Mesh, time: float | None = None) -> np.ndarray:
+    """World matrices ``[J, 4, 4]`` (column vectors) of ``mesh``'s joints at ``time``, from the
+    skeleton bound to the mesh prim ``mesh.name`` and its animation source."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    p = Path(path)
+    stage = _open(p)
+    prim = stage.GetPrimAtPath(mesh.name)
+    if not prim:
+        raise input_error(p, f"no prim {mesh.name}")
+    tc = Usd.TimeCode.Default() if time is None else Usd.TimeCode(time)
+    root = UsdSkel.Root.Find(prim)
+    skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+    if not root or not skel:
+        raise input_error(p, f"{mesh.name} is not bound to a skeleton")
+    cache = UsdSkel.Cache()
+    cache.Populate(root, Usd.TraverseInstanceProxies())
+    skel_q = cache.GetSkelQuery(skel)
+    names = [str(j) for j in skel_q.GetJointOrder()]
+    xf = np.asarray(skel_q.ComputeJointSkelTransforms(tc), dtype=np.float64).transpose(0, 2, 1)
+    skel_world = np.asarray(
+        UsdGeom.Xformable(skel.GetPrim()).ComputeLocalToWorldTransform(tc), dtype=np.float64
+    ).T
+    world = skel_world @ xf
+    missing = [j for j in mesh.joint_names if j not in names]
+    if missing:
+        raise input_error(p, f"joints {missing[:3]} are not in the skeleton")
+    return world[[names.index(j) for j in mesh.joint_names]]
+
+
+def usd_blend_shape_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, float]:
+    """The SkelAnimation blend-shape weights bound to ``mesh.name`` at ``time``."""
+    from pxr import Usd, UsdSkel
+
+    p = Path(path)
+    stage = _open(p)
+    prim = stage.GetPrimAtPath(mesh.name)
+    skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton() if prim else None
+    if not skel:
+        raise input_error(p, f"{mesh.name} is not bound to a skeleton")
+    src = UsdSkel.BindingAPI(skel.GetPrim()).GetAnimationSource()
+    if not src:
+        raise input_error(p, f"{skel.GetPath()} has no animation source")
+    anim = UsdSkel.Animation(src)
+    names = [str(n) for n in (anim.GetBlendShapesAttr().Get() or [])]
+    vals = anim.GetBlendShapeWeightsAttr().Get(Usd.TimeCode(time))
+    if vals is None:
+        return {}
+    return dict(zip(names, map(float, vals)))
