@@ -459,7 +459,7 @@ def compress_and_check(
 
 def choose_format(checks: Sequence[FormatCheck], budget: Budget) -> FormatCheck | None:
     """The check with the fewest bytes that meets the budget (ties: lower mean error)."""
-    ok = [c for c in checks if c.verdict == "pass" and budget.ok(c.error)]
+    ok = [c for c in checks if all(budget.ok(e) for e in [c.error, *c.blended.values()])]
     if not ok:
         return None
     return min(ok, key=lambda c: (c.bytes, c.error.mean_deg, FORMATS.index(c.format)))

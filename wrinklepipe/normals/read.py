@@ -131,12 +131,18 @@ def guess_layout(values: np.ndarray) -> str:
 
 
 def decode_texels(
-    values: np.ndarray, layout: str = "auto", signed: bool = False, unit_tolerance: float = 0.05
+    values: np.ndarray,
+    layout: str = "auto",
+    signed: bool = False,
+    unit_tolerance: float = 0.05,
+    bits: int = 0,
 ) -> tuple[np.ndarray, NormalStats]:
     """Texel values [H, W, C] -> (vectors [H, W, 3] float32, :class:`NormalStats`).
 
     The vectors are normalised where they can be (NaN and zero texels stay as they are; see
-    :func:`repair_normals`). ``signed``: values are already in [-1, 1].
+    :func:`repair_normals`). ``signed``: values are already in [-1, 1]. ``bits`` (8 or 16):
+    the values are ``q / (2^bits - 1)`` of integer texels, decoded exactly as
+    ``(2 q - top) / top``.
     """
     v = np.asarray(values, dtype=_F)
     if v.ndim == 2:
@@ -158,7 +164,15 @@ def decode_texels(
         raise ValueError(f"layout 'ag' (DXT5nm) needs 4 channels, the map has {c}")
 
     def sig(x: np.ndarray) -> np.ndarray:
-        return x if signed else x * _F(2.0) - _F(1.0)
+        if signed:
+            return x
+        if bits:
+            # exact and symmetric: (2 q - top) / top, so flipping green (q -> top - q) gives
+            # exactly -y and a DirectX map read as DirectX equals the OpenGL map bit for bit
+            top = _F((1 << bits) - 1)
+            qi = np.rint(x * top)
+            return (qi * _F(2.0) - top) / top
+        return x * _F(2.0) - _F(1.0)
 
     if lay == "rgb":
         n = sig(v[..., :3]).astype(_F, copy=True)
@@ -222,12 +236,15 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
     if o.convention not in ("auto", "opengl", "directx"):
         raise input_error(path, f"unknown convention {o.convention!r} (auto, opengl, directx)")
     signed = False
+    bits = 0
     if path.suffix.lower() == ".dds":
         values, source_format, channels = _read_dds_values(path, o.max_pixels)
+        bits = 8
     else:
         values, info = read_image(path, o.max_pixels)
         channels = info.channels
         source_format = info.file_format
+        bits = {"uint8": 8, "uint16": 16}.get(info.format, 0)
         if info.format in ("half", "float", "double"):
             finite = values[np.isfinite(values)]
             signed = bool(finite.size and finite.min() < -1e-3)
@@ -238,7 +255,7 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
             "3 (RGB) or 4 (RGBA, or DXT5nm with x in alpha)",
         )
     try:
-        normals, stats = decode_texels(values, o.layout, signed, o.unit_tolerance)
+        normals, stats = decode_texels(values, o.layout, signed, o.unit_tolerance, bits)
     except ValueError as exc:
         raise input_error(path, str(exc)) from None
     layout = o.layout if o.layout != "auto" else (guess_layout(values) if not signed else "rgb")

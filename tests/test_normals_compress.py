@@ -1,0 +1,158 @@
+"""Block compression checks: BC5 vs BC1 vs BC3nm on the demo, independent decoding, metrics."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from wrinklepipe.demo import character
+from wrinklepipe.normals import compress as cmp
+from wrinklepipe.normals import dds
+from wrinklepipe.normals import encode as enc
+
+
+@pytest.fixture(scope="module")
+def demo():
+    return character.generate(256)
+
+
+@pytest.fixture(scope="module")
+def demo_checks(demo):
+    """PD wrinkle-only maps of both demo states through every two-channel format."""
+    out = {}
+    for k in range(2):
+        n = demo.wrinkle_only_normal(k).astype(np.float32)
+        q, s, _ = enc.encode_pd_u8(n, "auto")
+        dec = cmp.decoder_for("pd", s)
+        out[k] = {f: cmp.compress_and_check(q, n, f, dec, budget=cmp.Budget()) for f in cmp.FORMATS}
+    return out
+
+
+def test_bc5_beats_bc1_and_bc3nm_on_demo_wrinkle_maps(demo_checks):
+    for _k, checks in demo_checks.items():
+        bc5, bc1, bc3 = checks["bc5"].error, checks["bc1"].error, checks["bc3nm"].error
+        assert bc5.mean_deg < bc1.mean_deg
+        assert bc5.mean_deg < bc3.mean_deg
+        # and the codec's own share is small (BC5 stores each channel with 8-bit endpoints)
+        assert checks["bc5"].compression_error.mean_deg < 0.5
+        assert checks["bc5"].bytes == 256 * 256  # 1 byte per texel
+        assert checks["bc1"].bytes == 256 * 256 // 2
+
+
+def test_error_stats_match_numpy_reference():
+    rng = np.random.default_rng(0)
+    a = rng.gamma(2.0, 0.3, size=300_000).astype(np.float32)
+    e = cmp.error_stats(a)
+    assert e.mean_deg == pytest.approx(float(a.astype(np.float64).mean()), rel=1e-6)
+    assert e.p99_deg == pytest.approx(float(np.percentile(a, 99, method="inverted_cdf")))
+    assert e.max_deg == pytest.approx(float(a.max()))
+    small = np.array([3.0, 1.0, 2.0], np.float32)
+    assert cmp.error_stats(small).p99_deg == 3.0  # nearest rank ceil(0.99 * 3) = 3
+
+
+def test_angle_deg_hand_values():
+    a = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]], np.float32)
+    b = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [math.sin(1e-3), 0.0, math.cos(1e-3)]])
+    got = cmp.angle_deg(a, b.astype(np.float32))
+    np.testing.assert_allclose(got, [90.0, 0.0, math.degrees(1e-3)], rtol=1e-4, atol=1e-6)
+
+
+def test_psnr_hand_value():
+    r = np.zeros((4, 4, 2), np.uint8)
+    d = r.copy()
+    d[0, 0, 0] = 16  # mse = 256 / 16 = 16 on channel 0
+    p = cmp.psnr(r, d)
+    assert p[0] == pytest.approx(10 * math.log10(255**2 / 16))
+    assert p[1] == math.inf
+
+
+def test_bc3nm_swizzle_puts_x_in_alpha_y_in_green():
+    q = np.zeros((4, 4, 2), np.uint8)
+    q[..., 0] = 200
+    q[..., 1] = 60
+    rgba = cmp.pack_rgba(q, "bc3nm")
+    assert rgba[0, 0].tolist() == [255, 60, 0, 200]
+    dec = cmp.decode_bc(cmp.encode_bc(rgba, "bc3nm"), 4, 4, "bc3nm")
+    xy = cmp.unpack_u8(dec, "bc3nm")
+    assert np.abs(xy.astype(int) - [200, 60]).max() <= 1
+
+
+def test_texture2ddecoder_bgra_is_turned_into_rgba():
+    q = np.zeros((4, 4, 2), np.uint8)
+    q[..., 0] = 250  # x -> R
+    q[..., 1] = 10  # y -> G
+    rgba = cmp.decode_bc(cmp.encode_bc(cmp.pack_rgba(q, "bc5"), "bc5"), 4, 4, "bc5")
+    assert abs(int(rgba[0, 0, 0]) - 250) <= 1 and abs(int(rgba[0, 0, 1]) - 10) <= 1
+
+
+def test_fused_pd_path_equals_plain_calls(demo):
+    n = demo.wrinkled_normal(1)[:, :200].astype(np.float32)  # 256 x 200
+    s = 1.0
+    q, _, clipped = enc.encode_pd_u8(n, s)
+    data = cmp.encode_bc(cmp.pack_rgba(q, "bc5"), "bc5")
+    angles = np.empty(n.shape[:2], np.float32)
+    r = cmp.pd_compress_check(n, s, "bc5", angles_out=angles)
+    assert r.data == data  # chunked compression == one call
+    assert r.clipped == clipped == enc.pd_clipped_count(n, s)
+    dec = enc.decode_pd(
+        enc.dequantize(cmp.unpack_u8(cmp.decode_bc(data, 200, 256, "bc5"), "bc5")), s
+    )
+    ref = np.degrees(
+        np.arccos(np.clip((dec.astype(np.float64) * n).sum(-1), -1, 1))
+    )  # float64 reference
+    np.testing.assert_allclose(angles, ref, atol=2e-2)
+    assert r.error.mean_deg == pytest.approx(ref.mean(), abs=2e-3)
+    assert r.error.max_deg == pytest.approx(ref.max(), abs=2e-2)
+
+
+def test_padding_and_refusal():
+    n = np.zeros((6, 10, 3), np.float32)
+    n[..., 2] = 1
+    r = cmp.pd_compress_check(n, 1.0, "bc5")
+    assert r.padded and len(r.data) == 2 * 3 * 16  # 8 x 12 padded -> 2 x 3 blocks
+    with pytest.raises(ValueError, match="multiples of 4"):
+        cmp.pd_compress_check(n, 1.0, "bc5", pad=False)
+    with pytest.raises(ValueError, match="multiples of 4"):
+        cmp.encode_bc(np.zeros((6, 10, 4), np.uint8), "bc5")
+
+
+@pytest.mark.parametrize(
+    "fmt,dx10", [("bc5", None), ("bc5", False), ("bc1", None), ("bc3nm", None)]
+)
+def test_written_dds_decoded_independently_gives_the_measured_texels(
+    tmp_path: Path, demo, demo_checks, fmt, dx10
+):
+    """OpenImageIO's own DDS decoder (not texture2ddecoder) reads what the check measured."""
+    check = demo_checks[1][fmt]
+    path = tmp_path / f"m_{fmt}.dds"
+    path.write_bytes(dds.dds_bytes(fmt, 256, 256, [check.data], dx10=dx10))
+    buf = oiio.ImageBuf(str(path))
+    px = np.asarray(buf.get_pixels(oiio.UINT8))
+    assert not buf.has_error
+    if fmt == "bc3nm":
+        xy = px[..., [3, 1]]
+    else:
+        xy = px[..., :2]
+    # decoders may round BC4-style interpolation differently by one step
+    diff = np.abs(xy.astype(int) - check.decoded.astype(int))
+    assert diff.max() <= 1
+    assert np.mean(diff > 0) < 0.2
+    # the error the check reported is what the independently decoded texels give
+    n = demo.wrinkle_only_normal(1).astype(np.float32)
+    s = enc.auto_pd_scale(n)
+    ind = enc.decode_pd(enc.dequantize(xy.astype(np.uint8)), s)
+    e = cmp.angular_error_stats(ind, n)
+    assert e.mean_deg == pytest.approx(check.error.mean_deg, abs=0.02)
+    assert e.p99_deg == pytest.approx(check.error.p99_deg, abs=0.1)
+
+
+def test_choose_format_picks_smallest_within_budget(demo_checks):
+    checks = list(demo_checks[1].values())
+    loose = cmp.Budget(max_p99_deg=90.0)
+    assert cmp.choose_format(checks, loose).format == "bc1"  # 4 bpp
+    tight = cmp.Budget(max_p99_deg=1e-6)
+    assert cmp.choose_format(checks, tight) is None
