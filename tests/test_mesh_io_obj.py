@@ -1,0 +1,64 @@
+"""OBJ ingest: vertex splits at UV seams, fan triangulation, V flip, relative indices, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wrinklepipe.errors import InputError
+from wrinklepipe.io.mesh import load_mesh, load_meshes
+
+OBJ = """# two quads sharing an edge that is a UV seam
+o left
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 2 0 0
+v 2 1 0
+vt 0 0
+vt 0.5 0
+vt 0.5 1
+vt 0 1
+vt 0.6 0
+vt 1 0
+vt 1 1
+vt 0.6 1
+vn 0 0 1
+f 1/1/1 2/2/1 3/3/1 4/4/1
+o right
+f 2/5/1 5/6/1 6/7/1 -4/8/1
+"""
+
+
+def test_obj_parts_splits_and_triangulation(tmp_path):
+    f = tmp_path / "q.obj"
+    f.write_text(OBJ)
+    parts = load_meshes(f)
+    assert [p.name for p in parts] == ["left", "right"]
+    m = load_mesh(f)
+    assert m.vertex_count == 8 and m.triangle_count == 4
+    np.testing.assert_array_equal(parts[1].positions[3], [1, 1, 0])  # -4 = v 3
+    np.testing.assert_allclose(parts[0].uvs[3], [0, 0])  # vt (0, 1) flipped to glTF v
+    assert any("fan-triangulated 1 polygon" in n for n in parts[0].notes)
+    np.testing.assert_allclose(m.normals, np.tile([0, 0, 1], (8, 1)))
+
+
+def test_obj_errors(tmp_path):
+    f = tmp_path / "bad.obj"
+    f.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n")
+    with pytest.raises(InputError, match="out of range"):
+        load_mesh(f)
+    f.write_text("v 0 0 0\nv 1 0 0\n")
+    with pytest.raises(InputError, match="no faces"):
+        load_mesh(f)
+    f.write_text("v 0 nan 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(InputError, match="NaN"):
+        load_mesh(f)
+    f.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n")
+    m = load_mesh(f)  # the collinear triangle is skipped and counted; xatlas UVs noted
+    assert m.triangle_count == 1
+    assert any("skipped 1 degenerate" in n for n in m.notes)
+    assert any("xatlas" in n for n in m.notes)
+    with pytest.raises(InputError, match="unknown mesh format"):
+        load_mesh(tmp_path / "x.fbx")

@@ -1,0 +1,146 @@
+"""USD mesh ingest: UsdSkel blend shapes with inbetweens against OpenUSD's own baked baseline,
+UsdSkel skinning against UsdSkel's skinning, faceVarying/indexed st, bad inputs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wrinklepipe.errors import InputError
+from wrinklepipe.geometry.dynamic import DynamicWeights, morph_pose, skinned_pose
+from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
+from wrinklepipe.io.mesh_usd import usd_blend_shape_weights, usd_joint_world_matrices
+
+pxr = pytest.importorskip("pxr")
+from pxr import Usd, UsdGeom, UsdSkel, Vt  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "usd"
+SKEL = DATA / "openusd/usd/usdSkel/testenv/testUsdSkelBakeSkinning"
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared/data absent")
+RAW = LoadOptions(generate_uvs=False)
+
+
+def nearest(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    d, i = cKDTree(points).query(queries)
+    assert d.max() < 1e-5
+    return i
+
+
+@needs_data
+def test_blend_shapes_with_inbetweens_match_openusd_baseline():
+    f = SKEL / "blendshapes.usda"
+    m = next(x for x in load_meshes(f, RAW) if x.name == "/TestPlane/Mesh")
+    assert m.morph_names[:5] == ("targetA", "targetB", "targetC", "targetC@0.5", "targetC@1.5")
+    assert sum("@" in n for n in m.morph_names) == 5
+    baked = Usd.Stage.Open(str(SKEL / "baseline/blendshapes.baked.usda"))
+    pts = UsdGeom.Mesh(baked.GetPrimAtPath("/TestPlane/Mesh")).GetPointsAttr()
+    rest = np.asarray(pts.Get(1.0), dtype=np.float64)
+    idx = nearest(rest, m.positions)
+    worst = 0.0
+    for t in pts.GetTimeSamples():
+        posed = morph_pose(m, usd_blend_shape_weights(f, m, t))
+        worst = max(worst, float(np.abs(posed - np.asarray(pts.Get(t))[idx]).max()))
+    # Measured: 3.9e-6 over all 131 frames (weights -1..2, inbetweens at -0.499, 0.5, 1.5).
+    assert worst < 1e-4
+
+
+@needs_data
+@pytest.mark.parametrize(
+    ("rel", "prim"),
+    [
+        ("openusd/usd/usdSkel/testenv/testUsdSkelBakeSkinning/lbs.usda", "/Root/Mesh"),
+        ("openusd/usd/usdSkel/doxygen/skinnedArm.usda", "/Model/Arm"),
+        ("usd-wg/test_assets/USDZ/RiggedFigure/RiggedFigure.usdz", None),
+    ],
+)
+def test_skinning_matches_usdskel(rel, prim):
+    f = DATA / rel
+    parts = load_meshes(f, RAW)
+    m = parts[0] if prim is None else next(x for x in parts if x.name == prim)
+    stage = Usd.Stage.Open(str(f))
+    p = stage.GetPrimAtPath(m.name)
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root.Find(p), Usd.TraverseInstanceProxies())
+    sq = cache.GetSkinningQuery(p)
+    skel = UsdSkel.BindingAPI(p).GetInheritedSkeleton()
+    kq = cache.GetSkelQuery(skel)
+    geom = np.asarray(sq.GetGeomBindTransform()).T
+    raw = np.asarray(UsdGeom.Mesh(p).GetPointsAttr().Get(), dtype=np.float64)
+    idx = nearest(raw @ geom[:3, :3].T + geom[:3, 3], m.positions)
+    t0, t1 = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+    for t in (t0, 0.5 * (t0 + t1), t1):
+        tc = Usd.TimeCode(t)
+        pts = Vt.Vec3fArray(UsdGeom.Mesh(p).GetPointsAttr().Get(tc))
+        sq.ComputeSkinnedPoints(kq.ComputeSkinningTransforms(tc), pts, tc)
+        w = np.asarray(UsdGeom.Xformable(skel.GetPrim()).ComputeLocalToWorldTransform(tc)).T
+        ref = np.asarray(pts, dtype=np.float64) @ w[:3, :3].T + w[:3, 3]
+        ours = skinned_pose(m, usd_joint_world_matrices(f, m, t))
+        np.testing.assert_allclose(ours, ref[idx], atol=1e-5)
+
+
+@needs_data
+def test_dynamic_weights_on_usd_blend_shapes():
+    f = SKEL / "blendshapes.usda"
+    m = next(x for x in load_meshes(f, RAW) if x.name == "/TestPlane/Mesh")
+    op = DynamicWeights.build(m.positions, m.indices)
+    # targetC at 1 lifts and shears part of the plane: that skin stretches (w < 0), the rest
+    # of the plane is untouched (w = 0).
+    w = op.frame(morph_pose(m, {"targetC": 1.0}))
+    assert w.min() < -0.1 and np.isfinite(w).all()
+    assert (np.abs(w) < 1e-6).sum() > 10
+    np.testing.assert_allclose(op.frame(m.positions), 0.0, atol=1e-6)
+
+
+def write_usda(path: Path, body: str) -> Path:
+    path.write_text('#usda 1.0\n(\n    upAxis = "Y"\n)\n' + body)
+    return path
+
+
+QUAD = """
+def Mesh "quad"
+{
+    int[] faceVertexCounts = [4, 4]
+    int[] faceVertexIndices = [0, 1, 2, 3, 1, 4, 5, 2]
+    point3f[] points = [(0,0,0), (1,0,0), (1,1,0), (0,1,0), (2,0,0), (2,1,0)]
+    %s
+}
+"""
+
+
+def test_face_varying_indexed_st_splits_seam(tmp_path):
+    # Two quads sharing the edge 1-2; faceVarying st makes that edge a UV seam.
+    st = (
+        "texCoord2f[] primvars:st = [(0,0), (0.5,0), (0.5,1), (0,1), (0.6,0), (1,0), (1,1),"
+        ' (0.6,1)] (interpolation = "faceVarying")\n'
+        "    int[] primvars:st:indices = [0, 1, 2, 3, 4, 5, 6, 7]"
+    )
+    m = load_mesh(write_usda(tmp_path / "q.usda", QUAD % st))
+    assert m.vertex_count == 8  # points 1 and 2 are split by the seam
+    assert m.triangle_count == 4
+    # V flipped to the glTF convention: st (0, 1) -> uv (0, 0).
+    i = int(np.flatnonzero((m.positions == [0, 1, 0]).all(1))[0])
+    np.testing.assert_allclose(m.uvs[i], [0, 0])
+    # Indexed vertex st: shared, no split.
+    st2 = (
+        'texCoord2f[] primvars:st = [(0,0), (1,1)] (interpolation = "vertex")\n'
+        "    int[] primvars:st:indices = [0, 0, 1, 1, 0, 1]"
+    )
+    m2 = load_mesh(write_usda(tmp_path / "v.usda", QUAD % st2))
+    assert m2.vertex_count == 6
+    np.testing.assert_allclose(m2.uvs[2], [1, 0])
+
+
+def test_usd_bad_inputs(tmp_path):
+    bad = QUAD.replace("[0, 1, 2, 3, 1, 4, 5, 2]", "[0, 1, 2, 3, 1, 4, 5, 9]") % ""
+    with pytest.raises(InputError, match="out of range"):
+        load_mesh(write_usda(tmp_path / "b.usda", bad))
+    empty = 'def Mesh "m"\n{\n    point3f[] points = [(0,0,0)]\n}\n'
+    with pytest.raises(InputError, match="no UsdGeom.Mesh with faces"):
+        load_mesh(write_usda(tmp_path / "e.usda", empty))
+    (tmp_path / "junk.usda").write_text("this is not usd")
+    with pytest.raises(InputError, match="cannot open"):
+        load_mesh(tmp_path / "junk.usda")
