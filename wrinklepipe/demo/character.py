@@ -26,7 +26,7 @@ from wrinklepipe.model import height_to_normal
 from wrinklepipe.presets import jimenez
 
 DEMO_SEED = 20111
-DEMO_VERSION = 1
+DEMO_VERSION = 2
 STATE_NAMES: tuple[str, ...] = ("stretch", "compress")
 MORPH_NAMES: tuple[str, ...] = (
     "brow_raise",
@@ -238,6 +238,7 @@ def _head_mesh(n_lon: int = 96, n_lat: int = 64) -> DemoMesh:
     u = 0.5 + phi / (2.0 * np.pi)
     v = theta / np.pi
     pos = _head_surface(theta, phi)
+    pos[:, -1] = pos[:, 0]  # seam twins: bit-identical positions (sin(-pi) != -sin(pi) in floats)
     ring_pos = pos.reshape(-1, 3)
     ring_uv = np.stack([u, v], axis=-1).reshape(-1, 2)
     rows, cols = theta.shape
@@ -310,13 +311,13 @@ def _morph_deltas(positions: np.ndarray, fx: np.ndarray, fy: np.ndarray) -> np.n
     out[1] = (w * 4 * mm)[:, None] * np.stack([-np.sign(fx) * 0.6, -np.ones_like(fx), 0 * fx], -1)
     # smiles: mouth corners up and out.
     for i, side in ((2, 1.0), (3, -1.0)):
-        w = bump(side * 0.35, 0.55, 0.25, 0.2) * front
+        w = bump(side * 0.35, 0.55, 0.25, 0.2) * front * _smoothstep(0.0, 0.15, side * fx)
         out[i] = (w * 7 * mm)[:, None] * np.stack(
             [side * np.ones_like(fx), np.ones_like(fx) * 0.8, 0 * fx], -1
         )
     # squints: lower lids and cheeks up.
     for i, side in ((4, 1.0), (5, -1.0)):
-        w = bump(side * 0.55, -0.05, 0.3, 0.15) * front
+        w = bump(side * 0.55, -0.05, 0.3, 0.15) * front * _smoothstep(0.0, 0.15, side * fx)
         out[i] = (w * 4 * mm)[:, None] * up
     # nose wrinkle: nose skin pulled up.
     out[6] = (3 * mm * bump(0.0, -0.05, 0.25, 0.2) * front)[:, None] * up
