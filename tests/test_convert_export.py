@@ -97,3 +97,17 @@ def test_cli_errors(written, tmp_path, capsys):
     assert "no .gltf" in capsys.readouterr().err
     assert main(["export", str(written), "--engine", "unity", "-o", str(written)]) == 2
     assert "input" in capsys.readouterr().err
+
+
+def test_cli_refuses_gltf_with_escaping_uri(written, tmp_path, capsys):
+    doc = json.loads((written / "demo.gltf").read_text())
+    doc["images"][0]["uri"] = "../../secret.png"
+    bad = written / "bad.gltf"
+    bad.write_text(json.dumps(doc))
+    try:
+        assert main(["export", str(bad), "--engine", "unity", "-o", str(tmp_path / "o")]) == 2
+    finally:
+        bad.unlink()
+    err = capsys.readouterr().err
+    assert "bad.gltf" in err and "/images/0/uri" in err and "'..'" in err
+    assert "Traceback" not in err and not (tmp_path / "o").exists()

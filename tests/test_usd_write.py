@@ -200,3 +200,20 @@ def test_reader_refuses_non_wrinkle_stage(tmp_path):
     stage.Save()
     with pytest.raises(InputError, match="not a wrinklepipe asset"):
         read_usd(tmp_path / "plain.usda")
+
+
+def test_bias_and_metadata_round_trip(pkg, tmp_path):
+    from dataclasses import replace
+
+    rng = np.random.default_rng(3)
+    colors = rng.random((pkg.mesh.vertex_count, 4)).astype(np.float32)
+    meta = dict(
+        pkg.meta, drivers=[{"kind": "curves", "keys": {"glabella": [[0.0, 0.0], [1.0, 0.5]]}}]
+    )
+    p2 = replace(pkg, mesh=replace(pkg.mesh, colors=colors), meta=meta)
+    write_gltf(p2, tmp_path / "g", "x")
+    g = read_gltf(tmp_path / "g" / "x.gltf")
+    write_usd(g, tmp_path / "u.usda")
+    u = read_usd(tmp_path / "u.usda")
+    assert np.array_equal(g.mesh.colors, colors) and np.array_equal(u.mesh.colors, colors)
+    assert u.meta["drivers"] == g.meta["drivers"] == meta["drivers"]
