@@ -481,12 +481,15 @@ _PACK = {
 _UNPACK = {"bc5": (16, 8), "bc1": (16, 8), "bc7": (16, 8), "bc3nm": (24, 8)}
 
 
-def _pd_chunk(nc: np.ndarray, s: float, fmt: str, width: int) -> tuple[bytes, int, np.ndarray]:
-    """One row chunk of the fused path: returns (block data, clipped texels, half-angles)."""
-    h_c = nc.shape[0]
-    # planar half-normals: contiguous planes are ~3x faster than strided ones
-    p = np.empty((3, h_c, width), dtype=_F)
+def _half_planes(nc: np.ndarray) -> np.ndarray:
+    """Planar half-normals [3, h, w]: contiguous planes are ~3x faster than strided ones."""
+    p = np.empty((3,) + nc.shape[:2], dtype=_F)
     np.multiply(nc.transpose(2, 0, 1), _F(0.5), out=p)
+    return p
+
+
+def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str) -> tuple[np.ndarray, int]:
+    """8-bit PD texels of half-normal planes, packed as RGBA8 for ``fmt``; clipped count."""
     hx, hy, hz = p
     k = _F(127.5 / s)
     if float(hz.min()) <= 0.0:
@@ -507,18 +510,19 @@ def _pd_chunk(nc: np.ndarray, s: float, fmt: str, width: int) -> tuple[bytes, in
         np.floor(u, out=u)
     px, py, const = _PACK[fmt]
     lo, hi = (ux, uy) if px < py else (uy, ux)
-    shift = abs(px - py) * 8
-    hi *= _F(1 << shift)
+    hi *= _F(1 << (abs(px - py) * 8))
     hi += lo  # exact: < 2^24
     pix = hi.astype(np.uint32)
     if min(px, py):
         np.left_shift(pix, np.uint32(8 * min(px, py)), out=pix)
     np.bitwise_or(pix, np.uint32(const), out=pix)
-    rgba = pix.view(np.uint8).reshape(h_c, width, 4)
-    data = encode_bc(rgba, fmt)
-    # decode independently and measure: half-angle asin(|n/2 - ref/2|)
-    raw = decode_bc_bgra(data, width, h_c, fmt)
-    v = raw.view(np.uint32).reshape(h_c, width)
+    return pix.view(np.uint8).reshape(hx.shape + (4,)), clipped
+
+
+def _pd_measure_chunk(raw: np.ndarray, p: np.ndarray, s: float, fmt: str) -> np.ndarray:
+    """Half-angles ``asin(|n/2 - ref/2|)`` of decoded PD texels (BGRA) against half-normals."""
+    hx, hy, hz = p
+    v = raw.view(np.uint32).reshape(hx.shape)
     sx, sy = _UNPACK[fmt]
     step = _F(2.0 * s / 255.0)
     t = np.right_shift(v, np.uint32(sx))
@@ -532,7 +536,7 @@ def _pd_chunk(nc: np.ndarray, s: float, fmt: str, width: int) -> tuple[bytes, in
         d *= step
         d -= _F(s)
     inv = dx * dx
-    np.multiply(dy, dy, out=a)
+    a = dy * dy
     inv += a
     inv += _F(1.0)
     np.sqrt(inv, out=inv)
@@ -549,8 +553,46 @@ def _pd_chunk(nc: np.ndarray, s: float, fmt: str, width: int) -> tuple[bytes, in
     dx += inv
     np.sqrt(dx, out=dx)
     np.clip(dx, _F(0.0), _F(1.0), out=dx)
-    np.arcsin(dx, out=dx)
-    return data, clipped, dx
+    return np.arcsin(dx, out=dx)
+
+
+def _pd_chunk(nc: np.ndarray, s: float, fmt: str, width: int) -> tuple[bytes, int, np.ndarray]:
+    """One row chunk of the fused path: returns (block data, clipped texels, half-angles)."""
+    p = _half_planes(nc)
+    rgba, clipped = _pd_pack_chunk(p, s, fmt)
+    data = encode_bc(rgba, fmt)
+    raw = decode_bc_bgra(data, width, nc.shape[0], fmt)
+    return data, clipped, _pd_measure_chunk(raw, p, s, fmt)
+
+
+def pd_pack(normals: np.ndarray, scale: float, fmt: str = "bc5") -> tuple[np.ndarray, int]:
+    """Unit normals [H, W, 3] (H, W multiples of 4) -> RGBA8 PD texels for ``fmt``; clipped."""
+    n = np.asarray(normals, dtype=_F)
+    h, w = n.shape[:2]
+    rgba = np.empty((h, w, 4), dtype=np.uint8)
+
+    def work(rows: slice) -> int:
+        packed, clipped = _pd_pack_chunk(_half_planes(n[rows]), float(scale), fmt)
+        rgba[rows] = packed
+        return clipped
+
+    return rgba, int(sum(map_rows(work, h, w)))
+
+
+def pd_decode_error(
+    bgra: np.ndarray, normals: np.ndarray, scale: float, fmt: str = "bc5"
+) -> ErrorStats:
+    """Angular error of decoded PD texels (texture2ddecoder's BGRA) against unit normals."""
+    n = np.asarray(normals, dtype=_F)
+    h, w = n.shape[:2]
+    raw = np.ascontiguousarray(bgra[:h, :w])
+    half = np.empty((h, w), dtype=_F)
+
+    def work(rows: slice) -> None:
+        half[rows] = _pd_measure_chunk(raw[rows], _half_planes(n[rows]), float(scale), fmt)
+
+    map_rows(work, h, w)
+    return error_stats(half, unit=360.0 / math.pi)
 
 
 @dataclass
