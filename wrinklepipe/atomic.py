@@ -38,22 +38,32 @@ def default_mode() -> int:
     return 0o666 & ~mask
 
 
-def write_bytes(path: str | Path, data: bytes, inputs: Iterable[str | Path] = ()) -> Path:
-    """Write ``data`` to ``path`` atomically (temp file in the same folder + ``os.replace``)."""
+@contextlib.contextmanager
+def temp_path(path: str | Path, inputs: Iterable[str | Path] = ()) -> Iterator[Path]:
+    """Yield a temporary sibling of ``path`` (same suffix, so writers pick the same format) to
+    write to; on success it gets umask permissions and is renamed over ``path``, on failure it
+    is removed and ``path`` is untouched."""
     path = Path(path)
     check_not_input(path, inputs)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    tmp = Path(name)
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
+        yield tmp
         os.chmod(tmp, default_mode())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
-    return path
+
+
+def write_bytes(path: str | Path, data: bytes, inputs: Iterable[str | Path] = ()) -> Path:
+    """Write ``data`` to ``path`` atomically (temp file in the same folder + ``os.replace``)."""
+    with temp_path(path, inputs) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
 
 
 def dumps_json(obj: Any) -> str:

@@ -7,16 +7,13 @@ for integer formats (0..255 or 0..65535 mapped exactly), as stored for float for
 
 from __future__ import annotations
 
-import contextlib
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
 
-from wrinklepipe.atomic import check_not_input, default_mode
+from wrinklepipe.atomic import check_not_input, temp_path
 from wrinklepipe.errors import input_error
 
 #: Default cap on width x height for any image read (64 Mpx, e.g. 8192 x 8192).
@@ -139,22 +136,13 @@ def write_image(
         spec.attribute("DateTime", "")
     if path.suffix.lower() == ".exr":
         spec.attribute("compression", "zip")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        out = oiio.ImageOutput.create(tmp)
+    with temp_path(path) as tmp:
+        out = oiio.ImageOutput.create(str(tmp))
         if out is None:
             raise input_error(path, f"no writer for this extension: {oiio.geterror().strip()}")
-        ok = out.open(tmp, spec) and out.write_image(np.ascontiguousarray(pixels))
+        ok = out.open(str(tmp), spec) and out.write_image(np.ascontiguousarray(pixels))
         msg = out.geterror()
         out.close()
         if not ok:
             raise OSError(f"{path}: write failed: {msg}")
-        os.chmod(tmp, default_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
     return path
