@@ -22,6 +22,7 @@ sort of one bin, so large maps need no full sort.
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -267,11 +268,15 @@ def _p99_max(a: np.ndarray) -> tuple[float, float]:
 
 
 def error_stats(
-    angles: np.ndarray, mask: np.ndarray | None = None, unit: float = 1.0
+    angles: np.ndarray,
+    mask: np.ndarray | None = None,
+    unit: float = 1.0,
+    total: float | None = None,
 ) -> ErrorStats:
     """Mean / p99 (nearest rank, exact) / max of per-texel angles, in degrees.
 
-    ``unit`` converts the input to degrees (e.g. ``360 / pi`` for half-angles in radians).
+    ``unit`` converts the input to degrees (e.g. ``360 / pi`` for half-angles in radians);
+    ``total`` is the sum of the angles when the caller already has it (chunked kernels).
     NaN angles are counted as 180 degrees (a texel that decodes to nothing is wrong).
     """
     a = np.asarray(angles, dtype=_F)
@@ -281,7 +286,8 @@ def error_stats(
     n = int(a.size)
     if n == 0:
         return ErrorStats(0.0, 0.0, 0.0, 0)
-    total = _sum(a)
+    if total is None or mask is not None:
+        total = _sum(a)
     if not math.isfinite(total):
         a = np.where(np.isnan(a), _F(180.0 / unit), a)
         total = _sum(a)
@@ -481,28 +487,49 @@ _PACK = {
 _UNPACK = {"bc5": (16, 8), "bc1": (16, 8), "bc7": (16, 8), "bc3nm": (24, 8)}
 
 
+_LOCAL = threading.local()
+
+
+def _ws(name: str, shape: tuple[int, ...], dtype: type = np.float32) -> np.ndarray:
+    """A per-thread scratch array, reused across chunks (fresh arrays cost page faults)."""
+    cache = getattr(_LOCAL, "ws", None)
+    if cache is None:
+        cache = _LOCAL.ws = {}
+    key = (name, dtype)
+    arr = cache.get(key)
+    size = int(np.prod(shape))
+    if arr is None or arr.size < size:
+        arr = cache[key] = np.empty(size, dtype=dtype)
+    return arr[:size].reshape(shape)
+
+
 def _half_planes(nc: np.ndarray) -> np.ndarray:
     """Planar half-normals [3, h, w]: contiguous planes are ~3x faster than strided ones."""
-    p = np.empty((3,) + nc.shape[:2], dtype=_F)
+    p = _ws("planes", (3,) + nc.shape[:2])
     np.multiply(nc.transpose(2, 0, 1), _F(0.5), out=p)
     return p
 
 
 def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str) -> tuple[np.ndarray, int]:
-    """8-bit PD texels of half-normal planes, packed as RGBA8 for ``fmt``; clipped count."""
+    """8-bit PD texels of half-normal planes, packed as RGBA8 for ``fmt``; clipped count.
+
+    The RGBA array is a per-thread scratch buffer: use it before the next call.
+    """
     hx, hy, hz = p
+    shape = hx.shape
     k = _F(127.5 / s)
+    r = _ws("r", shape)
     if float(hz.min()) <= 0.0:
-        zc = np.maximum(hz, _F(5e-31))
-        r = np.divide(k, zc, out=zc)
+        np.maximum(hz, _F(5e-31), out=r)
+        np.divide(k, r, out=r)
     else:
-        r = np.divide(k, hz)
-    ux = hx * r
+        np.divide(k, hz, out=r)
+    ux = np.multiply(hx, r, out=_ws("ux", shape))
     uy = np.multiply(hy, r, out=r)
-    a = np.abs(ux)
-    b = np.abs(uy)
+    a = np.abs(ux, out=_ws("a", shape))
+    b = np.abs(uy, out=_ws("b", shape))
     np.maximum(a, b, out=a)
-    clipped = int(np.count_nonzero(a > _F(127.5)))
+    clipped = int(np.count_nonzero(np.greater(a, _F(127.5), out=_ws("m", shape, np.bool_))))
     # quantise: floor(clip(u + 128, 0, 255)) == round-half-up of 127.5 + u, clipped
     for u in (ux, uy):
         u += _F(128.0)
@@ -512,57 +539,72 @@ def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str) -> tuple[np.ndarray, int]:
     lo, hi = (ux, uy) if px < py else (uy, ux)
     hi *= _F(1 << (abs(px - py) * 8))
     hi += lo  # exact: < 2^24
-    pix = hi.astype(np.uint32)
+    pix = _ws("pix", shape, np.uint32)
+    np.copyto(pix, hi, casting="unsafe")
     if min(px, py):
         np.left_shift(pix, np.uint32(8 * min(px, py)), out=pix)
-    np.bitwise_or(pix, np.uint32(const), out=pix)
-    return pix.view(np.uint8).reshape(hx.shape + (4,)), clipped
+    if fmt != "bc5":  # BC5 reads R and G only
+        np.bitwise_or(pix, np.uint32(const), out=pix)
+    return pix.view(np.uint8).reshape(shape + (4,)), clipped
 
 
-def _pd_measure_chunk(raw: np.ndarray, p: np.ndarray, s: float, fmt: str) -> np.ndarray:
-    """Half-angles ``asin(|n/2 - ref/2|)`` of decoded PD texels (BGRA) against half-normals."""
+def _pd_measure_chunk(
+    raw: np.ndarray, p: np.ndarray, s: float, fmt: str, out: np.ndarray
+) -> np.ndarray:
+    """Half-angles ``asin(|n/2 - ref/2|)`` of decoded PD texels (BGRA) against half-normals.
+
+    With ``u = q - 127.5`` (texel units) the decoded slope is ``u t`` (``t = 2 s / 255``), so
+    ``n / 2 = (u_x, u_y, 1 / t) * 0.5 / sqrt(u_x^2 + u_y^2 + 1 / t^2)``.
+    """
     hx, hy, hz = p
-    v = raw.view(np.uint32).reshape(hx.shape)
+    shape = hx.shape
+    v = raw.view(np.uint32).reshape(shape)
     sx, sy = _UNPACK[fmt]
-    step = _F(2.0 * s / 255.0)
-    t = np.right_shift(v, np.uint32(sx))
+    kk = _F((255.0 / (2.0 * s)) ** 2)  # 1 / t^2
+    kz = _F(255.0 / (2.0 * s))  # 1 / t
+    t = _ws("t", shape, np.uint32)
+    np.right_shift(v, np.uint32(sx), out=t)
     if sx < 24:
         np.bitwise_and(t, np.uint32(255), out=t)
-    dx = t.astype(_F)
+    dx = _ws("dx", shape)
+    np.copyto(dx, t, casting="unsafe")
     np.right_shift(v, np.uint32(sy), out=t)
     np.bitwise_and(t, np.uint32(255), out=t)
-    dy = t.astype(_F)
-    for d in (dx, dy):
-        d *= step
-        d -= _F(s)
-    inv = dx * dx
-    a = dy * dy
+    dy = _ws("dy", shape)
+    np.copyto(dy, t, casting="unsafe")
+    dx -= _F(127.5)
+    dy -= _F(127.5)
+    inv = np.multiply(dx, dx, out=_ws("inv", shape))
+    a = np.multiply(dy, dy, out=_ws("a", shape))
     inv += a
-    inv += _F(1.0)
+    inv += kk
     np.sqrt(inv, out=inv)
-    np.divide(_F(0.5), inv, out=inv)  # = nz / 2
-    dx *= inv
+    np.divide(_F(0.5), inv, out=inv)
+    dx *= inv  # nx / 2
     dx -= hx
     dx *= dx
-    dy *= inv
+    dy *= inv  # ny / 2
     dy -= hy
     dy *= dy
     dx += dy
+    inv *= kz  # nz / 2
     inv -= hz
     inv *= inv
     dx += inv
     np.sqrt(dx, out=dx)
-    np.clip(dx, _F(0.0), _F(1.0), out=dx)
-    return np.arcsin(dx, out=dx)
+    # |a - b| / 2 <= 1 for unit vectors; a NaN here (non-unit input) counts as 180 degrees
+    return np.arcsin(dx, out=out)
 
 
-def _pd_chunk(nc: np.ndarray, s: float, fmt: str, width: int) -> tuple[bytes, int, np.ndarray]:
+def _pd_chunk(
+    nc: np.ndarray, s: float, fmt: str, width: int, out: np.ndarray
+) -> tuple[bytes, int, np.ndarray]:
     """One row chunk of the fused path: returns (block data, clipped texels, half-angles)."""
     p = _half_planes(nc)
     rgba, clipped = _pd_pack_chunk(p, s, fmt)
     data = encode_bc(rgba, fmt)
     raw = decode_bc_bgra(data, width, nc.shape[0], fmt)
-    return data, clipped, _pd_measure_chunk(raw, p, s, fmt)
+    return data, clipped, _pd_measure_chunk(raw, p, s, fmt, out)
 
 
 def pd_pack(normals: np.ndarray, scale: float, fmt: str = "bc5") -> tuple[np.ndarray, int]:
@@ -589,7 +631,7 @@ def pd_decode_error(
     half = np.empty((h, w), dtype=_F)
 
     def work(rows: slice) -> None:
-        half[rows] = _pd_measure_chunk(raw[rows], _half_planes(n[rows]), float(scale), fmt)
+        _pd_measure_chunk(raw[rows], _half_planes(n[rows]), float(scale), fmt, half[rows])
 
     map_rows(work, h, w)
     return error_stats(half, unit=360.0 / math.pi)
@@ -640,19 +682,20 @@ def pd_compress_check(
     hp, wp = n.shape[:2]
     half = np.empty((hp, wp), dtype=_F)
 
-    def work(rows: slice) -> tuple[bytes, int]:
-        data, clipped, ang = _pd_chunk(n[rows], s, fmt, wp)
-        half[rows] = ang
-        return data, clipped
+    def work(rows: slice) -> tuple[bytes, int, float]:
+        data, clipped, ang = _pd_chunk(n[rows], s, fmt, wp, half[rows])
+        return data, clipped, float(ang.sum(dtype=np.float64))  # summed while in cache
 
     results = map_rows(work, hp, wp)
     data = b"".join(r[0] for r in results)
     clipped = sum(r[1] for r in results)
+    total: float | None = sum(r[2] for r in results)
     if padded:
         clipped = enc.pd_clipped_count(src, s)
         half = np.ascontiguousarray(half[:h, :w])
+        total = None
     unit = 360.0 / math.pi
-    err = error_stats(half, unit=unit)
+    err = error_stats(half, unit=unit, total=total)
     if angles_out is not None:
         np.multiply(half, _F(unit), out=angles_out)
     return PDCheck(fmt, w, h, s, int(clipped), data, err, padded)
