@@ -79,8 +79,9 @@ def _first_appearance(labels: np.ndarray, n_labels: int) -> np.ndarray:
     return number[f]
 
 
-def _cell_firsts(q: list[np.ndarray], n: int) -> np.ndarray:
-    """For every point, the index of the first point (lowest index) in its grid cell."""
+def _cell_firsts(q: list[np.ndarray], n: int) -> tuple[np.ndarray, np.ndarray | None, int]:
+    """For every point, the index of the first point (lowest index) in its grid cell; also the
+    sorted unique packed cell keys and the bits per axis (None, 0 when keys were not packed)."""
     bits = max(1, int(max(int(a.max()) for a in q)).bit_length())
     idx_bits = max(1, int(n - 1).bit_length())
     if 3 * bits + idx_bits <= 63:
@@ -100,6 +101,7 @@ def _cell_firsts(q: list[np.ndarray], n: int) -> np.ndarray:
         _, inv = np.unique(np.stack(q, axis=1), axis=0, return_inverse=True)
         order = np.argsort(inv.reshape(-1), kind="stable")
         cellk = inv.reshape(-1)[order]
+        bits = 0
     start = np.empty(n, dtype=bool)
     start[0] = True
     np.not_equal(cellk[1:], cellk[:-1], out=start[1:])
@@ -107,7 +109,37 @@ def _cell_firsts(q: list[np.ndarray], n: int) -> np.ndarray:
     np.maximum.accumulate(run_start, out=run_start)
     rep = np.empty(n, dtype=np.int64)
     rep[order] = order[run_start]
-    return rep
+    return rep, (cellk[start] if bits else None), bits
+
+
+def _neighbour_occupied(
+    q: list[np.ndarray], side: list[np.ndarray], ukeys: np.ndarray, bits: int
+) -> np.ndarray:
+    """For points in cells ``q`` near the faces ``side`` (-1, 0, +1 per axis): is any cell
+    across a near face (or edge, or corner) occupied? ``ukeys``: sorted packed cell keys."""
+    hit = np.zeros(len(q[0]), dtype=bool)
+    top = (1 << bits) - 1
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dz in (-1, 0, 1):  # the 26 neighbour offsets (not a loop over points)
+                if dx == dy == dz == 0:
+                    continue
+                ok = ~hit
+                for d, sd in zip((dx, dy, dz), side):
+                    if d:
+                        ok &= sd == d
+                sel = np.flatnonzero(ok)
+                if not len(sel):
+                    continue
+                nx, ny, nz = q[0][sel] + dx, q[1][sel] + dy, q[2][sel] + dz
+                valid = (nx >= 0) & (ny >= 0) & (nz >= 0) & (nx <= top) & (ny <= top) & (nz <= top)
+                sel, nx, ny, nz = sel[valid], nx[valid], ny[valid], nz[valid]
+                k = (nx << (2 * bits)) | (ny << bits) | nz
+                pos = np.searchsorted(ukeys, k)
+                found = pos < len(ukeys)
+                found[found] = ukeys[pos[found]] == k[found]
+                hit[sel[found]] = True
+    return hit
 
 
 def compute_vertex_ids(
@@ -168,18 +200,25 @@ def compute_vertex_ids(
             cell = 0.5 * tol  # same cell => within tol / 2: never dense
         sub_cols = cols if active is None else [c[active] for c in cols]
         m = len(sub_cols[0])
-        g = [(c - o) * (1.0 / cell) for c, o in zip(sub_cols, lo)]
-        q = [a.astype(np.int64) for a in g]  # g >= 0: truncation is floor
-        if active is not None:
-            for a in range(3):
-                q0 = q[a].min()
-                q[a] -= q0
-                g[a] -= q0
+        inv = 1.0 / cell
+        g = []
+        q = []
+        for c, o in zip(sub_cols, lo):
+            ga = np.subtract(c, o)
+            ga *= inv
+            qa = ga.astype(np.int64)  # ga >= 0: truncation is floor
+            if active is not None:
+                q0 = qa.min()
+                qa -= q0
+                ga -= q0
+            g.append(ga)
+            q.append(qa)
         local = np.arange(m, dtype=np.int64)
-        rep = _cell_firsts(q, m)
+        rep, ukeys, bits = _cell_firsts(q, m)
+        is_rep = rep == local
         dense_pt = None
         if not fine:
-            dup = np.flatnonzero(rep != local)  # only non-first points can lie away from the first
+            dup = np.flatnonzero(~is_rep)  # only non-first points can lie away from the first
             r = rep[dup]
             spread = np.abs(sub_cols[0][dup] - sub_cols[0][r])
             np.maximum(spread, np.abs(sub_cols[1][dup] - sub_cols[1][r]), out=spread)
@@ -190,21 +229,37 @@ def compute_vertex_ids(
                 dense_cell[r[loose]] = True
                 dense_pt = dense_cell[rep]
         # Representatives of settled cells that lie near a cell face may link across it.
-        rep_idx = np.flatnonzero(rep == local)
-        settled = np.ones(m, dtype=bool) if dense_pt is None else ~dense_pt
-        rep_idx = rep_idx[settled[rep_idx]]
+        rep_idx = np.flatnonzero(is_rep if dense_pt is None else is_rep & ~dense_pt)
         margin = 1.5 * tol / cell
+        frs = []
         near = np.zeros(len(rep_idx), dtype=bool)
         for a in range(3):
-            fr = g[a][rep_idx] - q[a][rep_idx]
-            near |= (fr < margin) | (fr > 1.0 - margin)
+            ga = g[a][rep_idx]
+            ga -= np.floor(ga)
+            frs.append(ga)
+            near |= ga < margin
+            near |= ga > 1.0 - margin
+        rep_idx = rep_idx[near]
+        if active is None and ukeys is not None and len(rep_idx):
+            # Level 0 sees every point: keep only candidates whose neighbour cell across a
+            # near face is occupied at all (exact: a partner within tol lies in such a cell).
+            sides = []
+            for fr in frs:
+                fr = fr[near]
+                sides.append((fr > 1.0 - margin).astype(np.int64) - (fr < margin))
+            qs = [qa[rep_idx] for qa in q]
+            rep_idx = rep_idx[_neighbour_occupied(qs, sides, ukeys, bits)]
         to_global = local if active is None else active
-        if active is None and dense_pt is None:
+        if active is None:
             f = rep
+            if dense_pt is not None:
+                f = rep.copy()
+                dense_idx = np.flatnonzero(dense_pt)
+                f[dense_idx] = dense_idx  # unsettled: resolved at the finer levels
         else:
-            keep = np.flatnonzero(settled)
+            keep = np.flatnonzero(~dense_pt) if dense_pt is not None else local
             f[to_global[keep]] = to_global[rep[keep]]
-        cands.append(to_global[rep_idx[near]])
+        cands.append(to_global[rep_idx])
         if dense_pt is None:
             break
         active = to_global[np.flatnonzero(dense_pt)]
