@@ -164,40 +164,56 @@ def decode_texels(
         raise ValueError(f"layout 'ag' (DXT5nm) needs 4 channels, the map has {c}")
 
     def sig(x: np.ndarray) -> np.ndarray:
+        """A new float32 array of signed components."""
         if signed:
-            return x
+            return np.array(x, dtype=_F, copy=True)
         if bits:
             # exact and symmetric: (2 q - top) / top, so flipping green (q -> top - q) gives
             # exactly -y and a DirectX map read as DirectX equals the OpenGL map bit for bit
             top = _F((1 << bits) - 1)
-            qi = np.rint(x * top)
-            return (qi * _F(2.0) - top) / top
-        return x * _F(2.0) - _F(1.0)
+            q = x * top
+            np.rint(q, out=q)
+            q *= _F(2.0)
+            q -= top
+            q /= top
+            return q
+        q = x * _F(2.0)
+        q -= _F(1.0)
+        return q
 
     if lay == "rgb":
-        n = sig(v[..., :3]).astype(_F, copy=True)
+        n = np.ascontiguousarray(sig(v[..., :3]))
     else:
         x = sig(v[..., 3] if lay == "ag" else v[..., 0])
         y = sig(v[..., 1])
-        n = np.stack([x, y, np.zeros_like(x)], axis=-1).astype(_F)
+        n = np.empty(x.shape + (3,), dtype=_F)
+        n[..., 0] = x
+        n[..., 1] = y
         z2 = _F(1.0) - x * x - y * y
-        n[..., 2] = np.sqrt(np.maximum(z2, _F(0.0)))
-    nan = ~np.isfinite(n).all(axis=-1)
-    length = np.sqrt(np.einsum("...c,...c->...", np.where(nan[..., None], 0, n), n))
-    zero = ~nan & (length < 1e-6)
-    non_unit = ~nan & ~zero & (np.abs(length - 1.0) > unit_tolerance)
-    zneg = ~nan & (n[..., 2] < 0)
+        np.maximum(z2, _F(0.0), out=z2)
+        np.sqrt(z2, out=n[..., 2])
+    l2 = np.einsum("...c,...c->...", n, n)
+    length = np.sqrt(l2, out=l2)
+    if np.isfinite(length.sum(dtype=np.float64)):
+        nan = np.zeros(length.shape, dtype=bool)
+    else:
+        nan = ~np.isfinite(length)
+    zero = length < 1e-6  # NaN compares False
+    non_unit = np.abs(length - _F(1.0)) > unit_tolerance
+    non_unit &= ~zero
+    zneg = n[..., 2] < 0
     stats = NormalStats(
         texels=int(nan.size),
-        nan=int(nan.sum()),
-        zero=int(zero.sum()),
-        non_unit=int(non_unit.sum()),
-        z_negative=int(zneg.sum()),
+        nan=int(np.count_nonzero(nan)),
+        zero=int(np.count_nonzero(zero)),
+        non_unit=int(np.count_nonzero(non_unit)),
+        z_negative=int(np.count_nonzero(zneg)),
         first_nan=_first(nan),
         first_zero=_first(zero),
     )
-    good = ~nan & ~zero
-    n[good] /= length[good][:, None]
+    # divide in place; NaN and zero texels are left as they are
+    safe = np.where(zero | nan, _F(1.0), length)
+    n /= safe[..., None]
     return n, stats
 
 
