@@ -327,7 +327,10 @@ def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
         drivers=[dict(d) for d in manifest.drivers],
         budget=dict(manifest.budget),
         resolution={k: v for k, v in manifest.resolution.items() if isinstance(v, int)},
-        provenance={"manifest": manifest.path.name},
+        provenance={
+            "manifest": manifest.path.name,
+            "auto_resolution": sorted(k for k, v in manifest.resolution.items() if v == "auto"),
+        },
     )
     return asset, notes
 
@@ -359,6 +362,30 @@ def auto_pd_scale(slopes: np.ndarray, percentile: float = 99.9) -> float:
     return float(min(max(2.0 ** np.ceil(np.log2(p)), 1.0 / 16), 64.0))
 
 
+def auto_wrinkle_size(asset: WrinkleAsset) -> tuple[int | None, dict[int, float]]:
+    """Smallest power-of-two state size whose blended error over the expressions meets the
+    budget (:func:`wrinklepipe.normals.resample.auto_size`); None when it cannot be chosen."""
+    auto_size = optional("wrinklepipe.normals.resample", "auto_size")
+    budget_cls = optional("wrinklepipe.normals.compress", "Budget")
+    if auto_size is None or budget_cls is None or asset.encoding != "pd" or not asset.expressions:
+        return None, {}
+    if asset.policy == "signed":
+        return None, {}
+    h = asset.states.shape[1]
+    base = _resize_normals(asset.base, h)
+    slopes = model.normal_to_pd(asset.states) - model.normal_to_pd(base)[None]
+    masks = asset.masks
+    if masks.shape[1] != h:
+        from wrinklepipe import masks as wm
+
+        masks = np.asarray(wm.resample_masks(masks, h), np.float32)
+    weights = [asset.expression_weights({e: 1.0}) for e in sorted(asset.expressions)]
+    b = asset.budget
+    limits = budget_cls(b.get("max_mean_deg"), b.get("max_p99_deg", 2.0))
+    size, tried = auto_size(base, slopes, masks, weights, limits, policy=asset.policy)
+    return int(size), {int(k): float(v.p99_deg) for k, v in tried.items()}
+
+
 @dataclass
 class StageReport:
     """What the stages did, for report.json."""
@@ -372,8 +399,17 @@ class StageReport:
 def run_stages(asset: WrinkleAsset, auto_scale: bool) -> tuple[WrinkleAsset, StageReport]:
     """Resample to the target resolutions, prepare the mesh, choose the PD scale."""
     rep = StageReport()
-    res = asset.resolution
+    res = dict(asset.resolution)
     base, states, masks = asset.base, asset.states, asset.masks
+    if "wrinkle" in asset.provenance.get("auto_resolution", ()):
+        size, tried = auto_wrinkle_size(asset)
+        if size is not None:
+            res["wrinkle"] = size
+            rep.notes.append(
+                "wrinkle resolution auto: "
+                + ", ".join(f"{k}: p99 {v:.2f} deg" for k, v in sorted(tried.items()))
+                + f" -> {size}"
+            )
     if "base" in res and res["base"] != base.shape[0]:
         base = _resize_normals(base, int(res["base"]))
         rep.notes.append(f"base resampled to {res['base']}")
@@ -416,7 +452,8 @@ class ConvertOptions:
     ``glb``: also a self-contained ``NAME.glb``. ``usd_format``: ``"usda"`` (always written) plus
     ``"usdc"`` or ``"usdz"`` on request. ``force``: replace a non-empty output folder.
     ``compressed``: DDS + KTX2 textures when the compression stage is installed. ``validate``:
-    run :mod:`wrinklepipe.validate` on the written folder when it is installed. ``bits``: PNG
+    run :mod:`wrinklepipe.validate` on the written folder when it is installed (``render``: with
+    its GPU render pass). ``bits``: PNG
     depth of the base and state maps. ``mask_layout``: None = the manifest's ``formats``.
     """
 
@@ -425,6 +462,7 @@ class ConvertOptions:
     force: bool = False
     compressed: bool = True
     validate: bool = True
+    render: bool = True
     bits: int = 8
     mask_layout: str | None = None
 
@@ -464,28 +502,108 @@ def curve_files(curve: WeightCurves, regions: list[str]) -> dict[str, bytes]:
     }
 
 
-def compressed_files(pkg: WrinklePackage) -> tuple[dict[str, bytes], list[str]]:
-    """BC-compressed copies of the base and state maps as DDS and KTX2 (BC5: X in R, Y in G)."""
-    pack_xy = optional("wrinklepipe.normals.compress", "pack_xy")
-    encode_bc = optional("wrinklepipe.normals.compress", "encode_bc")
+#: Block formats tried for a two-channel normal map when the manifest says ``auto``.
+AUTO_FORMATS: tuple[str, ...] = ("bc5", "bc3nm", "bc7", "bc1")
+_BLOCK = ("bc5", "bc1", "bc3nm", "bc7")
+
+
+def compressed_files(
+    pkg: WrinklePackage,
+    budget: dict[str, float] | None = None,
+    formats: dict[str, str] | None = None,
+) -> tuple[dict[str, bytes], list[str], dict[str, Any]]:
+    """Block-compressed copies (DDS + KTX2) of the base and the PD state maps.
+
+    For each map the format is the manifest's ``formats.base`` / ``formats.wrinkle``; ``auto``
+    (default) tries :data:`AUTO_FORMATS` and keeps the smallest that meets the budget for every
+    map of the group (error of the decoded map against the stored 8-bit map, measured by
+    :func:`wrinklepipe.normals.compress.compress_and_check`); all states share one format. When
+    no format passes, the group ships as PNG only and a note says why.
+    Returns (files, notes, per-map choices for the report).
+    """
+    nc = optional("wrinklepipe.normals", "compress")
     dds_bytes = optional("wrinklepipe.normals.dds", "dds_bytes")
     ktx2_bytes = optional("wrinklepipe.normals.ktx2", "ktx2_bytes")
-    if None in (pack_xy, encode_bc, dds_bytes, ktx2_bytes):
-        return {}, ["compressed textures skipped: wrinklepipe.normals compression not installed"]
+    needed = ("compress_and_check", "decoder_for", "Budget")
+    if (
+        nc is None
+        or dds_bytes is None
+        or ktx2_bytes is None
+        or not all(hasattr(nc, n) for n in needed)
+    ):
+        return {}, ["compressed textures skipped: wrinklepipe.normals compression missing"], {}
     files: dict[str, bytes] = {}
     notes: list[str] = []
-    for t in pkg.textures:
-        if t.role not in ("base_normal", "state") or t.bits != 8:
+    choices: dict[str, Any] = {}
+    budget = budget or {}
+    limits = nc.Budget(budget.get("max_mean_deg"), budget.get("max_p99_deg", 2.0))
+    formats = formats or {}
+    meta = pkg.meta
+    lut = np.arange(256, dtype=np.float32) / np.float32(255.0)
+    groups: list[tuple[str, str, Any, list[Any]]] = [
+        (
+            "base",
+            formats.get("base", "auto"),
+            nc.decoder_for("full"),
+            [t for t in pkg.textures if t.role == "base_normal"],
+        ),
+    ]
+    if meta["encoding"] == "pd":  # every state ships in one format (shaders sample them alike)
+        groups.append(
+            (
+                "wrinkle",
+                formats.get("wrinkle", "auto"),
+                nc.decoder_for("pd", scale=float(meta["scale"])),
+                [t for t in pkg.textures if t.role == "state"],
+            )
+        )
+    else:
+        notes.append(f"{meta['encoding']} states ship as PNG only (block copies are for pd)")
+    for group, want, decode, maps in groups:
+        maps = [t for t in maps if t.bits == 8]
+        if not maps or (want not in _BLOCK and want != "auto"):
             continue
-        h, w = t.pixels.shape[:2]
-        if h % 4 or w % 4:
-            notes.append(f"{t.name}: {w}x{h} is not a multiple of 4, not compressed")
+        candidates = AUTO_FORMATS if want == "auto" else (want,)
+        checks: dict[str, list[Any]] = {}
+        for f in candidates:
+            checks[f] = []
+            for t in maps:
+                stored = t.pixels[..., :2]
+                reference = decode(lut[stored], slice(0, stored.shape[0]))
+                checks[f].append(
+                    nc.compress_and_check(stored, reference, f, decode, limits, keep_decoded=False)
+                )
+        passing = [f for f in candidates if all(c.verdict == "pass" for c in checks[f])]
+        if want != "auto":
+            pick = want
+            if not passing:
+                notes.append(f"{group}: {want} as requested, over the error budget")
+        elif passing:  # fewest bytes; ties keep the AUTO_FORMATS order (BC5, the paper's 3Dc)
+            pick = min(
+                passing, key=lambda f: (sum(c.bytes for c in checks[f]), candidates.index(f))
+            )
+        else:
+            pick = None
+            best = min(candidates, key=lambda f: max(c.error.mean_deg for c in checks[f]))
+            worst = max(checks[best], key=lambda c: c.error.mean_deg)
+            notes.append(
+                f"{group}: no block format meets the budget (best {best}: mean "
+                f"{worst.error.mean_deg:.2f}, p99 {worst.error.p99_deg:.2f} deg); PNG only"
+            )
+        choices[group] = {
+            "requested": want,
+            "chosen": pick or "png",
+            "checks": {
+                f: {t.name: c.to_json() for t, c in zip(maps, cs)} for f, cs in checks.items()
+            },
+        }
+        if pick is None:
             continue
-        xy = t.pixels[..., :2].astype(np.float32) / np.float32(255.0)
-        data = encode_bc(pack_xy(xy, "bc5"), "bc5")
-        files[f"compressed/{t.name}.dds"] = dds_bytes("bc5", w, h, [data])
-        files[f"compressed/{t.name}.ktx2"] = ktx2_bytes("bc5", w, h, [data])
-    return files, notes
+        for t, c in zip(maps, checks[pick]):
+            h, w = t.pixels.shape[:2]
+            files[f"compressed/{t.name}.dds"] = dds_bytes(pick, w, h, [c.data])
+            files[f"compressed/{t.name}.ktx2"] = ktx2_bytes(pick, w, h, [c.data])
+    return files, notes, choices
 
 
 def decode_errors(asset: WrinkleAsset, pkg: WrinklePackage) -> dict[str, dict[str, float]]:
@@ -504,27 +622,50 @@ def decode_errors(asset: WrinkleAsset, pkg: WrinklePackage) -> dict[str, dict[st
     return out
 
 
-def _validate(folder: Path, gltf_name: str) -> dict[str, Any]:
-    """Run :mod:`wrinklepipe.validate` on the written glTF (when that stage is installed).
+def _scrub(obj: Any, replacements: dict[str, str]) -> Any:
+    """Replace machine-specific path prefixes in every string of a JSON-able value."""
+    if isinstance(obj, str):
+        for old, new in replacements.items():
+            obj = obj.replace(old, new)
+        return obj
+    if isinstance(obj, dict):
+        return {k: _scrub(v, replacements) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_scrub(v, replacements) for v in obj]
+    return obj
 
-    Only deterministic parts go into the report: counts and issues (no timings).
+
+def validate_output(
+    folder: Path, manifest_path: Path | None = None, render: bool = True
+) -> dict[str, Any]:
+    """Run :mod:`wrinklepipe.validate` on a written folder (when that stage is installed).
+
+    With ``manifest_path`` the shipped textures are compared with the source maps. Only
+    deterministic parts go into the report (counts and issues, no timings); paths are written
+    relative to the output folder (``.``) and the manifest's folder (``<source>``).
     """
-    load_input = optional("wrinklepipe.validate", "load_input")
+    load_input = optional("wrinklepipe.validate", "load_input") or optional(
+        "wrinklepipe.validate.loader", "load_input"
+    )
     run = optional("wrinklepipe.validate", "validate")
     if load_input is None or run is None:
         return {"status": "skipped", "reason": "wrinklepipe.validate not installed"}
-    report = run(load_input(folder / gltf_name))
+    load_options = optional("wrinklepipe.validate.loader", "LoadOptions")
+    options = optional("wrinklepipe.validate", "ValidateOptions")
+    src = str(manifest_path) if manifest_path is not None else None
+    inp = load_input(folder, load_options(source=src)) if load_options else load_input(folder)
+    report = run(inp, options(render=render)) if options else run(inp)
     issues = [
-        {
-            "code": str(i.code),
-            "severity": str(i.severity),
-            "message": str(i.message),
-            "pointer": str(i.pointer).replace(str(folder), "."),
-        }
+        i.to_json()
+        if hasattr(i, "to_json")
+        else {"code": i.code, "severity": i.severity, "message": i.message, "pointer": i.pointer}
         for i in report.issues
     ]
+    replacements = {str(folder): "."}
+    if manifest_path is not None:
+        replacements[str(manifest_path.parent)] = "<source>"
     counts = {k: int(v) for k, v in report.counts.items()}
-    return {"status": "ran", "counts": counts, "issues": issues}
+    return _scrub({"status": "ran", "counts": counts, "issues": issues}, replacements)
 
 
 def report_html(report: dict[str, Any]) -> str:
@@ -589,9 +730,13 @@ def report_html(report: dict[str, Any]) -> str:
 
 
 def build_outputs(
-    pkg: WrinklePackage, options: ConvertOptions
-) -> tuple[dict[str, bytes], list[str]]:
-    """Every output file as ``{relative path: bytes}`` (except USD, written by usd-core)."""
+    pkg: WrinklePackage,
+    options: ConvertOptions,
+    budget: dict[str, float] | None = None,
+    formats: dict[str, str] | None = None,
+) -> tuple[dict[str, bytes], list[str], dict[str, Any]]:
+    """Every output file as ``{relative path: bytes}`` (except USD, written by usd-core), notes,
+    and the block-format choices."""
     from wrinklepipe.io.gltf_write import glb_bytes, gltf_document
     from wrinklepipe.io.package import png_bytes
 
@@ -608,14 +753,15 @@ def build_outputs(
         gdoc, gdata, _ = gltf_document(pkg, embed_images=True)
         files[f"{name}.glb"] = glb_bytes(gdoc, gdata)
     notes: list[str] = []
+    choices: dict[str, Any] = {}
     if options.compressed:
-        comp, n = compressed_files(pkg)
+        comp, n, choices = compressed_files(pkg, budget, formats)
         files.update(comp)
         notes += n
     regions = [r["name"] for r in pkg.meta["regions"]]
     for c in pkg.curves:
         files.update(curve_files(c, regions))
-    return files, notes
+    return files, notes, choices
 
 
 def convert(
@@ -633,27 +779,32 @@ def convert(
     output = Path(output)
     manifest = load_manifest(manifest_path)
     inputs = [manifest.root, *manifest.input_files]
-    with status("reading inputs"):
-        asset, notes = ingest(manifest)
-    with status("resampling, tangents, vertex IDs"):
-        asset, stage_rep = run_stages(asset, auto_scale=manifest.pd_scale == "auto")
-    notes += stage_rep.notes
-    with status("evaluating drivers"):
-        curves, n = evaluate_drivers(asset, manifest.root)
-    notes += n
-    layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
-    pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
-    with status("encoding and packing"):
-        files, n = build_outputs(pkg, opt)
-    notes += n
-    name = pkg.name
-    input_rows = []
-    for p in manifest.input_files:
-        data = p.read_bytes()
-        rel = p.relative_to(manifest.root).as_posix() if manifest.root in p.parents else p.name
-        input_rows.append({"file": rel, "bytes": len(data), "sha256": _sha256(data)})
     try:
+        # The output checks (not an input, empty or --force) run first, before any work.
         with staged_folder(output, force=opt.force, inputs=inputs) as tmp:
+            with status("reading inputs"):
+                asset, notes = ingest(manifest)
+            with status("resampling, tangents, vertex IDs"):
+                asset, stage_rep = run_stages(asset, auto_scale=manifest.pd_scale == "auto")
+            notes += stage_rep.notes
+            with status("evaluating drivers"):
+                curves, n = evaluate_drivers(asset, manifest.root)
+            notes += n
+            layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
+            pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
+            with status("encoding, packing, compressing"):
+                files, n, choices = build_outputs(pkg, opt, asset.budget, manifest.formats)
+            notes += n
+            name = pkg.name
+            input_rows = []
+            for p in manifest.input_files:
+                data = p.read_bytes()
+                rel = (
+                    p.relative_to(manifest.root).as_posix()
+                    if manifest.root in p.parents
+                    else p.name
+                )
+                input_rows.append({"file": rel, "bytes": len(data), "sha256": _sha256(data)})
             for rel, data in sorted(files.items()):
                 write_bytes(tmp / rel, data)
             usd_names = [f"{name}.usda"] + (
@@ -663,7 +814,7 @@ def convert(
                 write_usd(pkg, tmp / u, write_textures=False)
             with status("validating"):
                 validation = (
-                    _validate(tmp, f"{name}.gltf")
+                    validate_output(tmp, manifest.path, opt.render)
                     if opt.validate
                     else {"status": "skipped", "reason": "--no-validate"}
                 )
@@ -709,6 +860,7 @@ def convert(
                     "clipped_texels": stage_rep.clipped_texels,
                 },
                 "decode_error": decode_errors(asset, pkg),
+                "compression": choices,
                 "notes": notes,
                 "outputs": outputs,
                 "validation": validation,
@@ -717,8 +869,9 @@ def convert(
             write_bytes(tmp / "report.html", report_html(report).encode("utf-8"))
     except OSError as exc:
         reason = exc.strerror or str(exc)
+        where = f" ({exc.filename})" if exc.filename else ""
         raise input_error(
-            output, f"could not write the output ({reason}); nothing was changed"
+            output, f"conversion stopped: {reason}{where}; nothing was changed"
         ) from None
     errors = int(validation.get("counts", {}).get("error", 0))
     return ConvertResult(output, report, 1 if errors else 0)
@@ -814,7 +967,7 @@ def export_files(pkg: WrinklePackage, engine: str) -> tuple[dict[str, bytes], li
     tex_files: dict[str, str] = {}
     compressed: dict[str, bytes] = {}
     if preset.normal_format == "bc5":
-        compressed, n = compressed_files(shipped)
+        compressed, n, _ = compressed_files(shipped, {}, {"base": "bc5", "wrinkle": "bc5"})
         notes += n
     for t in shipped.textures:
         dds = f"compressed/{t.name}.dds"

@@ -50,6 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-compress", action="store_true", help="skip DDS/KTX2 textures")
     p.add_argument("--no-validate", action="store_true", help="skip validating the output")
+    p.add_argument("--no-render", action="store_true", help="validate without the GPU render pass")
     p.add_argument("--json", action="store_true", help="print report.json on stdout")
 
 
@@ -63,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
         force=args.force,
         compressed=not args.no_compress,
         validate=not args.no_validate,
+        render=not args.no_render,
         bits=args.bits,
         mask_layout=args.mask_layout,
     )
