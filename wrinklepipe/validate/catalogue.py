@@ -1,0 +1,378 @@
+"""The rule catalogue: every code ``validate-asset`` can report, in one place.
+
+Codes are stable (``WP-<AREA>-<NNN>``); a code is never reused for a different check. The docs
+table ``docs/ISSUES.md`` is generated from :data:`RULES` (``python -m
+wrinklepipe.validate.catalogue docs/ISSUES.md``), as the Khronos glTF-Validator's ISSUES.md is;
+a test fails when the file is stale.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+SEVERITIES = ("error", "warning", "info")
+
+
+@dataclass(frozen=True)
+class Rule:
+    code: str
+    severity: str  # default severity (a config file may change it)
+    title: str
+    description: str
+    fix: str
+
+
+@dataclass
+class Issue:
+    """One finding: a rule code, where, what, and what to do about it."""
+
+    code: str
+    message: str
+    pointer: str
+    severity: str = ""
+    fix: str = ""
+    data: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "code": self.code,
+            "severity": self.severity,
+            "message": self.message,
+            "pointer": self.pointer,
+            "fix": self.fix,
+        }
+        if self.data:
+            out["data"] = self.data
+        return out
+
+
+AREAS = {
+    "LOAD": "Container and declarations",
+    "MAP": "Normal and wrinkle maps",
+    "MASK": "Region masks and the channel table",
+    "WGT": "Weights and drivers",
+    "MESH": "Mesh, tangents, vertex IDs, morph targets",
+    "TEX": "Texture formats, compression and footprint",
+    "RND": "Render pass (GPU vs numpy reference)",
+}
+
+RULES: tuple[Rule, ...] = (
+    # --- LOAD
+    Rule(
+        "WP-LOAD-001",
+        "error",
+        "Unknown encoding or policy",
+        "The asset declares an encoding or policy the wrinkle model does not define, or a policy "
+        "whose state count does not fit (``signed`` needs exactly two states).",
+        "Declare one of the encodings pd, diff, full, composite and one of the policies clamp01, "
+        "signed, additive, renormalize, lerp.",
+    ),
+    Rule(
+        "WP-LOAD-002",
+        "error",
+        "State without a texture",
+        "A declared wrinkle state has no shipped texture, or state textures differ in size or "
+        "format (the shader samples them as one texture array).",
+        "Ship one texture per state, all of one size and format.",
+    ),
+    # --- MAP
+    Rule(
+        "WP-MAP-001",
+        "error",
+        "NaN or non-unit normals",
+        "Texels of a three-channel normal map decode to NaN or to a vector whose length is off "
+        "1 by more than the tolerance (0.05 for 8-bit, quantisation included).",
+        "Renormalise the map before quantising (encode-normals does).",
+    ),
+    Rule(
+        "WP-MAP-002",
+        "error",
+        "Normals pointing into the surface",
+        "Texels of a tangent-space normal map with z < 0 (after decode).",
+        "Repair with z = |z| and renormalise, or fix the bake's cage.",
+    ),
+    Rule(
+        "WP-MAP-003",
+        "error",
+        "Green-convention mismatch",
+        "The map is not integrable under the declared green convention but is under the other "
+        "one (curl test on the slopes): the green channel is flipped (DirectX vs OpenGL).",
+        "Flip the green channel, or declare the convention the map was baked in.",
+    ),
+    Rule(
+        "WP-MAP-004",
+        "error",
+        "PD slopes outside the recorded cone",
+        "More than the allowed fraction of a pd map's texels sit at the edge of the recorded "
+        "scale s (|d| >= s): their slopes were clipped, flattening the deepest wrinkles.",
+        'Record a larger pd_scale (pd_scale = "auto" picks a power of two covering 99.9%).',
+    ),
+    Rule(
+        "WP-MAP-005",
+        "error",
+        "Difference map bias is off",
+        "Where no region is active a difference map must store 0.5 (no change); its median "
+        "there is off by more than 2/255, so the face shifts even at zero weight.",
+        "Re-encode with D = 0.5 + 0.5 (W - B) from the same base that ships.",
+    ),
+    Rule(
+        "WP-MAP-006",
+        "error",
+        "Content does not match the declared encoding",
+        "Decoded under the declared encoding the state is far from the source, while another "
+        "encoding explains it (e.g. a diff map declared as pd).",
+        "Declare the encoding the map was written with, or re-encode it.",
+    ),
+    # --- MASK
+    Rule(
+        "WP-MASK-001",
+        "error",
+        "Mask values outside [0, 1]",
+        "A region mask holds NaN or values below 0 or above 1.",
+        "Clamp the mask to [0, 1] (pack-masks does).",
+    ),
+    Rule(
+        "WP-MASK-002",
+        "error",
+        "Overlapping masks under a policy that does not clamp",
+        "Masks sum above 1 where the policy is additive, so overlapping regions double the "
+        "wrinkle.",
+        "Make the masks a partition of unity, or use policy clamp01 or renormalize.",
+    ),
+    Rule(
+        "WP-MASK-003",
+        "warning",
+        "Region covers nothing",
+        "A region's mask is zero everywhere (below 1/255), so its weight never shows.",
+        "Paint the region, or remove it and its weights.",
+    ),
+    Rule(
+        "WP-MASK-004",
+        "error",
+        "Channel table does not match the packed textures",
+        "A channel-table entry names a missing texture or channel, two regions share a slot, a "
+        "region has no entry, or the packed channel holds another region's mask (swapped "
+        "channels).",
+        "Rebuild the table with pack-masks, or fix the entry the message names.",
+    ),
+    Rule(
+        "WP-MASK-005",
+        "error",
+        "Mask painted on the wrong side",
+        "A region declared left (the character's left, +X) has most of its mask on the right, "
+        "or the other way round.",
+        "Mirror the mask, or fix the region's side.",
+    ),
+    # --- WGT
+    Rule(
+        "WP-WGT-001",
+        "error",
+        "Weight outside the policy's range",
+        "An expression or driver weight lies outside the range the policy accepts "
+        "(wrinklepipe.model.POLICY_WEIGHT_RANGE).",
+        "Scale the weights into the range, or pick the policy they were authored for.",
+    ),
+    Rule(
+        "WP-WGT-002",
+        "error",
+        "Expression names an unknown region",
+        "An expression row weights a region that does not exist in the asset.",
+        "Rename the region in the expression table or add the region.",
+    ),
+    Rule(
+        "WP-WGT-003",
+        "error",
+        "Per-vertex weights jump across a UV seam",
+        "Twins of a UV seam (same position, split for their UVs) carry different per-vertex "
+        "weights, so dynamic wrinkles show a seam.",
+        "Smooth per-vertex weights over vertex IDs (Oat), not over render vertices.",
+    ),
+    # --- MESH
+    Rule(
+        "WP-MESH-001",
+        "error",
+        "Missing tangents",
+        "The mesh carries no tangents: engines generate their own and the normal maps no longer "
+        "match the bake.",
+        "Ship MikkTSpace tangents (explicit TANGENT attribute).",
+    ),
+    Rule(
+        "WP-MESH-002",
+        "error",
+        "Tangents are not MikkTSpace",
+        "Tangents are not unit, not orthogonal to the normal, have |w| != 1, or disagree with "
+        "the UV gradient direction or handedness of their triangles.",
+        "Regenerate tangents with MikkTSpace after the last UV or topology change.",
+    ),
+    Rule(
+        "WP-MESH-003",
+        "error",
+        "UV-seam twins have different vertex IDs",
+        "Render vertices at one position (split for UVs) must share one spatial-hash ID.",
+        "Recompute vertex IDs from welded positions (vertex-ids).",
+    ),
+    Rule(
+        "WP-MESH-004",
+        "error",
+        "Vertex IDs disagree with positions",
+        "One vertex ID is used by vertices at different positions.",
+        "Recompute vertex IDs from positions after the last edit.",
+    ),
+    Rule(
+        "WP-MESH-005",
+        "error",
+        "Morph-target count mismatch",
+        "The number of morph-target names, deltas and the targets a driver refers to disagree.",
+        "Export one name per morph target and keep driver inputs in sync.",
+    ),
+    Rule(
+        "WP-MESH-006",
+        "warning",
+        "No mesh or no UVs",
+        "Without a mesh with UVs the render pass cannot run.",
+        "Ship the mesh with TEXCOORD_0.",
+    ),
+    # --- TEX
+    Rule(
+        "WP-TEX-001",
+        "error",
+        "sRGB on a normal map",
+        "A normal or wrinkle map is tagged sRGB; the GPU decodes it with the sRGB curve and "
+        "every normal tilts.",
+        "Tag normal maps as linear (raw / non-color data).",
+    ),
+    Rule(
+        "WP-TEX-002",
+        "error",
+        "sRGB on a mask",
+        "A mask texture is tagged sRGB, so mask values are remapped by the sRGB curve.",
+        "Tag masks as linear (raw / non-color data).",
+    ),
+    Rule(
+        "WP-TEX-003",
+        "error",
+        "BC texture size not a multiple of 4",
+        "Block-compressed textures must be a multiple of 4 texels in both directions.",
+        "Resize or pad to a multiple of 4 before compressing.",
+    ),
+    Rule(
+        "WP-TEX-004",
+        "error",
+        "Texture data does not match its format",
+        "Level 0 holds fewer bytes than its format and size need (truncated or mislabelled).",
+        "Re-export the texture.",
+    ),
+    Rule(
+        "WP-TEX-005",
+        "error",
+        "Shipping error over budget",
+        "For some expression the wrinkled normal from the shipped (quantised, compressed, "
+        "resampled) maps differs from the source by more than the budget (mean or p99 degrees).",
+        "Use a better format (BC5 or 16-bit), a larger size, or loosen the budget.",
+    ),
+    Rule(
+        "WP-TEX-006",
+        "info",
+        "Resolution above what the budget needs",
+        "A state map at half its size still meets the budget for every expression; the extra "
+        "bytes are wasted.",
+        "Ship the map at half size (resolution.wrinkle).",
+    ),
+    Rule(
+        "WP-TEX-007",
+        "info",
+        "Texture footprint",
+        "Total bytes of the shipped textures (level 0), per role.",
+        "",
+    ),
+    # --- RND
+    Rule(
+        "WP-RND-001",
+        "error",
+        "GPU render disagrees with the numpy reference",
+        "The tangent-space normal buffer rendered by the shaders differs from the numpy model "
+        "evaluated at the same rasterised UVs by more than 0.5 degrees mean or 2 degrees p99 "
+        "(sampling the same shipped bytes).",
+        "Check colour-space tags and formats of the textures; report a bug if they are right.",
+    ),
+    Rule(
+        "WP-RND-002",
+        "error",
+        "Wrinkles where masks x weights are zero",
+        "The render of an expression differs from neutral where the source masks times weights "
+        "are zero.",
+        "Check the mask packing, the channel table and the sides of the regions.",
+    ),
+    Rule(
+        "WP-RND-003",
+        "warning",
+        "No wrinkle where masks x weights are active",
+        "Where the source says a region with relief is fully active, the render does not "
+        "change from neutral.",
+        "Check the mask packing and the state textures.",
+    ),
+    Rule(
+        "WP-RND-004",
+        "warning",
+        "Render pass skipped",
+        "The render pass could not run (no OpenGL 3.3 context, no mesh, or unsupported layout).",
+        "Install Mesa's EGL (llvmpipe) or run on a machine with a GPU.",
+    ),
+)
+
+RULES_BY_CODE: dict[str, Rule] = {r.code: r for r in RULES}
+
+
+def make_issue(code: str, message: str, pointer: str, fix: str = "", **data: Any) -> Issue:
+    """An issue for ``code`` with the catalogue's severity and default fix."""
+    rule = RULES_BY_CODE[code]
+    return Issue(code, message, pointer, rule.severity, fix or rule.fix, dict(data))
+
+
+def issues_markdown() -> str:
+    """The docs table (``docs/ISSUES.md``), generated from :data:`RULES`."""
+    lines = [
+        "# validate-asset issue codes",
+        "",
+        "Generated from `wrinklepipe/validate/catalogue.py` by",
+        "`python -m wrinklepipe.validate.catalogue docs/ISSUES.md`; do not edit by hand.",
+        "",
+        "Severities are the defaults; a config file (`--config`) can ignore a code or change its "
+        "severity.",
+        "",
+    ]
+    counts = {s: sum(r.severity == s for r in RULES) for s in SEVERITIES}
+    lines.append(
+        f"{len(RULES)} rules: "
+        + ", ".join(f"{counts[s]} {s}{'s' if counts[s] != 1 else ''}" for s in SEVERITIES)
+        + "."
+    )
+    for area, title in AREAS.items():
+        rules = [r for r in RULES if r.code.split("-")[1] == area]
+        lines += ["", f"## {area}: {title}", ""]
+        lines.append("| Code | Severity | Title | Description | Suggested fix |")
+        lines.append("|---|---|---|---|---|")
+        for r in rules:
+            cells = [f"`{r.code}`", r.severity, r.title, r.description, r.fix or "-"]
+            lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Write the docs table to the given path (stdout without one)."""
+    args = sys.argv[1:] if argv is None else argv
+    text = issues_markdown()
+    if args:
+        from wrinklepipe.atomic import write_bytes
+
+        write_bytes(Path(args[0]), text.encode("utf-8"))
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,212 @@
+"""Options and the shared, cached decode of one :class:`ValidationInput` that rules read."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from wrinklepipe import model
+from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.validate import textures as tx
+from wrinklepipe.validate.inputs import Texture, ValidationInput
+
+
+@dataclass(frozen=True)
+class ValidateOptions:
+    """What ``validate-asset`` checks and how strictly (defaults are the documented ones).
+
+    ``render``: run the GPU render pass. ``render_size``: square render target in pixels.
+    ``gpu_max_mean_deg`` / ``gpu_max_p99_deg``: GPU normal buffer vs numpy reference.
+    ``unit_tolerance``: allowed | |n| - 1 | of stored three-channel normals.
+    ``max_bad_fraction``: fraction of texels allowed to break a per-texel rule (NaN, z < 0).
+    ``max_clipped_fraction``: fraction of pd texels allowed at the edge of the cone.
+    ``wrinkle_deg``: a pixel "shows a wrinkle" when it differs from neutral by more than this.
+    ``grid``: largest texture-space grid (per side) for source comparisons.
+    """
+
+    render: bool = True
+    render_size: int = 512
+    gpu_max_mean_deg: float = 0.5
+    gpu_max_p99_deg: float = 2.0
+    unit_tolerance: float = 0.05
+    max_bad_fraction: float = 0.001
+    max_clipped_fraction: float = 0.001
+    wrinkle_deg: float = 1.0
+    leak_fraction: float = 0.002
+    grid: int = 512
+    default_budget: tuple[float, float] = (1.0, 4.0)  # mean, p99 degrees when the asset has none
+    half_res_check: bool = True
+
+
+def expression_weights(asset: WrinkleAsset, expr: str | None) -> np.ndarray:
+    """Weights for one expression at full amount (None: neutral) in the policy's shape.
+
+    Regions the asset does not have are skipped (WP-WGT-002 reports them).
+    """
+    names = asset.region_names
+    per_region = np.zeros(len(names), np.float32)
+    if expr is not None:
+        for region, w in asset.expressions.get(expr, {}).items():
+            if region in names:
+                per_region[names.index(region)] += np.float32(w)
+    if asset.policy == "signed":
+        return per_region
+    return per_region[:, None] * asset.region_state_matrix()
+
+
+def encode_source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.ndarray:
+    """Source (float) states in the representation :func:`wrinklepipe.model.combine` takes."""
+    if encoding == "pd":
+        return model.normal_to_pd(states) - model.normal_to_pd(base)[None]
+    if encoding == "diff":
+        return model.normal_to_diff(states, base[None])
+    if encoding == "full":
+        return model.normalize(states)
+    return model.pd_to_normal(model.normal_to_pd(states) - model.normal_to_pd(base)[None])
+
+
+@dataclass
+class Context:
+    """Decoded shipped data, shared by all rules (decoded once, lazily)."""
+
+    inp: ValidationInput
+    options: ValidateOptions = field(default_factory=ValidateOptions)
+    timings: dict[str, float] = field(default_factory=dict)
+    metrics: dict[str, object] = field(default_factory=dict)
+
+    _values: dict[str, np.ndarray | None] = field(default_factory=dict)
+
+    @property
+    def asset(self) -> WrinkleAsset:
+        return self.inp.asset
+
+    def values(self, tex: Texture, apply_srgb: bool = False) -> np.ndarray | None:
+        """Stored values of a texture, or None when its bytes cannot be decoded."""
+        key = f"{tex.name}|{apply_srgb}"
+        if key not in self._values:
+            try:
+                self._values[key] = tx.decode_values(tex, apply_srgb)
+            except (ValueError, KeyError):
+                self._values[key] = None
+        return self._values[key]
+
+    # ---------------------------------------------------------------- shipped, decoded
+    @cached_property
+    def base_tex(self) -> Texture | None:
+        b = self.inp.by_role("base")
+        return b[0] if b else None
+
+    @cached_property
+    def shipped_base(self) -> np.ndarray | None:
+        """Unit normals of the shipped base ``[H, W, 3]`` (None without a usable texture)."""
+        t = self.base_tex
+        if t is None:
+            return None
+        v = self.values(t)
+        return None if v is None else tx.values_to_normals(v, tx.xy_layout(t))
+
+    @cached_property
+    def shipped_states(self) -> list[np.ndarray] | None:
+        """Each state in combine's representation (None if any is missing or undecodable)."""
+        a = self.asset
+        if a.encoding not in model.ENCODINGS:
+            return None
+        out = []
+        for t in self.inp.state_textures():
+            if t is None:
+                return None
+            v = self.values(t)
+            if v is None:
+                return None
+            try:
+                out.append(tx.decode_state(v, a.encoding, tx.xy_layout(t), a.pd_scale))
+            except ValueError:
+                return None
+        return out
+
+    @cached_property
+    def shipped_masks(self) -> np.ndarray | None:
+        """Region masks ``[R, H, W]`` read through the channel table (None if it is unusable)."""
+        inp = self.inp
+        if not inp.channel_table:
+            return None
+        by_region = {e.region: e for e in inp.channel_table}
+        layers = []
+        shape = None
+        for r in self.asset.region_names:
+            e = by_region.get(r)
+            t = inp.texture(e.texture) if e else None
+            if e is None or t is None or e.channel >= t.channels:
+                return None
+            v = self.values(t)
+            if v is None:
+                return None
+            if shape is not None and v.shape[:2] != shape:
+                return None
+            shape = v.shape[:2]
+            m = v[..., e.channel]
+            if e.split is not None:
+                st = inp.texture(e.split[0])
+                sv = self.values(st) if st is not None else None
+                if sv is None or e.split[1] >= sv.shape[-1] or sv.shape[:2] != shape:
+                    return None
+                s = sv[..., e.split[1]]
+                m = m * s if e.side == "left" else m * (1.0 - s) if e.side == "right" else m
+            layers.append(m)
+        if not layers:
+            return None
+        return np.stack(layers).astype(np.float32)
+
+    # ---------------------------------------------------------------- comparison grid
+    @cached_property
+    def grid_shape(self) -> tuple[int, int]:
+        """Texture-space grid for shipped-vs-source comparisons (the largest map, capped)."""
+        sizes = [t.height for t in self.inp.textures if t.role in ("base", "state")]
+        sizes.append(int(self.asset.base.shape[0]))
+        n = min(max(sizes), self.options.grid)
+        return n, n
+
+    def to_grid(self, img: np.ndarray) -> np.ndarray:
+        h, w = self.grid_shape
+        if img.ndim == 2:
+            return tx.resize_bilinear(img[..., None], h, w)[..., 0]
+        return tx.resize_bilinear(img, h, w)
+
+    def masks_to_grid(self, masks: np.ndarray) -> np.ndarray:
+        h, w = self.grid_shape
+        return np.moveaxis(tx.resize_bilinear(np.moveaxis(masks, 0, -1), h, w), -1, 0)
+
+    @cached_property
+    def source_on_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Source base, encoded states and masks on the grid (needs ``has_source``)."""
+        a = self.asset
+        if not self.inp.has_source or a.encoding not in model.ENCODINGS or len(a.states) == 0:
+            return None
+        base = model.normalize(self.to_grid(a.base))
+        states = np.stack([model.normalize(self.to_grid(s)) for s in a.states])
+        enc = encode_source_states(base, states, a.encoding)
+        return base, enc.astype(np.float32), self.masks_to_grid(a.masks)
+
+    @cached_property
+    def shipped_on_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Shipped base, states (combine representation) and masks on the grid."""
+        if self.shipped_base is None or self.shipped_states is None:
+            return None
+        masks = self.shipped_masks if self.shipped_masks is not None else self.asset.masks
+        base = model.normalize(self.to_grid(self.shipped_base))
+        st = []
+        for s in self.shipped_states:
+            g = self.to_grid(s)
+            if self.asset.encoding in ("full", "composite"):
+                g = model.normalize(g)
+            st.append(g)
+        return base, np.stack(st).astype(np.float32), self.masks_to_grid(masks)
+
+    def expressions(self) -> list[str | None]:
+        """Neutral (None) and every expression, in a stable order."""
+        return [None, *sorted(self.asset.expressions)]
+
+    def weights(self, expr: str | None) -> np.ndarray:
+        return expression_weights(self.asset, expr)

@@ -1,0 +1,554 @@
+"""The render pass: draw the mesh with the GLSL wrinkle model, compare with the numpy model.
+
+For neutral and every expression the shaders in ``shaders/`` render, in one draw, a shaded
+image, the tangent-space normal buffer (float32) and the UV buffer. The numpy reference
+(:func:`wrinklepipe.model.blend`) is evaluated at the rasterised UVs on the same shipped texels
+(bilinear, clamp to edge, no mipmaps, like the GPU), so the two must agree to within the GPU's
+filtering precision; a wrong colour-space tag or an unsupported format shows as a disagreement.
+Wrinkles must change the render only where the source masks x weights are non-zero.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from wrinklepipe import model
+from wrinklepipe.asset import Mesh
+from wrinklepipe.paths import SHADERS_DIR
+from wrinklepipe.validate import gl as glw
+from wrinklepipe.validate import textures as tx
+from wrinklepipe.validate.catalogue import Issue, make_issue
+from wrinklepipe.validate.context import Context
+from wrinklepipe.validate.inputs import Texture, ValidationInput
+
+MAX_STATES = 8
+MAX_LAYERS = 16
+_ENC = {"pd": 0, "diff": 1, "full": 2, "composite": 3}
+_POL = {"clamp01": 0, "signed": 1, "additive": 2, "renormalize": 3, "lerp": 4}
+
+
+def shader_source(name: str, defines: dict[str, int] | None = None) -> str:
+    """A shader from ``shaders/`` with ``//#include common.glsl`` expanded and ``defines``
+    inserted after the ``#version`` line."""
+    text = (SHADERS_DIR / name).read_text(encoding="utf-8")
+    common = (SHADERS_DIR / "common.glsl").read_text(encoding="utf-8")
+    text = text.replace("//#include common.glsl", common)
+    if defines:
+        head, rest = text.split("\n", 1)
+        block = "".join(f"#define {k} {v}\n" for k, v in sorted(defines.items()))
+        text = head + "\n" + block + rest
+    return text
+
+
+def shader_defines(inp: ValidationInput, n_layers: int) -> dict[str, int]:
+    """The compile-time specialisation of ``wrinkle.frag`` for one asset."""
+    a = inp.asset
+    base = inp.by_role("base")[0]
+    states = inp.state_textures()
+    return {
+        "ENCODING": _ENC[a.encoding],
+        "POLICY": _POL[a.policy],
+        "NUM_STATES": len(a.state_names),
+        "NUM_LAYERS": n_layers,
+        "BASE_LAYOUT": 0 if tx.xy_layout(base) == "rgb" else 1,
+        "STATE_LAYOUT": 0 if tx.xy_layout(states[0]) == "rgb" else 1,
+    }
+
+
+def ortho_front(positions: np.ndarray, aspect: float = 1.0, margin: float = 1.05) -> np.ndarray:
+    """Column-major MVP of an orthographic view along -Z fitted to the mesh's bounds."""
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    c = (lo + hi) / 2.0
+    half = max((hi[0] - lo[0]) / 2.0 / aspect, (hi[1] - lo[1]) / 2.0) * margin
+    zr = max((hi[2] - lo[2]) / 2.0, 1e-9) * 1.01
+    m = np.array(
+        [
+            [1.0 / (half * aspect), 0.0, 0.0, -c[0] / (half * aspect)],
+            [0.0, 1.0 / half, 0.0, -c[1] / half],
+            [0.0, 0.0, -1.0 / zr, c[2] / zr],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
+        np.float32,
+    )
+    return m.T.copy()
+
+
+@dataclass
+class Frame:
+    """One pose as rendered: images are ``[H, W, C]`` float32, row 0 at the top."""
+
+    color: np.ndarray
+    normal: np.ndarray
+    uv: np.ndarray
+
+    @property
+    def covered(self) -> np.ndarray:
+        return self.normal[..., 3] > 0.5
+
+
+@dataclass
+class Renderer:
+    """GL state for one asset: programs, the mesh and the uploaded textures."""
+
+    inp: ValidationInput
+    size: int = 512
+    ctx: Any = None
+    gl: glw.RawGL | None = None
+    names: list[int] = field(default_factory=list)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.ctx = glw.create_context()
+        try:
+            self._setup()
+        except Exception:
+            self.release()
+            raise
+
+    # ------------------------------------------------------------------ setup
+    def _setup(self) -> None:
+        import moderngl
+
+        ctx, inp = self.ctx, self.inp
+        a = inp.asset
+        self.gl = glw.RawGL.load()
+        self.info = {
+            "renderer": ctx.info.get("GL_RENDERER", ""),
+            "gl_version": ctx.version_code,
+            "size": self.size,
+        }
+        vs = shader_source("wrinkle.vert")
+        self.mask_layers = _mask_layers(inp)
+        self.defines = shader_defines(inp, len(self.mask_layers))
+        self.prog = ctx.program(
+            vertex_shader=vs, fragment_shader=shader_source("wrinkle.frag", self.defines)
+        )
+        self.plain = ctx.program(
+            vertex_shader=vs,
+            fragment_shader=shader_source(
+                "plain_normal.frag", {"BASE_LAYOUT": self.defines["BASE_LAYOUT"]}
+            ),
+        )
+        mesh: Mesh = a.mesh
+        tangents = mesh.tangents
+        if tangents is None or np.asarray(tangents).shape != (mesh.vertex_count, 4):
+            from wrinklepipe.validate.rules_mesh import uv_tangents
+
+            tangents = uv_tangents(mesh)
+        normals = mesh.normals
+        if normals is None:
+            normals = _vertex_normals(mesh)
+        verts = np.concatenate(
+            [
+                np.asarray(mesh.positions, np.float32),
+                np.asarray(normals, np.float32),
+                np.asarray(tangents, np.float32),
+                np.asarray(mesh.uvs, np.float32),
+            ],
+            axis=1,
+        )
+        self.vbo = ctx.buffer(np.ascontiguousarray(verts).tobytes())
+        self.ibo = ctx.buffer(np.ascontiguousarray(mesh.indices, np.uint32).tobytes())
+        layout = (self.vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")
+        self.vao = ctx.vertex_array(self.prog, [layout], self.ibo, index_element_size=4)
+        self.vao_plain = ctx.vertex_array(self.plain, [layout], self.ibo, index_element_size=4)
+        # split draws: triangles that touch a non-zero texel of a weighted mask layer get the
+        # wrinkle shader, the rest the plain one (identical output where every activation is 0)
+        self.indices = np.ascontiguousarray(mesh.indices, np.uint32)
+        self.ibo_w = ctx.buffer(reserve=max(self.indices.nbytes, 4), dynamic=True)
+        self.ibo_p = ctx.buffer(reserve=max(self.indices.nbytes, 4), dynamic=True)
+        self.vao_w = ctx.vertex_array(self.prog, [layout], self.ibo_w, index_element_size=4)
+        self.vao_p = ctx.vertex_array(self.plain, [layout], self.ibo_p, index_element_size=4)
+        self.mvp = ortho_front(np.asarray(mesh.positions, np.float64))
+        s = self.size
+        self.targets = [
+            ctx.renderbuffer((s, s), 4, dtype="f4"),
+            ctx.renderbuffer((s, s), 4, dtype="f4"),
+            ctx.renderbuffer((s, s), 4, dtype="f4"),
+        ]
+        self.depth = ctx.depth_renderbuffer((s, s))
+        self.fbo = ctx.framebuffer(self.targets, self.depth)
+        # --- textures: the exact shipped bytes
+        base = inp.by_role("base")[0]
+        self.base_name = glw.upload(self.gl, [base], array=False)
+        self.names.append(self.base_name)
+        self.base_tex = ctx.external_texture(self.base_name, (base.width, base.height), 4, 0, "f1")
+        self.base_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        states = inp.state_textures()
+        self.state_name = glw.upload(self.gl, states, array=True)
+        self.names.append(self.state_name)
+        self.mask_name = glw.upload(self.gl, self.mask_layers, array=True)
+        self.names.append(self.mask_name)
+        for prog in (self.prog, self.plain):
+            self._set(prog, "u_mvp", self.mvp.tobytes())
+            self._set(prog, "u_base", 0)
+        p = self.prog
+        self._set(p, "u_states", 1)
+        self._set(p, "u_masks", 2)
+        self._set(p, "u_pd_scale", float(a.pd_scale))
+        used = np.zeros((MAX_LAYERS, 4), np.float32)
+        for e in inp.channel_table:
+            used[self._layer_index(e.texture), e.channel] = 1.0
+        self._set(p, "u_used", used.tobytes())
+        self.touch = triangle_layer_touch(self.mask_layers, mesh)  # [T, L] bool
+
+    def _layer_index(self, texture: str) -> int:
+        return [t.name for t in self.mask_layers].index(texture)
+
+    @staticmethod
+    def _set(prog: Any, name: str, value: Any) -> None:
+        if name not in prog:
+            return
+        if isinstance(value, bytes):
+            u = prog[name]
+            # the compiler trims arrays to the elements used; send that many
+            size = u.array_length * u.dimension * 4
+            prog[name].write(value[:size])
+        else:
+            prog[name].value = value
+
+    def release(self) -> None:
+        if self.gl is not None and self.names:
+            glw.delete(self.gl, self.names)
+            self.names = []
+        if self.ctx is not None:
+            self.ctx.release()
+            self.ctx = None
+
+    # ------------------------------------------------------------------ drawing
+    def layer_weights(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``[R, K]`` region weights -> per-layer ``mat4`` uniforms for states 0..3 and 4..7
+        (column c holds the weights of mask channel c) and per-layer on/off flags."""
+        a = self.inp.asset
+        w = np.asarray(weights, np.float32)
+        if w.ndim == 1:
+            w = w[:, None]
+        out = np.zeros((MAX_LAYERS, 4, MAX_STATES), np.float32)  # [layer, channel, state]
+        names = a.region_names
+        for e in self.inp.channel_table:
+            r = names.index(e.region)
+            out[self._layer_index(e.texture), e.channel, : w.shape[1]] = w[r]
+        lo = np.ascontiguousarray(out[:, :, :4])
+        hi = np.ascontiguousarray(out[:, :, 4:])
+        on = (np.abs(out).reshape(MAX_LAYERS, -1).max(axis=1) > 0).astype(np.int32)
+        return lo, hi, on
+
+    def active_triangles(self, weights: np.ndarray | None) -> np.ndarray:
+        """Triangles whose UV footprint touches a non-zero texel of a layer with a weight."""
+        if weights is None:
+            return np.zeros(len(self.indices), bool)
+        _, _, on = self.layer_weights(weights)
+        on = on[: self.touch.shape[1]].astype(bool)
+        return self.touch[:, on].any(axis=1)
+
+    def draw(
+        self,
+        weights: np.ndarray | None,
+        plain: bool = False,
+        read: bool = True,
+        split: bool = True,
+    ) -> Frame | None:
+        """Render one pose (``weights`` ``[R, K]``, or ``[R]`` under ``signed``).
+
+        ``plain``: the plain normal-map shader everywhere (the benchmark's baseline).
+        ``split``: the wrinkle shader only on triangles a weighted mask touches (the same
+        image: elsewhere every activation is 0 and the model returns the base); ``False``
+        draws every triangle with the wrinkle shader.
+        """
+        import moderngl
+
+        ctx = self.ctx
+        self.fbo.use()
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE)
+        self.base_tex.use(0)
+        glw.bind(self.gl, 1, self.state_name, array=True)
+        glw.bind(self.gl, 2, self.mask_name, array=True)
+        if plain:
+            self.vao_plain.render(moderngl.TRIANGLES)
+        else:
+            lo, hi, on = self.layer_weights(weights)
+            self._set(self.prog, "u_wlo", lo.tobytes())
+            self._set(self.prog, "u_whi", hi.tobytes())
+            if not split:
+                self.vao.render(moderngl.TRIANGLES)
+            else:
+                act = self.active_triangles(weights)
+                wi, pi = self.indices[act], self.indices[~act]
+                if len(wi):
+                    self.ibo_w.write(wi.tobytes())
+                    self.vao_w.render(moderngl.TRIANGLES, vertices=wi.size)
+                if len(pi):
+                    self.ibo_p.write(pi.tobytes())
+                    self.vao_p.render(moderngl.TRIANGLES, vertices=pi.size)
+        if not read:
+            ctx.finish()
+            return None
+        s = self.size
+        imgs = []
+        for i in range(3):
+            raw = self.fbo.read(components=4, attachment=i, dtype="f4")
+            imgs.append(np.frombuffer(raw, np.float32).reshape(s, s, 4)[::-1].copy())
+        return Frame(*imgs)
+
+
+def triangle_layer_touch(layers: list[Texture], mesh: Mesh) -> np.ndarray:
+    """``[T, L]``: does triangle t's UV box reach a non-zero texel of mask layer l (bilinear
+    footprint included)? Summed-area tables make it one vectorised lookup per triangle."""
+    uv = np.asarray(mesh.uvs, np.float64)[np.asarray(mesh.indices, np.int64)]  # [T, 3, 2]
+    lo, hi = uv.min(axis=1), uv.max(axis=1)
+    out = np.zeros((len(uv), len(layers)), bool)
+    for i, t in enumerate(layers):
+        v = tx.decode_values(t)
+        h, w = v.shape[:2]
+        nz = (np.abs(v).max(axis=-1) > 0).astype(np.int64)
+        sat = np.zeros((h + 1, w + 1), np.int64)
+        sat[1:, 1:] = nz.cumsum(0).cumsum(1)
+        x0 = np.clip(np.floor(lo[:, 0] * w - 0.5), 0, w - 1).astype(np.int64)
+        x1 = np.clip(np.floor(hi[:, 0] * w - 0.5) + 1, 0, w - 1).astype(np.int64)
+        y0 = np.clip(np.floor(lo[:, 1] * h - 0.5), 0, h - 1).astype(np.int64)
+        y1 = np.clip(np.floor(hi[:, 1] * h - 0.5) + 1, 0, h - 1).astype(np.int64)
+        count = sat[y1 + 1, x1 + 1] - sat[y0, x1 + 1] - sat[y1 + 1, x0] + sat[y0, x0]
+        out[:, i] = count > 0
+    return out
+
+
+def _vertex_normals(mesh: Mesh) -> np.ndarray:
+    from wrinklepipe.demo.character import vertex_normals
+
+    return vertex_normals(np.asarray(mesh.positions, np.float32), np.asarray(mesh.indices))
+
+
+def _mask_layers(inp: ValidationInput) -> list[Texture]:
+    used = []
+    for e in inp.channel_table:
+        if e.texture not in used:
+            used.append(e.texture)
+    return [
+        inp.texture(n) for n in sorted(used, key=lambda n: [t.name for t in inp.textures].index(n))
+    ]
+
+
+# ------------------------------------------------------------------------------------------------
+# numpy reference at the rasterised UVs
+
+
+@dataclass
+class Samples:
+    """Shipped (and source) data sampled at the covered pixels' UVs, shared by all poses."""
+
+    base: np.ndarray  # [N, 3]
+    states: np.ndarray  # [K, N, C]
+    masks: np.ndarray  # [R, N] shipped
+    src_masks: np.ndarray | None  # [R, N]
+    src_relief: np.ndarray | None  # [K, N] degrees between source state and base
+
+
+def sample_reference(ctx: Context, uv: np.ndarray) -> Samples:
+    inp, a = ctx.inp, ctx.asset
+    bt = ctx.base_tex
+    base = tx.values_to_normals(tx.bilinear(ctx.values(bt), uv), tx.xy_layout(bt))
+    states = []
+    for t in inp.state_textures():
+        v = tx.bilinear(ctx.values(t), uv)
+        states.append(tx.decode_state(v, a.encoding, tx.xy_layout(t), a.pd_scale))
+    sampled: dict[str, np.ndarray] = {}
+    masks = []
+    by_region = {e.region: e for e in inp.channel_table}
+    for r in a.region_names:
+        e = by_region[r]
+        if e.texture not in sampled:
+            sampled[e.texture] = tx.bilinear(ctx.values(inp.texture(e.texture)), uv)
+        masks.append(sampled[e.texture][:, e.channel])
+    src_masks = src_relief = None
+    if inp.has_source:
+        src_masks = tx.bilinear(np.moveaxis(np.asarray(a.masks, np.float32), 0, -1), uv).T
+        b = model.normalize(tx.bilinear(np.asarray(a.base, np.float32), uv))
+        rel = []
+        for s in a.states:
+            w = model.normalize(tx.bilinear(np.asarray(s, np.float32), uv))
+            rel.append(model.angular_error_deg(w, b).astype(np.float32))
+        src_relief = np.stack(rel) if rel else None
+    return Samples(base, np.stack(states), np.stack(masks), src_masks, src_relief)
+
+
+def _stats(e: np.ndarray) -> dict[str, float]:
+    if e.size == 0:
+        return {"mean": 0.0, "p99": 0.0, "max": 0.0}
+    return {
+        "mean": round(float(e.mean()), 4),
+        "p99": round(float(np.percentile(e, 99)), 4),
+        "max": round(float(e.max()), 4),
+    }
+
+
+def _skip(reason: str, where: str) -> tuple[list[Issue], dict[str, Any], dict[str, Any]]:
+    return (
+        [make_issue("WP-RND-004", f"render pass skipped: {reason}", where)],
+        {"skipped": reason},
+        {},
+    )
+
+
+def can_render(ctx: Context) -> str:
+    """Empty when the render pass can run on this input, else the reason it cannot."""
+    inp, a = ctx.inp, ctx.asset
+    if a.mesh is None or a.mesh.uvs is None:
+        return "no mesh with UVs"
+    if a.encoding not in _ENC or a.policy not in _POL:
+        return "unknown encoding or policy"
+    if a.policy == "signed" and len(a.state_names) != 2:
+        return "policy 'signed' needs two states"
+    if not inp.by_role("base") or ctx.values(ctx.base_tex) is None:
+        return "no decodable base texture"
+    sts = inp.state_textures()
+    if not sts or any(t is None or ctx.values(t) is None for t in sts):
+        return "a state texture is missing or undecodable"
+    if len({(t.fmt, t.width, t.height) for t in sts}) > 1:
+        return "state textures differ in size or format"
+    if len(sts) > MAX_STATES:
+        return f"more than {MAX_STATES} states"
+    if ctx.shipped_masks is None:
+        return "the channel table or mask textures are unusable"
+    if any(e.split is not None for e in inp.channel_table):
+        return "the lr-split mask layout is not supported by the render pass"
+    layers = _mask_layers(inp)
+    if len(layers) > MAX_LAYERS:
+        return f"more than {MAX_LAYERS} mask textures"
+    if len({(t.fmt, t.width, t.height) for t in layers}) > 1:
+        return "mask textures differ in size or format"
+    for t in [ctx.base_tex, *sts, *layers]:
+        if t.is_block and (t.width % 4 or t.height % 4):
+            return f"{t.name!r} is block-compressed with a size that is not a multiple of 4"
+    return ""
+
+
+def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, Any]]:
+    """Render neutral and every expression; returns (issues, render info, images)."""
+    inp, a, o = ctx.inp, ctx.asset, ctx.options
+    where = inp.pointer("meta")
+    reason = can_render(ctx)
+    if reason:
+        return _skip(reason, where)
+    try:
+        r = Renderer(inp, o.render_size)
+    except glw.GLUnavailable as exc:
+        return _skip(str(exc), where)
+    images: dict[str, Any] = {}
+    issues: list[Issue] = []
+    info = dict(r.info)
+    try:
+        t0 = time.perf_counter()
+        frames = {}
+        for expr in ctx.expressions():
+            frames[expr] = r.draw(ctx.weights(expr))
+        info["render_s"] = round(time.perf_counter() - t0, 4)
+        plain = r.draw(None, plain=True)
+    finally:
+        r.release()
+    t0 = time.perf_counter()
+    neutral = frames[None]
+    cov = neutral.covered
+    uv = neutral.uv[cov][:, :2]
+    samples = sample_reference(ctx, uv)
+    per_pose: dict[str, Any] = {}
+    gpu_bad = []
+    leaks = []
+    missing = []
+    n_gpu_neutral = neutral.normal[cov][:, :3]
+    dilate = np.ones((5, 5), bool)
+    for expr, fr in frames.items():
+        label = expr or "neutral"
+        w = ctx.weights(expr)
+        ref = model.blend(samples.base, samples.states, samples.masks, w, a.encoding, a.policy)
+        gpu = fr.normal[cov][:, :3]
+        err = model.angular_error_deg(gpu, ref).astype(np.float32)
+        st = _stats(err)
+        entry: dict[str, Any] = {"gpu_vs_reference_deg": st}
+        if st["mean"] > o.gpu_max_mean_deg or st["p99"] > o.gpu_max_p99_deg:
+            gpu_bad.append((label, st))
+        emap = np.zeros(cov.shape, np.float32)
+        emap[cov] = err
+        images[f"gpu_error/{label}"] = emap
+        images[f"render/{label}"] = fr.color[..., :3]
+        if expr is not None:
+            change = model.angular_error_deg(gpu, n_gpu_neutral).astype(np.float32)
+            changed = change > o.wrinkle_deg
+            masks_expected = samples.src_masks if samples.src_masks is not None else samples.masks
+            act = model.activations(masks_expected, w, a.policy)
+            active = np.abs(act).sum(axis=0) > 1e-4
+            act_img = np.zeros(cov.shape, bool)
+            act_img[cov] = active
+            act_img = ndimage.binary_dilation(act_img, dilate, iterations=2)
+            leak = changed & ~act_img[cov]
+            n_leak = int(leak.sum())
+            entry["changed_pixels"] = int(changed.sum())
+            entry["leak_pixels"] = n_leak
+            if n_leak > o.leak_fraction * cov.sum():
+                leaks.append((label, n_leak))
+            if samples.src_relief is not None:
+                k_rel = samples.src_relief
+                full_act = act > 0.5
+                strong = (full_act & (k_rel > 4.0 * o.wrinkle_deg)).any(axis=0)
+                quiet = strong & (change < 0.5 * o.wrinkle_deg)
+                entry["strong_pixels"] = int(strong.sum())
+                entry["quiet_pixels"] = int(quiet.sum())
+                if strong.sum() > 50 and quiet.sum() > 0.25 * strong.sum():
+                    missing.append((label, int(quiet.sum()), int(strong.sum())))
+            cmap = np.zeros(cov.shape, np.float32)
+            cmap[cov] = change
+            images[f"change/{label}"] = cmap
+        per_pose[label] = entry
+    plain_err = model.angular_error_deg(plain.normal[cov][:, :3], samples.base)
+    info["plain_vs_reference_deg"] = _stats(plain_err.astype(np.float32))
+    info["covered_pixels"] = int(cov.sum())
+    info["poses"] = per_pose
+    info["compare_s"] = round(time.perf_counter() - t0, 4)
+    ctx.metrics["gpu_vs_reference_deg"] = {
+        k: v["gpu_vs_reference_deg"] for k, v in per_pose.items()
+    }
+    # mask overlay from the UV buffer: shipped masks coloured per region over the neutral render
+    overlay = np.zeros(cov.shape + (3,), np.float32)
+    rng = np.random.default_rng(7)
+    colors = rng.uniform(0.2, 1.0, (len(a.regions), 3)).astype(np.float32)
+    overlay[cov] = np.clip(samples.masks.T @ colors, 0.0, 1.0)
+    images["mask_overlay"] = 0.5 * neutral.color[..., :3] + 0.5 * overlay
+    images["_region_colors"] = colors
+    if gpu_bad:
+        worst = max(gpu_bad, key=lambda x: x[1]["p99"])
+        issues.append(
+            make_issue(
+                "WP-RND-001",
+                f"{len(gpu_bad)} of {len(frames)} poses: GPU normal buffer vs numpy reference "
+                f"over {o.gpu_max_mean_deg:g} mean / {o.gpu_max_p99_deg:g} p99 degrees; worst "
+                f"{worst[0]}: mean {worst[1]['mean']:.2f}, p99 {worst[1]['p99']:.2f}",
+                where,
+            )
+        )
+    if leaks:
+        worst = max(leaks, key=lambda x: x[1])
+        issues.append(
+            make_issue(
+                "WP-RND-002",
+                f"{len(leaks)} expression(s) change the render where masks x weights are zero; "
+                f"worst {worst[0]}: {worst[1]} pixels",
+                inp.pointer("masks"),
+            )
+        )
+    if missing:
+        worst = max(missing, key=lambda x: x[1] / x[2])
+        issues.append(
+            make_issue(
+                "WP-RND-003",
+                f"{len(missing)} expression(s) show no wrinkle where the source is fully "
+                f"active; worst {worst[0]}: {worst[1]} of {worst[2]} pixels unchanged",
+                inp.pointer("masks"),
+            )
+        )
+    return issues, info, images

@@ -1,0 +1,311 @@
+"""Reports of ``validate-asset``: JSON (``schemas/report.schema.json``), a terminal summary
+through rich, and ``report.html`` with its images written as files beside it (no network).
+"""
+
+from __future__ import annotations
+
+import html
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe import __version__
+from wrinklepipe.atomic import dumps_json, staged_folder, write_bytes
+from wrinklepipe.validate.catalogue import RULES_BY_CODE
+from wrinklepipe.validate.run import Report
+
+SCHEMA_ID = "wrinklepipe/validate-report@1"
+#: Fields that change between machines or runs; dropped by :func:`normalized`.
+VOLATILE = ("tool.version", "timings", "render", "input.path", "metrics.gpu_vs_reference_deg")
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return round(v, 6) if np.isfinite(v) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    return x
+
+
+def report_json(report: Report, fail_on: str = "error") -> dict[str, Any]:
+    """The JSON document (see ``schemas/report.schema.json``)."""
+    return _jsonable(
+        {
+            "schema": SCHEMA_ID,
+            "tool": {"name": "wrinklepipe validate-asset", "version": __version__},
+            "input": report.input,
+            "counts": report.counts,
+            "ignored": report.ignored,
+            "fail_on": fail_on,
+            "exit_code": report.exit_code(fail_on),
+            "issues": [i.to_json() for i in report.issues],
+            "metrics": report.metrics,
+            "timings": report.timings,
+            "render": report.render,
+        }
+    )
+
+
+_NUM = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+
+
+def normalized(doc: dict[str, Any]) -> dict[str, Any]:
+    """A report without volatile fields, for golden comparisons.
+
+    Drops timings, the tool version, render details (GPU-dependent) and the input path; in the
+    messages of render-pass issues (``WP-RND-*``) every number becomes ``#``; other messages
+    keep their numbers but floats are rounded to 1 decimal (8-bit/BC decoding is exact, but
+    float sums differ in the last digits between numpy builds).
+    """
+    out = {k: v for k, v in doc.items() if k not in ("timings", "render", "metrics")}
+    out["tool"] = {"name": doc["tool"]["name"]}
+    out["input"] = {k: v for k, v in doc["input"].items() if k != "path"}
+    out["input"]["textures"] = [
+        {k: v for k, v in t.items() if k != "pointer"} for t in doc["input"].get("textures", [])
+    ]
+    issues = []
+    for i in doc["issues"]:
+        j = {k: v for k, v in i.items() if k not in ("data", "pointer")}
+        if i["code"].startswith("WP-RND"):
+            j["message"] = _NUM.sub("#", i["message"])
+        else:
+            j["message"] = re.sub(r"\d+\.\d+", lambda m: f"{float(m.group()):.1f}", i["message"])
+        j["pointer"] = Path(i["pointer"].split("#")[0].split(" ")[0]).name + (
+            "#" + i["pointer"].split("#", 1)[1] if "#" in i["pointer"] else ""
+        )
+        issues.append(j)
+    out["issues"] = issues
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# terminal
+
+
+def print_summary(report: Report, console: Any, fail_on: str = "error", limit: int = 40) -> None:
+    """A short summary: counts, the issues (first ``limit``), the render-pass agreement."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    style = {"error": "bold red", "warning": "yellow", "info": "cyan"}
+    c = report.counts
+    inp = report.input
+    console.print(
+        f"[bold]{escape(str(inp.get('name')))}[/] ({escape(str(inp.get('kind')))}: "
+        f"{escape(str(inp.get('path')))}) encoding {inp.get('encoding')}, policy "
+        f"{inp.get('policy')}, {len(inp.get('states', []))} states, "
+        f"{len(inp.get('regions', []))} regions"
+    )
+    if report.issues:
+        t = Table(show_header=True, header_style="bold", box=None, pad_edge=False)
+        t.add_column("severity")
+        t.add_column("code")
+        t.add_column("message", overflow="fold")
+        t.add_column("where", overflow="fold")
+        for i in report.issues[:limit]:
+            t.add_row(
+                f"[{style[i.severity]}]{i.severity}[/]",
+                i.code,
+                escape(i.message),
+                escape(i.pointer),
+            )
+        console.print(t)
+        if len(report.issues) > limit:
+            console.print(f"... and {len(report.issues) - limit} more (see the JSON report)")
+    gpu = report.metrics.get("gpu_vs_reference_deg")
+    if gpu:
+        worst = max(gpu.values(), key=lambda s: s["p99"])
+        console.print(
+            f"render pass ({escape(str(report.render.get('renderer', '')))}): GPU vs numpy "
+            f"reference worst mean {max(s['mean'] for s in gpu.values()):.3f} deg, "
+            f"p99 {worst['p99']:.3f} deg over {len(gpu)} poses"
+        )
+    elif report.render.get("skipped"):
+        console.print(f"render pass skipped: {escape(report.render['skipped'])}")
+    verdict = "[bold red]FAILED[/]" if report.exit_code(fail_on) else "[bold green]passed[/]"
+    console.print(
+        f"{verdict}: {c['error']} error(s), {c['warning']} warning(s), {c['info']} info"
+        + (f", {report.ignored} ignored" if report.ignored else "")
+        + (f" (failing on {fail_on})" if fail_on != "error" else "")
+    )
+
+
+# ------------------------------------------------------------------------------------------------
+# HTML
+
+_RAMP = np.array(
+    [[0.05, 0.03, 0.2], [0.3, 0.1, 0.55], [0.75, 0.2, 0.4], [0.98, 0.55, 0.1], [1.0, 1.0, 0.6]],
+    np.float32,
+)
+
+
+def heat(values: np.ndarray, vmax: float) -> np.ndarray:
+    """A heat map ``[H, W, 3]`` of ``values`` in [0, vmax] (dark -> bright)."""
+    t = np.clip(np.nan_to_num(values) / max(vmax, 1e-9), 0.0, 1.0) * (len(_RAMP) - 1)
+    i = np.minimum(t.astype(np.int64), len(_RAMP) - 2)
+    f = (t - i)[..., None]
+    return (_RAMP[i] * (1 - f) + _RAMP[i + 1] * f).astype(np.float32)
+
+
+def _png(img: np.ndarray) -> bytes:
+    from wrinklepipe.io.package import png_bytes
+
+    arr = np.clip(np.rint(np.asarray(img, np.float64) * 255.0), 0, 255).astype(np.uint8)
+    return png_bytes(arr)
+
+
+def _to_srgb(img: np.ndarray) -> np.ndarray:
+    c = np.clip(img, 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+def html_images(report: Report) -> dict[str, bytes]:
+    """File name -> PNG bytes of every picture the HTML shows."""
+    im = report.images
+    files: dict[str, bytes] = {}
+    for key, arr in sorted(im.items()):
+        if key.startswith("_"):
+            continue
+        name = key.replace("/", "_") + ".png"
+        if key.startswith("render/") or key == "mask_overlay":
+            files[name] = _png(_to_srgb(arr))
+        elif key.startswith("gpu_error/"):
+            files[name] = _png(heat(arr, 2.0))
+        elif key.startswith("change/"):
+            files[name] = _png(heat(arr, 10.0))
+        elif key.startswith("shipping_error/"):
+            files[name] = _png(heat(arr, 5.0))
+    return files
+
+
+def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
+    """The HTML page; images are ``files_dir/<name>.png`` relative to the page."""
+    doc = report_json(report, fail_on)
+    e = html.escape
+    c = doc["counts"]
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'>",
+        f"<title>validate-asset: {e(str(doc['input']['name']))}</title>",
+        "<style>body{font:14px sans-serif;margin:24px;max-width:1400px}"
+        "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
+        "vertical-align:top}th{background:#eee}.error{color:#b00}.warning{color:#a60}"
+        ".info{color:#067}figure{display:inline-block;margin:4px;text-align:center}"
+        "figure img{width:240px;image-rendering:pixelated;border:1px solid #999}"
+        "figcaption{font-size:12px}</style></head><body>",
+        f"<h1>validate-asset: {e(str(doc['input']['name']))}</h1>",
+        f"<p>{e(str(doc['input']['kind']))} <code>{e(str(doc['input']['path']))}</code> - "
+        f"encoding <b>{e(doc['input']['encoding'])}</b>, policy "
+        f"<b>{e(doc['input']['policy'])}</b>, states {e(', '.join(doc['input']['states']))}</p>",
+        f"<p><b class='{'error' if doc['exit_code'] else 'info'}'>"
+        f"{'FAILED' if doc['exit_code'] else 'passed'}</b>: {c['error']} errors, "
+        f"{c['warning']} warnings, {c['info']} info (exit code {doc['exit_code']}).</p>",
+        "<h2>Issues</h2>",
+    ]
+    if doc["issues"]:
+        parts.append(
+            "<table><tr><th>severity</th><th>code</th><th>message</th><th>where</th>"
+            "<th>suggested fix</th></tr>"
+        )
+        for i in doc["issues"]:
+            title = RULES_BY_CODE[i["code"]].title
+            parts.append(
+                f"<tr><td class='{i['severity']}'>{i['severity']}</td>"
+                f"<td title='{e(title)}'><code>{e(i['code'])}</code></td><td>{e(i['message'])}"
+                f"</td><td><code>{e(i['pointer'])}</code></td><td>{e(i['fix'])}</td></tr>"
+            )
+        parts.append("</table>")
+    else:
+        parts.append("<p>No issues.</p>")
+    images = html_images(report)
+
+    def fig(name: str, caption: str) -> str:
+        if name not in images:
+            return ""
+        return (
+            f"<figure><img src='{e(files_dir)}/{e(name)}' alt='{e(caption)}'>"
+            f"<figcaption>{e(caption)}</figcaption></figure>"
+        )
+
+    poses = list(report.render.get("poses", {}))
+    if poses:
+        parts.append(
+            "<h2>Contact sheet</h2><p>The first render is neutral (no wrinkles); each "
+            "expression is shown with wrinkles, then its change from neutral (0..10 "
+            "degrees) and the GPU vs numpy-reference error (0..2 degrees).</p><div>"
+        )
+        for p in poses:
+            parts.append("<div>")
+            parts.append(fig(f"render_{p}.png", f"{p}: render"))
+            parts.append(fig(f"change_{p}.png", f"{p}: change from neutral"))
+            parts.append(fig(f"gpu_error_{p}.png", f"{p}: GPU vs reference"))
+            parts.append(fig(f"shipping_error_{p}.png", f"{p}: shipped vs source (0..5 deg)"))
+            parts.append("</div>")
+        parts.append("</div>")
+        parts.append(
+            "<h2>Mask overlay</h2>" + fig("mask_overlay.png", "shipped masks over neutral")
+        )
+    elif any(k.startswith("shipping_error_") for k in images):
+        parts.append("<h2>Shipped vs source (texture space, 0..5 degrees)</h2><div>")
+        for k in sorted(images):
+            if k.startswith("shipping_error_"):
+                parts.append(fig(k, k[len("shipping_error_") : -4]))
+        parts.append("</div>")
+    parts.append("<h2>Metrics</h2>")
+    for key, val in sorted(doc["metrics"].items()):
+        parts.append(f"<h3>{e(key)}</h3>")
+        if isinstance(val, dict) and val and all(isinstance(v, dict) for v in val.values()):
+            cols = sorted({k for v in val.values() for k in v})
+            parts.append(
+                "<table><tr><th></th>" + "".join(f"<th>{e(c)}</th>" for c in cols) + "</tr>"
+            )
+            for row, v in val.items():
+                parts.append(
+                    f"<tr><th>{e(row)}</th>"
+                    + "".join(f"<td>{e(str(v.get(c, '')))}</td>" for c in cols)
+                    + "</tr>"
+                )
+            parts.append("</table>")
+        else:
+            parts.append(f"<pre>{e(dumps_json(val))}</pre>")
+    if doc["render"]:
+        r = {k: v for k, v in doc["render"].items() if k != "poses"}
+        parts.append(f"<h2>Render pass</h2><pre>{e(dumps_json(r))}</pre>")
+    parts.append("</body></html>\n")
+    return "\n".join(p for p in parts if p)
+
+
+def write_reports(
+    report: Report,
+    json_path: str | Path | None = None,
+    html_path: str | Path | None = None,
+    fail_on: str = "error",
+    inputs: tuple[str | Path, ...] = (),
+) -> list[Path]:
+    """Write report.json and/or report.html (+ ``<stem>_files/`` images) atomically."""
+    written = []
+    if json_path is not None:
+        written.append(
+            write_bytes(json_path, dumps_json(report_json(report, fail_on)).encode(), inputs)
+        )
+    if html_path is not None:
+        html_path = Path(html_path)
+        files_dir = f"{html_path.stem}_files"
+        images = html_images(report)
+        with staged_folder(html_path.parent / files_dir, force=True, inputs=inputs) as tmp:
+            for name, data in images.items():
+                (tmp / name).write_bytes(data)
+        written.append(
+            write_bytes(html_path, report_html(report, files_dir, fail_on).encode(), inputs)
+        )
+    return written

@@ -1,0 +1,154 @@
+"""Rules on texture formats, compression error, resolution and footprint (WP-TEX-*)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wrinklepipe import model
+from wrinklepipe.validate import textures as tx
+from wrinklepipe.validate.catalogue import Issue, make_issue
+from wrinklepipe.validate.context import Context
+
+
+def check_formats(ctx: Context) -> list[Issue]:
+    out: list[Issue] = []
+    for t in ctx.inp.textures:
+        if t.srgb and t.role in ("base", "state"):
+            out.append(make_issue("WP-TEX-001", f"{t.role} map {t.name!r} is tagged sRGB", t.where))
+        if t.srgb and t.role == "mask":
+            out.append(make_issue("WP-TEX-002", f"mask texture {t.name!r} is tagged sRGB", t.where))
+        if t.is_block and (t.width % 4 or t.height % 4):
+            out.append(
+                make_issue(
+                    "WP-TEX-003",
+                    f"{t.fmt} texture {t.name!r} is {t.width}x{t.height}, not a multiple of 4",
+                    t.where,
+                )
+            )
+        if len(t.data) < t.expected_size():
+            out.append(
+                make_issue(
+                    "WP-TEX-004",
+                    f"{t.fmt} {t.width}x{t.height} needs {t.expected_size()} bytes, "
+                    f"{t.name!r} has {len(t.data)}",
+                    t.where,
+                )
+            )
+    return out
+
+
+def _budget(ctx: Context) -> tuple[float, float]:
+    b = ctx.asset.budget or {}
+    mean, p99 = ctx.options.default_budget
+    return float(b.get("max_mean_deg", mean)), float(b.get("max_p99_deg", p99))
+
+
+def _stats(err: np.ndarray) -> tuple[float, float, float]:
+    e = err.reshape(-1)
+    return float(e.mean()), float(np.percentile(e, 99)), float(e.max())
+
+
+def shipping_errors(
+    ctx: Context, shipped: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> dict[str, tuple[float, float, float, np.ndarray]]:
+    """Per expression: (mean, p99, max, error map) of shipped vs source on the grid."""
+    a = ctx.asset
+    src = ctx.source_on_grid
+    out = {}
+    for expr in ctx.expressions():
+        w = ctx.weights(expr)
+        n_src = model.blend(src[0], src[1], src[2], w, a.encoding, a.policy)
+        n_ship = model.blend(shipped[0], shipped[1], shipped[2], w, a.encoding, a.policy)
+        err = model.angular_error_deg(n_ship, n_src).astype(np.float32)
+        out[expr or "neutral"] = (*_stats(err), err)
+    return out
+
+
+def check_compression(ctx: Context) -> list[Issue]:
+    a, inp = ctx.asset, ctx.inp
+    out: list[Issue] = []
+    if (
+        ctx.source_on_grid is None
+        or ctx.shipped_on_grid is None
+        or a.policy not in model.POLICIES
+        or (a.policy == "signed" and len(a.state_names) != 2)
+    ):
+        return out
+    mean_b, p99_b = _budget(ctx)
+    errs = shipping_errors(ctx, ctx.shipped_on_grid)
+    ctx.metrics["shipping_error_deg"] = {
+        e: {"mean": round(m, 4), "p99": round(p, 4), "max": round(x, 4)}
+        for e, (m, p, x, _) in errs.items()
+    }
+    ctx.metrics["shipping_error_maps"] = {e: v[3] for e, v in errs.items()}
+    over = [(e, m, p) for e, (m, p, _, _) in errs.items() if m > mean_b or p > p99_b]
+    if over:
+        worst = max(over, key=lambda x: x[2])
+        out.append(
+            make_issue(
+                "WP-TEX-005",
+                f"{len(over)} of {len(errs)} poses over the budget (mean {mean_b:g}, p99 "
+                f"{p99_b:g} degrees); worst {worst[0]}: mean {worst[1]:.2f}, p99 "
+                f"{worst[2]:.2f}",
+                inp.pointer("textures"),
+            )
+        )
+    elif ctx.options.half_res_check:
+        out += _half_resolution(ctx, mean_b, p99_b)
+    return out
+
+
+def _half_resolution(ctx: Context, mean_b: float, p99_b: float) -> list[Issue]:
+    """Would the states at half size still meet the budget? Then the extra bytes are wasted."""
+    a = ctx.asset
+    texs = ctx.inp.state_textures()
+    if not texs or any(t is None for t in texs) or ctx.shipped_states is None:
+        return []
+    h, w = ctx.shipped_states[0].shape[:2]
+    if h < 8 or w < 8 or h % 2 or w % 2:
+        return []
+    base, _, masks = ctx.shipped_on_grid
+    half = []
+    for s in ctx.shipped_states:
+        small = s.reshape(h // 2, 2, w // 2, 2, -1).mean(axis=(1, 3))
+        g = ctx.to_grid(small)
+        if a.encoding in ("full", "composite"):
+            g = model.normalize(g)
+        half.append(g)
+    errs = shipping_errors(ctx, (base, np.stack(half).astype(np.float32), masks))
+    if all(m <= mean_b and p <= p99_b for m, p, _, _ in errs.values()):
+        wasted = sum(len(t.data) for t in texs) * 3 // 4
+        worst = max(p for _, p, _, _ in errs.values())
+        return [
+            make_issue(
+                "WP-TEX-006",
+                f"the {len(texs)} state map(s) at {w // 2}x{h // 2} instead of {w}x{h} still "
+                f"meet the budget (worst p99 {worst:.2f} degrees); {wasted} bytes wasted",
+                ctx.inp.pointer("textures"),
+                wasted_bytes=int(wasted),
+            )
+        ]
+    return []
+
+
+def check_footprint(ctx: Context) -> list[Issue]:
+    texs = ctx.inp.textures
+    if not texs:
+        return []
+    per_role: dict[str, int] = {}
+    for t in texs:
+        per_role[t.role] = per_role.get(t.role, 0) + len(t.data)
+    total = sum(per_role.values())
+    ctx.metrics["footprint_bytes"] = {"total": total, **per_role}
+    parts = ", ".join(f"{r} {b}" for r, b in sorted(per_role.items()))
+    return [
+        make_issue(
+            "WP-TEX-007",
+            f"{len(texs)} textures, {total} bytes ({total / 1024:.1f} KiB) at level 0: {parts}",
+            ctx.inp.pointer("textures"),
+            bytes=total,
+        )
+    ]
+
+
+__all__ = ["check_formats", "check_compression", "check_footprint", "shipping_errors", "tx"]

@@ -1,0 +1,254 @@
+"""Rules on declarations and on the normal / wrinkle maps (WP-LOAD-*, WP-MAP-*)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wrinklepipe import model
+from wrinklepipe.validate import textures as tx
+from wrinklepipe.validate.catalogue import Issue, make_issue
+from wrinklepipe.validate.context import Context
+from wrinklepipe.validate.inputs import Texture
+
+
+def check_declarations(ctx: Context) -> list[Issue]:
+    a, inp = ctx.asset, ctx.inp
+    out: list[Issue] = []
+    where = inp.pointer("meta")
+    if a.encoding not in model.ENCODINGS:
+        out.append(make_issue("WP-LOAD-001", f"unknown encoding {a.encoding!r}", where))
+    if a.policy not in model.POLICIES:
+        out.append(make_issue("WP-LOAD-001", f"unknown policy {a.policy!r}", where))
+    elif a.policy == "signed" and len(a.state_names) != 2:
+        out.append(
+            make_issue(
+                "WP-LOAD-001",
+                f"policy 'signed' needs exactly 2 states, the asset has {len(a.state_names)}",
+                where,
+            )
+        )
+    if inp.textures:
+        sts = inp.state_textures()
+        for name, t in zip(a.state_names, sts):
+            if t is None:
+                out.append(
+                    make_issue("WP-LOAD-002", f"state {name!r} has no shipped texture", where)
+                )
+        present = [t for t in sts if t is not None]
+        if len({(t.fmt, t.width, t.height) for t in present}) > 1:
+            desc = ", ".join(f"{t.state}: {t.fmt} {t.width}x{t.height}" for t in present)
+            out.append(
+                make_issue(
+                    "WP-LOAD-002", f"state textures differ in size or format ({desc})", where
+                )
+            )
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# green convention: integrability (curl) of the slope field
+
+
+def convention_score(slopes: np.ndarray, weight: np.ndarray | None = None) -> float:
+    """+1 when PD slopes ``[H, W, 2]`` are integrable with +Y up (OpenGL), -1 when only with
+    green flipped (DirectX), near 0 when the map has no relief to tell.
+
+    With ``px = -dh/dcol`` and ``py = +dh/drow`` (rows run down, +Y up) the mixed derivatives
+    satisfy ``d(px)/drow = -d(py)/dcol``; the score is the normalised correlation of the two.
+    """
+    s = np.asarray(slopes, np.float64)
+    a = np.gradient(s[..., 0], axis=0)
+    b = np.gradient(s[..., 1], axis=1)
+    if weight is not None:
+        a, b = a * weight, b * weight
+    den = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    if not np.isfinite(den) or den < 1e-12:
+        return 0.0
+    return float(-np.sum(a * b) / den)
+
+
+def _state_slopes(ctx: Context, k: int, state: np.ndarray) -> np.ndarray | None:
+    """Slopes of what a state map holds (the wrinkle, or the wrinkled face) for the curl test."""
+    enc = ctx.asset.encoding
+    if enc == "pd":
+        return state
+    if enc in ("full", "composite"):
+        return model.normal_to_pd(state)
+    base = ctx.shipped_base
+    if base is None:
+        return None
+    if base.shape[:2] != state.shape[:2]:
+        base = tx.resize_bilinear(base, *state.shape[:2])
+    return model.normal_to_pd(model.normalize(base + model.diff_to_delta(state)))
+
+
+def _normal_map_texture_checks(ctx: Context, t: Texture, normals_raw: np.ndarray) -> list[Issue]:
+    o = ctx.options
+    out = []
+    n = normals_raw.reshape(-1, 3)
+    total = max(n.shape[0], 1)
+    nan = ~np.isfinite(n).all(axis=1)
+    length = np.linalg.norm(np.nan_to_num(n), axis=1)
+    tol = o.unit_tolerance
+    bad = nan | (np.abs(length - 1.0) > tol)
+    if bad.sum() > o.max_bad_fraction * total:
+        first = int(np.flatnonzero(bad)[0])
+        out.append(
+            make_issue(
+                "WP-MAP-001",
+                f"{int(bad.sum())} of {total} texels are NaN ({int(nan.sum())}) or not unit "
+                f"(| |n| - 1 | > {tol}); first at texel ({first % t.width}, {first // t.width})",
+                t.where,
+                texels=int(bad.sum()),
+            )
+        )
+    neg = np.nan_to_num(n[:, 2]) < 0
+    if neg.sum() > o.max_bad_fraction * total:
+        first = int(np.flatnonzero(neg)[0])
+        out.append(
+            make_issue(
+                "WP-MAP-002",
+                f"{int(neg.sum())} of {total} texels have z < 0; first at texel "
+                f"({first % t.width}, {first // t.width})",
+                t.where,
+                texels=int(neg.sum()),
+            )
+        )
+    return out
+
+
+def _convention_issue(ctx: Context, t: Texture, slopes: np.ndarray) -> Issue | None:
+    score = convention_score(slopes)
+    ctx.metrics.setdefault("convention_score", {})[t.name] = round(score, 4)
+    declared = t.convention if t.convention in ("opengl", "directx") else "opengl"
+    detected = "opengl" if score > 0.25 else "directx" if score < -0.25 else "undetermined"
+    if detected not in ("undetermined", declared):
+        return make_issue(
+            "WP-MAP-003",
+            f"declared {declared} (+Y {'up' if declared == 'opengl' else 'down'}) but the slopes "
+            f"are integrable only as {detected} (curl score {score:+.2f}): green is flipped",
+            t.where,
+            score=round(score, 3),
+        )
+    return None
+
+
+def check_maps(ctx: Context) -> list[Issue]:
+    a = ctx.asset
+    o = ctx.options
+    out: list[Issue] = []
+    bt = ctx.base_tex
+    if bt is not None and ctx.values(bt) is not None:
+        v = ctx.values(bt)
+        layout = tx.xy_layout(bt)
+        if layout == "rgb":
+            out += _normal_map_texture_checks(ctx, bt, tx.raw_normals(v, layout))
+        if ctx.shipped_base is not None:
+            issue = _convention_issue(ctx, bt, model.normal_to_pd(ctx.shipped_base))
+            if issue:
+                out.append(issue)
+    states = ctx.shipped_states
+    texs = ctx.inp.state_textures()
+    if states is None:
+        return out
+    for k, (t, st) in enumerate(zip(texs, states)):
+        v = ctx.values(t)
+        layout = tx.xy_layout(t)
+        if a.encoding in ("full", "composite") and layout == "rgb":
+            out += _normal_map_texture_checks(ctx, t, tx.raw_normals(v, layout))
+        slopes = _state_slopes(ctx, k, st)
+        if slopes is not None:
+            issue = _convention_issue(ctx, t, slopes)
+            if issue:
+                out.append(issue)
+        if a.encoding == "pd":
+            edge = np.abs(2.0 * v[..., :2] - 1.0) >= 1.0 - 0.5 / 255.0
+            clipped = int(edge.any(axis=-1).sum())
+            total = v.shape[0] * v.shape[1]
+            ctx.metrics.setdefault("pd_clipped_texels", {})[t.name] = clipped
+            if clipped > o.max_clipped_fraction * total:
+                out.append(
+                    make_issue(
+                        "WP-MAP-004",
+                        f"{clipped} of {total} texels ({100.0 * clipped / total:.2f}%) sit at the "
+                        f"edge of the recorded cone (pd_scale {a.pd_scale:g}, "
+                        f"{np.degrees(np.arctan(a.pd_scale)):.1f} degrees): slopes were clipped",
+                        t.where,
+                        texels=clipped,
+                    )
+                )
+        if a.encoding == "diff" and v.shape[-1] >= 3:
+            med = np.median(v[..., :3].reshape(-1, 3), axis=0)
+            off = np.abs(med - 0.5)
+            if off.max() > 2.0 / 255.0:
+                out.append(
+                    make_issue(
+                        "WP-MAP-005",
+                        "median stored value is ("
+                        + ", ".join(f"{x:.3f}" for x in med)
+                        + f"), expected 0.5 (off by {off.max() * 255:.1f}/255)",
+                        t.where,
+                    )
+                )
+    out += _encoding_match(ctx)
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# does the content fit the declared encoding? (needs the source)
+
+
+def _as_full(
+    enc: str, base: np.ndarray, values: np.ndarray, layout: str, scale: float
+) -> np.ndarray:
+    if enc == "pd":
+        d = tx.decode_state(values, "pd", layout, scale)
+        return model.pd_to_normal(model.normal_to_pd(base) + d)
+    if enc == "diff":
+        return model.normalize(base + model.diff_to_delta(values[..., :3]))
+    n = tx.values_to_normals(values, layout)
+    if enc == "full":
+        return n
+    return model.pd_to_normal(model.normal_to_pd(base) + model.normal_to_pd(n))
+
+
+def _encoding_match(ctx: Context) -> list[Issue]:
+    a, inp = ctx.asset, ctx.inp
+    if not inp.has_source or ctx.shipped_base is None or a.encoding not in model.ENCODINGS:
+        return []
+    out = []
+    for k, t in enumerate(inp.state_textures()):
+        v = ctx.values(t) if t is not None else None
+        if v is None or k >= len(a.states):
+            continue
+        h, w = v.shape[:2]
+        base = model.normalize(tx.resize_bilinear(ctx.shipped_base, h, w))
+        src = model.normalize(tx.resize_bilinear(a.states[k], h, w))
+        # judge on the texels that carry a wrinkle (elsewhere every encoding decodes to B)
+        src_base = model.normalize(tx.resize_bilinear(a.base, h, w))
+        relief = model.angular_error_deg(src, src_base) > 2.0
+        if relief.sum() < 16:
+            continue
+        errs = {}
+        for enc in model.ENCODINGS:
+            if enc == "diff" and v.shape[-1] < 3:
+                continue
+            full = _as_full(enc, base, v, tx.xy_layout(t), a.pd_scale)
+            errs[enc] = float(np.mean(model.angular_error_deg(full, src)[relief]))
+        ctx.metrics.setdefault("encoding_fit_mean_deg", {})[t.name] = {
+            e: round(x, 3) for e, x in errs.items()
+        }
+        declared = errs.get(a.encoding, np.inf)
+        best = min(errs, key=errs.get)
+        if best != a.encoding and declared > 1.0 and declared > 3.0 * errs[best]:
+            out.append(
+                make_issue(
+                    "WP-MAP-006",
+                    f"state {t.state!r} decoded as {a.encoding} is {declared:.2f} degrees (mean over "
+                    f"wrinkled texels) from the source; decoded as {best} it is {errs[best]:.2f}: it looks like "
+                    f"a {best} map",
+                    t.where,
+                    fix=f"Declare encoding = {best!r}, or re-encode the map as {a.encoding}.",
+                )
+            )
+    return out

@@ -1,0 +1,169 @@
+"""Rules on the mesh: tangents, vertex IDs, morph targets (WP-MESH-*)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wrinklepipe.asset import Mesh
+from wrinklepipe.validate.catalogue import Issue, make_issue
+from wrinklepipe.validate.context import Context
+from wrinklepipe.validate.rules_weights import group_spread, position_groups
+
+
+def uv_tangents(mesh: Mesh) -> np.ndarray:
+    """Reference per-vertex tangents ``[V, 4]`` from UV gradients (glTF UVs, +Y up = -v).
+
+    Per triangle: ``T = dP/du``, ``B = -dP/dv`` (v runs down in glTF), summed per vertex,
+    Gram-Schmidt against the vertex normal; ``w = sign(dot(cross(N, T), B))``. This is the
+    frame MikkTSpace produces up to its angle weighting; the validator compares against it
+    with a generous tolerance.
+    """
+    p = np.asarray(mesh.positions, np.float64)
+    uv = np.asarray(mesh.uvs, np.float64)
+    idx = np.asarray(mesh.indices, np.int64)
+    n = np.asarray(mesh.normals, np.float64)
+    p0, p1, p2 = p[idx[:, 0]], p[idx[:, 1]], p[idx[:, 2]]
+    t0, t1, t2 = uv[idx[:, 0]], uv[idx[:, 1]], uv[idx[:, 2]]
+    e1, e2 = p1 - p0, p2 - p0
+    d1, d2 = t1 - t0, t2 - t0
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    ok = np.abs(det) > 1e-20
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+    dpdu = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * inv
+    dpdv = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * inv
+    tan = np.zeros_like(p)
+    bit = np.zeros_like(p)
+    for c in range(3):
+        np.add.at(tan, idx[:, c], dpdu)
+        np.add.at(bit, idx[:, c], -dpdv)
+    t = tan - n * np.einsum("ij,ij->i", tan, n)[:, None]
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-30)
+    w = np.where(np.einsum("ij,ij->i", np.cross(n, t), bit) < 0, -1.0, 1.0)
+    return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
+
+
+def check_mesh(ctx: Context) -> list[Issue]:
+    a, inp, o = ctx.asset, ctx.inp, ctx.options
+    mesh = a.mesh
+    where = inp.pointer("mesh")
+    if mesh is None or mesh.uvs is None:
+        what = "no mesh" if mesh is None else "a mesh without UVs"
+        return [
+            make_issue("WP-MESH-006", f"the asset has {what}; the render pass cannot run", where)
+        ]
+    out: list[Issue] = []
+    v = mesh.vertex_count
+    if mesh.tangents is None:
+        out.append(make_issue("WP-MESH-001", f"mesh {mesh.name!r} has no tangents", where))
+    elif mesh.normals is not None:
+        tg = np.asarray(mesh.tangents, np.float64)
+        if tg.shape != (v, 4):
+            out.append(
+                make_issue(
+                    "WP-MESH-002", f"tangents have shape {tg.shape}, expected ({v}, 4)", where
+                )
+            )
+        else:
+            n = np.asarray(mesh.normals, np.float64)
+            ref = uv_tangents(mesh).astype(np.float64)
+            length = np.linalg.norm(tg[:, :3], axis=1)
+            t = tg[:, :3] / np.maximum(length, 1e-30)[:, None]
+            not_unit = np.abs(length - 1.0) > 0.01
+            not_orth = np.abs(np.einsum("ij,ij->i", t, n)) > 0.1
+            bad_w = np.abs(np.abs(tg[:, 3]) - 1.0) > 1e-3
+            # reference tangents exist where some triangle had a UV gradient
+            has_ref = np.linalg.norm(ref[:, :3], axis=1) > 0.5
+            cos = np.einsum("ij,ij->i", t, ref[:, :3])
+            off_dir = has_ref & (cos < np.cos(np.radians(45.0)))
+            flip = has_ref & (np.sign(tg[:, 3]) != np.sign(ref[:, 3])) & ~bad_w
+            bad = not_unit | not_orth | bad_w | off_dir | flip
+            ctx.metrics["tangent_mismatch_vertices"] = int(bad.sum())
+            if bad.sum() > max(o.max_bad_fraction * v, 0.01 * v):
+                first = int(np.flatnonzero(bad)[0])
+                parts = [
+                    f"{int(x.sum())} {label}"
+                    for x, label in (
+                        (not_unit, "not unit"),
+                        (not_orth, "not orthogonal to the normal"),
+                        (bad_w, "with |w| != 1"),
+                        (off_dir, "more than 45 degrees off the UV gradient"),
+                        (flip, "with flipped handedness"),
+                    )
+                    if x.any()
+                ]
+                out.append(
+                    make_issue(
+                        "WP-MESH-002",
+                        f"{int(bad.sum())} of {v} tangents are not MikkTSpace-like ("
+                        + ", ".join(parts)
+                        + f"); first vertex {first}",
+                        where + f" vertex {first}",
+                    )
+                )
+    if mesh.vertex_ids is not None and len(mesh.vertex_ids) == v:
+        ids = np.asarray(mesh.vertex_ids, np.int64)
+        groups = position_groups(mesh.positions)
+        spread = group_spread(groups, ids[:, None].astype(np.float64))
+        bad = spread > 0
+        if bad.any():
+            first = int(np.flatnonzero(bad)[0])
+            out.append(
+                make_issue(
+                    "WP-MESH-003",
+                    f"{int(bad.sum())} vertices share a position with a twin of another ID "
+                    f"(first vertex {first}, id {int(ids[first])})",
+                    where + f" vertex {first}",
+                )
+            )
+        _, id_groups = np.unique(ids, return_inverse=True)
+        p = np.asarray(mesh.positions, np.float64)
+        diag = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0))) or 1.0
+        pspread = group_spread(id_groups.reshape(-1), p)
+        badp = pspread > 1e-5 * diag
+        if badp.any():
+            first = int(np.flatnonzero(badp)[0])
+            out.append(
+                make_issue(
+                    "WP-MESH-004",
+                    f"{int(badp.sum())} vertices share an ID with a vertex at another position "
+                    f"(first vertex {first}, id {int(ids[first])}, {pspread[first]:.3g} apart)",
+                    where + f" vertex {first}",
+                )
+            )
+    names = tuple(mesh.morph_names)
+    deltas = mesh.morph_deltas
+    n_deltas = 0 if deltas is None else int(np.asarray(deltas).shape[0])
+    if (names or n_deltas) and len(names) != n_deltas:
+        out.append(
+            make_issue(
+                "WP-MESH-005",
+                f"{len(names)} morph-target names but {n_deltas} morph targets",
+                where,
+            )
+        )
+    if deltas is not None and n_deltas and np.asarray(deltas).shape[1] != v:
+        out.append(
+            make_issue(
+                "WP-MESH-005",
+                f"morph targets have {np.asarray(deltas).shape[1]} vertices, the mesh {v}",
+                where,
+            )
+        )
+    for i, d in enumerate(a.drivers):
+        if d.get("kind") != "blendshapes":
+            continue
+        wanted = d.get("inputs") or d.get("morphs") or []
+        if isinstance(wanted, dict):
+            wanted = list(wanted)
+        missing = [m for m in wanted if isinstance(m, str) and m not in names]
+        if missing:
+            out.append(
+                make_issue(
+                    "WP-MESH-005",
+                    f"blendshapes driver {i} reads morph targets the mesh lacks: "
+                    + ", ".join(repr(m) for m in missing[:5])
+                    + (" ..." if len(missing) > 5 else ""),
+                    inp.pointer("drivers") + f"/{i}",
+                )
+            )
+    return out

@@ -1,0 +1,73 @@
+"""Rules on weights: expression tables, drivers and per-vertex weights (WP-WGT-*)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wrinklepipe.model import POLICY_WEIGHT_RANGE
+from wrinklepipe.validate.catalogue import Issue, make_issue
+from wrinklepipe.validate.context import Context
+
+
+def position_groups(positions: np.ndarray) -> np.ndarray:
+    """Group index of every vertex: vertices at bit-identical positions share one group."""
+    _, inverse = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
+    return inverse.reshape(-1)
+
+
+def group_spread(groups: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Per vertex: max minus min of ``values`` ``[V, C]`` over its group (0 for singletons)."""
+    v = np.asarray(values, np.float64).reshape(len(groups), -1)
+    n = int(groups.max()) + 1 if len(groups) else 0
+    hi = np.full((n, v.shape[1]), -np.inf)
+    lo = np.full((n, v.shape[1]), np.inf)
+    np.maximum.at(hi, groups, v)
+    np.minimum.at(lo, groups, v)
+    return (hi - lo).max(axis=1)[groups]
+
+
+def check_weights(ctx: Context) -> list[Issue]:
+    a, inp = ctx.asset, ctx.inp
+    out: list[Issue] = []
+    rng = POLICY_WEIGHT_RANGE.get(a.policy)
+    names = set(a.region_names)
+    for expr in sorted(a.expressions):
+        for region, w in sorted(a.expressions[expr].items()):
+            ptr = inp.pointer("expressions") + f"/{expr}/{region}"
+            if region not in names:
+                out.append(
+                    make_issue(
+                        "WP-WGT-002", f"expression {expr!r} weights unknown region {region!r}", ptr
+                    )
+                )
+            if rng is not None and not (rng.low <= float(w) <= rng.high):
+                out.append(
+                    make_issue(
+                        "WP-WGT-001",
+                        f"expression {expr!r}, region {region!r}: weight {float(w):g} outside "
+                        f"[{rng.low:g}, {rng.high:g}] of policy {a.policy!r}",
+                        ptr,
+                    )
+                )
+    # Per-vertex weights (dynamic wrinkles, painted bias): seam twins must agree.
+    mesh = a.mesh
+    if mesh is not None and inp.vertex_weights:
+        groups = position_groups(mesh.positions)
+        for name, vals in sorted(inp.vertex_weights.items()):
+            vals = np.asarray(vals)
+            if vals.shape[0] != mesh.vertex_count:
+                continue
+            spread = group_spread(groups, vals)
+            bad = spread > 1e-3
+            if bad.any():
+                first = int(np.flatnonzero(bad)[0])
+                out.append(
+                    make_issue(
+                        "WP-WGT-003",
+                        f"per-vertex weights {name!r} differ between UV-seam twins at "
+                        f"{int(bad.sum())} vertices (largest jump {spread.max():.3f}); first "
+                        f"vertex {first}",
+                        inp.pointer("mesh") + f" vertex {first}",
+                    )
+                )
+    return out

@@ -1,0 +1,137 @@
+"""Run every rule, then the render pass, and collect one :class:`Report`."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from wrinklepipe.validate import (
+    rules_compression,
+    rules_maps,
+    rules_masks,
+    rules_mesh,
+    rules_weights,
+)
+from wrinklepipe.validate.catalogue import SEVERITIES, Issue
+from wrinklepipe.validate.config import Config
+from wrinklepipe.validate.context import Context, ValidateOptions
+from wrinklepipe.validate.inputs import ValidationInput
+
+#: (name, check) in the order they run.
+CHECKS: tuple[tuple[str, Callable[[Context], list[Issue]]], ...] = (
+    ("declarations", rules_maps.check_declarations),
+    ("formats", rules_compression.check_formats),
+    ("maps", rules_maps.check_maps),
+    ("channel_table", rules_masks.check_channel_table),
+    ("masks", rules_masks.check_masks),
+    ("weights", rules_weights.check_weights),
+    ("mesh", rules_mesh.check_mesh),
+    ("compression", rules_compression.check_compression),
+    ("footprint", rules_compression.check_footprint),
+)
+
+_RANK = {s: i for i, s in enumerate(SEVERITIES)}
+
+
+@dataclass
+class Report:
+    """Everything one validation found: issues (after config), metrics, timings, images."""
+
+    input: dict[str, Any]
+    issues: list[Issue]
+    metrics: dict[str, Any] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+    render: dict[str, Any] = field(default_factory=dict)
+    images: dict[str, Any] = field(default_factory=dict)  # name -> array, for the HTML report
+    ignored: int = 0
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return {s: sum(i.severity == s for i in self.issues) for s in SEVERITIES}
+
+    def codes(self) -> list[str]:
+        return sorted({i.code for i in self.issues})
+
+    def exit_code(self, fail_on: str = "error") -> int:
+        """0 clean, 1 when an issue at or above ``fail_on`` severity was found."""
+        limit = _RANK[fail_on]
+        return 1 if any(_RANK[i.severity] <= limit for i in self.issues) else 0
+
+
+def describe_input(inp: ValidationInput) -> dict[str, Any]:
+    a = inp.asset
+    return {
+        "path": inp.path,
+        "kind": inp.kind,
+        "name": a.name,
+        "encoding": a.encoding,
+        "policy": a.policy,
+        "pd_scale": float(a.pd_scale),
+        "states": list(a.state_names),
+        "regions": list(a.region_names),
+        "expressions": sorted(a.expressions),
+        "has_source": bool(inp.has_source),
+        "textures": [
+            {
+                "name": t.name,
+                "role": t.role,
+                "format": t.fmt,
+                "width": t.width,
+                "height": t.height,
+                "bytes": len(t.data),
+                "srgb": bool(t.srgb),
+                "pointer": t.where,
+            }
+            for t in inp.textures
+        ],
+        "mesh": None
+        if a.mesh is None
+        else {"vertices": a.mesh.vertex_count, "triangles": a.mesh.triangle_count},
+    }
+
+
+def validate(
+    inp: ValidationInput,
+    options: ValidateOptions | None = None,
+    config: Config | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> Report:
+    """Validate one asset: all rules, then (``options.render``) the GPU render pass."""
+    cfg = config or Config()
+    opts = cfg.validate_options(options) if cfg.options else (options or ValidateOptions())
+    ctx = Context(inp, opts)
+    issues: list[Issue] = []
+    for name, check in CHECKS:
+        if progress:
+            progress(name)
+        t0 = time.perf_counter()
+        issues += check(ctx)
+        ctx.timings[name] = time.perf_counter() - t0
+    render_info: dict[str, Any] = {}
+    images: dict[str, Any] = {}
+    if opts.render:
+        from wrinklepipe.validate import render
+
+        if progress:
+            progress("render")
+        t0 = time.perf_counter()
+        r_issues, render_info, images = render.render_pass(ctx)
+        issues += r_issues
+        ctx.timings["render"] = time.perf_counter() - t0
+    for key in ("shipping_error_maps",):
+        if key in ctx.metrics:
+            for e, m in ctx.metrics.pop(key).items():
+                images[f"shipping_error/{e}"] = m
+    issues, dropped = cfg.apply(issues)
+    issues.sort(key=lambda i: (_RANK[i.severity], i.code, i.pointer, i.message))
+    return Report(
+        input=describe_input(inp),
+        issues=issues,
+        metrics=ctx.metrics,
+        timings={k: round(v, 4) for k, v in ctx.timings.items()},
+        render=render_info,
+        images=images,
+        ignored=dropped,
+    )
