@@ -352,70 +352,180 @@ def c_no_wrinkle() -> ValidationInput:
 
 CASES: list[Case] = [
     Case("clean", ["WP-TEX-007"], "the demo, 8-bit, nothing wrong", c_clean),
-    Case("load_unknown_encoding", ["WP-LOAD-001", "WP-RND-004", "WP-TEX-007"],
-         "encoding 'bump' is not a wrinkle encoding", c_unknown_encoding),
-    Case("load_missing_state", ["WP-LOAD-002", "WP-RND-004", "WP-TEX-007"],
-         "the compress state's texture is missing", c_missing_state),
-    Case("map_non_unit", ["WP-MAP-001", "WP-TEX-005", "WP-TEX-007"],
-         "half the base map scaled to length 0.8", c_non_unit),
-    Case("map_z_negative", ["WP-MAP-002", "WP-TEX-005", "WP-TEX-007"],
-         "a quarter of the base map has z < 0", c_z_negative),
-    Case("map_flipped_green", ["WP-MAP-003", "WP-TEX-005", "WP-TEX-007"],
-         "base map baked DirectX (green down), declared OpenGL", c_flipped_green),
-    Case("map_pd_clipped", ["WP-MAP-004", "WP-TEX-005", "WP-TEX-007"],
-         "pd maps encoded with scale 1/16: the slopes clip", c_pd_clipped),
-    Case("map_diff_bias", ["WP-MAP-005", "WP-TEX-005", "WP-TEX-007"],
-         "difference maps shifted by 12/255", c_diff_bias),
-    Case("map_diff_declared_pd", ["WP-MAP-006", "WP-TEX-005", "WP-TEX-007"],
-         "difference maps declared as pd", c_diff_declared_pd),
-    Case("mask_out_of_range", ["WP-MASK-001", "WP-TEX-007"],
-         "glabella mask painted up to 1.5 in the source (the shipped 8-bit channel clips)",
-         c_mask_out_of_range),
-    Case("mask_overlap_additive", ["WP-MASK-002", "WP-TEX-007"],
-         "forehead_inner_l overlaps the glabella under policy additive", c_mask_overlap_additive),
+    Case(
+        "load_unknown_encoding",
+        ["WP-LOAD-001", "WP-RND-004", "WP-TEX-007"],
+        "encoding 'bump' is not a wrinkle encoding",
+        c_unknown_encoding,
+    ),
+    Case(
+        "load_missing_state",
+        ["WP-LOAD-002", "WP-RND-004", "WP-TEX-007"],
+        "the compress state's texture is missing",
+        c_missing_state,
+    ),
+    Case(
+        "map_non_unit",
+        ["WP-MAP-001", "WP-TEX-005", "WP-TEX-007"],
+        "half the base map scaled to length 0.8",
+        c_non_unit,
+    ),
+    Case(
+        "map_z_negative",
+        ["WP-MAP-002", "WP-TEX-005", "WP-TEX-007"],
+        "a quarter of the base map has z < 0",
+        c_z_negative,
+    ),
+    Case(
+        "map_flipped_green",
+        ["WP-MAP-003", "WP-TEX-005", "WP-TEX-007"],
+        "base map baked DirectX (green down), declared OpenGL",
+        c_flipped_green,
+    ),
+    Case(
+        "map_pd_clipped",
+        ["WP-MAP-004", "WP-TEX-005", "WP-TEX-007"],
+        "pd maps encoded with scale 1/16: the slopes clip",
+        c_pd_clipped,
+    ),
+    Case(
+        "map_diff_bias",
+        ["WP-MAP-005", "WP-TEX-005", "WP-TEX-007"],
+        "difference maps shifted by 12/255",
+        c_diff_bias,
+    ),
+    Case(
+        "map_diff_declared_pd",
+        ["WP-MAP-006", "WP-TEX-005", "WP-TEX-007"],
+        "difference maps declared as pd",
+        c_diff_declared_pd,
+    ),
+    Case(
+        "mask_out_of_range",
+        ["WP-MASK-001", "WP-TEX-007"],
+        "glabella mask painted up to 1.5 in the source (the shipped 8-bit channel clips)",
+        c_mask_out_of_range,
+    ),
+    Case(
+        "mask_overlap_additive",
+        ["WP-MASK-002", "WP-TEX-007"],
+        "forehead_inner_l overlaps the glabella under policy additive",
+        c_mask_overlap_additive,
+    ),
     Case("mask_empty", ["WP-MASK-003", "WP-TEX-007"], "the chin mask is empty", c_mask_empty),
-    Case("mask_swapped_channels", ["WP-MASK-004", "WP-TEX-007"],
-         "channels r (nose_l) and b (glabella) of mask_1 swapped", c_mask_swapped),
-    Case("mask_wrong_side", ["WP-MASK-005", "WP-TEX-007"],
-         "nose_l painted on the character's right", c_mask_wrong_side),
-    Case("mask_channel_table", ["WP-MASK-004", "WP-RND-004", "WP-TEX-007"],
-         "a channel-table entry names a texture that does not ship", c_channel_table),
-    Case("weight_out_of_range", ["WP-WGT-001", "WP-TEX-007"],
-         "joy weights forehead_outer_l 1.7 under clamp01", c_weight_range),
-    Case("weight_unknown_region", ["WP-WGT-002", "WP-TEX-007"],
-         "joy weights a region 'cheek_l' that does not exist", c_unknown_region),
-    Case("weight_seam_jump", ["WP-WGT-003", "WP-TEX-007"],
-         "per-vertex dynamic weights differ between UV-seam twins", c_seam_weights),
+    Case(
+        "mask_swapped_channels",
+        ["WP-MASK-004", "WP-TEX-007"],
+        "channels r (nose_l) and b (glabella) of mask_1 swapped",
+        c_mask_swapped,
+    ),
+    Case(
+        "mask_wrong_side",
+        ["WP-MASK-005", "WP-TEX-007"],
+        "nose_l painted on the character's right",
+        c_mask_wrong_side,
+    ),
+    Case(
+        "mask_channel_table",
+        ["WP-MASK-004", "WP-RND-004", "WP-TEX-007"],
+        "a channel-table entry names a texture that does not ship",
+        c_channel_table,
+    ),
+    Case(
+        "weight_out_of_range",
+        ["WP-WGT-001", "WP-TEX-007"],
+        "joy weights forehead_outer_l 1.7 under clamp01",
+        c_weight_range,
+    ),
+    Case(
+        "weight_unknown_region",
+        ["WP-WGT-002", "WP-TEX-007"],
+        "joy weights a region 'cheek_l' that does not exist",
+        c_unknown_region,
+    ),
+    Case(
+        "weight_seam_jump",
+        ["WP-WGT-003", "WP-TEX-007"],
+        "per-vertex dynamic weights differ between UV-seam twins",
+        c_seam_weights,
+    ),
     Case("mesh_no_tangents", ["WP-MESH-001", "WP-TEX-007"], "no tangents", c_no_tangents),
-    Case("mesh_bad_tangents", ["WP-MESH-002", "WP-TEX-007"],
-         "tangent handedness flipped everywhere", c_bad_tangents),
-    Case("mesh_seam_ids", ["WP-MESH-003", "WP-TEX-007"],
-         "vertex IDs differ across the UV seam", c_seam_ids),
-    Case("mesh_id_positions", ["WP-MESH-004", "WP-TEX-007"],
-         "two distant vertices share an ID", c_id_positions),
-    Case("mesh_morph_count", ["WP-MESH-005", "WP-TEX-007"],
-         "one more morph-target name than targets", c_morph_count),
-    Case("mesh_no_uvs", ["WP-MESH-006", "WP-RND-004", "WP-TEX-007"], "the mesh has no UVs",
-         c_no_uvs),
-    Case("tex_srgb_normal", ["WP-RND-001", "WP-TEX-001", "WP-TEX-007"],
-         "base normal map tagged sRGB", c_srgb_normal),
-    Case("tex_srgb_mask", ["WP-TEX-002", "WP-TEX-007"],
-         "mask_0 tagged sRGB", c_srgb_mask),
-    Case("tex_bc_size", ["WP-RND-004", "WP-TEX-003", "WP-TEX-005", "WP-TEX-007"],
-         "BC5 base map declared 126 x 126", c_bc_size),
-    Case("tex_truncated", ["WP-RND-004", "WP-TEX-004", "WP-TEX-007"],
-         "wrinkle_stretch holds half its bytes", c_truncated),
-    Case("tex_over_budget", ["WP-TEX-005", "WP-TEX-007"],
-         "BC5/BC7 of the noisy demo base misses a 1 / 4 degree budget", c_over_budget),
-    Case("tex_wasted_resolution", ["WP-TEX-006", "WP-TEX-007"],
-         "a loose budget (2 / 8 degrees) that half-size wrinkle maps still meet", c_wasted),
-    Case("mask_lr_swapped", ["WP-MASK-004", "WP-MASK-005", "WP-TEX-007"],
-         "channels r (forehead_outer_l) and g (forehead_outer_r) of mask_0 swapped",
-         c_lr_swapped),
-    Case("render_leak", ["WP-MASK-004", "WP-RND-002", "WP-TEX-005", "WP-TEX-007"],
-         "the glabella channel is also painted over the chin", c_leak),
-    Case("render_no_wrinkle", ["WP-RND-003", "WP-TEX-005", "WP-TEX-007"],
-         "wrinkle maps exported flat", c_no_wrinkle),
+    Case(
+        "mesh_bad_tangents",
+        ["WP-MESH-002", "WP-TEX-007"],
+        "tangent handedness flipped everywhere",
+        c_bad_tangents,
+    ),
+    Case(
+        "mesh_seam_ids",
+        ["WP-MESH-003", "WP-TEX-007"],
+        "vertex IDs differ across the UV seam",
+        c_seam_ids,
+    ),
+    Case(
+        "mesh_id_positions",
+        ["WP-MESH-004", "WP-TEX-007"],
+        "two distant vertices share an ID",
+        c_id_positions,
+    ),
+    Case(
+        "mesh_morph_count",
+        ["WP-MESH-005", "WP-TEX-007"],
+        "one more morph-target name than targets",
+        c_morph_count,
+    ),
+    Case(
+        "mesh_no_uvs", ["WP-MESH-006", "WP-RND-004", "WP-TEX-007"], "the mesh has no UVs", c_no_uvs
+    ),
+    Case(
+        "tex_srgb_normal",
+        ["WP-RND-001", "WP-TEX-001", "WP-TEX-007"],
+        "base normal map tagged sRGB",
+        c_srgb_normal,
+    ),
+    Case("tex_srgb_mask", ["WP-TEX-002", "WP-TEX-007"], "mask_0 tagged sRGB", c_srgb_mask),
+    Case(
+        "tex_bc_size",
+        ["WP-RND-004", "WP-TEX-003", "WP-TEX-005", "WP-TEX-007"],
+        "BC5 base map declared 126 x 126",
+        c_bc_size,
+    ),
+    Case(
+        "tex_truncated",
+        ["WP-RND-004", "WP-TEX-004", "WP-TEX-007"],
+        "wrinkle_stretch holds half its bytes",
+        c_truncated,
+    ),
+    Case(
+        "tex_over_budget",
+        ["WP-TEX-005", "WP-TEX-007"],
+        "BC5/BC7 of the noisy demo base misses a 1 / 4 degree budget",
+        c_over_budget,
+    ),
+    Case(
+        "tex_wasted_resolution",
+        ["WP-TEX-006", "WP-TEX-007"],
+        "a loose budget (2 / 8 degrees) that half-size wrinkle maps still meet",
+        c_wasted,
+    ),
+    Case(
+        "mask_lr_swapped",
+        ["WP-MASK-004", "WP-MASK-005", "WP-TEX-007"],
+        "channels r (forehead_outer_l) and g (forehead_outer_r) of mask_0 swapped",
+        c_lr_swapped,
+    ),
+    Case(
+        "render_leak",
+        ["WP-MASK-004", "WP-RND-002", "WP-TEX-005", "WP-TEX-007"],
+        "the glabella channel is also painted over the chin",
+        c_leak,
+    ),
+    Case(
+        "render_no_wrinkle",
+        ["WP-RND-003", "WP-TEX-005", "WP-TEX-007"],
+        "wrinkle maps exported flat",
+        c_no_wrinkle,
+    ),
 ]
 
 
@@ -429,8 +539,9 @@ def main(argv: list[str] | None = None) -> int:
     index = []
     shared = bundle_arrays(c_clean())  # every case stores only what differs from "clean"
     for case in CASES:
-        index.append({"name": case.name, "expect": sorted(case.expect),
-                      "description": case.description})
+        index.append(
+            {"name": case.name, "expect": sorted(case.expect), "description": case.description}
+        )
         if args.cases and case.name not in args.cases:
             continue
         inp = case.build()
@@ -441,12 +552,15 @@ def main(argv: list[str] | None = None) -> int:
         folder = HERE / case.name
         if not args.check:
             write_bytes(folder / "asset.wpv", data)
-        report = validate(read_bundle(folder / "asset.wpv") if not args.check else inp,
-                          config=config)
+        report = validate(
+            read_bundle(folder / "asset.wpv") if not args.check else inp, config=config
+        )
         codes = sorted({i.code for i in report.issues})
         ok = codes == sorted(case.expect)
-        print(f"{'ok ' if ok else 'BAD'} {case.name}: {codes}"
-              + ("" if ok else f" (built to give {sorted(case.expect)})"))
+        print(
+            f"{'ok ' if ok else 'BAD'} {case.name}: {codes}"
+            + ("" if ok else f" (built to give {sorted(case.expect)})")
+        )
         bad += not ok
         if ok and not args.check:
             doc = normalized(report_json(report))

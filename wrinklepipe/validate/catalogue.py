@@ -2,7 +2,7 @@
 
 Codes are stable (``WP-<AREA>-<NNN>``); a code is never reused for a different check. The docs
 table ``docs/ISSUES.md`` is generated from :data:`RULES` (``python -m
-wrinklepipe.validate.catalogue docs/ISSUES.md``), as the Khronos glTF-Validator's ISSUES.md is;
+wrinklepipe.validate docs/ISSUES.md``), as the Khronos glTF-Validator's ISSUES.md is;
 a test fails when the file is stale.
 """
 
@@ -338,7 +338,7 @@ def issues_markdown() -> str:
         "# validate-asset issue codes",
         "",
         "Generated from `wrinklepipe/validate/catalogue.py` by",
-        "`python -m wrinklepipe.validate.catalogue docs/ISSUES.md`; do not edit by hand.",
+        "`python -m wrinklepipe.validate docs/ISSUES.md`; do not edit by hand.",
         "",
         "Severities are the defaults; a config file (`--config`) can ignore a code or change its "
         "severity.",

@@ -244,9 +244,9 @@ def _encoding_match(ctx: Context) -> list[Issue]:
             out.append(
                 make_issue(
                     "WP-MAP-006",
-                    f"state {t.state!r} decoded as {a.encoding} is {declared:.2f} degrees (mean over "
-                    f"wrinkled texels) from the source; decoded as {best} it is {errs[best]:.2f}: it looks like "
-                    f"a {best} map",
+                    f"state {t.state!r} decoded as {a.encoding} is {declared:.2f} degrees (mean "
+                    f"over wrinkled texels) from the source; decoded as {best} it is "
+                    f"{errs[best]:.2f}: it looks like a {best} map",
                     t.where,
                     fix=f"Declare encoding = {best!r}, or re-encode the map as {a.encoding}.",
                 )
