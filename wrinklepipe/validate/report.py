@@ -57,7 +57,7 @@ def report_json(report: Report, fail_on: str = "error") -> dict[str, Any]:
     )
 
 
-_NUM = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+_NUM = re.compile(r"(?<![\w.])[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 
 
 def normalized(doc: dict[str, Any]) -> dict[str, Any]:
