@@ -291,6 +291,26 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
         else None,
         name=str(gm.get("name", "mesh")),
     )
+    node = next((n for n in doc.get("nodes", []) if n.get("mesh") == 0), {})
+    if "skin" in node and "JOINTS_0" in attrs and "WEIGHTS_0" in attrs:
+        skins = doc.get("skins", [])
+        si = node["skin"]
+        if not isinstance(si, int) or not 0 <= si < len(skins):
+            raise r.err(f"skin {si} does not exist", "/skins")
+        joints = [int(j) for j in skins[si].get("joints", [])]
+        nodes = doc.get("nodes", [])
+        if any(not 0 <= j < len(nodes) for j in joints):
+            raise r.err("skin joint is not a node", f"/skins/{si}/joints")
+        mesh.joint_names = tuple(str(nodes[j].get("name") or f"joint{j}") for j in joints)
+        mesh.joints = r.accessor(attrs["JOINTS_0"]).astype(np.int64)
+        mesh.skin_weights = r.accessor(attrs["WEIGHTS_0"]).astype(np.float32)
+        if mesh.joints.max(initial=0) >= len(joints):
+            raise r.err("JOINTS_0 index past the skin's joints", "/meshes/0/primitives/0")
+        if "inverseBindMatrices" in skins[si]:
+            ibm = r.accessor(skins[si]["inverseBindMatrices"]).astype(np.float32)
+            if ibm.shape != (len(joints), 16):
+                raise r.err("inverseBindMatrices count differs from joints", f"/skins/{si}")
+            mesh.inverse_bind = np.ascontiguousarray(ibm.reshape(-1, 4, 4).transpose(0, 2, 1))
     for a in (mesh.uvs, mesh.normals, mesh.tangents, mesh.colors):
         if a is not None and a.shape[0] != nv:
             raise r.err(

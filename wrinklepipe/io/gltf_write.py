@@ -120,6 +120,52 @@ def _check_mesh(pkg: WrinklePackage) -> None:
         raise input_error(where, f"vertex IDs must lie in [0, {MAX_FLOAT_ID}) to be exact as FLOAT")
 
 
+def skin_weights_normalized(weights: np.ndarray) -> np.ndarray:
+    """Skin weights whose rows sum to 1 (rows off by more than 1e-6 are divided by their sum;
+    all-zero rows bind to the first joint), as glTF requires of WEIGHTS_0."""
+    w = np.asarray(weights, np.float32)
+    total = w.sum(axis=1, dtype=np.float64)
+    fix = np.abs(total - 1.0) > 1e-6
+    if np.any(fix):
+        w = w.copy()
+        safe = np.where(total[fix] > 0, total[fix], 1.0)
+        w[fix] = (w[fix] / safe[:, None]).astype(np.float32)
+        w[fix & (total <= 0)] = np.array([1, 0, 0, 0], np.float32)
+    return w
+
+
+def _skin(m: Any, buf: _Buffer, attrs: dict[str, int]) -> dict[str, Any] | None:
+    """JOINTS_0/WEIGHTS_0 and a skin whose joints are root nodes placed at their bind pose.
+
+    The mesh keeps joint names and inverse bind matrices but no hierarchy, so every joint is a
+    root node whose matrix is its bind-pose world matrix ``inverse(IBM)``: the rest pose renders
+    exactly and each joint drives its vertices.
+    """
+    if m.joints is None or m.skin_weights is None or not len(m.joint_names):
+        return None
+    n = len(m.joint_names)
+    w = skin_weights_normalized(m.skin_weights)
+    j = np.where(w > 0, np.asarray(m.joints, np.int64), 0)
+    if j.max(initial=0) >= n or j.min(initial=0) < 0:
+        raise input_error(m.name, f"joint indices must lie in [0, {n})")
+    attrs["JOINTS_0"] = buf.accessor(j.astype(np.uint16), _ARRAY_BUFFER)
+    attrs["WEIGHTS_0"] = buf.accessor(w, _ARRAY_BUFFER)
+    ibm = (
+        np.asarray(m.inverse_bind, np.float32)
+        if m.inverse_bind is not None
+        else np.tile(np.eye(4, dtype=np.float32), (n, 1, 1))
+    )
+    nodes = []
+    for name, inv in zip(m.joint_names, ibm):
+        node: dict[str, Any] = {"name": str(name)}
+        world = np.linalg.inv(inv.astype(np.float64))
+        if not np.allclose(world, np.eye(4), atol=0.0):
+            node["matrix"] = [float(np.float32(x)) for x in world.T.reshape(-1)]
+        nodes.append(node)
+    acc = buf.accessor(np.ascontiguousarray(ibm.transpose(0, 2, 1)).reshape(n, 16))
+    return {"joints": list(range(1, n + 1)), "inverseBindMatrices": acc, "_nodes": nodes}
+
+
 def gltf_document(
     pkg: WrinklePackage, options: GltfOptions | None = None, embed_images: bool = False
 ) -> tuple[dict[str, Any], bytes, dict[str, bytes]]:
@@ -141,6 +187,7 @@ def gltf_document(
     }
     if m.colors is not None:
         attrs[BIAS_ATTRIBUTE] = buf.accessor(m.colors.astype(np.float32), _ARRAY_BUFFER)
+    skin = _skin(m, buf, attrs)
     idx = m.indices.reshape(-1)
     idx_arr = idx.astype(np.uint16 if m.vertex_count < 65535 else np.uint32)
     prim: dict[str, Any] = {
@@ -245,12 +292,16 @@ def gltf_document(
         "extensions": {EXTENSION: ext},
     }
     used = [EXTENSION] + ([POINTER_EXTENSION] if animations else [])
+    nodes: list[dict[str, Any]] = [{"name": pkg.name, "mesh": 0}]
+    if skin is not None:
+        nodes[0]["skin"] = 0
+        nodes += skin.pop("_nodes")
     doc: dict[str, Any] = {
         "asset": {"version": "2.0", "generator": opt.generator},
         "extensionsUsed": sorted(used),
         "scene": 0,
-        "scenes": [{"name": pkg.name, "nodes": [0]}],
-        "nodes": [{"name": pkg.name, "mesh": 0}],
+        "scenes": [{"name": pkg.name, "nodes": list(range(len(nodes)))}],
+        "nodes": nodes,
         "meshes": [mesh],
         "materials": [material],
         "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}],
@@ -262,6 +313,8 @@ def gltf_document(
     }
     if animations:
         doc["animations"] = animations
+    if skin is not None:
+        doc["skins"] = [skin]
     data = buf.data()
     data += b"\0" * ((-len(data)) % 4)
     doc["buffers"][0]["byteLength"] = len(data)

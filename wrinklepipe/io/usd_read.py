@@ -129,6 +129,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     bias = primvar("wrinkle:bias", required=False)
     morph_names: tuple[str, ...] = ()
     deltas = None
+    skin: dict[str, Any] = {}
     if mesh_prim.HasAPI(UsdSkel.BindingAPI):
         binding = UsdSkel.BindingAPI(mesh_prim)
         names_attr = binding.GetBlendShapesAttr().Get()
@@ -144,6 +145,23 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
                     for t in targets
                 ]
             )
+        skel_targets = binding.GetSkeletonRel().GetTargets()
+        skel_prim = stage.GetPrimAtPath(skel_targets[0]) if skel_targets else None
+        names = skel_prim.GetAttribute("wrinkle:jointNames") if skel_prim else None
+        if names and names.HasAuthoredValue():
+            ji = binding.GetJointIndicesPrimvar()
+            jw = binding.GetJointWeightsPrimvar()
+            k = ji.GetElementSize()
+            skin["joint_names"] = tuple(str(x) for x in names.Get())
+            skin["joints"] = np.asarray(ji.Get(), np.int64).reshape(-1, k)
+            skin["skin_weights"] = np.asarray(jw.Get(), np.float32).reshape(-1, k)
+            ibm = skel_prim.GetAttribute("wrinkle:inverseBindTransforms").Get()
+            if ibm is not None:
+                skin["inverse_bind"] = np.ascontiguousarray(
+                    np.asarray(ibm, np.float64).transpose(0, 2, 1).astype(np.float32)
+                )
+            if skin["joints"].shape[0] != nv or skin["skin_weights"].shape[0] != nv:
+                raise input_error(file, "joint indices/weights do not match the points", mkey)
     mesh = Mesh(
         positions=positions,
         indices=indices.reshape(-1, 3).astype(np.uint32),
@@ -155,6 +173,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         vertex_ids=primvar("wrinkle:vertexId").astype(np.int64),
         colors=None if bias is None else bias.astype(np.float32),
         name=mesh_prim.GetName(),
+        **skin,
     )
 
     # -- textures ----------------------------------------------------------------------------

@@ -60,6 +60,86 @@ def _ident(name: str) -> str:
     return Tf.MakeValidIdentifier(name)
 
 
+def _skel(stage, root_path, mesh, m) -> None:  # noqa: ANN001
+    """Skeleton + SkelAnimation + binding: the mesh's skin (joints at their bind pose, flat, as
+    in the glTF) or one root joint, and one BlendShape per morph target."""
+    from pxr import Gf, Sdf, UsdSkel, Vt
+
+    from wrinklepipe.io.gltf_write import skin_weights_normalized
+
+    has_skin = m.joints is not None and m.skin_weights is not None and len(m.joint_names) > 0
+    skel = UsdSkel.Skeleton.Define(stage, root_path.AppendChild("Skel"))
+    if has_skin:
+        n = len(m.joint_names)
+        used: set[str] = set()
+        joint_tokens = []
+        for name in m.joint_names:
+            tok = _ident(name)
+            while tok in used:
+                tok += "_"
+            used.add(tok)
+            joint_tokens.append(tok)
+        ibm = (
+            np.asarray(m.inverse_bind, np.float32)
+            if m.inverse_bind is not None
+            else np.tile(np.eye(4, dtype=np.float32), (n, 1, 1))
+        )
+        # Gf matrices act on row vectors: the math matrix M is stored as M^T.
+        bind = [Gf.Matrix4d(np.linalg.inv(b.astype(np.float64)).T.tolist()) for b in ibm]
+        exact = skel.GetPrim().CreateAttribute(
+            "wrinkle:inverseBindTransforms", Sdf.ValueTypeNames.Matrix4dArray
+        )
+        exact.SetCustom(True)
+        exact.Set(Vt.Matrix4dArray([Gf.Matrix4d(b.astype(np.float64).T.tolist()) for b in ibm]))
+        names = skel.GetPrim().CreateAttribute("wrinkle:jointNames", Sdf.ValueTypeNames.StringArray)
+        names.SetCustom(True)
+        names.Set(Vt.StringArray([str(x) for x in m.joint_names]))
+    else:
+        joint_tokens = ["root"]
+        bind = [Gf.Matrix4d(1.0)]
+    skel.CreateJointsAttr(Vt.TokenArray(joint_tokens))
+    skel.CreateBindTransformsAttr(Vt.Matrix4dArray(bind))
+    skel.CreateRestTransformsAttr(Vt.Matrix4dArray(bind))  # flat: local = world
+    anim = UsdSkel.Animation.Define(stage, skel.GetPath().AppendChild("Anim"))
+    anim.CreateJointsAttr(Vt.TokenArray(joint_tokens))
+    translations, rotations, scales = [], [], []
+    for b in bind:
+        xf = Gf.Transform(b)
+        translations.append(Gf.Vec3f(xf.GetTranslation()))
+        rotations.append(Gf.Quatf(xf.GetRotation().GetQuat()))
+        scales.append(Gf.Vec3h(xf.GetScale()))
+    anim.CreateTranslationsAttr(Vt.Vec3fArray(translations))
+    anim.CreateRotationsAttr(Vt.QuatfArray(rotations))
+    anim.CreateScalesAttr(Vt.Vec3hArray(scales))
+    shape_names = [_ident(n) for n in m.morph_names] if m.morph_deltas is not None else []
+    if shape_names:
+        anim.CreateBlendShapesAttr(Vt.TokenArray(shape_names))
+        anim.CreateBlendShapeWeightsAttr(Vt.FloatArray([0.0] * len(shape_names)))
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    if has_skin:
+        w = skin_weights_normalized(m.skin_weights)
+        j = np.where(w > 0, np.asarray(m.joints, np.int64), 0).astype(np.int32)
+        k = j.shape[1]
+        binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromNumpy(j.reshape(-1)))
+        binding.CreateJointWeightsPrimvar(False, k).Set(
+            Vt.FloatArray.FromNumpy(np.ascontiguousarray(w.reshape(-1)))
+        )
+    else:
+        binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
+        binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
+    if shape_names:
+        binding.CreateBlendShapesAttr(Vt.TokenArray(shape_names))
+        targets = []
+        for name, delta in zip(shape_names, m.morph_deltas):
+            bs = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
+            bs.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(delta, np.float32)))
+            targets.append(bs.GetPath())
+        binding.CreateBlendShapeTargetsRel().SetTargets(targets)
+
+
 def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None):  # noqa: ANN201
     """Build an in-memory ``Usd.Stage`` for the package (textures referenced, not written)."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
@@ -79,7 +159,8 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None):  # noqa
     root_name = _ident(pkg.name)
     root_path = Sdf.Path("/" + root_name)
     has_morphs = m.morph_deltas is not None and len(m.morph_names) > 0
-    if has_morphs:
+    has_skin = m.joints is not None and m.skin_weights is not None and len(m.joint_names) > 0
+    if has_morphs or has_skin:
         root = UsdSkel.Root.Define(stage, root_path).GetPrim()
     else:
         root = UsdGeom.Xform.Define(stage, root_path).GetPrim()
@@ -116,36 +197,9 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None):  # noqa
             Vt.Vec4fArray.FromNumpy(np.ascontiguousarray(m.colors, np.float32))
         )
 
-    # -- blend shapes (UsdSkel) ----------------------------------------------------------------
-    if has_morphs:
-        skel = UsdSkel.Skeleton.Define(stage, root_path.AppendChild("Skel"))
-        skel.CreateJointsAttr(Vt.TokenArray(["root"]))
-        ident = Gf.Matrix4d(1.0)
-        skel.CreateBindTransformsAttr(Vt.Matrix4dArray([ident]))
-        skel.CreateRestTransformsAttr(Vt.Matrix4dArray([ident]))
-        anim = UsdSkel.Animation.Define(stage, skel.GetPath().AppendChild("Anim"))
-        shape_names = [_ident(n) for n in m.morph_names]
-        anim.CreateBlendShapesAttr(Vt.TokenArray(shape_names))
-        anim.CreateBlendShapeWeightsAttr(Vt.FloatArray([0.0] * len(shape_names)))
-        anim.CreateJointsAttr(Vt.TokenArray(["root"]))
-        anim.CreateTranslationsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 0, 0)]))
-        anim.CreateRotationsAttr(Vt.QuatfArray([Gf.Quatf(1, 0, 0, 0)]))
-        anim.CreateScalesAttr(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)]))
-        UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
-            [anim.GetPath()]
-        )
-        binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
-        binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
-        binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
-        binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
-        binding.CreateGeomBindTransformAttr(ident)
-        binding.CreateBlendShapesAttr(Vt.TokenArray(shape_names))
-        targets = []
-        for name, delta in zip(shape_names, m.morph_deltas):
-            bs = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
-            bs.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(delta, np.float32)))
-            targets.append(bs.GetPath())
-        binding.CreateBlendShapeTargetsRel().SetTargets(targets)
+    # -- skin and blend shapes (UsdSkel) ------------------------------------------------------
+    if has_morphs or has_skin:
+        _skel(stage, root_path, mesh, m)
 
     # -- material --------------------------------------------------------------------------------
     looks = UsdGeom.Scope.Define(stage, root_path.AppendChild("Looks"))
