@@ -83,6 +83,25 @@ def test_skinning_matches_usdskel(rel, prim):
 
 
 @needs_data
+@pytest.mark.parametrize(
+    ("rel", "n_shapes"),
+    [
+        ("openusd/usd/usdSkel/testenv/testUsdSkelBakeSkinning/blendshapes.usda", 6),
+        ("openusd/usd/usdSkel/testenv/testUsdSkelBakeSkinning/blendshapesWithNormals.usda", 4),
+        (
+            "openusd/usdImaging/usdImagingGL/testenv/testUsdImagingGLSkelBlendShapes/blendshapes.usda",
+            6,
+        ),
+    ],
+)
+def test_usdskel_blend_shape_scenes_ingest(rel, n_shapes):
+    m = next(x for x in load_meshes(DATA / rel) if x.morph_names)
+    assert sum("@" not in n for n in m.morph_names) == n_shapes
+    assert m.morph_deltas.shape == (len(m.morph_names), m.vertex_count, 3)
+    assert m.uvs is not None and m.triangle_count > 0
+
+
+@needs_data
 def test_dynamic_weights_on_usd_blend_shapes():
     f = SKEL / "blendshapes.usda"
     m = next(x for x in load_meshes(f, RAW) if x.name == "/TestPlane/Mesh")

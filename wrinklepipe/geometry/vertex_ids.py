@@ -116,29 +116,32 @@ def _neighbour_occupied(
     q: list[np.ndarray], side: list[np.ndarray], ukeys: np.ndarray, bits: int
 ) -> np.ndarray:
     """For points in cells ``q`` near the faces ``side`` (-1, 0, +1 per axis): is any cell
-    across a near face (or edge, or corner) occupied? ``ukeys``: sorted packed cell keys."""
+    across a near face (or edge, or corner) occupied? ``ukeys``: sorted packed cell keys.
+
+    The cells to look at are the non-zero sub-vectors of ``side`` (1 for a point near one
+    face, 3 near an edge, 7 near a corner): a loop over the 7 axis masks, not over points."""
     hit = np.zeros(len(q[0]), dtype=bool)
     top = (1 << bits) - 1
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dz in (-1, 0, 1):  # the 26 neighbour offsets (not a loop over points)
-                if dx == dy == dz == 0:
-                    continue
-                ok = ~hit
-                for d, sd in zip((dx, dy, dz), side):
-                    if d:
-                        ok &= sd == d
-                sel = np.flatnonzero(ok)
-                if not len(sel):
-                    continue
-                nx, ny, nz = q[0][sel] + dx, q[1][sel] + dy, q[2][sel] + dz
-                valid = (nx >= 0) & (ny >= 0) & (nz >= 0) & (nx <= top) & (ny <= top) & (nz <= top)
-                sel, nx, ny, nz = sel[valid], nx[valid], ny[valid], nz[valid]
-                k = (nx << (2 * bits)) | (ny << bits) | nz
-                pos = np.searchsorted(ukeys, k)
-                found = pos < len(ukeys)
-                found[found] = ukeys[pos[found]] == k[found]
-                hit[sel[found]] = True
+    nz = [sd != 0 for sd in side]
+    for mask in range(1, 8):
+        use = [(mask >> a) & 1 for a in range(3)]
+        ok = ~hit
+        for a in range(3):
+            if use[a]:
+                ok &= nz[a]
+        sel = np.flatnonzero(ok)
+        if not len(sel):
+            continue
+        key = np.zeros(len(sel), dtype=np.int64)
+        valid = np.ones(len(sel), dtype=bool)
+        for a in range(3):
+            c = q[a][sel] + side[a][sel] if use[a] else q[a][sel]
+            valid &= (c >= 0) & (c <= top)
+            key |= c << ((2 - a) * bits)
+        pos = np.searchsorted(ukeys, key)
+        found = valid & (pos < len(ukeys))
+        found[found] = ukeys[pos[found]] == key[found]
+        hit[sel[found]] = True
     return hit
 
 
@@ -163,9 +166,13 @@ def compute_vertex_ids(
     n = len(p)
     if n == 0:
         return np.zeros(0, dtype=np.int64)
+    if p.dtype not in (np.float32, np.float64):
+        p = p.astype(np.float64)
     cols = [np.ascontiguousarray(p[:, a], dtype=np.float64) for a in range(3)]
-    if not np.isfinite(cols[0].sum() + cols[1].sum() + cols[2].sum()):
-        finite = np.isfinite(cols[0]) & np.isfinite(cols[1]) & np.isfinite(cols[2])
+    lo = np.array([c.min() for c in cols])
+    hi = np.array([c.max() for c in cols])
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        finite = np.isfinite(p).all(axis=1)
         bad = np.flatnonzero(~finite)
         if len(bad):
             raise input_error(
@@ -175,14 +182,12 @@ def compute_vertex_ids(
             )
     if opts.tolerance is not None and not (np.isfinite(opts.tolerance) and opts.tolerance >= 0):
         raise input_error(source, f"tolerance must be a finite number >= 0, got {opts.tolerance}")
-    lo = np.array([c.min() for c in cols])
-    hi = np.array([c.max() for c in cols])
     if opts.tolerance is not None:
         tol = float(opts.tolerance)
     else:
         tol = float(np.linalg.norm(hi - lo)) * float(opts.relative_tolerance)
     if tol <= 0.0:
-        return _exact_ids(np.stack(cols, axis=1) + 0.0)  # +0.0 turns -0.0 into 0.0
+        return _exact_ids(p.astype(np.float64) + 0.0)  # +0.0 turns -0.0 into 0.0
 
     factor = opts.coarse_factor
     if factor is None:
@@ -220,9 +225,10 @@ def compute_vertex_ids(
         if not fine:
             dup = np.flatnonzero(~is_rep)  # only non-first points can lie away from the first
             r = rep[dup]
-            spread = np.abs(sub_cols[0][dup] - sub_cols[0][r])
-            np.maximum(spread, np.abs(sub_cols[1][dup] - sub_cols[1][r]), out=spread)
-            np.maximum(spread, np.abs(sub_cols[2][dup] - sub_cols[2][r]), out=spread)
+            spread = np.zeros(len(dup))
+            for c in sub_cols:
+                d = c[dup] - c[r]
+                np.maximum(spread, np.abs(d), out=spread)
             loose = spread > 0.5 * tol
             if loose.any():
                 dense_cell = np.zeros(m, dtype=bool)
@@ -269,7 +275,7 @@ def compute_vertex_ids(
     if len(cand) > 1:
         from scipy.spatial import cKDTree
 
-        pts = np.stack([c[cand] for c in cols], axis=1)
+        pts = p[cand].astype(np.float64)
         tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
         # Euclidean query (faster than p=inf), then keep the Chebyshev distance <= 2 tol.
         pairs = tree.query_pairs(2.0 * np.sqrt(3.0) * tol, p=2.0, output_type="ndarray")

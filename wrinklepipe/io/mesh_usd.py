@@ -292,12 +292,15 @@ def _blend_shapes(
     skipped = 0
 
     def dense(offsets: Any, idx: np.ndarray | None, label: str) -> np.ndarray | None:
+        if offsets is None:  # a normal-only shape: no point motion
+            mesh.notes.append(
+                f"blend shape {label} has no point offsets (normal-only): zero deltas"
+            )
+            return np.zeros((len(vmap), 3), np.float32)
         try:
             o = np.asarray(offsets, dtype=np.float64).reshape(-1, 3)
         except (TypeError, ValueError):
-            o = None
-        if offsets is None or o is None:
-            mesh.notes.append(f"skipped blend shape {label}: no offsets")
+            mesh.notes.append(f"skipped blend shape {label}: offsets are not 3-vectors")
             return None
         full = np.zeros((n_p, 3))
         if idx is None:
