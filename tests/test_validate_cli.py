@@ -162,3 +162,12 @@ def test_khronos_validator_corpus_gives_clear_messages(capsys):
         if dt > 10.0:
             slow.append((p, dt))
     assert not slow
+
+
+def test_bench_validate_quick_smoke():
+    from wrinklepipe.bench.validate import bench_validate
+
+    res = bench_validate(quick=True)
+    steps = {r.step for r in res.rows}
+    assert "plain normal-map shader" in steps
+    assert res.extra["wrinkle_vs_plain_split"] > 0
