@@ -11,8 +11,8 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-#: Texels per chunk (about 1 MB per float32 plane).
-CHUNK_TEXELS = 1 << 18
+#: Texels per chunk (512 KB per float32 plane; measured best on a 2-core EPYC).
+CHUNK_TEXELS = 1 << 17
 
 _POOL: ThreadPoolExecutor | None = None
 
