@@ -35,54 +35,12 @@ from wrinklepipe.io.package import (
     PackOptions,
     WeightCurves,
     WrinklePackage,
-    optional,
     package_from_asset,
     resize_normals_pd,
 )
 
 # ------------------------------------------------------------------------------------------------
 # mesh stage
-
-
-def _fallback_tangents(mesh: Mesh) -> np.ndarray:
-    """Per-vertex tangents from UV derivatives (area-weighted, Gram-Schmidt, w = handedness).
-
-    Used only when :mod:`wrinklepipe.geometry.tangents` (MikkTSpace) is not installed.
-    """
-    p = mesh.positions.astype(np.float64)
-    uv = mesh.uvs.astype(np.float64) * np.array([1.0, -1.0])  # v up for the tangent frame
-    n = mesh.normals.astype(np.float64)
-    tri = mesh.indices.astype(np.int64)
-    e1 = p[tri[:, 1]] - p[tri[:, 0]]
-    e2 = p[tri[:, 2]] - p[tri[:, 0]]
-    d1 = uv[tri[:, 1]] - uv[tri[:, 0]]
-    d2 = uv[tri[:, 2]] - uv[tri[:, 0]]
-    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
-    r = np.where(np.abs(det) > 1e-20, 1.0 / np.where(det == 0, 1.0, det), 0.0)[:, None]
-    t = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * r
-    b = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * r
-    tacc = np.zeros_like(p)
-    bacc = np.zeros_like(p)
-    for c in range(3):
-        np.add.at(tacc, tri[:, c], t)
-        np.add.at(bacc, tri[:, c], b)
-    tacc -= n * np.einsum("ij,ij->i", n, tacc)[:, None]
-    norm = np.linalg.norm(tacc, axis=1, keepdims=True)
-    # Degenerate: any vector perpendicular to n.
-    alt = np.cross(n, np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-    tacc = np.where(norm > 1e-12, tacc / np.maximum(norm, 1e-30), alt)
-    tacc /= np.linalg.norm(tacc, axis=1, keepdims=True)
-    w = np.where(np.einsum("ij,ij->i", np.cross(n, tacc), bacc) < 0.0, -1.0, 1.0)
-    return np.concatenate([tacc, w[:, None]], axis=1).astype(np.float32)
-
-
-def _fallback_vertex_ids(positions: np.ndarray) -> np.ndarray:
-    """IDs shared by bit-identical positions, numbered by first appearance."""
-    _, first, inverse = np.unique(positions, axis=0, return_index=True, return_inverse=True)
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    return rank[inverse.reshape(-1)].astype(np.int64)
 
 
 def prepare_mesh(mesh: Mesh) -> Mesh:
@@ -96,22 +54,16 @@ def prepare_mesh(mesh: Mesh) -> Mesh:
         mesh = replace(mesh, normals=vertex_normals(mesh.positions, mesh.indices))
         notes.append("computed area-weighted vertex normals")
     if mesh.tangents is None:
-        mikktspace_tangents = optional("wrinklepipe.geometry.tangents", "mikktspace_tangents")
-        if mikktspace_tangents is not None:
-            tangents = mikktspace_tangents(mesh.positions, mesh.normals, mesh.uvs, mesh.indices)
-            notes.append("computed MikkTSpace tangents")
-        else:
-            tangents = _fallback_tangents(mesh)
-            notes.append("computed per-vertex UV tangents (MikkTSpace stage not installed)")
+        from wrinklepipe.geometry.tangents import mikktspace_tangents
+
+        tangents = mikktspace_tangents(mesh.positions, mesh.normals, mesh.uvs, mesh.indices)
+        notes.append("computed MikkTSpace tangents")
         mesh = replace(mesh, tangents=np.asarray(tangents, np.float32))
     if mesh.vertex_ids is None:
-        compute_vertex_ids = optional("wrinklepipe.geometry.vertex_ids", "compute_vertex_ids")
-        if compute_vertex_ids is not None:
-            ids = compute_vertex_ids(mesh.positions)
-            notes.append("computed spatial-hash vertex IDs")
-        else:
-            ids = _fallback_vertex_ids(mesh.positions)
-            notes.append("computed vertex IDs by exact position (vertex-ids stage not installed)")
+        from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
+
+        ids = compute_vertex_ids(mesh.positions)
+        notes.append("computed spatial-hash vertex IDs")
         mesh = replace(mesh, vertex_ids=np.asarray(ids, np.int64))
     return replace(mesh, notes=notes)
 
@@ -202,77 +154,19 @@ def evaluate_drivers(asset: WrinkleAsset, root: Path) -> tuple[list[WeightCurves
 
 
 def _read_normals(path: Path, convention: str) -> tuple[np.ndarray, list[str]]:
-    """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes."""
-    read_normal_map = optional("wrinklepipe.normals.read", "read_normal_map")
-    read_options = optional("wrinklepipe.normals.read", "ReadOptions")
-    if read_normal_map is not None and read_options is not None:
-        nm = read_normal_map(path, read_options(convention=convention))
-        notes = [f"{path.name}: {nm.source_format}, convention {nm.convention}"]
-        return np.asarray(nm.normals, np.float32), notes
-    from wrinklepipe.io.images import read_image
+    """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes (wrinklepipe.normals.read)."""
+    from wrinklepipe.normals.read import ReadOptions, read_normal_map
 
-    values, info = read_image(path)
-    if values.shape[-1] < 2:
-        raise input_error(path, "a normal map needs at least two channels (RG or RGB)")
-    xy = values[..., :2] * np.float32(2.0) - np.float32(1.0)
-    if values.shape[-1] >= 3:
-        z = values[..., 2] * np.float32(2.0) - np.float32(1.0)
-    else:
-        z = np.sqrt(np.maximum(0.0, 1.0 - np.einsum("...c,...c->...", xy, xy)))
-    n = np.concatenate([xy, z[..., None]], axis=-1)
-    notes = [f"{path.name}: {info.file_format} {info.format}"]
-    if convention == "directx":
-        n[..., 1] *= -1.0
-        notes.append(f"{path.name}: DirectX green flipped to OpenGL")
-    bad = int(np.count_nonzero(n[..., 2] <= 0.0))
-    if bad:
-        notes.append(f"{path.name}: {bad} texels with z <= 0 (repaired to z = |z|)")
-        n[..., 2] = np.maximum(np.abs(n[..., 2]), 1e-6)
-    return model.normalize(n), notes
+    nm = read_normal_map(path, ReadOptions(convention=convention))
+    notes = [f"{path.name}: {nm.source_format}, convention {nm.convention}"]
+    return np.asarray(nm.normals, np.float32), notes
 
 
 def _load_mesh(path: Path) -> Mesh:
-    """The render mesh (wrinklepipe.io.mesh.load_mesh; a glTF-only reader until that lands)."""
-    load_mesh = optional("wrinklepipe.io.mesh", "load_mesh")
-    if load_mesh is not None:
-        return load_mesh(path)
-    if path.suffix.lower() not in (".gltf", ".glb"):
-        raise input_error(path, "only glTF/GLB meshes can be read (mesh ingest not installed)")
-    from wrinklepipe.io.gltf_read import GltfReadOptions, _Reader
+    """The render mesh (:func:`wrinklepipe.io.mesh.load_mesh`: glTF, USD, OBJ)."""
+    from wrinklepipe.io.mesh import load_mesh
 
-    r = _Reader(path, GltfReadOptions())
-    meshes = r.doc.get("meshes", [])
-    if not meshes:
-        raise r.err("no meshes", "/meshes")
-    gm = meshes[0]
-    prim = gm["primitives"][0]
-    attrs = prim.get("attributes", {})
-    if "POSITION" not in attrs or "TEXCOORD_0" not in attrs:
-        raise r.err("mesh needs POSITION and TEXCOORD_0", "/meshes/0/primitives/0")
-    pos = r.accessor(attrs["POSITION"]).astype(np.float32)
-    idx = (
-        r.accessor(prim["indices"]).astype(np.int64)
-        if "indices" in prim
-        else np.arange(len(pos), dtype=np.int64)
-    )
-    targets = prim.get("targets", [])
-    names = tuple(gm.get("extras", {}).get("targetNames", ()))
-    if len(names) != len(targets):
-        names = tuple(f"target_{i}" for i in range(len(targets)))
-    return Mesh(
-        positions=pos,
-        indices=idx.reshape(-1, 3).astype(np.uint32),
-        uvs=r.accessor(attrs["TEXCOORD_0"]).astype(np.float32),
-        normals=r.accessor(attrs["NORMAL"]).astype(np.float32) if "NORMAL" in attrs else None,
-        tangents=r.accessor(attrs["TANGENT"]).astype(np.float32) if "TANGENT" in attrs else None,
-        morph_names=names,
-        morph_deltas=(
-            np.stack([r.accessor(t["POSITION"]).astype(np.float32) for t in targets])
-            if targets
-            else None
-        ),
-        name=str(gm.get("name") or path.stem),
-    )
+    return load_mesh(path)
 
 
 def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
@@ -351,23 +245,20 @@ def _resize_normals(normals: np.ndarray, size: int) -> np.ndarray:
 
 
 def auto_pd_scale(slopes: np.ndarray, percentile: float = 99.9) -> float:
-    """Smallest power of two >= the ``percentile`` of ``max(|dx|, |dy|)``, within [1/16, 64]."""
-    _auto = optional("wrinklepipe.normals.encode", "auto_pd_scale")
-    if _auto is not None:
-        return float(_auto(slopes, percentile))
-    m = np.max(np.abs(slopes), axis=-1).ravel()
-    p = float(np.percentile(m, percentile)) if m.size else 0.0
-    if p <= 1.0 / 16:
-        return 1.0 / 16
-    return float(min(max(2.0 ** np.ceil(np.log2(p)), 1.0 / 16), 64.0))
+    """Smallest power of two >= the ``percentile`` of ``max(|dx|, |dy|)`` of the wrinkle slopes
+    (:func:`wrinklepipe.normals.encode.auto_pd_scale`)."""
+    from wrinklepipe.normals.encode import auto_pd_scale as _auto
+
+    return float(_auto(slopes, percentile))
 
 
 def auto_wrinkle_size(asset: WrinkleAsset) -> tuple[int | None, dict[int, float]]:
     """Smallest power-of-two state size whose blended error over the expressions meets the
     budget (:func:`wrinklepipe.normals.resample.auto_size`); None when it cannot be chosen."""
-    auto_size = optional("wrinklepipe.normals.resample", "auto_size")
-    budget_cls = optional("wrinklepipe.normals.compress", "Budget")
-    if auto_size is None or budget_cls is None or asset.encoding != "pd" or not asset.expressions:
+    from wrinklepipe.normals.compress import Budget as budget_cls
+    from wrinklepipe.normals.resample import auto_size
+
+    if asset.encoding != "pd" or not asset.expressions:
         return None, {}
     if asset.policy == "signed":
         return None, {}
@@ -451,9 +342,9 @@ class ConvertOptions:
 
     ``glb``: also a self-contained ``NAME.glb``. ``usd_format``: ``"usda"`` (always written) plus
     ``"usdc"`` or ``"usdz"`` on request. ``force``: replace a non-empty output folder.
-    ``compressed``: DDS + KTX2 textures when the compression stage is installed. ``validate``:
-    run :mod:`wrinklepipe.validate` on the written folder when it is installed (``render``: with
-    its GPU render pass). ``bits``: PNG
+    ``compressed``: DDS + KTX2 copies of the base and states (format chosen against the budget).
+    ``validate``: run :mod:`wrinklepipe.validate` on the written folder (``render``: with its GPU
+    render pass). ``bits``: PNG
     depth of the base and state maps. ``mask_layout``: None = the manifest's ``formats``.
     """
 
@@ -521,17 +412,10 @@ def compressed_files(
     no format passes, the group ships as PNG only and a note says why.
     Returns (files, notes, per-map choices for the report).
     """
-    nc = optional("wrinklepipe.normals", "compress")
-    dds_bytes = optional("wrinklepipe.normals.dds", "dds_bytes")
-    ktx2_bytes = optional("wrinklepipe.normals.ktx2", "ktx2_bytes")
-    needed = ("compress_and_check", "decoder_for", "Budget")
-    if (
-        nc is None
-        or dds_bytes is None
-        or ktx2_bytes is None
-        or not all(hasattr(nc, n) for n in needed)
-    ):
-        return {}, ["compressed textures skipped: wrinklepipe.normals compression missing"], {}
+    from wrinklepipe.normals import compress as nc
+    from wrinklepipe.normals.dds import dds_bytes
+    from wrinklepipe.normals.ktx2 import ktx2_bytes
+
     files: dict[str, bytes] = {}
     notes: list[str] = []
     choices: dict[str, Any] = {}
@@ -638,29 +522,18 @@ def _scrub(obj: Any, replacements: dict[str, str]) -> Any:
 def validate_output(
     folder: Path, manifest_path: Path | None = None, render: bool = True
 ) -> dict[str, Any]:
-    """Run :mod:`wrinklepipe.validate` on a written folder (when that stage is installed).
+    """Run :mod:`wrinklepipe.validate` on a written folder.
 
     With ``manifest_path`` the shipped textures are compared with the source maps. Only
     deterministic parts go into the report (counts and issues, no timings); paths are written
     relative to the output folder (``.``) and the manifest's folder (``<source>``).
     """
-    load_input = optional("wrinklepipe.validate", "load_input") or optional(
-        "wrinklepipe.validate.loader", "load_input"
-    )
-    run = optional("wrinklepipe.validate", "validate")
-    if load_input is None or run is None:
-        return {"status": "skipped", "reason": "wrinklepipe.validate not installed"}
-    load_options = optional("wrinklepipe.validate.loader", "LoadOptions")
-    options = optional("wrinklepipe.validate", "ValidateOptions")
+    from wrinklepipe.validate import ValidateOptions, validate
+    from wrinklepipe.validate.loader import LoadOptions, load_input
+
     src = str(manifest_path) if manifest_path is not None else None
-    inp = load_input(folder, load_options(source=src)) if load_options else load_input(folder)
-    report = run(inp, options(render=render)) if options else run(inp)
-    issues = [
-        i.to_json()
-        if hasattr(i, "to_json")
-        else {"code": i.code, "severity": i.severity, "message": i.message, "pointer": i.pointer}
-        for i in report.issues
-    ]
+    report = validate(load_input(folder, LoadOptions(source=src)), ValidateOptions(render=render))
+    issues = [i.to_json() for i in report.issues]
     replacements = {str(folder): "."}
     if manifest_path is not None:
         replacements[str(manifest_path.parent)] = "<source>"

@@ -15,7 +15,7 @@ compress) and write one folder:
   NAME.glb               self-contained GLB (--glb)
   NAME.usda              USD with the WrinkleMapsAPI schema (+ NAME.usdc / NAME.usdz on request)
   textures/*.png         base normal, wrinkle states, packed masks (shared by glTF and USD)
-  compressed/*.dds|ktx2  BC5 copies of the normal maps (when the compression stage is installed)
+  compressed/*.dds|ktx2  BC copies of base and states: the smallest format within the budget
   curves/*.csv|json      region weights over time, one file pair per driver
   report.json, .html     what was read, done and written (hashes), validation results
 

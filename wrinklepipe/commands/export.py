@@ -10,8 +10,8 @@ DESCRIPTION = """\
 Read what `convert` wrote (the output folder, a .gltf/.glb or a .usda/.usdc/.usdz) and write the
 wrinkle maps the way an engine wants them:
 
-  unreal   DirectX normal maps (green flipped: stored G -> 255 - G), BC5 .dds when the
-           compression stage is installed (else PNG), HLSL combine function
+  unreal   DirectX normal maps (green flipped: stored G -> 255 - G) as BC5 .dds (a note says
+           when BC5 exceeds the error budget), masks as PNG, HLSL combine function
   unity    OpenGL (+Y) PNGs + the glTF (for glTFast / UnityGLTF), HLSL combine function
   godot    OpenGL (+Y) PNGs + the glTF, GLSL combine function
   blender  OpenGL (+Y) PNGs + the glTF

@@ -82,20 +82,6 @@ class PackOptions:
     mask_layout: str = "rgba"
 
 
-def optional(module: str, name: str) -> Any:
-    """``module.name`` if that stage is installed and importable, else None.
-
-    Stages built by other parts of the project are used when present; until then the pipeline
-    falls back to a simpler local implementation and says so in the report.
-    """
-    import importlib
-
-    try:
-        return getattr(importlib.import_module(module), name)
-    except Exception:  # noqa: BLE001 - an absent or half-installed stage means "not available"
-        return None
-
-
 # ------------------------------------------------------------------------------------------------
 # encoding: the formulas of wrinklepipe.model / docs/normals.md (values01 = what 8/16-bit stores)
 
@@ -157,23 +143,13 @@ def decode_state(base: np.ndarray, stored: np.ndarray, encoding: str, scale: flo
 def resize_normals_pd(normals: np.ndarray, h: int, w: int) -> np.ndarray:
     """Unit normals resampled to ``h`` x ``w`` in PD space (linear, so wrinkle slopes add up).
 
-    Uses :func:`wrinklepipe.normals.resample.resize_normals` when installed; otherwise a box
-    filter for whole-number reductions and nearest texel for anything else.
+    :func:`wrinklepipe.normals.resample.resize_normals` with ``space="pd"``.
     """
     if normals.shape[0] == h and normals.shape[1] == w:
         return normals
-    resize_normals = optional("wrinklepipe.normals.resample", "resize_normals")
-    if resize_normals is not None:
-        return np.asarray(resize_normals(normals, (h, w), space="pd"), np.float32)
-    sh, sw = normals.shape[:2]
-    d = model.normal_to_pd(normals)
-    if sh % h == 0 and sw % w == 0:
-        d = d.reshape(h, sh // h, w, sw // w, 2).mean(axis=(1, 3))
-    else:
-        d = d[((np.arange(h) + 0.5) * sh / h).astype(int)][
-            :, ((np.arange(w) + 0.5) * sw / w).astype(int)
-        ]
-    return model.pd_to_normal(d)
+    from wrinklepipe.normals.resample import resize_normals
+
+    return np.asarray(resize_normals(normals, (h, w), space="pd"), np.float32)
 
 
 def pack_masks(
