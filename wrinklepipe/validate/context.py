@@ -24,6 +24,8 @@ class ValidateOptions:
     ``max_clipped_fraction``: fraction of pd texels allowed at the edge of the cone.
     ``wrinkle_deg``: a pixel "shows a wrinkle" when it differs from neutral by more than this.
     ``grid``: largest texture-space grid (per side) for source comparisons.
+    ``half_res_check``: look for wasted resolution (WP-TEX-006).
+    ``dynamic_targets``: morph targets whose dynamic weights are checked across seams (0: off).
     """
 
     render: bool = True
@@ -38,6 +40,7 @@ class ValidateOptions:
     grid: int = 512
     default_budget: tuple[float, float] = (1.0, 4.0)  # mean, p99 degrees when the asset has none
     half_res_check: bool = True
+    dynamic_targets: int = 8  # morph targets whose dynamic weights are checked across seams
 
 
 def expression_weights(asset: WrinkleAsset, expr: str | None) -> np.ndarray:

@@ -108,6 +108,7 @@ class ValidationInput:
     kind: str = "memory"  # "folder" | "gltf" | "usd" | "manifest" | "bundle" | "demo" | "memory"
     pointers: dict[str, str] = field(default_factory=dict)  # item -> "file#pointer"
     vertex_weights: dict[str, np.ndarray] = field(default_factory=dict)  # name -> [V] or [V, K]
+    weight_curves: dict[str, np.ndarray] = field(default_factory=dict)  # name -> [T, R] weights
     extra: dict[str, Any] = field(default_factory=dict)
 
     def texture(self, name: str) -> Texture | None:

@@ -228,10 +228,14 @@ def input_from_package(
             entry.split = (mask_names[int(sp["texture"])], CHANNELS.index(sp["channel"]))
             entry.side = str(e.get("side", "center"))
         table.append(entry)
+    curves = {
+        str(c.name): np.asarray(c.values, np.float32) for c in getattr(pkg, "curves", []) or []
+    }
     return ValidationInput(
         asset=asset,
         textures=textures,
         channel_table=table,
+        weight_curves=curves,
         has_source=False,
         path=path,
         kind=kind,
@@ -462,6 +466,8 @@ def _bundle_parts(inp: ValidationInput) -> tuple[dict[str, Any], dict[str, np.nd
         arrays[f"texture/{i}"] = np.frombuffer(t.data, np.uint8)
     for name, v in inp.vertex_weights.items():
         arrays[f"vertex_weights/{name}"] = np.asarray(v, np.float32)
+    for name, v in inp.weight_curves.items():
+        arrays[f"weight_curves/{name}"] = np.asarray(v, np.float32)
     meta = {
         "version": BUNDLE_VERSION,
         "asset": {
@@ -589,6 +595,7 @@ def read_bundle(path: str | Path) -> ValidationInput:
             entry.side = e["side"]
         table.append(entry)
     vw = {k.split("/", 1)[1]: v for k, v in arrays.items() if k.startswith("vertex_weights/")}
+    wc = {k.split("/", 1)[1]: v for k, v in arrays.items() if k.startswith("weight_curves/")}
     return ValidationInput(
         asset=asset,
         textures=textures,
@@ -598,5 +605,6 @@ def read_bundle(path: str | Path) -> ValidationInput:
         kind="bundle",
         pointers=dict(meta["pointers"]),
         vertex_weights=vw,
+        weight_curves=wc,
         extra=dict(meta.get("extra", {})),
     )

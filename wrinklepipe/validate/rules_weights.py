@@ -26,6 +26,29 @@ def group_spread(groups: np.ndarray, values: np.ndarray) -> np.ndarray:
     return (hi - lo).max(axis=1)[groups]
 
 
+def dynamic_weights(mesh: object, max_targets: int = 8) -> dict[str, np.ndarray]:
+    """Oat's dynamic wrinkle weights of each morph target at full weight, smoothed over the
+    mesh's vertex IDs by :mod:`wrinklepipe.geometry.dynamic` (empty when not applicable)."""
+    if (
+        max_targets <= 0
+        or mesh.vertex_ids is None
+        or mesh.morph_deltas is None
+        or len(mesh.morph_names) != len(mesh.morph_deltas)
+        or np.asarray(mesh.morph_deltas).shape[1:] != np.asarray(mesh.positions).shape
+    ):
+        return {}
+    try:
+        from wrinklepipe.geometry.dynamic import DynamicWeights
+    except ImportError:  # pragma: no cover - the geometry stage is not installed
+        return {}
+    rest = np.asarray(mesh.positions, np.float64)
+    op = DynamicWeights.build(rest, np.asarray(mesh.indices), np.asarray(mesh.vertex_ids))
+    out = {}
+    for name, delta in list(zip(mesh.morph_names, mesh.morph_deltas))[:max_targets]:
+        out[f"dynamic:{name}"] = np.asarray(op.frame(rest + np.asarray(delta, np.float64)))
+    return out
+
+
 def check_weights(ctx: Context) -> list[Issue]:
     a, inp = ctx.asset, ctx.inp
     out: list[Issue] = []
@@ -49,11 +72,31 @@ def check_weights(ctx: Context) -> list[Issue]:
                         ptr,
                     )
                 )
+    # Weight curves (animated region weights, [T, R]) must stay in the policy's range.
+    for name, vals in sorted(inp.weight_curves.items()):
+        v = np.asarray(vals, np.float64)
+        if rng is None or v.ndim != 2 or v.shape[1] != len(a.regions):
+            continue
+        bad = ~np.isfinite(v) | (v < rng.low) | (v > rng.high)
+        if bad.any():
+            f, r = np.unravel_index(int(np.flatnonzero(bad)[0]), v.shape)
+            out.append(
+                make_issue(
+                    "WP-WGT-001",
+                    f"weight curve {name!r}: {int(bad.sum())} keys outside [{rng.low:g}, "
+                    f"{rng.high:g}] of policy {a.policy!r}; first: key {f}, region "
+                    f"{a.region_names[r]!r} = {v[f, r]:g}",
+                    inp.pointer("drivers") + f"/curves/{name}",
+                )
+            )
     # Per-vertex weights (dynamic wrinkles, painted bias): seam twins must agree.
     mesh = a.mesh
-    if mesh is not None and inp.vertex_weights:
+    per_vertex = dict(inp.vertex_weights)
+    if mesh is not None:
+        per_vertex.update(dynamic_weights(mesh, max_targets=ctx.options.dynamic_targets))
+    if mesh is not None and per_vertex:
         groups = position_groups(mesh.positions)
-        for name, vals in sorted(inp.vertex_weights.items()):
+        for name, vals in sorted(per_vertex.items()):
             vals = np.asarray(vals)
             if vals.shape[0] != mesh.vertex_count:
                 continue
