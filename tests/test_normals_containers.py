@@ -264,3 +264,30 @@ def test_bench_normals_quick_smoke():
     assert "bare etcpak.compress_bc5" in steps and "whole (fused, no read)" in steps
     assert all(row.mpix_per_s and row.mpix_per_s > 0 for row in r.rows)
     assert 0 < r.extra["error"]["mean_deg"] < 10.0
+
+
+def test_uastc_ktx2_when_basis_universal_is_installed(tmp_path, demo_files):
+    pytest.importorskip("alktx2")
+    folder, _ = demo_files
+    out, rep = tmp_path / "u.ktx2", tmp_path / "u.json"
+    argv = ["--base", folder / "base.png", "-o", out, "--format", "uastc", "--report", rep]
+    assert _cli(folder / "compress.png", *argv) == 0
+    raw = out.read_bytes()
+    assert raw[:12] == bytes.fromhex("AB4B5458203230BB0D0A1A0A")
+    r = json.loads(rep.read_text())
+    chk = r["checks"][0]
+    assert chk["format"] == "uastc" and chk["error"]["p99_deg"] <= 2.0
+    # about as good as BC5 on the same map (both keep 8-bit-ish precision per channel)
+    bc5 = tmp_path / "b.dds"
+    rep5 = tmp_path / "b.json"
+    _cli(folder / "compress.png", "--base", folder / "base.png", "-o", bc5, "--report", rep5)
+    e5 = json.loads(rep5.read_text())["checks"][0]["error"]["mean_deg"]
+    assert chk["error"]["mean_deg"] < 2 * e5
+
+
+def test_uastc_refused_for_dds(tmp_path, demo_files, capsys):
+    folder, _ = demo_files
+    out = tmp_path / "u.dds"
+    assert _cli(folder / "compress.png", "-o", out, "--format", "uastc") == 2
+    assert not out.exists()
+    assert "KTX2" in capsys.readouterr().err

@@ -17,10 +17,11 @@ tangent space (--convention, detected when auto), encode it and write OUT:
   --encoding diff  0.5 + 0.5 gain (W - B) (needs --base; --gain G|auto)
   --encoding full  the normal map itself (x, y in R, G; z rebuilt for BC formats)
 
---format bc5|bc1|bc3nm|bc7 writes a .dds or .ktx2 (mip chain unless --no-mips); png8/png16 a
-.png/.tif; exr a half-float .exr; auto picks the smallest block format whose error stays within
-the budget (--max-p99 / --max-mean degrees). Every block format is decoded independently
-(texture2ddecoder) and measured: angular error mean / p99 / max, PSNR per channel, the error of
+--format bc5|bc1|bc3nm|bc7 writes a .dds or .ktx2 (mip chain unless --no-mips); uastc a .ktx2
+(Basis Universal, needs the alktx2 package); png8/png16 a .png/.tif; exr a half-float .exr;
+auto picks the smallest block format whose error stays within the budget (--max-p99 /
+--max-mean degrees). Every block format is decoded independently (texture2ddecoder) and
+measured: angular error mean / p99 / max, PSNR per channel, the error of
 the blended result at weights 0.5 and 1 (with --base), bytes, verdict.
 
 Exit codes: 0 written and within budget, 1 written but over budget, 2 bad input (nothing

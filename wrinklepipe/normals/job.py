@@ -27,7 +27,7 @@ from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
 _F = np.float32
 
 ENCODINGS = ("pd", "diff", "full")
-OUTPUT_FORMATS = ("bc5", "bc1", "bc3nm", "bc7", "png8", "png16", "exr", "auto")
+OUTPUT_FORMATS = ("bc5", "bc1", "bc3nm", "bc7", "uastc", "png8", "png16", "exr", "auto")
 #: BC7 (bc7enc) is slow: above this many texels ``--format auto`` leaves it out.
 AUTO_BC7_MAX_TEXELS = 1 << 20
 
@@ -89,7 +89,9 @@ def _resolve_format(out: Path, fmt: str | None) -> tuple[str, str]:
         raise input_error(
             out, f"unknown format {fmt!r}; expected one of {', '.join(OUTPUT_FORMATS)}"
         )
-    block = fmt in cmp.FORMATS or fmt == "auto"
+    if fmt == "uastc" and container != "ktx2":
+        raise input_error(out, "format uastc is written as KTX2: use a .ktx2 output")
+    block = fmt in cmp.FORMATS or fmt in ("auto", "uastc")
     if block and container not in ("dds", "ktx2"):
         raise input_error(
             out, f"format {fmt} is block-compressed: write it to a .dds or .ktx2 file"
@@ -230,6 +232,20 @@ def encode_normals(
     q = enc.quantize(values, 8)
     dec = cmp.decoder_for(o.encoding, params.get("scale", 1.0), params.get("gain", 1.0), b_n)
     blend = _blend_fn(o.encoding, params, b_n, truth)
+    if fmt == "uastc":
+        from wrinklepipe.normals import uastc
+
+        try:
+            check, data = uastc.uastc_check(q, truth, dec, budget, mips=o.mips)
+        except ValueError as exc:
+            raise input_error(out, str(exc)) from None
+        ok = check.verdict == "pass"
+        report["format"] = {"name": "uastc", "container": "ktx2", "bytes": len(data)}
+        report["checks"] = [check.to_json()]
+        report["verdict"] = "pass" if ok else "fail"
+        report["footprint"] = fp.footprint([(out.name, "bc5", w, h, o.mips)]).to_json()
+        report["notes"] = notes + ["uastc: GPU footprint as 8 bpp (transcoded to BC7/ASTC)"]
+        return EncodeResult(data, report, ok, report["notes"])
     candidates = (
         [fmt]
         if fmt != "auto"
