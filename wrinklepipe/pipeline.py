@@ -444,6 +444,8 @@ def compressed_files(
     else:
         notes.append(f"{meta['encoding']} states ship as PNG only (block copies are for pd)")
     for group, want, decode, maps in groups:
+        if any(t.bits != 8 for t in maps):
+            notes.append(f"{group}: 16-bit maps ship as PNG only (block formats are 8-bit)")
         maps = [t for t in maps if t.bits == 8]
         if not maps or (want not in _BLOCK and want != "auto"):
             continue

@@ -27,9 +27,11 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from wrinklepipe.asset import Mesh
 from wrinklepipe.atomic import check_not_input, write_bytes
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.package import MAX_FLOAT_ID, WrinklePackage, png_bytes
@@ -60,7 +62,7 @@ def _ident(name: str) -> str:
     return Tf.MakeValidIdentifier(name)
 
 
-def _skel(stage, root_path, mesh, m) -> None:  # noqa: ANN001
+def _skel(stage: Any, root_path: Any, mesh: Any, m: Mesh) -> None:
     """Skeleton + SkelAnimation + binding: the mesh's skin (joints at their bind pose, flat, as
     in the glTF) or one root joint, and one BlendShape per morph target."""
     from pxr import Gf, Sdf, UsdSkel, Vt
@@ -140,8 +142,11 @@ def _skel(stage, root_path, mesh, m) -> None:  # noqa: ANN001
         binding.CreateBlendShapeTargetsRel().SetTargets(targets)
 
 
-def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None):  # noqa: ANN201
-    """Build an in-memory ``Usd.Stage`` for the package (textures referenced, not written)."""
+def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
+    """Build an in-memory ``Usd.Stage`` for the package (textures referenced, not written).
+
+    Keep the returned stage referenced while using its layers (they die with it).
+    """
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
     opt = options or UsdOptions()
@@ -216,7 +221,7 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None):  # noqa
     reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
     tdir = f"./{opt.texture_dir}/" if opt.texture_dir else "./"
 
-    def texture(name: str, scale: tuple, bias: tuple):  # noqa: ANN202
+    def texture(name: str, scale: tuple, bias: tuple) -> Any:
         tex = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild(_ident(name)))
         tex.CreateIdAttr("UsdUVTexture")
         tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
@@ -345,7 +350,7 @@ def write_usd(
     return written
 
 
-def _export_via_temp(layer, path: Path, fmt: str) -> Path:  # noqa: ANN001
+def _export_via_temp(layer: Any, path: Path, fmt: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".{fmt}", dir=path.parent)
     os.close(fd)
@@ -387,7 +392,7 @@ def usdz_bytes(entries: list[tuple[str, bytes]]) -> bytes:
     return buf.getvalue()
 
 
-def _write_usdz(stage, pkg: WrinklePackage, path: Path, opt: UsdOptions) -> Path:  # noqa: ANN001
+def _write_usdz(stage: Any, pkg: WrinklePackage, path: Path, opt: UsdOptions) -> Path:
     """A usdz holding a usdc root layer and the PNGs it references."""
     with tempfile.TemporaryDirectory(prefix="wrinklepipe-usdz-") as work:
         layer_path = Path(work) / f"{path.stem}.usdc"
