@@ -237,21 +237,21 @@ def compute_vertex_ids(
         # Representatives of settled cells that lie near a cell face may link across it.
         rep_idx = np.flatnonzero(is_rep if dense_pt is None else is_rep & ~dense_pt)
         margin = 1.5 * tol / cell
-        frs = []
-        near = np.zeros(len(rep_idx), dtype=bool)
+        # Near a face: |frac - 1/2| > 1/2 - margin on some axis (contiguous passes, no gathers).
+        dist = None
         for a in range(3):
-            ga = g[a][rep_idx]
-            ga -= np.floor(ga)
-            frs.append(ga)
-            near |= ga < margin
-            near |= ga > 1.0 - margin
-        rep_idx = rep_idx[near]
+            fr = g[a] - q[a]
+            fr -= 0.5
+            np.abs(fr, out=fr)
+            dist = fr if dist is None else np.maximum(dist, fr, out=dist)
+        near_all = dist > 0.5 - margin
+        rep_idx = rep_idx[near_all[rep_idx]]
         if active is None and ukeys is not None and len(rep_idx):
             # Level 0 sees every point: keep only candidates whose neighbour cell across a
             # near face is occupied at all (exact: a partner within tol lies in such a cell).
             sides = []
-            for fr in frs:
-                fr = fr[near]
+            for a in range(3):
+                fr = g[a][rep_idx] - q[a][rep_idx]
                 sides.append((fr > 1.0 - margin).astype(np.int64) - (fr < margin))
             qs = [qa[rep_idx] for qa in q]
             rep_idx = rep_idx[_neighbour_occupied(qs, sides, ukeys, bits)]
