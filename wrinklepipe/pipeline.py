@@ -543,6 +543,18 @@ def validate_output(
     return _scrub({"status": "ran", "counts": counts, "issues": issues}, replacements)
 
 
+def _validation_html(validation: dict[str, Any], table: Any) -> str:
+    if validation.get("status") != "ran":
+        return f"<p>{html.escape(str(validation.get('reason', 'skipped')))}</p>"
+    counts = validation.get("counts", {})
+    head = ", ".join(f"{v} {k}(s)" for k, v in sorted(counts.items()))
+    rows = [
+        [i.get("severity", ""), i.get("code", ""), i.get("message", ""), i.get("pointer", "")]
+        for i in validation.get("issues", [])
+    ]
+    return f"<p>{html.escape(head)}</p>" + table(rows, ["severity", "code", "message", "where"])
+
+
 def report_html(report: dict[str, Any]) -> str:
     """A static, self-contained HTML summary of report.json (textures linked, not embedded)."""
     esc = html.escape
@@ -587,8 +599,13 @@ def report_html(report: dict[str, Any]) -> str:
         ),
         "<h2>Stages</h2><ul>",
         "".join(f"<li>{esc(n)}</li>" for n in report["notes"]),
-        "</ul><h2>Validation</h2>",
-        f"<pre>{esc(json.dumps(report['validation'], indent=2, sort_keys=True))}</pre>",
+        "</ul><h2>Block compression</h2>",
+        table(
+            [[g, c["requested"], c["chosen"]] for g, c in sorted(report["compression"].items())],
+            ["maps", "requested", "chosen"],
+        ),
+        "<h2>Validation</h2>",
+        _validation_html(report["validation"], table),
         "<h2>Outputs</h2>",
         table(
             [[o["file"], o["bytes"], o["sha256"][:16]] for o in report["outputs"]],
