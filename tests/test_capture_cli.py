@@ -159,3 +159,23 @@ def test_mismatched_counts(small, capsys):
 def test_all_black_photo(small, capsys):
     msg = _bad(small, capsys, "n.png", "black.png", "a.json", "b.csv")
     assert "black.png" in msg and "all black" in msg
+
+
+def test_eight_bit_srgb_photos(session, tmp_path):
+    # Camera-style 8-bit sRGB files: decoded to linear before the ratio (--colorspace srgb, as
+    # 'auto' would pick for an untagged JPEG).
+    s8 = tmp_path / "s8"
+    s8.mkdir()
+    for name in ("neutral", "expression"):
+        lin = read_image(session / f"{name}.png")[0][..., 0].astype(np.float64)
+        enc = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
+        write_image(s8 / f"{name}.png", enc, bits=8)
+    for f in ("neutral.json", "expression.csv", "texture.json", "roi.png", "truth_texture.png"):
+        (s8 / f).write_bytes((session / f).read_bytes())
+    out = tmp_path / "o8"
+    assert main(_args(s8, out) + ["--colorspace", "srgb"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    truth = report["orientation"]["integrable"]["truth"]
+    assert truth["tilt"]["mean"] < 0.5 * truth["flat"]["mean"]
+    assert truth["angular"]["mean"] < 0.6 * truth["flat"]["mean"]  # measured 4.0 vs 7.4
+    assert report["ratio"]["exposure_factor"] == pytest.approx(0.93 / 0.9, abs=3e-3)

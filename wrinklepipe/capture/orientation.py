@@ -20,12 +20,20 @@ indistinguishable (``h`` and ``-h`` give the same R). Methods here:
     slope changes sign only by passing through zero, where ``R = 1/sqrt(1 + slope^2)`` peaks
     (a furrow's floor, a shoulder's crest), never at a minimum of R (the steepest line, where
     the paper's gradient flips). So the lean is propagated pixel to pixel over a maximum
-    spanning tree of the crease pixels (steepest pairs first), continuing across every pair
-    except those across which R peaks (along the crease axis), where it flips. That leaves one
-    free sign per connected crease: the concave/convex ambiguity proper (``h`` and ``-h`` are
-    equally integrable and give the same R). It is set by the furrow rule's vote over the whole
-    crease, weighted by slope, which is far more robust than the furrow rule per pixel and
-    also right on shoulders and wide creases where the per-pixel rule fails.
+    spanning tree of the crease pixels, continuing across every pair except those across which
+    R has a concave peak along the crease axis, where it flips (flip links enter the tree first,
+    then the steepest pairs). That leaves one free sign per connected crease: the
+    concave/convex ambiguity proper (``h`` and ``-h`` are equally integrable and give the same
+    R). It is set by integrating the crease's slope field alone (Poisson, on its bounding box)
+    and choosing the sign that makes it a dent below its flat surroundings (``crease_sign =
+    "dent"``; ``"vote"`` uses the furrow rule's slope-weighted majority instead). One decision
+    per crease is far more robust than the furrow rule per pixel, and right on shoulders and
+    wide creases where the per-pixel rule fails.
+
+    Known limits: where two creases meet (a "V" of crow's feet) or at a crease's end the
+    propagation can take a path that misses the floor line, leaving part of a crease flipped;
+    a shoulder separated from its furrow by a flat gap (wider than the deadband) is its own
+    crease and is made a dent too.
 
 :func:`integrability_residual` reports how far a normal map is from a gradient field (Poisson
 integration with Neumann borders, solved with a DCT), a diagnostic for any of the three.
@@ -55,6 +63,10 @@ class OrientationOptions:
     furrow_sigma: float = 3.0
     #: Pixels tilted less than this (degrees) are not part of a crease segment.
     min_tilt_deg: float = 2.0
+    #: ``integrable``: how the one free sign per crease is chosen: ``dent`` (the crease,
+    #: integrated, lies below its surroundings) or ``vote`` (the furrow rule's slope-weighted
+    #: majority over the crease).
+    crease_sign: str = "dent"
 
 
 def _grad(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -98,6 +110,10 @@ def furrow_direction(r: np.ndarray, axis: np.ndarray, furrow_sigma: float) -> np
     return axis * sign[..., None]
 
 
+#: Strength multiplier of flip links (R peaks) in the spanning tree.
+FLIP_PRIORITY = 100.0
+
+
 def _edge_preferences(
     r: np.ndarray, axis: np.ndarray, mag: np.ndarray, member: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -113,7 +129,16 @@ def _edge_preferences(
     """
     h, w = member.shape
     idx = np.arange(h * w).reshape(h, w)
-    d_row, d_col = np.gradient(np.asarray(r, np.float64))
+    rr = np.asarray(r, np.float64)
+    d_row, d_col = np.gradient(rr)
+    # Curvature of R along the axis (on R smoothed a little more): a real peak is concave;
+    # noise wiggles on the flat bottom of a steepest line (where R is convex) are not peaks.
+    rs = rr
+    s_row, s_col = np.gradient(rs)
+    s_rr, s_rc = np.gradient(s_row)
+    _, s_cc = np.gradient(s_col)
+    ax, ay = axis[..., 0], axis[..., 1]
+    concave = (ax * ax * s_cc + 2 * ax * ay * s_rc + ay * ay * s_rr) < 0
     out_a, out_b, out_f, out_s = [], [], [], []
     for dr, dc, g in ((0, 1, d_col), (1, 0, d_row)):
         hh, ww = h - dr, w - dc
@@ -121,10 +146,13 @@ def _edge_preferences(
         gi = g[:hh, :ww][ok]
         gj = g[dr:, dc:][ok]
         across = np.abs(axis[..., 1 if dr else 0])[:hh, :ww][ok] > 0.5
+        peak = concave[:hh, :ww][ok] | concave[dr:, dc:][ok]
         out_a.append(idx[:hh, :ww][ok])
         out_b.append(idx[dr:, dc:][ok])
-        out_f.append(across & (gi > 0) & (gj < 0))
-        out_s.append(mag[:hh, :ww][ok] + mag[dr:, dc:][ok])
+        flip = across & (gi > 0) & (gj < 0) & peak
+        out_f.append(flip)
+        # Peaks are the decisive evidence: linked first (before any path around a crease end).
+        out_s.append((mag[:hh, :ww][ok] + mag[dr:, dc:][ok]) * np.where(flip, FLIP_PRIORITY, 1.0))
     a = np.concatenate(out_a)
     b = np.concatenate(out_b)
     flat = axis.reshape(-1, 2)
@@ -184,6 +212,46 @@ def orient_axis_field(
     return axis * sign.reshape(h, w)[..., None], labels.reshape(h, w)
 
 
+#: Regions (largest slope mass first) whose sign is set by integrating them; the rest vote.
+MAX_INTEGRATED_REGIONS = 256
+#: Flat margin (pixels) around a region's bounding box when it is integrated.
+REGION_MARGIN = 4
+
+
+def _dent_signs(fields: np.ndarray, labels: np.ndarray, n: int, signs: np.ndarray) -> np.ndarray:
+    """Per region: the sign that makes the region's integrated height a dent.
+
+    Each region's slope field alone (zero around it) is integrated (Poisson, on its bounding box
+    with a flat margin); the crease is a furrow when its pixels lie below the flat margin, so
+    the sign is flipped where the mean height of the region, relative to the margin, is > 0.
+    Regions beyond ``MAX_INTEGRATED_REGIONS`` keep their furrow vote.
+    """
+    h, w = labels.shape
+    out = signs.copy()
+    member = labels >= 0
+    mag = np.hypot(fields[..., 0], fields[..., 1])
+    mass = np.bincount(labels[member], weights=mag[member], minlength=n)
+    objs = ndimage.find_objects(labels + 1)  # slices per region (label k at index k)
+    order = np.argsort(-mass, kind="stable")[:MAX_INTEGRATED_REGIONS]
+    for k in order:  # one small Poisson solve per region (bounded count), not per pixel
+        sl = objs[k] if k < len(objs) else None
+        if sl is None or mass[k] <= 0:
+            continue
+        m = REGION_MARGIN
+        r0, r1 = max(sl[0].start - m, 0), min(sl[0].stop + m, h)
+        c0, c1 = max(sl[1].start - m, 0), min(sl[1].stop + m, w)
+        inside = labels[r0:r1, c0:c1] == k
+        f = np.where(inside[..., None], fields[r0:r1, c0:c1], 0.0) * signs[k]
+        hh = integrate_poisson(-f[..., 0], -f[..., 1])
+        ring = ~member[r0:r1, c0:c1]
+        if not ring.any() or not inside.any():
+            continue
+        depth = float(hh[inside].mean() - hh[ring].mean())
+        if depth > 0:
+            out[k] = -signs[k]
+    return out
+
+
 def integrable_direction(
     r: np.ndarray,
     nz: np.ndarray,
@@ -209,6 +277,8 @@ def integrable_direction(
         minlength=n,
     )
     signs = np.where(votes < 0, -1.0, 1.0)
+    if options.crease_sign == "dent":
+        signs = _dent_signs(oriented * (tan_t * member)[..., None], labels, n, signs)
     out = fallback.copy()
     out[member] = oriented[member] * signs[lab][:, None]
     return out

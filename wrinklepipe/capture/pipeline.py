@@ -12,6 +12,7 @@ Steps (Dutreve et al. section 3, with the guards and the orientation priors of t
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,6 +41,21 @@ class CaptureOptions:
     rotate_normals: bool = True
     #: Also compute the other orientation methods (for the report's side-by-side comparison).
     compare_methods: bool = True
+    #: Factor applied to every Gaussian sigma (ratio blur, structure tensor, furrow scale), which
+    #: are given for a photo up to ``SCALE_REFERENCE_PX`` wide; ``None``: ``max(1, width / 384)``
+    #: (wrinkles are wider in pixels in a larger photo of the same face).
+    scale: float | None = None
+
+
+#: Photo width (pixels) at which the sigmas apply unscaled.
+SCALE_REFERENCE_PX = 384.0
+
+
+def sigma_scale(width: int, options: CaptureOptions) -> float:
+    """The factor applied to the sigmas for a photo ``width`` pixels wide."""
+    if options.scale is not None:
+        return float(options.scale)
+    return max(1.0, width / SCALE_REFERENCE_PX)
 
 
 @dataclass(frozen=True)
@@ -77,6 +93,7 @@ class CaptureResult:
     warp_expression: WarpStats
     warp_texture: WarpStats
     integrability: dict[str, float]  # method -> residual in the ROI (photo space)
+    sigma_scale: float = 1.0  # factor the sigmas were multiplied by
 
     @property
     def normal(self) -> np.ndarray:
@@ -119,6 +136,13 @@ def capture(
     i0 = np.asarray(neutral, np.float32)
     i1 = np.asarray(expression, np.float32)
     h, w = i0.shape
+    k = sigma_scale(w, o)
+    ratio_opts = dataclasses.replace(o.ratio, blur_sigma=o.ratio.blur_sigma * k)
+    orient_opts = dataclasses.replace(
+        o.orientation,
+        structure_sigma=o.orientation.structure_sigma * k,
+        furrow_sigma=o.orientation.furrow_sigma * k,
+    )
     roi_m = np.ones((h, w), np.float32) if roi is None else np.asarray(roi, np.float32)
 
     # 1. expression -> neutral.
@@ -127,17 +151,12 @@ def capture(
     warped, inside = W.sample(i1, map1)
 
     # 2-3. ratio, tilt, orientation.
-    rr = ratio_image(i0, warped, inside, roi_m, nz_neutral, o.ratio)
+    rr = ratio_image(i0, warped, inside, roi_m, nz_neutral, ratio_opts)
     methods = METHODS if o.compare_methods else (o.orientation.method,)
     photo: dict[str, np.ndarray] = {}
     integrability: dict[str, float] = {}
     for m in methods:  # up to three methods, each vectorised over the image
-        opts = OrientationOptions(
-            method=m,
-            structure_sigma=o.orientation.structure_sigma,
-            furrow_sigma=o.orientation.furrow_sigma,
-            min_tilt_deg=o.orientation.min_tilt_deg,
-        )
+        opts = dataclasses.replace(orient_opts, method=m)
         n = apply_roi(orient(rr.ratio, rr.nz, opts, roi_m), roi_m)
         photo[m] = n
         integrability[m] = integrability_residual(n, roi_m)
@@ -168,4 +187,5 @@ def capture(
         warp_expression=_stats(map1, lm_neutral, lm_expression),
         warp_texture=_stats(map2, lm_texture, lm_photo),
         integrability=integrability,
+        sigma_scale=k,
     )

@@ -140,7 +140,9 @@ def ratio_image(
     exposure = 1.0
     sel = valid & in_roi
     if o.normalize_exposure and sel.any():
-        level = skin_level(raw[sel])
+        # On the blurred ratio: quantised photos give a spiky histogram of raw ratios.
+        smooth = _masked_blur(raw, valid.astype(np.float64), max(o.blur_sigma, 1.0))
+        level = skin_level(smooth[sel])
         if level > 1e-6:
             exposure = level
     r = np.where(valid, raw / exposure, 1.0)

@@ -96,6 +96,7 @@ def build_report(
             "fraction_outside_photo": float(1.0 - result.inside_texture.mean()),
         },
         "orientation": methods,
+        "sigma_scale": result.sigma_scale,
     }
     return _round_tree(report)
 

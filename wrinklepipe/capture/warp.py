@@ -29,7 +29,7 @@ COARSE_MARGIN = 4
 
 #: ``dense_map(step=0)`` evaluates the spline at every pixel up to this many pixels, on a
 #: 2-pixel grid above.
-EXACT_PIXELS = 4096 * 1024
+EXACT_PIXELS = 1024 * 1024
 
 
 @dataclass(frozen=True)

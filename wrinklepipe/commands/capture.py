@@ -81,7 +81,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="auto",
         help="how photo values are encoded (auto: sRGB unless tagged linear or float)",
     )
-    p.add_argument("--blur", type=float, default=1.0, help="Gaussian blur of R, pixels (1.0)")
+    p.add_argument(
+        "--blur", type=float, default=1.0, help="Gaussian blur of R, pixels before --scale (1.0)"
+    )
     p.add_argument(
         "--dark", type=float, default=0.02, help="neutral luminance below which R is not taken"
     )
@@ -90,7 +92,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--no-exposure", action="store_true", help="do not normalise the flash/exposure ratio"
     )
     p.add_argument(
-        "--furrow-sigma", type=float, default=3.0, help="crease half-width, pixels (3.0)"
+        "--furrow-sigma",
+        type=float,
+        default=3.0,
+        help="crease half-width, pixels before --scale (3.0)",
+    )
+    p.add_argument(
+        "--scale",
+        type=float,
+        default=None,
+        help="multiply the blur/furrow sigmas (default: max(1, photo width / 384))",
     )
     p.add_argument("--truth", metavar="MAP", help="a true normal map (texture space) to score")
     p.add_argument("--example", metavar="DIR", help="write a synthetic session into DIR and stop")
@@ -211,7 +222,10 @@ def run(args: argparse.Namespace) -> int:
     ]
     if missing:
         raise InputError([Problem("<arguments>", f"missing {m}") for m in missing])
-    for flag, val in (("--blur", args.blur), ("--dark", args.dark), ("--nz", args.nz)):
+    checks = [("--blur", args.blur), ("--dark", args.dark), ("--nz", args.nz)]
+    if args.scale is not None:
+        checks.append(("--scale", args.scale))
+    for flag, val in checks:
         if not np.isfinite(val) or val < 0:
             raise input_error("<arguments>", f"{flag} must be a finite number >= 0, got {val}")
     if not 0 < args.nz <= 1:
@@ -296,6 +310,7 @@ def run(args: argparse.Namespace) -> int:
             deadband=args.deadband,
         ),
         orientation=OrientationOptions(method=args.orientation, furrow_sigma=args.furrow_sigma),
+        scale=args.scale,
     )
     with status("capturing"):
         res = capture(i0, i1, pn, pe, pp, pt, tuple(tex_shape), roi, nz, options)
@@ -335,6 +350,7 @@ def run(args: argparse.Namespace) -> int:
         "nz": args.nz,
         "nz_regions": list(args.nz_region),
         "colorspace": args.colorspace,
+        "scale": args.scale,
     }
     report = build_report(res, inputs, opts, outputs, te)
     input_files = [v for k, v in inputs.items()]

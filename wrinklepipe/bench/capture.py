@@ -1,0 +1,86 @@
+"""Benchmark of ``wrinklepipe capture`` on the synthetic session, with its accuracy.
+
+Baseline: one Gaussian blur (sigma 1) of the neutral photo, the cheapest whole-image step of the
+stage. Rows: the thin-plate warp of the expression photo, the ratio image, each orientation
+method, the warp into texture space, and the whole stage (all three methods, as the CLI runs it).
+``extra`` holds the accuracy against the synthetic truth (degrees, texture space, ROI).
+"""
+
+from __future__ import annotations
+
+from scipy import ndimage
+
+from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
+from wrinklepipe.capture import CaptureOptions, OrientationOptions, capture
+from wrinklepipe.capture import warp as W
+from wrinklepipe.capture.evaluate import errors
+from wrinklepipe.capture.orientation import METHODS, orient
+from wrinklepipe.capture.ratio import ratio_image
+from wrinklepipe.capture.synthetic import SceneOptions, make_scene
+
+
+@benchmark("capture", "ratio-image capture: warps, ratio, orientation methods, whole stage")
+def bench_capture(quick: bool) -> BenchResult:
+    size, tex = (192, 128) if quick else (1024, 512)
+    sc = make_scene(SceneOptions(size=size, texture_size=tex))
+    repeat = 2 if quick else 3
+    mpix = size * size / 1e6
+    res = BenchResult(
+        "capture",
+        f"photos {size}^2, texture {tex}^2, {len(sc.lm_neutral)} landmarks"
+        + (" (quick)" if quick else ""),
+        baseline="gaussian blur of the photo",
+    )
+
+    def row(step: str, fn: object, note: str = "") -> None:
+        t = median_time(fn, repeat)  # type: ignore[arg-type]
+        res.rows.append(BenchRow(step, t, mpix_per_s=mpix / t if t > 0 else None, note=note))
+
+    row("gaussian blur of the photo", lambda: ndimage.gaussian_filter(sc.neutral, 1.0))
+    warp1 = W.fit_tps(sc.lm_neutral, sc.lm_expression)
+    row(
+        "warp expression -> neutral",
+        lambda: W.sample(sc.expression, W.dense_map(warp1, sc.neutral.shape)),
+        "TPS at every pixel + bilinear sampling",
+    )
+    warped, inside = W.sample(sc.expression, W.dense_map(warp1, sc.neutral.shape))
+    row("ratio image", lambda: ratio_image(sc.neutral, warped, inside, sc.roi))
+    rr = ratio_image(sc.neutral, warped, inside, sc.roi)
+    for m in METHODS:
+        opts = OrientationOptions(method=m)
+        row(f"orientation {m}", lambda opts=opts: orient(rr.ratio, rr.nz, opts, sc.roi))
+    warp2 = W.fit_tps(sc.lm_texture, sc.lm_neutral)
+    row("warp photo -> texture", lambda: W.dense_map(warp2, (tex, tex)))
+
+    def whole() -> object:
+        return capture(
+            sc.neutral,
+            sc.expression,
+            sc.lm_neutral,
+            sc.lm_expression,
+            sc.lm_neutral,
+            sc.lm_texture,
+            (tex, tex),
+            sc.roi,
+            options=CaptureOptions(),
+        )
+
+    row("whole stage (3 methods)", whole, "includes leave-one-out landmark fits")
+    out = whole()
+    table = {m: errors(n, sc.truth_texture, sc.roi_texture) for m, n in out.normal_texture.items()}
+    res.extra = {
+        "accuracy_deg": {
+            m: {
+                "tilt_mean": round(e["tilt"]["mean"], 3),
+                "angular_mean": round(e["angular"]["mean"], 3),
+                "angular_p95": round(e["angular"]["p95"], 3),
+                "crease_angular_mean": round(e["crease_angular"]["mean"], 3),
+                "orientation_correct": round(e["orientation_correct"], 4),
+            }
+            for m, e in table.items()
+        },
+        "flat_map_mean_deg": round(table["gradient"]["flat"]["mean"], 3),
+        "default_method": OrientationOptions().method,
+        "best_method": min(table, key=lambda m: table[m]["angular"]["mean"]),
+    }
+    return res.finish()
