@@ -189,7 +189,8 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     if why:
         notes.append(f"ignored normals ({why})")
 
-    # Render vertices: distinct (point, uv, normal) corners, numbered by first appearance.
+    # Render vertices: distinct (point, uv, normal) corners, in point order (so a mesh without
+    # splits keeps its points' order), copies of a point ordered by first appearance.
     cols = [fvi[:, None].astype(np.float64)]
     if uv_c is not None:
         cols.append(uv_c)
@@ -198,7 +199,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     key = np.concatenate(cols, axis=1) + 0.0
     _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
     inv = inv.reshape(-1)
-    order = np.argsort(first, kind="stable")
+    order = np.lexsort((first, fvi[first]))
     rank = np.empty(len(order), np.int64)
     rank[order] = np.arange(len(order))
     corner_v = rank[inv]
@@ -231,7 +232,16 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
         nn /= np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-30)
         normals = nn
 
+    vertex_ids = None
+    vid_pv = api.GetPrimvar("wrinkle:vertexId")
+    if vid_pv and vid_pv.HasValue():
+        vid_c, why = _primvar_corners(vid_pv, time, counts, fvi, n_p, 1)
+        if vid_c is not None and np.all(vid_c >= 0) and np.all(vid_c == np.rint(vid_c)):
+            vertex_ids = vid_c[src, 0].astype(np.int64)
+        else:
+            notes.append("ignored primvars:wrinkle:vertexId" + (f" ({why})" if why else ""))
     mesh = Mesh(
+        vertex_ids=vertex_ids,
         positions=positions.astype(np.float32),
         indices=tris.astype(np.uint32),
         uvs=None if uvs is None else uvs.astype(np.float32),
