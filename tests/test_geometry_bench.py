@@ -1,4 +1,4 @@
-"""Smoke run of ``wrinklepipe bench geometry --quick`` (performance itself is the benchmark's job)."""
+"""Smoke run of ``wrinklepipe bench geometry --quick`` (speed itself is the benchmark's job)."""
 
 from __future__ import annotations
 
