@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from wrinklepipe.demo import character
 from wrinklepipe.normals import compress as cmp
@@ -156,3 +158,18 @@ def test_choose_format_picks_smallest_within_budget(demo_checks):
     assert cmp.choose_format(checks, loose).format == "bc1"  # 4 bpp
     tight = cmp.Budget(max_p99_deg=1e-6)
     assert cmp.choose_format(checks, tight) is None
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.integers(1, 200_000),
+    st.floats(0.1, 5.0),
+    st.integers(0, 2**31 - 1),
+)
+def test_error_stats_law(n, spread, seed):
+    """p99 is the exact nearest-rank value and max/mean match numpy, for any size."""
+    a = (np.random.default_rng(seed).gamma(1.5, spread, n)).astype(np.float32)
+    e = cmp.error_stats(a)
+    assert e.p99_deg == float(np.percentile(a, 99, method="inverted_cdf"))
+    assert e.max_deg == float(a.max())
+    assert e.mean_deg == pytest.approx(float(a.astype(np.float64).mean()), rel=1e-6)

@@ -249,15 +249,17 @@ def _sum(a: np.ndarray) -> float:
 def _p99_max(a: np.ndarray) -> tuple[float, float]:
     """Exact nearest-rank p99 and max of a flat float32 array without a full sort.
 
-    A strided sample gives a value ``lo`` safely below the p99; only the values >= lo (about
-    2 %) are collected and partially sorted. If the guess was too high, all values are used.
+    A sample of 65 536 values gives ``lo`` safely below the p99 (98th percentile of the
+    sample: ten standard errors below); only the values >= lo (about 2 %) are collected and
+    partially sorted. If the guess was too high, all values are used.
     """
     n = int(a.size)
     k = max(0, math.ceil(0.99 * n) - 1)
     lo = -np.inf
     if n > 1 << 16:
-        sample = a[:: n // (1 << 15)]
-        lo = _F(np.percentile(sample, 97.5))
+        # a fixed pseudo-random sample (a stride could alias with image columns)
+        idx = np.random.default_rng(0x5EED).integers(0, n, 1 << 16)
+        lo = _F(np.percentile(a[idx], 98.0))
     parts = _flat_parts(n)
     cand = np.concatenate(_pmap(lambda s: a[s][a[s] >= lo], parts))
     below = n - int(cand.size)
@@ -517,20 +519,20 @@ def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str) -> tuple[np.ndarray, int]:
     hx, hy, hz = p
     shape = hx.shape
     k = _F(127.5 / s)
-    r = _ws("r", shape)
+    r = _ws("f0", shape)
     if float(hz.min()) <= 0.0:
         np.maximum(hz, _F(5e-31), out=r)
         np.divide(k, r, out=r)
     else:
         np.divide(k, hz, out=r)
-    ux = np.multiply(hx, r, out=_ws("ux", shape))
+    ux = np.multiply(hx, r, out=_ws("f1", shape))
     uy = np.multiply(hy, r, out=r)
     lim = _F(127.5)
     if max(float(ux.max()), -float(ux.min()), float(uy.max()), -float(uy.min())) <= lim:
         clipped = 0  # the common case, from four reductions
     else:
-        a = np.abs(ux, out=_ws("a", shape))
-        b = np.abs(uy, out=_ws("b", shape))
+        a = np.abs(ux, out=_ws("f2", shape))
+        b = np.abs(uy, out=_ws("f3", shape))
         np.maximum(a, b, out=a)
         clipped = int(np.count_nonzero(np.greater(a, lim, out=_ws("m", shape, np.bool_))))
     # quantise: floor(clip(u + 128, 0, 255)) == round-half-up of 127.5 + u, clipped
@@ -542,7 +544,7 @@ def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str) -> tuple[np.ndarray, int]:
     lo, hi = (ux, uy) if px < py else (uy, ux)
     hi *= _F(1 << (abs(px - py) * 8))
     hi += lo  # exact: < 2^24
-    pix = _ws("pix", shape, np.uint32)
+    pix = _ws("u0", shape, np.uint32)
     np.copyto(pix, hi, casting="unsafe")
     if min(px, py):
         np.left_shift(pix, np.uint32(8 * min(px, py)), out=pix)
@@ -564,10 +566,10 @@ def _pd_measure_chunk(
     ix, iy = _BGRA_XY[fmt]
     kk = _F((255.0 / (2.0 * s)) ** 2)  # 1 / t^2
     kz = _F(255.0 / (2.0 * s))  # 1 / t
-    dx = np.subtract(raw[..., ix], _F(127.5), out=_ws("dx", shape), dtype=_F)
-    dy = np.subtract(raw[..., iy], _F(127.5), out=_ws("dy", shape), dtype=_F)
-    inv = np.multiply(dx, dx, out=_ws("inv", shape))
-    a = np.multiply(dy, dy, out=_ws("a", shape))
+    dx = np.subtract(raw[..., ix], _F(127.5), out=_ws("f0", shape), dtype=_F)
+    dy = np.subtract(raw[..., iy], _F(127.5), out=_ws("f1", shape), dtype=_F)
+    inv = np.multiply(dx, dx, out=_ws("f2", shape))
+    a = np.multiply(dy, dy, out=_ws("f3", shape))
     inv += a
     inv += kk
     np.sqrt(inv, out=inv)
