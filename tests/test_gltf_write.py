@@ -264,3 +264,23 @@ def test_vertex_ids_beyond_float_precision_refused(pkg, tmp_path):
     big = replace(pkg, mesh=replace(pkg.mesh, vertex_ids=pkg.mesh.vertex_ids + (1 << 24)))
     with pytest.raises(InputError, match="exact as FLOAT"):
         write_gltf(big, tmp_path, "x")
+
+
+def test_names_from_inputs_never_leave_the_folder(tmp_path):
+    from wrinklepipe.io.package import WeightCurves, safe_name
+    from wrinklepipe.pipeline import curve_files
+
+    asset = _tiny_asset()
+    asset = replace(asset, state_names=("../../evil",))
+    pkg = package_from_asset(asset)
+    write_gltf(pkg, tmp_path / "out", "t")
+    files = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*") if p.is_file())
+    assert all(f.startswith("out/") for f in files), files
+    assert "out/textures/wrinkle_.._.._evil.png" in files
+    assert pkg.meta["states"][0]["name"] == "../../evil"  # the name itself is kept
+    c = WeightCurves("../up/../x", np.zeros(1, np.float32), np.zeros((1, 1), np.float32))
+    assert sorted(curve_files(c, ["r"])) == ["curves/_up_.._x.csv", "curves/_up_.._x.json"]
+    assert safe_name("a/b", {"a_b"}) == "a_b_2"
+    bad = replace(pkg, textures=[replace(t, name="../x") for t in pkg.textures])
+    with pytest.raises(InputError, match="not a safe file name"):
+        write_gltf(bad, tmp_path / "o2", "t")

@@ -217,3 +217,21 @@ def test_bias_and_metadata_round_trip(pkg, tmp_path):
     u = read_usd(tmp_path / "u.usda")
     assert np.array_equal(g.mesh.colors, colors) and np.array_equal(u.mesh.colors, colors)
     assert u.meta["drivers"] == g.meta["drivers"] == meta["drivers"]
+
+
+def test_several_weight_curves_keep_names_and_order(pkg, tmp_path):
+    from dataclasses import replace
+
+    from wrinklepipe.io.package import WeightCurves
+
+    c0 = pkg.curves[0]
+    c1 = WeightCurves("z blink/test", np.array([0.0, 0.5], np.float32), c0.values[:2][::-1])
+    c2 = WeightCurves("a_second", np.array([0.25], np.float32), c0.values[3:4])
+    p2 = replace(pkg, curves=[c0, c1, c2])
+    write_gltf(p2, tmp_path / "g", "x")
+    g = read_gltf(tmp_path / "g" / "x.gltf")
+    write_usd(g, tmp_path / "u.usda")
+    u = read_usd(tmp_path / "u.usda")
+    assert [c.name for c in u.curves] == [c.name for c in g.curves] == [c0.name, c1.name, c2.name]
+    for a, b in zip(u.curves, p2.curves):
+        assert np.array_equal(a.times, b.times) and np.array_equal(a.values, b.values)

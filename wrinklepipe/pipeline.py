@@ -37,6 +37,7 @@ from wrinklepipe.io.package import (
     WrinklePackage,
     package_from_asset,
     resize_normals_pd,
+    safe_name,
 )
 
 # ------------------------------------------------------------------------------------------------
@@ -375,8 +376,11 @@ def _fmt(x: float) -> str:
     return format(float(np.float32(x)), ".9g")
 
 
-def curve_files(curve: WeightCurves, regions: list[str]) -> dict[str, bytes]:
+def curve_files(
+    curve: WeightCurves, regions: list[str], taken: set[str] | None = None
+) -> dict[str, bytes]:
     """A weight curve as ``curves/NAME.json`` and ``curves/NAME.csv`` (time, then the regions)."""
+    stem = safe_name(curve.name, taken)  # the name stays exact inside the JSON
     rows = ["time," + ",".join(regions)]
     for t, row in zip(curve.times, curve.values):
         rows.append(",".join([_fmt(t)] + [_fmt(v) for v in row]))
@@ -388,8 +392,8 @@ def curve_files(curve: WeightCurves, regions: list[str]) -> dict[str, bytes]:
         "interpolation": "linear",
     }
     return {
-        f"curves/{curve.name}.csv": ("\n".join(rows) + "\n").encode("utf-8"),
-        f"curves/{curve.name}.json": dumps_json(js).encode("utf-8"),
+        f"curves/{stem}.csv": ("\n".join(rows) + "\n").encode("utf-8"),
+        f"curves/{stem}.json": dumps_json(js).encode("utf-8"),
     }
 
 
@@ -651,8 +655,9 @@ def build_outputs(
         files.update(comp)
         notes += n
     regions = [r["name"] for r in pkg.meta["regions"]]
+    taken: set[str] = set()
     for c in pkg.curves:
-        files.update(curve_files(c, regions))
+        files.update(curve_files(c, regions, taken))
     return files, notes, choices
 
 
@@ -872,9 +877,13 @@ def export_files(pkg: WrinklePackage, engine: str) -> tuple[dict[str, bytes], li
         tex_files[t.name] = rel
     meta = shipped.meta
     regions = [r["name"] for r in meta["regions"]]
+    taken: set[str] = set()
+    curve_paths = []
     for c in pkg.curves:
-        for rel, data in curve_files(c, regions).items():
+        for rel, data in curve_files(c, regions, taken).items():
             files[f"{engine}/{rel}"] = data
+            if rel.endswith(".csv"):
+                curve_paths.append(f"{engine}/{rel}")
     setup = {
         "engine": engine,
         "convention": preset.convention,
@@ -890,7 +899,7 @@ def export_files(pkg: WrinklePackage, engine: str) -> tuple[dict[str, bytes], li
         },
         "regions": meta["regions"],
         "expressions": meta["expressions"],
-        "curves": [f"{engine}/curves/{c.name}.csv" for c in pkg.curves],
+        "curves": curve_paths,
         "notes": notes,
     }
     files[f"{engine}/wrinkle_setup.json"] = dumps_json(setup).encode("utf-8")

@@ -27,6 +27,7 @@ from wrinklepipe.io.package import (
     WeightCurves,
     WrinklePackage,
     png_pixels,
+    safe_name,
 )
 
 _COMPONENTS = {
@@ -320,6 +321,7 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
     # -- textures ---------------------------------------------------------------------------
     textures: list[PackedTexture] = []
     by_image: dict[int, str] = {}
+    taken: set[str] = set()
 
     def tex(info: Any, key: str, role: str) -> str:
         if not isinstance(info, dict) or "index" not in info:
@@ -327,8 +329,7 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
         src = _texture_image(r, info["index"], key)
         if src not in by_image:
             name, px = r.image(src)
-            if any(t.name == name for t in textures):
-                name = f"{name}_{src}"
+            name = safe_name(name, taken)
             textures.append(PackedTexture(name, px, role))
             by_image[src] = name
         return by_image[src]
@@ -337,7 +338,10 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
         raise r.err("material has no normalTexture (the base normal map)", "/materials/0")
     base_name = tex(mats[0]["normalTexture"], "/materials/0/normalTexture", "base_normal")
     if base_name != "base_normal":
+        if "base_normal" in taken:
+            raise r.err("an image other than the base normal map is named 'base_normal'")
         textures[-1].name = "base_normal"
+        taken.add("base_normal")
         by_image = {k: ("base_normal" if v == base_name else v) for k, v in by_image.items()}
     try:
         states = [

@@ -30,7 +30,13 @@ import numpy as np
 
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.package import EXTENSION, MAX_FLOAT_ID, WrinklePackage, png_bytes
+from wrinklepipe.io.package import (
+    EXTENSION,
+    MAX_FLOAT_ID,
+    WrinklePackage,
+    png_bytes,
+    safe_name,
+)
 
 POINTER_EXTENSION = "KHR_animation_pointer"
 WEIGHTS_POINTER = f"/materials/0/extensions/{EXTENSION}/weights"
@@ -208,6 +214,8 @@ def gltf_document(
     images, textures, files = [], [], {}
     tex_index: dict[str, int] = {}
     for t in pkg.textures:
+        if safe_name(t.name) != t.name:
+            raise input_error(pkg.name, f"texture name {t.name!r} is not a safe file name")
         data = png_bytes(t.pixels)
         img: dict[str, Any] = {"name": t.name}
         if embed_images:

@@ -29,6 +29,22 @@ CHANNELS = "rgba"
 MAX_FLOAT_ID = 1 << 24
 
 
+def safe_name(name: str, taken: set[str] | None = None) -> str:
+    """A file stem made from ``name``: letters, digits, ``_ . -`` only, no leading dot, unique
+    within ``taken`` (which it updates). Texture and curve files are named with it, so names
+    from a manifest or a foreign glTF can never point outside the output folder."""
+    import re
+
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)).lstrip(".") or "unnamed"
+    if taken is not None:
+        base, i = stem, 1
+        while stem in taken:
+            i += 1
+            stem = f"{base}_{i}"
+        taken.add(stem)
+    return stem
+
+
 @dataclass
 class PackedTexture:
     """One stored texture: integer pixels ``[H, W, C]`` (uint8/uint16), row 0 = top (glTF v=0)."""
@@ -203,6 +219,7 @@ def package_from_asset(
     scale = float(asset.pd_scale) if asset.encoding in ("pd", "diff") else 1.0
     base = model.normalize(asset.base)
     textures = [PackedTexture("base_normal", _q(0.5 + 0.5 * base, opt.bits), "base_normal")]
+    taken = {"base_normal"}
     states_meta = []
     for k, name in enumerate(asset.state_names):
         st = model.normalize(asset.states[k])
@@ -210,7 +227,9 @@ def package_from_asset(
         if b.shape[:2] != st.shape[:2]:
             b = resize_normals_pd(base, st.shape[0], st.shape[1])
         tex = PackedTexture(
-            f"wrinkle_{name}", _q(encode_state(b, st, asset.encoding, scale), opt.bits), "state"
+            safe_name(f"wrinkle_{name}", taken),
+            _q(encode_state(b, st, asset.encoding, scale), opt.bits),
+            "state",
         )
         textures.append(tex)
         states_meta.append({"name": name, "texture": tex.name})
@@ -219,7 +238,7 @@ def package_from_asset(
     mask_tex, table = pack_masks(masks, names, opt.mask_layout, [r.side for r in asset.regions])
     mask_names = []
     for i, t in enumerate(mask_tex):
-        mask_names.append(f"mask_{i}")
+        mask_names.append(safe_name(f"mask_{i}", taken))
         textures.append(PackedTexture(mask_names[-1], _q(t, 8), "mask"))
     meta: dict[str, Any] = {
         "encoding": asset.encoding,

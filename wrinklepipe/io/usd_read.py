@@ -18,7 +18,13 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.package import PackedTexture, WeightCurves, WrinklePackage, png_pixels
+from wrinklepipe.io.package import (
+    PackedTexture,
+    WeightCurves,
+    WrinklePackage,
+    png_pixels,
+    safe_name,
+)
 from wrinklepipe.io.usd_write import API_NAME, register_schema
 
 
@@ -180,7 +186,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     textures: list[PackedTexture] = []
 
     def add_texture(asset: Any, key: str, role: str, name: str | None = None) -> str:
-        name = name or _stem(asset)
+        name = name or safe_name(_stem(asset))
         if not any(t.name == name for t in textures):
             data = _asset_bytes(path, asset, file, key, opt)
             textures.append(PackedTexture(name, png_pixels(data, f"{file} {key}"), role))
@@ -293,11 +299,15 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     )
     if first is not None:
         curves.append(first)
-    for attr in sorted(mat_prim.GetAttributes(), key=lambda a: a.GetName()):
-        if attr.GetName().startswith("wrinkle:curves:"):
-            c = curve(attr, attr.GetName().split(":", 2)[2])
-            if c is not None:
-                curves.append(c)
+    order = mat_prim.GetAttribute("wrinkle:curveNames")
+    names = [str(n) for n in order.Get()] if order and order.HasAuthoredValue() else []
+    for i, curve_name in enumerate(names[1:], start=1):
+        attr = mat_prim.GetAttribute(f"wrinkle:curves:curve{i}")
+        if not attr:
+            raise input_error(file, f"wrinkle:curves:curve{i} missing", str(mat_prim.GetPath()))
+        c = curve(attr, curve_name)
+        if c is not None:
+            curves.append(c)
     del Sdf
     name = stage.GetDefaultPrim().GetName() if stage.GetDefaultPrim() else path.stem
     return WrinklePackage(name, mesh, textures, meta, curves)

@@ -34,7 +34,7 @@ import numpy as np
 from wrinklepipe.asset import Mesh
 from wrinklepipe.atomic import check_not_input, write_bytes
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.package import MAX_FLOAT_ID, WrinklePackage, png_bytes
+from wrinklepipe.io.package import MAX_FLOAT_ID, WrinklePackage, png_bytes, safe_name
 from wrinklepipe.paths import SCHEMAS_DIR
 
 API_NAME = "WrinkleMapsAPI"
@@ -152,6 +152,9 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
     opt = options or UsdOptions()
     register_schema()
     m = pkg.mesh
+    for t in pkg.textures:
+        if safe_name(t.name) != t.name:
+            raise input_error(pkg.name, f"texture name {t.name!r} is not a safe file name")
     if m.uvs is None or m.normals is None or m.tangents is None or m.vertex_ids is None:
         raise input_error(pkg.name, "USD output needs UVs, normals, tangents and vertex IDs")
     if int(np.max(m.vertex_ids, initial=0)) >= MAX_FLOAT_ID:
@@ -307,10 +310,11 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
             weights.Set(Vt.FloatArray.FromNumpy(row), Usd.TimeCode(float(t) * opt.fps))
         stage.SetStartTimeCode(float(c.times[0]) * opt.fps)
         stage.SetEndTimeCode(float(c.times[-1]) * opt.fps)
-        for extra in pkg.curves[1:]:
-            a = prim.CreateAttribute(
-                f"wrinkle:curves:{_ident(extra.name)}", Sdf.ValueTypeNames.FloatArray
-            )
+        order = prim.CreateAttribute("wrinkle:curveNames", Sdf.ValueTypeNames.StringArray)
+        order.SetCustom(True)
+        order.Set(Vt.StringArray([str(x.name) for x in pkg.curves]))
+        for i, extra in enumerate(pkg.curves[1:], start=1):
+            a = prim.CreateAttribute(f"wrinkle:curves:curve{i}", Sdf.ValueTypeNames.FloatArray)
             a.SetCustom(True)
             for t, row in zip(
                 np.asarray(extra.times, np.float32), np.asarray(extra.values, np.float32)
