@@ -26,7 +26,7 @@ from wrinklepipe.model import height_to_normal
 from wrinklepipe.presets import jimenez
 
 DEMO_SEED = 20111
-DEMO_VERSION = 2
+DEMO_VERSION = 3
 STATE_NAMES: tuple[str, ...] = ("stretch", "compress")
 MORPH_NAMES: tuple[str, ...] = (
     "brow_raise",
@@ -40,7 +40,7 @@ MORPH_NAMES: tuple[str, ...] = (
 )
 
 # Face frame in UV: fx in [-1, 1] across the face (character's left positive), fy positive down.
-_FACE_U0, _FACE_UW = 0.5, 0.16
+_FACE_U0, _FACE_UW = 0.5, 0.216
 _FACE_V0, _FACE_VH = 0.52, 0.22
 
 
@@ -94,6 +94,15 @@ def _uv_grid(size: int) -> tuple[np.ndarray, np.ndarray]:
     return u, v
 
 
+def u_of_longitude(phi: np.ndarray) -> np.ndarray:
+    """UV u of a longitude (phi = 0 at the face, +-pi at the seam behind the head).
+
+    Not uniform: the face gets about 1.4x the texels of a plain lat-long map, the back of the
+    head fewer, as an artist would lay it out. Monotonic, with u(-pi) = 0 and u(pi) = 1.
+    """
+    return 0.5 + 0.5 * (0.3 * phi / np.pi + 0.7 * np.sin(phi / 2.0))
+
+
 def face_coords(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Face frame: ``fx`` across the face (character's left positive), ``fy`` down."""
     return (u - _FACE_U0) / _FACE_UW, (v - _FACE_V0) / _FACE_VH
@@ -137,21 +146,21 @@ def _wrinkle_heights(size: int, rng: np.random.Generator) -> np.ndarray:
     px_per_fy = _FACE_VH * size
 
     # --- stretch: horizontal forehead lines (furrows), slightly curved and of varying depth.
-    line_period = 0.085  # in fy units
+    line_period = 0.11  # in fy units
     curve = 0.06 * fx**2
     phase = (fy - curve) / line_period
     dist = (phase - np.round(phase)) * line_period * px_per_fy
-    depth = 2.6 * (1.0 + 0.25 * np.sin(3.1 * fx + 0.7 * np.round(phase)))
+    depth = 3.4 * (1.0 + 0.25 * np.sin(3.1 * fx + 0.7 * np.round(phase)))
     forehead = _box(fy, -1.02, -0.46, 0.05) * _box(fx, -0.92, 0.92, 0.08)
-    stretch = -depth * _groove(dist, 3.2 * tex) * forehead * tex
+    stretch = -depth * _groove(dist, 4.5 * tex) * forehead * tex
 
     # --- compress
     # glabella: two vertical furrows between the brows.
     glab = np.zeros_like(fx)
     for x0 in (-0.07, 0.07):
         d = (fx - x0 - 0.15 * (fy + 0.34)) * px_per_fx
-        glab += _groove(d, 3.0 * tex)
-    glab *= _box(fy, -0.50, -0.22, 0.04) * 2.8 * tex
+        glab += _groove(d, 4.0 * tex)
+    glab *= _box(fy, -0.50, -0.22, 0.04) * 3.6 * tex
     # crow's feet: radial lines at the outer eye corners (fx = +-0.78, fy = -0.18).
     crow = np.zeros_like(fx)
     for side in (-1.0, 1.0):
@@ -162,26 +171,26 @@ def _wrinkle_heights(size: int, rng: np.random.Generator) -> np.ndarray:
         spokes = np.cos(7.0 * ang) * 0.5 + 0.5
         crow += (
             (spokes**6)
-            * _smoothstep(8 * tex * 4, 16 * tex * 4, r)
-            * (1.0 - _smoothstep(40 * tex * 4, 52 * tex * 4, r))
-            * (np.abs(ang) < 1.1)
+            * _smoothstep(24 * tex, 48 * tex, r)
+            * (1.0 - _smoothstep(100 * tex, 136 * tex, r))
+            * (1.0 - _smoothstep(0.8, 1.2, np.abs(ang)))
         )
     crow *= 2.2 * tex
     # nose: horizontal "bunny lines" across the upper nose.
-    nphase = (fy + 0.02) / 0.07
-    ndist = (nphase - np.round(nphase)) * 0.07 * px_per_fy
-    nose = _groove(ndist, 2.6 * tex) * _box(fy, -0.16, 0.10, 0.03) * _box(fx, -0.22, 0.22, 0.05)
-    nose *= 2.4 * tex
+    nphase = (fy + 0.02) / 0.09
+    ndist = (nphase - np.round(nphase)) * 0.09 * px_per_fy
+    nose = _groove(ndist, 3.5 * tex) * _box(fy, -0.16, 0.10, 0.03) * _box(fx, -0.22, 0.22, 0.05)
+    nose *= 3.0 * tex
     # nasolabial creases: a curved groove from the nose wing to past the mouth corner.
     naso = np.zeros_like(fx)
     for side in (-1.0, 1.0):
         t = fy
         x_line = side * (0.30 + 0.16 * (t - 0.12) + 0.35 * (t - 0.12) ** 2)
         d = (fx - x_line) * px_per_fx
-        naso += _groove(d, 4.0 * tex) * _box(t, 0.14, 0.62, 0.05)
+        naso += _groove(d, 5.0 * tex) * _box(t, 0.14, 0.62, 0.05)
     naso *= 3.0 * tex
     # chin dimpling: smooth bumps and pits on the chin (peau d'orange).
-    bumps = ndimage.gaussian_filter(rng.standard_normal((size, size)), 5.0 * tex, mode="wrap")
+    bumps = ndimage.gaussian_filter(rng.standard_normal((size, size)), 7.0 * tex, mode="wrap")
     bumps /= max(float(np.abs(bumps).max()), 1e-9)
     chin_zone = _box(fy, 0.78, 1.02, 0.05) * _box(fx, -0.38, 0.38, 0.08)
     chin = bumps * chin_zone * 9.0 * tex
@@ -235,7 +244,7 @@ def _head_mesh(n_lon: int = 96, n_lat: int = 64) -> DemoMesh:
     lat = np.linspace(0.0, np.pi, n_lat + 1)[1:-1]  # polar angle from the top
     lon = np.linspace(-np.pi, np.pi, n_lon + 1)  # n_lon + 1 columns: first and last coincide
     theta, phi = np.meshgrid(lat, lon, indexing="ij")  # [n_lat-1, n_lon+1]
-    u = 0.5 + phi / (2.0 * np.pi)
+    u = u_of_longitude(phi)
     v = theta / np.pi
     pos = _head_surface(theta, phi)
     pos[:, -1] = pos[:, 0]  # seam twins: bit-identical positions (sin(-pi) != -sin(pi) in floats)
@@ -284,7 +293,7 @@ def _head_surface(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
     """Ellipsoid head with a nose bump and brow ridge; theta from the top, phi = 0 at the face."""
     st, ct = np.sin(theta), np.cos(theta)
     sp, cp = np.sin(phi), np.cos(phi)
-    fx = phi / (2 * np.pi * _FACE_UW)
+    fx = (u_of_longitude(phi) - _FACE_U0) / _FACE_UW
     fy = (theta / np.pi - _FACE_V0) / _FACE_VH
     nose = 0.018 * np.exp(-0.5 * ((fx / 0.18) ** 2 + ((fy + 0.05) / 0.22) ** 2))
     brow = 0.004 * np.exp(-0.5 * ((fy + 0.42) / 0.08) ** 2) * np.exp(-0.5 * (fx / 0.9) ** 2)
