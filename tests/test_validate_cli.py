@@ -171,3 +171,38 @@ def test_bench_validate_quick_smoke():
     steps = {r.step for r in res.rows}
     assert "plain normal-map shader" in steps
     assert res.extra["wrinkle_vs_plain_split"] > 0
+
+
+@pytest.fixture(scope="module")
+def converted(tmp_path_factory):
+    from wrinklepipe.demo.source import write_demo_source
+    from wrinklepipe.pipeline import ConvertOptions, convert
+
+    root = tmp_path_factory.mktemp("conv")
+    manifest = write_demo_source(root / "src", size=128)
+    convert(manifest, root / "out", ConvertOptions(glb=True, usd_format="usdz"))
+    return manifest, root / "out"
+
+
+def test_convert_output_with_its_source(capsys, converted):
+    manifest, out = converted
+    code, text, err = run(
+        capsys, out, "--source", manifest, "--render-size", "128", "--json", "--no-render"
+    )
+    doc = json.loads(text)
+    assert doc["input"]["kind"] == "folder" and doc["input"]["has_source"]
+    # the BC5 copies in compressed/ (written where BC5 meets the budget) are what is validated
+    fmts = {t["role"]: t["format"] for t in doc["input"]["textures"]}
+    compressed = {p.stem for p in (out / "compressed").glob("*.dds")}
+    for t in doc["input"]["textures"]:
+        if t["role"] != "mask":
+            assert (t["format"] == "bc5") == (t["name"] in compressed), t
+    assert fmts["mask"] == "rgba8"
+    assert set(doc["metrics"]["shipping_error_deg"]) >= {"neutral", "joy", "anger"}
+    assert code == (1 if doc["counts"]["error"] else 0)
+    # the PNGs of the same folder, and the USD package, load too
+    code, text, _ = run(capsys, out, "--textures", "png", "--no-render", "--json")
+    assert {t["format"] for t in json.loads(text)["input"]["textures"]} <= {"rgb8", "rgba8"}
+    usdz = next(out.glob("*.usdz"))
+    code, text, _ = run(capsys, usdz, "--no-render", "--json")
+    assert json.loads(text)["input"]["kind"] == "usd"
