@@ -284,3 +284,40 @@ def test_names_from_inputs_never_leave_the_folder(tmp_path):
     bad = replace(pkg, textures=[replace(t, name="../x") for t in pkg.textures])
     with pytest.raises(InputError, match="not a safe file name"):
         write_gltf(bad, tmp_path / "o2", "t")
+
+
+@pytest.mark.parametrize("layout", ["rgba", "array", "lr-split", "jimenez8"])
+def test_every_mask_layout_matches_the_schema_and_round_trips(layout, tmp_path):
+    from wrinklepipe.io.package import PackOptions, asset_from_package
+
+    names = [
+        "forehead_outer_l",
+        "forehead_outer_r",
+        "forehead_inner_l",
+        "forehead_inner_r",
+        "nose_l",
+        "nose_r",
+        "glabella",
+        "chin",
+    ]
+    # sided masks never overlap their twin (left half / right half), values multiple of 1/255
+    rng = np.random.default_rng(5)
+    masks = (rng.integers(0, 256, (8, 4, 4)) / 255).astype(np.float32)
+    masks[0::2, :, :2] = 0  # left regions only on the right half of the image ...
+    masks[1:6:2, :, 2:] = 0  # ... right regions only on the left half
+    asset = replace(
+        _tiny_asset(),
+        masks=masks,
+        regions=tuple(
+            Region(n, "left" if n.endswith("_l") else "right" if n.endswith("_r") else "center")
+            for n in names
+        ),
+    )
+    pkg = package_from_asset(asset, PackOptions(mask_layout=layout))
+    write_gltf(pkg, tmp_path, "t")
+    doc = json.loads((tmp_path / "t.gltf").read_text())
+    ext = doc["materials"][0]["extensions"][EXTENSION]
+    jsonschema.validate(ext, json.loads(SCHEMA.read_text()), cls=jsonschema.Draft202012Validator)
+    assert ext["masks"]["layout"] == layout
+    back = asset_from_package(read_gltf(tmp_path / "t.gltf"))
+    assert np.allclose(back.masks, masks, atol=0.5 / 255 + 1e-6)
