@@ -8,7 +8,7 @@
     drivers       weight curves [T, R] from the manifest's drivers
     package       encode + pack (wrinklepipe.io.package)
     write         glTF (+GLB), USD (.usda, +.usdc/.usdz), PNG textures, DDS/KTX2, curves
-    validate      wrinklepipe.validate on what was written (when available)
+    validate      wrinklepipe.validate on what was written, against the source maps
     report        report.json + report.html
 
 Everything is written into a temporary sibling folder that is renamed into place only when

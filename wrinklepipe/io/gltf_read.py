@@ -187,6 +187,8 @@ class _Reader:
         off = int(a.get("byteOffset", 0))
         elem = dtype.itemsize * width
         stride = stride or elem
+        if stride < elem or stride % dtype.itemsize:
+            raise self.err(f"byteStride {stride} does not fit {elem}-byte elements", key)
         need = off + (count - 1) * stride + elem if count else 0
         if need > len(data):
             raise self.err(f"accessor needs {need} bytes, its bufferView has {len(data)}", key)
