@@ -19,8 +19,8 @@ the orientation comes from --orientation; the map is masked by --roi and warped 
 character's texture space through the texture landmarks.
 
 orientation (which way each wrinkle normal leans; the ratio only gives how much):
-  integrable  the slope field of a smooth surface flips sign only where R peaks (default;
-              one sign per crease, set by the furrow vote)
+  integrable  a smooth surface's slope flips sign only where R peaks (default; one sign
+              per crease: the one that makes the integrated crease a dent)
   furrow      lean towards the crease's centre line, per pixel
   gradient    the paper: along grad R (right on only part of each crease)
 
@@ -73,7 +73,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     from wrinklepipe.capture.orientation import METHODS
 
-    p.add_argument("--orientation", choices=METHODS, default="integrable", help="(integrable)")
+    p.add_argument(
+        "--orientation",
+        choices=METHODS,
+        default="integrable",
+        help="orientation prior (integrable)",
+    )
     p.add_argument("--state", default="capture", help="name of the wrinkle state (capture)")
     p.add_argument(
         "--colorspace",
