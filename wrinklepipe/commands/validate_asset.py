@@ -68,7 +68,15 @@ def run(args: argparse.Namespace) -> int:
     with status(f"loading {args.path}"):
         inp = load_input(args.path, LoadOptions(textures=args.textures, source=args.source))
     with status("validating"):
-        report = validate(inp, options, config)
+        try:
+            report = validate(inp, options, config)
+        except (MemoryError, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # noqa: BLE001 - a rule tripping on an odd asset: no traceback
+            msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+            raise input_error(
+                args.path, f"validation could not run ({type(exc).__name__}: {msg}); please report"
+            ) from None
     inputs = (args.path,) if args.path and not str(args.path).startswith("demo") else ()
     write_reports(report, args.report, args.html, args.fail_on, inputs=inputs)
     if args.json:

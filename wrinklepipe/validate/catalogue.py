@@ -78,6 +78,13 @@ RULES: tuple[Rule, ...] = (
         "format (the shader samples them as one texture array).",
         "Ship one texture per state, all of one size and format.",
     ),
+    Rule(
+        "WP-LOAD-003",
+        "error",
+        "Nothing can wrinkle",
+        "The asset declares no wrinkle states or no regions, so no weight can ever show.",
+        "Declare at least one state with its map and one region with its mask.",
+    ),
     # --- MAP
     Rule(
         "WP-MAP-001",

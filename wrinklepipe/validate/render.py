@@ -401,6 +401,8 @@ def can_render(ctx: Context) -> str:
     inp, a = ctx.inp, ctx.asset
     if a.mesh is None or a.mesh.uvs is None:
         return "no mesh with UVs"
+    if not a.regions or not a.state_names:
+        return "no regions or no states"
     if a.encoding not in _ENC or a.policy not in _POL:
         return "unknown encoding or policy"
     if a.policy == "signed" and len(a.state_names) != 2:
@@ -440,6 +442,8 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
         r = Renderer(inp, o.render_size)
     except glw.GLUnavailable as exc:
         return _skip(str(exc), where)
+    except Exception as exc:  # noqa: BLE001 - a driver refusing a shader or format
+        return _skip(f"{type(exc).__name__}: {str(exc).strip()[:300]}", where)
     images: dict[str, Any] = {}
     issues: list[Issue] = []
     info = dict(r.info)

@@ -72,6 +72,8 @@ def check_compression(ctx: Context) -> list[Issue]:
         or ctx.shipped_on_grid is None
         or a.policy not in model.POLICIES
         or (a.policy == "signed" and len(a.state_names) != 2)
+        or not a.regions
+        or not a.state_names
     ):
         return out
     mean_b, p99_b = _budget(ctx)

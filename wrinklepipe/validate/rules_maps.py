@@ -27,6 +27,9 @@ def check_declarations(ctx: Context) -> list[Issue]:
                 where,
             )
         )
+    if not a.state_names or not a.regions:
+        what = "no wrinkle states" if not a.state_names else "no regions"
+        out.append(make_issue("WP-LOAD-003", f"the asset declares {what}", where))
     if inp.textures:
         sts = inp.state_textures()
         for name, t in zip(a.state_names, sts):
@@ -57,6 +60,8 @@ def convention_score(slopes: np.ndarray, weight: np.ndarray | None = None) -> fl
     satisfy ``d(px)/drow = -d(py)/dcol``; the score is the normalised correlation of the two.
     """
     s = np.asarray(slopes, np.float64)
+    if s.ndim != 3 or s.shape[0] < 3 or s.shape[1] < 3:
+        return 0.0
     a = np.gradient(s[..., 0], axis=0)
     b = np.gradient(s[..., 1], axis=1)
     if weight is not None:

@@ -187,11 +187,15 @@ def _check_sides(ctx: Context) -> list[Issue]:
     if masks.shape[0] != len(a.regions) or masks.shape[0] == 0:
         return []
     cent, centre, unit = side_centroids(masks, a.mesh)
-    spread = float(np.max(np.abs(cent - centre))) or 1.0
+    if a.mesh is not None and a.mesh.uvs is not None:
+        x = np.asarray(a.mesh.positions, np.float64)[:, 0]
+        half = max(float(x.max() - x.min()) / 2.0, 1e-12)
+    else:
+        half = 0.5
     out = []
     for i, reg in enumerate(a.regions):
-        off = (cent[i] - centre) / spread
-        if reg.side == "left" and off < -0.2 or reg.side == "right" and off > 0.2:
+        off = (cent[i] - centre) / half  # -1..1 across the whole head (or texture)
+        if reg.side == "left" and off < -0.02 or reg.side == "right" and off > 0.02:
             actual = "right" if off < 0 else "left"
             out.append(
                 make_issue(
