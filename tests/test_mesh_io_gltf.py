@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from wrinklepipe.errors import InputError
 from wrinklepipe.geometry.dynamic import skinned_pose, triangle_weights
@@ -275,3 +277,40 @@ def test_sparse_sample_values():
     m = load_mesh(SAMPLES / "SimpleSparseAccessor/glTF-Embedded/SimpleSparseAccessor.gltf")
     # The sparse accessor lifts three vertices of the flat base (y 0 / 1) to y = 2, 3 and 4.
     assert sorted(np.unique(m.positions[:, 1]).tolist()) == [0.0, 1.0, 2.0, 3.0, 4.0]
+
+
+MUTATIONS = [
+    ("accessors", 0, "count", [0, 1, 5, 10**9, -1, "x", None]),
+    ("accessors", 0, "componentType", [5120, 5121, 5125, 1, "f", None]),
+    ("accessors", 0, "type", ["VEC2", "SCALAR", "MAT4", "BAD", 3]),
+    ("accessors", 0, "bufferView", [1, 2, 99, -1, "0"]),
+    ("accessors", 0, "byteOffset", [4, 1, 10**6, -8]),
+    ("accessors", 1, "count", [0, 2, 7, 10**6]),
+    ("accessors", 1, "componentType", [5126, 5121, 5125]),
+    ("accessors", 2, "type", ["VEC3", "SCALAR"]),
+    ("bufferViews", 0, "byteLength", [0, 3, 10**7, -1]),
+    ("bufferViews", 0, "byteStride", [4, 0, 1000]),
+    ("bufferViews", 1, "buffer", [1, -1, "a"]),
+    ("buffers", 0, "uri", ["data:application/octet-stream;base64,AAA", "../x.bin", "/etc/x", 5]),
+    ("meshes", 0, "primitives", [[], [{}], [{"attributes": {}}], "x", [{"attributes": 5}]]),
+    ("nodes", 0, "mesh", [5, -1, "0"]),
+    ("nodes", 0, "matrix", [[1, 2], [0] * 16, "x"]),
+    ("nodes", 0, "children", [[0], [9], "x"]),
+]
+
+
+@settings(max_examples=60, deadline=None)
+@given(picks=st.lists(st.tuples(st.integers(0, len(MUTATIONS) - 1), st.integers(0, 9)), max_size=3))
+def test_mutated_gltf_never_tracebacks(tmp_path_factory, picks):
+    d = tmp_path_factory.mktemp("mut")
+    f = write_gltf(d / "m.gltf", [(QUAD_P, {}), (QUAD_I, {}), (QUAD_UV, {})], quad_doc())
+    doc = json.loads(f.read_text())
+    for mi, vi in picks:
+        section, i, key, values = MUTATIONS[mi]
+        doc[section][i][key] = values[vi % len(values)]
+    f.write_text(json.dumps(doc))
+    try:
+        m = load_mesh(f, LoadOptions(generate_uvs=False))
+    except InputError:
+        return
+    assert m.triangle_count > 0 and int(m.indices.max()) < m.vertex_count

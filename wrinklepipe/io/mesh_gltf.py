@@ -146,12 +146,24 @@ class _MeshReader(_Reader):
         return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
 
 
+def _vec(node: dict[str, Any], key: str, default: list[float], n: int) -> np.ndarray:
+    v = node.get(key, default)
+    try:
+        a = np.asarray(v, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if a.shape != (n,) or not np.isfinite(a).all():
+        raise ValueError(f"{key} must be {n} finite numbers")
+    return a
+
+
 def _node_matrix(node: dict[str, Any]) -> np.ndarray:
+    """Local matrix of a node (column vectors); ValueError for malformed TRS / matrix."""
     if "matrix" in node:
-        return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major
-    t = np.asarray(node.get("translation", [0, 0, 0]), dtype=np.float64)
-    x, y, z, w = np.asarray(node.get("rotation", [0, 0, 0, 1]), dtype=np.float64)
-    s = np.asarray(node.get("scale", [1, 1, 1]), dtype=np.float64)
+        return _vec(node, "matrix", [], 16).reshape(4, 4).T  # column-major
+    t = _vec(node, "translation", [0, 0, 0], 3)
+    x, y, z, w = _vec(node, "rotation", [0, 0, 0, 1], 4)
+    s = _vec(node, "scale", [1, 1, 1], 3)
     r = np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
@@ -165,13 +177,29 @@ def _node_matrix(node: dict[str, Any]) -> np.ndarray:
     return m
 
 
+def _int_list(v: Any) -> list[int]:
+    if not isinstance(v, list) or not all(isinstance(c, int) for c in v):
+        raise ValueError("must be a list of integers")
+    return v
+
+
 def world_matrices(doc: dict[str, Any]) -> dict[int, np.ndarray]:
-    """World matrix of every node reachable from the scenes (or all roots if no scenes)."""
+    """World matrix of every node reachable from the scenes (or all roots if no scenes).
+
+    Raises ValueError (with the node) for malformed nodes; the callers turn it into an
+    InputError naming the file."""
     nodes = doc.get("nodes", [])
-    children = {c for n in nodes for c in n.get("children", [])}
+    if not isinstance(nodes, list) or not all(isinstance(n, dict) for n in nodes):
+        raise ValueError("nodes must be a list of objects")
+    children: set[int] = set()
+    for i, n in enumerate(nodes):
+        try:
+            children.update(_int_list(n.get("children", [])))
+        except ValueError as exc:
+            raise ValueError(f"nodes[{i}].children {exc}") from None
     roots: list[int] = []
     for sc in doc.get("scenes", []):
-        roots.extend(sc.get("nodes", []))
+        roots.extend(_int_list(sc.get("nodes", [])) if isinstance(sc, dict) else [])
     if not roots:
         roots = [i for i in range(len(nodes)) if i not in children]
     out: dict[int, np.ndarray] = {}
@@ -180,7 +208,10 @@ def world_matrices(doc: dict[str, Any]) -> dict[int, np.ndarray]:
         i, parent = stack.pop()
         if i in out or not 0 <= i < len(nodes):
             continue
-        out[i] = parent @ _node_matrix(nodes[i])
+        try:
+            out[i] = parent @ _node_matrix(nodes[i])
+        except ValueError as exc:
+            raise ValueError(f"nodes[{i}]: {exc}") from None
         stack.extend((int(c), out[i]) for c in nodes[i].get("children", []))
     return out
 
@@ -228,13 +259,25 @@ def read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) -
 
     Raises :class:`InputError` naming the file and JSON pointer for anything malformed.
     """
+    try:
+        return _read_gltf_meshes(path, options)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        # Safety net for structures the specific checks did not foresee: still one clear line.
+        kind = type(exc).__name__
+        raise input_error(path, f"malformed glTF ({kind}: {str(exc)[:200]})") from None
+
+
+def _read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) -> list[Mesh]:
     opts = options or GltfMeshOptions()
     r = _MeshReader(Path(path), GltfReadOptions())
     doc = r.doc
     file_notes = check_extensions(r)
     meshes = doc.get("meshes", [])
     nodes = doc.get("nodes", [])
-    worlds = world_matrices(doc)
+    try:
+        worlds = world_matrices(doc)
+    except ValueError as exc:
+        raise r.err(str(exc), "/nodes") from None
     instances: list[tuple[int, int | None]] = []  # (mesh index, node index)
     used = set()
     for ni in sorted(worlds):
@@ -260,7 +303,10 @@ def read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) -
             mesh = _read_primitive(r, mi, pi, prim, names, skin)
             mesh.notes[:0] = file_notes
             if skin is None and opts.bake_transforms and not np.allclose(world, np.eye(4)):
-                mesh = _bake(mesh, world)
+                try:
+                    mesh = _bake(mesh, world)
+                except ValueError:
+                    raise r.err("the node's world transform is singular", f"/nodes/{ni}") from None
                 mesh.notes.append(f"baked the world transform of node {ni}")
             label = gm.get("name") or f"mesh{mi}"
             mesh.name = f"{label}/{pi}" if len(gm.get("primitives", [])) > 1 else str(label)
@@ -422,6 +468,8 @@ def drop_degenerate(positions: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray
 
 def _bake(mesh: Mesh, m: np.ndarray) -> Mesh:
     lin = m[:3, :3]
+    if abs(np.linalg.det(lin)) < 1e-30:
+        raise ValueError("singular transform")
     mesh.positions = (mesh.positions.astype(np.float64) @ lin.T + m[:3, 3]).astype(np.float32)
     if mesh.morph_deltas is not None:
         mesh.morph_deltas = (mesh.morph_deltas.astype(np.float64) @ lin.T).astype(np.float32)
