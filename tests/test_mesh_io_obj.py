@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from wrinklepipe.errors import InputError
-from wrinklepipe.io.mesh import load_mesh, load_meshes
+from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
 
 OBJ = """# two quads sharing an edge that is a UV seam
 o left
@@ -62,3 +64,37 @@ def test_obj_errors(tmp_path):
     assert any("xatlas" in n for n in m.notes)
     with pytest.raises(InputError, match="unknown mesh format"):
         load_mesh(tmp_path / "x.fbx")
+
+
+LINE = st.one_of(
+    st.builds(lambda a, b, c: f"v {a} {b} {c}", *[st.floats(allow_nan=True) | st.just("x")] * 3),
+    st.builds(lambda a, b: f"vt {a} {b}", st.floats(-2, 2), st.floats(-2, 2)),
+    st.just("vn 0 0 1"),
+    st.builds(
+        lambda ids: "f " + " ".join(ids),
+        st.lists(
+            st.builds(
+                lambda v, t, n: f"{v}/{t}/{n}",
+                st.integers(-6, 8),
+                st.integers(-3, 3) | st.just(""),
+                st.integers(-2, 2) | st.just(""),
+            ),
+            min_size=1,
+            max_size=5,
+        ),
+    ),
+    st.sampled_from(["o part", "g", "# comment", "", "s off", "usemtl x", "f", "v"]),
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(lines=st.lists(LINE, max_size=14))
+def test_random_obj_never_tracebacks(tmp_path_factory, lines):
+    f = tmp_path_factory.mktemp("obj") / "r.obj"
+    f.write_text("\n".join(lines) + "\n")
+    try:
+        m = load_mesh(f, LoadOptions(generate_uvs=False))
+    except InputError:
+        return
+    assert m.triangle_count > 0 and int(m.indices.max()) < m.vertex_count
+    assert np.isfinite(m.positions).all()
