@@ -57,35 +57,80 @@ def test_usd_validation_detects_problems(tmp_path):
     assert {"MissingDefaultPrim", "MissingUpAxisMetadata"} <= names
 
 
+_HAS_API_SCRIPT = """
+import sys
+from wrinklepipe.io.usd_write import API_ATTRIBUTES, API_NAME  # registers the plugin on import
+from pxr import Usd
+stage = Usd.Stage.Open(sys.argv[1])
+mat = stage.GetPrimAtPath("/demo/Looks/skin")
+api = Usd.SchemaRegistry.GetTypeFromSchemaTypeName(API_NAME)
+definition = Usd.SchemaRegistry().FindAppliedAPIPrimDefinition(API_NAME)
+assert api and mat.HasAPI(api), "HasAPI"
+for name, type_name in API_ATTRIBUTES.items():
+    assert str(definition.GetAttributeDefinition(name).GetTypeName()) == type_name, name
+    assert str(mat.GetAttribute(name).GetTypeName()) == type_name, name
+print("ok")
+"""
+
+
 def test_wrinkle_maps_api_is_applied_and_typed(usda):
-    register_schema()
+    # A fresh process, as a user's: the plugin is registered before USD builds its registry
+    # (this test process may have opened stages before the plugin was registered).
+    import subprocess
+    import sys
+
+    proc = subprocess.run(
+        [sys.executable, "-c", _HAS_API_SCRIPT, str(usda)], capture_output=True, text=True
+    )
+    assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stderr
+
+
+def test_api_attributes_match_generated_schema():
+    from wrinklepipe.io.usd_write import API_ATTRIBUTES, USD_SCHEMA_DIR
+
+    layer = Sdf.Layer.FindOrOpen(str(USD_SCHEMA_DIR / "generatedSchema.usda"))
+    spec = layer.GetPrimAtPath("/WrinkleMapsAPI")
+    declared = {a.name: str(a.typeName) for a in spec.attributes}
+    assert declared == API_ATTRIBUTES
+
+
+def test_typed_values_without_the_plugin(usda):
+    # whatever the registration state of this process, the authored values carry their types
     stage = Usd.Stage.Open(str(usda))
     mat = stage.GetPrimAtPath("/demo/Looks/skin")
-    api_type = Usd.SchemaRegistry.GetTypeFromSchemaTypeName(API_NAME)
-    assert api_type  # the codeless schema is registered through schemas/usd/plugInfo.json
-    assert mat.HasAPI(api_type)
-    assert API_NAME in mat.GetAppliedSchemas()
-    expected = {
-        "wrinkle:encoding": "token",
-        "wrinkle:scale": "double",
-        "wrinkle:policy": "token",
-        "wrinkle:stateNames": "token[]",
-        "wrinkle:regionNames": "token[]",
-        "wrinkle:maskTexture": "int[]",
-        "wrinkle:maskChannel": "token[]",
-        "wrinkle:expressionWeights": "double[]",
-        "wrinkle:weights": "float[]",
-    }
-    definition = Usd.SchemaRegistry().FindAppliedAPIPrimDefinition(API_NAME)
-    for name, type_name in expected.items():
-        assert str(definition.GetAttributeDefinition(name).GetTypeName()) == type_name, name
-        assert str(mat.GetAttribute(name).GetTypeName()) == type_name, name
+    assert API_NAME in mat.GetMetadata("apiSchemas").ApplyOperations([])
+    assert str(mat.GetAttribute("wrinkle:expressionWeights").GetTypeName()) == "double[]"
     assert mat.GetAttribute("wrinkle:encoding").Get() == "pd"
     assert list(mat.GetAttribute("wrinkle:regionNames").Get())[6] == "glabella"
     # Jimenez Table 1.1 anger row, regions in order (Red..Gray)
     names = list(mat.GetAttribute("wrinkle:expressionNames").Get())
     table = np.asarray(mat.GetAttribute("wrinkle:expressionWeights").Get()).reshape(len(names), 8)
     assert table[names.index("anger")].tolist() == [-0.6, -0.6, -0.8, -0.8, 0.8, 0.8, 1.0, 0.0]
+
+
+_LATE_SCRIPT = """
+import sys
+from pxr import Usd
+Usd.Stage.Open(sys.argv[1]).Traverse()  # USD builds its schema registry before the plugin
+assert not Usd.SchemaRegistry().FindAppliedAPIPrimDefinition("WrinkleMapsAPI")
+from wrinklepipe.io.usd_read import read_usd
+from wrinklepipe.io.usd_write import write_usd
+pkg = read_usd(sys.argv[1])
+write_usd(pkg, sys.argv[2], write_textures=False)
+print("ok")
+"""
+
+
+def test_late_plugin_registration_changes_nothing(usda, tmp_path):
+    import subprocess
+    import sys
+
+    out = tmp_path / "late.usda"
+    proc = subprocess.run(
+        [sys.executable, "-c", _LATE_SCRIPT, str(usda), str(out)], capture_output=True, text=True
+    )
+    assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stderr
+    assert out.read_bytes() == usda.read_bytes()
 
 
 def test_material_network(usda):

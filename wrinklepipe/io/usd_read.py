@@ -65,6 +65,16 @@ def _asset_bytes(layer_path: Path, asset: Any, file: str, key: str, opt: UsdRead
     return data
 
 
+def _has_api(prim: Any) -> bool:
+    """``WrinkleMapsAPI`` applied: by the schema registry, or as authored ``apiSchemas`` (USD
+    filters schemas it does not know out of ``GetAppliedSchemas`` when the plugin was
+    registered too late in this process)."""
+    if API_NAME in prim.GetAppliedSchemas():
+        return True
+    op = prim.GetMetadata("apiSchemas")
+    return op is not None and API_NAME in op.ApplyOperations([])
+
+
 def _stem(asset: Any) -> str:
     return PurePosixPath(asset.path.replace("\\", "/")).stem
 
@@ -87,7 +97,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         raise input_error(file, "cannot open USD stage")
     mat_prim = None
     for prim in stage.Traverse():
-        if prim.IsA(UsdShade.Material) and API_NAME in prim.GetAppliedSchemas():
+        if prim.IsA(UsdShade.Material) and _has_api(prim):
             mat_prim = prim
             break
     if mat_prim is None:

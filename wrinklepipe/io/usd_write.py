@@ -41,11 +41,44 @@ API_NAME = "WrinkleMapsAPI"
 USD_SCHEMA_DIR = SCHEMAS_DIR / "usd"
 
 
+#: The attributes of ``WrinkleMapsAPI`` and their types (as in schemas/usd/generatedSchema.usda;
+#: a test keeps the two equal). They are authored with these types whether or not the schema
+#: is registered in this process, so the output never depends on plugin load order.
+API_ATTRIBUTES: dict[str, str] = {
+    "wrinkle:encoding": "token",
+    "wrinkle:scale": "double",
+    "wrinkle:policy": "token",
+    "wrinkle:stateNames": "token[]",
+    "wrinkle:maskLayout": "token",
+    "wrinkle:maskNames": "token[]",
+    "wrinkle:regionNames": "token[]",
+    "wrinkle:regionSides": "token[]",
+    "wrinkle:regionStates": "string[]",
+    "wrinkle:maskTexture": "int[]",
+    "wrinkle:maskChannel": "token[]",
+    "wrinkle:splitTexture": "int[]",
+    "wrinkle:splitChannel": "token[]",
+    "wrinkle:expressionNames": "token[]",
+    "wrinkle:expressionWeights": "double[]",
+    "wrinkle:drivers": "string",
+    "wrinkle:weights": "float[]",
+    "wrinkle:weightCurve": "token",
+}
+
+
 def register_schema() -> None:
-    """Register the codeless ``WrinkleMapsAPI`` (``schemas/usd/plugInfo.json``); idempotent."""
+    """Register the codeless ``WrinkleMapsAPI`` (``schemas/usd/plugInfo.json``); idempotent.
+
+    USD builds its schema registry once, the first time a stage needs it: registration only
+    takes effect if it happens before that (this module registers on import; or set
+    ``PXR_PLUGINPATH_NAME`` to ``schemas/usd``). Writing and reading never depend on it.
+    """
     from pxr import Plug
 
     Plug.Registry().RegisterPlugins(str(USD_SCHEMA_DIR))
+
+
+register_schema()
 
 
 @dataclass(frozen=True)
@@ -265,7 +298,11 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
         interface_texture("mask", _ident(name), name, (1, 1, 1, 1), (0, 0, 0, 0))
 
     prim = mat.GetPrim()
-    prim.ApplyAPI(API_NAME)
+    prim.AddAppliedSchema(API_NAME)  # metadata only: works whether or not the schema is loaded
+    attrs = {
+        name: prim.CreateAttribute(name, Sdf.ValueTypeNames.Find(t), custom=False)
+        for name, t in API_ATTRIBUTES.items()
+    }
     table = meta["masks"]["table"]
     regions = meta["regions"]
     names = [r["name"] for r in regions]
@@ -298,14 +335,14 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
         "wrinkle:drivers": json.dumps(meta.get("drivers", []), sort_keys=True),
     }
     for attr_name, value in values.items():
-        prim.GetAttribute(attr_name).Set(value)
+        attrs[attr_name].Set(value)
     if [str(e.get("region")) for e in table] != names:
         raise input_error(pkg.name, "channel table must list the regions in region order")
-    weights = prim.GetAttribute("wrinkle:weights")
+    weights = attrs["wrinkle:weights"]
     weights.Set(Vt.FloatArray([float(w) for w in meta["weights"]]))
     if pkg.curves:
         c = pkg.curves[0]
-        prim.GetAttribute("wrinkle:weightCurve").Set(c.name)
+        attrs["wrinkle:weightCurve"].Set(c.name)
         for t, row in zip(np.asarray(c.times, np.float32), np.asarray(c.values, np.float32)):
             weights.Set(Vt.FloatArray.FromNumpy(row), Usd.TimeCode(float(t) * opt.fps))
         stage.SetStartTimeCode(float(c.times[0]) * opt.fps)
