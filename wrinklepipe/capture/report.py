@@ -159,16 +159,15 @@ def write_pictures(
     return out
 
 
-_CSS = """
-body{font:14px/1.45 system-ui,sans-serif;margin:24px;color:#1d1f21;background:#fafafa}
-h1{font-size:20px;margin:0 0 4px}h2{font-size:16px;margin:22px 0 8px;border-bottom:1px solid #ddd}
-table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #ddd;padding:3px 8px;
-text-align:right}th{background:#eee}td.l,th.l{text-align:left}
-.grid{display:flex;flex-wrap:wrap;gap:12px}figure{margin:0;width:260px}
-figure img{width:256px;image-rendering:pixelated;border:1px solid #ccc;background:#fff}
-figcaption{font-size:12px;color:#444}.best{font-weight:600;background:#e8f5e9}
-.muted{color:#777}
-"""
+#: The validator's report style (wrinklepipe.validate.report), plus a highlight for the best row.
+_CSS = (
+    "body{font:14px sans-serif;margin:24px;max-width:1400px}"
+    "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
+    "vertical-align:top}th{background:#eee}figure{display:inline-block;margin:4px;"
+    "text-align:center}figure img{width:240px;image-rendering:pixelated;border:1px solid #999}"
+    "figcaption{font-size:12px;max-width:240px}.best{font-weight:bold;background:#efe}"
+    ".muted{color:#666}td.l,th.l{text-align:left}"
+)
 
 
 def _table(header: list[str], rows: list[list[str]], best_row: int | None = None) -> str:
@@ -317,7 +316,7 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
             names.index(report["method"]) if report["method"] in names else None,
         )
     )
-    parts.append("<h2>Pictures</h2><div class=grid>")
+    parts.append("<h2>Pictures</h2><div>")
     for caption, rel in pictures.items():
         parts.append(
             f"<figure><a href='{html.escape(rel)}'><img src='{html.escape(rel)}' "

@@ -1,0 +1,16 @@
+"""Smoke run of the capture benchmark in quick mode (the full run is ``wrinklepipe bench``)."""
+
+from __future__ import annotations
+
+from wrinklepipe.bench.capture import bench_capture
+
+
+def test_capture_benchmark_quick():
+    res = bench_capture(True)
+    steps = [r.step for r in res.rows]
+    assert steps[0] == res.baseline and "whole stage (3 methods)" in steps
+    assert all(r.median_s > 0 and r.ratio > 0 for r in res.rows)
+    acc = res.extra["accuracy_deg"]
+    assert set(acc) == {"gradient", "furrow", "integrable"}
+    assert res.extra["best_method"] == res.extra["default_method"] == "integrable"
+    assert acc["integrable"]["tilt_mean"] < 0.5 * res.extra["flat_map_mean_deg"]
