@@ -243,3 +243,24 @@ def test_normalized_report_hides_gpu_numbers():
     assert n["issues"][1]["message"] == "score -1.0"
     assert n["issues"][1]["pointer"] == "b.wpv#/textures/t"
     assert "timings" not in n and "path" not in n["input"]
+
+
+def test_dynamic_weights_are_continuous_with_good_ids_and_jump_with_broken_ones():
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests" / "corpus"))
+    import generate
+
+    from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
+    from wrinklepipe.validate.rules_weights import dynamic_weights
+
+    broken = generate.c_dynamic_seam().asset.mesh
+    good = broken.__class__(
+        **{**broken.__dict__, "vertex_ids": compute_vertex_ids(broken.positions)}
+    )
+    groups = position_groups(good.positions)
+    w_good = dynamic_weights(good)["dynamic:back_squash"]
+    w_bad = dynamic_weights(broken)["dynamic:back_squash"]
+    assert np.abs(w_good).max() > 0.5  # the morph does wrinkle the back of the head
+    assert group_spread(groups, w_good[:, None]).max() < 1e-5
+    assert group_spread(groups, w_bad[:, None]).max() > 0.1

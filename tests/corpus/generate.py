@@ -269,6 +269,25 @@ def c_seam_ids() -> ValidationInput:
     return inp
 
 
+def c_dynamic_seam() -> ValidationInput:
+    inp = c_seam_ids()  # seam twins with different IDs ...
+    m = mesh_of(inp)
+    # ... and a morph target (a function of position, so twins move together) that squashes
+    # the back of the head more on the character's left: the two sides of the seam differ
+    p = m.positions.astype(np.float64)
+    phi = np.arctan2(p[:, 0], p[:, 2])
+    near = np.clip(1.0 - (np.pi - np.abs(phi)) / 0.8, 0.0, 1.0)
+    side = np.clip(0.5 + p[:, 0] / 0.02, 0.0, 1.0)
+    delta = np.zeros_like(p)
+    delta[:, 1] = -0.2 * near * side * p[:, 1]
+    inp.asset.mesh = replace(
+        m,
+        morph_names=m.morph_names + ("back_squash",),
+        morph_deltas=np.concatenate([m.morph_deltas, delta[None].astype(np.float32)]),
+    )
+    return inp
+
+
 def c_id_positions() -> ValidationInput:
     inp = ship(demo())
     m = mesh_of(inp)
@@ -472,6 +491,12 @@ CASES: list[Case] = [
         ["WP-MESH-003", "WP-TEX-007"],
         "vertex IDs differ across the UV seam",
         c_seam_ids,
+    ),
+    Case(
+        "weight_dynamic_seam",
+        ["WP-MESH-003", "WP-TEX-007", "WP-WGT-003"],
+        "broken seam IDs make the dynamic weights of a back-of-head morph jump at the seam",
+        c_dynamic_seam,
     ),
     Case(
         "mesh_id_positions",

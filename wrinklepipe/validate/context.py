@@ -40,7 +40,7 @@ class ValidateOptions:
     grid: int = 512
     default_budget: tuple[float, float] = (1.0, 4.0)  # mean, p99 degrees when the asset has none
     half_res_check: bool = True
-    dynamic_targets: int = 8  # morph targets whose dynamic weights are checked across seams
+    dynamic_targets: int = 16  # morph targets whose dynamic weights are checked across seams
 
 
 def expression_weights(asset: WrinkleAsset, expr: str | None) -> np.ndarray:

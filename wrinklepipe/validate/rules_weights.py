@@ -26,7 +26,7 @@ def group_spread(groups: np.ndarray, values: np.ndarray) -> np.ndarray:
     return (hi - lo).max(axis=1)[groups]
 
 
-def dynamic_weights(mesh: object, max_targets: int = 8) -> dict[str, np.ndarray]:
+def dynamic_weights(mesh: object, max_targets: int = 16) -> dict[str, np.ndarray]:
     """Oat's dynamic wrinkle weights of each morph target at full weight, smoothed over the
     mesh's vertex IDs by :mod:`wrinklepipe.geometry.dynamic` (empty when not applicable)."""
     if (
