@@ -75,6 +75,17 @@ def test_end_to_end_outputs_report_and_determinism(session, tmp_path, capsys):
     assert "http" not in html
     snippet = (out / "manifest_snippet.toml").read_text()
     assert 'map = "capture.png"' in snippet and "states_include_base = false" in snippet
+    # The snippet makes a valid manifest with a base map (the lead's loader and schema).
+    from wrinklepipe.manifest import load_manifest
+
+    write_image(out / "base.png", np.broadcast_to([0.5, 0.5, 1.0], (128, 128, 3)), bits=16)
+    text = 'name = "captured"\nbase = "base.png"\nstates_include_base = false\n\n' + snippet
+    (out / "manifest.toml").write_text(text)
+    m = load_manifest(out / "manifest.toml")
+    assert [s.name for s in m.states] == ["capture"] and not m.states_include_base
+    assert m.regions[0].states == ("capture",)
+    (out / "manifest.toml").unlink()
+    (out / "base.png").unlink()
     # Byte-identical on rerun.
     out2 = tmp_path / "b"
     assert main(_args(session, out2)) == 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 from typing import Any
 
@@ -214,6 +215,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.example:
         return _write_example(args.example, args.force)
+    if not re.fullmatch(r"[A-Za-z0-9_]+", args.state):
+        raise input_error(
+            "<arguments>",
+            f"--state must be letters, digits and '_' (a manifest name): {args.state!r}",
+        )
     missing = [
         flag
         for flag, val in (
@@ -360,9 +366,10 @@ def run(args: argparse.Namespace) -> int:
     report = build_report(res, inputs, opts, outputs, te)
     input_files = [v for k, v in inputs.items()]
     snippet = (
-        "# wrinklepipe capture: paste into the character's manifest.\n"
-        "# The captured map holds the wrinkles alone (no base detail).\n"
-        "states_include_base = false\n\n"
+        "# wrinklepipe capture: merge into the character's manifest (copy the maps beside it).\n"
+        "# The captured map holds the wrinkles alone (no base detail), so the manifest needs,\n"
+        "# at its top level (above any [[table]]):\n"
+        "#   states_include_base = false\n\n"
         f'[[states]]\nname = "{state}"\nmap = "{state}.png"\n\n'
         f'[[regions]]\nname = "{state}_roi"\nmask = "{state}_roi.png"\nstates = ["{state}"]\n'
     )
