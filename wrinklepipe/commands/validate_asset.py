@@ -37,7 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--config", metavar="FILE", help="TOML/JSON: ignore codes, change severities")
     p.add_argument("--no-render", action="store_true", help="skip the GPU render pass")
-    p.add_argument("--render-size", type=int, default=512, help="render target size (default 512)")
+    p.add_argument("--render-size", type=int, default=None, help="render target size (default 512)")
     p.add_argument(
         "--source", metavar="MANIFEST", help="source manifest to measure the shipping error against"
     )
@@ -57,14 +57,15 @@ def run(args: argparse.Namespace) -> int:
     from wrinklepipe.validate.loader import LoadOptions, load_input
     from wrinklepipe.validate.report import print_summary, report_json, write_reports
 
-    if not 16 <= args.render_size <= 4096:
+    if args.render_size is not None and not 16 <= args.render_size <= 4096:
         raise input_error("--render-size", f"{args.render_size} is not in 16..4096")
     config = load_config(args.config) if args.config else Config()
-    options = dataclasses.replace(
-        config.validate_options(ValidateOptions()),
-        render=not args.no_render,
-        render_size=args.render_size,
-    )
+    options = config.validate_options(ValidateOptions())
+    if args.no_render:
+        options = dataclasses.replace(options, render=False)
+    if args.render_size is not None:
+        options = dataclasses.replace(options, render_size=args.render_size)
+    config = Config(config.ignore, config.severity, {})  # options are applied above
     with status(f"loading {args.path}"):
         inp = load_input(args.path, LoadOptions(textures=args.textures, source=args.source))
     with status("validating"):

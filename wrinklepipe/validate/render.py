@@ -367,6 +367,13 @@ def sample_reference(ctx: Context, uv: np.ndarray) -> Samples:
             sampled[e.texture] = tx.bilinear(ctx.values(inp.texture(e.texture)), uv)
         masks.append(sampled[e.texture][:, e.channel])
     src_masks = src_relief = None
+    if not inp.has_source and states:
+        # no source: the relief each shipped state adds at full activation
+        rel = []
+        for k in range(len(states)):
+            w = model.combine(base, states[k][None], np.ones((1, len(uv)), np.float32), a.encoding)
+            rel.append(model.angular_error_deg(w, base).astype(np.float32))
+        src_relief = np.stack(rel)
     if inp.has_source:
         src_masks = tx.bilinear(np.moveaxis(np.asarray(a.masks, np.float32), 0, -1), uv).T
         b = model.normalize(tx.bilinear(np.asarray(a.base, np.float32), uv))
@@ -496,7 +503,7 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
             entry["leak_pixels"] = n_leak
             if n_leak > o.leak_fraction * cov.sum():
                 leaks.append((label, n_leak))
-            if samples.src_relief is not None:
+            if samples.src_relief is not None and len(samples.src_relief) == len(act):
                 k_rel = samples.src_relief
                 full_act = act > 0.5
                 strong = (full_act & (k_rel > 4.0 * o.wrinkle_deg)).any(axis=0)
