@@ -314,3 +314,31 @@ def test_mutated_gltf_never_tracebacks(tmp_path_factory, picks):
     except InputError:
         return
     assert m.triangle_count > 0 and int(m.indices.max()) < m.vertex_count
+
+
+@needs_data
+def test_morph_weight_animation_sampled_like_pygltflib():
+    from pygltflib import GLTF2
+
+    from wrinklepipe.io.mesh_gltf import gltf_morph_weights
+
+    f = SAMPLES / "AnimatedMorphCube/glTF-Binary/AnimatedMorphCube.glb"
+    g = GLTF2().load(str(f))
+    blob = g.binary_blob()
+    smp = g.animations[0].samplers[0]
+
+    def acc(i: int) -> np.ndarray:
+        a = g.accessors[i]
+        bv = g.bufferViews[a.bufferView]
+        off = (bv.byteOffset or 0) + (a.byteOffset or 0)
+        return np.frombuffer(blob, np.float32, count=a.count, offset=off)
+
+    t_in = acc(smp.input)
+    w_out = acc(smp.output).reshape(len(t_in), 2)  # two targets per key
+    m = load_mesh(f)
+    for k in (0, 30, 64, 126):
+        w = gltf_morph_weights(f, m, float(t_in[k]))
+        np.testing.assert_allclose([w["target_0"], w["target_1"]], w_out[k], atol=1e-6)
+    mid = 0.5 * (t_in[40] + t_in[41])
+    w = gltf_morph_weights(f, m, float(mid))
+    np.testing.assert_allclose(w["target_0"], 0.5 * (w_out[40, 0] + w_out[41, 0]), atol=1e-6)

@@ -94,11 +94,23 @@ def deformed_pose(args: argparse.Namespace, mesh: object, parts: list) -> np.nda
     if kind == "usd":
         return np.concatenate([_usd_part_pose(args, part) for part in parts])
     if kind == "gltf":
-        from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices
+        from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, gltf_morph_weights
 
-        if mesh.joints is None:
-            raise input_error(args.mesh, "--time needs a skinned glTF mesh (use --morph)")
-        return skinned_pose(mesh, gltf_joint_world_matrices(args.mesh, mesh, args.time))
+        p = mesh.positions.astype(np.float64)
+        if mesh.morph_names:
+            w = gltf_morph_weights(args.mesh, mesh, args.time)
+            p = morph_pose(mesh, w, source=str(args.mesh))
+        if mesh.joints is not None:
+            rest = mesh.positions
+            mesh.positions = p.astype(np.float32)
+            try:
+                jm = gltf_joint_world_matrices(args.mesh, mesh, args.time)
+                p = skinned_pose(mesh, jm, source=str(args.mesh))
+            finally:
+                mesh.positions = rest
+        elif not mesh.morph_names:
+            raise input_error(args.mesh, "--time needs a skinned or morph-animated glTF mesh")
+        return p
     raise input_error(args.mesh, "--time needs a glTF or USD file with an animation")
 
 

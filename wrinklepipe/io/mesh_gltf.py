@@ -526,6 +526,43 @@ def gltf_joint_world_matrices(
     return np.stack([worlds.get(names_to_node[n], np.eye(4)) for n in mesh.joint_names])
 
 
+def gltf_morph_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, float]:
+    """Morph-target weights at ``time`` (seconds) of the first animation's ``weights`` channels
+    (else the node's / mesh's default ``weights``), by target name, for targets ``mesh`` has."""
+    r = _MeshReader(Path(path), GltfReadOptions())
+    doc = r.doc
+    nodes = doc.get("nodes", [])
+    meshes = doc.get("meshes", [])
+    out: dict[str, float] = {}
+    for ni, node in enumerate(nodes):
+        if "mesh" not in node or not 0 <= int(node["mesh"]) < len(meshes):
+            continue
+        gm = meshes[int(node["mesh"])]
+        n_t = max((len(p.get("targets", [])) for p in gm.get("primitives", [])), default=0)
+        if not n_t:
+            continue
+        names = list((gm.get("extras") or {}).get("targetNames", []))
+        names = [str(names[i]) if i < len(names) else f"target_{i}" for i in range(n_t)]
+        w = np.asarray(node.get("weights", gm.get("weights", [0.0] * n_t)), dtype=np.float64)
+        for ai, anim in enumerate(doc.get("animations", [])[:1]):
+            for ci, ch in enumerate(anim.get("channels", [])):
+                tgt = ch.get("target", {})
+                if tgt.get("path") != "weights" or tgt.get("node") != ni:
+                    continue
+                smp = anim["samplers"][ch["sampler"]]
+                key = f"/animations/{ai}/channels/{ci}"
+                t_in = r.typed(smp["input"], key)[:, 0].astype(np.float64)
+                vals = r.typed(smp["output"], key).astype(np.float64).reshape(-1)
+                interp = smp.get("interpolation", "LINEAR")
+                k = 3 if interp == "CUBICSPLINE" else 1
+                vals = vals.reshape(len(t_in), k, n_t)[:, k // 2]
+                w = _sample(t_in, vals, float(time), "STEP" if interp == "STEP" else "LINEAR", "w")
+        for name, value in zip(names, w):
+            if name in mesh.morph_names:
+                out.setdefault(name, float(value))
+    return out
+
+
 def _sample(t: np.ndarray, v: np.ndarray, time: float, interp: str, path: str) -> np.ndarray:
     if time <= t[0]:
         return v[0]
