@@ -122,7 +122,7 @@ def test_dynamic_bad_inputs_exit_2(tmp_path, capsys):
     bad = tmp_path / "bad.npy"
     np.save(bad, np.zeros((3, 3)))
     assert main(["dynamic", str(f), "--pose", str(bad), "-o", o]) == 2
-    assert main(["dynamic", str(f), "--time", "1", "-o", o]) == 2  # not skinned
+    assert main(["dynamic", str(f), "--time", "1", "-o", o]) == 2  # no animation
     err = capsys.readouterr().err
     assert "Traceback" not in err
     assert "unknown morph" in err and "NAME=WEIGHT" in err and "pose has shape" in err

@@ -495,6 +495,8 @@ def gltf_joint_world_matrices(
     the file's first animation (LINEAR / STEP samplers; CUBICSPLINE uses the values only)."""
     r = _MeshReader(Path(path), GltfReadOptions())
     doc = r.doc
+    if time is not None and not doc.get("animations"):
+        raise r.err("the file has no animation to sample", "/animations")
     nodes = [dict(n) for n in doc.get("nodes", [])]
     if time is not None and doc.get("animations"):
         anim = doc["animations"][0]
@@ -531,6 +533,8 @@ def gltf_morph_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, f
     (else the node's / mesh's default ``weights``), by target name, for targets ``mesh`` has."""
     r = _MeshReader(Path(path), GltfReadOptions())
     doc = r.doc
+    if not doc.get("animations"):
+        raise r.err("the file has no animation to sample", "/animations")
     nodes = doc.get("nodes", [])
     meshes = doc.get("meshes", [])
     out: dict[str, float] = {}
