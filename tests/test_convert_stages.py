@@ -58,3 +58,32 @@ def test_prepare_mesh_adds_tangents_and_ids():
     assert out.vertex_ids[2] == out.vertex_ids[4] and len(set(out.vertex_ids[:4])) == 4
     with pytest.raises(InputError, match="no UVs"):
         prepare_mesh(Mesh(positions=pos, indices=mesh.indices))
+
+
+def test_blendshapes_driver_gives_region_and_morph_curves(tmp_path):
+    from dataclasses import replace
+
+    from wrinklepipe.demo import demo_asset
+    from wrinklepipe.pipeline import evaluate_drivers
+
+    asset = demo_asset(16)
+    spec = {
+        "kind": "blendshapes",
+        "name": "performance",
+        "fps": 4,
+        "rows": [["brow_raise", "forehead_outer_l", 0.0, 1.0, 1.0, 0.0]],
+        "keys": {"brow_raise": [[0.0, 0.0], [1.0, 1.0], [2.0, 0.25]]},
+    }
+    curves, _ = evaluate_drivers(replace(asset, drivers=[spec]), tmp_path)
+    (c,) = curves
+    assert c.name == "performance"
+    assert c.times.tolist() == [0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0]
+    # brow_raise keys sampled linearly: 0 -> 1 over 1 s, then 1 -> 0.25 over the next second
+    expect = [0.0, 0.25, 0.5, 0.75, 1.0, 0.8125, 0.625, 0.4375, 0.25]
+    j = asset.mesh.morph_names.index("brow_raise")
+    assert c.morph_weights[:, j].tolist() == expect
+    assert np.count_nonzero(np.delete(c.morph_weights, j, axis=1)) == 0
+    # the row (slope 1, cut 0 on (0, 1]) passes it to forehead_outer_l only
+    r = asset.region_names.index("forehead_outer_l")
+    assert c.values[:, r].tolist() == expect
+    assert np.count_nonzero(np.delete(c.values, r, axis=1)) == 0

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -280,3 +282,36 @@ def test_several_weight_curves_keep_names_and_order(pkg, tmp_path):
     assert [c.name for c in u.curves] == [c.name for c in g.curves] == [c0.name, c1.name, c2.name]
     for a, b in zip(u.curves, p2.curves):
         assert np.array_equal(a.times, b.times) and np.array_equal(a.values, b.values)
+
+
+def test_morph_weight_animation_round_trip(pkg, tmp_path):
+    from dataclasses import replace
+
+    from pxr import UsdSkel
+
+    from wrinklepipe.io import khronos
+
+    c0 = pkg.curves[0]
+    rng = np.random.default_rng(11)
+    mw = rng.random((len(c0.times), len(pkg.mesh.morph_names))).astype(np.float32)
+    p2 = replace(pkg, curves=[replace(c0, morph_weights=mw)])
+    write_gltf(p2, tmp_path / "a", "x")
+    doc = json.loads((tmp_path / "a" / "x.gltf").read_text())
+    channels = doc["animations"][0]["channels"]
+    assert {"node": 0, "path": "weights"} in [ch["target"] for ch in channels]
+    if khronos.available():
+        issues = khronos.validate_gltf(tmp_path / "a" / "x.gltf")["issues"]
+        assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+    g = read_gltf(tmp_path / "a" / "x.gltf")
+    assert np.array_equal(g.curves[0].morph_weights, mw)
+    write_usd(g, tmp_path / "x.usda")
+    stage = Usd.Stage.Open(str(tmp_path / "x.usda"))
+    anim = UsdSkel.Animation(stage.GetPrimAtPath("/demo/Skel/Anim"))
+    fps = stage.GetTimeCodesPerSecond()
+    t2 = float(c0.times[2]) * fps
+    assert np.array_equal(np.asarray(anim.GetBlendShapeWeightsAttr().Get(t2)), mw[2])
+    u = read_usd(tmp_path / "x.usda")
+    assert np.array_equal(u.curves[0].morph_weights, mw)
+    write_gltf(u, tmp_path / "b", "x")
+    for rel in ("x.gltf", "x.bin"):
+        assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes()

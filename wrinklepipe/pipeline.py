@@ -120,6 +120,33 @@ def curves_from_weights(
     return WeightCurves(name, np.asarray(times, np.float32), per_region.astype(np.float32)), lost
 
 
+def morph_inputs(
+    ctx: Any, spec: dict[str, Any], times: np.ndarray, names: tuple[str, ...]
+) -> np.ndarray | None:
+    """The morph-target weights ``[T, M]`` a blendshapes driver reads, sampled at ``times``
+    (its glTF animation, keys or constant morphs, through :mod:`wrinklepipe.drivers.curves`),
+    so the output plays the face and its wrinkles together. None when it has none."""
+    from wrinklepipe.drivers.base import resolve
+    from wrinklepipe.drivers.curves import load_keys, read_gltf_morph_animation, sample_keys
+
+    t = np.asarray(times, np.float64)
+    file = spec.get("file")
+    if file is not None and Path(str(file)).suffix.lower() in (".gltf", ".glb"):
+        _, got, x = read_gltf_morph_animation(resolve(ctx, str(file)), t)
+        out = np.zeros((t.size, len(names)), np.float32)
+        for j, n in enumerate(got):
+            if n in names:
+                out[:, names.index(n)] = x[:, j]
+        return out
+    if "morphs" in spec and "keys" not in spec and file is None:
+        row = [float(spec["morphs"].get(n, 0.0)) for n in names]
+        return np.tile(np.array(row, np.float32), (t.size, 1))
+    keys, interp, _ = load_keys(ctx, spec)
+    if not keys:
+        return None
+    return sample_keys(keys, names, t, interp or "linear").astype(np.float32)
+
+
 def evaluate_drivers(asset: WrinkleAsset, root: Path) -> tuple[list[WeightCurves], list[str]]:
     """Weight curves for each driver of the asset (wrinklepipe.drivers); notes on what happened."""
     notes: list[str] = []
@@ -143,6 +170,8 @@ def evaluate_drivers(asset: WrinkleAsset, root: Path) -> tuple[list[WeightCurves
             name = f"{name}_{i}"
         used.add(name)
         curve, lost = curves_from_weights(name, res.times, res.weights, asset.region_state_matrix())
+        if kind == "blendshapes" and asset.mesh is not None and asset.mesh.morph_names:
+            curve.morph_weights = morph_inputs(ctx, spec, res.times, asset.mesh.morph_names)
         if lost > 1e-6:
             notes.append(f"drivers[{i}] ({kind}): per-state weights differ by up to {lost:.3g}")
         notes.extend(f"drivers[{i}] ({kind}): {n}" for n in res.notes)

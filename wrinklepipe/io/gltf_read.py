@@ -404,9 +404,28 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
         ai = wc.get("animation")
         if not isinstance(ai, int) or not 0 <= ai < len(anims):
             raise r.err(f"animation {ai!r} does not exist", f"{pkey}/weightCurves/{i}")
-        s = anims[ai]["samplers"][anims[ai]["channels"][0]["sampler"]]
+        anim = anims[ai]
+        pointer = [
+            ch for ch in anim.get("channels", []) if ch.get("target", {}).get("path") == "pointer"
+        ]
+        if not pointer:
+            raise r.err("animation has no KHR_animation_pointer channel", f"/animations/{ai}")
+        s = anim["samplers"][pointer[0]["sampler"]]
         times = r.accessor(s["input"]).astype(np.float32)
         vals = r.accessor(s["output"]).astype(np.float32).reshape(-1)
+        morph = None
+        for ch in anim.get("channels", []):
+            tgt = ch.get("target", {})
+            if tgt.get("path") == "weights" and tgt.get("node") == 0:
+                ms = anim["samplers"][ch["sampler"]]
+                mv = r.accessor(ms["output"]).astype(np.float32).reshape(-1)
+                n_m = len(mesh.morph_names)
+                if not n_m or mv.size != times.size * n_m:
+                    raise r.err(
+                        f"morph weights: {mv.size} values for {times.size} keys x {n_m} targets",
+                        f"/animations/{ai}",
+                    )
+                morph = mv.reshape(times.size, n_m)
         if vals.size != times.size * len(regions):
             raise r.err(
                 f"animation output has {vals.size} values, expected {times.size} x {len(regions)}",
@@ -414,7 +433,10 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
             )
         curves.append(
             WeightCurves(
-                str(wc.get("name", f"curve_{i}")), times, vals.reshape(times.size, len(regions))
+                str(wc.get("name", f"curve_{i}")),
+                times,
+                vals.reshape(times.size, len(regions)),
+                morph,
             )
         )
     name = str(

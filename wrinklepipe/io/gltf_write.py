@@ -273,19 +273,31 @@ def gltf_document(
                 f"weight curve {c.name!r}: values {values.shape} do not match "
                 f"{times.shape[0]} keys x {len(region_names)} regions",
             )
-        sampler = {
-            "input": buf.accessor(times, minmax=True),
-            "output": buf.accessor(values.reshape(-1)),
-            "interpolation": "LINEAR",
-        }
-        channel = {
-            "sampler": 0,
-            "target": {
-                "path": "pointer",
-                "extensions": {POINTER_EXTENSION: {"pointer": WEIGHTS_POINTER}},
-            },
-        }
-        animations.append({"name": c.name, "samplers": [sampler], "channels": [channel]})
+        t_acc = buf.accessor(times, minmax=True)
+        samplers = [
+            {"input": t_acc, "output": buf.accessor(values.reshape(-1)), "interpolation": "LINEAR"}
+        ]
+        channels = [
+            {
+                "sampler": 0,
+                "target": {
+                    "path": "pointer",
+                    "extensions": {POINTER_EXTENSION: {"pointer": WEIGHTS_POINTER}},
+                },
+            }
+        ]
+        if c.morph_weights is not None:
+            mw = np.asarray(c.morph_weights, np.float32)
+            if mw.shape != (times.shape[0], len(m.morph_names)) or not len(m.morph_names):
+                raise input_error(
+                    pkg.name,
+                    f"weight curve {c.name!r}: morph weights {mw.shape} do not match "
+                    f"{times.shape[0]} keys x {len(m.morph_names)} morph targets",
+                )
+            out = buf.accessor(mw.reshape(-1))
+            samplers.append({"input": t_acc, "output": out, "interpolation": "LINEAR"})
+            channels.append({"sampler": 1, "target": {"node": 0, "path": "weights"}})
+        animations.append({"name": c.name, "samplers": samplers, "channels": channels})
     if animations:
         ext["weightCurves"] = [{"name": c.name, "animation": i} for i, c in enumerate(pkg.curves)]
 

@@ -60,11 +60,14 @@ class PackedTexture:
 
 @dataclass
 class WeightCurves:
-    """Region weights keyed over time: ``times`` [T] seconds, ``values`` [T, R] (float32)."""
+    """Region weights keyed over time: ``times`` [T] seconds, ``values`` [T, R] (float32), and
+    optionally the morph-target weights ``morph_weights`` [T, M] that drive them (a blendshapes
+    driver's inputs), played together."""
 
     name: str
     times: np.ndarray
     values: np.ndarray
+    morph_weights: np.ndarray | None = None
 
 
 @dataclass

@@ -309,6 +309,17 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     )
     if first is not None:
         curves.append(first)
+
+    def morphs(i: int, c: WeightCurves) -> WeightCurves:
+        a = mat_prim.GetAttribute(f"wrinkle:morphCurves:curve{i}")
+        if not a or not a.GetTimeSamples():
+            return c
+        codes = a.GetTimeSamples()
+        mw = np.stack([np.asarray(a.Get(Usd.TimeCode(t)), np.float32) for t in codes])
+        if len(codes) != len(c.times) or mw.shape[1] != len(mesh.morph_names):
+            raise input_error(file, f"{a.GetPath()}: morph weights do not match the curve")
+        return WeightCurves(c.name, c.times, c.values, mw)
+
     order = mat_prim.GetAttribute("wrinkle:curveNames")
     names = [str(n) for n in order.Get()] if order and order.HasAuthoredValue() else []
     for i, curve_name in enumerate(names[1:], start=1):
@@ -318,6 +329,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         c = curve(attr, curve_name)
         if c is not None:
             curves.append(c)
+    curves = [morphs(i, c) for i, c in enumerate(curves)]
     del Sdf
     name = stage.GetDefaultPrim().GetName() if stage.GetDefaultPrim() else path.stem
     return WrinklePackage(name, mesh, textures, meta, curves)

@@ -175,6 +175,30 @@ def _skel(stage: Any, root_path: Any, mesh: Any, m: Mesh) -> None:
         binding.CreateBlendShapeTargetsRel().SetTargets(targets)
 
 
+def _morph_curves(stage: Any, root_path: Any, prim: Any, pkg: WrinklePackage, fps: float) -> None:
+    """Morph-target weights of each curve: ``wrinkle:morphCurves:curve<i>`` time samples on the
+    material (exact), and those of the first curve also as the SkelAnimation's
+    ``blendShapeWeights`` time samples (what UsdSkel plays)."""
+    from pxr import Sdf, Usd, UsdSkel, Vt
+
+    for i, c in enumerate(pkg.curves):
+        if c.morph_weights is None:
+            continue
+        mw = np.asarray(c.morph_weights, np.float32)
+        if mw.shape != (len(c.times), len(pkg.mesh.morph_names)):
+            raise input_error(pkg.name, f"curve {c.name!r}: morph weights of shape {mw.shape}")
+        a = prim.CreateAttribute(f"wrinkle:morphCurves:curve{i}", Sdf.ValueTypeNames.FloatArray)
+        a.SetCustom(True)
+        codes = [Usd.TimeCode(float(t) * fps) for t in np.asarray(c.times, np.float32)]
+        for code, row in zip(codes, mw):
+            a.Set(Vt.FloatArray.FromNumpy(row), code)
+        if i == 0:
+            anim = UsdSkel.Animation(stage.GetPrimAtPath(root_path.AppendPath("Skel/Anim")))
+            bsw = anim.GetBlendShapeWeightsAttr()
+            for code, row in zip(codes, mw):
+                bsw.Set(Vt.FloatArray.FromNumpy(row), code)
+
+
 def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
     """Build an in-memory ``Usd.Stage`` for the package (textures referenced, not written).
 
@@ -357,6 +381,7 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
                 np.asarray(extra.times, np.float32), np.asarray(extra.values, np.float32)
             ):
                 a.Set(Vt.FloatArray.FromNumpy(row), Usd.TimeCode(float(t) * opt.fps))
+        _morph_curves(stage, root_path, prim, pkg, opt.fps)
 
     UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
     return stage
