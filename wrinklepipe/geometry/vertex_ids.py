@@ -168,9 +168,9 @@ def compute_vertex_ids(
         return np.zeros(0, dtype=np.int64)
     if p.dtype not in (np.float32, np.float64):
         p = p.astype(np.float64)
-    cols = [np.ascontiguousarray(p[:, a], dtype=np.float64) for a in range(3)]
-    lo = np.array([c.min() for c in cols])
-    hi = np.array([c.max() for c in cols])
+    cols = [np.ascontiguousarray(p[:, a]) for a in range(3)]  # float32 stays float32
+    lo = np.array([c.min() for c in cols], dtype=np.float64)
+    hi = np.array([c.max() for c in cols], dtype=np.float64)
     if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
         finite = np.isfinite(p).all(axis=1)
         bad = np.flatnonzero(~finite)
@@ -203,14 +203,18 @@ def compute_vertex_ids(
         fine = cell <= 0.5 * tol
         if fine:
             cell = 0.5 * tol  # same cell => within tol / 2: never dense
-        sub_cols = cols if active is None else [c[active] for c in cols]
+        sub_cols = cols if active is None else [c[active].astype(np.float64) for c in cols]
         m = len(sub_cols[0])
         inv = 1.0 / cell
         g = []
         q = []
         for c, o in zip(sub_cols, lo):
-            ga = np.subtract(c, o)
-            ga *= inv
+            if c.dtype == np.float32:  # exact: lo is one of the float32 values
+                ga = np.subtract(c, np.float32(o))
+                ga *= np.float32(inv)
+            else:
+                ga = np.subtract(c, o)
+                ga *= inv
             qa = ga.astype(np.int64)  # ga >= 0: truncation is floor
             if active is not None:
                 q0 = qa.min()
@@ -218,6 +222,9 @@ def compute_vertex_ids(
                 ga -= q0
             g.append(ga)
             q.append(qa)
+        # Rounding of the cell coordinates (float32 at most 4 roundings of 2^-24 relative):
+        # widen the near-face margin by it so the candidates stay a superset.
+        slack = 4.0 * 2.0**-23 * float(max(a.max() for a in g)) if g[0].dtype == np.float32 else 0.0
         local = np.arange(m, dtype=np.int64)
         rep, ukeys, bits = _cell_firsts(q, m)
         is_rep = rep == local
@@ -227,7 +234,8 @@ def compute_vertex_ids(
             r = rep[dup]
             spread = np.zeros(len(dup))
             for c in sub_cols:
-                d = c[dup] - c[r]
+                d = c[dup].astype(np.float64)
+                d -= c[r]
                 np.maximum(spread, np.abs(d), out=spread)
             loose = spread > 0.5 * tol
             if loose.any():
@@ -236,11 +244,11 @@ def compute_vertex_ids(
                 dense_pt = dense_cell[rep]
         # Representatives of settled cells that lie near a cell face may link across it.
         rep_idx = np.flatnonzero(is_rep if dense_pt is None else is_rep & ~dense_pt)
-        margin = 1.5 * tol / cell
+        margin = 1.5 * tol / cell + slack
         # Near a face: |frac - 1/2| > 1/2 - margin on some axis (contiguous passes, no gathers).
         dist = None
         for a in range(3):
-            fr = g[a] - q[a]
+            fr = g[a] - np.floor(g[a])
             fr -= 0.5
             np.abs(fr, out=fr)
             dist = fr if dist is None else np.maximum(dist, fr, out=dist)
@@ -251,7 +259,8 @@ def compute_vertex_ids(
             # near face is occupied at all (exact: a partner within tol lies in such a cell).
             sides = []
             for a in range(3):
-                fr = g[a][rep_idx] - q[a][rep_idx]
+                ga = g[a][rep_idx]
+                fr = ga - np.floor(ga)
                 sides.append((fr > 1.0 - margin).astype(np.int64) - (fr < margin))
             qs = [qa[rep_idx] for qa in q]
             rep_idx = rep_idx[_neighbour_occupied(qs, sides, ukeys, bits)]
