@@ -175,19 +175,20 @@ def test_property_twins_share_and_separated_differ(n, offset, scale, seed):
     np.testing.assert_array_equal(ids, rank[truth])
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("mesh_name", ["sphere", "head"])
-def test_jitter_at_cell_borders(mesh_name, sphere, head):
+def test_jitter_at_cell_borders(mesh_name, dtype, sphere, head):
     # Snap every vertex onto a corner of the hash grid (coarse_factor 16 -> cells of 16 tol),
     # then jitter by < tol/10: twins now straddle cell faces in every axis.
     mesh = sphere if mesh_name == "sphere" else head
     p = mesh.positions.astype(np.float64)
     tol = 1e-5 * float(np.linalg.norm(p.max(0) - p.min(0)))
     cell = 16 * tol
-    snapped = np.round((p - p.min(0)) / cell) * cell
+    snapped = (np.round((p - p.min(0)) / cell) * cell + 0.05).astype(dtype)
     opts = VertexIdOptions(tolerance=tol, coarse_factor=16)
     ids = compute_vertex_ids(snapped, options=opts)
-    assert same_partition(ids, exact_groups(snapped))
+    assert same_partition(ids, exact_groups(snapped.astype(np.float64)))
     rng = np.random.default_rng(11)
     for _ in range(3):
-        jit = snapped + rng.uniform(-tol / 10, tol / 10, size=p.shape)
+        jit = (snapped + rng.uniform(-tol / 10, tol / 10, size=p.shape)).astype(dtype)
         np.testing.assert_array_equal(compute_vertex_ids(jit, options=opts), ids)
