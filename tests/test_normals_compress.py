@@ -91,18 +91,17 @@ def test_texture2ddecoder_bgra_is_turned_into_rgba():
     assert abs(int(rgba[0, 0, 0]) - 250) <= 1 and abs(int(rgba[0, 0, 1]) - 10) <= 1
 
 
-def test_fused_pd_path_equals_plain_calls(demo):
+@pytest.mark.parametrize("fmt", ["bc5", "bc1", "bc3nm", "bc7"])
+def test_fused_pd_path_equals_plain_calls(demo, fmt):
     n = demo.wrinkled_normal(1)[:, :200].astype(np.float32)  # 256 x 200
     s = 1.0
     q, _, clipped = enc.encode_pd_u8(n, s)
-    data = cmp.encode_bc(cmp.pack_rgba(q, "bc5"), "bc5")
+    data = cmp.encode_bc(cmp.pack_rgba(q, fmt), fmt)
     angles = np.empty(n.shape[:2], np.float32)
-    r = cmp.pd_compress_check(n, s, "bc5", angles_out=angles)
+    r = cmp.pd_compress_check(n, s, fmt, angles_out=angles)
     assert r.data == data  # chunked compression == one call
     assert r.clipped == clipped == enc.pd_clipped_count(n, s)
-    dec = enc.decode_pd(
-        enc.dequantize(cmp.unpack_u8(cmp.decode_bc(data, 200, 256, "bc5"), "bc5")), s
-    )
+    dec = enc.decode_pd(enc.dequantize(cmp.unpack_u8(cmp.decode_bc(data, 200, 256, fmt), fmt)), s)
     ref = np.degrees(
         np.arccos(np.clip((dec.astype(np.float64) * n).sum(-1), -1, 1))
     )  # float64 reference
