@@ -171,6 +171,17 @@ def resize_normals_pd(normals: np.ndarray, h: int, w: int) -> np.ndarray:
     return np.asarray(resize_normals(normals, (h, w), space="pd"), np.float32)
 
 
+def _base_at(
+    base: np.ndarray, shape: tuple[int, ...], cache: dict[tuple[int, ...], np.ndarray]
+) -> np.ndarray:
+    """The base at a state's size (PD-space resample, computed once per size)."""
+    if base.shape[:2] == tuple(shape):
+        return base
+    if tuple(shape) not in cache:
+        cache[tuple(shape)] = resize_normals_pd(base, int(shape[0]), int(shape[1]))
+    return cache[tuple(shape)]
+
+
 def pack_masks(
     masks: np.ndarray, names: list[str], layout: str, sides: list[str] | None = None
 ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
@@ -223,12 +234,11 @@ def package_from_asset(
     base = model.normalize(asset.base)
     textures = [PackedTexture("base_normal", _q(0.5 + 0.5 * base, opt.bits), "base_normal")]
     taken = {"base_normal"}
+    cache: dict[tuple[int, ...], np.ndarray] = {}
     states_meta = []
     for k, name in enumerate(asset.state_names):
         st = model.normalize(asset.states[k])
-        b = base
-        if b.shape[:2] != st.shape[:2]:
-            b = resize_normals_pd(base, st.shape[0], st.shape[1])
+        b = _base_at(base, st.shape[:2], cache)
         tex = PackedTexture(
             safe_name(f"wrinkle_{name}", taken),
             _q(encode_state(b, st, asset.encoding, scale), opt.bits),
@@ -268,11 +278,10 @@ def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
     enc, scale = str(meta["encoding"]), float(meta["scale"])
     base = model.normalize(2.0 * _dq(pkg.texture("base_normal").pixels)[..., :3] - 1.0)
     states = []
+    cache: dict[tuple[int, ...], np.ndarray] = {}
     for s in meta["states"]:
         stored = _dq(pkg.texture(s["texture"]).pixels)
-        b = base
-        if b.shape[:2] != stored.shape[:2]:
-            b = resize_normals_pd(base, stored.shape[0], stored.shape[1])
+        b = _base_at(base, stored.shape[:2], cache)
         states.append(decode_state(b, stored, enc, scale))
     mask_tex = [_dq(pkg.texture(n).pixels) for n in meta["masks"]["textures"]]
     masks = unpack_masks(mask_tex, meta["masks"]["table"])
