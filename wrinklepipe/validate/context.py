@@ -59,6 +59,31 @@ def expression_weights(asset: WrinkleAsset, expr: str | None) -> np.ndarray:
     return per_region[:, None] * asset.region_state_matrix()
 
 
+def resize_normals(normals: np.ndarray, h: int, w: int) -> np.ndarray:
+    """Unit normals resampled in PD space as ``convert`` does (bilinear when that stage is
+    not installed)."""
+    n = np.asarray(normals, np.float32)
+    if n.shape[:2] == (h, w):
+        return n
+    try:
+        from wrinklepipe.io.package import resize_normals_pd
+
+        return np.asarray(resize_normals_pd(n, h, w), np.float32)
+    except ImportError:  # pragma: no cover
+        return model.pd_to_normal(tx.resize_bilinear(model.normal_to_pd(n), h, w))
+
+
+def resize_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:
+    """Masks ``[R, H, W]`` resampled as ``convert`` does (box down, bilinear up)."""
+    m = np.asarray(masks, np.float32)
+    try:
+        from wrinklepipe.masks import resample_masks
+
+        return np.asarray(resample_masks(m, (h, w)), np.float32)
+    except ImportError:  # pragma: no cover
+        return np.moveaxis(tx.resize_bilinear(np.moveaxis(m, 0, -1), h, w), -1, 0)
+
+
 def encode_source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.ndarray:
     """Source (float) states in the representation :func:`wrinklepipe.model.combine` takes."""
     if encoding == "pd":
@@ -165,9 +190,11 @@ class Context:
     # ---------------------------------------------------------------- comparison grid
     @cached_property
     def grid_shape(self) -> tuple[int, int]:
-        """Texture-space grid for shipped-vs-source comparisons (the largest map, capped)."""
+        """Texture-space grid for shipped-vs-source comparisons (the largest shipped normal
+        map, capped at ``options.grid``)."""
         sizes = [t.height for t in self.inp.textures if t.role in ("base", "state")]
-        sizes.append(int(self.asset.base.shape[0]))
+        if not sizes:
+            sizes = [int(self.asset.base.shape[0])]
         n = min(max(sizes), self.options.grid)
         return n, n
 
@@ -182,15 +209,49 @@ class Context:
         return np.moveaxis(tx.resize_bilinear(np.moveaxis(masks, 0, -1), h, w), -1, 0)
 
     @cached_property
+    def source_at_shipped_size(self) -> dict[str, np.ndarray] | None:
+        """The source resampled to the shipped sizes the way ``convert`` resamples (normals in
+        PD space, masks box-down / bilinear-up), so comparisons measure what encoding,
+        quantisation and compression lost, not the chosen resolution (WP-TEX-006 covers that).
+
+        Keys: ``base`` (at the base texture's size), ``states`` and ``base_at_states`` (at the
+        state textures' size), ``masks`` (at the mask textures' size).
+        """
+        a = self.asset
+        if not self.inp.has_source or len(a.states) == 0:
+            return None
+        bt = self.base_tex
+        hb, wb = (bt.height, bt.width) if bt is not None else a.base.shape[:2]
+        sts = [t for t in self.inp.state_textures() if t is not None]
+        hs, ws = (sts[0].height, sts[0].width) if sts else a.states.shape[1:3]
+        out = {
+            "base": resize_normals(a.base, hb, wb),
+            "states": np.stack([resize_normals(st, hs, ws) for st in a.states]),
+            "base_at_states": resize_normals(a.base, hs, ws),
+        }
+        masks = np.asarray(a.masks, np.float32)
+        ship = self.shipped_masks
+        if ship is not None and masks.shape[0] and ship.shape[1:] != masks.shape[1:]:
+            masks = resize_masks(masks, *ship.shape[1:])
+        out["masks"] = masks
+        return out
+
+    @cached_property
     def source_on_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Source base, encoded states and masks on the grid (needs ``has_source``)."""
         a = self.asset
-        if not self.inp.has_source or a.encoding not in model.ENCODINGS or len(a.states) == 0:
+        src = self.source_at_shipped_size
+        if src is None or a.encoding not in model.ENCODINGS:
             return None
-        base = model.normalize(self.to_grid(a.base))
-        states = np.stack([model.normalize(self.to_grid(s)) for s in a.states])
-        enc = encode_source_states(base, states, a.encoding)
-        return base, enc.astype(np.float32), self.masks_to_grid(a.masks)
+        enc = encode_source_states(src["base_at_states"], src["states"], a.encoding)
+        st = []
+        for s in enc:
+            g = self.to_grid(s)
+            if a.encoding in ("full", "composite"):
+                g = model.normalize(g)
+            st.append(g)
+        base = model.normalize(self.to_grid(src["base"]))
+        return base, np.stack(st).astype(np.float32), self.masks_to_grid(src["masks"])
 
     @cached_property
     def shipped_on_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:

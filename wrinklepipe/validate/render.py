@@ -374,12 +374,14 @@ def sample_reference(ctx: Context, uv: np.ndarray) -> Samples:
             w = model.combine(base, states[k][None], np.ones((1, len(uv)), np.float32), a.encoding)
             rel.append(model.angular_error_deg(w, base).astype(np.float32))
         src_relief = np.stack(rel)
-    if inp.has_source:
-        src_masks = tx.bilinear(np.moveaxis(np.asarray(a.masks, np.float32), 0, -1), uv).T
-        b = model.normalize(tx.bilinear(np.asarray(a.base, np.float32), uv))
+    src = ctx.source_at_shipped_size
+    if src is not None:
+        # the source at the shipped sizes: resolution choices are WP-TEX-006's business
+        src_masks = tx.bilinear(np.moveaxis(src["masks"], 0, -1), uv).T
+        b = model.normalize(tx.bilinear(src["base_at_states"], uv))
         rel = []
-        for s in a.states:
-            w = model.normalize(tx.bilinear(np.asarray(s, np.float32), uv))
+        for s in src["states"]:
+            w = model.normalize(tx.bilinear(s, uv))
             rel.append(model.angular_error_deg(w, b).astype(np.float32))
         src_relief = np.stack(rel) if rel else None
     return Samples(base, np.stack(states), np.stack(masks), src_masks, src_relief)

@@ -246,7 +246,9 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
         )
         for p in poses:
             parts.append("<div>")
-            parts.append(fig(f"render_{p}.png", f"{p}: render"))
+            if p != "neutral":
+                parts.append(fig("render_neutral.png", f"{p}: without wrinkles"))
+            parts.append(fig(f"render_{p}.png", f"{p}: with wrinkles" if p != "neutral" else p))
             parts.append(fig(f"change_{p}.png", f"{p}: change from neutral"))
             parts.append(fig(f"gpu_error_{p}.png", f"{p}: GPU vs reference"))
             parts.append(fig(f"shipping_error_{p}.png", f"{p}: shipped vs source (0..5 deg)"))

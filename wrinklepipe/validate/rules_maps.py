@@ -7,7 +7,7 @@ import numpy as np
 from wrinklepipe import model
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
-from wrinklepipe.validate.context import Context
+from wrinklepipe.validate.context import Context, resize_normals
 from wrinklepipe.validate.inputs import Texture
 
 
@@ -227,10 +227,13 @@ def _encoding_match(ctx: Context) -> list[Issue]:
         if v is None or k >= len(a.states):
             continue
         h, w = v.shape[:2]
-        base = model.normalize(tx.resize_bilinear(ctx.shipped_base, h, w))
-        src = model.normalize(tx.resize_bilinear(a.states[k], h, w))
+        base = resize_normals(ctx.shipped_base, h, w)
+        ref = ctx.source_at_shipped_size
+        if ref is None or ref["states"].shape[1:3] != (h, w):
+            continue
+        src = ref["states"][k]
         # judge on the texels that carry a wrinkle (elsewhere every encoding decodes to B)
-        src_base = model.normalize(tx.resize_bilinear(a.base, h, w))
+        src_base = ref["base_at_states"]
         relief = model.angular_error_deg(src, src_base) > 2.0
         if relief.sum() < 16:
             continue
