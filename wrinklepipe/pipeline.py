@@ -482,25 +482,37 @@ def compressed_files(
         maps = [t for t in maps if t.bits == 8]
         if not maps or (want not in _BLOCK and want != "auto"):
             continue
-        candidates = AUTO_FORMATS if want == "auto" else (want,)
+        # Smallest blocks first (BC1: 8 bytes; then BC5, BC3nm, BC7: 16), stop at the first
+        # format every map of the group passes with: that is the smallest that meets the budget.
+        candidates = (
+            tuple(
+                sorted(
+                    AUTO_FORMATS, key=lambda f: (nc.block_data_size(f, 4, 4), AUTO_FORMATS.index(f))
+                )
+            )
+            if want == "auto"
+            else (want,)
+        )
+        references = []
+        for t in maps:
+            stored = t.pixels[..., :2]
+            references.append((stored, decode(lut[stored], slice(0, stored.shape[0]))))
         checks: dict[str, list[Any]] = {}
         for f in candidates:
-            checks[f] = []
-            for t in maps:
-                stored = t.pixels[..., :2]
-                reference = decode(lut[stored], slice(0, stored.shape[0]))
-                checks[f].append(
-                    nc.compress_and_check(stored, reference, f, decode, limits, keep_decoded=False)
-                )
+            checks[f] = [
+                nc.compress_and_check(st, ref, f, decode, limits, keep_decoded=False)
+                for st, ref in references
+            ]
+            if all(c.verdict == "pass" for c in checks[f]):
+                break
+        candidates = tuple(checks)
         passing = [f for f in candidates if all(c.verdict == "pass" for c in checks[f])]
         if want != "auto":
             pick = want
             if not passing:
                 notes.append(f"{group}: {want} as requested, over the error budget")
-        elif passing:  # fewest bytes; ties keep the AUTO_FORMATS order (BC5, the paper's 3Dc)
-            pick = min(
-                passing, key=lambda f: (sum(c.bytes for c in checks[f]), candidates.index(f))
-            )
+        elif passing:
+            pick = passing[0]
         else:
             pick = None
             best = min(candidates, key=lambda f: max(c.error.mean_deg for c in checks[f]))
