@@ -81,7 +81,7 @@ def _stem(asset: Any) -> str:
 
 def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> WrinklePackage:
     """Load a wrinklepipe USD stage as a :class:`WrinklePackage`."""
-    from pxr import Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel
+    from pxr import Tf, Usd, UsdGeom, UsdShade, UsdSkel
 
     opt = options or UsdReadOptions()
     path = Path(path)
@@ -330,6 +330,5 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         if c is not None:
             curves.append(c)
     curves = [morphs(i, c) for i, c in enumerate(curves)]
-    del Sdf
     name = stage.GetDefaultPrim().GetName() if stage.GetDefaultPrim() else path.stem
     return WrinklePackage(name, mesh, textures, meta, curves)
