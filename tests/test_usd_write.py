@@ -315,3 +315,13 @@ def test_morph_weight_animation_round_trip(pkg, tmp_path):
     write_gltf(u, tmp_path / "b", "x")
     for rel in ("x.gltf", "x.bin"):
         assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes()
+
+
+@pytest.mark.parametrize(
+    "name, data", [("x.usda", b"#usda 1.0\ndef Xform (((\n"), ("x.usdz", b"PK\x03\x04junk")]
+)
+def test_reader_refuses_broken_files(tmp_path, name, data):
+    (tmp_path / name).write_bytes(data)
+    with pytest.raises(InputError) as exc:
+        read_usd(tmp_path / name)
+    assert name in str(exc.value)
