@@ -230,7 +230,8 @@ def package_from_asset(
     opt = options or PackOptions()
     if asset.mesh is None:
         raise input_error(asset.name, "the asset has no mesh; glTF and USD output need one")
-    scale = float(asset.pd_scale) if asset.encoding in ("pd", "diff") else 1.0
+    # pd: the slope range; diff is stored with gain 1 (what shaders and the validator assume)
+    scale = float(asset.pd_scale) if asset.encoding == "pd" else 1.0
     base = model.normalize(asset.base)
     textures = [PackedTexture("base_normal", _q(0.5 + 0.5 * base, opt.bits), "base_normal")]
     taken = {"base_normal"}
