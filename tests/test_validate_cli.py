@@ -206,3 +206,12 @@ def test_convert_output_with_its_source(capsys, converted):
     usdz = next(out.glob("*.usdz"))
     code, text, _ = run(capsys, usdz, "--no-render", "--json")
     assert json.loads(text)["input"]["kind"] == "usd"
+
+
+def test_manifest_before_conversion(capsys, converted):
+    manifest, _ = converted
+    code, text, err = run(capsys, manifest, "--no-render", "--json")
+    doc = json.loads(text)
+    assert doc["input"]["kind"] == "manifest" and doc["input"]["has_source"]
+    assert code == 0, err
+    assert "shipping_error_deg" in doc["metrics"]

@@ -343,6 +343,11 @@ def _load_manifest(p: Path) -> ValidationInput:
     inp = input_from_package(pkg, str(p), "manifest")
     inp.asset = asset
     inp.has_source = True
+    if asset.drivers:
+        from wrinklepipe.pipeline import evaluate_drivers
+
+        curves, _ = _guard(lambda: evaluate_drivers(asset, p.parent), p, "the drivers")
+        inp.weight_curves = {str(c.name): np.asarray(c.values, np.float32) for c in curves}
     inp.pointers.update({k: str(p) for k in ("meta", "masks", "channels", "textures")})
     inp.pointers["expressions"] = f"{p} [expressions]"
     return inp
