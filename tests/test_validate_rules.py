@@ -264,3 +264,44 @@ def test_dynamic_weights_are_continuous_with_good_ids_and_jump_with_broken_ones(
     assert np.abs(w_good).max() > 0.5  # the morph does wrinkle the back of the head
     assert group_spread(groups, w_good[:, None]).max() < 1e-5
     assert group_spread(groups, w_bad[:, None]).max() > 0.1
+
+
+SAMPLE = ROOT.parent / "shared" / "data" / "gltf-samples" / "NormalTangentMirrorTest"
+
+
+@pytest.mark.shared
+@pytest.mark.skipif(not SAMPLE.is_dir(), reason="../shared/data is absent")
+def test_exported_mikktspace_tangents_pass_and_rotated_ones_fail():
+    from dataclasses import replace
+
+    from wrinklepipe.asset import WrinkleAsset
+    from wrinklepipe.io.mesh import load_mesh
+    from wrinklepipe.validate.context import Context
+    from wrinklepipe.validate.inputs import ValidationInput
+    from wrinklepipe.validate.rules_mesh import check_mesh
+
+    mesh = load_mesh(SAMPLE / "glTF" / "NormalTangentMirrorTest.gltf")
+    assert mesh.tangents is not None and (mesh.tangents[:, 3] < 0).any()  # mirrored UVs
+
+    def codes(m: Mesh) -> list[str]:
+        a = WrinkleAsset(
+            "t",
+            np.zeros((4, 4, 3), np.float32),
+            np.zeros((0, 4, 4, 3)),
+            (),
+            np.zeros((0, 4, 4)),
+            (),
+            mesh=m,
+        )
+        return [i.code for i in check_mesh(Context(ValidationInput(a)))]
+
+    assert codes(mesh) == []
+    t = mesh.tangents.astype(np.float64).copy()
+    n = mesh.normals.astype(np.float64)
+    b = np.cross(n, t[:, :3])
+    ang = np.radians(20.0)  # rotate every tangent 20 degrees about its normal
+    t[:, :3] = np.cos(ang) * t[:, :3] + np.sin(ang) * b
+    assert codes(replace(mesh, tangents=t.astype(np.float32))) == ["WP-MESH-002"]
+    flipped = mesh.tangents.copy()
+    flipped[:, 3] *= -1
+    assert codes(replace(mesh, tangents=flipped)) == ["WP-MESH-002"]
