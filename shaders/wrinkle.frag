@@ -34,6 +34,15 @@
 #ifndef STATE_LAYOUT
 #define STATE_LAYOUT 1
 #endif
+#ifndef LR_SPLIT
+#define LR_SPLIT 0
+#endif
+#ifndef SPLIT_LAYER
+#define SPLIT_LAYER 0
+#endif
+#ifndef SPLIT_CHANNEL
+#define SPLIT_CHANNEL 3
+#endif
 #define MAX_LAYERS 16
 
 //#include common.glsl
@@ -49,6 +58,16 @@ uniform float u_pd_scale;
 uniform mat4 u_wlo[MAX_LAYERS];  // weights of states 0..3: column c = mask channel c
 uniform mat4 u_whi[MAX_LAYERS];  // weights of states 4..7
 uniform vec4 u_used[MAX_LAYERS];  // 1 for channels that hold a region (renormalize)
+#if LR_SPLIT
+// lr-split layout (2009 blog): a left/right pair shares a channel c; the split channel s is 1 on
+// the character's left, so M_left = c * s, M_right = c * (1 - s). Centre regions use u_wlo.
+uniform mat4 u_wlo_l[MAX_LAYERS];
+uniform mat4 u_whi_l[MAX_LAYERS];
+uniform mat4 u_wlo_r[MAX_LAYERS];
+uniform mat4 u_whi_r[MAX_LAYERS];
+uniform vec4 u_used_l[MAX_LAYERS];
+uniform vec4 u_used_r[MAX_LAYERS];
+#endif
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out vec4 out_normal;
@@ -58,12 +77,22 @@ void main() {
     vec4 s_lo = vec4(0.0);
     vec4 s_hi = vec4(0.0);
     float total = 0.0;
+#if LR_SPLIT
+    float sp = textureLod(u_masks, vec3(v_uv, float(SPLIT_LAYER)), 0.0)[SPLIT_CHANNEL];
+#endif
     for (int l = 0; l < NUM_LAYERS; ++l) {
         vec4 m = textureLod(u_masks, vec3(v_uv, float(l)), 0.0);
         total += dot(m, u_used[l]);
         s_lo += u_wlo[l] * m;
 #if NUM_STATES > 4
         s_hi += u_whi[l] * m;
+#endif
+#if LR_SPLIT
+        total += sp * dot(m, u_used_l[l]) + (1.0 - sp) * dot(m, u_used_r[l]);
+        s_lo += sp * (u_wlo_l[l] * m) + (1.0 - sp) * (u_wlo_r[l] * m);
+#if NUM_STATES > 4
+        s_hi += sp * (u_whi_l[l] * m) + (1.0 - sp) * (u_whi_r[l] * m);
+#endif
 #endif
     }
     vec4 a_lo;

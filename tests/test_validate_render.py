@@ -104,3 +104,26 @@ def test_ortho_front_maps_the_bounding_box_into_clip_space():
     assert hom[:, 1] == pytest.approx([-1.0, 1.0])
     assert hom[0, 0] == pytest.approx(-hom[1, 0])
     assert hom[1, 2] < hom[0, 2]
+
+
+@pytest.mark.parametrize("policy", ["clamp01", "renormalize"])
+def test_lr_split_layout_renders_like_the_model(policy):
+    from wrinklepipe.io.package import PackOptions, package_from_asset
+    from wrinklepipe.pipeline import prepare_mesh
+    from wrinklepipe.validate.loader import input_from_package
+
+    a = demo_asset(128, policy=policy)
+    m = a.masks.copy()
+    for left, right in [(0, 1), (2, 3), (4, 5)]:  # one side per texel, as lr-split requires
+        m[right][(m[left] > 0) & (m[right] > 0)] = 0
+    ex = {e: {r: max(w, 0.0) for r, w in row.items()} for e, row in a.expressions.items()}
+    a = replace(a, masks=m, expressions=ex, mesh=prepare_mesh(a.mesh))
+    inp = input_from_package(
+        package_from_asset(a, PackOptions(mask_layout="lr-split")), "x", "gltf"
+    )
+    assert any(e.split for e in inp.channel_table)
+    report = validate(inp, ValidateOptions(render_size=128))
+    assert [i.code for i in report.issues] == ["WP-TEX-007"]
+    for pose, s in report.metrics["gpu_vs_reference_deg"].items():
+        assert s["mean"] <= 0.5 and s["p99"] <= 2.0, (pose, s)
+    assert report.render["poses"]["anger"]["changed_pixels"] > 100

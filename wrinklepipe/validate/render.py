@@ -48,6 +48,11 @@ def shader_source(name: str, defines: dict[str, int] | None = None) -> str:
 def shader_defines(inp: ValidationInput, n_layers: int) -> dict[str, int]:
     """The compile-time specialisation of ``wrinkle.frag`` for one asset."""
     a = inp.asset
+    split: dict[str, int] = {}
+    sp = next((e.split for e in inp.channel_table if e.split is not None), None)
+    if sp is not None:
+        names = [t.name for t in _mask_layers(inp)]
+        split = {"LR_SPLIT": 1, "SPLIT_LAYER": names.index(sp[0]), "SPLIT_CHANNEL": int(sp[1])}
     base = inp.by_role("base")[0]
     states = inp.state_textures()
     return {
@@ -57,6 +62,7 @@ def shader_defines(inp: ValidationInput, n_layers: int) -> dict[str, int]:
         "NUM_LAYERS": n_layers,
         "BASE_LAYOUT": 0 if tx.xy_layout(base) == "rgb" else 1,
         "STATE_LAYOUT": 0 if tx.xy_layout(states[0]) == "rgb" else 1,
+        **split,
     }
 
 
@@ -191,10 +197,11 @@ class Renderer:
         self._set(p, "u_states", 1)
         self._set(p, "u_masks", 2)
         self._set(p, "u_pd_scale", float(a.pd_scale))
-        used = np.zeros((MAX_LAYERS, 4), np.float32)
+        used = np.zeros((3, MAX_LAYERS, 4), np.float32)
         for e in inp.channel_table:
-            used[self._layer_index(e.texture), e.channel] = 1.0
-        self._set(p, "u_used", used.tobytes())
+            used[_split_part(e), self._layer_index(e.texture), e.channel] = 1.0
+        for i, suffix in enumerate(("", "_l", "_r")):
+            self._set(p, f"u_used{suffix}", used[i].tobytes())
         self.touch = triangle_layer_touch(self.mask_layers, mesh)  # [T, L] bool
 
     def _layer_index(self, texture: str) -> int:
@@ -223,19 +230,25 @@ class Renderer:
     # ------------------------------------------------------------------ drawing
     def layer_weights(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``[R, K]`` region weights -> per-layer ``mat4`` uniforms for states 0..3 and 4..7
-        (column c holds the weights of mask channel c) and per-layer on/off flags."""
+        (column c holds the weights of mask channel c) and per-layer on/off flags.
+
+        Arrays are ``[3, MAX_LAYERS, 4, 4]``: unsplit regions, then the left and right regions
+        of the lr-split layout.
+        """
         a = self.inp.asset
         w = np.asarray(weights, np.float32)
         if w.ndim == 1:
             w = w[:, None]
-        out = np.zeros((MAX_LAYERS, 4, MAX_STATES), np.float32)  # [layer, channel, state]
+        out = np.zeros((3, MAX_LAYERS, 4, MAX_STATES), np.float32)  # [part, layer, ch, state]
         names = a.region_names
         for e in self.inp.channel_table:
-            r = names.index(e.region)
-            out[self._layer_index(e.texture), e.channel, : w.shape[1]] = w[r]
-        lo = np.ascontiguousarray(out[:, :, :4])
-        hi = np.ascontiguousarray(out[:, :, 4:])
-        on = (np.abs(out).reshape(MAX_LAYERS, -1).max(axis=1) > 0).astype(np.int32)
+            part = _split_part(e)
+            out[part, self._layer_index(e.texture), e.channel, : w.shape[1]] = w[
+                names.index(e.region)
+            ]
+        lo = np.ascontiguousarray(out[..., :4])
+        hi = np.ascontiguousarray(out[..., 4:])
+        on = (np.abs(out).max(axis=(0, 2, 3)) > 0).astype(np.int32)
         return lo, hi, on
 
     def active_triangles(self, weights: np.ndarray | None) -> np.ndarray:
@@ -274,8 +287,9 @@ class Renderer:
             self.vao_plain.render(moderngl.TRIANGLES)
         else:
             lo, hi, on = self.layer_weights(weights)
-            self._set(self.prog, "u_wlo", lo.tobytes())
-            self._set(self.prog, "u_whi", hi.tobytes())
+            for i, suffix in enumerate(("", "_l", "_r")):
+                self._set(self.prog, f"u_wlo{suffix}", lo[i].tobytes())
+                self._set(self.prog, f"u_whi{suffix}", hi[i].tobytes())
             if not split:
                 self.vao.render(moderngl.TRIANGLES)
             else:
@@ -325,11 +339,19 @@ def _vertex_normals(mesh: Mesh) -> np.ndarray:
     return vertex_normals(np.asarray(mesh.positions, np.float32), np.asarray(mesh.indices))
 
 
+def _split_part(e: object) -> int:
+    """0: an unsplit region; 1 / 2: the left / right region of an lr-split channel."""
+    if e.split is None:
+        return 0
+    return 1 if e.side == "left" else 2 if e.side == "right" else 0
+
+
 def _mask_layers(inp: ValidationInput) -> list[Texture]:
     used = []
     for e in inp.channel_table:
-        if e.texture not in used:
-            used.append(e.texture)
+        for name in (e.texture, e.split[0] if e.split else None):
+            if name is not None and name not in used:
+                used.append(name)
     return [
         inp.texture(n) for n in sorted(used, key=lambda n: [t.name for t in inp.textures].index(n))
     ]
@@ -361,11 +383,20 @@ def sample_reference(ctx: Context, uv: np.ndarray) -> Samples:
     sampled: dict[str, np.ndarray] = {}
     masks = []
     by_region = {e.region: e for e in inp.channel_table}
+
+    def sample(name: str) -> np.ndarray:
+        if name not in sampled:
+            sampled[name] = tx.bilinear(ctx.values(inp.texture(name)), uv)
+        return sampled[name]
+
     for r in a.region_names:
         e = by_region[r]
-        if e.texture not in sampled:
-            sampled[e.texture] = tx.bilinear(ctx.values(inp.texture(e.texture)), uv)
-        masks.append(sampled[e.texture][:, e.channel])
+        m = sample(e.texture)[:, e.channel]
+        part = _split_part(e)
+        if part:
+            s = sample(e.split[0])[:, e.split[1]]
+            m = m * s if part == 1 else m * (1.0 - s)
+        masks.append(m)
     src_masks = src_relief = None
     if not inp.has_source and states:
         # no source: the relief each shipped state adds at full activation
@@ -427,8 +458,9 @@ def can_render(ctx: Context) -> str:
         return f"more than {MAX_STATES} states"
     if ctx.shipped_masks is None:
         return "the channel table or mask textures are unusable"
-    if any(e.split is not None for e in inp.channel_table):
-        return "the lr-split mask layout is not supported by the render pass"
+    splits = {e.split for e in inp.channel_table if e.split is not None}
+    if len(splits) > 1:
+        return "more than one split channel (lr-split layout)"
     layers = _mask_layers(inp)
     if len(layers) > MAX_LAYERS:
         return f"more than {MAX_LAYERS} mask textures"

@@ -49,7 +49,8 @@ def check_channel_table(ctx: Context) -> list[Issue]:
                     where,
                 )
             )
-        key = (e.texture, e.channel)
+        # an lr-split pair shares one channel: its left and right halves are different slots
+        key = (e.texture, e.channel, e.side if e.split is not None else "")
         if key in seen:
             out.append(
                 make_issue(
