@@ -36,6 +36,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="lowest severity that makes the exit code 1 (default: error)",
     )
     p.add_argument("--config", metavar="FILE", help="TOML/JSON: ignore codes, change severities")
+    p.add_argument(
+        "--no-timings",
+        action="store_true",
+        help="leave timings out of the JSON report (byte-identical reruns)",
+    )
     p.add_argument("--no-render", action="store_true", help="skip the GPU render pass")
     p.add_argument("--render-size", type=int, default=None, help="render target size (default 512)")
     p.add_argument(
@@ -78,6 +83,11 @@ def run(args: argparse.Namespace) -> int:
             raise input_error(
                 args.path, f"validation could not run ({type(exc).__name__}: {msg}); please report"
             ) from None
+    if args.no_timings:
+        report.timings = {}
+        report.render = {
+            k: v for k, v in report.render.items() if k not in ("render_s", "compare_s")
+        }
     inputs = (args.path,) if args.path and not str(args.path).startswith("demo") else ()
     write_reports(report, args.report, args.html, args.fail_on, inputs=inputs)
     if args.json:

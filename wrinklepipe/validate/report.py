@@ -281,7 +281,8 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
         else:
             parts.append(f"<pre>{e(dumps_json(val))}</pre>")
     if doc["render"]:
-        r = {k: v for k, v in doc["render"].items() if k != "poses"}
+        # no timings in the page: the same input gives the same bytes (they are in the JSON)
+        r = {k: v for k, v in doc["render"].items() if k not in ("poses", "render_s", "compare_s")}
         parts.append(f"<h2>Render pass</h2><pre>{e(dumps_json(r))}</pre>")
     parts.append("</body></html>\n")
     return "\n".join(p for p in parts if p)
