@@ -127,3 +127,65 @@ def test_lr_split_layout_renders_like_the_model(policy):
     for pose, s in report.metrics["gpu_vs_reference_deg"].items():
         assert s["mean"] <= 0.5 and s["p99"] <= 2.0, (pose, s)
     assert report.render["poses"]["anger"]["changed_pixels"] > 100
+
+
+@pytest.mark.parametrize(
+    "fmt, tol",
+    [
+        ("r8", 1e-6),
+        ("rg8", 1e-6),
+        ("rgb8", 1e-6),
+        ("rgba8", 1e-6),
+        ("rg16", 1e-6),
+        ("rgba16", 1e-6),
+        ("rgba32f", 1e-6),
+        # block formats: llvmpipe's palette rounding differs from texture2ddecoder's by <= 2/255
+        ("bc1", 2.5 / 255),
+        ("bc3", 2.5 / 255),
+        ("bc4", 2.5 / 255),
+        ("bc5", 2.5 / 255),
+        ("bc7", 2.5 / 255),
+    ],
+)
+def test_uploaded_bytes_sample_like_the_numpy_decoder(fmt, tol):
+    import etcpak
+    import moderngl
+
+    from wrinklepipe.validate.inputs import FORMATS, Texture
+    from wrinklepipe.validate.textures import decode_values
+
+    rng = np.random.default_rng(3)
+    n = 16
+    ch, _, kind = FORMATS[fmt]
+    if kind == "block":
+        rgba = rng.integers(0, 256, (n, n, 4), dtype=np.uint8)
+        data = getattr(etcpak, f"compress_{fmt}")(rgba.tobytes(), n, n)
+    elif kind == "unorm8":
+        data = rng.integers(0, 256, (n, n, ch), dtype=np.uint8).tobytes()
+    elif kind == "unorm16":
+        data = rng.integers(0, 65536, (n, n, ch), dtype=np.uint16).astype("<u2").tobytes()
+    else:
+        data = rng.random((n, n, ch), dtype=np.float32).tobytes()
+    tex = Texture("t", "base", fmt, n, n, data)
+    ctx = glw.create_context()
+    gl = glw.RawGL.load()
+    try:
+        name = glw.upload(gl, [tex], array=False)
+        prog = ctx.program(
+            vertex_shader="#version 330\nin vec2 p; out vec2 uv;"
+            "void main(){uv = p * 0.5 + 0.5; gl_Position = vec4(p, 0, 1);}",
+            fragment_shader="#version 330\nuniform sampler2D s; in vec2 uv; out vec4 o;"
+            "void main(){o = textureLod(s, uv, 0.0);}",
+        )
+        vbo = ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], "f4").tobytes())
+        vao = ctx.vertex_array(prog, [(vbo, "2f", "p")])
+        fbo = ctx.framebuffer([ctx.renderbuffer((n, n), 4, dtype="f4")])
+        fbo.use()
+        glw.bind(gl, 0, name, array=False)
+        vao.render(moderngl.TRIANGLES)
+        gpu = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(n, n, 4)
+    finally:
+        ctx.release()
+    ref = decode_values(tex)
+    # one fragment per texel centre; the framebuffer's row 0 is the texture's row 0 (t = 0)
+    assert np.abs(gpu[..., :ch] - ref).max() <= tol

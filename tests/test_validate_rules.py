@@ -305,3 +305,35 @@ def test_exported_mikktspace_tangents_pass_and_rotated_ones_fail():
     flipped = mesh.tangents.copy()
     flipped[:, 3] *= -1
     assert codes(replace(mesh, tangents=flipped)) == ["WP-MESH-002"]
+
+
+def test_bundle_round_trip_and_inheritance(tmp_path):
+    from wrinklepipe.demo import demo_asset
+    from wrinklepipe.validate.loader import bundle_arrays, bundle_bytes, read_bundle
+    from wrinklepipe.validate.ship import ShipOptions, ship_asset
+
+    inp = ship_asset(demo_asset(32), ShipOptions(compress=True))
+    inp.vertex_weights = {"bias": np.arange(inp.asset.mesh.vertex_count, dtype=np.float32)}
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "x.wpv").write_bytes(bundle_bytes(inp))
+    assert bundle_bytes(inp) == bundle_bytes(inp)  # deterministic (fixed zip dates)
+    back = read_bundle(tmp_path / "a" / "x.wpv")
+    assert [t.data for t in back.textures] == [t.data for t in inp.textures]
+    assert [(t.fmt, t.layout, t.state) for t in back.textures] == [
+        (t.fmt, t.layout, t.state) for t in inp.textures
+    ]
+    assert np.array_equal(back.asset.mesh.tangents, inp.asset.mesh.tangents)
+    assert back.channel_table == inp.channel_table and back.has_source
+    # a bundle that stores only what differs from another one
+    inp.asset.expressions = {"joy": {"chin": 0.5}}
+    inp.textures[0].srgb = True
+    (tmp_path / "b").mkdir()
+    small = bundle_bytes(inp, "../a/x.wpv", bundle_arrays(read_bundle(tmp_path / "a" / "x.wpv")))
+    (tmp_path / "b" / "y.wpv").write_bytes(small)
+    assert len(small) < 0.1 * len(bundle_bytes(inp))
+    y = read_bundle(tmp_path / "b" / "y.wpv")
+    assert y.textures[0].srgb and y.asset.expressions == {"joy": {"chin": 0.5}}
+    assert np.array_equal(y.asset.base, inp.asset.base)
+    (tmp_path / "a" / "x.wpv").unlink()
+    with pytest.raises(InputError, match="inherits"):
+        read_bundle(tmp_path / "b" / "y.wpv")
