@@ -565,6 +565,19 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
     overlay[cov] = np.clip(samples.masks.T @ colors, 0.0, 1.0)
     images["mask_overlay"] = 0.5 * neutral.color[..., :3] + 0.5 * overlay
     images["_region_colors"] = colors
+    # crop the contact sheet to the masked area (with a margin), square
+    union = np.zeros(cov.shape, bool)
+    union[cov] = samples.masks.max(axis=0) > 1.0 / 255.0
+    if union.any():
+        ys, xs = np.nonzero(union)
+        cy, cx = (ys.min() + ys.max()) / 2, (xs.min() + xs.max()) / 2
+        half = int(max(ys.max() - ys.min(), xs.max() - xs.min()) * 0.6) + 4
+        y0, x0 = max(int(cy) - half, 0), max(int(cx) - half, 0)
+        y1, x1 = min(int(cy) + half, cov.shape[0]), min(int(cx) + half, cov.shape[1])
+        info["crop"] = [int(x0), int(y0), int(x1), int(y1)]
+        for k in list(images):
+            if k.split("/")[0] in ("render", "gpu_error", "change"):
+                images[k] = images[k][y0:y1, x0:x1]
     if gpu_bad:
         worst = max(gpu_bad, key=lambda x: x[1]["p99"])
         issues.append(

@@ -240,9 +240,11 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
     poses = list(report.render.get("poses", {}))
     if poses:
         parts.append(
-            "<h2>Contact sheet</h2><p>The first render is neutral (no wrinkles); each "
-            "expression is shown with wrinkles, then its change from neutral (0..10 "
-            "degrees) and the GPU vs numpy-reference error (0..2 degrees).</p><div>"
+            "<h2>Contact sheet</h2><p>Neutral first; then each expression without and with "
+            "wrinkles, its change from neutral (0..10 degrees), the GPU vs numpy-reference "
+            "error (0..2 degrees) and, with a source, the shipped vs source error in texture "
+            "space (0..5 degrees). Renders are cropped to the masked area; the mask overlay "
+            "shows the whole view.</p><div>"
         )
         for p in poses:
             parts.append("<div>")
