@@ -59,7 +59,7 @@ class RatioOptions:
     #: Soft noise floor on ``1 - R`` (R units); ``None``: ``deadband_sigmas`` times the noise of
     #: the blurred R, measured on the bright side of its mode (wrinkles only darken).
     deadband: float | None = None
-    deadband_sigmas: float = 2.0
+    deadband_sigmas: float = 3.0
 
 
 @dataclass(frozen=True)
