@@ -190,3 +190,30 @@ def test_eight_bit_srgb_photos(session, tmp_path):
     assert truth["tilt"]["mean"] < 0.5 * truth["flat"]["mean"]
     assert truth["angular"]["mean"] < 0.6 * truth["flat"]["mean"]  # measured 4.0 vs 7.4
     assert report["ratio"]["exposure_factor"] == pytest.approx(0.93 / 0.9, abs=3e-3)
+
+
+def test_photo_landmarks_and_nz_regions(session, tmp_path, capsys):
+    base = tmp_path / "base"
+    assert main(_args(session, base)) == 0
+    # An explicit photo-side set equal to the neutral landmarks changes nothing.
+    same = tmp_path / "same"
+    assert main(_args(session, same) + ["--photo-landmarks", str(session / "neutral.json")]) == 0
+    assert (same / "capture.png").read_bytes() == (base / "capture.png").read_bytes()
+    # A neutral surface tilted away from the camera in a region: the same ratio means less
+    # wrinkle tilt there (the extra tilt beyond the neutral's own), nothing changes elsewhere.
+    mask = np.zeros((192, 192))
+    mask[:, :96] = 1.0
+    write_image(tmp_path / "left.png", mask, bits=8)
+    tilted = tmp_path / "tilted"
+    assert main(_args(session, tilted) + ["--nz-region", f"{tmp_path / 'left.png'}=0.9"]) == 0
+    rep = json.loads((tilted / "report.json").read_text())
+    assert rep["options"]["nz_regions"] == [f"{tmp_path / 'left.png'}=0.9"]
+    zb = read_image(base / "pictures" / "normal_photo_integrable.png")[0][..., 2]
+    zt = read_image(tilted / "pictures" / "normal_photo_integrable.png")[0][..., 2]
+    assert np.array_equal(zb[:, 100:], zt[:, 100:])
+    creased = zb[:, :90] < 0.97  # 0.5 + 0.5 z: tilted more than ~17 degrees
+    assert creased.any() and np.all(zt[:, :90][creased] >= zb[:, :90][creased])
+    # A malformed region is one clear message.
+    capsys.readouterr()
+    assert main(_args(session, tmp_path / "x") + ["--nz-region", "left.png"]) == 2
+    assert "expects MASK=VALUE" in capsys.readouterr().err

@@ -21,9 +21,12 @@ def test_ratio_is_the_cosine_ratio():
     i1 = np.full((8, 8), 0.4)
     r = ratio_image(i0, i1, options=PLAIN)
     assert np.allclose(r.ratio, 0.8) and np.allclose(r.nz, 0.8)
-    # With the neutral surface tilted (N_z = 0.9) the wrinkled N'_z is R N_z (equation 2).
+    # With the neutral surface tilted (N_z = 0.9) the expression's z is R N_z = 0.72 (equation
+    # 2); the wrinkle alone is the extra tilt acos(0.72) - acos(0.9) = 43.946 - 25.842 degrees.
     r = ratio_image(i0, i1, nz_neutral=0.9, options=PLAIN)
-    assert np.allclose(r.nz, 0.72)
+    assert np.allclose(r.nz, np.cos(np.radians(43.9455 - 25.8419)), atol=1e-5)
+    # No change between the photos: no wrinkle, whatever the neutral tilt.
+    assert np.allclose(ratio_image(i0, i0, nz_neutral=0.8, options=PLAIN).nz, 1.0)
 
 
 def test_dark_pixels_are_not_divided_and_counted():

@@ -4,6 +4,9 @@ Under a light at the camera a Lambertian pixel is ``I = C_d C_l N_z`` (with N_z 
 camera), so the ratio of the registered expression photo to the neutral photo cancels the skin
 colour: ``R = I'_d / I = N'_z / N_z``. With the neutral surface's ``N_z`` given (default 1, the
 paper's "locally plane, parallel to the camera"), the wrinkled normal's z is ``N'_z = R N_z``.
+The map this package writes holds the wrinkle alone, relative to the neutral surface, so its z
+is the cosine of the *extra* tilt ``acos(R N_z) - acos(N_z)`` (tilts assumed in one plane); with
+``N_z = 1`` that is the paper's ``N'_z = R``.
 
 Guards (all reported, none silent):
 
@@ -68,7 +71,7 @@ class RatioResult:
 
     raw: np.ndarray  # I'_d / I where valid, 1 elsewhere (before exposure and blur)
     ratio: np.ndarray  # after exposure normalisation, blur and deadband (unclipped)
-    nz: np.ndarray  # N'_z = clip(R N_z, 0, 1)
+    nz: np.ndarray  # z of the wrinkle normal: cos(acos(R N_z) - acos(N_z)); = R when N_z = 1
     valid: np.ndarray  # bool: divided (not dark, inside the expression photo)
     exposure: float  # the factor R was divided by
     frac_dark: float
@@ -118,7 +121,7 @@ def ratio_image(
     nz_neutral: np.ndarray | float = 1.0,
     options: RatioOptions | None = None,
 ) -> RatioResult:
-    """Compute ``R = I'_d / I`` and ``N'_z = R N_z`` from luminance images ``[H, W]``.
+    """Compute ``R = I'_d / I`` and the wrinkle normal's z from luminance images ``[H, W]``.
 
     ``inside`` marks pixels that the warp sampled inside the expression photo; ``roi`` (0..1)
     weights the statistics (exposure median, clipped fractions); ``nz_neutral`` is a scalar or a
@@ -152,8 +155,11 @@ def ratio_image(
     if deadband > 0:
         r = 1.0 - np.maximum((1.0 - r) - deadband, 0.0) + np.maximum(r - 1.0, 0.0)
     nzn = np.broadcast_to(np.asarray(nz_neutral, np.float64), (h, w))
-    nz_raw = r * nzn
-    nz = np.clip(nz_raw, 0.0, 1.0)
+    nz_raw = r * nzn  # the paper's N'_z: the expression's z towards the camera
+    # The map holds the wrinkle alone, in the neutral surface's frame: the extra tilt beyond the
+    # neutral's own (assuming the two tilts lie in one plane; N_z = 1 gives the paper's N'_z).
+    extra = np.arccos(np.clip(nz_raw, 0.0, 1.0)) - np.arccos(np.clip(nzn, 0.0, 1.0))
+    nz = np.cos(np.clip(extra, 0.0, np.pi / 2))
     return RatioResult(
         raw=raw.astype(np.float32),
         ratio=r.astype(np.float32),
