@@ -218,7 +218,7 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
                     _f(w1["fit_mean_px"], 4),
                     _f(w1["leave_one_out_max_px"]),
                     _f(w1["leave_one_out_mean_px"]),
-                    w1["leave_one_out_worst_index"],
+                    w1.get("leave_one_out_worst_name", w1["leave_one_out_worst_index"]),
                 ],
                 [
                     "photo -> texture",
@@ -227,7 +227,7 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
                     _f(w2["fit_mean_px"], 4),
                     _f(w2["leave_one_out_max_px"]),
                     _f(w2["leave_one_out_mean_px"]),
-                    w2["leave_one_out_worst_index"],
+                    w2.get("leave_one_out_worst_name", w2["leave_one_out_worst_index"]),
                 ],
             ],
         ),

@@ -279,9 +279,11 @@ def run(args: argparse.Namespace) -> int:
             else lm_n
         )
         pp, pt = L.pair(lm_p, lm_t)
+        lm_t_names = lm_p.names if lm_p.names is not None and lm_t.names is not None else None
         L.check_inside(lm_p, info0.width, info0.height, "neutral photo")
         L.check_inside(lm_t, tw, th, "texture")
     else:  # identity: the map stays in photo space
+        lm_t_names = None
         tex_shape = shape
         corners = np.array(
             [[0, 0], [info0.width, 0], [0, info0.height], [info0.width, info0.height]], float
@@ -364,6 +366,10 @@ def run(args: argparse.Namespace) -> int:
         "scale": args.scale,
     }
     report = build_report(res, inputs, opts, outputs, te)
+    for key, names in (("expression_to_neutral", lm_n.names), ("photo_to_texture", lm_t_names)):
+        worst = report["warps"][key]["leave_one_out_worst_index"]
+        if names is not None and worst is not None:
+            report["warps"][key]["leave_one_out_worst_name"] = names[worst]
     input_files = [v for k, v in inputs.items()]
     snippet = (
         "# wrinklepipe capture: merge into the character's manifest (copy the maps beside it).\n"
