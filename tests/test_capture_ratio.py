@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from wrinklepipe.capture.ratio import (
     RatioOptions,
@@ -85,3 +87,23 @@ def test_colour_helpers_hand_values():
     rgb = np.zeros((1, 1, 3), np.float32)
     rgb[..., 0] = 1.0
     assert float(luminance(rgb)[0, 0]) == pytest.approx(0.2126, abs=1e-6)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    st.floats(0.5, 2.0),
+    st.floats(0.3, 0.99),
+    st.integers(0, 10_000),
+)
+def test_ratio_law_cancels_albedo_and_exposure(exposure, shade, seed):
+    # Any skin colour and any flash difference: N'_z comes back as the shading alone, as long as
+    # most of the ROI is unwrinkled (the skin level is then the exposure).
+    rng = np.random.default_rng(seed)
+    albedo = rng.uniform(0.1, 1.0, (24, 24))
+    shading = np.ones((24, 24))
+    shading[:8] = shade  # a third of the image "wrinkled"
+    r = ratio_image(
+        albedo, exposure * albedo * shading, options=RatioOptions(blur_sigma=0.0, deadband=0.0)
+    )
+    assert r.exposure == pytest.approx(exposure, rel=2e-3)
+    assert np.allclose(r.nz[:8], shade, atol=3e-3) and np.allclose(r.nz[8:], 1.0, atol=3e-3)
