@@ -54,7 +54,7 @@ in vec2 v_uv;
 uniform sampler2D u_base;
 uniform sampler2DArray u_states;
 uniform sampler2DArray u_masks;
-uniform float u_pd_scale;
+uniform float u_pd_scale;  // pd: slope range of the stored values; diff: gain
 uniform mat4 u_wlo[MAX_LAYERS];  // weights of states 0..3: column c = mask channel c
 uniform mat4 u_whi[MAX_LAYERS];  // weights of states 4..7
 uniform vec4 u_used[MAX_LAYERS];  // 1 for channels that hold a region (renormalize)
@@ -136,7 +136,7 @@ void main() {
 #if ENCODING == ENC_PD
         d += ak * (c.rg * 2.0 - 1.0) * u_pd_scale;
 #elif ENCODING == ENC_DIFF
-        acc += ak * (c.rgb * 2.0 - 1.0);
+        acc += ak * (c.rgb * 2.0 - 1.0) / u_pd_scale;  // u_pd_scale is the diff gain
 #elif ENCODING == ENC_FULL
         acc += ak * (decode_normal(c, STATE_LAYOUT) - B);
 #else

@@ -189,3 +189,36 @@ def test_uploaded_bytes_sample_like_the_numpy_decoder(fmt, tol):
     ref = decode_values(tex)
     # one fragment per texel centre; the framebuffer's row 0 is the texture's row 0 (t = 0)
     assert np.abs(gpu[..., :ch] - ref).max() <= tol
+
+
+def test_diff_gain_is_undone_like_the_package_decoder():
+    """A diff map stored with gain 2 (0.5 + 0.5 * 2 (W - B)) decodes to the same face."""
+    from wrinklepipe.io.package import PackOptions, package_from_asset
+    from wrinklepipe.io.package import decode_state as package_decode
+    from wrinklepipe.pipeline import prepare_mesh
+    from wrinklepipe.validate.loader import input_from_package
+
+    a = demo_asset(128, encoding="diff")
+    a = replace(a, pd_scale=2.0, mesh=prepare_mesh(a.mesh))
+    inp = input_from_package(package_from_asset(a, PackOptions()), "x.gltf", "gltf")
+    inp.asset = replace(inp.asset, base=a.base, states=a.states, masks=a.masks, budget={})
+    inp.has_source = True
+    report = validate(inp, ValidateOptions(render_size=128))
+    assert "WP-TEX-005" not in [i.code for i in report.issues]
+    assert max(s["p99"] for s in report.metrics["shipping_error_deg"].values()) < 1.0
+    for pose, s in report.metrics["gpu_vs_reference_deg"].items():
+        assert s["mean"] <= 0.5 and s["p99"] <= 2.0, (pose, s)
+    # our decode of one texel agrees with the package's own decoder
+    t = inp.state_textures()[1]
+    v = np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, -1)[..., :3] / 255.0
+    from wrinklepipe.validate.textures import decode_state
+
+    base = model.normalize(
+        2
+        * np.frombuffer(inp.by_role("base")[0].data, np.uint8).reshape(128, 128, -1)[..., :3]
+        / 255.0
+        - 1
+    )
+    ours = model.normalize(base + model.diff_to_delta(decode_state(v, "diff", "rgb", 2.0)))
+    theirs = package_decode(base, v.astype(np.float32), "diff", 2.0)
+    assert model.angular_error_deg(ours, theirs).max() < 1e-3

@@ -265,7 +265,38 @@ def _from_reader(p: Path, kind: str) -> ValidationInput:
     folder = p.parent
     files = {t.name: str(folder / "textures" / f"{t.name}.png") for t in pkg.textures}
     files = {k: v for k, v in files.items() if Path(v).exists()}
-    return input_from_package(pkg, str(p), kind, files)
+    inp = input_from_package(pkg, str(p), kind, files)
+    if kind == "usd":
+        _usd_pointers(inp, p)
+    return inp
+
+
+def _usd_pointers(inp: ValidationInput, p: Path) -> None:
+    """Point issues at prims: the material with WrinkleMapsAPI, its attributes, the mesh."""
+    try:
+        from pxr import Usd, UsdGeom
+
+        stage = Usd.Stage.Open(str(p))
+        mat = mesh = None
+        for prim in stage.Traverse():
+            if mat is None and "WrinkleMapsAPI" in prim.GetAppliedSchemas():
+                mat = prim.GetPath()
+            if mesh is None and prim.IsA(UsdGeom.Mesh):
+                mesh = prim.GetPath()
+    except Exception:  # noqa: BLE001 - pointers are a convenience; the reader already worked
+        return
+    if mat is not None:
+        inp.pointers.update(
+            {
+                "meta": f"{p}<{mat}>",
+                "channels": f"{p}<{mat}>.wrinkle:maskChannel",
+                "expressions": f"{p}<{mat}>.wrinkle:expressionWeights",
+                "drivers": f"{p}<{mat}>.wrinkle:drivers",
+                "masks": f"{p}<{mat}>",
+            }
+        )
+    if mesh is not None:
+        inp.pointers["mesh"] = f"{p}<{mesh}>"
 
 
 def _load_folder(p: Path, o: LoadOptions) -> ValidationInput:

@@ -210,7 +210,9 @@ def _as_full(
         d = tx.decode_state(values, "pd", layout, scale)
         return model.pd_to_normal(model.normal_to_pd(base) + d)
     if enc == "diff":
-        return model.normalize(base + model.diff_to_delta(values[..., :3]))
+        return model.normalize(
+            base + model.diff_to_delta(tx.decode_state(values, enc, layout, scale))
+        )
     n = tx.values_to_normals(values, layout)
     if enc == "full":
         return n

@@ -73,8 +73,8 @@ def stored_state_values(asset: WrinkleAsset) -> np.ndarray:
     enc = encode_source_states(base, states, asset.encoding)
     if asset.encoding == "pd":
         return 0.5 + 0.5 * np.clip(enc / np.float32(asset.pd_scale), -1.0, 1.0)
-    if asset.encoding == "diff":
-        return enc
+    if asset.encoding == "diff":  # gain g = pd_scale: 0.5 + 0.5 g (W - B)
+        return np.clip(0.5 + (enc - 0.5) * np.float32(asset.pd_scale), 0.0, 1.0)
     return 0.5 + 0.5 * enc
 
 

@@ -81,7 +81,9 @@ def raw_normals(values: np.ndarray, layout: str) -> np.ndarray:
 def decode_state(values: np.ndarray, encoding: str, layout: str, pd_scale: float) -> np.ndarray:
     """What the model's ``combine`` takes for one state (see :func:`wrinklepipe.model.combine`).
 
-    pd: slopes ``[H, W, 2]``; diff: ``D`` in [0, 1] ``[H, W, 3]``; full / composite: unit normals.
+    pd: slopes ``[H, W, 2]`` (stored ``0.5 + 0.5 d / scale``); diff: ``D`` ``[H, W, 3]`` with
+    the gain undone (stored ``0.5 + 0.5 g (W - B)`` with ``g = scale``; returned
+    ``0.5 + (v - 0.5) / g`` so that ``2 D - 1 = W - B``); full / composite: unit normals.
     """
     v = np.asarray(values, np.float32)
     if encoding == "pd":
@@ -89,7 +91,9 @@ def decode_state(values: np.ndarray, encoding: str, layout: str, pd_scale: float
     if encoding == "diff":
         if v.shape[-1] < 3:
             raise ValueError("a diff map needs three channels")
-        return v[..., :3]
+        if float(pd_scale) == 1.0:
+            return v[..., :3]
+        return (0.5 + (v[..., :3] - 0.5) / np.float32(pd_scale)).astype(np.float32)
     return values_to_normals(v, layout)
 
 
