@@ -268,7 +268,31 @@ def _from_reader(p: Path, kind: str) -> ValidationInput:
     inp = input_from_package(pkg, str(p), kind, files)
     if kind == "usd":
         _usd_pointers(inp, p)
+    else:
+        _gltf_pointers(inp, p)
     return inp
+
+
+def _gltf_pointers(inp: ValidationInput, p: Path) -> None:
+    """JSON pointers to where the extension actually sits (a material's, or the document's)."""
+    try:
+        doc = _gltf_json(p, 1 << 30)
+    except InputError:  # pragma: no cover - the reader already parsed it
+        return
+    ext = f"/extensions/{EXTENSION}"
+    for i, m in enumerate(doc.get("materials", []) or []):
+        if isinstance(m, dict) and EXTENSION in (m.get("extensions") or {}):
+            ext = f"/materials/{i}/extensions/{EXTENSION}"
+            break
+    inp.pointers.update(
+        {
+            "meta": f"{p}#{ext}",
+            "channels": f"{p}#{ext}/masks/table",
+            "masks": f"{p}#{ext}/masks",
+            "expressions": f"{p}#{ext}/expressions",
+            "drivers": f"{p}#{ext}/drivers",
+        }
+    )
 
 
 def _usd_pointers(inp: ValidationInput, p: Path) -> None:
