@@ -74,20 +74,22 @@ def check_channel_table(ctx: Context) -> list[Issue]:
         return out
     flat_s = ship.reshape(ship.shape[0], -1)
     flat_r = src.reshape(src.shape[0], -1)
-    # fraction of texels where a shipped channel and a source mask differ by more than 0.1
-    diff = (np.abs(flat_s[:, None, :] - flat_r[None, :, :]) > 0.1).mean(axis=-1)
+    # fraction of texels where a shipped channel and a source mask differ by more than 0.1;
+    # only a channel that differs from its own mask is compared with every other mask
+    own_all = (np.abs(flat_s - flat_r) > 0.1).mean(axis=-1)
     for i, r in enumerate(a.region_names):
-        own = diff[i, i]
+        own = own_all[i]
         if own <= 0.01:
             continue
-        j = int(np.argmin(diff[i]))
-        if j != i and diff[i, j] < 0.5 * own:
+        row = (np.abs(flat_s[i][None, :] - flat_r) > 0.1).mean(axis=-1)
+        j = int(np.argmin(row))
+        if j != i and row[j] < 0.5 * own:
             out.append(
                 make_issue(
                     "WP-MASK-004",
                     f"the channel of region {r!r} holds the mask of {a.region_names[j]!r} "
                     f"({100 * own:.1f}% of texels differ from its own source mask, "
-                    f"{100 * diff[i, j]:.1f}% from {a.region_names[j]!r}): channels swapped?",
+                    f"{100 * row[j]:.1f}% from {a.region_names[j]!r}): channels swapped?",
                     _slot(inp, r),
                 )
             )
