@@ -222,3 +222,42 @@ def test_diff_gain_is_undone_like_the_package_decoder():
     ours = model.normalize(base + model.diff_to_delta(decode_state(v, "diff", "rgb", 2.0)))
     theirs = package_decode(base, v.astype(np.float32), "diff", 2.0)
     assert model.angular_error_deg(ours, theirs).max() < 1e-3
+
+
+@pytest.mark.parametrize("policy", ["clamp01", "additive"])
+def test_metahuman_scale_37_regions_3_states(policy):
+    from scipy import ndimage
+
+    from wrinklepipe.asset import Region
+    from wrinklepipe.presets import metahuman
+
+    a = demo_asset(128)
+    n = len(metahuman.REGIONS)
+    rng = np.random.default_rng(0)
+    blobs = ndimage.gaussian_filter(rng.random((n, 32, 32)), (0, 2, 2))
+    m = (blobs > np.percentile(blobs, 80)).astype(np.float32)
+    m = np.stack([np.kron(x, np.ones((4, 4))) for x in m]).astype(np.float32)
+    m /= np.maximum(m.sum(axis=0), 1.0)  # a partition: sums <= 1
+    regions = tuple(
+        Region(r, "center", (metahuman.STATES[i % 3],)) for i, r in enumerate(metahuman.REGIONS)
+    )
+    ex = {
+        "e1": {r: 0.8 for r in metahuman.REGIONS[::2]},
+        "e2": {r: 1.0 for r in metahuman.REGIONS[1::3]},
+    }
+    b = replace(
+        a,
+        states=np.concatenate([a.states, a.states[:1]]),
+        state_names=metahuman.STATES,
+        masks=m,
+        regions=regions,
+        expressions=ex,
+        policy=policy,
+    )
+    inp = ship_asset(b, ShipOptions(compress=False))
+    assert len({e.texture for e in inp.channel_table}) == 10  # 37 masks, 4 to a texture
+    report = validate(inp, ValidateOptions(render_size=128))
+    assert "WP-MASK-002" not in [i.code for i in report.issues]  # 8-bit rounding is not overlap
+    assert "skipped" not in report.render
+    for pose, s in report.metrics["gpu_vs_reference_deg"].items():
+        assert s["mean"] <= 0.5 and s["p99"] <= 2.0, (pose, s)
