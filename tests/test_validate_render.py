@@ -261,3 +261,30 @@ def test_metahuman_scale_37_regions_3_states(policy):
     assert "skipped" not in report.render
     for pose, s in report.metrics["gpu_vs_reference_deg"].items():
         assert s["mean"] <= 0.5 and s["p99"] <= 2.0, (pose, s)
+
+
+@pytest.mark.parametrize("policy", ["clamp01", "lerp"])
+def test_six_states_use_the_second_weight_matrix(policy):
+    from wrinklepipe.asset import Region
+
+    a = demo_asset(128, policy=policy)
+    names = tuple(f"s{k}" for k in range(6))
+    # state k is the wrinkle of demo state k % 2 at amount 0.5 + 0.25 k
+    states = np.stack(
+        [
+            model.pd_to_normal(
+                model.normal_to_pd(a.base)
+                + (0.5 + 0.25 * k)
+                * (model.normal_to_pd(a.states[k % 2]) - model.normal_to_pd(a.base))
+            )
+            for k in range(6)
+        ]
+    )
+    regions = tuple(Region(r.name, r.side, (names[i % 6],)) for i, r in enumerate(a.regions))
+    b = replace(a, states=states, state_names=names, regions=regions)
+    report = validate(ship_asset(b, ShipOptions(compress=False)), ValidateOptions(render_size=128))
+    assert "skipped" not in report.render
+    for pose, s in report.metrics["gpu_vs_reference_deg"].items():
+        assert s["mean"] <= 0.5 and s["p99"] <= 2.0, (pose, s)
+    # regions 4 and 5 drive states s4 and s5 (the second matrix): anger weights them 0.8
+    assert report.render["poses"]["anger"]["changed_pixels"] > 100
