@@ -18,13 +18,23 @@ CASES = json.loads((CORPUS / "cases.json").read_text())["cases"]
 
 
 @pytest.fixture(scope="module")
+def need_gl():
+    from wrinklepipe.validate import gl as glw
+
+    try:
+        glw.create_context().release()
+    except glw.GLUnavailable as exc:
+        pytest.skip(f"the golden reports include the render pass; no OpenGL: {exc}")
+
+
+@pytest.fixture(scope="module")
 def config():
     return load_config(CORPUS / "config.toml")
 
 
 @pytest.mark.gpu
 @pytest.mark.parametrize("case", CASES, ids=[c["name"] for c in CASES])
-def test_corpus_case(case, config):
+def test_corpus_case(case, config, need_gl):
     folder = CORPUS / case["name"]
     report = validate(read_bundle(folder / "asset.wpv"), config=config)
     assert sorted({i.code for i in report.issues}) == case["expect"], case["description"]
