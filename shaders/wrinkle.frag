@@ -132,6 +132,7 @@ void main() {
 #endif
     for (int k = 0; k < NUM_STATES; ++k) {
         float ak = k < 4 ? a_lo[k] : a_hi[k - 4];
+        if (ak == 0.0) continue;  // a GPU skips the fetch for a whole wave; exact (a = 0 adds 0)
         vec4 c = textureLod(u_states, vec3(v_uv, float(k)), 0.0);
 #if ENCODING == ENC_PD
         d += ak * (c.rg * 2.0 - 1.0) * u_pd_scale;
