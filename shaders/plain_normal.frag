@@ -10,13 +10,20 @@ uniform sampler2D u_base;
 #ifndef BASE_LAYOUT
 #define BASE_LAYOUT 1
 #endif
+#ifndef BASE_FLIP_Y
+#define BASE_FLIP_Y 0
+#endif
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out vec4 out_normal;
 layout(location = 2) out vec4 out_uv;
 
 void main() {
-    vec3 N = decode_normal(textureLod(u_base, v_uv, 0.0), BASE_LAYOUT);
+    vec4 cb = textureLod(u_base, v_uv, 0.0);
+#if BASE_FLIP_Y
+    cb.g = 1.0 - cb.g;
+#endif
+    vec3 N = decode_normal(cb, BASE_LAYOUT);
     out_color = vec4(shade(to_object(N, v_normal, v_tangent)), 1.0);
     out_normal = vec4(N, 1.0);
     out_uv = vec4(v_uv, 0.0, 1.0);

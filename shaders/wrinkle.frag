@@ -5,7 +5,8 @@
 //   N   = combine(B, {W_k, a_k}, encoding)
 // Specialised at compile time (as engines do with material permutations): the renderer
 // prepends #defines for ENCODING, POLICY, NUM_STATES (1..8), NUM_LAYERS (1..16) and
-// BASE_LAYOUT / STATE_LAYOUT (0: xyz in rgb, 1: xy in rg with z rebuilt).
+// BASE_LAYOUT / STATE_LAYOUT (0: xyz in rgb, 1: xy in rg with z rebuilt), BASE_FLIP_Y /
+// STATE_FLIP_Y (maps declared DirectX), LR_SPLIT / SPLIT_LAYER / SPLIT_CHANNEL (lr-split masks).
 // Outputs: 0 shaded colour, 1 tangent-space normal (w = 1 where covered), 2 UV (z = sum |a_k|).
 #define ENC_PD 0
 #define ENC_DIFF 1
@@ -33,6 +34,12 @@
 #endif
 #ifndef STATE_LAYOUT
 #define STATE_LAYOUT 1
+#endif
+#ifndef BASE_FLIP_Y
+#define BASE_FLIP_Y 0
+#endif
+#ifndef STATE_FLIP_Y
+#define STATE_FLIP_Y 0
 #endif
 #ifndef LR_SPLIT
 #define LR_SPLIT 0
@@ -121,7 +128,11 @@ void main() {
 #endif
 #endif
 
-    vec3 B = decode_normal(textureLod(u_base, v_uv, 0.0), BASE_LAYOUT);
+    vec4 cb = textureLod(u_base, v_uv, 0.0);
+#if BASE_FLIP_Y
+    cb.g = 1.0 - cb.g;  // declared DirectX (+Y down): read as +Y
+#endif
+    vec3 B = decode_normal(cb, BASE_LAYOUT);
 #if ENCODING == ENC_PD
     vec2 d = B.xy / max(B.z, 1e-12);
 #elif ENCODING == ENC_COMPOSITE
@@ -134,6 +145,9 @@ void main() {
         float ak = k < 4 ? a_lo[k] : a_hi[k - 4];
         if (ak == 0.0) continue;  // a GPU skips the fetch for a whole wave; exact (a = 0 adds 0)
         vec4 c = textureLod(u_states, vec3(v_uv, float(k)), 0.0);
+#if STATE_FLIP_Y
+        c.g = 1.0 - c.g;
+#endif
 #if ENCODING == ENC_PD
         d += ak * (c.rg * 2.0 - 1.0) * u_pd_scale;
 #elif ENCODING == ENC_DIFF

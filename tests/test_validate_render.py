@@ -288,3 +288,26 @@ def test_six_states_use_the_second_weight_matrix(policy):
         assert s["mean"] <= 0.5 and s["p99"] <= 2.0, (pose, s)
     # regions 4 and 5 drive states s4 and s5 (the second matrix): anger weights them 0.8
     assert report.render["poses"]["anger"]["changed_pixels"] > 100
+
+
+def test_a_map_declared_directx_is_read_as_declared():
+    def shipped(flip: bool, declare: str):
+        inp = ship_asset(demo_asset(128), ShipOptions(compress=False))
+        t = inp.by_role("base")[0]
+        px = np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, 4).copy()
+        if flip:
+            px[..., 1] = 255 - px[..., 1]
+        t.data = px.tobytes()
+        t.convention = declare
+        return inp
+
+    # a DirectX map declared DirectX: read correctly everywhere, GPU included
+    r = validate(shipped(True, "directx"), ValidateOptions(render_size=128))
+    assert [i.code for i in r.issues] == ["WP-TEX-007"]
+    assert r.metrics["convention_score"]["base_normal"] > 0.9
+    assert max(s["mean"] for s in r.metrics["gpu_vs_reference_deg"].values()) < 0.5
+    # an OpenGL map declared DirectX is the flipped-green defect, seen from the other side
+    r = validate(shipped(False, "directx"), ValidateOptions(render_size=128))
+    assert {"WP-MAP-003", "WP-TEX-005"} <= {i.code for i in r.issues}
+    msg = next(i.message for i in r.issues if i.code == "WP-MAP-003")
+    assert "declared directx" in msg and "only as opengl" in msg

@@ -111,11 +111,16 @@ class Context:
         return self.inp.asset
 
     def values(self, tex: Texture, apply_srgb: bool = False) -> np.ndarray | None:
-        """Stored values of a texture, or None when its bytes cannot be decoded."""
+        """Stored values of a texture (green flipped for a normal map declared DirectX, so every
+        consumer sees +Y), or None when its bytes cannot be decoded."""
         key = f"{tex.name}|{apply_srgb}"
         if key not in self._values:
             try:
-                self._values[key] = tx.decode_values(tex, apply_srgb)
+                v = tx.decode_values(tex, apply_srgb)
+                if tex.convention == "directx" and tex.role in ("base", "state"):
+                    v = v.copy()  # read as declared: +Y down, so y = -(2g - 1)
+                    v[..., 1] = 1.0 - v[..., 1]
+                self._values[key] = v
             except (ValueError, KeyError):
                 self._values[key] = None
         return self._values[key]

@@ -62,6 +62,8 @@ def shader_defines(inp: ValidationInput, n_layers: int) -> dict[str, int]:
         "NUM_LAYERS": n_layers,
         "BASE_LAYOUT": 0 if tx.xy_layout(base) == "rgb" else 1,
         "STATE_LAYOUT": 0 if tx.xy_layout(states[0]) == "rgb" else 1,
+        "BASE_FLIP_Y": int(base.convention == "directx"),
+        "STATE_FLIP_Y": int(states[0].convention == "directx"),
         **split,
     }
 
@@ -137,7 +139,8 @@ class Renderer:
         self.plain = ctx.program(
             vertex_shader=vs,
             fragment_shader=shader_source(
-                "plain_normal.frag", {"BASE_LAYOUT": self.defines["BASE_LAYOUT"]}
+                "plain_normal.frag",
+                {k: self.defines[k] for k in ("BASE_LAYOUT", "BASE_FLIP_Y")},
             ),
         )
         mesh: Mesh = a.mesh
@@ -452,8 +455,8 @@ def can_render(ctx: Context) -> str:
     sts = inp.state_textures()
     if not sts or any(t is None or ctx.values(t) is None for t in sts):
         return "a state texture is missing or undecodable"
-    if len({(t.fmt, t.width, t.height) for t in sts}) > 1:
-        return "state textures differ in size or format"
+    if len({(t.fmt, t.width, t.height, t.convention) for t in sts}) > 1:
+        return "state textures differ in size, format or declared convention"
     if len(sts) > MAX_STATES:
         return f"more than {MAX_STATES} states"
     if ctx.shipped_masks is None:

@@ -125,8 +125,11 @@ def _normal_map_texture_checks(ctx: Context, t: Texture, normals_raw: np.ndarray
 def _convention_issue(ctx: Context, t: Texture, slopes: np.ndarray) -> Issue | None:
     score = convention_score(slopes)
     ctx.metrics.setdefault("convention_score", {})[t.name] = round(score, 4)
+    # the slopes were read as declared (context.values flips a DirectX map), so a negative
+    # score means the map is in the other convention than declared
     declared = t.convention if t.convention in ("opengl", "directx") else "opengl"
-    detected = "opengl" if score > 0.25 else "directx" if score < -0.25 else "undetermined"
+    other = "directx" if declared == "opengl" else "opengl"
+    detected = declared if score > 0.25 else other if score < -0.25 else "undetermined"
     if detected not in ("undetermined", declared):
         return make_issue(
             "WP-MAP-003",
