@@ -498,11 +498,15 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
             frames[expr] = r.draw(ctx.weights(expr))
         info["render_s"] = round(time.perf_counter() - t0, 4)
         plain = r.draw(None, plain=True)
+    except Exception as exc:  # noqa: BLE001 - a driver failing mid-draw: report, do not crash
+        return _skip(f"{type(exc).__name__}: {str(exc).strip()[:300]}", where)
     finally:
         r.release()
     t0 = time.perf_counter()
     neutral = frames[None]
     cov = neutral.covered
+    if not cov.any():
+        return _skip("the mesh covers no pixel of the render target", where)
     uv = neutral.uv[cov][:, :2]
     samples = sample_reference(ctx, uv)
     per_pose: dict[str, Any] = {}
