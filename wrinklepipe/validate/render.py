@@ -72,7 +72,7 @@ def ortho_front(positions: np.ndarray, aspect: float = 1.0, margin: float = 1.05
     """Column-major MVP of an orthographic view along -Z fitted to the mesh's bounds."""
     lo, hi = positions.min(axis=0), positions.max(axis=0)
     c = (lo + hi) / 2.0
-    half = max((hi[0] - lo[0]) / 2.0 / aspect, (hi[1] - lo[1]) / 2.0) * margin
+    half = max((hi[0] - lo[0]) / 2.0 / aspect, (hi[1] - lo[1]) / 2.0, 1e-9) * margin
     zr = max((hi[2] - lo[2]) / 2.0, 1e-9) * 1.01
     m = np.array(
         [
