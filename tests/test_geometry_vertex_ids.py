@@ -192,3 +192,43 @@ def test_jitter_at_cell_borders(mesh_name, dtype, sphere, head):
     for _ in range(3):
         jit = (snapped + rng.uniform(-tol / 10, tol / 10, size=p.shape)).astype(dtype)
         np.testing.assert_array_equal(compute_vertex_ids(jit, options=opts), ids)
+
+
+def _twins_and_strangers(spread: float, tol: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """300 positions on a 10*tol lattice scattered over ``spread`` (distinct ones far apart
+    against the tolerance), each repeated with jitter below tol/10; expected groups = lattice
+    sites."""
+    rng = np.random.default_rng(seed)
+    sites = rng.integers(0, int(spread / (10 * tol)), size=(300, 3)).astype(np.float64)
+    sites = np.unique(sites, axis=0) * (10 * tol)
+    reps = np.repeat(np.arange(len(sites)), 3)
+    pts = sites[reps] + rng.uniform(-0.09, 0.09, size=(len(reps), 3)) * tol
+    order = rng.permutation(len(pts))
+    return pts[order], reps[order]
+
+
+@pytest.mark.parametrize(
+    ("spread", "tol", "factor"),
+    [
+        (1.0, 1e-6, 16.0),  # cell key + index in one int64 (the fast path)
+        (10.0, 1e-6, 16.0),  # 20 bits a cell axis: cell key alone, indirect sort
+        (1e3, 1e-6, 16.0),  # 2^26 cells an axis: lexicographic sort of the rows
+    ],
+)
+def test_wide_grids_fall_back_and_agree(spread, tol, factor):
+    pts, expected = _twins_and_strangers(spread, tol, 3)
+    ids = compute_vertex_ids(pts, options=VertexIdOptions(tolerance=tol, coarse_factor=factor))
+    assert same_partition(ids, expected)
+    first = np.unique(ids, return_index=True)[1]
+    assert np.all(np.diff(first) > 0)  # numbered by first appearance
+
+
+def test_grid_finer_than_float_resolution_links_with_kd_tree():
+    # Distinct positions 1e-9 apart near the origin plus one point 1e5 away: with tol 1e-12 a
+    # hash grid over the extent would need > 2^52 cells an axis; the k-d tree links instead.
+    pts, expected = _twins_and_strangers(1e-7, 1e-12, 4)
+    pts = np.vstack([pts, [[1e5, 0.0, 0.0]]])
+    expected = np.append(expected, expected.max() + 1)
+    ids = compute_vertex_ids(pts, options=VertexIdOptions(tolerance=1e-12, coarse_factor=16))
+    assert same_partition(ids, expected)
+    assert ids[-1] == ids.max()

@@ -16,13 +16,18 @@ Contract (``tol`` = the tolerance, Chebyshev distance, i.e. per axis):
 - IDs are ``0 .. n-1`` numbered by first appearance, so the result is deterministic and a
   permutation of the vertex order gives the same partition.
 
-Algorithm: positions are quantised into cells of ``coarse_factor * tol`` and grouped by one
-sort of ``(cell key, vertex index)`` packed in an int64 (which also yields each cell's first
-vertex). A cell whose positions all lie within ``tol / 2`` of its first position is one cluster;
-the points of the rare cells that are not are re-gridded at an eighth of the size, down to cells
-of ``tol / 2`` (an adaptive octree). Cluster representatives within ``1.5 * tol`` of a cell face
-are linked with a k-d tree (Chebyshev radius ``2 * tol``) and merged by connected components.
-Numbering by first appearance is a prefix sum over "is the first vertex of its cluster".
+Algorithm: positions are quantised into cells of ``coarse_factor * tol``; the three cell
+coordinates and the vertex index are packed into one int64 and sorted once (which groups the
+cells and yields each cell's first vertex; wider grids fall back to an int64 cell key with an
+indirect sort, then to a lexicographic sort of the rows, and grids finer than 2^52 cells to
+linking every point with the k-d tree). A cell whose positions all lie within ``tol / 2`` of
+its first position is one cluster; the points of the rare cells that are not are re-gridded at
+an eighth of the size, down to cells of ``tol / 2`` (an adaptive octree). Cluster
+representatives within ``1.5 * tol`` of a cell face are candidates; on the top level only those
+whose cell across that face holds a candidate or is dense are kept (a sorted search). The
+candidates are linked with a k-d tree (Chebyshev radius ``2 * tol``) and merged by connected
+components. Numbering by first appearance is a prefix sum over "is the first vertex of its
+cluster".
 """
 
 from __future__ import annotations
@@ -79,44 +84,18 @@ def _first_appearance(labels: np.ndarray, n_labels: int) -> np.ndarray:
     return number[f]
 
 
-def _cell_firsts(q: list[np.ndarray], n: int) -> tuple[np.ndarray, np.ndarray | None, int]:
-    """For every point, the index of the first point (lowest index) in its grid cell; also the
-    sorted unique packed cell keys and the bits per axis (None, 0 when keys were not packed)."""
-    bits = max(1, int(max(int(a.max()) for a in q)).bit_length())
-    idx_bits = max(1, int(n - 1).bit_length())
-    if 3 * bits + idx_bits <= 63:
-        # One sort of (cell key, index) packed in an int64: groups cells, index ascending.
-        key = q[0] << (2 * bits + idx_bits)
-        key |= q[1] << (bits + idx_bits)
-        key |= q[2] << idx_bits
-        key |= np.arange(n, dtype=np.int64)
-        key.sort(kind="stable")
-        order = key & np.int64((1 << idx_bits) - 1)
-        cellk = key >> idx_bits
-    elif bits <= 21:
-        key = (q[0] << 42) | (q[1] << 21) | q[2]
-        order = np.argsort(key, kind="stable")
-        cellk = key[order]
-    else:  # tolerance tiny against the extent: exact grouping of rows
-        _, inv = np.unique(np.stack(q, axis=1), axis=0, return_inverse=True)
-        order = np.argsort(inv.reshape(-1), kind="stable")
-        cellk = inv.reshape(-1)[order]
-        bits = 0
-    start = np.empty(n, dtype=bool)
-    start[0] = True
-    np.not_equal(cellk[1:], cellk[:-1], out=start[1:])
-    run_start = np.where(start, np.arange(n, dtype=np.int64), 0)
-    np.maximum.accumulate(run_start, out=run_start)
-    rep = np.empty(n, dtype=np.int64)
-    rep[order] = order[run_start]
-    return rep, (cellk[start] if bits else None), bits
+# Cell coordinates a hash grid level may have (float64 cell coordinates stay exact integers);
+# finer grids fall back to linking every point with the k-d tree.
+_MAX_CELLS = float(2**52)
+# float32 cell coordinates only while their rounding stays far below the near-face margin.
+_MAX_CELLS_FLOAT32 = float(2**14)
 
 
 def _neighbour_occupied(
     q: list[np.ndarray], side: list[np.ndarray], ukeys: np.ndarray, bits: int
 ) -> np.ndarray:
     """For points in cells ``q`` near the faces ``side`` (-1, 0, +1 per axis): is any cell
-    across a near face (or edge, or corner) occupied? ``ukeys``: sorted packed cell keys.
+    across a near face (or edge, or corner) in ``ukeys`` (sorted packed cell keys)?
 
     The cells to look at are the non-zero sub-vectors of ``side`` (1 for a point near one
     face, 3 near an edge, 7 near a corner): a loop over the 7 axis masks, not over points."""
@@ -145,6 +124,153 @@ def _neighbour_occupied(
     return hit
 
 
+def _cluster(
+    cols: list[np.ndarray],
+    lo: np.ndarray,
+    ext: float,
+    cell: float,
+    tol: float,
+    parent_cell: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One level of the adaptive hash grid over the points ``cols`` (3 coordinate arrays).
+
+    Returns ``(f, cand)``: ``f[i]`` the (local) index of the first point of i's cluster, and
+    the local indices of the cluster representatives that may link across a cell face.
+    ``ext``: largest coordinate of these points above ``lo`` (bounds the cell coordinates);
+    ``parent_cell``: None for the level that sees every point (only there are candidates
+    filtered by the occupancy of the cells across their near faces), else the cell size of
+    the level whose dense cells these points fill.
+    """
+    top = parent_cell is None
+    m = len(cols[0])
+    local = np.arange(m, dtype=np.int64)
+    fine = cell <= 0.5 * tol
+    if fine:
+        cell = 0.5 * tol  # same cell => within tol / 2: never dense
+    n_cells = ext / cell
+    if n_cells >= _MAX_CELLS:
+        # Tolerance below what a hash grid resolves at this extent: every point is its own
+        # node and a candidate; the k-d tree links them (exact, only slower).
+        return local, local
+    use32 = n_cells < _MAX_CELLS_FLOAT32 and all(c.dtype == np.float32 for c in cols)
+    inv = 1.0 / cell
+    fr: list[np.ndarray] = []
+    q: list[np.ndarray] = []
+    for c, o in zip(cols, lo):
+        if use32:  # exact: lo is one of the float32 values
+            ga = np.subtract(c, np.float32(o))
+            ga *= np.float32(inv)
+        else:
+            ga = np.subtract(c, o, dtype=np.float64)
+            ga *= inv
+        fl = np.floor(ga)
+        ga -= fl  # the fraction within the cell (exact)
+        if not top:
+            fl -= fl.min()
+        fr.append(ga)
+        q.append(fl.astype(np.int64))
+    # Rounding of the cell coordinates (a few roundings of eps relative): widen the near-face
+    # margin by it so the candidates stay a superset.
+    eps = 2.0**-23 if use32 else 2.0**-52
+    slack = 8.0 * eps * (n_cells + 1.0)
+    qmax = int(n_cells * (1.0 + 1e-9)) + 2 if top else max(int(qa.max()) for qa in q)
+    bits = max(1, qmax.bit_length())
+    idx_bits = max(1, int(m - 1).bit_length())
+
+    point_key = None  # packed cell key of every point (original order), when packed
+    key_shift = 0
+    if 3 * bits + idx_bits <= 63:
+        # One sort of (cell key, index) packed in an int64: groups the cells, index ascending.
+        np.left_shift(q[0], 2 * bits + idx_bits, out=q[0])
+        np.left_shift(q[1], bits + idx_bits, out=q[1])
+        np.left_shift(q[2], idx_bits, out=q[2])
+        key = q[0]
+        key |= q[1]
+        key |= q[2]
+        key |= local
+        cellk = np.sort(key, kind="stable")
+        order = cellk & np.int64((1 << idx_bits) - 1)
+        np.right_shift(cellk, idx_bits, out=cellk)
+        point_key, key_shift = key, idx_bits
+    elif 3 * bits <= 63:  # 21 bits or fewer per axis: one int64 key, indirect sort
+        key = q[0] << (2 * bits)
+        key |= q[1] << bits
+        key |= q[2]
+        order = np.argsort(key, kind="stable")
+        cellk = key[order]
+        point_key = key
+    else:  # more than 2^21 cells on an axis: sort the rows lexicographically
+        order = np.lexsort((q[2], q[1], q[0]))
+        cellk = None
+    start = np.empty(m, dtype=bool)
+    start[0] = True
+    if cellk is not None:
+        np.not_equal(cellk[1:], cellk[:-1], out=start[1:])
+    else:
+        start[1:] = False
+        for qa in q:
+            s = qa[order]
+            start[1:] |= s[1:] != s[:-1]
+    starts = np.flatnonzero(start)
+    run = np.cumsum(start, dtype=np.int64)
+    run -= 1
+    node_sorted = order[starts][run]  # per sorted position: the first point of its cell
+    f = np.empty(m, dtype=np.int64)
+    f[order] = node_sorted
+
+    dense = None
+    dense_cell = None
+    if not fine and len(starts) < m:
+        dup = np.flatnonzero(~start)  # only non-first points can lie away from the first
+        di = order[dup]
+        ri = node_sorted[dup]
+        spread = np.zeros(len(dup))
+        for c in cols:
+            d = c[di].astype(np.float64)
+            d -= c[ri]
+            np.maximum(spread, np.abs(d), out=spread)
+        loose = spread > 0.5 * tol
+        if loose.any():
+            dense_cell = np.zeros(len(starts), dtype=bool)
+            dense_cell[run[dup[loose]]] = True
+            is_dense = np.zeros(m, dtype=bool)
+            is_dense[order[dense_cell[run]]] = True
+            dense = np.flatnonzero(is_dense)  # ascending: local firsts stay the lowest index
+
+    # Representatives of settled cells near a cell face may link across it.
+    margin = 1.5 * tol / cell + slack
+    near = None
+    for a in range(3):
+        na = fr[a] < margin
+        na |= fr[a] > 1.0 - margin
+        near = na if near is None else np.logical_or(near, na, out=near)
+    cand = np.flatnonzero(near)
+    cand = cand[f[cand] == cand]
+    if dense is not None:
+        cand = cand[~is_dense[cand]]
+    if top and point_key is not None and len(cand):
+        # Keep a candidate only when a cell across its near face holds a candidate or is
+        # dense (exact: a partner within tol lies in such a cell, and that cell's
+        # representative lies within 1.5 tol of the shared face unless the cell is dense).
+        ck = point_key[cand] >> key_shift
+        table = ck if dense_cell is None else np.concatenate([ck, cellk[starts[dense_cell]]])
+        table = np.sort(table)  # distinct: one candidate per cell, dense cells have none
+        top_q = (1 << bits) - 1
+        qs = [(ck >> ((2 - a) * bits)) & top_q for a in range(3)]
+        sides = []
+        for a in range(3):
+            fa = fr[a][cand]
+            sides.append((fa > 1.0 - margin).astype(np.int64) - (fa < margin))
+        cand = cand[_neighbour_occupied(qs, sides, table, bits)]
+    if dense is None:
+        return f, cand
+    sub_cols = [c[dense].astype(np.float64) for c in cols]
+    sub_ext = max(float(s.max()) - float(o) for s, o in zip(sub_cols, lo))
+    sub_f, sub_cand = _cluster(sub_cols, lo, sub_ext, cell / 8.0, tol, cell)
+    f[dense] = dense[sub_f]
+    return f, np.concatenate([cand, dense[sub_cand]])
+
+
 def compute_vertex_ids(
     positions: np.ndarray,
     tolerance: float | None = None,
@@ -168,7 +294,7 @@ def compute_vertex_ids(
         return np.zeros(0, dtype=np.int64)
     if p.dtype not in (np.float32, np.float64):
         p = p.astype(np.float64)
-    cols = [np.ascontiguousarray(p[:, a]) for a in range(3)]  # float32 stays float32
+    cols = [p[:, a] for a in range(3)]  # strided views; float32 stays float32
     lo = np.array([c.min() for c in cols], dtype=np.float64)
     hi = np.array([c.max() for c in cols], dtype=np.float64)
     if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
@@ -196,91 +322,7 @@ def compute_vertex_ids(
         spacing = np.sqrt(area / n) if area > 0 else float(ext.max()) / n
         factor = float(np.clip(_SPACING_FRACTION * spacing / tol, 16.0, 4096.0))
     cell = tol * float(factor)
-    f = np.arange(n, dtype=np.int64)  # node of every point: the first point of its cluster
-    cands = []
-    active = None  # None: all points
-    while True:
-        fine = cell <= 0.5 * tol
-        if fine:
-            cell = 0.5 * tol  # same cell => within tol / 2: never dense
-        sub_cols = cols if active is None else [c[active].astype(np.float64) for c in cols]
-        m = len(sub_cols[0])
-        inv = 1.0 / cell
-        g = []
-        q = []
-        for c, o in zip(sub_cols, lo):
-            if c.dtype == np.float32:  # exact: lo is one of the float32 values
-                ga = np.subtract(c, np.float32(o))
-                ga *= np.float32(inv)
-            else:
-                ga = np.subtract(c, o)
-                ga *= inv
-            qa = ga.astype(np.int64)  # ga >= 0: truncation is floor
-            if active is not None:
-                q0 = qa.min()
-                qa -= q0
-                ga -= q0
-            g.append(ga)
-            q.append(qa)
-        # Rounding of the cell coordinates (float32 at most 4 roundings of 2^-24 relative):
-        # widen the near-face margin by it so the candidates stay a superset.
-        slack = 4.0 * 2.0**-23 * float(max(a.max() for a in g)) if g[0].dtype == np.float32 else 0.0
-        local = np.arange(m, dtype=np.int64)
-        rep, ukeys, bits = _cell_firsts(q, m)
-        is_rep = rep == local
-        dense_pt = None
-        if not fine:
-            dup = np.flatnonzero(~is_rep)  # only non-first points can lie away from the first
-            r = rep[dup]
-            spread = np.zeros(len(dup))
-            for c in sub_cols:
-                d = c[dup].astype(np.float64)
-                d -= c[r]
-                np.maximum(spread, np.abs(d), out=spread)
-            loose = spread > 0.5 * tol
-            if loose.any():
-                dense_cell = np.zeros(m, dtype=bool)
-                dense_cell[r[loose]] = True
-                dense_pt = dense_cell[rep]
-        # Representatives of settled cells that lie near a cell face may link across it.
-        rep_idx = np.flatnonzero(is_rep if dense_pt is None else is_rep & ~dense_pt)
-        margin = 1.5 * tol / cell + slack
-        # Near a face: |frac - 1/2| > 1/2 - margin on some axis (contiguous passes, no gathers).
-        dist = None
-        for a in range(3):
-            fr = g[a] - np.floor(g[a])
-            fr -= 0.5
-            np.abs(fr, out=fr)
-            dist = fr if dist is None else np.maximum(dist, fr, out=dist)
-        near_all = dist > 0.5 - margin
-        rep_idx = rep_idx[near_all[rep_idx]]
-        if active is None and ukeys is not None and len(rep_idx):
-            # Level 0 sees every point: keep only candidates whose neighbour cell across a
-            # near face is occupied at all (exact: a partner within tol lies in such a cell).
-            sides = []
-            for a in range(3):
-                ga = g[a][rep_idx]
-                fr = ga - np.floor(ga)
-                sides.append((fr > 1.0 - margin).astype(np.int64) - (fr < margin))
-            qs = [qa[rep_idx] for qa in q]
-            rep_idx = rep_idx[_neighbour_occupied(qs, sides, ukeys, bits)]
-        to_global = local if active is None else active
-        if active is None:
-            f = rep
-            if dense_pt is not None:
-                f = rep.copy()
-                dense_idx = np.flatnonzero(dense_pt)
-                f[dense_idx] = dense_idx  # unsettled: resolved at the finer levels
-        else:
-            keep = np.flatnonzero(~dense_pt) if dense_pt is not None else local
-            f[to_global[keep]] = to_global[rep[keep]]
-        cands.append(to_global[rep_idx])
-        if dense_pt is None:
-            break
-        active = to_global[np.flatnonzero(dense_pt)]
-        cell = cell / 8.0
-
-    cand = np.concatenate(cands)
+    f, cand = _cluster(cols, lo, float((hi - lo).max()), cell, tol)
     if len(cand) > 1:
         from scipy.spatial import cKDTree
 
