@@ -133,6 +133,8 @@ def test_demo_command(tmp_path, monkeypatch, capsys):
     out = tmp_path / "demo-out"
     assert main(["demo", "-o", str(out), "--size", "64"]) == 0
     assert (out / "report.html").is_file() and (out / "demo_head.gltf").is_file()
+    assert (out / "validation.html").is_file()
+    assert (out / "validation_files" / "render_anger.png").is_file()
     printed = capsys.readouterr().err
     assert "report.html" in printed
     # A rerun replaces its own previous output without --force.

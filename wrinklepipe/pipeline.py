@@ -566,17 +566,24 @@ def _scrub(obj: Any, replacements: dict[str, str]) -> Any:
     return obj
 
 
+VALIDATION_HTML = "validation.html"
+
+
 def validate_output(
-    folder: Path, manifest_path: Path | None = None, render: bool = True
+    folder: Path, manifest_path: Path | None = None, render: bool = True, html_page: bool = False
 ) -> dict[str, Any]:
     """Run :mod:`wrinklepipe.validate` on a written folder.
 
     With ``manifest_path`` the shipped textures are compared with the source maps. Only
     deterministic parts go into the report (counts and issues, no timings); paths are written
-    relative to the output folder (``.``) and the manifest's folder (``<source>``).
+    relative to the output folder (``.``) and the manifest's folder (``<source>``). With
+    ``html_page`` the validator's own page (contact sheet of renders, error heat maps, mask
+    overlay, metrics) is written into the folder as ``validation.html`` + ``validation_files/``.
     """
     from wrinklepipe.validate import ValidateOptions, validate
     from wrinklepipe.validate.loader import LoadOptions, load_input
+    from wrinklepipe.validate.report import html_images
+    from wrinklepipe.validate.report import report_html as validation_page
 
     src = str(manifest_path) if manifest_path is not None else None
     report = validate(load_input(folder, LoadOptions(source=src)), ValidateOptions(render=render))
@@ -584,6 +591,12 @@ def validate_output(
     replacements = {str(folder): "."}
     if manifest_path is not None:
         replacements[str(manifest_path.parent)] = "<source>"
+    if html_page:
+        files_dir = Path(VALIDATION_HTML).stem + "_files"
+        for image, data in html_images(report).items():
+            write_bytes(folder / files_dir / image, data)
+        page = _scrub(validation_page(report, files_dir), replacements)
+        write_bytes(folder / VALIDATION_HTML, page.encode("utf-8"))
     counts = {k: int(v) for k, v in report.counts.items()}
     return _scrub({"status": "ran", "counts": counts, "issues": issues}, replacements)
 
@@ -597,7 +610,10 @@ def _validation_html(validation: dict[str, Any], table: Any) -> str:
         [i.get("severity", ""), i.get("code", ""), i.get("message", ""), i.get("pointer", "")]
         for i in validation.get("issues", [])
     ]
-    return f"<p>{html.escape(head)}</p>" + table(rows, ["severity", "code", "message", "where"])
+    link = f"<p>The validator's page: <a href='{VALIDATION_HTML}'>{VALIDATION_HTML}</a></p>"
+    return (
+        f"<p>{html.escape(head)}</p>" + link + table(rows, ["severity", "code", "message", "where"])
+    )
 
 
 def report_html(report: dict[str, Any]) -> str:
@@ -752,7 +768,7 @@ def convert(
                 write_usd(pkg, tmp / u, write_textures=False)
             with status("validating"):
                 validation = (
-                    validate_output(tmp, manifest.path, opt.render)
+                    validate_output(tmp, manifest.path, opt.render, html_page=True)
                     if opt.validate
                     else {"status": "skipped", "reason": "--no-validate"}
                 )

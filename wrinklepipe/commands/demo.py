@@ -69,9 +69,12 @@ def run(args: argparse.Namespace) -> int:
     validation = rep.get("validation", {})
     counts = validation.get("counts", {})
     err.print(f"[bold]outputs[/]      {result.output.resolve()}")
-    for name in sorted(p.name for p in result.output.iterdir() if p.is_file()):
-        err.print(f"  {name}")
+    for entry in sorted(result.output.iterdir()):
+        err.print(f"  {entry.name}{'/' if entry.is_dir() else ''}")
     err.print(f"[bold]report[/]       {(result.output / 'report.html').resolve()}")
+    page = result.output / "validation.html"
+    if page.is_file():
+        err.print(f"[bold]renders[/]      {page.resolve()}")
     if validation.get("status") == "skipped":
         err.print(f"[bold]validation[/]   skipped: {validation.get('reason', '')}")
         return result.exit_code
