@@ -32,17 +32,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.gltf_read import GltfReadOptions, _Reader
-
-_COMPONENTS = {
-    5120: np.int8,
-    5121: np.uint8,
-    5122: np.int16,
-    5123: np.uint16,
-    5125: np.uint32,
-    5126: np.float32,
-}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+from wrinklepipe.io.gltf_read import _COMPONENTS, _WIDTH, GltfReadOptions, _Reader
 
 #: Required extensions that do not change geometry (textures/materials/lights): ignored.
 _HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_")
