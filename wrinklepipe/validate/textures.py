@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.model import normalize
+from wrinklepipe.normals.encode import pd_values_to_slopes
 from wrinklepipe.validate.inputs import FORMATS, Texture
 
 
@@ -87,7 +88,7 @@ def decode_state(values: np.ndarray, encoding: str, layout: str, pd_scale: float
     """
     v = np.asarray(values, np.float32)
     if encoding == "pd":
-        return ((2.0 * v[..., :2] - 1.0) * np.float32(pd_scale)).astype(np.float32)
+        return pd_values_to_slopes(v, pd_scale)
     if encoding == "diff":
         if v.shape[-1] < 3:
             raise ValueError("a diff map needs three channels")
