@@ -60,17 +60,13 @@ def expression_weights(asset: WrinkleAsset, expr: str | None) -> np.ndarray:
 
 
 def resize_normals(normals: np.ndarray, h: int, w: int) -> np.ndarray:
-    """Unit normals resampled in PD space as ``convert`` does (bilinear when that stage is
-    not installed)."""
+    """Unit normals resampled in PD space as ``convert`` does."""
+    from wrinklepipe.io.package import resize_normals_pd
+
     n = np.asarray(normals, np.float32)
     if n.shape[:2] == (h, w):
         return n
-    try:
-        from wrinklepipe.io.package import resize_normals_pd
-
-        return np.asarray(resize_normals_pd(n, h, w), np.float32)
-    except ImportError:  # pragma: no cover
-        return model.pd_to_normal(tx.resize_bilinear(model.normal_to_pd(n), h, w))
+    return np.asarray(resize_normals_pd(n, h, w), np.float32)
 
 
 def resize_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:

@@ -144,14 +144,14 @@ class Renderer:
             ),
         )
         mesh: Mesh = a.mesh
-        tangents = mesh.tangents
-        if tangents is None or np.asarray(tangents).shape != (mesh.vertex_count, 4):
-            from wrinklepipe.validate.rules_mesh import uv_tangents
-
-            tangents = uv_tangents(mesh)
         normals = mesh.normals
         if normals is None:
             normals = _vertex_normals(mesh)
+        tangents = mesh.tangents
+        if tangents is None or np.asarray(tangents).shape != (mesh.vertex_count, 4):
+            from wrinklepipe.geometry.tangents import mikktspace_tangents
+
+            tangents = mikktspace_tangents(mesh.positions, normals, mesh.uvs, mesh.indices)
         verts = np.concatenate(
             [
                 np.asarray(mesh.positions, np.float32),

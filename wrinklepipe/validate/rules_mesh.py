@@ -10,49 +10,13 @@ from wrinklepipe.validate.context import Context
 from wrinklepipe.validate.rules_weights import group_spread, position_groups
 
 
-def uv_tangents(mesh: Mesh) -> np.ndarray:
-    """Reference per-vertex tangents ``[V, 4]`` from UV gradients (glTF UVs, +Y up = -v).
-
-    Per triangle: ``T = dP/du``, ``B = -dP/dv`` (v runs down in glTF), summed per vertex,
-    Gram-Schmidt against the vertex normal; ``w = sign(dot(cross(N, T), B))``. This is the
-    frame MikkTSpace produces up to its angle weighting; the validator compares against it
-    with a generous tolerance.
-    """
-    p = np.asarray(mesh.positions, np.float64)
-    uv = np.asarray(mesh.uvs, np.float64)
-    idx = np.asarray(mesh.indices, np.int64)
-    n = np.asarray(mesh.normals, np.float64)
-    p0, p1, p2 = p[idx[:, 0]], p[idx[:, 1]], p[idx[:, 2]]
-    t0, t1, t2 = uv[idx[:, 0]], uv[idx[:, 1]], uv[idx[:, 2]]
-    e1, e2 = p1 - p0, p2 - p0
-    d1, d2 = t1 - t0, t2 - t0
-    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
-    ok = np.abs(det) > 1e-20
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
-    dpdu = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * inv
-    dpdv = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * inv
-    tan = np.zeros_like(p)
-    bit = np.zeros_like(p)
-    for c in range(3):
-        np.add.at(tan, idx[:, c], dpdu)
-        np.add.at(bit, idx[:, c], -dpdv)
-    t = tan - n * np.einsum("ij,ij->i", tan, n)[:, None]
-    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-30)
-    w = np.where(np.einsum("ij,ij->i", np.cross(n, t), bit) < 0, -1.0, 1.0)
-    return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
-
-
 def reference_tangents(mesh: Mesh) -> tuple[np.ndarray, float, str]:
     """(tangents [V, 4], allowed angle in degrees, name): MikkTSpace from the geometry stage
-    (it reproduces the Khronos sample's exported tangents to 0.03 degrees), else the UV-gradient
-    frame with a generous tolerance."""
-    try:
-        from wrinklepipe.geometry.tangents import mikktspace_tangents
+    (it reproduces the Khronos sample's exported tangents to 0.03 degrees)."""
+    from wrinklepipe.geometry.tangents import mikktspace_tangents
 
-        t = mikktspace_tangents(mesh.positions, mesh.normals, mesh.uvs, mesh.indices)
-        return np.asarray(t, np.float64), 5.0, "MikkTSpace"
-    except ImportError:  # pragma: no cover - the geometry stage is not installed
-        return uv_tangents(mesh).astype(np.float64), 45.0, "the UV gradient"
+    t = mikktspace_tangents(mesh.positions, mesh.normals, mesh.uvs, mesh.indices)
+    return np.asarray(t, np.float64), 5.0, "MikkTSpace"
 
 
 def check_mesh(ctx: Context) -> list[Issue]:

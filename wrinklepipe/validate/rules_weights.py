@@ -37,10 +37,8 @@ def dynamic_weights(mesh: object, max_targets: int = 16) -> dict[str, np.ndarray
         or np.asarray(mesh.morph_deltas).shape[1:] != np.asarray(mesh.positions).shape
     ):
         return {}
-    try:
-        from wrinklepipe.geometry.dynamic import DynamicWeights
-    except ImportError:  # pragma: no cover - the geometry stage is not installed
-        return {}
+    from wrinklepipe.geometry.dynamic import DynamicWeights
+
     rest = np.asarray(mesh.positions, np.float64)
     op = DynamicWeights.build(rest, np.asarray(mesh.indices), np.asarray(mesh.vertex_ids))
     out = {}

@@ -107,12 +107,9 @@ def ship_asset(
         if t.role in ("base", "state") and t.fmt == "rgba8":
             t.layout = "rgb" if (t.role == "base" or asset.encoding != "pd") else "rg"
     if asset.mesh is not None and asset.mesh.tangents is None:
-        try:
-            from wrinklepipe.pipeline import prepare_mesh
+        from wrinklepipe.pipeline import prepare_mesh
 
-            asset = replace(asset, mesh=prepare_mesh(asset.mesh))
-        except ImportError:  # pragma: no cover - the output stage is not installed
-            pass
+        asset = replace(asset, mesh=prepare_mesh(asset.mesh))
     return ValidationInput(
         asset=asset,
         textures=textures,
