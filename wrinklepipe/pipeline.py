@@ -199,8 +199,10 @@ def _load_mesh(path: Path) -> Mesh:
     return load_mesh(path)
 
 
-def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
-    """Read every file a manifest names into a :class:`WrinkleAsset` (float maps, +Y)."""
+def read_maps(manifest: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """The manifest's maps as read: base ``[H, W, 3]``, wrinkled-face states ``[K, H, W, 3]``
+    (unit normals, +Y; wrinkle-only maps get the base added in PD space), masks ``[R, h, w]``,
+    and notes on what was read."""
     from wrinklepipe import masks as wm
 
     notes: list[str] = []
@@ -231,6 +233,12 @@ def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
             [r.mask for r in manifest.regions], names=[r.name for r in manifest.regions]
         )
         mask_arr = np.asarray(ms.masks, np.float32)
+    return base, np.stack(states), mask_arr, notes
+
+
+def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
+    """Read every file a manifest names into a :class:`WrinkleAsset` (float maps, +Y)."""
+    base, states, mask_arr, notes = read_maps(manifest)
     mesh = _load_mesh(manifest.mesh) if manifest.mesh is not None else None
     if mesh is None:
         raise input_error(
@@ -239,7 +247,7 @@ def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
     asset = WrinkleAsset(
         name=manifest.name,
         base=base,
-        states=np.stack(states),
+        states=states,
         state_names=tuple(s.name for s in manifest.states),
         masks=mask_arr,
         regions=tuple(Region(r.name, r.side, tuple(r.states)) for r in manifest.regions),

@@ -98,95 +98,29 @@ def blend_frames(
         yield int(f), blend(base, states, masks, w, encoding, policy)
 
 
-def _resize_normals(n: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    from scipy import ndimage
-
-    from wrinklepipe.model import normalize
-
-    if n.shape[:2] == size:
-        return n
-    f = (size[0] / n.shape[0], size[1] / n.shape[1], 1.0)
-    return normalize(ndimage.zoom(n.astype(np.float64), f, order=1, mode="nearest", grid_mode=True))
-
-
-def _read_normals(path: Path, convention: str) -> np.ndarray:
-    from wrinklepipe.io.images import read_image
-    from wrinklepipe.model import normalize
-
-    try:
-        from wrinklepipe.normals.read import ReadOptions, read_normal_map
-
-        conv = convention if convention in ("auto", "opengl", "directx") else "auto"
-        return np.asarray(read_normal_map(path, ReadOptions(convention=conv)).normals, np.float32)
-    except ImportError:
-        pass
-    px, _ = read_image(path)
-    if px.shape[-1] < 3:
-        raise input_error(path, "expected an RGB normal map")
-    n = px[..., :3] * 2.0 - 1.0
-    if convention == "directx":
-        n[..., 1] *= -1.0
-    return normalize(n)
-
-
-def _read_region_mask(path: Path, channel: str | None) -> np.ndarray:
-    from wrinklepipe.io.images import read_image
-    from wrinklepipe.masks.read import mask_from_pixels
-
-    if channel is None:
-        from wrinklepipe.masks.read import read_mask
-
-        return read_mask(path)[0]
-    px, _ = read_image(path)
-    return mask_from_pixels(px[..., "rgba".index(channel)], path)
-
-
 def load_maps(manifest: Any, size: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Base ``[H, W, 3]``, encoded states ``[K, H, W, C]`` and masks ``[R, H, W]`` at one size."""
-    from wrinklepipe.masks import resample_masks, stack_masks
+    """Base ``[H, W, 3]``, encoded states ``[K, H, W, C]`` and masks ``[R, H, W]`` at one size
+    (the base's unless ``size``), read as ``convert`` reads them and resampled in PD space."""
+    from wrinklepipe.io.package import resize_normals_pd
+    from wrinklepipe.masks import resample_masks
+    from wrinklepipe.pipeline import read_maps
 
-    base = _read_normals(manifest.base, manifest.convention)
-    hw = (size, size) if size else base.shape[:2]
-    base = _resize_normals(base, hw)
-    states = np.stack(
-        [_resize_normals(_read_normals(s.map, manifest.convention), hw) for s in manifest.states]
-    )
-    masks = stack_masks(
-        [_read_region_mask(r.mask, r.channel) for r in manifest.regions],
-        [r.name for r in manifest.regions],
-        [r.mask for r in manifest.regions],
-    )
-    masks = resample_masks(masks, hw)
-    enc = encode_states(base, states, manifest.encoding, manifest.states_include_base)
-    return base, enc, masks
+    base, states, masks, _ = read_maps(manifest)
+    h, w = (size, size) if size else base.shape[:2]
+    base = resize_normals_pd(base, h, w)
+    states = np.stack([resize_normals_pd(s, h, w) for s in states])
+    masks = resample_masks(masks, (h, w))
+    # read_maps returns the wrinkled face, so the states always include the base here
+    return base, encode_states(base, states, manifest.encoding, True), masks
 
 
 def load_mesh_for_drivers(path: Path | None) -> Mesh | None:
-    """The manifest's mesh (morph names, skin) through the geometry loader when installed,
-    else just the morph-target names from a glTF (enough for the blendshapes driver)."""
+    """The manifest's mesh (morph names, skin) through :func:`wrinklepipe.io.mesh.load_mesh`."""
     if path is None:
         return None
-    try:
-        from wrinklepipe.io.mesh import load_mesh  # type: ignore[import-not-found]
+    from wrinklepipe.io.mesh import load_mesh
 
-        return load_mesh(path)
-    except ImportError:
-        pass
-    if path.suffix.lower() not in (".gltf", ".glb"):
-        return None
-    import pygltflib
-
-    try:
-        g = pygltflib.GLTF2().load(str(path))
-    except Exception as exc:  # pygltflib raises many kinds
-        raise input_error(path, f"cannot read glTF: {exc}") from None
-    names: list[str] = []
-    for m in g.meshes:
-        for n in (m.extras or {}).get("targetNames", []):
-            if n not in names:
-                names.append(str(n))
-    empty = np.zeros((0, 3), np.float32)
-    return Mesh(empty, np.zeros((0, 3), np.uint32), morph_names=tuple(names), name=path.name)
+    return load_mesh(path)
 
 
 def _pick_driver(manifest: Any, kind: str | None) -> tuple[int, dict[str, Any]]:
