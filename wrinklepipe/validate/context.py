@@ -71,13 +71,9 @@ def resize_normals(normals: np.ndarray, h: int, w: int) -> np.ndarray:
 
 def resize_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:
     """Masks ``[R, H, W]`` resampled as ``convert`` does (box down, bilinear up)."""
-    m = np.asarray(masks, np.float32)
-    try:
-        from wrinklepipe.masks import resample_masks
+    from wrinklepipe.masks import resample_masks
 
-        return np.asarray(resample_masks(m, (h, w)), np.float32)
-    except ImportError:  # pragma: no cover
-        return np.moveaxis(tx.resize_bilinear(np.moveaxis(m, 0, -1), h, w), -1, 0)
+    return np.asarray(resample_masks(np.asarray(masks, np.float32), (h, w)), np.float32)
 
 
 def encode_source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.ndarray:
