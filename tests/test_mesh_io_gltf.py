@@ -342,3 +342,37 @@ def test_morph_weight_animation_sampled_like_pygltflib():
     mid = 0.5 * (t_in[40] + t_in[41])
     w = gltf_morph_weights(f, m, float(mid))
     np.testing.assert_allclose(w["target_0"], 0.5 * (w_out[40, 0] + w_out[41, 0]), atol=1e-6)
+
+
+# --- animation sampling (glTF 2.0 Appendix C), against hand-computed values ------------------
+
+
+def test_linear_rotation_is_slerp():
+    from wrinklepipe.io.mesh_gltf import sample_channel
+
+    t = np.array([0.0, 1.0])
+    # identity to 90 degrees about Z: at a quarter of the way, 22.5 degrees (nlerp gives ~18.4)
+    q = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, np.sin(np.pi / 4), np.cos(np.pi / 4)]])
+    got = sample_channel(t, q, 0.25, "LINEAR", "rotation")
+    half = np.radians(22.5) / 2
+    assert got == pytest.approx([0.0, 0.0, np.sin(half), np.cos(half)], abs=1e-12)
+
+
+def test_cubic_spline_hermite_by_hand():
+    from wrinklepipe.io.mesh_gltf import sample_channel
+
+    t = np.array([0.0, 2.0])
+    # [in-tangent, value, out-tangent] per key, one component
+    v = np.array([[[0.0], [1.0], [3.0]], [[-1.0], [4.0], [0.0]]])
+    s = 0.5  # time 1.0 of 2.0
+    h00, h10, h01, h11 = (
+        2 * s**3 - 3 * s**2 + 1,
+        s**3 - 2 * s**2 + s,
+        -2 * s**3 + 3 * s**2,
+        s**3 - s**2,
+    )
+    expected = h00 * 1.0 + 2.0 * h10 * 3.0 + h01 * 4.0 + 2.0 * h11 * -1.0
+    assert sample_channel(t, v, 1.0, "CUBICSPLINE", "translation")[0] == pytest.approx(expected)
+    assert sample_channel(t, v, -1.0, "CUBICSPLINE", "translation")[0] == 1.0  # clamped
+    assert sample_channel(t, v, 9.0, "CUBICSPLINE", "translation")[0] == 4.0
+    assert sample_channel(t, v[:, 1], 1.5, "STEP", "translation")[0] == 1.0

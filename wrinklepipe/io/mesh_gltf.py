@@ -482,7 +482,7 @@ def gltf_joint_world_matrices(
     path: str | Path, mesh: Mesh, time: float | None = None
 ) -> np.ndarray:
     """World matrices ``[J, 4, 4]`` of ``mesh``'s joints, at rest or at ``time`` (seconds) of
-    the file's first animation (LINEAR / STEP samplers; CUBICSPLINE uses the values only)."""
+    the file's first animation (STEP, LINEAR with slerp for rotations, CUBICSPLINE)."""
     r = _MeshReader(Path(path), GltfReadOptions())
     doc = r.doc
     if time is not None and not doc.get("animations"):
@@ -501,8 +501,8 @@ def gltf_joint_world_matrices(
             vals = r.typed(smp["output"], key).astype(np.float64)
             interp = smp.get("interpolation", "LINEAR")
             if interp == "CUBICSPLINE":
-                vals = vals.reshape(len(t_in), 3, -1)[:, 1]
-            nodes[int(tgt["node"])][path_] = _sample(
+                vals = vals.reshape(len(t_in), 3, -1)
+            nodes[int(tgt["node"])][path_] = sample_channel(
                 t_in, vals, float(time), interp, path_
             ).tolist()
             nodes[int(tgt["node"])].pop("matrix", None)
@@ -548,28 +548,61 @@ def gltf_morph_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, f
                 t_in = r.typed(smp["input"], key)[:, 0].astype(np.float64)
                 vals = r.typed(smp["output"], key).astype(np.float64).reshape(-1)
                 interp = smp.get("interpolation", "LINEAR")
-                k = 3 if interp == "CUBICSPLINE" else 1
-                vals = vals.reshape(len(t_in), k, n_t)[:, k // 2]
-                w = _sample(t_in, vals, float(time), "STEP" if interp == "STEP" else "LINEAR", "w")
+                shape = (len(t_in), 3, n_t) if interp == "CUBICSPLINE" else (len(t_in), n_t)
+                w = sample_channel(
+                    t_in,
+                    vals.reshape(shape),
+                    float(time),
+                    interp,
+                    "weights",
+                )
         for name, value in zip(names, w):
             if name in mesh.morph_names:
                 out.setdefault(name, float(value))
     return out
 
 
-def _sample(t: np.ndarray, v: np.ndarray, time: float, interp: str, path: str) -> np.ndarray:
+def slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:
+    """Spherical linear interpolation of unit quaternions (the shorter arc), as glTF specifies."""
+    q0 = np.asarray(q0, np.float64)
+    q1 = np.asarray(q1, np.float64)
+    d = float(np.dot(q0, q1))
+    if d < 0.0:
+        q1, d = -q1, -d
+    if d > 0.9995:  # nearly parallel: lerp is exact to float precision
+        q = (1 - a) * q0 + a * q1
+    else:
+        theta = np.arccos(d)
+        q = (np.sin((1 - a) * theta) * q0 + np.sin(a * theta) * q1) / np.sin(theta)
+    return q / np.linalg.norm(q)
+
+
+def sample_channel(t: np.ndarray, v: np.ndarray, time: float, interp: str, path: str) -> np.ndarray:
+    """Sample a glTF animation channel at ``time`` per the glTF 2.0 spec (Appendix C).
+
+    ``v`` is ``[N, C]`` for STEP / LINEAR and ``[N, 3, C]`` (in-tangent, value, out-tangent)
+    for CUBICSPLINE. LINEAR rotations slerp; cubic rotations are normalised. Times outside the
+    keys clamp to the first / last value.
+    """
+    vals = v[:, 1] if interp == "CUBICSPLINE" else v
     if time <= t[0]:
-        return v[0]
+        return vals[0]
     if time >= t[-1]:
-        return v[-1]
+        return vals[-1]
     k = int(np.searchsorted(t, time, side="right")) - 1
     if interp == "STEP":
-        return v[k]
-    a = (time - t[k]) / (t[k + 1] - t[k])
+        return vals[k]
+    td = t[k + 1] - t[k]
+    a = (time - t[k]) / td
+    if interp == "CUBICSPLINE":
+        a2, a3 = a * a, a * a * a
+        out = (
+            (2 * a3 - 3 * a2 + 1) * v[k, 1]
+            + td * (a3 - 2 * a2 + a) * v[k, 2]
+            + (-2 * a3 + 3 * a2) * v[k + 1, 1]
+            + td * (a3 - a2) * v[k + 1, 0]
+        )
+        return out / np.linalg.norm(out) if path == "rotation" else out
     if path == "rotation":
-        q0, q1 = v[k], v[k + 1]
-        if np.dot(q0, q1) < 0:
-            q1 = -q1
-        q = (1 - a) * q0 + a * q1  # nlerp
-        return q / np.linalg.norm(q)
-    return (1 - a) * v[k] + a * v[k + 1]
+        return slerp(vals[k], vals[k + 1], a)
+    return (1 - a) * vals[k] + a * vals[k + 1]
