@@ -91,14 +91,29 @@ _MAX_CELLS = float(2**52)
 _MAX_CELLS_FLOAT32 = float(2**14)
 
 
-def _neighbour_occupied(
-    q: list[np.ndarray], side: list[np.ndarray], ukeys: np.ndarray, bits: int
-) -> np.ndarray:
-    """For points in cells ``q`` near the faces ``side`` (-1, 0, +1 per axis): is any cell
-    across a near face (or edge, or corner) in ``ukeys`` (sorted packed cell keys)?
+_HASH_MUL = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing of packed cell keys
 
-    The cells to look at are the non-zero sub-vectors of ``side`` (1 for a point near one
-    face, 3 near an edge, 7 near a corner): a loop over the 7 axis masks, not over points."""
+
+def _cell_hash(keys: np.ndarray, hash_bits: int) -> np.ndarray:
+    """Multiplicative hash of int64 cell keys into ``hash_bits`` bits."""
+    h = keys.view(np.uint64) * _HASH_MUL  # wraps modulo 2^64
+    h >>= np.uint64(64 - hash_bits)
+    return h
+
+
+def _neighbour_occupied(
+    q: list[np.ndarray], side: list[np.ndarray], table: np.ndarray, bits: int
+) -> np.ndarray:
+    """For points in cells ``q`` near the faces ``side`` (-1, 0, +1 per axis): may a cell
+    across a near face (or edge, or corner) be one of the packed cell keys ``table``?
+
+    A superset: the keys are hashed into a bitmap about 32 times their number (cache-sized),
+    so a few answers are false positives (they only add k-d tree candidates), never false
+    negatives. The cells to look at are the non-zero sub-vectors of ``side`` (1 for a point
+    near one face, 3 near an edge, 7 near a corner): a loop over the 7 axis masks."""
+    hash_bits = max(12, int(32 * len(table)).bit_length())
+    occupied = np.zeros(1 << hash_bits, dtype=bool)
+    occupied[_cell_hash(np.ascontiguousarray(table, dtype=np.int64), hash_bits)] = True
     hit = np.zeros(len(q[0]), dtype=bool)
     top = (1 << bits) - 1
     nz = [sd != 0 for sd in side]
@@ -116,10 +131,8 @@ def _neighbour_occupied(
         for a in range(3):
             c = q[a][sel] + side[a][sel] if use[a] else q[a][sel]
             valid &= (c >= 0) & (c <= top)
-            key |= c << ((2 - a) * bits)
-        pos = np.searchsorted(ukeys, key)
-        found = valid & (pos < len(ukeys))
-        found[found] = ukeys[pos[found]] == key[found]
+            key |= (c & top) << ((2 - a) * bits)
+        found = valid & occupied[_cell_hash(key, hash_bits)]
         hit[sel[found]] = True
     return hit
 
@@ -212,19 +225,19 @@ def _cluster(
             s = qa[order]
             start[1:] |= s[1:] != s[:-1]
     starts = np.flatnonzero(start)
-    run = np.cumsum(start, dtype=np.int64)
-    run -= 1
-    node_sorted = order[starts][run]  # per sorted position: the first point of its cell
-    f = np.empty(m, dtype=np.int64)
-    f[order] = node_sorted
-
+    # Every point is its own node except the non-first points of a cell (few): those point at
+    # their cell's first point (the run start before them; sorted needles: a cheap search).
+    f = local.copy()
     dense = None
     dense_cell = None
-    if not fine and len(starts) < m:
-        dup = np.flatnonzero(~start)  # only non-first points can lie away from the first
+    if len(starts) < m:
+        dup = np.flatnonzero(~start)
+        dup_cell = np.searchsorted(starts, dup, side="right") - 1
         di = order[dup]
-        ri = node_sorted[dup]
-        spread = np.zeros(len(dup))
+        ri = order[starts[dup_cell]]
+        f[di] = ri
+    if not fine and len(starts) < m:
+        spread = np.zeros(len(dup))  # only non-first points can lie away from the first
         for c in cols:
             d = c[di].astype(np.float64)
             d -= c[ri]
@@ -232,9 +245,10 @@ def _cluster(
         loose = spread > 0.5 * tol
         if loose.any():
             dense_cell = np.zeros(len(starts), dtype=bool)
-            dense_cell[run[dup[loose]]] = True
+            dense_cell[dup_cell[loose]] = True
             is_dense = np.zeros(m, dtype=bool)
-            is_dense[order[dense_cell[run]]] = True
+            is_dense[order[starts[dense_cell]]] = True
+            is_dense[di[dense_cell[dup_cell]]] = True
             dense = np.flatnonzero(is_dense)  # ascending: local firsts stay the lowest index
 
     # Representatives of settled cells near a cell face may link across it.
@@ -248,20 +262,30 @@ def _cluster(
     cand = cand[f[cand] == cand]
     if dense is not None:
         cand = cand[~is_dense[cand]]
-    if top and point_key is not None and len(cand):
+    if point_key is not None and len(cand) and margin < 0.5:
         # Keep a candidate only when a cell across its near face holds a candidate or is
         # dense (exact: a partner within tol lies in such a cell, and that cell's
         # representative lies within 1.5 tol of the shared face unless the cell is dense).
         ck = point_key[cand] >> key_shift
         table = ck if dense_cell is None else np.concatenate([ck, cellk[starts[dense_cell]]])
-        table = np.sort(table)  # distinct: one candidate per cell, dense cells have none
         top_q = (1 << bits) - 1
         qs = [(ck >> ((2 - a) * bits)) & top_q for a in range(3)]
         sides = []
         for a in range(3):
             fa = fr[a][cand]
             sides.append((fa > 1.0 - margin).astype(np.int64) - (fa < margin))
-        cand = cand[_neighbour_occupied(qs, sides, table, bits)]
+        keep = _neighbour_occupied(qs, sides, table, bits)
+        if not top:
+            # A partner may lie outside these points (beyond the parent cell): keep the
+            # candidates near a face of their parent cell too.
+            pinv = 1.0 / parent_cell
+            for c, o in zip(cols, lo):
+                g = np.subtract(c[cand], o, dtype=np.float64)
+                g *= pinv
+                pm = 1.5 * tol / parent_cell + 8.0 * 2.0**-52 * (float(g.max(initial=0)) + 2.0)
+                g -= np.floor(g)  # the fraction within the parent cell
+                keep |= (g < pm) | (g > 1.0 - pm)
+        cand = cand[keep]
     if dense is None:
         return f, cand
     sub_cols = [c[dense].astype(np.float64) for c in cols]
@@ -269,6 +293,22 @@ def _cluster(
     sub_f, sub_cand = _cluster(sub_cols, lo, sub_ext, cell / 8.0, tol, cell)
     f[dense] = dense[sub_f]
     return f, np.concatenate([cand, dense[sub_cand]])
+
+
+def _bounds(p: np.ndarray, block: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis min and max (float64, NaN when any is NaN) of ``[V, 3]`` positions, reduced
+    over rows of ``block`` vertices (contiguous passes, faster than strided columns)."""
+    k = len(p) // block * block
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    if k:
+        rows = p[:k].reshape(-1, 3 * block)
+        lo = rows.min(axis=0).reshape(block, 3).min(axis=0).astype(np.float64)
+        hi = rows.max(axis=0).reshape(block, 3).max(axis=0).astype(np.float64)
+    if k < len(p):
+        lo = np.minimum(lo, p[k:].min(axis=0))
+        hi = np.maximum(hi, p[k:].max(axis=0))
+    return lo, hi
 
 
 def compute_vertex_ids(
@@ -295,8 +335,7 @@ def compute_vertex_ids(
     if p.dtype not in (np.float32, np.float64):
         p = p.astype(np.float64)
     cols = [p[:, a] for a in range(3)]  # strided views; float32 stays float32
-    lo = np.array([c.min() for c in cols], dtype=np.float64)
-    hi = np.array([c.max() for c in cols], dtype=np.float64)
+    lo, hi = _bounds(p)
     if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
         finite = np.isfinite(p).all(axis=1)
         bad = np.flatnonzero(~finite)
