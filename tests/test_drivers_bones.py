@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -151,3 +152,44 @@ def test_dynamic_driver_uses_the_geometry_hook(monkeypatch):
     ctx = wd.DriverContext(["face"], ("stretch", "compress"), policy="signed")
     res = wd.evaluate("dynamic", ctx, {}, times=[0.0, 1.0])
     assert res.per_vertex and res.weights.shape == (2, 5, 1) and res.states == ("signed",)
+
+
+# --- bones from a skinned glTF's own animation (Khronos RiggedSimple) --------------------------
+
+_RIGGED = (
+    Path(__file__).resolve().parents[2]
+    / "shared"
+    / "data"
+    / "gltf-samples"
+    / "RiggedSimple"
+    / "glTF-Binary"
+    / "RiggedSimple.glb"
+)
+
+
+@pytest.mark.skipif(not _RIGGED.is_file(), reason="../shared/data is absent")
+def test_bones_from_gltf_animation_reach_the_reference_frame():
+    from wrinklepipe.drivers import DriverContext, evaluate
+    from wrinklepipe.io.mesh import load_mesh
+    from wrinklepipe.io.mesh_gltf import gltf_animation_times
+
+    keys = gltf_animation_times(_RIGGED)
+    t_ref = float(keys[len(keys) // 2])
+    mesh = load_mesh(_RIGGED)
+    ctx = DriverContext(("r",), ("bent",), mesh=mesh, root=_RIGGED.parent, fps=24)
+    spec = {
+        "kind": "bones",
+        "file": _RIGGED.name,
+        "root": "Bone",
+        "reference_times": {"bent": t_ref},
+    }
+    res = evaluate("bones", ctx, spec, np.array([float(keys[0]), t_ref]))
+    beta = np.asarray(res.weights)  # [frames, vertices, poses]
+    assert beta.shape == (2, mesh.vertex_count, 1)
+    # At the reference frame every moving bone sits at C: alpha = theta = 1 on its vertices.
+    skinned_by_moving = dense_skin(mesh.joints, mesh.skin_weights, 2)[:, 1] > 0  # Bone.001
+    assert np.allclose(beta[1, skinned_by_moving, 0], 1.0)
+    # In the root joint's own space the root never moves: its vertices alone stay at 0.
+    only_root = ~skinned_by_moving
+    assert np.allclose(beta[:, only_root, 0], 0.0)
+    assert 0.0 <= beta.min() and beta.max() <= 1.0

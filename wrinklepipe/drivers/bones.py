@@ -25,6 +25,15 @@ Spec::
 
 ``poses`` (if given) replaces the file's neutral/reference poses; the first pose named
 ``neutral`` is the neutral one. Skin weights come from the file, else from the mesh.
+
+Or the animation of a skinned glTF/GLB (the joints' world positions over its first animation,
+sampled per glTF 2.0; the rest pose is the neutral one unless ``poses`` names one)::
+
+    kind = "bones"
+    file = "face_rig.glb"
+    root = "head"                              # optional: positions in this joint's space
+    joints = ["brow_l", "brow_r", "jaw"]       # optional: default every joint of the skin
+    reference_times = {compress = 2.0, stretch = 3.5}   # reference poses = frames of the file
 """
 
 from __future__ import annotations
@@ -93,12 +102,64 @@ def _xyz_table(
     return out
 
 
+def _gltf_bones_doc(
+    ctx: DriverContext, spec: Mapping[str, Any], times: np.ndarray | None
+) -> dict[str, Any]:
+    """The bones file's content (see the module doc) from a skinned glTF's first animation."""
+    from wrinklepipe.io.mesh import load_mesh
+    from wrinklepipe.io.mesh_gltf import gltf_animation_times, gltf_joint_world_matrices_at
+
+    path = resolve(ctx, str(spec["file"]))
+    rig = load_mesh(path)
+    if not rig.joint_names:
+        raise spec_problem(ctx, f"{path.name} has no skin (no joints)", "file")
+    if times is None:
+        keys = gltf_animation_times(path)
+        n = max(int(round((keys[-1] - keys[0]) * ctx.fps)) + 1, 1)
+        times = keys[0] + np.arange(n) / ctx.fps
+    names = list(rig.joint_names)
+    joints = [str(j) for j in spec.get("joints", names)]
+    unknown = [j for j in joints if j not in names]
+    if unknown:
+        raise spec_problem(ctx, f"joints {unknown} are not in {path.name}'s skin", "joints")
+    root = spec.get("root")
+    if root is not None and str(root) not in names:
+        raise spec_problem(ctx, f"root joint {root!r} is not in {path.name}'s skin", "root")
+    ref_names = [str(k) for k in dict(spec.get("reference_times", {}))]
+    ref_times = [float(t) for t in dict(spec.get("reference_times", {})).values()]
+    # one read of the file: rest pose, reference frames, animation frames
+    m = gltf_joint_world_matrices_at(path, rig, [None, *ref_times, *map(float, times)])
+    if root is not None:
+        m = np.linalg.inv(m[:, names.index(str(root))])[:, None] @ m
+    sel = [names.index(j) for j in joints]
+    pos = m[:, sel][..., :3, 3]  # [1 + P + F, J, 3]
+
+    def table(p: np.ndarray) -> dict[str, list[float]]:
+        return {j: p[i].tolist() for i, j in enumerate(joints)}
+
+    frames = pos[1 + len(ref_times) :]
+    out: dict[str, Any] = {
+        "times": [float(t) for t in times],
+        "bones": {j: frames[:, i].tolist() for i, j in enumerate(joints)},
+        "neutral": table(pos[0]),
+        "reference_poses": {n: table(pos[1 + i]) for i, n in enumerate(ref_names)},
+    }
+    if ctx.mesh is None or ctx.mesh.skin_weights is None:
+        out["skin"] = {
+            "joints": names,
+            "weights": dense_skin(rig.joints, rig.skin_weights, len(names)).tolist(),
+        }
+    return out
+
+
 @register("bones")
 def bones_driver(
     ctx: DriverContext, spec: Mapping[str, Any], times: np.ndarray | None
 ) -> DriverResult:
     doc: dict[str, Any] = {}
-    if "file" in spec:
+    if "file" in spec and str(spec["file"]).lower().endswith((".gltf", ".glb")):
+        doc = _gltf_bones_doc(ctx, spec, times)
+    elif "file" in spec:
         path = resolve(ctx, str(spec["file"]))
         try:
             doc = json.loads(path.read_text(encoding="utf-8"))

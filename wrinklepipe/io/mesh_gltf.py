@@ -24,6 +24,7 @@ Container, buffer and URI safety come from :mod:`wrinklepipe.io.gltf_read`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -483,39 +484,64 @@ def gltf_joint_world_matrices(
 ) -> np.ndarray:
     """World matrices ``[J, 4, 4]`` of ``mesh``'s joints, at rest or at ``time`` (seconds) of
     the file's first animation (STEP, LINEAR with slerp for rotations, CUBICSPLINE)."""
+    return gltf_joint_world_matrices_at(path, mesh, [time])[0]
+
+
+def gltf_joint_world_matrices_at(
+    path: str | Path, mesh: Mesh, times: Sequence[float | None]
+) -> np.ndarray:
+    """World matrices ``[F, J, 4, 4]`` of ``mesh``'s joints at each of ``times`` (None: the
+    rest pose), reading the file once."""
     r = _MeshReader(Path(path), GltfReadOptions())
     doc = r.doc
-    if time is not None and not doc.get("animations"):
+    if any(t is not None for t in times) and not doc.get("animations"):
         raise r.err("the file has no animation to sample", "/animations")
-    nodes = [dict(n) for n in doc.get("nodes", [])]
-    if time is not None and doc.get("animations"):
-        anim = doc["animations"][0]
-        for ci, ch in enumerate(anim.get("channels", [])):
-            tgt = ch.get("target", {})
-            path_ = tgt.get("path")
-            if path_ not in ("translation", "rotation", "scale") or "node" not in tgt:
-                continue
-            smp = anim["samplers"][ch["sampler"]]
-            key = f"/animations/0/channels/{ci}"
-            t_in = r.typed(smp["input"], key)[:, 0].astype(np.float64)
-            vals = r.typed(smp["output"], key).astype(np.float64)
-            interp = smp.get("interpolation", "LINEAR")
-            if interp == "CUBICSPLINE":
-                vals = vals.reshape(len(t_in), 3, -1)
-            nodes[int(tgt["node"])][path_] = sample_channel(
-                t_in, vals, float(time), interp, path_
-            ).tolist()
-            nodes[int(tgt["node"])].pop("matrix", None)
-    worlds = world_matrices({**doc, "nodes": nodes})
+    rest_nodes = [dict(n) for n in doc.get("nodes", [])]
+    channels = []
+    for ci, ch in enumerate((doc.get("animations") or [{}])[0].get("channels", [])):
+        tgt = ch.get("target", {})
+        path_ = tgt.get("path")
+        if path_ not in ("translation", "rotation", "scale") or "node" not in tgt:
+            continue
+        smp = doc["animations"][0]["samplers"][ch["sampler"]]
+        key = f"/animations/0/channels/{ci}"
+        t_in = r.typed(smp["input"], key)[:, 0].astype(np.float64)
+        vals = r.typed(smp["output"], key).astype(np.float64)
+        interp = smp.get("interpolation", "LINEAR")
+        if interp == "CUBICSPLINE":
+            vals = vals.reshape(len(t_in), 3, -1)
+        channels.append((int(tgt["node"]), path_, t_in, vals, interp))
     names_to_node = {}
     for s in doc.get("skins", []):
         for j in s.get("joints", []):
-            nm = str(nodes[j].get("name") or f"joint{j}")
+            nm = str(rest_nodes[j].get("name") or f"joint{j}")
             names_to_node.setdefault(nm, j)
     missing = [n for n in mesh.joint_names if n not in names_to_node]
     if missing:
         raise input_error(str(path), f"joints {missing} are not nodes of the file")
-    return np.stack([worlds.get(names_to_node[n], np.eye(4)) for n in mesh.joint_names])
+    out = []
+    for time in times:  # per frame: a few matrix products per node
+        nodes = [dict(n) for n in rest_nodes]
+        if time is not None:
+            for node, path_, t_in, vals, interp in channels:
+                nodes[node][path_] = sample_channel(t_in, vals, float(time), interp, path_).tolist()
+                nodes[node].pop("matrix", None)
+        worlds = world_matrices({**doc, "nodes": nodes})
+        out.append(np.stack([worlds.get(names_to_node[n], np.eye(4)) for n in mesh.joint_names]))
+    return np.stack(out)
+
+
+def gltf_animation_times(path: str | Path) -> np.ndarray:
+    """Sorted key times (seconds) of the file's first animation, over all its channels."""
+    r = _MeshReader(Path(path), GltfReadOptions())
+    anims = r.doc.get("animations") or []
+    if not anims:
+        raise r.err("the file has no animation", "/animations")
+    keys = [
+        r.typed(s["input"], f"/animations/0/samplers/{i}")[:, 0].astype(np.float64)
+        for i, s in enumerate(anims[0].get("samplers", []))
+    ]
+    return np.unique(np.concatenate(keys)) if keys else np.zeros(1)
 
 
 def gltf_morph_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, float]:
