@@ -227,7 +227,7 @@ def _cluster(
     starts = np.flatnonzero(start)
     # Every point is its own node except the non-first points of a cell (few): those point at
     # their cell's first point (the run start before them; sorted needles: a cheap search).
-    f = local.copy()
+    f = local  # the index field of the keys is packed already: reuse the array
     dense = None
     dense_cell = None
     if len(starts) < m:
@@ -374,9 +374,8 @@ def compute_vertex_ids(
             pairs = pairs[cheb <= 2.0 * tol]
         if len(pairs):
             f = _merge(f, f[cand[pairs[:, 0]]], f[cand[pairs[:, 1]]])
-    idx = np.arange(n, dtype=np.int64)
-    is_first = f == idx
-    number = np.cumsum(is_first, dtype=np.int64) - 1
+    number = np.cumsum(f == np.arange(n, dtype=np.int64), dtype=np.int64)
+    number -= 1
     return number[f]
 
 
