@@ -188,3 +188,21 @@ def test_bad_inputs_are_clear():
     w = op.frame(p * 0.5)
     np.testing.assert_allclose(w[:3], 0.75, atol=1e-6)
     np.testing.assert_allclose(w[3:], 0.0)
+
+
+def test_edge_operator_rows_are_hand_computed_edges():
+    # Two triangles; E @ P must give p1 - p0 (rows 0..T-1) and p2 - p0 (rows T..2T-1).
+    p = np.array([[0, 0, 0], [2, 0, 0], [0, 3, 0], [1, 1, 4]], dtype=np.float64)
+    idx = np.array([[0, 1, 2], [1, 3, 2]])
+    op = DynamicWeights.build(p, idx, options=DynamicOptions(dtype="float64"))
+    e = op.edges @ p
+    np.testing.assert_array_equal(e, [[2, 0, 0], [-1, 1, 4], [0, 3, 0], [-2, 3, 0]])
+    # The frame (index form of E) matches the area ratio from these edges, in float32 too.
+    q = p * np.array([1.0, 0.5, 1.0])
+    area0 = 0.5 * np.linalg.norm(np.cross(e[:2], e[2:]), axis=1)
+    eq = op.edges @ q
+    area1 = 0.5 * np.linalg.norm(np.cross(eq[:2], eq[2:]), axis=1)
+    expected = np.clip((area0 - area1) / area0, -1, 1)
+    np.testing.assert_allclose(op.triangle_frame(q), expected, atol=1e-12)
+    op32 = DynamicWeights.build(p, idx)
+    np.testing.assert_allclose(op32.triangle_frame(q), expected, atol=1e-6)

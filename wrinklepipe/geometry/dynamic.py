@@ -7,9 +7,12 @@ Per vertex the weights are smoothed by the angle-weighted average over the incid
 copies a UV seam splits get exactly the same weight. Oat's rest-pose bias (vertex colours) is
 added before the final clamp.
 
-:class:`DynamicWeights` builds two sparse matrices once (edge differences ``E`` ``[2T, V]`` and
+:class:`DynamicWeights` builds two sparse operators once (edge differences ``E`` ``[2T, V]`` and
 the smoothing operator ``S`` ``[V, T]``); a frame is ``E @ P`` -> areas -> ``S @ w``: two sparse
-products and a few vector operations.
+products and a few vector operations. ``E`` has exactly two entries a row (+1, -1), so it is kept
+in index form (the triangles' corner indices) and applied as three gathers and two subtractions
+per coordinate: the same product, without reading the constant values (measured faster than a
+CSR product); ``S`` is a CSR matrix.
 
 The deformed pose comes from :func:`morph_pose` (morph-target weights) or :func:`skinned_pose`
 (linear blend skinning with joint world matrices). Oat's texture-space alternative (rasterise the
@@ -124,7 +127,7 @@ class DynamicWeights:
     :meth:`triangle_frame` (-> ``[T]`` raw per-triangle weights).
     """
 
-    edges: sp.csr_matrix  # [2T, V]: row t = p1 - p0, row T + t = p2 - p0 of triangle t
+    corners: np.ndarray  # [3, T] intp: corner indices; E @ P = (P[c1] - P[c0], P[c2] - P[c0])
     smooth: sp.csr_matrix  # [V, T]: angle weights grouped by vertex ID, rows sum to 1 (or 0)
     inv_rest_area2: np.ndarray  # [T]: 1 / (2 * rest area); 0 for skipped triangles
     valid: np.ndarray  # [T]: 1 for triangles that vote, 0 for skipped ones
@@ -166,12 +169,7 @@ class DynamicWeights:
             if bias.shape != (n_v,):
                 raise input_error(source, f"bias must have one value per vertex ({n_v})")
 
-        rows = np.repeat(np.arange(2 * n_t), 2)
-        first = np.stack([idx[:, 1], idx[:, 0]], axis=1).reshape(-1)
-        second = np.stack([idx[:, 2], idx[:, 0]], axis=1).reshape(-1)
-        cols = np.concatenate([first, second])
-        vals = np.tile(np.array([1.0, -1.0], dtype=dtype), 2 * n_t)
-        edges = sp.csr_matrix((vals, (rows, cols)), shape=(2 * n_t, n_v), dtype=dtype)
+        corners = np.ascontiguousarray(idx.T, dtype=np.intp)
 
         area2 = 2.0 * triangle_areas(p, idx)
         ok = area2 > 2.0 * opts.min_rest_area
@@ -199,28 +197,47 @@ class DynamicWeights:
         if skipped:
             notes.append(f"skipped {skipped} zero-area triangle(s) (weight 0, no vote)")
         valid = ok.astype(dtype)
-        return cls(edges, smooth, inv.astype(dtype), valid, bias, ids, skipped, notes)
+        return cls(corners, smooth, inv.astype(dtype), valid, bias, ids, skipped, notes)
+
+    @property
+    def edges(self) -> sp.csr_matrix:
+        """The edge operator ``E`` ``[2T, V]`` as a CSR matrix (row t = p1 - p0, row T + t =
+        p2 - p0 of triangle t); frames apply it in index form."""
+        c0, c1, c2 = self.corners
+        n_t = len(c0)
+        rows = np.repeat(np.arange(2 * n_t), 2)
+        cols = np.concatenate(
+            [np.stack([c1, c0], axis=1).reshape(-1), np.stack([c2, c0], axis=1).reshape(-1)]
+        )
+        vals = np.tile(np.array([1.0, -1.0], dtype=self.inv_rest_area2.dtype), 2 * n_t)
+        shape = (2 * n_t, self.smooth.shape[0])
+        return sp.csr_matrix((vals, (rows, cols)), shape=shape)
 
     def triangle_frame(self, deformed_positions: np.ndarray) -> np.ndarray:
         """Per-triangle weights ``[T]`` for a deformed pose ``[V, 3]`` (first sparse product)."""
         dtype = self.inv_rest_area2.dtype
         p = np.asarray(deformed_positions, dtype=dtype)
-        if p.shape != (self.edges.shape[1], 3):
-            want = f"[{self.edges.shape[1]}, 3]"
-            raise input_error("pose", f"deformed positions must be {want}, got {list(p.shape)}")
-        n_t = len(self.inv_rest_area2)
-        # One sparse product per coordinate, contiguous halves: a = p1 - p0, b = p2 - p0.
-        ex, ey, ez = (self.edges @ np.ascontiguousarray(p[:, k]) for k in range(3))
-        ax, bx = ex[:n_t], ex[n_t:]
-        ay, by = ey[:n_t], ey[n_t:]
-        az, bz = ez[:n_t], ez[n_t:]
+        n_v = self.smooth.shape[0]
+        if p.shape != (n_v, 3):
+            raise input_error("pose", f"deformed positions must be [{n_v}, 3], got {list(p.shape)}")
+        c0, c1, c2 = self.corners
+        # E @ P per coordinate (contiguous columns): a = p1 - p0, b = p2 - p0.
+        ab = []
+        for x in np.ascontiguousarray(p.T):
+            x0 = x.take(c0)
+            a = x.take(c1)
+            a -= x0
+            b = x.take(c2)
+            b -= x0
+            ab.append((a, b))
+        (ax, bx), (ay, by), (az, bz) = ab
         c = ay * bz
         c -= az * by
         s = c * c
-        c = az * bx
+        np.multiply(az, bx, out=c)
         c -= ax * bz
         s += c * c
-        c = ax * by
+        np.multiply(ax, by, out=c)
         c -= ay * bx
         s += c * c
         np.sqrt(s, out=s)
