@@ -5,10 +5,11 @@ them; once in file order and once shuffled) against ``trimesh.grouping.unique_ro
 positions quantised to the tolerance, measured interleaved in the same run (CPU time). Limits:
 at most the baseline's time (ratio <= 1) and at most 0.5 s.
 
-Dynamic weights for a 100k-triangle sphere: one frame (two sparse products and the area
-arithmetic, float32, one thread: scipy's sparse products are single-threaded) against one sparse
-mat-vec with the smoothing operator (``S @ w``); limit 2 ms a frame, reported also as the ratio
-to that mat-vec. The build of the operators is reported, not limited.
+Dynamic weights for a 100k-triangle sphere: one frame (the edge operator in index form, the
+area arithmetic and the smoothing CSR product, float32, one thread: numpy gathers and scipy's
+sparse products are single-threaded) against one sparse mat-vec with the smoothing operator
+(``S @ w``); limit 2 ms a frame, reported also as the ratio to that mat-vec. The build of the
+operators is reported, not limited.
 """
 
 from __future__ import annotations
