@@ -50,3 +50,16 @@ def test_bench_unknown_name_exits_2(capsys):
 
 def test_every_command_of_the_brief_is_there():
     assert list(_subcommands()) == list(COMMAND_ORDER)
+
+
+def test_bench_limits_ratio_and_seconds():
+    from wrinklepipe.bench import BenchResult, BenchRow
+
+    r = BenchResult("x", "d", baseline="base")
+    r.rows = [BenchRow("base", 0.010), BenchRow("fast", 0.015), BenchRow("slow", 0.050)]
+    r.limits = {"fast": 2.0, "slow": 4.0}
+    r.limits_s = {"fast": 0.001}
+    r.finish()
+    assert [row.ratio for row in r.rows] == [1.0, 1.5, 5.0]
+    assert r.failures() == ["x: slow ratio 5.00 > 4.0", "x: fast 0.015 s > 0.001 s"]
+    assert r.limit_text("fast") == "<= 2x, <= 1 ms" and r.limit_text("base") == ""

@@ -33,7 +33,8 @@ class BenchResult:
     description: str
     baseline: str
     rows: list[BenchRow] = field(default_factory=list)
-    limits: dict[str, float] = field(default_factory=dict)  # step -> max ratio (or max seconds)
+    limits: dict[str, float] = field(default_factory=dict)  # step -> max ratio to the baseline
+    limits_s: dict[str, float] = field(default_factory=dict)  # step -> max median seconds
     extra: dict[str, Any] = field(default_factory=dict)
 
     def finish(self) -> BenchResult:
@@ -49,7 +50,21 @@ class BenchResult:
             row = next((r for r in self.rows if r.step == step), None)
             if row is not None and not row.ratio <= limit:
                 out.append(f"{self.name}: {step} ratio {row.ratio:.2f} > {limit}")
+        for step, seconds in self.limits_s.items():
+            row = next((r for r in self.rows if r.step == step), None)
+            if row is not None and not row.median_s <= seconds:
+                out.append(f"{self.name}: {step} {row.median_s:.4g} s > {seconds:g} s")
         return out
+
+    def limit_text(self, step: str) -> str:
+        """How the limits on ``step`` read in a table: ``<= 4x``, ``<= 2 ms``, both, or ''."""
+        parts = []
+        if step in self.limits:
+            parts.append(f"<= {self.limits[step]:g}x")
+        if step in self.limits_s:
+            s = self.limits_s[step]
+            parts.append(f"<= {s * 1e3:g} ms" if s < 1 else f"<= {s:g} s")
+        return ", ".join(parts)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -67,6 +82,7 @@ class BenchResult:
                 for r in self.rows
             ],
             "limits": self.limits,
+            "limits_s": self.limits_s,
             "failures": self.failures(),
             "extra": self.extra,
         }

@@ -61,13 +61,12 @@ def run(args: argparse.Namespace) -> int:
                 table.add_column(col, justify="left" if col == "step" else "right")
             for row in r.rows:
                 mps = "" if row.mpix_per_s is None else f"{row.mpix_per_s:.1f}"
-                limit = r.limits.get(row.step)
                 table.add_row(
                     row.step + (" (baseline)" if row.step == r.baseline else ""),
                     f"{row.median_s * 1e3:.2f} ms",
                     "" if math.isnan(row.ratio) else f"{row.ratio:.2f}x",
                     mps,
-                    "" if limit is None else f"<= {limit}x",
+                    r.limit_text(row.step),
                 )
             out.print(table)
         for f in failures:
