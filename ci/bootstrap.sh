@@ -15,7 +15,11 @@ log() { printf '\033[1m[wrinklepipe setup]\033[0m %s\n' "$*" >&2; }
 # 1. Debian packages for headless OpenGL (EGL + Mesa llvmpipe) and Node.js for gltf-validator.
 APT_PKGS="libegl1 libgl1 libgl1-mesa-dri"
 command -v npm >/dev/null 2>&1 || APT_PKGS="$APT_PKGS nodejs npm"
-command -v python3 >/dev/null 2>&1 || APT_PKGS="$APT_PKGS python3 python3-venv"
+if ! command -v python3 >/dev/null 2>&1; then
+  APT_PKGS="$APT_PKGS python3 python3-venv"
+elif ! python3 -c "import ensurepip, venv" >/dev/null 2>&1; then
+  APT_PKGS="$APT_PKGS python3-venv"  # Debian splits venv/ensurepip out of python3
+fi
 missing=""
 for p in $APT_PKGS; do
   dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"
