@@ -649,6 +649,8 @@ def report_html(report: dict[str, Any]) -> str:
         "<h2>Textures</h2><div>",
         "".join(
             f"<figure style='display:inline-block'><img src='{esc(o['file'])}' "
+            # masks keep a region in alpha: show them on black, texels unsmoothed
+            "style='width:160px;background:#000;image-rendering:pixelated' "
             f"alt='{esc(o['file'])}'><figcaption>{esc(o['file'])}</figcaption></figure>"
             for o in report["outputs"]
             if o["file"].startswith("textures/")
