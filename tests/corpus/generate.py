@@ -24,7 +24,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
 
-from wrinklepipe.asset import Region, WrinkleAsset  # noqa: E402
+from wrinklepipe.asset import WrinkleAsset  # noqa: E402
 from wrinklepipe.atomic import dumps_json, write_bytes  # noqa: E402
 from wrinklepipe.validate import ValidationInput, load_config, validate  # noqa: E402
 from wrinklepipe.validate.loader import bundle_arrays, bundle_bytes, read_bundle  # noqa: E402
@@ -37,25 +37,14 @@ CONFIG = HERE / "config.toml"
 
 def demo(encoding: str = "pd", policy: str = "clamp01") -> WrinkleAsset:
     """The demo at SIZE with a coarser head mesh (keeps the corpus small)."""
-    from wrinklepipe.demo import character
-    from wrinklepipe.demo import demo_mesh as to_mesh
+    from dataclasses import replace
 
-    c = character.generate(SIZE)
-    c.mesh = character._head_mesh(48, 32)
-    states = np.stack([c.wrinkled_normal(k) for k in range(len(c.state_names))])
-    return WrinkleAsset(
-        name="demo",
-        base=c.base_normal,
-        states=states.astype(np.float32),
-        state_names=c.state_names,
-        masks=c.masks,
-        regions=tuple(Region(n, s) for n, s in zip(c.region_names, c.region_sides)),
-        expressions=c.expressions,
-        encoding=encoding,
-        policy=policy,
-        pd_scale=1.0,
-        mesh=to_mesh(c),
+    from wrinklepipe.demo import demo_asset
+
+    return replace(
+        demo_asset(SIZE, encoding, policy, mesh_resolution=(48, 32)),
         budget={"max_mean_deg": 0.5, "max_p99_deg": 1.0},
+        resolution={},
         provenance={"generator": "tests/corpus/generate.py", "size": SIZE},
     )
 

@@ -22,14 +22,20 @@ def demo_mesh(character: DemoCharacter) -> Mesh:
     )
 
 
-def demo_asset(size: int = 1024, encoding: str = "pd", policy: str = "clamp01") -> WrinkleAsset:
+def demo_asset(
+    size: int = 1024,
+    encoding: str = "pd",
+    policy: str = "clamp01",
+    mesh_resolution: tuple[int, int] = (96, 64),
+) -> WrinkleAsset:
     """The demo as an in-memory asset at full resolution (maps and masks ``size`` x ``size``).
 
     ``states`` hold the wrinkled face (base + wrinkle height) at full activation, so every encoding
     can be derived from them; the paper's reduced sizes are in ``resolution``.
     """
-    c = generate(size)
     import numpy as np
+
+    c = generate(size, mesh_resolution=mesh_resolution)
 
     states = np.stack([c.wrinkled_normal(k) for k in range(len(c.state_names))])
     return WrinkleAsset(

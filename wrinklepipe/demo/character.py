@@ -355,14 +355,17 @@ def vertex_normals(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-def generate(size: int = 1024, seed: int = DEMO_SEED) -> DemoCharacter:
-    """Build the demo character (deterministic for a given ``size`` and ``seed``)."""
+def generate(
+    size: int = 1024, seed: int = DEMO_SEED, mesh_resolution: tuple[int, int] = (96, 64)
+) -> DemoCharacter:
+    """Build the demo character (deterministic for a given ``size`` and ``seed``); the head mesh
+    has ``mesh_resolution`` = (longitudes, latitudes) segments."""
     rng = np.random.default_rng(seed)
     base = _base_height(size, rng)
     wrinkles = _wrinkle_heights(size, rng)
     masks = _masks(size)
     return DemoCharacter(
-        mesh=_head_mesh(),
+        mesh=_head_mesh(*mesh_resolution),
         base_height=base,
         wrinkle_heights=wrinkles,
         state_names=STATE_NAMES,
