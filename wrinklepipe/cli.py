@@ -9,10 +9,14 @@ name, so adding a command means adding a file. Exit codes: 0 success, 1 errors f
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import os
 import pkgutil
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 
 from wrinklepipe import __version__
 from wrinklepipe.errors import InputError
@@ -65,8 +69,42 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Interrupted(BaseException):
+    """A termination signal, raised in the main thread so every ``finally`` (locks, staging
+    folders) runs before the process ends."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+
+
+@contextlib.contextmanager
+def _signals_raise() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise :class:`Interrupted` for the duration (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise Interrupted(signum)
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+def _os_message(exc: OSError) -> str:
+    where = exc.filename or "output"
+    return f"{where}: {exc.strerror or exc}"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``wrinklepipe`` console script."""
+    """Entry point of the ``wrinklepipe`` console script.
+
+    Every failure ends in one message per problem and exit code 2, never a traceback; an
+    unexpected error is reported as an internal error (``WRINKLEPIPE_DEBUG=1`` re-raises it)."""
     from rich.markup import escape
 
     from wrinklepipe.console import err
@@ -76,12 +114,39 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "_run", None):
         parser.print_help(sys.stderr)
         return 2
+
+    def fail(message: str) -> int:
+        err.print(f"[bold red]error:[/] {escape(message)}", soft_wrap=True)
+        return 2
+
+    debug = bool(os.environ.get("WRINKLEPIPE_DEBUG"))
     try:
-        return int(args._run(args) or 0)
+        with _signals_raise():
+            return int(args._run(args) or 0)
     except InputError as exc:
         for problem in exc.problems:
-            err.print(f"[bold red]error:[/] {escape(str(problem))}", soft_wrap=True)
+            fail(str(problem))
         return 2
-    except KeyboardInterrupt:
-        err.print("interrupted")
-        return 2
+    except (KeyboardInterrupt, Interrupted) as exc:
+        name = str(exc) if isinstance(exc, Interrupted) else "SIGINT"
+        return fail(f"interrupted ({name}); outputs are complete or absent, never partial")
+    except OSError as exc:
+        if debug:
+            raise
+        return fail(_os_message(exc))
+    except MemoryError:
+        if debug:
+            raise
+        return fail("out of memory (try a smaller input, or --max-pixels / --size)")
+    except RecursionError:
+        if debug:
+            raise
+        return fail("an input is nested too deeply to read")
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: one message, no traceback
+        if debug:
+            raise
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        return fail(
+            f"internal error ({type(exc).__name__}: {msg}) in `wrinklepipe {args.command}`; "
+            "please report it with the input (WRINKLEPIPE_DEBUG=1 shows the traceback)"
+        )

@@ -7,7 +7,7 @@ import math
 
 from rich.table import Table
 
-from wrinklepipe.atomic import write_json
+from wrinklepipe.atomic import dumps_json, write_output
 from wrinklepipe.bench import load_all
 from wrinklepipe.console import emit_json, err, out
 from wrinklepipe.errors import input_error
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         results.append(registry[name][1](args.quick))
     payload = {"quick": bool(args.quick), "results": [r.to_json() for r in results]}
     if args.record:
-        write_json(args.record, payload)
+        write_output(args.record, dumps_json(payload).encode("utf-8"))
     failures = [f for r in results for f in r.failures()]
     if args.json:
         emit_json(payload)

@@ -113,7 +113,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.atomic import write_bytes, write_json
+    from wrinklepipe.atomic import output_files, write_bytes, write_json
     from wrinklepipe.console import emit_json, err, status
     from wrinklepipe.normals.job import EncodeOptions, encode_normals
 
@@ -133,12 +133,13 @@ def run(args: argparse.Namespace) -> int:
         max_mean_deg=args.max_mean,
     )
     inputs = [args.input] + ([args.base] if args.base else [])
-    with status(f"encoding {args.input}"):
-        res = encode_normals(args.input, args.output, opts, args.base)
-    res.report["output"] = {"path": str(Path(args.output)), "bytes": len(res.data)}
-    write_bytes(args.output, res.data, inputs=inputs)
-    if args.report:
-        write_json(args.report, res.report, inputs=inputs)
+    with output_files(args.output, args.report):  # a second run into the same files is refused
+        with status(f"encoding {args.input}"):
+            res = encode_normals(args.input, args.output, opts, args.base)
+        res.report["output"] = {"path": str(Path(args.output)), "bytes": len(res.data)}
+        write_bytes(args.output, res.data, inputs=inputs)
+        if args.report:
+            write_json(args.report, res.report, inputs=inputs)
     if args.json:
         emit_json(res.report)
     else:

@@ -46,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def write_per_vertex(path: Path, values: np.ndarray, meta: dict[str, Any], inputs: list) -> None:
     """Write a per-vertex array as .npy, .json or .txt/.csv atomically."""
-    from wrinklepipe.atomic import dumps_json, write_bytes
+    from wrinklepipe.atomic import dumps_json, write_output
     from wrinklepipe.errors import input_error
 
     suffix = path.suffix.lower()
@@ -64,7 +64,7 @@ def write_per_vertex(path: Path, values: np.ndarray, meta: dict[str, Any], input
         data = ("\n".join(lines.tolist()) + "\n").encode()
     else:
         raise input_error(path, "output must end in .npy, .json, .txt or .csv")
-    write_bytes(path, data, inputs=inputs)
+    write_output(path, data, inputs=inputs)
 
 
 def run(args: argparse.Namespace) -> int:

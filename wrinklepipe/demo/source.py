@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pygltflib
 
-from wrinklepipe.atomic import staged_folder, write_bytes
+from wrinklepipe.atomic import output_lock, staged_folder, write_bytes
 from wrinklepipe.demo.character import DEMO_VERSION, DemoCharacter, generate
 from wrinklepipe.io.images import write_image
 
@@ -178,6 +178,9 @@ def demo_source_dir(size: int = 1024) -> Path:
     manifest = target / "manifest.toml"
     if manifest.is_file():
         return manifest
-    with staged_folder(target, force=True) as tmp:
-        write_demo_source(tmp, size)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with output_lock(target, wait=True):  # parallel workers: one writes, the others wait
+        if not manifest.is_file():
+            with staged_folder(target, force=True) as tmp:
+                write_demo_source(tmp, size)
     return manifest

@@ -373,9 +373,9 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     text = issues_markdown()
     if args:
-        from wrinklepipe.atomic import write_bytes
+        from wrinklepipe.atomic import write_output
 
-        write_bytes(Path(args[0]), text.encode("utf-8"))
+        write_output(Path(args[0]), text.encode("utf-8"))
     else:
         sys.stdout.write(text)
     return 0

@@ -580,9 +580,9 @@ def _bundle_parts(inp: ValidationInput) -> tuple[dict[str, Any], dict[str, np.nd
 
 def write_bundle(inp: ValidationInput, path: str | Path) -> Path:
     """Write a (self-contained) bundle atomically."""
-    from wrinklepipe.atomic import write_bytes
+    from wrinklepipe.atomic import write_output
 
-    return write_bytes(path, bundle_bytes(inp))
+    return write_output(path, bundle_bytes(inp))
 
 
 def _read_zip(p: Path, depth: int = 0) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe import __version__
-from wrinklepipe.atomic import dumps_json, staged_folder, write_bytes
+from wrinklepipe.atomic import dumps_json, output_files, staged_folder, write_bytes
+from wrinklepipe.errors import input_error
 from wrinklepipe.validate.catalogue import RULES_BY_CODE
 from wrinklepipe.validate.run import Report
 
@@ -290,6 +291,37 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
     return "\n".join(p for p in parts if p)
 
 
+def _ours(folder: Path, html_path: Path) -> bool:
+    """A report's images folder is the tool's when the HTML report beside it is a validate-asset
+    page that references every file in it (nothing the user added, nothing foreign)."""
+    try:
+        text = html_path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return False
+    if "<title>validate-asset: " not in text:
+        return False
+    for p in folder.rglob("*"):
+        if p.is_symlink() or (p.is_file() and f"{folder.name}/{p.name}" not in text):
+            return False
+        if p.is_dir():
+            return False  # the tool writes no subfolders there
+    return True
+
+
+def _check_files_folder(folder: Path, html_path: Path) -> None:
+    """An existing images folder is replaced only when it is empty or provably the tool's
+    (:func:`_ours`); anything else is the user's and is never touched."""
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise input_error(folder, "is in the way of the HTML report's images; nothing was written")
+    if folder.is_dir() and any(folder.iterdir()) and not _ours(folder, html_path):
+        raise input_error(
+            folder,
+            f"exists and was not written by wrinklepipe for {html_path.name} (it holds files that "
+            "report does not show), so the HTML report's images cannot go there; nothing was "
+            "written. Choose another --html name or move that folder",
+        )
+
+
 def write_reports(
     report: Report,
     json_path: str | Path | None = None,
@@ -297,20 +329,28 @@ def write_reports(
     fail_on: str = "error",
     inputs: tuple[str | Path, ...] = (),
 ) -> list[Path]:
-    """Write report.json and/or report.html (+ ``<stem>_files/`` images) atomically."""
+    """Write report.json and/or report.html (+ ``<stem>_files/`` images) atomically, under the
+    outputs' locks; every check runs before anything is written."""
     written = []
-    if json_path is not None:
-        written.append(
-            write_bytes(json_path, dumps_json(report_json(report, fail_on)).encode(), inputs)
-        )
+    files_dir = None
     if html_path is not None:
         html_path = Path(html_path)
-        files_dir = f"{html_path.stem}_files"
-        images = html_images(report)
-        with staged_folder(html_path.parent / files_dir, force=True, inputs=inputs) as tmp:
-            for name, data in images.items():
-                (tmp / name).write_bytes(data)
-        written.append(
-            write_bytes(html_path, report_html(report, files_dir, fail_on).encode(), inputs)
-        )
+        files_dir = html_path.parent / f"{html_path.stem}_files"
+        _check_files_folder(files_dir, html_path)
+    with output_files(json_path, html_path):
+        if json_path is not None:
+            written.append(
+                write_bytes(json_path, dumps_json(report_json(report, fail_on)).encode(), inputs)
+            )
+        if html_path is not None and files_dir is not None:
+            images = html_images(report)
+            _check_files_folder(files_dir, html_path)
+            with staged_folder(files_dir, force=True, inputs=inputs) as tmp:
+                for name, data in images.items():
+                    (tmp / name).write_bytes(data)
+            written.append(
+                write_bytes(
+                    html_path, report_html(report, files_dir.name, fail_on).encode(), inputs
+                )
+            )
     return written

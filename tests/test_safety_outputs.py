@@ -1,0 +1,275 @@
+"""Issue 11, data loss: nothing of the user's is ever removed or replaced.
+
+Each test reproduces one numbered defect of the issue (it failed before the fix)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import wrinklepipe.console
+from wrinklepipe import atomic
+from wrinklepipe.cli import main
+from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.paths import ROOT
+
+
+@pytest.fixture(scope="module")
+def source(tmp_path_factory) -> Path:
+    return write_demo_source(tmp_path_factory.mktemp("src") / "demo", size=32)
+
+
+def _tree(folder: Path) -> dict[str, bytes]:
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+def _during_run(monkeypatch, action) -> None:
+    """Run ``action`` once, in the middle of the next command's work (its first status step)."""
+    real = wrinklepipe.console.status
+    done = []
+
+    def status(message: str):
+        if not done:
+            done.append(message)
+            action()
+        return real(message)
+
+    monkeypatch.setattr(wrinklepipe.console, "status", status)
+
+
+def _convert(source: Path, out: Path, *extra: str) -> int:
+    return main(["convert", str(source), "-o", str(out), "--no-validate", *extra])
+
+
+# 1 ----------------------------------------------------------------------------------------------
+
+
+def test_files_added_to_the_output_during_convert_are_kept(source, tmp_path, monkeypatch, capsys):
+    """Defect 1: the folder did not exist at the start; the user makes it and puts a file in it
+    while convert runs; the run must not replace it (rename onto a non-empty folder fails)."""
+    out = tmp_path / "userdir"
+
+    def user():
+        out.mkdir()
+        (out / "important.txt").write_text("precious")
+
+    _during_run(monkeypatch, user)
+    assert _convert(source, out) == 2
+    err = capsys.readouterr().err
+    assert "changed while this run was writing" in err and "important.txt" in err
+    assert _tree(out) == {"important.txt": b"precious"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["userdir"]  # no leftovers
+
+
+def test_force_replaces_only_the_folder_as_it_was_at_the_start(
+    source, tmp_path, monkeypatch, capsys
+):
+    """Defect 1 with --force: a file added during the run is not destroyed by the replacement."""
+    out = tmp_path / "prev"
+    assert _convert(source, out) == 0
+    before = _tree(out)
+    _during_run(monkeypatch, lambda: (out / "added.txt").write_text("mine"))
+    assert _convert(source, out, "--force") == 2
+    assert "added.txt" in capsys.readouterr().err
+    assert _tree(out) == {**before, "added.txt": b"mine"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["prev"]
+
+
+def test_force_replaces_an_unchanged_previous_output(source, tmp_path):
+    out = tmp_path / "prev"
+    assert _convert(source, out) == 0
+    (out / "stale.txt").write_text("from an earlier run")
+    assert _convert(source, out, "--force") == 0
+    assert not (out / "stale.txt").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["prev"]
+
+
+# 2 ----------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_sibling_named_like_the_old_backup_is_untouched(source, tmp_path, force):
+    """Defect 2: ``.OUT.old`` beside the output was deleted (it is not the tool's)."""
+    out = tmp_path / "proj2"
+    out.mkdir()
+    if force:
+        (out / "previous.txt").write_text("old output")
+    backup = tmp_path / ".proj2.old"
+    backup.mkdir()
+    (backup / "backup.txt").write_text("x")
+    partial = tmp_path / ".proj2.abc123.partial"  # a name the old code used for its own folders
+    partial.mkdir()
+    (partial / "mine.txt").write_text("y")
+    assert _convert(source, out, *(["--force"] if force else [])) == 0
+    assert _tree(backup) == {"backup.txt": b"x"}
+    assert _tree(partial) == {"mine.txt": b"y"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        ".proj2.abc123.partial",
+        ".proj2.old",
+        "proj2",
+    ]
+
+
+# 3 ----------------------------------------------------------------------------------------------
+
+_HOLD = """
+import sys
+from wrinklepipe.atomic import output_lock
+with output_lock(sys.argv[1]):
+    print("held", flush=True)
+    sys.stdin.read()
+"""
+
+
+@contextlib.contextmanager
+def _lock_held_elsewhere(target: Path):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _HOLD, str(target)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        assert proc.stdout.readline().strip() == "held"
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+
+
+def test_second_writer_gets_a_clear_error(source, tmp_path, capsys):
+    """Defect 3: two converts into one output both succeeded; the second must be refused."""
+    out = tmp_path / "out"
+    with _lock_held_elsewhere(out) as holder:
+        assert _convert(source, out) == 2
+        err = capsys.readouterr().err
+        assert f"pid {holder.pid}" in err and ".out.wrinklepipe-lock" in err
+        assert not out.exists()
+    assert _convert(source, out) == 0  # the holder is gone: its lock is stale
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_stale_lock_of_a_killed_run_is_taken_over_and_removed(source, tmp_path):
+    out = tmp_path / "out"
+    with _lock_held_elsewhere(out) as holder:
+        holder.send_signal(signal.SIGKILL)
+        holder.wait()
+        assert atomic.lock_path(out).exists()
+    assert _convert(source, out) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_two_real_converts_into_one_output(source, tmp_path):
+    """Two processes at once: exactly one writes, the other is refused by the lock (or, if it
+    starts after the first has finished, by the non-empty folder); neither overwrites."""
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "wrinklepipe", "convert", str(source), "-o", str(out)]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    procs = [
+        subprocess.Popen([*cmd, "--no-validate"], stderr=subprocess.PIPE, text=True, env=env)
+        for _ in range(2)
+    ]
+    results = [(p.wait(), p.stderr.read()) for p in procs]
+    codes = sorted(code for code, _ in results)
+    assert codes == [0, 2], results
+    loser = next(err for code, err in results if code == 2)
+    assert "wrinklepipe-lock" in loser or "not empty" in loser
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+# 4 ----------------------------------------------------------------------------------------------
+
+_FAKE_WP = """#!/usr/bin/env bash
+# records what the CI script asks for; writes the output folder like convert would
+if [ "$1" = convert ]; then
+  [ -e "$4" ] && [ "$5" != --force ] && exit 2
+  mkdir -p "$4" && echo "$2" > "$4/source.txt"
+fi
+exit 0
+"""
+
+
+def _git(repo: Path, *args: str) -> None:
+    subprocess.run(["git", "-C", str(repo), *args], check=True, capture_output=True)
+
+
+def test_ci_outputs_are_unique_by_construction(tmp_path):
+    """Defect 4: ``chars/good`` and ``props/good`` both went to ``$OUT/good``."""
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    _git(repo, "init", "-q", "-b", "main")
+    _git(
+        repo,
+        "-c",
+        "user.email=a@b",
+        "-c",
+        "user.name=a",
+        "commit",
+        "-q",
+        "--allow-empty",
+        "-m",
+        "0",
+    )
+    for rel in (
+        "chars/good/manifest.toml",
+        "props/good/manifest.toml",
+        "x.toml",
+        "x/manifest.toml",
+    ):
+        (repo / rel).parent.mkdir(parents=True, exist_ok=True)
+        (repo / rel).write_text('schema = "wrinklepipe/manifest@1"\n')
+    _git(repo, "add", ".")
+    _git(repo, "-c", "user.email=a@b", "-c", "user.name=a", "commit", "-q", "-m", "1")
+    fake = tmp_path / "wp"
+    fake.write_text(_FAKE_WP)
+    fake.chmod(0o755)
+    env = {**os.environ, "BASE": "HEAD~1", "OUT": str(tmp_path / "out"), "WRINKLEPIPE": str(fake)}
+    script = ROOT / "ci" / "asset_conversion.sh"
+    res = subprocess.run(["bash", str(script)], cwd=repo, env=env, capture_output=True, text=True)
+    out = tmp_path / "out"
+    assert (out / "chars/good/manifest/source.txt").read_text() == "chars/good/manifest.toml\n"
+    assert (out / "props/good/manifest/source.txt").read_text() == "props/good/manifest.toml\n"
+    # x.toml -> out/x and x/manifest.toml -> out/x/manifest would nest: an error, not an overwrite
+    assert res.returncode == 1
+    assert "output collision" in res.stdout and "x/manifest.toml" in res.stdout
+    assert not (out / "x/manifest").exists()
+
+
+# 5 ----------------------------------------------------------------------------------------------
+
+
+def test_html_report_never_deletes_a_files_folder_it_did_not_write(tmp_path, capsys):
+    """Defect 5: ``--html docs/summary.html`` deleted an existing ``docs/summary_files/``."""
+    docs = tmp_path / "docs"
+    (docs / "summary_files").mkdir(parents=True)
+    (docs / "summary_files" / "notes.txt").write_text("mine")
+    html = docs / "summary.html"
+    args = ["validate-asset", "demo:pd@32", "--no-render", "--html", str(html)]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "summary_files" in err and "not written by wrinklepipe" in err
+    assert _tree(docs) == {"summary_files/notes.txt": b"mine"}
+    # its own folder (every file shown by the report beside it) is replaced on a rerun
+    (docs / "summary_files" / "notes.txt").unlink()
+    assert main(args) == 0
+    first = _tree(docs)
+    assert main(args) == 0
+    assert _tree(docs) == first
+    assert sorted(p.name for p in docs.iterdir()) == ["summary.html", "summary_files"]
+    # a file the user adds to it makes it theirs again
+    (docs / "summary_files" / "mine.png").write_bytes(b"x")
+    assert main(args) == 2
+    assert _tree(docs) == {**first, "summary_files/mine.png": b"x"}
