@@ -46,11 +46,18 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "$want" > "$stamp"
 fi
 
-# 3. The Khronos glTF-Validator from npm, in a project-local folder.
-if [ ! -x tools/node/node_modules/.bin/gltf-validator ]; then
-  log "installing npm gltf-validator into tools/node"
+# 3. npm tools in a project-local folder: the Khronos glTF-Validator, glTF-Transform's CLI
+#    (an independent reader for `inspect`) and gltfpack (the real meshopt/quantization encoder
+#    the ingest tests use).
+NPM_PKGS="gltf-validator @gltf-transform/cli gltfpack"
+npm_missing=""
+for p in $NPM_PKGS; do
+  [ -f "tools/node/node_modules/$p/package.json" ] || npm_missing="$npm_missing $p"
+done
+if [ -n "$npm_missing" ]; then
+  log "installing npm packages into tools/node:$npm_missing"
   mkdir -p tools/node
-  npm install --silent --no-audit --no-fund --prefix tools/node gltf-validator >/dev/null
+  npm install --silent --no-audit --no-fund --prefix tools/node $npm_missing >/dev/null
 fi
 export PATH="$ROOT/.venv/bin:$ROOT/tools/node/node_modules/.bin:$PATH"
 
