@@ -12,8 +12,9 @@ shift || true
 
 log() { printf '\033[1m[wrinklepipe setup]\033[0m %s\n' "$*" >&2; }
 
-# 1. Debian packages for headless OpenGL (EGL + Mesa llvmpipe) and Node.js for gltf-validator.
-APT_PKGS="libegl1 libgl1 libgl1-mesa-dri"
+# 1. Debian packages for headless OpenGL (EGL + Mesa llvmpipe), the HLSL -> SPIR-V -> GLSL
+#    compilers the shader tests use (glslang-tools, spirv-cross) and Node.js for gltf-validator.
+APT_PKGS="libegl1 libgl1 libgl1-mesa-dri glslang-tools spirv-cross"
 command -v npm >/dev/null 2>&1 || APT_PKGS="$APT_PKGS nodejs npm"
 if ! command -v python3 >/dev/null 2>&1; then
   APT_PKGS="$APT_PKGS python3 python3-venv"

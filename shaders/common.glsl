@@ -1,15 +1,6 @@
-// Shared by wrinkle.frag and plain_normal.frag (inserted after the #version line).
-// Decoding of stored values exactly as wrinklepipe/validate/textures.py does it.
-
-// layout 0: xyz in rgb, normalize(2c - 1); 1: xy in rg (or ag, swizzled at the sampler), z rebuilt.
-vec3 decode_normal(vec4 c, int layout_) {
-    if (layout_ == 0) {
-        return normalize(c.rgb * 2.0 - 1.0);
-    }
-    vec2 xy = c.rg * 2.0 - 1.0;
-    float z = sqrt(max(1.0 - dot(xy, xy), 0.0));
-    return normalize(vec3(xy, z));
-}
+// Shared by wrinkle.frag and plain_normal.frag (inserted after the #version line), after the
+// codec's generated decode functions (wrinklepipe.codec.shaders.decode_source("glsl"): wp_normal,
+// wp_pd, wp_diff_rgb, ...), which decode stored values exactly as wrinklepipe.codec does.
 
 // Tangent space -> object space with the mesh's tangent frame (bitangent = cross(N, T) * w).
 vec3 to_object(vec3 n_ts, vec3 normal, vec4 tangent) {

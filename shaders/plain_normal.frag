@@ -19,11 +19,10 @@ layout(location = 1) out vec4 out_normal;
 layout(location = 2) out vec4 out_uv;
 
 void main() {
-    vec4 cb = textureLod(u_base, v_uv, 0.0);
+    vec3 N = wp_normal(textureLod(u_base, v_uv, 0.0), BASE_LAYOUT);
 #if BASE_FLIP_Y
-    cb.g = 1.0 - cb.g;
+    N.y = -N.y;  // declared DirectX (+Y down): read as +Y
 #endif
-    vec3 N = decode_normal(cb, BASE_LAYOUT);
     out_color = vec4(shade(to_object(N, v_normal, v_tangent)), 1.0);
     out_normal = vec4(N, 1.0);
     out_uv = vec4(v_uv, 0.0, 1.0);

@@ -5,8 +5,10 @@
 //   N   = combine(B, {W_k, a_k}, encoding)
 // Specialised at compile time (as engines do with material permutations): the renderer
 // prepends #defines for ENCODING, POLICY, NUM_STATES (1..8), NUM_LAYERS (1..16) and
-// BASE_LAYOUT / STATE_LAYOUT (0: xyz in rgb, 1: xy in rg with z rebuilt), BASE_FLIP_Y /
-// STATE_FLIP_Y (maps declared DirectX), LR_SPLIT / SPLIT_LAYER / SPLIT_CHANNEL (lr-split masks).
+// BASE_LAYOUT / STATE_LAYOUT (WP_LAYOUT_RGB, _RG, _AG of the codec), STATE_BITS (8, 16, 0 for
+// float) and MAPPING_VERSION (the asset's value mapping), BASE_FLIP_Y / STATE_FLIP_Y (maps
+// declared DirectX), LR_SPLIT / SPLIT_LAYER / SPLIT_CHANNEL (lr-split masks). Stored values are
+// decoded by the codec's generated functions (wrinklepipe.codec.shaders).
 // Outputs: 0 shaded colour, 1 tangent-space normal (w = 1 where covered), 2 UV (z = sum |a_k|).
 #define ENC_PD 0
 #define ENC_DIFF 1
@@ -34,6 +36,12 @@
 #endif
 #ifndef STATE_LAYOUT
 #define STATE_LAYOUT 1
+#endif
+#ifndef STATE_BITS
+#define STATE_BITS 8
+#endif
+#ifndef MAPPING_VERSION
+#define MAPPING_VERSION 1
 #endif
 #ifndef BASE_FLIP_Y
 #define BASE_FLIP_Y 0
@@ -128,11 +136,10 @@ void main() {
 #endif
 #endif
 
-    vec4 cb = textureLod(u_base, v_uv, 0.0);
+    vec3 B = wp_normal(textureLod(u_base, v_uv, 0.0), BASE_LAYOUT);
 #if BASE_FLIP_Y
-    cb.g = 1.0 - cb.g;  // declared DirectX (+Y down): read as +Y
+    B.y = -B.y;  // declared DirectX (+Y down): read as +Y
 #endif
-    vec3 B = decode_normal(cb, BASE_LAYOUT);
 #if ENCODING == ENC_PD
     vec2 d = B.xy / max(B.z, 1e-12);
 #elif ENCODING == ENC_COMPOSITE
@@ -146,16 +153,19 @@ void main() {
         if (ak == 0.0) continue;  // a GPU skips the fetch for a whole wave; exact (a = 0 adds 0)
         vec4 c = textureLod(u_states, vec3(v_uv, float(k)), 0.0);
 #if STATE_FLIP_Y
-        c.g = 1.0 - c.g;
+        const vec3 fy = vec3(1.0, -1.0, 1.0);  // declared DirectX: y flips after decoding
+#else
+        const vec3 fy = vec3(1.0);
 #endif
 #if ENCODING == ENC_PD
-        d += ak * (c.rg * 2.0 - 1.0) * u_pd_scale;
+        d += ak * fy.xy * wp_pd(c, STATE_LAYOUT, MAPPING_VERSION, STATE_BITS, u_pd_scale);
 #elif ENCODING == ENC_DIFF
-        acc += ak * (c.rgb * 2.0 - 1.0) / u_pd_scale;  // u_pd_scale is the diff gain
+        // u_pd_scale is the diff gain
+        acc += ak * fy * wp_diff_rgb(c, MAPPING_VERSION, STATE_BITS, u_pd_scale);
 #elif ENCODING == ENC_FULL
-        acc += ak * (decode_normal(c, STATE_LAYOUT) - B);
+        acc += ak * (fy * wp_normal(c, STATE_LAYOUT) - B);
 #else
-        vec3 W = decode_normal(c, STATE_LAYOUT);
+        vec3 W = fy * wp_normal(c, STATE_LAYOUT);
         xy += ak * W.xy;
         z *= 1.0 + ak * (W.z - 1.0);
 #endif

@@ -29,9 +29,7 @@ _PARAMS = {
     "wrap_t": 0x2803,
     "base_level": 0x813C,
     "max_level": 0x813D,
-    "swizzle_r": 0x8E42,
 }
-GL_ALPHA = 0x1906
 
 #: fmt -> (internal, sRGB internal or 0, format, type) for uncompressed textures
 _PLAIN = {
@@ -174,8 +172,6 @@ def upload(gl: RawGL, layers: list[Texture], array: bool) -> int:
         ("max_level", 0),
     ):
         gl.param(target, _PARAMS[key], val)
-    if t0.layout == "ag":
-        gl.param(target, _PARAMS["swizzle_r"], GL_ALPHA)
     err = gl.get_error()
     if err:
         raise GLUnavailable(f"GL error 0x{err:04X} uploading {t0.name!r} ({t0.fmt})")

@@ -50,6 +50,8 @@ class Texture:
     (base, ``full`` and ``composite`` states; two-channel formats rebuild z), ``0.5 + 0.5 d / s``
     for ``pd`` states (R = x, G = y), ``D`` for ``diff`` states and the mask value for masks.
     ``layout`` says where x and y live in a normal map: ``"rg"`` (default) or ``"ag"`` (DXT5nm).
+    ``mapping`` is the value-mapping version of ``pd`` / ``diff`` values
+    (:mod:`wrinklepipe.codec.mappings`; 1 for assets that do not record one).
     """
 
     name: str
@@ -64,10 +66,16 @@ class Texture:
     state: str = ""  # state name when role == "state"
     convention: str = "opengl"  # declared green convention of a normal map
     layout: str = "rg"
+    mapping: int = 1
 
     @property
     def channels(self) -> int:
         return FORMATS[self.fmt][0]
+
+    @property
+    def bits(self) -> int:
+        """Bits per stored channel as the codec counts them: 8 (8-bit and BCn), 16, 0 (float)."""
+        return {"unorm8": 8, "block": 8, "unorm16": 16, "float": 0}[FORMATS[self.fmt][2]]
 
     @property
     def is_block(self) -> bool:

@@ -19,6 +19,8 @@ from scipy import ndimage
 
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh
+from wrinklepipe.codec.layouts import LAYOUT_IDS
+from wrinklepipe.codec.shaders import decode_source
 from wrinklepipe.paths import SHADERS_DIR
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate import textures as tx
@@ -33,11 +35,12 @@ _POL = {"clamp01": 0, "signed": 1, "additive": 2, "renormalize": 3, "lerp": 4}
 
 
 def shader_source(name: str, defines: dict[str, int] | None = None) -> str:
-    """A shader from ``shaders/`` with ``//#include common.glsl`` expanded and ``defines``
-    inserted after the ``#version`` line."""
+    """A shader from ``shaders/`` with ``//#include common.glsl`` expanded (the codec's
+    generated GLSL decode functions, then ``common.glsl``) and ``defines`` inserted after the
+    ``#version`` line."""
     text = (SHADERS_DIR / name).read_text(encoding="utf-8")
     common = (SHADERS_DIR / "common.glsl").read_text(encoding="utf-8")
-    text = text.replace("//#include common.glsl", common)
+    text = text.replace("//#include common.glsl", decode_source("glsl") + common)
     if defines:
         head, rest = text.split("\n", 1)
         block = "".join(f"#define {k} {v}\n" for k, v in sorted(defines.items()))
@@ -60,8 +63,10 @@ def shader_defines(inp: ValidationInput, n_layers: int) -> dict[str, int]:
         "POLICY": _POL[a.policy],
         "NUM_STATES": len(a.state_names),
         "NUM_LAYERS": n_layers,
-        "BASE_LAYOUT": 0 if tx.xy_layout(base) == "rgb" else 1,
-        "STATE_LAYOUT": 0 if tx.xy_layout(states[0]) == "rgb" else 1,
+        "BASE_LAYOUT": LAYOUT_IDS[tx.xy_layout(base)],
+        "STATE_LAYOUT": LAYOUT_IDS[tx.xy_layout(states[0])],
+        "STATE_BITS": states[0].bits,
+        "MAPPING_VERSION": states[0].mapping,
         "BASE_FLIP_Y": int(base.convention == "directx"),
         "STATE_FLIP_Y": int(states[0].convention == "directx"),
         **split,
