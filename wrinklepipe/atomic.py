@@ -29,6 +29,7 @@ import errno
 import fcntl
 import json
 import os
+import secrets
 import shutil
 import socket
 import sys
@@ -140,10 +141,14 @@ def _read_owner(fd: int) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
-def _write_owner(fd: int) -> None:
-    os.ftruncate(fd, 0)
-    os.lseek(fd, 0, os.SEEK_SET)
-    os.write(fd, (json.dumps(_owner(), sort_keys=True) + "\n").encode("utf-8"))
+def _write_owner(fd: int, record: dict[str, Any] | None = None) -> None:
+    data = (json.dumps(record or _owner(), sort_keys=True) + "\n").encode("utf-8")
+    os.pwrite(fd, data, 0)  # records only grow: a kill mid-update never loses what was there
+    os.ftruncate(fd, len(data))
+
+
+def _same_process(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    return all(a.get(k) == b.get(k) for k in ("tool", "pid", "host", "start"))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -156,7 +161,22 @@ def lock_path(target: str | Path) -> Path:
     return target.parent / f".{target.name}{LOCK_SUFFIX}"
 
 
-_HELD: dict[Path, int] = {}  # lock files this process holds -> nesting depth
+@dataclass
+class _Held:
+    """A lock this process holds: its fd, nesting depth and the record written into it (the
+    owner and every staging folder created for the output, so that the next holder can remove
+    what this run left if it dies, even a folder whose marker was not yet written)."""
+
+    fd: int
+    depth: int
+    record: dict[str, Any]
+
+    def register(self, staging_name: str) -> None:
+        self.record.setdefault("staging", []).append(staging_name)
+        _write_owner(self.fd, self.record)
+
+
+_HELD: dict[Path, _Held] = {}  # lock files this process holds
 
 
 def _describe(owner: dict[str, Any]) -> str:
@@ -210,20 +230,24 @@ def output_lock(target: str | Path, wait: bool = False) -> Iterator[Path]:
     target = Path(os.path.abspath(target))
     lock = lock_path(target)
     if lock in _HELD:
-        _HELD[lock] += 1
+        _HELD[lock].depth += 1
         try:
             yield lock
         finally:
-            _HELD[lock] -= 1
+            _HELD[lock].depth -= 1
         return
     fd = _acquire(lock, target, wait)
-    _HELD[lock] = 1
     try:
-        _write_owner(fd)
+        previous = _read_owner(fd)
+        held = _HELD[lock] = _Held(fd, 1, _owner())
+        _write_owner(fd, held.record)
+        if previous and _process_gone(previous):
+            for name in previous.get("staging", []):
+                _remove_recorded(target.parent, name, previous)
         remove_dead_leftovers(target.parent)
         yield lock
     finally:
-        del _HELD[lock]
+        _HELD.pop(lock, None)
         with contextlib.suppress(OSError):
             os.unlink(lock)  # unlink while still holding: a waiter retries on the new file
         os.close(fd)
@@ -237,7 +261,19 @@ class _Staging:
     """``.NAME.<random>.wrinklepipe-partial/`` with our marker (flock held while we live)."""
 
     def __init__(self, parent: Path, name: str) -> None:
-        self.dir = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=STAGING_SUFFIX, dir=parent))
+        held = _HELD.get(parent / f".{name}{LOCK_SUFFIX}")
+        for _ in range(100):
+            folder = parent / f".{name}.{secrets.token_hex(6)}{STAGING_SUFFIX}"
+            if held is not None:
+                held.register(folder.name)  # before it exists: no moment unaccounted for
+            try:
+                folder.mkdir(mode=0o700)
+                break
+            except FileExistsError:
+                continue
+        else:
+            raise FileExistsError(errno.EEXIST, "no free staging folder name", str(parent))
+        self.dir = folder
         try:
             marker = self.dir / STAGING_MARKER
             self.fd = os.open(marker, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
@@ -245,7 +281,7 @@ class _Staging:
             os.rmdir(self.dir)
             raise
         fcntl.flock(self.fd, fcntl.LOCK_EX)
-        _write_owner(self.fd)
+        _write_owner(self.fd, held.record if held is not None else None)
 
     def remove(self) -> None:
         _remove_staging(self.dir, self.fd)
@@ -271,9 +307,36 @@ def _remove_staging(folder: Path, fd: int) -> None:
         os.rmdir(folder)
 
 
+def _staging_name(name: str) -> bool:
+    return name.startswith(".") and name.endswith(STAGING_SUFFIX) and "/" not in name
+
+
+def _remove_recorded(parent: Path, name: str, holder: dict[str, Any]) -> None:
+    """Remove a staging folder that the lock of a dead run lists: when its marker names that run,
+    or when it holds nothing but an empty marker or nothing at all (killed while creating it)."""
+    folder = parent / str(name)
+    if not _staging_name(str(name)) or folder.is_symlink() or not folder.is_dir():
+        return
+    try:
+        fd = os.open(folder / STAGING_MARKER, os.O_RDWR | os.O_CLOEXEC | os.O_NOFOLLOW)
+    except FileNotFoundError:
+        with contextlib.suppress(OSError):
+            os.rmdir(folder)  # only if empty
+        return
+    except OSError:
+        return
+    if _try_flock(fd):
+        owner = _read_owner(fd)
+        only_marker = [p.name for p in folder.iterdir()] == [STAGING_MARKER]
+        if _same_process(owner, holder) or (not owner and only_marker):
+            _remove_staging(folder, fd)
+            return
+    os.close(fd)
+
+
 def _dead_staging_fd(entry: Path) -> int | None:
     """An flock'd fd on the marker of a staging folder that a dead run left, else None."""
-    if not entry.name.startswith(".") or not entry.name.endswith(STAGING_SUFFIX):
+    if not _staging_name(entry.name) or entry.is_symlink():
         return None
     try:
         fd = os.open(entry / STAGING_MARKER, os.O_RDWR | os.O_CLOEXEC | os.O_NOFOLLOW)

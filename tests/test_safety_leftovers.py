@@ -1,0 +1,142 @@
+"""Issue 11, leftovers (defects 6 and 7): a later run removes what a dead run left, and only
+that; a failure at the final rename leaves nothing behind and says so truthfully."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from wrinklepipe import atomic
+from wrinklepipe.cli import main
+from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.paths import ROOT
+
+
+@pytest.fixture(scope="module")
+def source(tmp_path_factory) -> Path:
+    return write_demo_source(tmp_path_factory.mktemp("src") / "demo", size=32)
+
+
+def _convert(source: Path, out: Path, *extra: str) -> int:
+    return main(["convert", str(source), "-o", str(out), "--no-validate", *extra])
+
+
+def _staging(folder: Path) -> list[Path]:
+    return sorted(folder.glob(f".*{atomic.STAGING_SUFFIX}"))
+
+
+def _kill_once_staging_appears(cmd: list[str], folder: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while not _staging(folder) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.005)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+
+
+def test_later_run_removes_what_a_killed_run_left(source, tmp_path):
+    """Defect 6: kill -9 left ``.OUT.<random>.partial`` folders that no later run removed."""
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "wrinklepipe", "convert", str(source), "-o", str(out)]
+    _kill_once_staging_appears([*cmd, "--no-validate"], tmp_path)
+    left = _staging(tmp_path)
+    assert left and not out.exists()  # the kill left its staging folder, never a partial output
+    marker = json.loads((left[0] / atomic.STAGING_MARKER).read_text())
+    assert marker["tool"] == "wrinklepipe" and marker["host"] == socket.gethostname()
+    assert _convert(source, out) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def _fake_staging(folder: Path, name: str, owner: dict | None) -> Path:
+    d = folder / f".{name}.x{atomic.STAGING_SUFFIX}"
+    d.mkdir()
+    (d / "data.bin").write_bytes(b"keep")
+    if owner is not None:
+        (d / atomic.STAGING_MARKER).write_text(json.dumps(owner))
+    return d
+
+
+def test_only_provably_dead_runs_leftovers_are_removed(source, tmp_path):
+    """A folder with the staging suffix is removed only when its marker names a process on this
+    host that is gone; no marker, a live process or another host: left alone."""
+    host = socket.gethostname()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    live = os.getppid()
+    base = {"tool": "wrinklepipe", "start": ""}
+    d_dead = _fake_staging(tmp_path, "a", {**base, "pid": dead.pid, "host": host})
+    keep = [
+        _fake_staging(tmp_path, "b", None),
+        _fake_staging(tmp_path, "c", {**base, "pid": live, "host": host}),
+        _fake_staging(tmp_path, "d", {**base, "pid": dead.pid, "host": host + "-elsewhere"}),
+        _fake_staging(tmp_path, "e", {"tool": "other", "pid": dead.pid, "host": host}),
+    ]
+    (tmp_path / "f.wrinklepipe-partial").mkdir()  # no leading dot: not even a candidate
+    assert _convert(source, tmp_path / "out") == 0
+    assert not d_dead.exists()
+    for d in keep:
+        assert (d / "data.bin").read_bytes() == b"keep"
+    assert (tmp_path / "f.wrinklepipe-partial").is_dir()
+
+
+def test_failure_at_the_final_rename_leaves_nothing(source, tmp_path, monkeypatch, capsys):
+    """Defect 7: the final rename failing (a busy mount point) left the complete staging folder
+    behind while the message said nothing was changed."""
+    out = tmp_path / "out"
+    real = os.replace
+
+    def busy(src, dst, *a, **k):
+        if Path(dst) == out:
+            raise OSError(errno.EBUSY, "Device or resource busy", str(dst))
+        return real(src, dst, *a, **k)
+
+    monkeypatch.setattr(os, "rename", busy)
+    monkeypatch.setattr(os, "replace", busy)
+    assert _convert(source, out) == 2
+    err = capsys.readouterr().err
+    assert "busy" in err and "nothing was changed" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_failure_at_the_final_rename_with_force_keeps_the_old_output(
+    source, tmp_path, monkeypatch, capsys
+):
+    out = tmp_path / "out"
+    assert _convert(source, out) == 0
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    real = os.replace
+    calls = []
+
+    def busy_second(src, dst, *a, **k):
+        if Path(dst) == out:
+            calls.append(src)
+            if len(calls) == 2:  # the first (onto the non-empty folder) fails as it should
+                raise OSError(errno.EBUSY, "Device or resource busy", str(dst))
+        return real(src, dst, *a, **k)
+
+    monkeypatch.setattr(os, "rename", busy_second)
+    monkeypatch.setattr(os, "replace", busy_second)
+    assert _convert(source, out, "--force") == 2
+    assert "nothing was changed" in capsys.readouterr().err
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_mount_point_output_is_refused_before_any_work(source, tmp_path, monkeypatch, capsys):
+    out = tmp_path / "mnt"
+    out.mkdir()
+    real = os.path.ismount
+    monkeypatch.setattr(os.path, "ismount", lambda p: Path(p) == out or real(p))
+    assert _convert(source, out) == 2
+    assert "mount point" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mnt"]
