@@ -1,0 +1,76 @@
+"""Weighted statistics: exact weighted quantiles against a brute-force sort."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wrinklepipe.fidelity import Budget, Stats, weighted_quantile, weighted_stats
+
+
+def brute_quantile(v, w, q):
+    """Smallest x with W(v <= x) >= q W, by sorting everything."""
+    v, w = np.asarray(v, float), np.asarray(w, float)
+    keep = w > 0
+    v, w = v[keep], w[keep]
+    order = np.argsort(v, kind="stable")
+    c = np.cumsum(w[order])
+    return float(v[order][np.searchsorted(c, q * c[-1] * (1 - 1e-12))])
+
+
+def test_unit_weights_are_the_nearest_rank_percentile():
+    rng = np.random.default_rng(1)
+    v = rng.exponential(1.0, 10_001)
+    for q in (0.5, 0.9, 0.99):
+        want = np.percentile(v, 100 * q, method="inverted_cdf")
+        assert weighted_quantile(v, np.ones_like(v), q) == want
+
+
+def test_a_hand_computed_weighted_quantile():
+    # weights 1, 1, 8 on 1, 2, 3: 99 % of the weight is only reached at 3, 10 % already at 1
+    assert weighted_quantile([3.0, 1.0, 2.0], [8.0, 1.0, 1.0], 0.99) == 3.0
+    assert weighted_quantile([3.0, 1.0, 2.0], [8.0, 1.0, 1.0], 0.1) == 1.0
+    assert weighted_quantile([3.0, 1.0, 2.0], [8.0, 1.0, 1.0], 0.15) == 2.0
+    # zero weights never count, whatever their value
+    assert weighted_quantile([100.0, 1.0], [0.0, 1.0], 0.99) == 1.0
+    assert weighted_quantile([], [], 0.5) == 0.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.floats(0, 90, allow_nan=False),
+            st.floats(0, 4, allow_nan=False, allow_subnormal=False),
+        ),
+        min_size=1,
+        max_size=400,
+    ),
+    st.sampled_from([0.01, 0.5, 0.9, 0.99, 1.0]),
+)
+def test_weighted_quantile_matches_a_full_sort(pairs, q):
+    v = np.array([p[0] for p in pairs])
+    w = np.array([p[1] for p in pairs])
+    if not (w > 0).any():
+        assert weighted_quantile(v, w, q) == 0.0
+        return
+    assert weighted_quantile(v, w, q) == brute_quantile(v, w, q)
+
+
+def test_many_ties_and_a_large_array():
+    rng = np.random.default_rng(2)
+    v = np.round(rng.normal(2.0, 1.0, 300_000), 1)  # heavy ties
+    w = rng.uniform(0.0, 1.0, v.size)
+    for q in (0.5, 0.99):
+        assert weighted_quantile(v, w, q) == brute_quantile(v, w, q)
+
+
+def test_weighted_stats_and_budget():
+    s = weighted_stats(np.array([1.0, 3.0, 50.0]), np.array([1.0, 3.0, 0.0]))
+    assert s.mean == pytest.approx((1 * 1 + 3 * 3) / 4)
+    assert s.max == 3.0 and s.texels == 2 and s.weight == 4.0 and s.p99 == 3.0
+    assert Budget(mean=3.0, p99=3.0).ok(s) and not Budget(p99=2.9).ok(s)
+    assert Budget.from_dict({"max_mean_deg": 0.5, "max_p99_deg": 1.0}) == Budget(0.5, 1.0)
+    assert weighted_stats(np.array([]), np.array([])) == Stats(0.0, 0.0, 0.0, 0, 0.0)
