@@ -13,8 +13,11 @@ shift || true
 log() { printf '\033[1m[wrinklepipe setup]\033[0m %s\n' "$*" >&2; }
 
 # 1. Debian packages for headless OpenGL (EGL + Mesa llvmpipe), the HLSL -> SPIR-V -> GLSL
-#    compilers the shader tests use (glslang-tools, spirv-cross) and Node.js for gltf-validator.
-APT_PKGS="libegl1 libgl1 libgl1-mesa-dri glslang-tools spirv-cross"
+#    compilers the shader tests use (glslang-tools, spirv-cross), chromium (the browser the
+#    three.js viewer's tests drive, headless) and Node.js for the npm tools.
+#    WRINKLEPIPE_BLENDER=1 also installs Debian's blender (the Blender export script's test).
+APT_PKGS="libegl1 libgl1 libgl1-mesa-dri glslang-tools spirv-cross chromium"
+if [ "${WRINKLEPIPE_BLENDER:-0}" = 1 ]; then APT_PKGS="$APT_PKGS blender"; fi
 command -v npm >/dev/null 2>&1 || APT_PKGS="$APT_PKGS nodejs npm"
 if ! command -v python3 >/dev/null 2>&1; then
   APT_PKGS="$APT_PKGS python3 python3-venv"
@@ -49,8 +52,9 @@ fi
 
 # 3. npm tools in a project-local folder: the Khronos glTF-Validator, glTF-Transform's CLI
 #    (an independent reader for `inspect`) and gltfpack (the real meshopt/quantization encoder
-#    the ingest tests use).
-NPM_PKGS="gltf-validator @gltf-transform/cli gltfpack"
+#    the ingest tests use), three.js (served by `wrinklepipe view`, no CDN) and playwright-core
+#    (drives Debian's chromium in the viewer's tests; it never downloads a browser).
+NPM_PKGS="gltf-validator @gltf-transform/cli gltfpack three playwright-core"
 npm_missing=""
 for p in $NPM_PKGS; do
   [ -f "tools/node/node_modules/$p/package.json" ] || npm_missing="$npm_missing $p"
@@ -58,7 +62,8 @@ done
 if [ -n "$npm_missing" ]; then
   log "installing npm packages into tools/node:$npm_missing"
   mkdir -p tools/node
-  npm install --silent --no-audit --no-fund --prefix tools/node $npm_missing >/dev/null
+  PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 \
+    npm install --silent --no-audit --no-fund --prefix tools/node $npm_missing >/dev/null
 fi
 export PATH="$ROOT/.venv/bin:$ROOT/tools/node/node_modules/.bin:$PATH"
 

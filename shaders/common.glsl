@@ -1,6 +1,5 @@
-// Shared by wrinkle.frag and plain_normal.frag (inserted after the #version line), after the
-// codec's generated decode functions (wrinklepipe.codec.shaders.decode_source("glsl"): wp_normal,
-// wp_pd, wp_diff_rgb, ...), which decode stored values exactly as wrinklepipe.codec does.
+// Shared by the validator's fragment shaders (wrinklepipe.shading.glsl), inserted after the
+// codec's generated decode functions (wrinklepipe.codec.shaders.decode_source("glsl")).
 
 // Tangent space -> object space with the mesh's tangent frame (bitangent = cross(N, T) * w).
 vec3 to_object(vec3 n_ts, vec3 normal, vec4 tangent) {

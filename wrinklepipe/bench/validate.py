@@ -5,12 +5,13 @@ ships them) and run every rule plus the render pass (neutral and the 6 expressio
 Table 1.1 at 512x512); limit 20 s (folded into a ratio to the baseline).
 
 Shader cost, measured interleaved in the same run on the same mesh, target and textures: the
-plain normal-map shader (``shaders/plain_normal.frag``, the baseline) against the wrinkle shader
-drawing the 6 expressions. Two wrinkle rows: the validator's split draw (the wrinkle shader on
-the triangles a weighted mask reaches, the plain shader elsewhere: the same image) with the
-1.5x limit, and the wrinkle shader on every triangle (reported, no limit). A CPU rasteriser
-(llvmpipe) runs both sides of a branch for a whole SIMD group, so on it every texture fetch of
-the wrinkle shader is paid on every fragment; a GPU skips them per wave.
+plain normal-map shader (``wrinklepipe.shading.glsl.validator_fragment(setup, plain=True)``, the
+baseline) against the wrinkle shader drawing the 6 expressions. Two wrinkle rows: the
+validator's split draw (the wrinkle shader on the triangles a weighted mask reaches, the plain
+shader elsewhere: the same image) with the 1.5x limit, and the wrinkle shader on every triangle
+(reported, no limit). A CPU rasteriser (llvmpipe) runs both sides of a branch for a whole SIMD
+group, so on it every texture fetch of the wrinkle shader is paid on every fragment; a GPU skips
+them per wave.
 """
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
 """The render pass: draw the mesh with the GLSL wrinkle model, compare with the numpy model.
 
-For neutral and every expression the shaders in ``shaders/`` render, in one draw, a shaded
-image, the tangent-space normal buffer (float32) and the UV buffer. The numpy reference
-(:func:`wrinklepipe.model.blend`) is evaluated at the rasterised UVs on the same shipped texels
-(bilinear, clamp to edge, no mipmaps, like the GPU), so the two must agree to within the GPU's
-filtering precision; a wrong colour-space tag or an unsupported format shows as a disagreement.
-Wrinkles must change the render only where the source masks x weights are non-zero.
+For neutral and every expression the generated shaders (:mod:`wrinklepipe.shading`) render, in
+one draw, a shaded image, the tangent-space normal buffer (float32) and the UV buffer. The numpy
+reference (:func:`wrinklepipe.model.blend`) is evaluated at the rasterised UVs on the same
+shipped texels (bilinear, clamp to edge, no mipmaps, like the GPU), so the two must agree to
+within the GPU's filtering precision; a wrong colour-space tag or an unsupported format shows as
+a disagreement. Wrinkles must change the render only where the source masks x weights are non-zero.
 """
 
 from __future__ import annotations
@@ -19,58 +19,50 @@ from scipy import ndimage
 
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh
-from wrinklepipe.codec.layouts import LAYOUT_IDS
-from wrinklepipe.codec.shaders import decode_source
-from wrinklepipe.paths import SHADERS_DIR
+from wrinklepipe.shading import glsl
+from wrinklepipe.shading.setup import MaskEntry, ShaderSetup
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context
 from wrinklepipe.validate.inputs import Texture, ValidationInput
 
-MAX_STATES = 8
-MAX_LAYERS = 16
-_ENC = {"pd": 0, "diff": 1, "full": 2, "composite": 3}
-_POL = {"clamp01": 0, "signed": 1, "additive": 2, "renormalize": 3, "lerp": 4}
 
-
-def shader_source(name: str, defines: dict[str, int] | None = None) -> str:
-    """A shader from ``shaders/`` with ``//#include common.glsl`` expanded (the codec's
-    generated GLSL decode functions, then ``common.glsl``) and ``defines`` inserted after the
-    ``#version`` line."""
-    text = (SHADERS_DIR / name).read_text(encoding="utf-8")
-    common = (SHADERS_DIR / "common.glsl").read_text(encoding="utf-8")
-    text = text.replace("//#include common.glsl", decode_source("glsl") + common)
-    if defines:
-        head, rest = text.split("\n", 1)
-        block = "".join(f"#define {k} {v}\n" for k, v in sorted(defines.items()))
-        text = head + "\n" + block + rest
-    return text
-
-
-def shader_defines(inp: ValidationInput, n_layers: int) -> dict[str, int]:
-    """The compile-time specialisation of ``wrinkle.frag`` for one asset."""
+def shader_setup(inp: ValidationInput) -> ShaderSetup:
+    """The asset as the wrinkle shader sees it (:mod:`wrinklepipe.shading.setup`)."""
     a = inp.asset
-    split: dict[str, int] = {}
-    sp = next((e.split for e in inp.channel_table if e.split is not None), None)
-    if sp is not None:
-        names = [t.name for t in _mask_layers(inp)]
-        split = {"LR_SPLIT": 1, "SPLIT_LAYER": names.index(sp[0]), "SPLIT_CHANNEL": int(sp[1])}
+    layers = _mask_layers(inp)
+    index = {t.name: i for i, t in enumerate(layers)}
+    by_region = {e.region: e for e in inp.channel_table}
+    entries = []
+    split = None
+    for r in a.region_names:
+        e = by_region[r]
+        entries.append(MaskEntry(index[e.texture], int(e.channel), _split_part(e)))
+        if e.split is not None:
+            split = (index[e.split[0]], int(e.split[1]))
     base = inp.by_role("base")[0]
     states = inp.state_textures()
-    return {
-        "ENCODING": _ENC[a.encoding],
-        "POLICY": _POL[a.policy],
-        "NUM_STATES": len(a.state_names),
-        "NUM_LAYERS": n_layers,
-        "BASE_LAYOUT": LAYOUT_IDS[tx.xy_layout(base)],
-        "STATE_LAYOUT": LAYOUT_IDS[tx.xy_layout(states[0])],
-        "STATE_BITS": states[0].bits,
-        "MAPPING_VERSION": states[0].mapping,
-        "BASE_FLIP_Y": int(base.convention == "directx"),
-        "STATE_FLIP_Y": int(states[0].convention == "directx"),
-        **split,
-    }
+
+    return ShaderSetup(
+        encoding=a.encoding,
+        policy=a.policy,
+        scale=float(a.pd_scale),
+        state_names=tuple(a.state_names),
+        region_names=tuple(a.region_names),
+        region_states=tuple(tuple(int(v) for v in row) for row in a.region_state_matrix()),
+        entries=tuple(entries),
+        layer_names=tuple(t.name for t in layers),
+        layer_channels=tuple(t.channels for t in layers),
+        split=split,
+        base_layout=tx.xy_layout(base),
+        state_layout=tx.xy_layout(states[0]),
+        state_bits=states[0].bits,
+        mapping=states[0].mapping,
+        base_convention=base.convention,
+        state_convention=states[0].convention,
+        output="opengl",
+    )
 
 
 def ortho_front(positions: np.ndarray, aspect: float = 1.0, margin: float = 1.05) -> np.ndarray:
@@ -135,18 +127,14 @@ class Renderer:
             "gl_version": ctx.version_code,
             "size": self.size,
         }
-        vs = shader_source("wrinkle.vert")
+        vs = glsl.vertex_shader()
         self.mask_layers = _mask_layers(inp)
-        self.defines = shader_defines(inp, len(self.mask_layers))
+        self.setup = shader_setup(inp)
         self.prog = ctx.program(
-            vertex_shader=vs, fragment_shader=shader_source("wrinkle.frag", self.defines)
+            vertex_shader=vs, fragment_shader=glsl.validator_fragment(self.setup)
         )
         self.plain = ctx.program(
-            vertex_shader=vs,
-            fragment_shader=shader_source(
-                "plain_normal.frag",
-                {k: self.defines[k] for k in ("BASE_LAYOUT", "BASE_FLIP_Y")},
-            ),
+            vertex_shader=vs, fragment_shader=glsl.validator_fragment(self.setup, plain=True)
         )
         mesh: Mesh = a.mesh
         normals = mesh.normals
@@ -205,15 +193,8 @@ class Renderer:
         self._set(p, "u_states", 1)
         self._set(p, "u_masks", 2)
         self._set(p, "u_pd_scale", float(a.pd_scale))
-        used = np.zeros((3, MAX_LAYERS, 4), np.float32)
-        for e in inp.channel_table:
-            used[_split_part(e), self._layer_index(e.texture), e.channel] = 1.0
-        for i, suffix in enumerate(("", "_l", "_r")):
-            self._set(p, f"u_used{suffix}", used[i].tobytes())
+        self._set(p, "u_used", self.setup.used_vectors().tobytes())
         self.touch = triangle_layer_touch(self.mask_layers, mesh)  # [T, L] bool
-
-    def _layer_index(self, texture: str) -> int:
-        return [t.name for t in self.mask_layers].index(texture)
 
     @staticmethod
     def _set(prog: Any, name: str, value: Any) -> None:
@@ -236,35 +217,11 @@ class Renderer:
             self.ctx = None
 
     # ------------------------------------------------------------------ drawing
-    def layer_weights(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``[R, K]`` region weights -> per-layer ``mat4`` uniforms for states 0..3 and 4..7
-        (column c holds the weights of mask channel c) and per-layer on/off flags.
-
-        Arrays are ``[3, MAX_LAYERS, 4, 4]``: unsplit regions, then the left and right regions
-        of the lr-split layout.
-        """
-        a = self.inp.asset
-        w = np.asarray(weights, np.float32)
-        if w.ndim == 1:
-            w = w[:, None]
-        out = np.zeros((3, MAX_LAYERS, 4, MAX_STATES), np.float32)  # [part, layer, ch, state]
-        names = a.region_names
-        for e in self.inp.channel_table:
-            part = _split_part(e)
-            out[part, self._layer_index(e.texture), e.channel, : w.shape[1]] = w[
-                names.index(e.region)
-            ]
-        lo = np.ascontiguousarray(out[..., :4])
-        hi = np.ascontiguousarray(out[..., 4:])
-        on = (np.abs(out).max(axis=(0, 2, 3)) > 0).astype(np.int32)
-        return lo, hi, on
-
     def active_triangles(self, weights: np.ndarray | None) -> np.ndarray:
         """Triangles whose UV footprint touches a non-zero texel of a layer with a weight."""
         if weights is None:
             return np.zeros(len(self.indices), bool)
-        _, _, on = self.layer_weights(weights)
-        on = on[: self.touch.shape[1]].astype(bool)
+        on = self.setup.groups_with_weight(weights)[: self.touch.shape[1]]
         return self.touch[:, on].any(axis=1)
 
     def draw(
@@ -294,10 +251,7 @@ class Renderer:
         if plain:
             self.vao_plain.render(moderngl.TRIANGLES)
         else:
-            lo, hi, on = self.layer_weights(weights)
-            for i, suffix in enumerate(("", "_l", "_r")):
-                self._set(self.prog, f"u_wlo{suffix}", lo[i].tobytes())
-                self._set(self.prog, f"u_whi{suffix}", hi[i].tobytes())
+            self._set(self.prog, "u_w", self.setup.weight_vectors(weights).tobytes())
             if not split:
                 self.vao.render(moderngl.TRIANGLES)
             else:
@@ -451,7 +405,7 @@ def can_render(ctx: Context) -> str:
         return "no mesh with UVs"
     if not a.regions or not a.state_names:
         return "no regions or no states"
-    if a.encoding not in _ENC or a.policy not in _POL:
+    if a.encoding not in model.ENCODINGS or a.policy not in model.POLICIES:
         return "unknown encoding or policy"
     if a.policy == "signed" and len(a.state_names) != 2:
         return "policy 'signed' needs two states"
@@ -462,18 +416,17 @@ def can_render(ctx: Context) -> str:
         return "a state texture is missing or undecodable"
     if len({(t.fmt, t.width, t.height, t.convention) for t in sts}) > 1:
         return "state textures differ in size, format or declared convention"
-    if len(sts) > MAX_STATES:
-        return f"more than {MAX_STATES} states"
     if ctx.shipped_masks is None:
         return "the channel table or mask textures are unusable"
     splits = {e.split for e in inp.channel_table if e.split is not None}
     if len(splits) > 1:
         return "more than one split channel (lr-split layout)"
     layers = _mask_layers(inp)
-    if len(layers) > MAX_LAYERS:
-        return f"more than {MAX_LAYERS} mask textures"
     if len({(t.fmt, t.width, t.height) for t in layers}) > 1:
         return "mask textures differ in size or format"
+    problems = shader_setup(inp).problems()
+    if problems:
+        return "; ".join(problems)
     for t in [ctx.base_tex, *sts, *layers]:
         if t.is_block and (t.width % 4 or t.height % 4):
             return f"{t.name!r} is block-compressed with a size that is not a multiple of 4"
