@@ -26,6 +26,7 @@ COMMAND_ORDER = (
     "demo",
     "convert",
     "validate-asset",
+    "inspect",
     "encode-normals",
     "pack-masks",
     "vertex-ids",

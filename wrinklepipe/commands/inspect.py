@@ -1,0 +1,123 @@
+"""``wrinklepipe inspect``: what a glTF holds (like ``gltf-transform inspect``), or what differs."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from rich.table import Table
+
+from wrinklepipe.console import emit_json, out
+
+NAME = "inspect"
+HELP = "list a glTF's scenes, meshes, materials, textures, skins, animations; or diff two"
+DESCRIPTION = """\
+Read a .gltf/.glb whole (meshopt and Draco geometry decoded) and list its scenes, nodes,
+meshes (primitives, vertices, morph targets, attributes with component types), materials
+(texture slots, alpha mode, extensions), textures (size, format, bytes), skins (joints,
+hierarchy depth), animations (channels, duration, keyframes) and extensions.
+
+With --diff A B, list what differs between two files, one line each: '-' only in A,
+'+' only in B, '~' changed. Exit 0 when they hold the same, 1 when something differs.
+
+examples:
+  wrinklepipe inspect RobotExpressive.glb
+  wrinklepipe inspect build/robot/robot.glb --json
+  wrinklepipe inspect --diff RobotExpressive.glb build/robot/robot.glb
+"""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("files", metavar="FILE", nargs="+", help=".gltf or .glb (two with --diff)")
+    p.add_argument("--diff", action="store_true", help="list what differs between FILE A and B")
+    p.add_argument("--json", action="store_true", help="print JSON on stdout")
+
+
+def _table(title: str, rows: list[dict[str, Any]], columns: list[str]) -> Table:
+    t = Table(title=title, title_justify="left", show_lines=False)
+    for c in ["#", *columns]:
+        t.add_column(c)
+    for i, r in enumerate(rows):
+        t.add_row(str(i), *(_cell(r.get(c)) for c in columns))
+    return t
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, dict):
+        return ", ".join(f"{k}:{x}" for k, x in v.items())
+    if isinstance(v, list):
+        return ", ".join(str(x) for x in v)
+    return str(v)
+
+
+def print_summary(s: dict[str, Any]) -> None:
+    """The summary as rich tables on stdout."""
+    out.print(f"[bold]{s['file']}[/bold]  generator {s['generator']!r}")
+    out.print(f"extensionsUsed: {', '.join(s['extensionsUsed']) or 'none'}")
+    out.print(f"extensionsRequired: {', '.join(s['extensionsRequired']) or 'none'}")
+    if s["decoded"]:
+        out.print(f"decoded on read: {', '.join(s['decoded'])}")
+    out.print(f"{s['nodes']} nodes, {s['cameras']} cameras, {s['vertices']} vertices")
+    out.print(_table("SCENES", s["scenes"], ["name", "roots"]))
+    rows = []
+    for m in s["meshes"]:
+        for j, p in enumerate(m["primitives"]):
+            rows.append(
+                {
+                    "mesh": m["name"] if j == 0 else "",
+                    "prim": j,
+                    "material": p["material"],
+                    "mode": p["mode"],
+                    "vertices": p["vertices"],
+                    "indices": p["indices"],
+                    "attributes": p["attributes"],
+                    "morphs": len(m["morphs"]) if j == 0 else "",
+                }
+            )
+    cols = ["mesh", "prim", "material", "mode", "vertices", "indices", "attributes", "morphs"]
+    out.print(_table("MESHES", rows, cols))
+    out.print(
+        _table(
+            "MATERIALS",
+            s["materials"],
+            ["name", "instances", "textures", "alphaMode", "doubleSided", "extensions"],
+        )
+    )
+    out.print(_table("TEXTURES", s["textures"], ["name", "format", "size", "bytes", "image"]))
+    out.print(_table("SKINS", s["skins"], ["name", "joints", "depth", "skeleton"]))
+    out.print(
+        _table(
+            "ANIMATIONS",
+            s["animations"],
+            ["name", "channels", "samplers", "duration", "keyframes", "paths"],
+        )
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from wrinklepipe.document import read_document
+    from wrinklepipe.document.inspect import diff, summary
+    from wrinklepipe.errors import input_error
+
+    if args.diff and len(args.files) != 2:
+        raise input_error("<arguments>", f"--diff needs two files, got {len(args.files)}")
+    if not args.diff and len(args.files) != 1:
+        raise input_error("<arguments>", "give one file (or two with --diff)")
+    summaries = [summary(read_document(f)) for f in args.files]
+    if not args.diff:
+        if args.json:
+            emit_json(summaries[0])
+        else:
+            print_summary(summaries[0])
+        return 0
+    lines = diff(summaries[0], summaries[1])
+    if args.json:
+        emit_json({"a": args.files[0], "b": args.files[1], "differences": lines})
+    else:
+        for line in lines:
+            out.print(line, markup=False, highlight=False)
+        if not lines:
+            out.print("no differences")
+    return 1 if lines else 0
