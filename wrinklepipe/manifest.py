@@ -9,7 +9,6 @@ the file and the key, as one :class:`wrinklepipe.errors.InputError`.
 from __future__ import annotations
 
 import json
-import tomllib
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -18,6 +17,7 @@ from typing import Any
 import jsonschema
 
 from wrinklepipe.errors import InputError, ProblemList
+from wrinklepipe.io.json_safe import loads_toml
 from wrinklepipe.model import POLICY_WEIGHT_RANGE
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.presets import jimenez
@@ -128,12 +128,17 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
     problems = ProblemList()
     if not path.exists():
         raise InputError(file=path, problems="manifest not found")
+    if path.is_dir():
+        inside = path / "manifest.toml"
+        hint = f" (did you mean {inside}?)" if inside.is_file() else ""
+        raise InputError(file=path, problems=f"is a folder, expected the manifest file{hint}")
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise InputError(file=path, problems="manifest is not UTF-8 text") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(file=path, problems=f"invalid TOML: {exc}") from None
+    except OSError as exc:
+        raise InputError(file=path, problems=f"cannot read: {exc.strerror or exc}") from None
+    data = loads_toml(text, path)
 
     _schema_problems(data, file, problems)
     problems.raise_if_any()  # the semantic checks below rely on well-typed data
@@ -228,6 +233,9 @@ def _file_problems(m: Manifest, file: str, problems: ProblemList) -> None:
     from wrinklepipe.io.images import read_header
 
     def exists(p: Path, key: str) -> bool:
+        if p.is_dir():
+            problems.add(file, f"is a folder, expected a file: {p}", key)
+            return False
         if not p.is_file():
             problems.add(file, f"file not found: {p}", key)
             return False

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,6 +25,7 @@ import numpy as np
 
 from wrinklepipe.capture.warp import is_collinear
 from wrinklepipe.errors import InputError, Problem, input_error
+from wrinklepipe.io.json_safe import loads_json
 
 MIN_LANDMARKS = 3
 
@@ -141,10 +141,7 @@ def read_landmarks(path: str | Path) -> Landmarks:
     except (OSError, UnicodeDecodeError) as exc:
         raise input_error(file, f"cannot read landmark file: {exc}") from None
     if file.suffix.lower() == ".json" or text.lstrip().startswith(("[", "{")):
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise input_error(file, f"invalid JSON at line {exc.lineno}: {exc.msg}") from None
+        data = loads_json(text, file, "landmark JSON")
         return _from_json(data, file)
     return _from_csv(text, file)
 

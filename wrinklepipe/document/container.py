@@ -9,7 +9,6 @@ is an :class:`~wrinklepipe.errors.InputError` naming the file and the JSON point
 from __future__ import annotations
 
 import base64
-import json
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import Any
 
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.io.gltf_read import GltfReadOptions, safe_uri_path
+from wrinklepipe.io.json_safe import loads_json
 
 GLB_MAGIC = 0x46546C67
 JSON_CHUNK = 0x4E4F534A
@@ -136,10 +136,7 @@ def open_container(path: str | Path, options: GltfReadOptions | None = None) -> 
         text, glb_bin = split_glb(data, file)
     else:
         text = data
-    try:
-        gltf = json.loads(text.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise input_error(file, f"not valid glTF JSON: {exc}") from None
+    gltf = loads_json(text, file, "glTF JSON")
     if not isinstance(gltf, dict) or not isinstance(gltf.get("asset"), dict):
         raise input_error(file, "not a glTF document (no asset object)", "/asset")
     if str(gltf["asset"].get("version")) != "2.0":

@@ -38,13 +38,13 @@ sampled per glTF 2.0; the rest pose is the neutral one unless ``poses`` names on
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from wrinklepipe.drivers.base import DriverContext, DriverResult, register, resolve, spec_problem
+from wrinklepipe.io.json_safe import loads_json
 
 
 def theta(x: np.ndarray | float) -> np.ndarray:
@@ -162,9 +162,12 @@ def bones_driver(
     elif "file" in spec:
         path = resolve(ctx, str(spec["file"]))
         try:
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
+            data = path.read_bytes()
+        except OSError as exc:
             raise spec_problem(ctx, f"cannot read bones file {path}: {exc}", "file") from None
+        doc = loads_json(data, path, "bones JSON")
+        if not isinstance(doc, dict):
+            raise spec_problem(ctx, f"bones file {path} must hold a JSON object", "file")
     anim = doc.get("bones")
     if not isinstance(anim, dict) or not anim:
         raise spec_problem(ctx, "bones driver needs an animation: file with 'bones'", "file")

@@ -23,7 +23,6 @@ glTF: every animation channel whose path is ``weights`` gives one curve per morp
 from __future__ import annotations
 
 import csv
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ from wrinklepipe.drivers.base import (
     spec_problem,
 )
 from wrinklepipe.errors import InputError, Problem, input_error
+from wrinklepipe.io.json_safe import loads_json
 
 INTERPOLATIONS = ("linear", "cubic", "step")
 
@@ -115,9 +115,10 @@ def read_curves_json(path: str | Path) -> tuple[Keys, str | None]:
     """JSON ``{"keys": {...}, "interpolation": ...}`` or ``{name: [[t, v], ...]}``."""
     path = Path(path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise input_error(path, f"cannot read JSON: {exc}") from None
+        data = path.read_bytes()
+    except OSError as exc:
+        raise input_error(path, f"cannot read JSON: {exc.strerror or exc}") from None
+    doc = loads_json(data, path)
     if not isinstance(doc, dict):
         raise input_error(path, "expected a JSON object")
     keys = doc.get("keys", doc)

@@ -10,7 +10,6 @@ from the PNG header and capped before any pixel is decoded. Every problem is an
 from __future__ import annotations
 
 import base64
-import json
 import struct
 import urllib.parse
 from dataclasses import dataclass
@@ -21,6 +20,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import (
     EXTENSION,
     PackedTexture,
@@ -110,10 +110,7 @@ class _Reader:
             self.glb_bin = bins[0] if bins else None
         else:
             text = data
-        try:
-            doc = json.loads(text.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise self.err(f"not valid glTF JSON: {exc}") from None
+        doc = loads_json(text, self.file, "glTF JSON")
         if not isinstance(doc, dict) or str(doc.get("asset", {}).get("version")) != "2.0":
             raise self.err("not a glTF 2.0 document (asset.version must be '2.0')", "/asset")
         return doc

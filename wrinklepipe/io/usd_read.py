@@ -8,7 +8,6 @@ relative and stay inside the layer's folder or package.
 
 from __future__ import annotations
 
-import json
 import struct
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -18,6 +17,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import (
     PackedTexture,
     WeightCurves,
@@ -269,12 +269,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         e: {rn: float(w) for rn, w in sorted(zip(region_names, row))}
         for e, row in sorted(zip(expr_names, ew))
     }
-    try:
-        drivers = json.loads(str(api("drivers")))
-    except json.JSONDecodeError as exc:
-        raise input_error(
-            file, f"wrinkle:drivers is not JSON: {exc}", str(mat_prim.GetPath())
-        ) from None
+    drivers = loads_json(str(api("drivers")), file, "wrinkle:drivers JSON", str(mat_prim.GetPath()))
     weights_attr = mat_prim.GetAttribute("wrinkle:weights")
     default = weights_attr.Get(Usd.TimeCode.Default())
     meta: dict[str, Any] = {

@@ -16,6 +16,7 @@ import numpy as np
 from wrinklepipe.atomic import write_json
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.io.images import read_image, write_image
+from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.masks.layouts import LAYOUTS, PackedMasks, check_table
 
 CHANNELS_FILE = "channels.json"
@@ -108,17 +109,14 @@ def _read_one(folder: Path, doc: dict[str, Any], where: str) -> PackedMasks:
 
 def read_packed(folder: str | Path) -> PackedMasks:
     """Read ``channels.json`` and its textures from ``folder`` (or a path to the JSON itself)."""
-    import json
-
     path = Path(folder)
     if path.is_dir():
         path = path / CHANNELS_FILE
     if not path.exists():
         raise input_error(path, "file not found")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise input_error(path, f"not valid JSON: {exc}") from None
+    if path.is_dir():
+        raise input_error(path, "is a folder, expected the channel table (channels.json)")
+    doc = loads_json(path.read_bytes(), path, "channel table JSON")
     if not isinstance(doc, dict):
         raise input_error(path, "expected a JSON object")
     packed = _read_one(path.parent, doc, str(path))

@@ -15,13 +15,12 @@ The Khronos glTF-Validator's JSON keys are accepted too: ``ignoredIssues`` and
 from __future__ import annotations
 
 import dataclasses
-import json
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from wrinklepipe.errors import InputError, Problem
+from wrinklepipe.io.json_safe import loads_json, loads_toml
 from wrinklepipe.validate.catalogue import RULES_BY_CODE, SEVERITIES, Issue
 from wrinklepipe.validate.context import ValidateOptions
 
@@ -100,11 +99,11 @@ def load_config(path: str | Path) -> Config:
     if not p.is_file():
         raise InputError([Problem(str(p), "config file not found")])
     text = p.read_bytes()
-    try:
-        if p.suffix.lower() == ".json":
-            data = json.loads(text.decode("utf-8"))
-        else:
-            data = tomllib.loads(text.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise InputError([Problem(str(p), f"cannot parse config: {exc}")]) from None
+    if p.suffix.lower() == ".json":
+        data = loads_json(text, p, "config JSON")
+    else:
+        try:
+            data = loads_toml(text.decode("utf-8"), p, "config TOML")
+        except UnicodeDecodeError:
+            raise InputError([Problem(str(p), "config is not UTF-8 text")]) from None
     return parse_config(data, str(p))

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import io
 import json
-import struct
 import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -28,7 +27,9 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
+from wrinklepipe.document.container import split_glb
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.validate.inputs import CHANNELS, FORMATS, ChannelEntry, Texture, ValidationInput
 
 EXTENSION = "WRINKLEPIPE_wrinkle_maps"
@@ -124,26 +125,10 @@ def _gltf_json(path: Path, max_bytes: int) -> dict[str, Any]:
         raise input_error(path, f"file is {size} bytes, over the cap of {max_bytes}")
     raw = path.read_bytes()
     if raw[:4] == b"glTF":
-        if len(raw) < 20:
-            raise input_error(path, "truncated GLB header")
-        _, version, length = struct.unpack_from("<4sII", raw, 0)
-        if version != 2:
-            raise input_error(path, f"GLB version {version}, expected 2")
-        clen, ctype = struct.unpack_from("<II", raw, 12)
-        if ctype != 0x4E4F534A or 20 + clen > len(raw):
-            raise input_error(path, "GLB's first chunk is not a complete JSON chunk")
-        raw = raw[20 : 20 + clen]
+        raw, _ = split_glb(raw, str(path))  # the one GLB container parser
     elif path.suffix.lower() == ".glb":
         raise input_error(path, "not a GLB file (bad magic)")
-    try:
-        text = raw.decode("utf-8-sig")
-        doc = json.loads(text)
-    except UnicodeDecodeError:
-        raise input_error(path, "not UTF-8 text, so not glTF JSON") from None
-    except json.JSONDecodeError as exc:
-        raise input_error(
-            path, f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
-        ) from None
+    doc = loads_json(raw, path, "glTF JSON")
     if not isinstance(doc, dict):
         raise input_error(path, "glTF JSON must be an object")
     return doc
@@ -588,7 +573,7 @@ def write_bundle(inp: ValidationInput, path: str | Path) -> Path:
 def _read_zip(p: Path, depth: int = 0) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     try:
         with zipfile.ZipFile(p) as z:
-            meta = json.loads(z.read("meta.json").decode("utf-8"))
+            meta = loads_json(z.read("meta.json"), p, "bundle meta.json")
             arrays = {
                 n[:-4]: np.lib.format.read_array(io.BytesIO(z.read(n)), allow_pickle=False)
                 for n in z.namelist()
