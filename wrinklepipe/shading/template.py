@@ -71,13 +71,12 @@ DECODE_HOOKS = """\
 #define WP_DECODE_STATE_NORMAL(t) (wp_normal(t, WP_STATE_LAYOUT) * WP_FLIP_S)
 #endif
 #ifndef WP_DECODE_PD
-#define WP_DECODE_PD(t) \\
-    (wp_pd(t, WP_STATE_LAYOUT, WP_MAPPING, WP_STATE_BITS, WP_SCALE) * WP_FLIP_S.xy)
+#define WP_DECODE_PD(t) (wp_pd(t, WP_STATE_LAYOUT, WP_MAPPING, WP_STATE_BITS, WP_SCALE) * WP_FLIP_S.xy)
 #endif
 #ifndef WP_DECODE_DIFF
 #define WP_DECODE_DIFF(t) (wp_diff_rgb(t, WP_MAPPING, WP_STATE_BITS, WP_SCALE) * WP_FLIP_S)
 #endif
-"""
+"""  # noqa: E501
 
 CORE = """\
 // wrinklepipe core: s_k = sum_r M_r w_rk; a_k = policy(s_k); N = combine(B, {W_k, a_k}).
