@@ -20,6 +20,7 @@ from collections.abc import Iterator, Sequence
 
 from wrinklepipe import __version__
 from wrinklepipe.errors import InputError
+from wrinklepipe.io.confine import allowed_roots
 
 #: Order in which subcommands are listed in ``--help``.
 COMMAND_ORDER = (
@@ -66,6 +67,14 @@ def build_parser() -> argparse.ArgumentParser:
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
         mod.add_arguments(p)
+        p.add_argument(
+            "--allow-root",
+            action="append",
+            default=[],
+            metavar="DIR",
+            help="also read files under DIR when an input names them (repeatable; by default "
+            "only files inside the folder of the file that names them are read)",
+        )
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -122,7 +131,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     debug = bool(os.environ.get("WRINKLEPIPE_DEBUG"))
     try:
-        with _signals_raise():
+        with _signals_raise(), allowed_roots(args.allow_root):
             return int(args._run(args) or 0)
     except InputError as exc:
         for problem in exc.problems:

@@ -8,6 +8,7 @@ the file and the key, as one :class:`wrinklepipe.errors.InputError`.
 
 from __future__ import annotations
 
+import difflib
 import json
 from dataclasses import dataclass, field
 from functools import cache
@@ -17,6 +18,7 @@ from typing import Any
 import jsonschema
 
 from wrinklepipe.errors import InputError, ProblemList
+from wrinklepipe.io.confine import confine
 from wrinklepipe.io.json_safe import loads_toml
 from wrinklepipe.model import POLICY_WEIGHT_RANGE
 from wrinklepipe.paths import SCHEMAS_DIR
@@ -97,28 +99,126 @@ def _key(path: Any) -> str:
     return out
 
 
-def _schema_problems(data: dict[str, Any], file: str, problems: ProblemList) -> None:
+# ------------------------------------------------------------------------------------------------
+# schema errors in words: what is allowed, never the schema itself
+
+_PATTERNS = {
+    "^[A-Za-z0-9_]+$": "letters, digits and '_'",
+    "^[A-Za-z0-9_][A-Za-z0-9_.-]{0,99}$": (
+        "letters, digits, '_', '.' and '-' (a safe file stem: not starting with '.' or '-', "
+        "at most 100 characters)"
+    ),
+}
+_TYPES = {
+    "string": "a string",
+    "number": "a number",
+    "integer": "an integer",
+    "boolean": "true or false",
+    "array": "an array",
+    "object": "a table",
+}
+
+
+def _type_of(value: Any) -> str:
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, dict):
+        return "a table"
+    return type(value).__name__
+
+
+def _bounds(schema: dict[str, Any]) -> str:
+    parts = []
+    if "exclusiveMinimum" in schema:
+        parts.append(f"> {schema['exclusiveMinimum']}")
+    if "minimum" in schema:
+        parts.append(f">= {schema['minimum']}")
+    if "exclusiveMaximum" in schema:
+        parts.append(f"< {schema['exclusiveMaximum']}")
+    if "maximum" in schema:
+        parts.append(f"<= {schema['maximum']}")
+    return " and ".join(parts)
+
+
+def allowed(schema: dict[str, Any]) -> str:
+    """What a (sub)schema accepts, in words: "one of 'a', 'b'", "a number > 0 and <= 64"."""
+    if "const" in schema:
+        return repr(schema["const"])
+    if "enum" in schema:
+        return "one of " + ", ".join(repr(v) for v in schema["enum"])
+    if "oneOf" in schema or "anyOf" in schema:
+        return " or ".join(allowed(s) for s in schema.get("oneOf", schema.get("anyOf", [])))
+    t = schema.get("type")
+    words = _TYPES.get(t, "a value") if isinstance(t, str) else "a value"
+    if t in ("number", "integer") and _bounds(schema):
+        words += " " + _bounds(schema)
+    if t == "string" and "pattern" in schema:
+        words += " of " + _PATTERNS.get(schema["pattern"], f"the form {schema['pattern']}")
+    if t == "array" and isinstance(schema.get("items"), dict):
+        words = f"an array of {_plural(allowed(schema['items']))}"
+    return words
+
+
+def _plural(words: str) -> str:
+    for a in ("an ", "a "):
+        if words.startswith(a):
+            head, _, rest = words[len(a) :].partition(" ")
+            return f"{head}s" + (f" {rest}" if rest else "")
+    return words
+
+
+def _schema_message(error: Any) -> str:
+    """One schema error as "what is wrong; what is allowed"."""
+    v, inst, sch = error.validator, error.instance, error.schema
+    if v in ("enum", "const", "oneOf", "anyOf", "type", "pattern"):
+        return f"{inst!r} is not allowed; expected {allowed(sch)}"
+    if v in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+        return f"{inst!r} is out of range; expected {allowed(sch)}"
+    if v == "minItems":
+        return f"needs at least {sch['minItems']} entries, has {len(inst)}"
+    if v == "maxItems":
+        return f"allows at most {sch['maxItems']} entries, has {len(inst)}"
+    if v == "uniqueItems":
+        return "entries must be unique"
+    return error.message
+
+
+def _schema_problems(data: dict[str, Any], file: str, problems: ProblemList) -> bool:
+    """Every schema error, each saying what is allowed (never quoting the schema). True when
+    the only errors are unknown keys (the data is still well typed for the semantic checks)."""
+    typed = True
     validator = jsonschema.Draft202012Validator(manifest_schema())
     for error in sorted(
         validator.iter_errors(data), key=lambda e: (list(map(str, e.path)), e.message)
     ):
         key = _key(error.absolute_path)
         if error.validator == "additionalProperties":
-            allowed = set(error.schema.get("properties", {}))
-            unknown = sorted(set(error.instance) - allowed)
-            for name in unknown:
-                problems.add(file, "unknown key", f"{key}.{name}" if key else name)
+            allowed_keys = sorted(error.schema.get("properties", {}))
+            for name in sorted(set(error.instance) - set(allowed_keys)):
+                close = difflib.get_close_matches(name, allowed_keys, n=1)
+                hint = f"did you mean {close[0]!r}? " if close else ""
+                problems.add(
+                    file,
+                    f"unknown key ({hint}allowed: {', '.join(allowed_keys)})",
+                    f"{key}.{name}" if key else name,
+                )
             continue
         if error.validator == "required":
             missing = error.message.split("'")[1] if "'" in error.message else error.message
             problems.add(file, "missing required key", f"{key}.{missing}" if key else missing)
+            typed = False
             continue
-        if error.validator in ("oneOf", "enum", "const") and error.schema.get("description"):
-            problems.add(
-                file, f"invalid value {error.instance!r}: {error.schema['description']}", key
-            )
-            continue
-        problems.add(file, error.message, key)
+        problems.add(file, _schema_message(error), key)
+        typed = False
+    return typed
 
 
 def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
@@ -140,10 +240,12 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
         raise InputError(file=path, problems=f"cannot read: {exc.strerror or exc}") from None
     data = loads_toml(text, path)
 
-    _schema_problems(data, file, problems)
-    problems.raise_if_any()  # the semantic checks below rely on well-typed data
-
     root = path.resolve().parent
+    typed = _schema_problems(data, file, problems)
+    _path_problems(data, root, file, problems, check_files)  # reported with schema errors
+    if not typed:
+        problems.raise_if_any()  # the semantic checks below rely on well-typed data
+
     expressions = data.get("expressions", {})
     if expressions == "jimenez":
         expressions = jimenez.expression_table()
@@ -178,6 +280,39 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
     _semantic_problems(m, file, problems, check_files)
     problems.raise_if_any()
     return m
+
+
+def _path_fields(data: dict[str, Any]) -> list[tuple[str, str]]:
+    """(key, path) of every file the manifest names, wherever the value is a string (so this
+    works on a manifest that also has schema errors)."""
+    out = [(k, data[k]) for k in ("mesh", "base") if isinstance(data.get(k), str)]
+    for table, field_name in (("states", "map"), ("regions", "mask"), ("drivers", "file")):
+        rows = data.get(table)
+        for i, row in enumerate(rows if isinstance(rows, list) else []):
+            if isinstance(row, dict) and isinstance(row.get(field_name), str):
+                out.append((f"{table}[{i}].{field_name}", row[field_name]))
+    return out
+
+
+def _path_problems(
+    data: dict[str, Any], root: Path, file: str, problems: ProblemList, check_files: bool
+) -> None:
+    """Each named file lies inside the manifest's folder (or an ``--allow-root``) and exists."""
+    for key, ref in _path_fields(data):
+        if not ref.strip():
+            problems.add(file, "empty path", key)
+            continue
+        try:
+            p = confine(root, ref, file, key)
+        except InputError as exc:
+            problems.problems.extend(exc.problems)
+            continue
+        if not check_files:
+            continue
+        if p.is_dir():
+            problems.add(file, f"is a folder, expected a file: {p}", key)
+        elif not p.is_file():
+            problems.add(file, f"file not found: {p}", key)
 
 
 def _duplicates(names: list[str]) -> list[str]:
@@ -224,41 +359,64 @@ def _semantic_problems(m: Manifest, file: str, problems: ProblemList, check_file
         problems.add(
             file, f"unsupported mesh format {m.mesh.suffix!r} ({', '.join(MESH_SUFFIXES)})", "mesh"
         )
+    _driver_problems(m, file, problems)
     if check_files:
         _file_problems(m, file, problems)
+
+
+def _driver_problems(m: Manifest, file: str, problems: ProblemList) -> None:
+    """What a driver names that the manifest must define, checked at load (not after the
+    expensive stages): expressions of an ``expressions`` driver, its preset."""
+    for i, d in enumerate(m.drivers):
+        if d.get("kind") != "expressions":
+            continue
+        preset = d.get("preset")
+        if preset is not None and preset != "jimenez":
+            problems.add(
+                file,
+                f"unknown expression preset {preset!r}; expected 'jimenez'",
+                f"drivers[{i}].preset",
+            )
+            continue
+        table = jimenez.expression_table() if preset == "jimenez" else m.expressions
+        if not table:
+            problems.add(
+                file,
+                "expressions driver without an expression table: add [expressions] or "
+                "preset = 'jimenez'",
+                f"drivers[{i}]",
+            )
+            continue
+        for field_name in ("keys", "morphs"):
+            names = d.get(field_name, {})
+            for name in sorted(set(names) - set(table)) if isinstance(names, dict) else ():
+                close = difflib.get_close_matches(name, list(table), n=1)
+                hint = f"did you mean {close[0]!r}? " if close else ""
+                problems.add(
+                    file,
+                    f"unknown expression {name!r} ({hint}expressions: {', '.join(sorted(table))})",
+                    f"drivers[{i}].{field_name}.{name}",
+                )
+
+
+def _rel(p: Path, root: Path) -> str:
+    return p.relative_to(root).as_posix() if root in p.parents else str(p)
 
 
 def _file_problems(m: Manifest, file: str, problems: ProblemList) -> None:
     from wrinklepipe.errors import InputError as _IE
     from wrinklepipe.io.images import read_header
 
-    def exists(p: Path, key: str) -> bool:
-        if p.is_dir():
-            problems.add(file, f"is a folder, expected a file: {p}", key)
-            return False
-        if not p.is_file():
-            problems.add(file, f"file not found: {p}", key)
-            return False
-        return True
-
-    if m.mesh is not None:
-        exists(m.mesh, "mesh")
-    exists(m.base, "base")
-    for i, s in enumerate(m.states):
-        exists(s.map, f"states[{i}].map")
-    for i, d in enumerate(m.drivers):
-        if "file" in d:
-            exists(m.root / d["file"], f"drivers[{i}].file")
-    sizes: dict[tuple[int, int], str] = {}
+    sizes: dict[tuple[int, int], str] = {}  # existence and confinement: _path_problems
     for i, r in enumerate(m.regions):
         key = f"regions[{i}].mask"
-        if not exists(r.mask, key):
+        if not r.mask.is_file():
             continue
         try:
             info = read_header(r.mask)
         except _IE as exc:
             for p in exc.problems:
-                problems.add(file, p.message, key)
+                problems.add(file, f"{_rel(r.mask, m.root)}: {p.message}", key)
             continue
         if r.channel is not None and _CHANNELS.index(r.channel) >= info.channels:
             problems.add(

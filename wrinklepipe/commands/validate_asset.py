@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from wrinklepipe.errors import input_error
+from wrinklepipe.errors import InputError, input_error
 
 NAME = "validate-asset"
 HELP = "check a converted folder, glTF/GLB/USD or manifest: rules, GPU render pass, reports"
@@ -76,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
     with status("validating"):
         try:
             report = validate(inp, options, config)
-        except (MemoryError, KeyboardInterrupt):
-            raise
+        except (MemoryError, KeyboardInterrupt, InputError):
+            raise  # an InputError is the input's fault, reported as itself (not a bug report)
         except Exception as exc:  # noqa: BLE001 - a rule tripping on an odd asset: no traceback
             msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
             raise input_error(

@@ -20,6 +20,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.confine import confine
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import (
     EXTENSION,
@@ -64,10 +65,9 @@ def safe_uri_path(folder: Path, uri: str, file: str, key: str) -> Path:
     parts = PurePosixPath(raw.replace("\\", "/")).parts
     if ".." in parts:
         raise input_error(file, f"URI {uri!r} leaves the asset folder ('..' not allowed)", key)
-    path = (folder / Path(*parts)).resolve() if parts else folder
-    if folder.resolve() not in path.parents:
-        raise input_error(file, f"URI {uri!r} resolves outside the asset folder", key)
-    return path
+    if not parts:
+        raise input_error(file, f"URI {uri!r} names no file", key)
+    return confine(folder, Path(*parts), file, key, "URI")  # the one confinement check
 
 
 class _Reader:
@@ -258,6 +258,12 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
         if need not in attrs:
             raise r.err(f"primitive has no {need} attribute", "/meshes/0/primitives/0/attributes")
     positions = r.accessor(attrs["POSITION"]).astype(np.float32)
+    bad = np.flatnonzero(~np.isfinite(positions).all(axis=-1))
+    if bad.size:
+        raise r.err(
+            f"{bad.size} position(s) are NaN or infinite (first: vertex {int(bad[0])})",
+            f"/accessors/{attrs['POSITION']}",
+        )
     nv = positions.shape[0]
     ids_f = r.accessor(attrs[ext.get("vertexIdAttribute", "_WRINKLE_VERTEX_ID")]).astype(np.float64)
     if np.any(ids_f != np.rint(ids_f)) or np.any(ids_f < 0):

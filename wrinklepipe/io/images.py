@@ -7,6 +7,11 @@ for integer formats (0..255 or 0..65535 mapped exactly), as stored for float for
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +25,32 @@ from wrinklepipe.errors import input_error
 DEFAULT_MAX_PIXELS = 8192 * 8192
 
 _BITS_TO_TYPE = {8: oiio.UINT8, 16: oiio.UINT16, 32: oiio.FLOAT, "half": oiio.HALF}
+
+
+@contextlib.contextmanager
+def _native_stderr_silenced() -> Iterator[None]:
+    """Keep what C libraries print straight to file descriptor 2 (libpng's "libpng error: ...")
+    off the terminal while a file is opened or decoded: OpenImageIO reports the same through
+    geterror(), which the tool turns into its one message."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):
+        yield
+        return
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+
+
+def _oiio_message(text: str) -> str:
+    """OpenImageIO's error text on one line (it may hold several)."""
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+    return "; ".join(dict.fromkeys(lines)) or "unrecognised or truncated image"
 
 
 @dataclass(frozen=True)
@@ -44,10 +75,10 @@ def read_header(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Image
         raise input_error(path, "is a folder, expected an image file")
     if path.stat().st_size == 0:
         raise input_error(path, "file is empty")
-    inp = oiio.ImageInput.open(str(path))
+    with _native_stderr_silenced():
+        inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        msg = oiio.geterror() or "unrecognised or truncated image"
-        raise input_error(path, f"cannot read image: {msg.strip()}")
+        raise input_error(path, f"cannot read image: {_oiio_message(oiio.geterror())}")
     try:
         spec = inp.spec()
         info = ImageInfo(
@@ -80,16 +111,19 @@ def read_image(
     # Keep alpha unassociated: masks and data textures must not be premultiplied on read.
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
-    inp = oiio.ImageInput.open(str(path), config)
-    if inp is None:
-        raise input_error(path, f"cannot read image: {oiio.geterror().strip()}")
-    try:
-        data = inp.read_image(0, 0, 0, info.channels, oiio.FLOAT)
-        err = inp.geterror()
-    finally:
-        inp.close()
+    with _native_stderr_silenced():
+        inp = oiio.ImageInput.open(str(path), config)
+        if inp is None:
+            raise input_error(path, f"cannot read image: {_oiio_message(oiio.geterror())}")
+        try:
+            data = inp.read_image(0, 0, 0, info.channels, oiio.FLOAT)
+            err = inp.geterror()
+        finally:
+            inp.close()
     if data is None or (err and not isinstance(data, np.ndarray)):
-        raise input_error(path, f"cannot decode pixels (truncated or corrupt?): {err.strip()}")
+        raise input_error(
+            path, f"cannot decode pixels (truncated or corrupt?): {_oiio_message(err)}"
+        )
     arr = np.asarray(data, dtype=np.float32)
     if arr.ndim == 2:
         arr = arr[..., None]

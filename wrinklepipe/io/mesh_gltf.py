@@ -254,8 +254,31 @@ def read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) -
         return _read_gltf_meshes(path, options)
     except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
         # Safety net for structures the specific checks did not foresee: still one clear line.
-        kind = type(exc).__name__
-        raise input_error(path, f"malformed glTF ({kind}: {str(exc)[:200]})") from None
+        del exc  # Python's wording ("'list' object has no attribute") helps nobody
+        raise input_error(
+            path,
+            "malformed glTF: a member has the wrong type or is missing (the Khronos glTF "
+            "validator names the exact place)",
+        ) from None
+
+
+def _objects(r: _MeshReader, value: Any, key: str) -> list[dict[str, Any]]:
+    """``value`` as an array of JSON objects, or a message naming the first that is not one."""
+    if not isinstance(value, list):
+        raise r.err(f"must be an array of objects, got {json_type(value)}", key)
+    for i, v in enumerate(value):
+        if not isinstance(v, dict):
+            raise r.err(f"must be an object, got {json_type(v)}", f"{key}/{i}")
+    return value
+
+
+def json_type(v: Any) -> str:
+    """The JSON name of a value's type (for messages)."""
+    if isinstance(v, bool):
+        return "a boolean"
+    if isinstance(v, (int, float)):
+        return "a number"
+    return {str: "a string", list: "an array", dict: "an object"}.get(type(v), "null")
 
 
 def _read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) -> list[Mesh]:
@@ -263,8 +286,8 @@ def _read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) 
     r = _MeshReader(Path(path), GltfReadOptions())
     doc = r.doc
     file_notes = check_extensions(r)
-    meshes = doc.get("meshes", [])
-    nodes = doc.get("nodes", [])
+    meshes = _objects(r, doc.get("meshes", []), "/meshes")
+    nodes = _objects(r, doc.get("nodes", []), "/nodes")
     try:
         worlds = world_matrices(doc)
     except ValueError as exc:
@@ -286,7 +309,9 @@ def _read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) 
         node = nodes[ni] if ni is not None else {}
         skin = _read_skin(r, int(node["skin"])) if "skin" in node else None
         world = worlds.get(ni, np.eye(4)) if ni is not None else np.eye(4)
-        for pi, prim in enumerate(gm.get("primitives", [])):
+        for pi, prim in enumerate(
+            _objects(r, gm.get("primitives", []), f"/meshes/{mi}/primitives")
+        ):
             mode = int(prim.get("mode", 4))
             if mode not in (4, 5, 6):
                 skipped_modes += 1

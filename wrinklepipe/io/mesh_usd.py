@@ -28,6 +28,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.confine import confine_usd
 from wrinklepipe.io.mesh_gltf import drop_degenerate
 
 
@@ -48,6 +49,7 @@ class UsdMeshOptions:
 def _open(path: Path) -> Any:
     from pxr import Tf, Usd
 
+    confine_usd(path)  # sublayers, references, payloads: inside the asset's folder
     try:
         stage = Usd.Stage.Open(str(path))
     except Tf.ErrorException as exc:

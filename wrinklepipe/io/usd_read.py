@@ -17,6 +17,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.confine import confine_usd
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import (
     PackedTexture,
@@ -89,6 +90,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     if not path.is_file():
         raise input_error(file, "file not found")
     register_schema()
+    confine_usd(path)  # sublayers, references, payloads: inside the asset's folder
     try:
         stage = Usd.Stage.Open(str(path))
     except Tf.ErrorException as exc:

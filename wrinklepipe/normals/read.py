@@ -11,11 +11,12 @@ BC5, BC7) through :mod:`wrinklepipe.normals.dds` and texture2ddecoder. Layouts:
 with four channels, ``rg`` when B is 0 everywhere (x and y only), else ``rgb``.
 
 Integer texels map ``[0, 1] -> [-1, 1]``; float (EXR) texels are taken as signed when any value
-is negative, else as ``[0, 1]``-encoded. Texel problems are counted: NaN, zero length,
-non-unit (``| |n| - 1 | > unit_tolerance``) and ``z < 0``. NaN and zero-length texels stop the
-read unless ``repair`` (they become (0, 0, 1)); with ``repair``, ``z < 0`` is mirrored to
-``|z|``. Non-unit texels are always renormalised (that is what decoding a normal map means);
-the count says how many needed it beyond quantisation.
+is negative, else as ``[0, 1]``-encoded. Texel problems are counted: NaN, zero length (shorter
+than :data:`MIN_LENGTH`: too short to carry a direction, e.g. a flat mid-grey (128, 128, 128)
+image, which is no normal map), non-unit (``| |n| - 1 | > unit_tolerance``) and ``z < 0``.
+NaN and zero-length texels stop the read unless ``repair`` (they become (0, 0, 1)); with
+``repair``, ``z < 0`` is mirrored to ``|z|``. Non-unit texels are always renormalised (that is
+what decoding a normal map means); the count says how many needed it beyond quantisation.
 """
 
 from __future__ import annotations
@@ -53,6 +54,11 @@ class ReadOptions:
     max_pixels: int = DEFAULT_MAX_PIXELS
     unit_tolerance: float = 0.05
     detect: bool = True
+
+
+#: A decoded texel shorter than this has no usable direction (8-bit (128, 128, 128) decodes to
+#: length 0.0068; a real normal map, even a filtered one, stays far above 0.5): it counts as zero.
+MIN_LENGTH = 0.5
 
 
 @dataclass
@@ -198,7 +204,7 @@ def decode_texels(
         nan = np.zeros(length.shape, dtype=bool)
     else:
         nan = ~np.isfinite(length)
-    zero = length < 1e-6  # NaN compares False
+    zero = length < _F(MIN_LENGTH)  # NaN compares False
     non_unit = np.abs(length - _F(1.0)) > unit_tolerance
     non_unit &= ~zero
     zneg = n[..., 2] < 0
@@ -223,7 +229,7 @@ def repair_normals(normals: np.ndarray) -> np.ndarray:
     bad = ~np.isfinite(n).all(axis=-1)
     n[bad] = 0.0
     length = np.sqrt(np.einsum("...c,...c->...", n, n))
-    bad |= length < 1e-6
+    bad |= length < _F(MIN_LENGTH)
     n[bad] = (0.0, 0.0, 1.0)
     n[..., 2] = np.abs(n[..., 2])
     length = np.sqrt(np.einsum("...c,...c->...", n, n))
@@ -287,12 +293,16 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
                     f"col {stats.first_nan[1]}"
                 )
             if stats.zero:
+                flat = " (a flat mid-grey image is no normal map: flat is (128, 128, 255))"
                 where.append(
-                    f"{stats.zero} zero-length texel(s), first at row "
-                    f"{stats.first_zero[0]}, col {stats.first_zero[1]}"
+                    f"{stats.zero} of {stats.texels} texel(s) too short to be normals "
+                    f"(length < {MIN_LENGTH}), first at row {stats.first_zero[0]}, col "
+                    f"{stats.first_zero[1]}" + (flat if stats.zero == stats.texels else "")
                 )
             raise input_error(
-                path, "; ".join(where) + " (use --repair to replace them with (0, 0, 1))"
+                path,
+                "; ".join(where) + "; fix the map (encode-normals --repair replaces them with "
+                "(0, 0, 1))",
             )
     if o.repair and (stats.nan or stats.zero or stats.z_negative):
         normals = repair_normals(normals)
