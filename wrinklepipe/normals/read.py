@@ -56,9 +56,12 @@ class ReadOptions:
     detect: bool = True
 
 
-#: A decoded texel shorter than this has no usable direction (8-bit (128, 128, 128) decodes to
-#: length 0.0068; a real normal map, even a filtered one, stays far above 0.5): it counts as zero.
+#: A decoded texel shorter than this has no reliable direction (8-bit (128, 128, 128) decodes
+#: to length 0.0068; a real normal map, even a filtered one, stays far above 0.5).
 MIN_LENGTH = 0.5
+#: More short texels than this fraction and the file is not a normal map (a flat grey image, a
+#: colour texture): refused unless ``repair``. Fewer (real maps have a few) are renormalised.
+MAX_SHORT_FRACTION = 0.001
 
 
 @dataclass
@@ -73,6 +76,8 @@ class NormalStats:
     repaired: bool = False
     first_nan: tuple[int, int] | None = None  # (row, col)
     first_zero: tuple[int, int] | None = None
+    short: int = 0  # shorter than MIN_LENGTH but not zero: no reliable direction
+    first_short: tuple[int, int] | None = None
 
     def to_json(self) -> dict[str, object]:
         return {
@@ -142,13 +147,14 @@ def decode_texels(
     signed: bool = False,
     unit_tolerance: float = 0.05,
     bits: int = 0,
+    keep_short: bool = False,
 ) -> tuple[np.ndarray, NormalStats]:
     """Texel values [H, W, C] -> (vectors [H, W, 3] float32, :class:`NormalStats`).
 
-    The vectors are normalised where they can be (NaN and zero texels stay as they are; see
-    :func:`repair_normals`). ``signed``: values are already in [-1, 1]. ``bits`` (8 or 16):
-    the values are ``q / (2^bits - 1)`` of integer texels, decoded exactly as
-    ``(2 q - top) / top``.
+    The vectors are normalised where they can be (NaN and zero texels stay as they are, and with
+    ``keep_short`` those shorter than :data:`MIN_LENGTH`; see :func:`repair_normals`).
+    ``signed``: values are already in [-1, 1]. ``bits`` (8 or 16): the values are
+    ``q / (2^bits - 1)`` of integer texels, decoded exactly as ``(2 q - top) / top``.
     """
     v = np.asarray(values, dtype=_F)
     if v.ndim == 2:
@@ -204,7 +210,8 @@ def decode_texels(
         nan = np.zeros(length.shape, dtype=bool)
     else:
         nan = ~np.isfinite(length)
-    zero = length < _F(MIN_LENGTH)  # NaN compares False
+    zero = length < 1e-6  # NaN compares False
+    short = (length < _F(MIN_LENGTH)) & ~zero
     non_unit = np.abs(length - _F(1.0)) > unit_tolerance
     non_unit &= ~zero
     zneg = n[..., 2] < 0
@@ -216,9 +223,12 @@ def decode_texels(
         z_negative=int(np.count_nonzero(zneg)),
         first_nan=_first(nan),
         first_zero=_first(zero),
+        short=int(np.count_nonzero(short)),
+        first_short=_first(short),
     )
-    # divide in place; NaN and zero texels are left as they are
-    safe = np.where(zero | nan, _F(1.0), length)
+    # divide in place; NaN and zero texels (and short ones with keep_short) are left as they are
+    keep = zero | nan | short if keep_short else zero | nan
+    safe = np.where(keep, _F(1.0), length)
     n /= safe[..., None]
     return n, stats
 
@@ -277,14 +287,17 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
             "3 (RGB) or 4 (RGBA, or DXT5nm with x in alpha)",
         )
     try:
-        normals, stats = decode_texels(values, o.layout, signed, o.unit_tolerance, bits)
+        normals, stats = decode_texels(
+            values, o.layout, signed, o.unit_tolerance, bits, keep_short=o.repair
+        )
     except ValueError as exc:
         raise input_error(path, str(exc)) from None
     layout = o.layout if o.layout != "auto" else (guess_layout(values) if not signed else "rgb")
     if signed and channels == 2:
         layout = "rg"
     notes: list[str] = []
-    if stats.nan or stats.zero:
+    too_short = stats.short > MAX_SHORT_FRACTION * stats.texels
+    if stats.nan or stats.zero or too_short:
         if not o.repair:
             where = []
             if stats.nan:
@@ -293,22 +306,28 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
                     f"col {stats.first_nan[1]}"
                 )
             if stats.zero:
+                where.append(
+                    f"{stats.zero} zero-length texel(s), first at row "
+                    f"{stats.first_zero[0]}, col {stats.first_zero[1]}"
+                )
+            if too_short:
                 flat = " (a flat mid-grey image is no normal map: flat is (128, 128, 255))"
                 where.append(
-                    f"{stats.zero} of {stats.texels} texel(s) too short to be normals "
-                    f"(length < {MIN_LENGTH}), first at row {stats.first_zero[0]}, col "
-                    f"{stats.first_zero[1]}" + (flat if stats.zero == stats.texels else "")
+                    f"{stats.short} of {stats.texels} texel(s) too short to be normals "
+                    f"(length < {MIN_LENGTH}), first at row {stats.first_short[0]}, col "
+                    f"{stats.first_short[1]}" + (flat if stats.short == stats.texels else "")
                 )
             raise input_error(
                 path,
                 "; ".join(where) + "; fix the map (encode-normals --repair replaces them with "
                 "(0, 0, 1))",
             )
-    if o.repair and (stats.nan or stats.zero or stats.z_negative):
+    if o.repair and (stats.nan or stats.zero or stats.short or stats.z_negative):
         normals = repair_normals(normals)
         stats.repaired = True
         notes.append(
-            f"repaired {stats.nan} NaN, {stats.zero} zero-length and {stats.z_negative} z<0 texels"
+            f"repaired {stats.nan} NaN, {stats.zero + stats.short} zero-length or short and "
+            f"{stats.z_negative} z<0 texels"
         )
     if stats.non_unit:
         notes.append(f"{stats.non_unit} texels were not unit length (renormalised)")
