@@ -20,9 +20,9 @@ _F = np.float32
 def test_v2_hand_computed_texels():
     m = codec.mapping(2)
     t = np.array([-1.0, -0.5, 0.0, 0.5, 1.0], _F)
-    # 128 + 127 t: -1 -> 1, -0.5 -> 64.5 -> 64 (half to even), 0 -> 128, 0.5 -> 191.5 -> 192
-    assert m.encode(t, 8).tolist() == [1, 64, 128, 192, 255]
-    assert m.encode(t, 16).tolist() == [1, 16384, 32768, 49152, 65535]
+    # 128 + 127 t: -1 -> 1, -0.5 -> 64.5 -> 65 (half up), 0 -> 128, 0.5 -> 191.5 -> 192
+    assert m.encode(t, 8).tolist() == [1, 65, 128, 192, 255]
+    assert m.encode(t, 16).tolist() == [1, 16385, 32768, 49152, 65535]
     assert m.decode(np.array([1, 128, 255], np.uint8)).tolist() == [-1.0, 0.0, 1.0]
     assert m.decode(np.array([0], np.uint8)).tolist() == [-1.0]  # clamps like SNORM
     assert m.decode(np.array([192], np.uint8))[0] == _F(64 / 127)
@@ -92,7 +92,7 @@ def test_flat_pd_under_v1_is_tilted_by_half_a_step():
 
 
 def test_pd_hand_computed():
-    # slope 0.25 at s = 0.5: t = 0.5 -> 128 + 63.5 = 191.5 -> 192; decode (64 / 127) * 0.5
+    # slope 0.25 at s = 0.5: t = 0.5 -> 128 + 63.5 = 191.5 -> 192 (half up); (64 / 127) * 0.5
     q, _ = codec.encode("pd", np.array([[0.25, -0.5]], _F), "png8", param=0.5)
     assert q.tolist() == [[192, 1, 0, 255]]
     d = codec.decode("pd", q, "png8", param=0.5)
@@ -140,7 +140,7 @@ def test_normal_maps_store_z_in_b_for_rgb_formats():
     n = np.array([[0.6, 0.0, 0.8]], _F)
     for fmt in ("bc1", "bc7", "png8", "uastc"):
         q, _ = codec.encode("full", n, fmt)
-        # glTF mapping 0.5 + 0.5 n: 0.8 -> 229.5 -> 230 (half to even), 0 -> 127.5 -> 128
+        # glTF mapping 0.5 + 0.5 n: 0.8 -> 229.5 -> 230 (half up), 0 -> 127.5 -> 128
         assert q.tolist() == [[204, 128, 230, 255]], fmt
     q, _ = codec.encode("full", n, "bc3nm")
     assert q.tolist() == [[255, 128, 0, 204]]  # DXT5nm: (1, y, 0, x)

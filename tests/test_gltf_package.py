@@ -23,26 +23,36 @@ from wrinklepipe.io.package import (
 finite = st.floats(-1.0, 1.0, width=32, allow_nan=False)
 
 
-def _q8(v: np.ndarray) -> np.ndarray:
-    return np.rint(np.clip(v, 0, 1) * 255) / 255
-
-
 @settings(max_examples=60, deadline=None)
 @given(
     arrays(np.float32, (4, 4, 2), elements=st.floats(-0.625, 0.625, width=32)),
     arrays(np.float32, (4, 4, 2), elements=finite),
     st.sampled_from([0.25, 0.5, 1.0, 2.0]),
+    st.sampled_from([8, 16]),
+    st.sampled_from([1, 2]),
 )
-def test_pd_slope_error_at_most_scale_over_255(base_slopes, unit, scale):
-    # wrinkle-only slopes inside the cone [-s, s]; stored v = 0.5 + 0.5 d / s, q = rint(255 v)
+def test_pd_slope_error_at_most_half_a_step(base_slopes, unit, scale, bits, version):
+    # wrinkle-only slopes inside the cone [-s, s]; t = d / s stored with the mapping's
+    # h steps per unit (v1: top / 2, v2: 2^(bits-1) - 1): |d - d'| <= s / (2 h)
     d = (unit * np.float32(scale)).astype(np.float32)
     base = model.pd_to_normal(base_slopes)
     wrinkled = model.pd_to_normal(model.normal_to_pd(base) + d)
-    stored = _q8(encode_state(base, wrinkled, "pd", scale)).astype(np.float32)
-    back = decode_state(base, stored, "pd", scale)
+    q = encode_state(base, wrinkled, "pd", scale, bits, version)
+    assert q.dtype == (np.uint8 if bits == 8 else np.uint16) and np.all(q[..., 2] == 0)
+    back = decode_state(base, q, "pd", scale, version)
     d_back = model.normal_to_pd(back) - model.normal_to_pd(base)
-    # |d - d'| = 2 s |v - q/255| <= s / 255 (plus float32 rounding of the slopes)
-    assert np.abs(d_back - d).max() <= scale / 255 + 2e-5 * (1 + scale)
+    h = ((1 << bits) - 1) / 2 if version == 1 else (1 << (bits - 1)) - 1
+    assert np.abs(d_back - d).max() <= scale / (2 * h) + 2e-5 * (1 + scale)
+
+
+def test_flat_pd_state_decodes_to_the_base_exactly():
+    base = model.pd_to_normal(np.array([[[0.3, -0.2]]], np.float32))
+    for bits in (8, 16):
+        q = encode_state(base, base, "pd", 0.5, bits)
+        assert q[0, 0].tolist() == [1 << (bits - 1), 1 << (bits - 1), 0]
+        # adds exactly zero slope: the base's own slopes come back bit for bit
+        same = model.pd_to_normal(model.normal_to_pd(base))
+        assert np.array_equal(decode_state(base, q, "pd", 0.5), same)
 
 
 @settings(max_examples=60, deadline=None)
@@ -50,17 +60,27 @@ def test_pd_slope_error_at_most_scale_over_255(base_slopes, unit, scale):
     arrays(np.float32, (3, 3, 2), elements=st.floats(-0.5, 0.5, width=32)),
     arrays(np.float32, (3, 3, 2), elements=st.floats(-0.5, 0.5, width=32)),
 )
-def test_diff_and_full_decode_within_one_level(base_slopes, w_slopes):
+def test_diff_and_full_decode_within_half_a_step(base_slopes, w_slopes):
     base = model.pd_to_normal(base_slopes)
     wrinkled = model.pd_to_normal(w_slopes)
-    # diff: D = 0.5 + 0.5 (W - B) -> W' = B + (2 q/255 - 1): per component within 1/255
-    stored = _q8(encode_state(base, wrinkled, "diff", 1.0)).astype(np.float32)
-    raw = base + (2 * stored - 1)
-    assert np.abs(raw - wrinkled).max() <= 1 / 255 + 1e-6
-    assert np.allclose(decode_state(base, stored, "diff", 1.0), model.normalize(raw), atol=1e-6)
-    # full: 0.5 + 0.5 W
-    stored = _q8(encode_state(base, wrinkled, "full", 1.0)).astype(np.float32)
-    assert np.abs((2 * stored - 1) - wrinkled).max() <= 1 / 255 + 1e-6
+    # diff (v2): q = 128 + 127 (W - B) -> W' = B + (q - 128) / 127: within 0.5 / 127
+    q = encode_state(base, wrinkled, "diff", 1.0)
+    raw = base + (q.astype(np.float64) - 128) / 127
+    assert np.abs(raw - wrinkled).max() <= 0.5 / 127 + 1e-6
+    assert np.allclose(decode_state(base, q, "diff", 1.0), model.normalize(raw), atol=1e-6)
+    # full: the glTF mapping 0.5 + 0.5 W at every version
+    q = encode_state(base, wrinkled, "full", 1.0)
+    assert np.abs((2 * q.astype(np.float64) / 255 - 1) - wrinkled).max() <= 1 / 255 + 1e-6
+
+
+def test_legacy_v1_assets_still_decode():
+    # an asset without a mapping field: v = 0.5 + 0.5 d / s; slope 0.25 at s = 0.5 -> 191.25
+    base = model.pd_to_normal(np.zeros((1, 1, 2), np.float32))
+    q = np.array([[[191, 128, 0]]], np.uint8)
+    back = decode_state(base, q, "pd", 0.5, None)
+    d = model.normal_to_pd(back)[0, 0]
+    assert d[0] == pytest.approx((2 * 191 / 255 - 1) * 0.5, abs=1e-6)
+    assert d[1] == pytest.approx((2 * 128 / 255 - 1) * 0.5, abs=1e-6)
 
 
 @settings(max_examples=40, deadline=None)

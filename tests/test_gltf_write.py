@@ -160,14 +160,17 @@ def test_writer_is_deterministic(pkg, tmp_path):
 
 
 def test_pd_texel_hand_computed(tmp_path):
-    # slopes (x/z, y/z) = (0.5, -0.25); scale 1: v = 0.5 + 0.5 d -> (0.75, 0.375) -> 191, 96
+    # slopes (x/z, y/z) = (0.5, -0.25); scale 1, mapping v2: q = 128 + 127 d / s
+    # -> 191.5 -> 192 (round half up), 96.25 -> 96; B = 0
     write_gltf(package_from_asset(_tiny_asset("pd", 1.0)), tmp_path, "t")
     px = png_pixels((tmp_path / "textures/wrinkle_s.png").read_bytes())
-    assert px[0, 0].tolist() == [191, 96, 0]
-    # scale 2: v = 0.5 + 0.25 d -> (0.625, 0.4375) -> 159.375 -> 159, 111.5625 -> 112
+    assert px[0, 0].tolist() == [192, 96, 0]
+    # scale 2: 128 + 63.5 * (0.5, -0.25) -> 159.75 -> 160, 112.125 -> 112
     write_gltf(package_from_asset(_tiny_asset("pd", 2.0)), tmp_path / "s2", "t")
     px = png_pixels((tmp_path / "s2/textures/wrinkle_s.png").read_bytes())
-    assert px[0, 0].tolist()[:2] == [159, 112]
+    assert px[0, 0].tolist()[:2] == [160, 112]
+    doc = json.loads((tmp_path / "t.gltf").read_text())
+    assert doc["materials"][0]["extensions"][EXTENSION]["mapping"] == 2
     # mask 0.5 -> 127.5 -> 128 in channel r of mask_0; base (0,0,1) -> (128, 128, 255)
     assert png_pixels((tmp_path / "textures/mask_0.png").read_bytes())[1, 1, 0] == 128
     assert png_pixels((tmp_path / "textures/base_normal.png").read_bytes())[0, 0].tolist() == [
@@ -178,12 +181,12 @@ def test_pd_texel_hand_computed(tmp_path):
 
 
 def test_diff_texel_hand_computed(tmp_path):
-    # W = (0.5, -0.25, 1)/|.| = (0.43644, -0.21822, 0.87287); D = 0.5 + 0.5 (W - (0,0,1))
+    # W = (0.5, -0.25, 1)/|.| = (0.43644, -0.21822, 0.87287); t = W - (0,0,1); q = 128 + 127 t
     write_gltf(package_from_asset(_tiny_asset("diff", 1.0)), tmp_path, "t")
     px = png_pixels((tmp_path / "textures/wrinkle_s.png").read_bytes())[0, 0]
     w = np.array([0.5, -0.25, 1.0]) / np.sqrt(1.3125)
-    expect = np.rint((0.5 + 0.5 * (w - [0, 0, 1])) * 255)
-    assert px.tolist() == expect.astype(int).tolist() == [183, 100, 111]
+    expect = np.rint(128 + 127 * (w - [0, 0, 1]))
+    assert px.tolist() == expect.astype(int).tolist() == [183, 100, 112]
 
 
 def test_png_has_no_colour_chunks():

@@ -34,8 +34,10 @@ def angle_deg64(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def test_quantisation_bound_is_the_hand_value():
-    # s = 1, 8 bits: half a step is 1/255 in slope; diagonal sqrt(2)/255 rad
-    assert enc.quantization_bound_deg(1.0, 8) == pytest.approx(math.degrees(math.sqrt(2) / 255))
+    # s = 1, 8 bits, mapping v2 (128 + 127 t): half a step is 1/254 in slope; diagonal
+    # sqrt(2)/254 rad; the legacy v1 (0.5 + 0.5 t) half step is 1/255
+    assert enc.quantization_bound_deg(1.0, 8) == pytest.approx(math.degrees(math.sqrt(2) / 254))
+    assert enc.quantization_bound_deg(1.0, 8, 1) == pytest.approx(math.degrees(math.sqrt(2) / 255))
     assert enc.cone_deg(1.0) == pytest.approx(45.0)
     assert enc.cone_deg(2.0) == pytest.approx(math.degrees(math.atan(2.0)))
 
@@ -46,7 +48,7 @@ def test_sphere_cap_pd_8bit_within_quantisation_bound(scale):
     n, inside = sphere_cap(96, 60.0, 0.7)
     q, s, clipped = enc.encode_pd_u8(n, scale)
     assert s == scale and clipped == 0
-    back = enc.decode_pd(enc.dequantize(q), scale)
+    back = enc.decode_pd(q, scale)
     err = angle_deg64(back, n)
     bound = enc.quantization_bound_deg(scale, 8)
     assert err.max() <= bound + 1e-4
@@ -56,8 +58,9 @@ def test_sphere_cap_pd_8bit_within_quantisation_bound(scale):
 
 def test_sphere_cap_pd_16bit_within_bound():
     n, _ = sphere_cap(64, 40.0, 0.7)
-    r = enc.encode_pd(n, 1.0)
-    back = enc.decode_pd(enc.dequantize(enc.quantize(r.values01, 16)), 1.0)
+    r = enc.encode_pd(n, 1.0, bits=16)
+    assert r.texels.dtype == np.uint16
+    back = enc.decode_pd(r.texels, 1.0)
     assert angle_deg64(back, n).max() <= enc.quantization_bound_deg(1.0, 16) + 1e-4
 
 
@@ -77,9 +80,13 @@ def test_clipped_count_equals_hand_count():
     assert enc.encode_pd_u8(n, 1.0)[2] == 6
     # with s = 2 only |slope| > 2: (0,3)? |-2.0| is not > 2; (1,3) = 1 texel
     assert enc.encode_pd_u8(n, 2.0)[2] == 1
-    # clipped texels saturate: (0,2) has px = 1.5 -> 255, (0,3) px = -2 -> 0
+    # clipped texels saturate: (0,2) has px = 1.5 -> 255, (0,3) px = -2 -> 1 (t = -1 under v2;
+    # 0 is never written), the flat texel (0,0) sits on 128 exactly
     q, _, _ = enc.encode_pd_u8(n, 1.0)
-    assert q[0, 2, 0] == 255 and q[0, 3, 0] == 0
+    assert q[0, 2, 0] == 255 and q[0, 3, 0] == 1 and q[0, 0].tolist() == [128, 128]
+    assert np.array_equal(enc.encode_pd(n, 1.0).texels, q)
+    q1, _, _ = enc.encode_pd_u8(n, 1.0, version=1)
+    assert q1[0, 3, 0] == 0 and q1[0, 0].tolist() == [128, 128]  # 127.5 rounds up
 
 
 def test_auto_scale_is_power_of_two_above_p999():
@@ -99,19 +106,21 @@ def test_diff_roundtrip_and_gain():
     b = _normals_from_slopes(rng.normal(0, 0.1, (16, 16)), rng.normal(0, 0.1, (16, 16)))
     w = _normals_from_slopes(rng.normal(0, 0.1, (16, 16)), rng.normal(0, 0.1, (16, 16)))
     d = enc.encode_diff(w, b)
-    np.testing.assert_allclose(d.values01, 0.5 + 0.5 * (w - b), atol=1e-6)
-    np.testing.assert_allclose(enc.decode_diff(d.values01), w - b, atol=1e-6)
+    np.testing.assert_array_equal(d.texels, np.rint(128 + 127 * (w - b)).astype(np.uint8))
+    np.testing.assert_allclose(enc.decode_diff(d.texels), w - b, atol=0.5 / 127 + 1e-6)
     g = enc.encode_diff(w, b, gain="auto")
     assert g.gain >= 1 and math.log2(g.gain).is_integer()
     assert g.clipped <= 0.002 * 256 + 1
-    np.testing.assert_allclose(enc.decode_diff(g.values01, g.gain), w - b, atol=2e-3)
+    np.testing.assert_allclose(enc.decode_diff(g.texels, g.gain), w - b, atol=2e-3)
 
 
 def test_full_two_channel_rebuilds_z():
     n = _normals_from_slopes(np.array([[0.3, -0.8]]), np.array([[0.1, 0.4]]))
     v = enc.encode_full(n, 2)
-    assert v.shape == (1, 2, 2)
-    np.testing.assert_allclose(enc.decode_full(v), n, atol=1e-6)
+    assert v.shape == (1, 2, 2) and v.dtype == np.uint8
+    np.testing.assert_array_equal(v, np.rint(255 * (0.5 + 0.5 * n[..., :2])).astype(np.uint8))
+    # z rebuilt from the 8-bit x, y: within the quantisation of x and y
+    assert angle_deg64(enc.decode_full(v), n).max() < math.degrees(2 / 255)
 
 
 def test_quantize_hand_values():
@@ -128,5 +137,5 @@ def test_pd_roundtrip_law(px, py, scale):
     n = _normals_from_slopes(np.array([[px]]), np.array([[py]]))
     q, _, clipped = enc.encode_pd_u8(n, scale)
     assert clipped == 0
-    back = enc.decode_pd(enc.dequantize(q), scale)
+    back = enc.decode_pd(q, scale)
     assert angle_deg64(back, n).max() <= enc.quantization_bound_deg(scale, 8) + 2e-4

@@ -153,9 +153,10 @@ def test_material_network(usda):
     assert src.sourceName == "wrinkle:state:stretch"
     assert mat.GetInput("wrinkle:state:stretch").Get().path == "./textures/wrinkle_stretch.png"
     assert mat.GetInput("wrinkle:mask:mask_1").Get().path == "./textures/mask_1.png"
-    # pd scale 1: the texture output is the slope: 2 s v - s
-    assert tuple(stretch.GetInput("scale").Get())[:2] == (2, 2)
-    assert tuple(stretch.GetInput("bias").Get())[:2] == (-1, -1)
+    # pd scale 1, mapping v2 at 8 bits: slope = s (255 v - 128) / 127 = v 255/127 - 128/127
+    assert tuple(stretch.GetInput("scale").Get())[:2] == pytest.approx((255 / 127,) * 2)
+    assert tuple(stretch.GetInput("bias").Get())[:2] == pytest.approx((-128 / 127,) * 2)
+    assert mat.GetPrim().GetAttribute("wrinkle:mapping").Get() == 2
 
 
 def test_v_flip_and_vertex_ids(usda, pkg):

@@ -49,9 +49,33 @@ from typing import Literal
 
 import numpy as np
 
+from wrinklepipe.codec.vectors import composite as composite_detail
+from wrinklepipe.codec.vectors import normal_to_pd, normalize, pd_to_normal
+
+__all__ = [
+    "ENCODINGS",
+    "POLICIES",
+    "POLICY_WEIGHT_RANGE",
+    "activations",
+    "angular_error_deg",
+    "blend",
+    "combine",
+    "composite_detail",
+    "diff_to_delta",
+    "height_slopes",
+    "height_to_normal",
+    "normal_to_diff",
+    "normal_to_pd",
+    "normalize",
+    "pd_to_normal",
+    "region_sum",
+]
+
 Encoding = Literal["pd", "diff", "full", "composite"]
 Policy = Literal["clamp01", "signed", "additive", "renormalize", "lerp"]
 
+#: The encodings of :mod:`wrinklepipe.codec.encodings` (their storage is declared there; this
+#: module combines their float quantities).
 ENCODINGS: tuple[str, ...] = ("pd", "diff", "full", "composite")
 POLICIES: tuple[str, ...] = ("clamp01", "signed", "additive", "renormalize", "lerp")
 
@@ -80,13 +104,6 @@ POLICY_WEIGHT_RANGE: dict[str, WeightRange] = {
 }
 
 
-def normalize(v: np.ndarray) -> np.ndarray:
-    """Unit vectors along the last axis (float32); zero vectors stay zero."""
-    v = np.asarray(v, dtype=np.float32)
-    n = np.sqrt(np.einsum("...c,...c->...", v, v))
-    return v / np.maximum(n, _EPS)[..., None]
-
-
 def height_to_normal(height: np.ndarray, texel_size: float = 1.0) -> np.ndarray:
     """Analytic tangent-space normal of a height field sampled on a grid, ``[H, W] -> [H, W, 3]``.
 
@@ -108,29 +125,6 @@ def height_slopes(height: np.ndarray, texel_size: float = 1.0) -> tuple[np.ndarr
     return px.astype(np.float32), py.astype(np.float32)
 
 
-def normal_to_pd(n: np.ndarray) -> np.ndarray:
-    """Partial-derivative encoding ``(x/z, y/z)`` (Jimenez et al., no minus sign). ``z > 0``."""
-    n = np.asarray(n, dtype=np.float32)
-    inv_z = np.reciprocal(np.maximum(n[..., 2], _EPS))
-    return n[..., :2] * inv_z[..., None]
-
-
-def pd_to_normal(d: np.ndarray) -> np.ndarray:
-    """Decode PD slopes: ``normalize(d.x, d.y, 1)``."""
-    d = np.asarray(d, dtype=np.float32)
-    x, y = d[..., 0], d[..., 1]
-    inv = np.asarray(x * x)  # 0-d stays an array so the in-place ops below work
-    inv += y * y
-    inv += np.float32(1.0)
-    np.sqrt(inv, out=inv)
-    np.reciprocal(inv, out=inv)
-    out = np.empty(d.shape[:-1] + (3,), dtype=np.float32)
-    np.multiply(x, inv, out=out[..., 0])
-    np.multiply(y, inv, out=out[..., 1])
-    out[..., 2] = inv
-    return out
-
-
 def normal_to_diff(wrinkled: np.ndarray, base: np.ndarray) -> np.ndarray:
     """Difference map ``0.5 + 0.5 (W - B)`` in [0, 1] (Jimenez et al. 1.2.1)."""
     return (0.5 + 0.5 * (np.asarray(wrinkled, np.float32) - np.asarray(base, np.float32))).astype(
@@ -141,14 +135,6 @@ def normal_to_diff(wrinkled: np.ndarray, base: np.ndarray) -> np.ndarray:
 def diff_to_delta(d: np.ndarray) -> np.ndarray:
     """The signed delta ``2 D - 1`` a difference map stores."""
     return (2.0 * np.asarray(d, np.float32) - 1.0).astype(np.float32)
-
-
-def composite_detail(base: np.ndarray, detail: np.ndarray) -> np.ndarray:
-    """Detail-preserving composite (Oat; Dutreve et al.): add x and y, multiply z, renormalise."""
-    b = np.asarray(base, np.float32)
-    w = np.asarray(detail, np.float32)
-    out = np.concatenate([b[..., :2] + w[..., :2], (b[..., 2] * w[..., 2])[..., None]], axis=-1)
-    return normalize(out)
 
 
 def _as_weight_matrix(weights: np.ndarray, policy: str, n_regions: int) -> np.ndarray:

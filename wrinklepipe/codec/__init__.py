@@ -45,7 +45,9 @@ from wrinklepipe.codec.mappings import (
     MAPPINGS,
     VERSIONS,
     Mapping,
+    dequantize_unorm,
     mapping,
+    quantize_unorm,
     texel_bits,
 )
 from wrinklepipe.codec.texels import decode, decode_sampled, encode, to_normal
@@ -76,6 +78,7 @@ __all__ = [
     "StorageFormat",
     "decode",
     "decode_sampled",
+    "dequantize_unorm",
     "encode",
     "encoding",
     "layout",
@@ -83,6 +86,7 @@ __all__ = [
     "normal_to_pd",
     "normalize",
     "pd_to_normal",
+    "quantize_unorm",
     "rebuild_z",
     "storage_format",
     "texel_bits",

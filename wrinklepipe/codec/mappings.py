@@ -65,15 +65,16 @@ class Mapping:
         return c, c - 1.0
 
     def encode(self, t: np.ndarray, bits: int) -> np.ndarray:
-        """Signed values -> texels: uint8/uint16 (rounded to nearest, ``t`` clipped to [-1, 1])
+        """Signed values -> texels: uint8/uint16 (rounded half up, ``t`` clipped to [-1, 1])
         or, for ``bits = 0``, float32 ``0.5 + 0.5 t`` (not clipped)."""
         t = np.asarray(t, dtype=_F)
         if check_bits(bits) == 0:
             return (t * _F(0.5) + _F(0.5)).astype(_F)
         c, h = self.centre(bits)
         v = np.clip(t, _F(-1.0), _F(1.0)) * _F(h)
-        v += _F(c)
-        np.rint(v, out=v)
+        v += _F(c + 0.5)
+        np.floor(v, out=v)  # round half up (the fused kernels of wrinklepipe.normals agree)
+        np.minimum(v, _F(c + h), out=v)
         return v.astype(np.uint8 if bits == 8 else np.uint16)
 
     def decode(self, q: np.ndarray, bits: int | None = None) -> np.ndarray:
@@ -142,3 +143,23 @@ def texel_bits(q: np.ndarray) -> int:
 def quantization_bound(bits: int, version: int = CURRENT_VERSION) -> float:
     """Largest error in ``t`` that rounding to ``bits`` can cause: half a step, ``0.5 / h``."""
     return 0.5 / mapping(version).centre(bits)[1] if bits else 0.0
+
+
+def quantize_unorm(values01: np.ndarray, bits: int = 8) -> np.ndarray:
+    """Plain UNORM quantisation of values in [0, 1] (masks): ``floor(top v + 0.5)``, clipped."""
+    if bits not in (8, 16):
+        raise ValueError(f"bits must be 8 or 16, got {bits}")
+    top = _F((1 << bits) - 1)
+    v = np.asarray(values01, dtype=_F) * top
+    np.clip(v, _F(0.0), top, out=v)
+    v += _F(0.5)
+    np.floor(v, out=v)  # round half up, as the value mappings
+    return v.astype(np.uint8 if bits == 8 else np.uint16)
+
+
+def dequantize_unorm(q: np.ndarray) -> np.ndarray:
+    """Integer texels back to values in [0, 1] (float32): ``q / top``."""
+    bits = texel_bits(q)
+    if bits == 0:
+        return np.asarray(q, _F)
+    return (np.asarray(q, _F) * _F(1.0 / ((1 << bits) - 1))).astype(_F)

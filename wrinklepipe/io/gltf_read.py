@@ -378,6 +378,7 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
         meta: dict[str, Any] = {
             "encoding": ext["encoding"],
             "scale": float(ext.get("scale", 1.0)),
+            "mapping": int(ext.get("mapping", 1)),  # assets written before v2 record none
             "policy": ext["policy"],
             "states": states,
             "masks": {

@@ -234,6 +234,7 @@ def gltf_document(
     ext: dict[str, Any] = {
         "encoding": meta["encoding"],
         "scale": float(meta["scale"]),
+        "mapping": int(meta.get("mapping", 1)),
         "policy": meta["policy"],
         "states": [
             {"name": s["name"], "texture": {"index": tex_index[s["texture"]]}}

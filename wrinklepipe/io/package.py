@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe import model
+from wrinklepipe import codec, model
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.errors import input_error
 
@@ -102,61 +102,69 @@ class PackOptions:
 
 
 # ------------------------------------------------------------------------------------------------
-# encoding: the formulas of wrinklepipe.model / docs/normals.md (values01 = what 8/16-bit stores)
+# encoding: one call into wrinklepipe.codec per map (docs/normals.md, "The codec")
+
+
+def _plain_format(bits: int) -> str:
+    if bits not in (8, 16):
+        raise ValueError(f"maps are stored at 8 or 16 bits, got {bits}")
+    return f"png{bits}"
 
 
 def _q(values01: np.ndarray, bits: int) -> np.ndarray:
-    """Round values in [0, 1] to uint8/uint16 (round to nearest, clipped)."""
-    top = np.float32((1 << bits) - 1)
-    v = np.clip(np.asarray(values01, np.float32) * top, 0.0, top)
-    return np.rint(v).astype(np.uint8 if bits == 8 else np.uint16)
+    """Mask values in [0, 1] -> uint8/uint16 (round to nearest, clipped)."""
+    return codec.quantize_unorm(values01, bits)
 
 
 def _dq(q: np.ndarray) -> np.ndarray:
-    """Integer texels back to values01 (float32)."""
-    top = np.float32(65535.0 if q.dtype == np.uint16 else 255.0)
-    return (q.astype(np.float32) * (np.float32(1.0) / top)).astype(np.float32)
+    """Integer mask texels back to values in [0, 1] (float32)."""
+    return codec.dequantize_unorm(q)
 
 
-def _full(n: np.ndarray) -> np.ndarray:
-    return np.clip(np.float32(0.5) + np.float32(0.5) * np.asarray(n, np.float32), 0.0, 1.0)
+def encode_base(base: np.ndarray, bits: int = 8) -> np.ndarray:
+    """The base normal map's texels ``[H, W, 3]`` (glTF ``normalTexture``: xyz in RGB)."""
+    return codec.encode("full", base, _plain_format(bits), channels=3)[0]
 
 
-def encode_state(base: np.ndarray, state: np.ndarray, encoding: str, scale: float) -> np.ndarray:
-    """Stored values01 ``[H, W, 3]`` of one wrinkled-face normal map ``state`` over ``base``.
+def decode_base(texels: np.ndarray) -> np.ndarray:
+    """Unit normals of stored base texels (``[H, W, >= 3]``)."""
+    return codec.decode("full", np.asarray(texels)[..., :3], "rgb")
 
-    pd: wrinkle-only slopes ``pd(W) - pd(B)`` in ``[-scale, scale]`` -> R, G (B unused, 0);
-    diff: ``0.5 + 0.5 scale (W - B)`` (scale = gain); full: ``0.5 + 0.5 W``; composite: the
-    wrinkle-only normal ``normalize(pd(W) - pd(B), 1)`` as ``0.5 + 0.5 n``.
+
+def encode_state(
+    base: np.ndarray,
+    state: np.ndarray,
+    encoding: str,
+    scale: float,
+    bits: int = 8,
+    version: int = codec.CURRENT_VERSION,
+) -> np.ndarray:
+    """Stored texels ``[H, W, 3]`` (uint8/uint16) of one wrinkled-face normal map over ``base``.
+
+    pd: wrinkle-only slopes ``pd(W) - pd(B)``, ``t = d / scale`` in R, G (B = 0); diff:
+    ``t = scale (W - B)`` (scale = gain) in RGB; full: ``W``; composite: the wrinkle-only normal
+    ``normalize(pd(W) - pd(B), 1)``. pd and diff use the value mapping ``version``
+    (:mod:`wrinklepipe.codec.mappings`); normal maps the glTF mapping.
     """
-    if encoding in ("pd", "composite"):
-        d = model.normal_to_pd(state) - model.normal_to_pd(base)
-        if encoding == "composite":
-            return _full(model.pd_to_normal(d))
-        rg = np.clip(np.float32(0.5) + d * np.float32(0.5 / scale), 0.0, 1.0)
-        return np.concatenate([rg, np.zeros(rg.shape[:-1] + (1,), np.float32)], axis=-1)
-    if encoding == "diff":
-        w, b = np.asarray(state, np.float32), np.asarray(base, np.float32)
-        return np.clip(np.float32(0.5) + (w - b) * np.float32(0.5 * scale), 0.0, 1.0)
-    if encoding == "full":
-        return _full(state)
-    raise ValueError(f"unknown encoding {encoding!r}")
+    e = codec.encoding(encoding)
+    x = e.from_normals(state, base)
+    return codec.encode(e, x, _plain_format(bits), param=scale, version=version, channels=3)[0]
 
 
-def decode_state(base: np.ndarray, stored: np.ndarray, encoding: str, scale: float) -> np.ndarray:
-    """Inverse of :func:`encode_state`: the wrinkled-face unit normal ``[H, W, 3]``."""
-    v = np.asarray(stored, np.float32)
-    if encoding == "pd":
-        d = (v[..., :2] * np.float32(2.0) - np.float32(1.0)) * np.float32(scale)
-        return model.pd_to_normal(model.normal_to_pd(base) + d)
-    if encoding == "diff":
-        return model.normalize(base + (v[..., :3] * np.float32(2.0) - 1.0) / np.float32(scale))
-    if encoding == "full":
-        return model.normalize(v[..., :3] * np.float32(2.0) - 1.0)
-    if encoding == "composite":
-        d = model.normal_to_pd(model.normalize(v[..., :3] * np.float32(2.0) - 1.0))
-        return model.pd_to_normal(model.normal_to_pd(base) + d)
-    raise ValueError(f"unknown encoding {encoding!r}")
+def decode_state(
+    base: np.ndarray,
+    texels: np.ndarray,
+    encoding: str,
+    scale: float,
+    version: int | None = codec.CURRENT_VERSION,
+) -> np.ndarray:
+    """Inverse of :func:`encode_state`: the wrinkled-face unit normal ``[H, W, 3]``.
+
+    ``version=None`` is the legacy v1 mapping (an asset that records none)."""
+    e = codec.encoding(encoding)
+    where = "rg" if e.components == 2 else "rgb"
+    x = codec.decode(e, np.asarray(texels), where, param=scale, version=version)
+    return e.to_normal(x, base)
 
 
 def resize_normals_pd(normals: np.ndarray, h: int, w: int) -> np.ndarray:
@@ -233,7 +241,7 @@ def package_from_asset(
     # pd: the slope range; diff is stored with gain 1 (what shaders and the validator assume)
     scale = float(asset.pd_scale) if asset.encoding == "pd" else 1.0
     base = model.normalize(asset.base)
-    textures = [PackedTexture("base_normal", _q(0.5 + 0.5 * base, opt.bits), "base_normal")]
+    textures = [PackedTexture("base_normal", encode_base(base, opt.bits), "base_normal")]
     taken = {"base_normal"}
     cache: dict[tuple[int, ...], np.ndarray] = {}
     states_meta = []
@@ -242,7 +250,7 @@ def package_from_asset(
         b = _base_at(base, st.shape[:2], cache)
         tex = PackedTexture(
             safe_name(f"wrinkle_{name}", taken),
-            _q(encode_state(b, st, asset.encoding, scale), opt.bits),
+            encode_state(b, st, asset.encoding, scale, opt.bits, codec.CURRENT_VERSION),
             "state",
         )
         textures.append(tex)
@@ -257,6 +265,7 @@ def package_from_asset(
     meta: dict[str, Any] = {
         "encoding": asset.encoding,
         "scale": scale,
+        "mapping": codec.CURRENT_VERSION,
         "policy": asset.policy,
         "states": states_meta,
         "masks": {"layout": opt.mask_layout, "textures": mask_names, "table": table},
@@ -273,17 +282,24 @@ def package_from_asset(
     return WrinklePackage(asset.name, asset.mesh, textures, meta, list(curves or []))
 
 
+def mapping_version(meta: dict[str, Any]) -> int:
+    """The value-mapping version an asset's metadata records (absent: the legacy v1);
+    ValueError for a version this wrinklepipe cannot read."""
+    return codec.mapping(int(meta.get("mapping", codec.LEGACY_VERSION))).version
+
+
 def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
     """Decode a package into float maps and masks (what validation and rendering work on)."""
     meta = pkg.meta
     enc, scale = str(meta["encoding"]), float(meta["scale"])
-    base = model.normalize(2.0 * _dq(pkg.texture("base_normal").pixels)[..., :3] - 1.0)
+    version = mapping_version(meta)
+    base = decode_base(pkg.texture("base_normal").pixels)
     states = []
     cache: dict[tuple[int, ...], np.ndarray] = {}
     for s in meta["states"]:
-        stored = _dq(pkg.texture(s["texture"]).pixels)
+        stored = pkg.texture(s["texture"]).pixels
         b = _base_at(base, stored.shape[:2], cache)
-        states.append(decode_state(b, stored, enc, scale))
+        states.append(decode_state(b, stored, enc, scale, version))
     mask_tex = [_dq(pkg.texture(n).pixels) for n in meta["masks"]["textures"]]
     masks = unpack_masks(mask_tex, meta["masks"]["table"])
     regions = tuple(

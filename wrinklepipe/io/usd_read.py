@@ -66,6 +66,12 @@ def _asset_bytes(layer_path: Path, asset: Any, file: str, key: str, opt: UsdRead
     return data
 
 
+def _mapping(prim: Any) -> int:
+    """``wrinkle:mapping`` (the value-mapping version); stages written before it hold v1."""
+    a = prim.GetAttribute("wrinkle:mapping")
+    return int(a.Get()) if a and a.HasAuthoredValue() else 1
+
+
 def _has_api(prim: Any) -> bool:
     """``WrinkleMapsAPI`` applied: by the schema registry, or as authored ``apiSchemas`` (USD
     filters schemas it does not know out of ``GetAppliedSchemas`` when the plugin was
@@ -277,6 +283,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     meta: dict[str, Any] = {
         "encoding": str(api("encoding")),
         "scale": float(api("scale")),
+        "mapping": _mapping(mat_prim),
         "policy": str(api("policy")),
         "states": states,
         "masks": {"layout": layout, "textures": mask_names, "table": table},

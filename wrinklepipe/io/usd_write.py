@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from wrinklepipe import codec
 from wrinklepipe.asset import Mesh
 from wrinklepipe.atomic import check_not_input, write_bytes
 from wrinklepipe.errors import input_error
@@ -47,6 +48,7 @@ USD_SCHEMA_DIR = SCHEMAS_DIR / "usd"
 API_ATTRIBUTES: dict[str, str] = {
     "wrinkle:encoding": "token",
     "wrinkle:scale": "double",
+    "wrinkle:mapping": "int",
     "wrinkle:policy": "token",
     "wrinkle:stateNames": "token[]",
     "wrinkle:maskLayout": "token",
@@ -303,12 +305,18 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
     )
     meta = pkg.meta
     enc, scale = str(meta["encoding"]), float(meta["scale"])
-    if enc == "pd":  # texture output = slopes in [-s, s]
-        s_scale, s_bias = (2 * scale, 2 * scale, 1, 1), (-scale, -scale, 0, 0)
-    elif enc == "diff":  # texture output = W - B
-        s_scale, s_bias = (2 / scale,) * 3 + (1,), (-1 / scale,) * 3 + (0,)
-    else:  # full / composite: unit normals
-        s_scale, s_bias = (2, 2, 2, 1), (-1, -1, -1, 0)
+    version = int(meta.get("mapping", 1))
+
+    def state_scale_bias(name: str) -> tuple[tuple, tuple]:
+        """UsdUVTexture scale and bias that turn the stored values into the quantity: pd slopes
+        in [-s, s], diff deltas W - B, unit normals (the codec's affine mapping, per bit depth)."""
+        e = codec.encoding(enc)
+        mul, add = e.mapping(version).affine(pkg.texture(name).bits)
+        if enc == "pd":
+            return (mul * scale, mul * scale, 1, 1), (add * scale, add * scale, 0, 0)
+        if enc == "diff":
+            return (mul / scale,) * 3 + (1,), (add / scale,) * 3 + (0,)
+        return (mul, mul, mul, 1), (add, add, add, 0)
 
     def interface_texture(kind: str, key: str, name: str, sc: tuple, bi: tuple) -> None:
         inp = mat.CreateInput(f"wrinkle:{kind}:{key}", Sdf.ValueTypeNames.Asset)
@@ -317,7 +325,7 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
         tex.CreateInput("file", Sdf.ValueTypeNames.Asset).ConnectToSource(inp)
 
     for s in meta["states"]:
-        interface_texture("state", _ident(s["name"]), s["texture"], s_scale, s_bias)
+        interface_texture("state", _ident(s["name"]), s["texture"], *state_scale_bias(s["texture"]))
     for name in meta["masks"]["textures"]:
         interface_texture("mask", _ident(name), name, (1, 1, 1, 1), (0, 0, 0, 0))
 
@@ -337,6 +345,7 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
     values = {
         "wrinkle:encoding": enc,
         "wrinkle:scale": scale,
+        "wrinkle:mapping": version,
         "wrinkle:policy": str(meta["policy"]),
         "wrinkle:stateNames": Vt.TokenArray([s["name"] for s in meta["states"]]),
         "wrinkle:maskLayout": str(meta["masks"]["layout"]),

@@ -2,16 +2,20 @@
 
 Encoders are etcpak's (from PyPI); decoding uses texture2ddecoder (which returns BGRA; this
 module hands back RGBA). etcpak's own decoders crash on some inputs and are never used.
-
-Formats for two-channel data (x, y; z is rebuilt or the data is PD slopes):
+Channel layouts are the codec's (:mod:`wrinklepipe.codec.formats`):
 
 ``bc5``    3Dc / ATI2: R = x, G = y, each an independent 8-bit-endpoint BC4 block (8 bpp).
-``bc1``    DXT1: R = x, G = y, B = 0 in one RGB565 block (4 bpp).
+``bc1``    DXT1 (4 bpp): a normal map stores x, y, z in R, G, B; two-component data (PD
+           slopes) R = x, G = y, B = 0.
 ``bc3nm``  DXT5nm: x in alpha (BC4-like block), y in green (6-bit endpoints), R = 1, B = 0
            (8 bpp) -- the swizzle Unity/Unreal "DXT5nm" normal maps use.
-``bc7``    BC7: R = x, G = y, B = 0, A = 1 (8 bpp); etcpak's bc7enc, slow on big maps.
+``bc7``    BC7 (8 bpp): x, y, z in R, G, B for a normal map (A = 1); PD slopes in R, G.
+``bc7xy``  BC7 with x, y only and z rebuilt: an explicit option, never chosen by ``auto``.
 
-Three-channel data (``diff`` maps, ``full`` with z) can go to ``bc1`` and ``bc7`` only.
+Three-channel data (``diff`` maps, normal maps with z) goes to ``bc1`` and ``bc7``.
+
+Stored texels are integers under the codec's value mapping; :func:`decoder_for` decodes them
+exactly (or sampled 8-bit values in [0, 1] with the shaders' arithmetic).
 
 Error metrics: the angle between the decoded and the reference unit normals (mean, p99, max,
 degrees), PSNR per stored channel against the uncompressed 8-bit texels. The p99 is exact
@@ -31,17 +35,20 @@ import etcpak
 import numpy as np
 import texture2ddecoder
 
+from wrinklepipe import codec
 from wrinklepipe.normals import _chunks
 from wrinklepipe.normals import encode as enc
 from wrinklepipe.normals._chunks import map_rows, pool, threads
 
 _F = np.float32
 
-FORMATS: tuple[str, ...] = ("bc5", "bc1", "bc3nm", "bc7")
+FORMATS: tuple[str, ...] = ("bc5", "bc1", "bc3nm", "bc7", "bc7xy")
+#: Formats ``auto`` chooses from (``bc7xy`` only when asked for by name).
+AUTO_FORMATS: tuple[str, ...] = tuple(f for f in FORMATS if not codec.storage_format(f).explicit)
 #: Bytes per 4x4 block.
-BLOCK_BYTES: dict[str, int] = {"bc1": 8, "bc3nm": 16, "bc5": 16, "bc7": 16}
+BLOCK_BYTES: dict[str, int] = {f: codec.storage_format(f).block_bytes for f in FORMATS}
 #: Formats that can hold three channels (x, y, z or a difference map).
-RGB_FORMATS: tuple[str, ...] = ("bc1", "bc7")
+RGB_FORMATS: tuple[str, ...] = tuple(f for f in FORMATS if codec.storage_format(f).rgb)
 
 
 # ------------------------------------------------------------------------------------------
@@ -66,33 +73,32 @@ def pad_to_blocks(values: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
     return np.pad(a, pad, mode="edge"), (h, w)
 
 
+def layout_of(fmt: str, channels: int) -> codec.Layout:
+    """The codec layout ``channels`` components take in ``fmt``: three -> x, y, z in R, G, B;
+    two -> the format's two-component layout (R, G; DXT5nm: A, G)."""
+    f = codec.storage_format(check_format(fmt))
+    if channels == 3:
+        if not f.rgb:
+            raise ValueError(f"{fmt} holds two channels; three-channel data needs bc1 or bc7")
+        return codec.RGB
+    if channels == 2:
+        return f.pair_layout
+    raise ValueError(f"expected 2 or 3 channels, got {channels}")
+
+
 def pack_rgba(q: np.ndarray, fmt: str, out: np.ndarray | None = None) -> np.ndarray:
     """Place 8-bit texels [H, W, 2 or 3] into the RGBA layout ``fmt`` expects [H, W, 4] uint8.
 
-    Two channels (x, y): bc5/bc1/bc7 -> (x, y, 0, 255); bc3nm -> (255, y, 0, x) (DXT5nm).
-    Three channels (bc1/bc7 only): (r, g, b, 255).
+    Two channels (x, y): bc5/bc1/bc7/bc7xy -> (x, y, 0, 255); bc3nm -> (255, y, 0, x) (DXT5nm).
+    Three channels (bc1/bc7 only): (x, y, z, 255).
     """
-    check_format(fmt)
     q = np.asarray(q)
     if q.dtype != np.uint8:
         raise ValueError(f"pack_rgba expects uint8 texels, got {q.dtype}")
-    c = q.shape[-1]
-    if c not in (2, 3):
-        raise ValueError(f"expected 2 or 3 channels, got {c}")
-    if c == 3 and fmt not in RGB_FORMATS:
-        raise ValueError(f"{fmt} holds two channels; three-channel data needs bc1 or bc7")
+    packed = codec.layouts.pack(q, layout_of(fmt, q.shape[-1]), 4)
     if out is None:
-        out = np.empty(q.shape[:-1] + (4,), dtype=np.uint8)
-    if fmt == "bc3nm":
-        out[..., 0] = 255
-        out[..., 1] = q[..., 1]
-        out[..., 2] = 0
-        out[..., 3] = q[..., 0]
-    else:
-        out[..., :c] = q
-        if c == 2:
-            out[..., 2] = 0
-        out[..., 3] = 255
+        return packed
+    out[...] = packed
     return out
 
 
@@ -116,7 +122,7 @@ def encode_bc(rgba: np.ndarray, fmt: str) -> bytes:
         return etcpak.compress_bc1(a, w, h)
     if fmt == "bc3nm":
         return etcpak.compress_bc3(a, w, h)
-    return etcpak.compress_bc7(a, w, h, None)
+    return etcpak.compress_bc7(a, w, h, None)  # bc7 and bc7xy
 
 
 def block_data_size(fmt: str, width: int, height: int) -> int:
@@ -129,6 +135,7 @@ _DECODERS = {
     "bc3nm": texture2ddecoder.decode_bc3,
     "bc5": texture2ddecoder.decode_bc5,
     "bc7": texture2ddecoder.decode_bc7,
+    "bc7xy": texture2ddecoder.decode_bc7,
 }
 
 
@@ -148,7 +155,7 @@ def decode_bc(data: bytes, width: int, height: int, fmt: str) -> np.ndarray:
 
 
 # channel index of x and y in texture2ddecoder's BGRA output, per format
-_BGRA_XY = {"bc5": (2, 1), "bc1": (2, 1), "bc7": (2, 1), "bc3nm": (3, 1)}
+_BGRA_XY = {"bc5": (2, 1), "bc1": (2, 1), "bc7": (2, 1), "bc7xy": (2, 1), "bc3nm": (3, 1)}
 
 
 def unpack_u8(
@@ -366,29 +373,37 @@ BLEND_WEIGHTS: tuple[float, ...] = (0.5, 1.0)
 
 
 def decoder_for(
-    encoding: str, scale: float = 1.0, gain: float = 1.0, base: np.ndarray | None = None
+    encoding: str,
+    scale: float = 1.0,
+    gain: float = 1.0,
+    base: np.ndarray | None = None,
+    version: int | None = codec.CURRENT_VERSION,
 ) -> Callable[[np.ndarray, slice], np.ndarray]:
-    """``f(values01 chunk, rows) -> normals chunk`` for an encoding (diff needs ``base``)."""
-    if encoding == "pd":
-        return lambda v, rows: enc.decode_pd(v, scale)
-    if encoding == "full":
-        return lambda v, rows: enc.decode_full(v)
-    if encoding == "diff":
+    """``f(texels chunk, rows) -> normals chunk`` for an encoding (diff needs ``base``).
+
+    Integer texels (components x, y[, z]) are decoded exactly by :func:`wrinklepipe.codec.decode`
+    under the mapping ``version``; float texels are sampled 8-bit values in [0, 1] and decoded
+    with the shaders' arithmetic (:func:`wrinklepipe.codec.decode_sampled`).
+    """
+    e = codec.encoding(encoding)
+    if e.name == "composite":
+        raise ValueError("composite maps are checked as full normal maps")
+    param = scale if e.name == "pd" else gain
+    if e.name == "diff":
         if base is None:
             raise ValueError("decoding a diff map needs the base normals")
         b = np.asarray(base, _F)
 
-        def dec(v: np.ndarray, rows: slice) -> np.ndarray:
-            from wrinklepipe.model import normalize
+    def dec(v: np.ndarray, rows: slice) -> np.ndarray:
+        v = np.asarray(v)
+        where = codec.RGB if v.shape[-1] == 3 else codec.RG
+        if v.dtype.kind == "f":
+            x = codec.decode_sampled(e, v, where, bits=8, param=param, version=version)
+        else:
+            x = codec.decode(e, v, where, param=param, version=version)
+        return e.to_normal(x, b[rows] if e.name == "diff" else None)
 
-            return normalize(b[rows] + enc.decode_diff(v, gain))
-
-        return dec
-    raise ValueError(f"unknown encoding {encoding!r}")
-
-
-def _u8_to_values01(q: np.ndarray) -> np.ndarray:
-    return q.astype(_F) * _F(1.0 / 255.0)
+    return dec
 
 
 def compress_and_check(
@@ -403,9 +418,11 @@ def compress_and_check(
 ) -> FormatCheck:
     """Compress 8-bit stored texels, decode them independently, measure the damage.
 
-    stored_u8: [H, W, 2 or 3] uint8 texels of the map (x, y[, z]) as an 8-bit file would hold.
+    stored_u8: [H, W, 2 or 3] uint8 texels of the map (x, y[, z]) as an 8-bit file would hold;
+               three components go to x, y, z in R, G, B (bc1 / bc7), two to the format's
+               two-component layout.
     reference: [H, W, 3] float unit normals the map is meant to reproduce.
-    decode:    values01 chunk -> normals chunk (see :func:`decoder_for`).
+    decode:    texels chunk -> normals chunk (see :func:`decoder_for`).
     blend:     optional ``f(decoded normals, weight) -> (blended, reference blended)``.
     Sizes that are not multiples of 4 are padded by edge replication (``pad``) or refused.
     """
@@ -427,15 +444,14 @@ def compress_and_check(
     angles = np.empty((h, w), dtype=_F)
     angles_c = np.empty((h, w), dtype=_F)
     dec_u8 = np.empty((h, w, c), dtype=np.uint8) if keep_decoded else None
-    lut = np.arange(256, dtype=_F) * _F(1.0 / 255.0)
 
     def work(rows: slice) -> None:
         d8 = unpack_u8(bgra[rows], fmt, c, bgra=True)
         if dec_u8 is not None:
             dec_u8[rows] = d8
-        n_dec = decode(lut[d8], rows)
+        n_dec = decode(d8, rows)
         angles[rows] = angle_deg(n_dec, ref[rows])
-        n_raw = decode(lut[q[rows]], rows)
+        n_raw = decode(q[rows], rows)
         angles_c[rows] = angle_deg(n_dec, n_raw)
 
     map_rows(work, h, w)
@@ -455,7 +471,7 @@ def compress_and_check(
         decoded=dec_u8,
     )
     if blend is not None:
-        n_all = decode(lut[decoded], slice(0, h))
+        n_all = decode(decoded, slice(0, h))
         for wgt in BLEND_WEIGHTS:
             got, want = blend(n_all, wgt)
             check.blended[f"{wgt:g}"] = angular_error_stats(got, want)
@@ -484,6 +500,7 @@ _PACK = {
     "bc5": (0, 1, 0xFF000000),
     "bc1": (0, 1, 0xFF000000),
     "bc7": (0, 1, 0xFF000000),
+    "bc7xy": (0, 1, 0xFF000000),
     "bc3nm": (3, 1, 0x000000FF),
 }
 
@@ -512,8 +529,8 @@ def _half_planes(nc: np.ndarray) -> np.ndarray:
     return p
 
 
-def _byte_plane(v: np.ndarray, byte: int, out: np.ndarray) -> np.ndarray:
-    """``float32(byte ``byte`` of each uint32 texel) - 127.5`` into ``out`` (cheapest path
+def _byte_plane(v: np.ndarray, byte: int, out: np.ndarray, centre: float) -> np.ndarray:
+    """``float32(byte ``byte`` of each uint32 texel) - centre`` into ``out`` (cheapest path
     found per byte: narrowing casts truncate, so no masking is needed)."""
     shape = v.shape
     if byte == 1:
@@ -527,18 +544,21 @@ def _byte_plane(v: np.ndarray, byte: int, out: np.ndarray) -> np.ndarray:
         t8 = _ws("u8", shape, np.uint8)
         np.copyto(t8, t32, casting="unsafe")
         np.copyto(out, t8, casting="unsafe")
-    out -= _F(127.5)
+    out -= _F(centre)
     return out
 
 
-def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str) -> tuple[np.ndarray, int]:
+def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str, version: int) -> tuple[np.ndarray, int]:
     """8-bit PD texels of normal planes, packed as RGBA8 for ``fmt``; clipped count.
 
-    The RGBA array is a per-thread scratch buffer: use it before the next call.
+    ``q = floor(c + h t + 0.5)`` with the mapping's centre ``c`` and steps ``h``, t clipped to
+    [-1, 1] (as :func:`wrinklepipe.normals.encode.encode_pd_u8`). The RGBA array is a
+    per-thread scratch buffer: use it before the next call.
     """
+    c, half = codec.mapping(version).centre(8)
     hx, hy, hz = p
     shape = hx.shape
-    k = _F(127.5 / s)
+    k = _F(half / s)
     r = _ws("f0", shape)
     if float(hz.min()) <= 0.0:
         np.maximum(hz, _F(5e-31), out=r)
@@ -547,7 +567,7 @@ def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str) -> tuple[np.ndarray, int]:
         np.divide(k, hz, out=r)
     ux = np.multiply(hx, r, out=_ws("f1", shape))
     uy = np.multiply(hy, r, out=r)
-    lim = _F(127.5)
+    lim = _F(half)
     if max(float(ux.max()), -float(ux.min()), float(uy.max()), -float(uy.min())) <= lim:
         clipped = 0  # the common case, from four reductions
     else:
@@ -555,11 +575,12 @@ def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str) -> tuple[np.ndarray, int]:
         b = np.abs(uy, out=_ws("f3", shape))
         np.maximum(a, b, out=a)
         clipped = int(np.count_nonzero(np.greater(a, lim, out=_ws("m", shape, np.bool_))))
-    # quantise: floor(clip(u + 128, 0, 255)) == round-half-up of 127.5 + u, clipped
+    # quantise: floor(clip(c + u + 0.5, c - h, c + h + 0.5)), capped at c + h
     for u in (ux, uy):
-        u += _F(128.0)
-        np.clip(u, _F(0.0), _F(255.0), out=u)
+        u += _F(c + 0.5)
+        np.clip(u, _F(c - half), _F(c + half + 0.5), out=u)
         np.floor(u, out=u)
+        np.minimum(u, _F(c + half), out=u)
     px, py, const = _PACK[fmt]
     lo, hi = (ux, uy) if px < py else (uy, ux)
     hi *= _F(1 << (abs(px - py) * 8))
@@ -574,21 +595,25 @@ def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str) -> tuple[np.ndarray, int]:
 
 
 def _pd_measure_chunk(
-    raw: np.ndarray, p: np.ndarray, s: float, fmt: str, out: np.ndarray
+    raw: np.ndarray, p: np.ndarray, s: float, fmt: str, out: np.ndarray, version: int
 ) -> np.ndarray:
     """Half-angles ``asin(|n - ref| / 2)`` of decoded PD texels (BGRA) against normal planes.
 
-    With ``u = q - 127.5`` (texel units) the decoded slope is ``u t`` (``t = 2 s / 255``), so
-    ``n = (u_x, u_y, 1 / t) / sqrt(u_x^2 + u_y^2 + 1 / t^2)``.
+    With ``u = q - c`` (texel units; v2 clamps at -h like the codec) the decoded slope is
+    ``u t`` (``t = s / h``), so ``n = (u_x, u_y, 1 / t) / sqrt(u_x^2 + u_y^2 + 1 / t^2)``.
     """
+    c, half = codec.mapping(version).centre(8)
     rx, ry, rz = p
     shape = rx.shape
     ix, iy = _BGRA_XY[fmt]
-    kk = _F((255.0 / (2.0 * s)) ** 2)  # 1 / t^2
-    kz = _F(255.0 / (2.0 * s))  # 1 / t
+    kk = _F((half / s) ** 2)  # 1 / t^2
+    kz = _F(half / s)  # 1 / t
     v = raw.view(np.uint32).reshape(shape)
-    dx = _byte_plane(v, ix, _ws("f0", shape))
-    dy = _byte_plane(v, iy, _ws("f1", shape))
+    dx = _byte_plane(v, ix, _ws("f0", shape), c)
+    dy = _byte_plane(v, iy, _ws("f1", shape), c)
+    if version >= 2:
+        np.maximum(dx, _F(-half), out=dx)
+        np.maximum(dy, _F(-half), out=dy)
     inv = np.multiply(dx, dx, out=_ws("f2", shape))
     a = np.multiply(dy, dy, out=_ws("f3", shape))
     inv += a
@@ -613,24 +638,26 @@ def _pd_measure_chunk(
 
 
 def _pd_chunk(
-    nc: np.ndarray, s: float, fmt: str, width: int, out: np.ndarray
+    nc: np.ndarray, s: float, fmt: str, width: int, out: np.ndarray, version: int
 ) -> tuple[bytes, int, np.ndarray]:
     """One row chunk of the fused path: returns (block data, clipped texels, half-angles)."""
     p = _half_planes(nc)
-    rgba, clipped = _pd_pack_chunk(p, s, fmt)
+    rgba, clipped = _pd_pack_chunk(p, s, fmt, version)
     data = encode_bc(rgba, fmt)
     raw = decode_bc_bgra(data, width, nc.shape[0], fmt)
-    return data, clipped, _pd_measure_chunk(raw, p, s, fmt, out)
+    return data, clipped, _pd_measure_chunk(raw, p, s, fmt, out, version)
 
 
-def pd_pack(normals: np.ndarray, scale: float, fmt: str = "bc5") -> tuple[np.ndarray, int]:
+def pd_pack(
+    normals: np.ndarray, scale: float, fmt: str = "bc5", version: int = codec.CURRENT_VERSION
+) -> tuple[np.ndarray, int]:
     """Unit normals [H, W, 3] (H, W multiples of 4) -> RGBA8 PD texels for ``fmt``; clipped."""
     n = np.asarray(normals, dtype=_F)
     h, w = n.shape[:2]
     rgba = np.empty((h, w, 4), dtype=np.uint8)
 
     def work(rows: slice) -> int:
-        packed, clipped = _pd_pack_chunk(_half_planes(n[rows]), float(scale), fmt)
+        packed, clipped = _pd_pack_chunk(_half_planes(n[rows]), float(scale), fmt, version)
         rgba[rows] = packed
         return clipped
 
@@ -638,7 +665,11 @@ def pd_pack(normals: np.ndarray, scale: float, fmt: str = "bc5") -> tuple[np.nda
 
 
 def pd_decode_error(
-    bgra: np.ndarray, normals: np.ndarray, scale: float, fmt: str = "bc5"
+    bgra: np.ndarray,
+    normals: np.ndarray,
+    scale: float,
+    fmt: str = "bc5",
+    version: int = codec.CURRENT_VERSION,
 ) -> ErrorStats:
     """Angular error of decoded PD texels (texture2ddecoder's BGRA) against unit normals."""
     n = np.asarray(normals, dtype=_F)
@@ -647,7 +678,7 @@ def pd_decode_error(
     half = np.empty((h, w), dtype=_F)
 
     def work(rows: slice) -> None:
-        _pd_measure_chunk(raw[rows], _half_planes(n[rows]), float(scale), fmt, half[rows])
+        _pd_measure_chunk(raw[rows], _half_planes(n[rows]), float(scale), fmt, half[rows], version)
 
     map_rows(work, h, w)
     return error_stats(half, unit=360.0 / math.pi)
@@ -673,6 +704,7 @@ def pd_compress_check(
     fmt: str = "bc5",
     pad: bool = True,
     angles_out: np.ndarray | None = None,
+    version: int = codec.CURRENT_VERSION,
 ) -> PDCheck:
     """PD-encode unit normals [H, W, 3] to 8 bits, block-compress, decode, measure.
 
@@ -699,7 +731,7 @@ def pd_compress_check(
     half = np.empty((hp, wp), dtype=_F)
 
     def work(rows: slice) -> tuple[bytes, int, float]:
-        data, clipped, ang = _pd_chunk(n[rows], s, fmt, wp, half[rows])
+        data, clipped, ang = _pd_chunk(n[rows], s, fmt, wp, half[rows], version)
         return data, clipped, float(ang.sum())  # float32 pairwise sum, while in cache
 
     results = map_rows(work, hp, wp)

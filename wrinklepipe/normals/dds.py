@@ -8,6 +8,10 @@ container names ``bc1``, ``bc3``, ``bc5``, ``bc7`` (a DXT5nm normal map is ``bc3
   that older engines and tools want (``dx10=False``). BC7 has no FourCC.
 - ``bc1`` and ``bc3`` default to the legacy FourCCs ``DXT1`` / ``DXT5`` (what every engine
   reads); ``dx10=True`` writes ``DXGI_FORMAT_BC1_UNORM`` (71) / ``BC3_UNORM`` (77) instead.
+- Storage format names are accepted too (``bc3nm`` -> ``bc3``, ``bc7xy`` -> ``bc7``); the DX10
+  header then records the layout's alpha mode (``miscFlags2``): custom (4) for DXT5nm, whose
+  alpha holds x, opaque (3) for BC1 / BC7 normal maps. Which channels hold x, y and z is
+  recorded beside the file (the glTF extension / USD schema), DDS has no field for it.
 
 The reader checks the size against a pixel cap before it allocates anything, and that the file
 holds all the bytes its header promises.
@@ -19,6 +23,7 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wrinklepipe import codec
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS
 
@@ -63,8 +68,24 @@ def mip_dims(width: int, height: int, count: int) -> list[tuple[int, int]]:
 
 
 def container_format(fmt: str) -> str:
-    """Map a compression format name (``bc3nm`` is DXT5nm data) to the container name."""
-    return "bc3" if fmt == "bc3nm" else fmt
+    """Map a storage format name (``bc3nm`` is DXT5nm data, ``bc7xy`` two-channel BC7) to the
+    container's block format name (:mod:`wrinklepipe.codec.formats`)."""
+    if fmt in BLOCK_BYTES:
+        return fmt
+    try:
+        container = codec.storage_format(fmt).container
+    except ValueError:
+        return fmt
+    return container or fmt
+
+
+def alpha_mode(fmt: str) -> int:
+    """DX10 ``miscFlags2`` alpha mode of a storage format: 4 (custom) for DXT5nm, whose alpha
+    holds x; 3 (opaque) for BC1 / BC7 (A = 1); 0 (unknown) for BC5, which has no alpha."""
+    try:
+        return codec.storage_format(fmt).dds_alpha_mode
+    except ValueError:
+        return 0
 
 
 def dds_bytes(
@@ -75,6 +96,7 @@ def dds_bytes(
     ``dx10=None`` picks the engine-friendly default (DX10 header for bc5/bc7, FourCC for
     bc1/bc3). Level sizes are checked against the format.
     """
+    mode = alpha_mode(fmt)
     fmt = container_format(fmt)
     if fmt not in BLOCK_BYTES:
         raise ValueError(f"DDS writer supports bc1, bc3, bc5, bc7; got {fmt!r}")
@@ -115,7 +137,7 @@ def dds_bytes(
     )
     parts = [MAGIC, header]
     if use_dx10:
-        parts.append(struct.pack("<5I", DXGI[fmt], D3D10_RESOURCE_DIMENSION_TEXTURE2D, 0, 1, 0))
+        parts.append(struct.pack("<5I", DXGI[fmt], D3D10_RESOURCE_DIMENSION_TEXTURE2D, 0, 1, mode))
     parts.extend(levels)
     return b"".join(parts)
 

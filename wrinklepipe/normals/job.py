@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from wrinklepipe import codec
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS
 from wrinklepipe.model import normal_to_pd, normalize, pd_to_normal
@@ -21,13 +22,13 @@ from wrinklepipe.normals import dds as dds_mod
 from wrinklepipe.normals import encode as enc
 from wrinklepipe.normals import footprint as fp
 from wrinklepipe.normals import ktx2 as ktx2_mod
-from wrinklepipe.normals import resample
+from wrinklepipe.normals import mips, resample
 from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
 
 _F = np.float32
 
 ENCODINGS = ("pd", "diff", "full")
-OUTPUT_FORMATS = ("bc5", "bc1", "bc3nm", "bc7", "uastc", "png8", "png16", "exr", "auto")
+OUTPUT_FORMATS = ("bc5", "bc1", "bc3nm", "bc7", "bc7xy", "uastc", "png8", "png16", "exr", "auto")
 #: BC7 (bc7enc) is slow: above this many texels ``--format auto`` leaves it out.
 AUTO_BC7_MAX_TEXELS = 1 << 20
 
@@ -108,31 +109,45 @@ def _resolve_format(out: Path, fmt: str | None) -> tuple[str, str]:
 def _stored(
     encoding: str, wrinkle: np.ndarray, base: np.ndarray | None, scale: float, gain: float | str
 ) -> tuple[np.ndarray, dict[str, Any], np.ndarray]:
-    """values01 [H, W, C] of the map, the encoding parameters, and the normals that the
-    stored map must decode to (pd with a base: the wrinkle-only normal; else the map)."""
+    """The map's quantity (:mod:`wrinklepipe.codec.encodings`: pd slopes, diff deltas, unit
+    normals), the encoding parameters, and the normals that the stored map must decode to (pd
+    with a base: the wrinkle-only normal; else the map)."""
     if encoding == "pd":
         slopes = enc.normal_slopes(wrinkle)
         if base is not None:
             slopes = slopes - enc.normal_slopes(base)  # wrinkle-only slopes (PD is linear)
-        n_store = pd_to_normal(np.nan_to_num(slopes, posinf=1e6, neginf=-1e6))
-        r = enc.encode_pd(n_store, scale)
-        params = {"scale": r.scale, "clipped": r.clipped, "cone_deg": round(r.cone_deg, 6)}
-        return r.values01, params, n_store
+        slopes = np.nan_to_num(slopes, posinf=1e6, neginf=-1e6)
+        n_store = pd_to_normal(slopes)
+        s = float(scale)
+        params = {
+            "scale": s,
+            "clipped": enc.pd_clipped_count(n_store, s),
+            "cone_deg": round(enc.cone_deg(s), 6),
+            "mapping": codec.CURRENT_VERSION,
+        }
+        return slopes, params, n_store
     if encoding == "diff":
-        d = enc.encode_diff(wrinkle, base, gain)
-        return d.values01, {"gain": d.gain, "clipped": d.clipped}, wrinkle
-    return enc.encode_full(wrinkle, 3), {}, wrinkle
+        g = enc.auto_diff_gain(wrinkle, base) if gain == "auto" else float(gain)
+        if not g > 0 or not math.isfinite(g):
+            raise ValueError(f"diff gain must be a positive number, got {gain!r}")
+        delta = np.asarray(wrinkle, _F) - np.asarray(base, _F)
+        _, clipped = codec.DIFF.to_signed(delta, g)
+        params = {"gain": g, "clipped": clipped, "mapping": codec.CURRENT_VERSION}
+        return delta, params, wrinkle
+    return normalize(wrinkle), {}, wrinkle
 
 
-def _decoded_normals(
-    encoding: str, values01: np.ndarray, params: dict[str, Any], base: np.ndarray | None
+def _param(encoding: str, params: dict[str, Any]) -> float:
+    return float(params.get("scale" if encoding == "pd" else "gain", 1.0))
+
+
+def _components(
+    encoding: str, x: np.ndarray, fmt: str, params: dict[str, Any], bits: int = 8
 ) -> np.ndarray:
-    """What the stored values decode to (comparable with ``_stored``'s third result)."""
-    if encoding == "pd":
-        return enc.decode_pd(values01, params["scale"])
-    if encoding == "diff":
-        return normalize(base + enc.decode_diff(values01, params["gain"]))
-    return enc.decode_full(values01)
+    """Texel components [H, W, 2 or 3] of the quantity in ``fmt``'s layout (codec)."""
+    lay = codec.storage_format(fmt).layout_for(encoding)
+    packed, _ = codec.encode(encoding, x, lay, param=_param(encoding, params), bits=bits)
+    return codec.layouts.unpack(packed, lay)
 
 
 def _read(path: Path, o: EncodeOptions) -> NormalMap:
@@ -189,9 +204,12 @@ def encode_normals(
     if o.encoding == "pd" and scale == "auto":
         slopes = enc.normal_slopes(w_n) - (enc.normal_slopes(b_n) if b_n is not None else 0)
         scale = enc.auto_pd_scale(np.nan_to_num(slopes, posinf=1e6, neginf=-1e6))
-    values, params, truth = _stored(
-        o.encoding, w_n, b_n, float(scale) if scale != "auto" else 1.0, o.gain
-    )
+    try:
+        x, params, truth = _stored(
+            o.encoding, w_n, b_n, float(scale) if scale != "auto" else 1.0, o.gain
+        )
+    except ValueError as exc:
+        raise input_error(src, str(exc)) from None
     report: dict[str, Any] = {
         "input": nm.to_json(),
         "base": base_nm.to_json() if base_nm else None,
@@ -204,9 +222,8 @@ def encode_normals(
             f"{params['clipped']} texels were outside the encodable range and were clipped"
         )
 
-    channels = 2 if o.encoding == "pd" else 3
     if fmt in ("png8", "png16", "exr"):
-        data, err = _plain(values, channels, fmt, container, o.encoding, params, b_n, truth)
+        data, err = _plain(x, fmt, container, o.encoding, params, b_n, truth)
         report["format"] = {"name": fmt, "error": err.to_json(), "bytes": len(data)}
         ok = budget.ok(err)
         report["verdict"] = "pass" if ok else "fail"
@@ -216,10 +233,7 @@ def encode_normals(
         report["notes"] = notes
         return EncodeResult(data, report, ok, notes)
 
-    # --- block formats
-    if o.encoding == "full":
-        values = values[..., :2]  # x, y; z is rebuilt
-        channels = 2
+    # --- block formats: each format stores the quantity in its own layout (codec)
     padded = bool(h % 4 or w % 4)
     if padded and not o.pad:
         raise input_error(
@@ -229,12 +243,12 @@ def encode_normals(
         )
     if padded:
         notes.append(f"{w} x {h} padded to multiples of 4 by repeating the edge texels")
-    q = enc.quantize(values, 8)
     dec = cmp.decoder_for(o.encoding, params.get("scale", 1.0), params.get("gain", 1.0), b_n)
     blend = _blend_fn(o.encoding, params, b_n, truth)
     if fmt == "uastc":
         from wrinklepipe.normals import uastc
 
+        q = _components(o.encoding, x, "uastc", params)
         try:
             check, data = uastc.uastc_check(q, truth, dec, budget, mips=o.mips)
         except ValueError as exc:
@@ -246,16 +260,19 @@ def encode_normals(
         report["footprint"] = fp.footprint([(out.name, "bc5", w, h, o.mips)]).to_json()
         report["notes"] = notes + ["uastc: GPU footprint as 8 bpp (transcoded to BC7/ASTC)"]
         return EncodeResult(data, report, ok, report["notes"])
+    if fmt != "auto" and not codec.storage_format(fmt).holds(o.encoding):
+        raise input_error(out, f"a {o.encoding} map has three channels; {fmt} holds two")
     candidates = (
         [fmt]
         if fmt != "auto"
-        else [f for f in cmp.FORMATS if channels == 2 or f in cmp.RGB_FORMATS]
+        else [f for f in cmp.AUTO_FORMATS if codec.storage_format(f).holds(o.encoding)]
     )
     if fmt == "auto" and h * w > AUTO_BC7_MAX_TEXELS and "bc7" in candidates:
         candidates.remove("bc7")
         notes.append("bc7 left out of --format auto: too slow above 1 Mpx")
     checks = []
     for f in candidates:
+        q = _components(o.encoding, x, f, params)
         checks.append(
             cmp.compress_and_check(
                 q, truth, f, dec, budget=budget, pad=True, blend=blend, keep_decoded=False
@@ -267,16 +284,17 @@ def encode_normals(
         notes.append(f"no format meets the budget; wrote the best one ({chosen.format})")
     levels = [chosen.data]
     if o.mips:
-        levels += _mip_levels(o.encoding, values, params, chosen.format, b_n)
-    cfmt = dds_mod.container_format(chosen.format)
+        levels += mips.block_levels(o.encoding, x, chosen.format, _param(o.encoding, params))
+    layout = codec.storage_format(chosen.format).layout_for(o.encoding).name
     if container == "dds":
-        data = dds_mod.dds_bytes(cfmt, w, h, levels, dx10=o.dx10)
+        data = dds_mod.dds_bytes(chosen.format, w, h, levels, dx10=o.dx10)
     else:
-        data = ktx2_mod.ktx2_bytes(cfmt, w, h, levels)
+        data = ktx2_mod.ktx2_bytes(chosen.format, w, h, levels, layout=layout)
     ok = chosen.verdict == "pass"
     report["format"] = {
         "name": chosen.format,
         "container": container,
+        "layout": layout,
         "levels": len(levels),
         "bytes": len(data),
     }
@@ -308,8 +326,7 @@ def _blend_fn(encoding: str, params: dict[str, Any], base: np.ndarray | None, tr
 
 
 def _plain(
-    values: np.ndarray,
-    channels: int,
+    x: np.ndarray,
     fmt: str,
     container: str,
     encoding: str,
@@ -317,42 +334,30 @@ def _plain(
     base: np.ndarray | None,
     truth: np.ndarray,
 ) -> tuple[bytes, cmp.ErrorStats]:
-    """Bytes of a PNG/TIFF/EXR file of the map and the error of its stored values."""
+    """Bytes of a PNG/TIFF/EXR file of the map (RGB: pd keeps B = 0) and the error of its
+    stored texels."""
     import tempfile
 
     from wrinklepipe.io.images import write_image
 
-    v = values
-    if channels == 2:
-        v = np.concatenate([v, np.zeros(v.shape[:2] + (1,), _F)], axis=-1)  # x, y, 0
+    f = codec.storage_format(fmt)
+    texels, _ = codec.encode(encoding, x, f, param=_param(encoding, params), channels=3)
     bits: int | str = {"png8": 8, "png16": 16, "exr": "half"}[fmt]
     if fmt == "exr":
-        stored = v.astype(np.float16).astype(_F)
+        texels = texels.astype(np.float16).astype(_F)  # what the half-float file holds
+        values = texels
     else:
-        stored = enc.dequantize(enc.quantize(v, int(bits)))
-    decoded = _decoded_normals(encoding, stored[..., :channels], params, base)
+        values = codec.dequantize_unorm(texels)  # re-quantised exactly by the writer
+    e = codec.encoding(encoding)
+    decoded = e.to_normal(
+        codec.decode(e, texels, f, param=_param(encoding, params)),
+        base if encoding == "diff" else None,
+    )
     err = cmp.angular_error_stats(decoded, truth)
     with tempfile.TemporaryDirectory() as tmp:
         p = Path(tmp) / f"out.{container}"
-        write_image(p, v if fmt == "exr" else v, bits=bits)
+        write_image(p, values, bits=bits)
         return p.read_bytes(), err
-
-
-def _mip_levels(
-    encoding: str, values01: np.ndarray, params: dict[str, Any], fmt: str, base: np.ndarray | None
-) -> list[bytes]:
-    """Block data of mip levels 1.. (filtered in a linear space: PD slopes, diff values)."""
-    out = []
-    chain = resample.mip_chain(values01, min_size=1)[1:]
-    for lvl in chain:
-        v = lvl
-        if encoding == "full":  # renormalise the filtered vectors, store x, y
-            n = enc.decode_full(np.clip(lvl, 0.0, 1.0))
-            v = enc.encode_full(n, 2)
-        q = enc.quantize(np.clip(v, 0.0, 1.0), 8)
-        qp, _ = cmp.pad_to_blocks(q)
-        out.append(cmp.encode_bc(cmp.pack_rgba(qp, fmt), fmt))
-    return out
 
 
 def _auto_size(

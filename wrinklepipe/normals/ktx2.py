@@ -9,8 +9,9 @@
 - a Basic Data Format Descriptor (Khronos Data Format 1.3, version 2) with the BC colour model,
   BT.709 primaries, *linear* transfer (normal maps are data), 4x4 texel blocks and one sample
   per BC sub-block (BC5: red and green; BC3: alpha then colour);
-- a key/value block with ``KTXorientation = rd`` (rows run down, glTF's UV origin) and
-  ``KTXwriter``;
+- a key/value block with ``KTXorientation = rd`` (rows run down, glTF's UV origin),
+  ``KTXwriter`` and, when the layout is given, ``KTXswizzle`` (``rgb1`` for x, y, z in R, G, B;
+  ``rg01`` for BC5's x, y; ``ag01`` for DXT5nm's x in A, y in G);
 - the mip levels, smallest first in the file, each aligned to ``lcm(block bytes, 4)``.
 
 Formats: ``bc1`` (VK_FORMAT_BC1_RGB_UNORM_BLOCK = 131), ``bc3`` (BC3_UNORM = 137), ``bc5``
@@ -23,6 +24,7 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wrinklepipe import codec
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS
 from wrinklepipe.normals.dds import BLOCK_BYTES, container_format, level_size, mip_dims
@@ -93,8 +95,13 @@ def _align(n: int, a: int) -> int:
     return (n + a - 1) // a * a
 
 
-def ktx2_bytes(fmt: str, width: int, height: int, levels: list[bytes]) -> bytes:
-    """A complete KTX2 file with ``levels`` (level 0 first) of BC block data."""
+def ktx2_bytes(
+    fmt: str, width: int, height: int, levels: list[bytes], layout: str | None = None
+) -> bytes:
+    """A complete KTX2 file with ``levels`` (level 0 first) of BC block data.
+
+    ``layout`` (a codec layout: ``rgb``, ``rg``, ``ag``) writes the ``KTXswizzle`` key that
+    says where the logical R, G, B, A come from (``rgb1``, ``rg01``, ``ag01``)."""
     fmt = container_format(fmt)
     if fmt not in VK_FORMAT:
         raise ValueError(f"KTX2 writer supports bc1, bc3, bc5, bc7; got {fmt!r}")
@@ -106,7 +113,10 @@ def ktx2_bytes(fmt: str, width: int, height: int, levels: list[bytes]) -> bytes:
             raise ValueError(f"level {i} ({w} x {h}) must hold {need} bytes, got {len(data)}")
     n = len(levels)
     dfd = data_format_descriptor(fmt)
-    kvd = _kvd({"KTXorientation": "rd", "KTXwriter": WRITER})
+    pairs = {"KTXorientation": "rd", "KTXwriter": WRITER}
+    if layout is not None:
+        pairs["KTXswizzle"] = codec.layout(layout).swizzle
+    kvd = _kvd(pairs)
     dfd_off = 80 + 24 * n
     kvd_off = dfd_off + len(dfd)
     end = kvd_off + len(kvd)

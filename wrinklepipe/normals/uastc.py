@@ -89,9 +89,8 @@ def uastc_check(
     rgba[..., 3] = 255
     ktx = encode_uastc(rgba, mips=mips)
     dec = decode_uastc(ktx)[..., :c]
-    lut = np.arange(256, dtype=np.float32) / np.float32(255.0)
-    n_dec = decode(lut[dec], slice(0, h))
-    n_raw = decode(lut[q], slice(0, h))
+    n_dec = decode(np.ascontiguousarray(dec), slice(0, h))
+    n_raw = decode(q, slice(0, h))
     check = cmp.FormatCheck(
         format="uastc",
         width=w,

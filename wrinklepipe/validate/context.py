@@ -97,25 +97,36 @@ class Context:
     metrics: dict[str, object] = field(default_factory=dict)
 
     _values: dict[str, np.ndarray | None] = field(default_factory=dict)
+    _texels: dict[str, np.ndarray | None] = field(default_factory=dict)
 
     @property
     def asset(self) -> WrinkleAsset:
         return self.inp.asset
 
     def values(self, tex: Texture, apply_srgb: bool = False) -> np.ndarray | None:
-        """Stored values of a texture (green flipped for a normal map declared DirectX, so every
-        consumer sees +Y), or None when its bytes cannot be decoded."""
+        """Stored values of a texture in [0, 1] as a sampler returns them (no convention flip:
+        that happens after decoding), or None when its bytes cannot be decoded."""
         key = f"{tex.name}|{apply_srgb}"
         if key not in self._values:
             try:
-                v = tx.decode_values(tex, apply_srgb)
-                if tex.convention == "directx" and tex.role in ("base", "state"):
-                    v = v.copy()  # read as declared: +Y down, so y = -(2g - 1)
-                    v[..., 1] = 1.0 - v[..., 1]
-                self._values[key] = v
+                self._values[key] = tx.decode_values(tex, apply_srgb)
             except (ValueError, KeyError):
                 self._values[key] = None
         return self._values[key]
+
+    def texels(self, tex: Texture) -> np.ndarray | None:
+        """Level-0 integer (or float) texels of a texture, or None when undecodable."""
+        if tex.name not in self._texels:
+            try:
+                self._texels[tex.name] = tx.texels(tex)
+            except (ValueError, KeyError):
+                self._texels[tex.name] = None
+        return self._texels[tex.name]
+
+    @staticmethod
+    def flips(tex: Texture) -> bool:
+        """A normal or wrinkle map declared DirectX: its y is negated after decoding."""
+        return tex.convention == "directx" and tex.role in ("base", "state")
 
     # ---------------------------------------------------------------- shipped, decoded
     @cached_property
@@ -125,16 +136,20 @@ class Context:
 
     @cached_property
     def shipped_base(self) -> np.ndarray | None:
-        """Unit normals of the shipped base ``[H, W, 3]`` (None without a usable texture)."""
+        """Unit normals of the shipped base ``[H, W, 3]`` (None without a usable texture),
+        decoded exactly from its texels by the codec."""
         t = self.base_tex
         if t is None:
             return None
-        v = self.values(t)
-        return None if v is None else tx.values_to_normals(v, tx.xy_layout(t))
+        q = self.texels(t)
+        if q is None:
+            return None
+        return tx.decode_texels(q, "base", tx.xy_layout(t), 1.0, flip_y=self.flips(t))
 
     @cached_property
     def shipped_states(self) -> list[np.ndarray] | None:
-        """Each state in combine's representation (None if any is missing or undecodable)."""
+        """Each state in combine's representation (None if any is missing or undecodable),
+        decoded exactly from its texels by the codec under the texture's mapping version."""
         a = self.asset
         if a.encoding not in model.ENCODINGS:
             return None
@@ -142,11 +157,15 @@ class Context:
         for t in self.inp.state_textures():
             if t is None:
                 return None
-            v = self.values(t)
-            if v is None:
+            q = self.texels(t)
+            if q is None:
                 return None
             try:
-                out.append(tx.decode_state(v, a.encoding, tx.xy_layout(t), a.pd_scale))
+                out.append(
+                    tx.decode_texels(
+                        q, a.encoding, tx.xy_layout(t), a.pd_scale, t.mapping, self.flips(t)
+                    )
+                )
             except ValueError:
                 return None
         return out

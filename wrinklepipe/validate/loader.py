@@ -170,10 +170,11 @@ def input_from_package(
     pkg: Any, path: str, kind: str, file_of: dict[str, str] | None = None
 ) -> ValidationInput:
     """A :class:`ValidationInput` from a :class:`wrinklepipe.io.package.WrinklePackage`."""
-    from wrinklepipe.io.package import asset_from_package
+    from wrinklepipe.io.package import asset_from_package, mapping_version
 
     asset = _guard(lambda: asset_from_package(pkg), Path(path), "the wrinkle data")
     meta = pkg.meta
+    version = _guard(lambda: mapping_version(meta), Path(path), "the mapping version")
     state_of = {s["texture"]: s["name"] for s in meta.get("states", [])}
     mask_names = list(meta.get("masks", {}).get("textures", []))
     textures = []
@@ -198,6 +199,7 @@ def input_from_package(
                 pointer="" if t.name in file_of else f"textures/{t.name}",
                 state=state_of.get(t.name, ""),
                 layout=layout if px.shape[-1] >= 3 else "rg",
+                mapping=version if role == "state" else 1,
             )
         )
     table = []
@@ -544,6 +546,7 @@ def _bundle_parts(inp: ValidationInput) -> tuple[dict[str, Any], dict[str, np.nd
                 "state": t.state,
                 "convention": t.convention,
                 "layout": t.layout,
+                **({"mapping": t.mapping} if t.mapping != 1 else {}),  # absent: v1
             }
             for t in inp.textures
         ],

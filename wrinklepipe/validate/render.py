@@ -337,11 +337,16 @@ class Samples:
 def sample_reference(ctx: Context, uv: np.ndarray) -> Samples:
     inp, a = ctx.inp, ctx.asset
     bt = ctx.base_tex
-    base = tx.values_to_normals(tx.bilinear(ctx.values(bt), uv), tx.xy_layout(bt))
+    # filter the stored values, then decode (as the sampler and the shader do)
+    base = tx.values_to_normals(tx.bilinear(ctx.values(bt), uv), tx.xy_layout(bt), ctx.flips(bt))
     states = []
     for t in inp.state_textures():
         v = tx.bilinear(ctx.values(t), uv)
-        states.append(tx.decode_state(v, a.encoding, tx.xy_layout(t), a.pd_scale))
+        states.append(
+            tx.decode_state(
+                v, a.encoding, tx.xy_layout(t), a.pd_scale, t.mapping, t.bits, ctx.flips(t)
+            )
+        )
     sampled: dict[str, np.ndarray] = {}
     masks = []
     by_region = {e.region: e for e in inp.channel_table}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wrinklepipe import model
+from wrinklepipe import codec, model
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context, resize_normals
@@ -170,7 +170,9 @@ def check_maps(ctx: Context) -> list[Issue]:
             if issue:
                 out.append(issue)
         if a.encoding == "pd":
-            edge = np.abs(2.0 * v[..., :2] - 1.0) >= 1.0 - 0.5 / 255.0
+            # texels at the edge of the cone: |t| within half a step of 1
+            half = 0.5 / codec.mapping(t.mapping).centre(t.bits or 8)[1]
+            edge = np.abs(tx.signed_values(v[..., [0, 1]], t, "pd")) >= 1.0 - half
             clipped = int(edge.any(axis=-1).sum())
             total = v.shape[0] * v.shape[1]
             ctx.metrics.setdefault("pd_clipped_texels", {})[t.name] = clipped
@@ -186,15 +188,21 @@ def check_maps(ctx: Context) -> list[Issue]:
                     )
                 )
         if a.encoding == "diff" and v.shape[-1] >= 3:
+            # the median delta of a difference map is 0 (most of a face does not wrinkle)
+            h = codec.mapping(t.mapping).centre(t.bits or 8)[1]
+            med_t = np.median(tx.signed_values(v[..., :3], t, "diff").reshape(-1, 3), axis=0)
             med = np.median(v[..., :3].reshape(-1, 3), axis=0)
-            off = np.abs(med - 0.5)
-            if off.max() > 2.0 / 255.0:
+            if np.abs(med_t).max() > 2.0 / h:
+                centre = codec.mapping(t.mapping).centre(t.bits or 8)[0] / (
+                    (1 << (t.bits or 8)) - 1
+                )
                 out.append(
                     make_issue(
                         "WP-MAP-005",
                         "median stored value is ("
                         + ", ".join(f"{x:.3f}" for x in med)
-                        + f"), expected 0.5 (off by {off.max() * 255:.1f}/255)",
+                        + f"), expected {centre:.3f} (off by {np.abs(med_t).max() * h:.1f}"
+                        f"/{(1 << (t.bits or 8)) - 1})",
                         t.where,
                     )
                 )
@@ -207,19 +215,14 @@ def check_maps(ctx: Context) -> list[Issue]:
 
 
 def _as_full(
-    enc: str, base: np.ndarray, values: np.ndarray, layout: str, scale: float
+    enc: str, base: np.ndarray, values: np.ndarray, t: Texture, scale: float
 ) -> np.ndarray:
-    if enc == "pd":
-        d = tx.decode_state(values, "pd", layout, scale)
-        return model.pd_to_normal(model.normal_to_pd(base) + d)
+    """The wrinkled face the stored values mean if they were ``enc`` (the codec's decode)."""
+    e = codec.encoding(enc)
+    x = tx.decode_state(values, enc, tx.xy_layout(t), scale, t.mapping, t.bits, Context.flips(t))
     if enc == "diff":
-        return model.normalize(
-            base + model.diff_to_delta(tx.decode_state(values, enc, layout, scale))
-        )
-    n = tx.values_to_normals(values, layout)
-    if enc == "full":
-        return n
-    return model.pd_to_normal(model.normal_to_pd(base) + model.normal_to_pd(n))
+        x = model.diff_to_delta(x)
+    return e.to_normal(x, base)
 
 
 def _encoding_match(ctx: Context) -> list[Issue]:
@@ -246,7 +249,7 @@ def _encoding_match(ctx: Context) -> list[Issue]:
         for enc in model.ENCODINGS:
             if enc == "diff" and v.shape[-1] < 3:
                 continue
-            full = _as_full(enc, base, v, tx.xy_layout(t), a.pd_scale)
+            full = _as_full(enc, base, v, t, a.pd_scale)
             errs[enc] = float(np.mean(model.angular_error_deg(full, src)[relief]))
         ctx.metrics.setdefault("encoding_fit_mean_deg", {})[t.name] = {
             e: round(x, 3) for e, x in errs.items()

@@ -1,8 +1,10 @@
 """Turn an in-memory asset into shipped textures (the demo and tests use this).
 
-A small, fixed packer: 8-bit (or BCn through etcpak) base, states in the asset's encoding, masks
-four to an RGBA texture. It exists so the validator can be run on the demo without the full
-``convert`` pipeline; real outputs are loaded by :mod:`wrinklepipe.validate.loader`.
+A small, fixed packer: 8-bit (or BCn) base, states in the asset's encoding, masks four to an
+RGBA texture. Texels come from :mod:`wrinklepipe.codec` (value mapping v2, the codec's layouts)
+and blocks from :func:`wrinklepipe.normals.compress.encode_bc`, the converter's own encoder, so
+the validator is run on exactly what ``convert`` would ship. Real outputs are loaded by
+:mod:`wrinklepipe.validate.loader`.
 """
 
 from __future__ import annotations
@@ -11,10 +13,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from wrinklepipe import model
+from wrinklepipe import codec, model
 from wrinklepipe.asset import WrinkleAsset
-from wrinklepipe.validate.context import encode_source_states
+from wrinklepipe.normals import compress as nc
 from wrinklepipe.validate.inputs import ChannelEntry, Texture, ValidationInput
+
+#: Validator format name -> codec storage format of the texels (plain formats store RGBA8).
+_STORAGE = {"bc1": "bc1", "bc3": "bc3nm", "bc5": "bc5", "bc7": "bc7", "rgba8": "png8"}
 
 
 @dataclass(frozen=True)
@@ -26,7 +31,7 @@ class ShipOptions:
 
 
 def _u8(values: np.ndarray) -> np.ndarray:
-    return np.clip(np.rint(np.asarray(values, np.float64) * 255.0), 0, 255).astype(np.uint8)
+    return codec.quantize_unorm(values, 8)
 
 
 def _rgba(values: np.ndarray) -> np.ndarray:
@@ -38,44 +43,68 @@ def _rgba(values: np.ndarray) -> np.ndarray:
     return _u8(out)
 
 
-def encode_texture(name: str, role: str, values: np.ndarray, fmt: str, state: str = "") -> Texture:
-    """Stored values ``[H, W, C]`` in [0, 1] -> a :class:`Texture` in ``fmt``."""
-    h, w = values.shape[:2]
-    rgba = _rgba(values)
-    if fmt in ("bc1", "bc3", "bc4", "bc5", "bc7"):
-        import etcpak
-
-        data = getattr(etcpak, f"compress_{fmt}")(np.ascontiguousarray(rgba).tobytes(), w, h)
+def _texture(name: str, role: str, rgba: np.ndarray, fmt: str, state: str = "") -> Texture:
+    """RGBA8 texels -> a :class:`Texture` in ``fmt`` (block formats through the converter's
+    encoder, sizes padded to whole blocks by edge replication)."""
+    h, w = rgba.shape[:2]
+    if fmt in _STORAGE and fmt != "rgba8":
+        padded, _ = nc.pad_to_blocks(np.ascontiguousarray(rgba))
+        data = nc.encode_bc(padded, _STORAGE[fmt])
     elif fmt == "rgba8":
-        data = rgba.tobytes()
+        data = np.ascontiguousarray(rgba).tobytes()
     elif fmt == "rg8":
         data = np.ascontiguousarray(rgba[..., :2]).tobytes()
     elif fmt == "rgb8":
         data = np.ascontiguousarray(rgba[..., :3]).tobytes()
-    elif fmt == "rgba32f":
-        out = np.zeros((h, w, 4), np.float32)
-        out[..., : values.shape[-1]] = values
-        data = out.tobytes()
     else:
         raise ValueError(f"cannot encode {fmt}")
     return Texture(name, role, fmt, w, h, bytes(data), state=state, file=f"{name}")
 
 
-def stored_state_values(asset: WrinkleAsset) -> np.ndarray:
-    """Stored values ``[K, H, W, C]`` of the states in the asset's encoding (float, unclipped
-    except for pd, which is clipped to the cone of ``pd_scale``)."""
+def encode_texture(name: str, role: str, values: np.ndarray, fmt: str, state: str = "") -> Texture:
+    """Stored values ``[H, W, C]`` in [0, 1] -> a :class:`Texture` in ``fmt`` (plain UNORM
+    quantisation; masks and hand-made test textures)."""
+    if fmt == "rgba32f":
+        h, w = values.shape[:2]
+        out = np.zeros((h, w, 4), np.float32)
+        out[..., : values.shape[-1]] = values
+        return Texture(name, role, fmt, w, h, out.tobytes(), state=state, file=f"{name}")
+    return _texture(name, role, _rgba(values), fmt, state)
+
+
+def encode_map(
+    name: str,
+    role: str,
+    encoding: str,
+    x: np.ndarray,
+    fmt: str,
+    scale: float = 1.0,
+    state: str = "",
+) -> Texture:
+    """A map's quantity ``x`` (pd slopes, diff deltas, unit normals; see
+    :mod:`wrinklepipe.codec.encodings`) -> a :class:`Texture` in ``fmt`` with the codec's layout
+    and value mapping (v2), recorded on the texture."""
+    f = codec.storage_format(_STORAGE[fmt])
+    e = codec.encoding(encoding)
+    lay = f.layout_for(e)
+    q, _ = codec.encode(e, x, f, param=scale, version=codec.CURRENT_VERSION)
+    t = _texture(name, role, q, fmt, state)
+    t.layout = lay.name
+    t.mapping = codec.CURRENT_VERSION if e.versioned else 1
+    return t
+
+
+def stored_state_quantities(asset: WrinkleAsset) -> np.ndarray:
+    """Each state's quantity ``[K, H, W, C]`` in the asset's encoding (the codec's
+    ``from_normals`` against the base at the states' size)."""
     base = model.normalize(asset.base)
     states = model.normalize(asset.states)
     if base.shape[:2] != states.shape[1:3]:
         from wrinklepipe.validate.textures import resize_bilinear
 
         base = model.normalize(resize_bilinear(base, *states.shape[1:3]))
-    enc = encode_source_states(base, states, asset.encoding)
-    if asset.encoding == "pd":
-        return 0.5 + 0.5 * np.clip(enc / np.float32(asset.pd_scale), -1.0, 1.0)
-    if asset.encoding == "diff":  # gain g = pd_scale: 0.5 + 0.5 g (W - B)
-        return np.clip(0.5 + (enc - 0.5) * np.float32(asset.pd_scale), 0.0, 1.0)
-    return 0.5 + 0.5 * enc
+    e = codec.encoding(asset.encoding)
+    return np.stack([e.from_normals(s, base) for s in states])
 
 
 def ship_asset(
@@ -85,14 +114,22 @@ def ship_asset(
     o = options or ShipOptions()
     two = "bc5" if o.compress else "rgba8"
     three = "bc7" if o.compress else "rgba8"
-    textures = [encode_texture("base_normal", "base", 0.5 + 0.5 * model.normalize(asset.base), two)]
-    stored = stored_state_values(asset)
+    base = model.normalize(asset.base)
+    textures = [encode_map("base_normal", "base", "full", base, two)]
+    quantities = stored_state_quantities(asset)
     fmt = three if asset.encoding == "diff" else two
     for k, name in enumerate(asset.state_names):
-        vals = stored[k] if asset.encoding == "diff" else stored[k][..., :2]
-        if fmt == "rgba8" and asset.encoding in ("full", "composite"):
-            vals = stored[k]
-        textures.append(encode_texture(f"wrinkle_{name}", "state", vals, fmt, state=name))
+        textures.append(
+            encode_map(
+                f"wrinkle_{name}",
+                "state",
+                asset.encoding,
+                quantities[k],
+                fmt,
+                float(asset.pd_scale),
+                state=name,
+            )
+        )
     table = []
     masks = np.clip(np.asarray(asset.masks, np.float32), 0.0, 1.0)
     for t in range((masks.shape[0] + 3) // 4):
@@ -102,10 +139,6 @@ def ship_asset(
         textures.append(encode_texture(f"mask_{t}", "mask", rgba, o.mask_format))
         for c in range(chunk.shape[0]):
             table.append(ChannelEntry(asset.regions[4 * t + c].name, f"mask_{t}", c))
-    # two-channel formats for normals: z is rebuilt; rgba8 keeps all three
-    for t in textures:
-        if t.role in ("base", "state") and t.fmt == "rgba8":
-            t.layout = "rgb" if (t.role == "base" or asset.encoding != "pd") else "rg"
     if asset.mesh is not None and asset.mesh.tangents is None:
         from wrinklepipe.pipeline import prepare_mesh
 

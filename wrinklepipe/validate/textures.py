@@ -1,16 +1,20 @@
-"""Decode shipped texture bytes to stored values, and sample them the way the GPU does.
+"""Decode shipped texture bytes to stored texels and values, and sample them as the GPU does.
 
 Everything here is numpy; BCn blocks are decoded by ``texture2ddecoder`` (BGRA output, swapped
-to RGBA). :func:`bilinear` reproduces ``GL_LINEAR`` with ``GL_CLAMP_TO_EDGE`` and no mipmaps,
-which is how the render pass samples, so the numpy reference sees the texels the shader sees.
+to RGBA). Stored values become quantities through :mod:`wrinklepipe.codec` only: exactly from
+integer texels (:func:`decode_texels`), or with the shaders' float arithmetic from sampled values
+(:func:`decode_state`, :func:`values_to_normals`). A map declared DirectX is flipped after
+decoding (``y = -y``), as the shaders do. :func:`bilinear` reproduces ``GL_LINEAR`` with
+``GL_CLAMP_TO_EDGE`` and no mipmaps, which is how the render pass samples, so the numpy reference
+sees the texels the shader sees.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import texture2ddecoder as t2d
 
-from wrinklepipe.model import normalize
-from wrinklepipe.normals.encode import pd_values_to_slopes
+from wrinklepipe import codec
 from wrinklepipe.validate.inputs import FORMATS, Texture
 
 
@@ -20,8 +24,9 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
-def decode_values(tex: Texture, apply_srgb: bool = False) -> np.ndarray:
-    """Stored values of level 0 as float32 ``[H, W, C]`` in [0, 1] (C = the format's channels).
+def texels(tex: Texture) -> np.ndarray:
+    """Level-0 texels as stored: uint8 (8-bit and BCn, decoded by texture2ddecoder), uint16, or
+    float32 for float formats; ``[H, W, C]`` with C the format's channels, RGBA order.
 
     Raises ``ValueError`` when the byte count does not match the format and size.
     """
@@ -33,22 +38,25 @@ def decode_values(tex: Texture, apply_srgb: bool = False) -> np.ndarray:
         )
     h, w = tex.height, tex.width
     if kind == "unorm8":
-        out = np.frombuffer(tex.data, np.uint8, count=h * w * ch).reshape(h, w, ch) / 255.0
-    elif kind == "unorm16":
-        out = np.frombuffer(tex.data, "<u2", count=h * w * ch).reshape(h, w, ch) / 65535.0
-    elif kind == "float":
-        out = np.frombuffer(tex.data, "<f4", count=h * w * ch).reshape(h, w, ch)
-    else:
-        import texture2ddecoder as t2d
+        return np.frombuffer(tex.data, np.uint8, count=h * w * ch).reshape(h, w, ch)
+    if kind == "unorm16":
+        return np.frombuffer(tex.data, "<u2", count=h * w * ch).reshape(h, w, ch).astype(np.uint16)
+    if kind == "float":
+        return np.frombuffer(tex.data, "<f4", count=h * w * ch).reshape(h, w, ch)
+    pw, ph = (w + 3) // 4 * 4, (h + 3) // 4 * 4
+    fn = getattr(t2d, f"decode_{tex.fmt}")
+    bgra = np.frombuffer(fn(tex.data, pw, ph), np.uint8).reshape(ph, pw, 4)[:h, :w]
+    return np.ascontiguousarray(bgra[..., [2, 1, 0, 3]][..., :ch])
 
-        pw, ph = (w + 3) // 4 * 4, (h + 3) // 4 * 4
-        fn = getattr(t2d, f"decode_{tex.fmt}")
-        bgra = np.frombuffer(fn(tex.data, pw, ph), np.uint8).reshape(ph, pw, 4)[:h, :w]
-        rgba = bgra[..., [2, 1, 0, 3]]
-        out = rgba[..., :ch] / 255.0
-    out = np.asarray(out, np.float32)
-    if apply_srgb and tex.srgb and kind != "float":
-        rgb = min(ch, 3)
+
+def decode_values(tex: Texture, apply_srgb: bool = False) -> np.ndarray:
+    """Stored values of level 0 as float32 ``[H, W, C]`` in [0, 1] (C = the format's channels).
+
+    Raises ``ValueError`` when the byte count does not match the format and size.
+    """
+    out = codec.dequantize_unorm(texels(tex))
+    if apply_srgb and tex.srgb and FORMATS[tex.fmt][2] != "float":
+        rgb = min(out.shape[-1], 3)
         out = out.copy()
         out[..., :rgb] = srgb_to_linear(out[..., :rgb])
     return out
@@ -61,14 +69,19 @@ def xy_layout(tex: Texture) -> str:
     return "rgb" if tex.channels >= 3 and tex.layout != "rg2" else "rg"
 
 
-def values_to_normals(values: np.ndarray, layout: str) -> np.ndarray:
-    """Unit normals from stored values: ``normalize(2 v - 1)``; two-channel layouts rebuild z."""
-    v = np.asarray(values, np.float32)
-    if layout == "rgb":
-        return normalize(2.0 * v[..., :3] - 1.0)
-    xy = 2.0 * (v[..., [3, 1]] if layout == "ag" else v[..., :2]) - 1.0
-    z = np.sqrt(np.maximum(1.0 - np.einsum("...c,...c->...", xy, xy), 0.0))
-    return normalize(np.concatenate([xy, z[..., None]], axis=-1))
+def _flip(x: np.ndarray, flip_y: bool) -> np.ndarray:
+    if not flip_y:
+        return x
+    x = np.array(x, np.float32, copy=True)
+    x[..., 1] *= np.float32(-1.0)
+    return x
+
+
+def values_to_normals(values: np.ndarray, layout: str, flip_y: bool = False) -> np.ndarray:
+    """Unit normals from stored (sampled) values: ``normalize(2 v - 1)``; two-channel layouts
+    rebuild z; ``flip_y`` reads a DirectX map as +Y (the codec's ``wp_normal``)."""
+    n = codec.decode_sampled("full", np.asarray(values, np.float32), layout, bits=8)
+    return _flip(n, flip_y)
 
 
 def raw_normals(values: np.ndarray, layout: str) -> np.ndarray:
@@ -79,23 +92,51 @@ def raw_normals(values: np.ndarray, layout: str) -> np.ndarray:
     return values_to_normals(v, layout)
 
 
-def decode_state(values: np.ndarray, encoding: str, layout: str, pd_scale: float) -> np.ndarray:
-    """What the model's ``combine`` takes for one state (see :func:`wrinklepipe.model.combine`).
+def signed_values(values: np.ndarray, tex: Texture, encoding: str) -> np.ndarray:
+    """The signed values ``t`` in [-1, 1] that a texture's (sampled) values hold under its
+    encoding's mapping (pd / diff: the texture's mapping version; normal maps: glTF)."""
+    m = codec.encoding(encoding).mapping(tex.mapping)
+    return m.decode_unorm(np.asarray(values, np.float32), tex.bits)
 
-    pd: slopes ``[H, W, 2]`` (stored ``0.5 + 0.5 d / scale``); diff: ``D`` ``[H, W, 3]`` with
-    the gain undone (stored ``0.5 + 0.5 g (W - B)`` with ``g = scale``; returned
-    ``0.5 + (v - 0.5) / g`` so that ``2 D - 1 = W - B``); full / composite: unit normals.
+
+def decode_state(
+    values: np.ndarray,
+    encoding: str,
+    layout: str,
+    pd_scale: float,
+    version: int = 1,
+    bits: int = 8,
+    flip_y: bool = False,
+) -> np.ndarray:
+    """What the model's ``combine`` takes for one state (see :func:`wrinklepipe.model.combine`)
+    from sampled values ``[..., C]`` in [0, 1], with the shaders' arithmetic.
+
+    pd: slopes ``[..., 2]`` (``t = d / scale`` under mapping ``version``); diff: ``D`` with the
+    gain undone (``2 D - 1 = W - B``); full / composite: unit normals.
     """
+    e = codec.encoding(encoding)
     v = np.asarray(values, np.float32)
-    if encoding == "pd":
-        return pd_values_to_slopes(v, pd_scale)
-    if encoding == "diff":
-        if v.shape[-1] < 3:
-            raise ValueError("a diff map needs three channels")
-        if float(pd_scale) == 1.0:
-            return v[..., :3]
-        return (0.5 + (v[..., :3] - 0.5) / np.float32(pd_scale)).astype(np.float32)
-    return values_to_normals(v, layout)
+    if e.name == "diff" and v.shape[-1] < 3:
+        raise ValueError("a diff map needs three channels")
+    where = "rgb" if e.name == "diff" else layout
+    x = codec.decode_sampled(e, v, where, bits=bits, param=pd_scale, version=version)
+    return e.combine_input(_flip(x, flip_y))
+
+
+def decode_texels(
+    q: np.ndarray,
+    encoding: str,
+    layout: str,
+    pd_scale: float,
+    version: int = 1,
+    flip_y: bool = False,
+) -> np.ndarray:
+    """Like :func:`decode_state` from integer texels, exactly (:func:`wrinklepipe.codec.decode`):
+    what the validator's shipped-data rules read. ``encoding="base"`` decodes a base map."""
+    e = codec.encoding("full" if encoding == "base" else encoding)
+    where = "rgb" if e.name == "diff" else layout
+    x = codec.decode(e, q, where, param=pd_scale, version=version)
+    return e.combine_input(_flip(x, flip_y))
 
 
 def bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
