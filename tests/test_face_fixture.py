@@ -89,7 +89,7 @@ def test_todays_automatic_choice_fails_the_fidelity_budget(fixture):
     tiny state map for the fixture; inside the active regions the result is far from the
     truth. Full resolution at scale 1 is within the budget."""
     from wrinklepipe.io.package import encode_state, resize_normals_pd
-    from wrinklepipe.normals.encode import pd_values_to_slopes
+    from wrinklepipe.normals.encode import decode_pd_slopes
     from wrinklepipe.pipeline import run_stages
 
     asset = fixture.asset()
@@ -108,8 +108,8 @@ def test_todays_automatic_choice_fails_the_fidelity_budget(fixture):
         b = resize_normals_pd(asset.base, n, n)
         st = []
         for k in range(len(states)):
-            v = encode_state(b, states[k], "pd", scale)
-            st.append(pd_values_to_slopes(np.rint(v[..., :2] * 255) / 255, scale))
+            q = encode_state(b, states[k], "pd", scale)  # 8-bit texels, the codec's mapping
+            st.append(decode_pd_slopes(q, scale))
         return fd.measure(truth, asset.base, np.stack(st), fixture.masks)
 
     got = shipped(today.states, today.pd_scale)
