@@ -8,9 +8,13 @@ from wrinklepipe.bench.capture import bench_capture
 def test_capture_benchmark_quick():
     res = bench_capture(True)
     steps = [r.step for r in res.rows]
-    assert steps[0] == res.baseline and "whole stage (3 methods)" in steps
+    assert steps[0] == res.baseline and "whole stage (4 methods)" in steps
+    assert "orientation sfs" in steps  # the new method's time beside the others
     assert all(r.median_s > 0 and r.ratio > 0 for r in res.rows)
     acc = res.extra["accuracy_deg"]
-    assert set(acc) == {"gradient", "furrow", "integrable"}
-    assert res.extra["best_method"] == res.extra["default_method"] == "integrable"
+    assert set(acc) == {"gradient", "furrow", "integrable", "sfs"}
+    assert res.extra["default_method"] == "integrable"  # no neutral normals in this session
     assert acc["integrable"]["tilt_mean"] < 0.5 * res.extra["flat_map_mean_deg"]
+    cur = res.extra["curved_forehead"]
+    assert cur["default_method"] == "sfs"  # the neutral's normals are given
+    assert set(cur["accuracy_deg"]) == set(acc)

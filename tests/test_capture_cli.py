@@ -64,8 +64,13 @@ def test_end_to_end_outputs_report_and_determinism(session, tmp_path, capsys):
         assert key in report["ratio"]
     assert report["ratio"]["exposure_factor"] == pytest.approx(0.93 / 0.9, abs=3e-3)
     means = {m: report["orientation"][m]["truth"]["angular"]["mean"] for m in report["orientation"]}
-    assert set(means) == {"gradient", "furrow", "integrable"}
-    assert min(means, key=means.get) == "integrable"
+    assert set(means) == {"gradient", "furrow", "integrable", "sfs"}
+    # no neutral normals given: auto is the integrable prior, the best of the priors here
+    assert min((m for m in means if m != "sfs"), key=means.get) == "integrable"
+    # every method states how well it explains the photos (lower is better)
+    resid = {m: report["orientation"][m]["ratio_residual"] for m in means}
+    assert all(v > 0 for v in resid.values())
+    assert resid["gradient"] > resid["integrable"]
     # The HTML sheet references pictures that exist beside it; no network.
     html = (out / "report.html").read_text()
     pics = sorted(p.name for p in (out / "pictures").iterdir())

@@ -68,7 +68,9 @@ def test_registration_of_the_expression_photo(session):
 
 def test_tilt_beats_half_the_flat_map(session):
     _, _, table = session
-    for m, e in table.items():  # the tilt does not depend on the orientation method
+    for m, e in table.items():  # the priors' tilt does not depend on the orientation rule
+        if m == "sfs":
+            continue
         # measured (integrable): 2.15 vs 7.42 with shoulders, 1.60 vs 5.39 without
         assert e["tilt"]["mean"] < 0.5 * e["flat"]["mean"], m
     e = table["integrable"]
@@ -86,10 +88,15 @@ def test_paper_orientation_is_right_only_on_part_of_each_crease(session):
 
 
 def test_orientation_priors_compared_and_the_best_is_default(session):
-    _, _, table = session
+    sc, res, table = session
     ang = {m: e["angular"]["mean"] for m, e in table.items()}
     assert ang["integrable"] < ang["furrow"] < ang["gradient"]
-    assert min(ang, key=ang.get) == OrientationOptions().method
+    # without the neutral's normals 'auto' is the integrable prior, the best rule here
+    assert OrientationOptions().method == "auto" and res.method == "integrable"
+    assert ang["integrable"] == min(ang[m] for m in ("gradient", "furrow", "integrable"))
+    # the shape-from-shading solve (offered, not chosen here) is measured worse on this
+    # flat-facing session without the neutral's normals (5.5 vs 3.0 degrees with shoulders)
+    assert ang["sfs"] > ang["integrable"]
     best = table["integrable"]
     assert best["orientation_correct"] > 0.75  # measured: 0.83 with shoulders, 0.83 without
     # Full angular error (measured, degrees: 3.06 vs flat 7.42 with shoulders, 3.02 vs 5.39

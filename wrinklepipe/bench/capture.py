@@ -2,8 +2,10 @@
 
 Baseline: one Gaussian blur (sigma 1) of the neutral photo, the cheapest whole-image step of the
 stage. Rows: the thin-plate warp of the expression photo, the ratio image, each orientation
-method, the warp into texture space, and the whole stage (all three methods, as the CLI runs it).
-``extra`` holds the accuracy against the synthetic truth (degrees, texture space, ROI).
+method (the shape-from-shading solve ``sfs`` beside the priors), the warp into texture space, and
+the whole stage (every method, as the CLI runs it). ``extra`` holds the accuracy against the
+synthetic truth (degrees, texture space, ROI) on the flat-facing session and, with the neutral's
+normals, on the issue-like curved forehead session (:mod:`wrinklepipe.capture.sessions`).
 """
 
 from __future__ import annotations
@@ -14,8 +16,10 @@ from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
 from wrinklepipe.capture import CaptureOptions, OrientationOptions, capture
 from wrinklepipe.capture import warp as W
 from wrinklepipe.capture.evaluate import errors
-from wrinklepipe.capture.orientation import METHODS, orient
+from wrinklepipe.capture import sfs as S
+from wrinklepipe.capture.orientation import PRIORS, orient
 from wrinklepipe.capture.ratio import ratio_image
+from wrinklepipe.capture.sessions import FOREHEAD, SessionOptions, make_session
 from wrinklepipe.capture.synthetic import SceneOptions, make_scene
 
 
@@ -46,9 +50,17 @@ def bench_capture(quick: bool) -> BenchResult:
     warped, inside = W.sample(sc.expression, W.dense_map(warp1, sc.neutral.shape))
     row("ratio image", lambda: ratio_image(sc.neutral, warped, inside, sc.roi))
     rr = ratio_image(sc.neutral, warped, inside, sc.roi)
-    for m in METHODS:
+    for m in PRIORS:
         opts = OrientationOptions(method=m)
         row(f"orientation {m}", lambda opts=opts: orient(rr.ratio, rr.nz, opts, sc.roi))
+    prior = orient(rr.ratio, rr.nz, OrientationOptions(method="integrable"), sc.roi)
+    q = prior[..., :2] * [-1.0, 1.0] / prior[..., 2:]
+    flat = sc.neutral[..., None] * 0.0 + [0.0, 0.0, 1.0]
+    row(
+        "orientation sfs",
+        lambda: S.solve_crease(rr.plain, flat, sc.roi, rr.valid, {"prior": q, "mirror": -q}),
+        "shape from shading, 2 starts + fusion",
+    )
     warp2 = W.fit_tps(sc.lm_texture, sc.lm_neutral)
     row("warp photo -> texture", lambda: W.dense_map(warp2, (tex, tex)))
 
@@ -65,9 +77,24 @@ def bench_capture(quick: bool) -> BenchResult:
             options=CaptureOptions(),
         )
 
-    row("whole stage (3 methods)", whole, "includes leave-one-out landmark fits")
+    row("whole stage (4 methods)", whole, "includes leave-one-out landmark fits")
     out = whole()
     table = {m: errors(n, sc.truth_texture, sc.roi_texture) for m, n in out.normal_texture.items()}
+    fs = make_session(
+        SessionOptions(size=size // 2 if quick else 512, texture_size=tex // 2, folds=FOREHEAD)
+    )
+    cur = capture(
+        fs.neutral,
+        fs.expression,
+        fs.lm_neutral,
+        fs.lm_expression,
+        fs.lm_neutral,
+        fs.lm_texture,
+        fs.truth_texture.shape[:2],
+        fs.roi,
+        neutral_normals=fs.neutral_normals,
+    )
+    curved = {m: errors(n, fs.truth_texture, fs.roi_texture) for m, n in cur.normal_texture.items()}
     res.extra = {
         "accuracy_deg": {
             m: {
@@ -80,7 +107,21 @@ def bench_capture(quick: bool) -> BenchResult:
             for m, e in table.items()
         },
         "flat_map_mean_deg": round(table["gradient"]["flat"]["mean"], 3),
-        "default_method": OrientationOptions().method,
+        "default_method": out.method,
         "best_method": min(table, key=lambda m: table[m]["angular"]["mean"]),
+        "curved_forehead": {
+            "photo_px": fs.neutral.shape[0],
+            "default_method": cur.method,
+            "flat_map_mean_deg": round(curved["sfs"]["flat"]["mean"], 3),
+            "accuracy_deg": {
+                m: {
+                    "tilt_mean": round(e["tilt"]["mean"], 3),
+                    "angular_mean": round(e["angular"]["mean"], 3),
+                    "orientation_correct": round(e["orientation_correct"], 4),
+                    "ratio_residual": round(cur.ratio_residual[m], 6),
+                }
+                for m, e in curved.items()
+            },
+        },
     }
     return res.finish()

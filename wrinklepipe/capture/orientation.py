@@ -47,15 +47,21 @@ import numpy as np
 from scipy import fft, ndimage, sparse
 from scipy.sparse import csgraph
 
-METHODS: tuple[str, ...] = ("gradient", "furrow", "integrable")
+#: The rules of this module (they need R alone).
+PRIORS: tuple[str, ...] = ("gradient", "furrow", "integrable")
+#: Every orientation method; ``sfs`` (:mod:`.sfs`) also needs the neutral's shape and runs in
+#: :func:`wrinklepipe.capture.pipeline.capture`.
+METHODS: tuple[str, ...] = PRIORS + ("sfs",)
 
 
 @dataclass(frozen=True)
 class OrientationOptions:
     """Parameters of the orientation step, with the defaults ``wrinklepipe capture`` uses."""
 
-    #: Which rule orients the normal: ``gradient`` (paper), ``furrow`` or ``integrable``.
-    method: str = "integrable"
+    #: Which method orients the normal: ``auto`` (``sfs`` when the neutral's normals are given,
+    #: else ``integrable``), ``sfs`` (shape from shading), ``integrable``, ``furrow`` or
+    #: ``gradient`` (the paper).
+    method: str = "auto"
     #: Gaussian window (pixels) of the structure tensor giving the crease-normal axis.
     structure_sigma: float = 1.5
     #: Gaussian (pixels) that merges a crease's two dark flanks into one centre line; about the
@@ -295,8 +301,8 @@ def orient(
     ``roi`` (0..1) limits the crease regions of the ``integrable`` method.
     """
     o = options or OrientationOptions()
-    if o.method not in METHODS:
-        raise ValueError(f"unknown orientation {o.method!r}; expected one of {', '.join(METHODS)}")
+    if o.method not in PRIORS:
+        raise ValueError(f"orient() runs {', '.join(PRIORS)}, not {o.method!r}")
     if o.method == "gradient":
         return _to_normals(gradient_direction(r), nz)
     axis = structure_axis(r, o.structure_sigma)

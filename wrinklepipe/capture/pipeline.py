@@ -4,7 +4,9 @@ Steps (Dutreve et al. section 3, with the guards and the orientation priors of t
 
 1. thin-plate warp of the expression photo onto the neutral photo (landmarks ``expr -> neutral``);
 2. ratio image ``R = I'_d / I`` on linear luminance, guarded, blurred (:mod:`.ratio`);
-3. ``N'_z = R N_z`` and the orientation (:mod:`.orientation`), every method for the report;
+3. ``N'_z = R N_z`` and the orientation: the priors of :mod:`.orientation` and the shape from
+   shading of :mod:`.sfs` (which uses the neutral's normals ``n0`` when they are given), every
+   method for the report, each with its ratio residual (how well it explains R);
 4. ROI masking (outside: the flat normal ``(0, 0, 1)``; a soft mask scales the in-plane part);
 5. thin-plate warp from photo space into the character's texture space, with the normals'
    in-plane part rotated into the texture's tangent frame.
@@ -17,9 +19,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wrinklepipe.capture import sfs as S
 from wrinklepipe.capture import warp as W
 from wrinklepipe.capture.orientation import (
     METHODS,
+    PRIORS,
     OrientationOptions,
     integrability_residual,
     orient,
@@ -34,6 +38,7 @@ class CaptureOptions:
 
     ratio: RatioOptions = field(default_factory=RatioOptions)
     orientation: OrientationOptions = field(default_factory=OrientationOptions)
+    sfs: S.SfsOptions = field(default_factory=S.SfsOptions)
     #: Grid step (pixels) at which the thin-plate splines are evaluated: 1 = every pixel (exact),
     #: 0 = every pixel up to 4 Mpx and every second pixel above (cubic refinement between).
     warp_step: int = 0
@@ -94,11 +99,25 @@ class CaptureResult:
     warp_texture: WarpStats
     integrability: dict[str, float]  # method -> residual in the ROI (photo space)
     sigma_scale: float = 1.0  # factor the sigmas were multiplied by
+    #: method -> RMS of (ratio of the method's integrated height - R) over the ROI
+    ratio_residual: dict[str, float] = field(default_factory=dict)
+    sfs: S.SfsResult | None = None  # the shape-from-shading solve (starts, exposure)
+    neutral_shape: str = "facing the camera"  # where n0 came from
 
     @property
     def normal(self) -> np.ndarray:
         """The wrinkle normal map of the chosen method, texture space."""
         return self.normal_texture[self.method]
+
+
+def resolve_method(method: str, has_neutral_normals: bool) -> str:
+    """``auto`` is ``sfs`` when the neutral's normals are known, ``integrable`` otherwise
+    (measured: see docs/capture.md); other names are themselves."""
+    if method == "auto":
+        return "sfs" if has_neutral_normals else "integrable"
+    if method not in METHODS:
+        raise ValueError(f"unknown orientation {method!r}; expected auto or {', '.join(METHODS)}")
+    return method
 
 
 def apply_roi(normals: np.ndarray, roi: np.ndarray) -> np.ndarray:
@@ -125,12 +144,15 @@ def capture(
     roi: np.ndarray | None = None,
     nz_neutral: np.ndarray | float = 1.0,
     options: CaptureOptions | None = None,
+    neutral_normals: np.ndarray | None = None,
 ) -> CaptureResult:
     """Run the capture on linear luminance photos ``[H, W]`` (and ``[H', W']``).
 
     Landmarks are ``[N, 2]`` pixel positions (x, y; origin at the top-left corner): neutral and
     expression photo pairs for the first warp; ``lm_photo`` (neutral photo) and ``lm_texture``
     (texture pixels) for the second. ``texture_shape`` is ``(height, width)`` of the output.
+    ``neutral_normals`` ``[H, W, 3]`` is the neutral face's shape seen from the camera (+Y up,
+    +Z towards the camera); it replaces ``nz_neutral`` (its z is the per-pixel N_z).
     """
     o = options or CaptureOptions()
     i0 = np.asarray(neutral, np.float32)
@@ -151,15 +173,49 @@ def capture(
     warped, inside = W.sample(i1, map1)
 
     # 2-3. ratio, tilt, orientation.
+    if neutral_normals is not None:
+        n0 = normalize(np.asarray(neutral_normals, np.float32)).astype(np.float64)
+        nz_neutral = n0[..., 2]
+        shape_src = "normal map"
+    else:
+        n0 = np.zeros((h, w, 3))
+        n0[..., 2] = 1.0
+        shape_src = "N_z given" if np.any(np.asarray(nz_neutral) != 1.0) else "facing the camera"
     rr = ratio_image(i0, warped, inside, roi_m, nz_neutral, ratio_opts)
-    methods = METHODS if o.compare_methods else (o.orientation.method,)
+    chosen = resolve_method(o.orientation.method, neutral_normals is not None)
+    methods = METHODS if o.compare_methods else (chosen,)
     photo: dict[str, np.ndarray] = {}
-    integrability: dict[str, float] = {}
-    for m in methods:  # up to three methods, each vectorised over the image
-        opts = dataclasses.replace(orient_opts, method=m)
-        n = apply_roi(orient(rr.ratio, rr.nz, opts, roi_m), roi_m)
-        photo[m] = n
-        integrability[m] = integrability_residual(n, roi_m)
+    for m in PRIORS:  # the priors (the integrable one also starts the solve)
+        if m in methods or (m == "integrable" and "sfs" in methods):
+            opts = dataclasses.replace(orient_opts, method=m)
+            photo[m] = apply_roi(orient(rr.ratio, rr.nz, opts, roi_m), roi_m)
+    # What the solve explains: R against the neutral's normals; without them (a neutral facing
+    # the camera, or a constant N_z) the neutral is flat and R the cosine of the extra tilt.
+    if neutral_normals is not None:
+        r_model = rr.plain.astype(np.float64)
+    else:
+        nzn = np.broadcast_to(np.asarray(nz_neutral, np.float64), (h, w))
+        extra = np.arccos(np.clip(rr.plain * nzn, 0.0, 1.0)) - np.arccos(np.clip(nzn, 0.0, 1.0))
+        r_model = np.where(nzn < 1.0, np.cos(np.clip(extra, 0.0, np.pi / 2)), rr.plain)
+    sfs_res = None
+    if "sfs" in methods:
+        prior = photo["integrable"].astype(np.float64)
+        z = np.maximum(prior[..., 2], 1e-3)
+        q = np.stack([-prior[..., 0] / z, prior[..., 1] / z], axis=-1)  # the prior's slopes
+        sfs_res = S.solve_crease(
+            r_model, n0, roi_m, rr.valid, {"integrable": q, "mirror": -q}, o.sfs
+        )
+        n1z = np.clip(r_model * n0[..., 2] / sfs_res.exposure, 0.0, 1.0)
+        photo["sfs"] = apply_roi(
+            S.normals_from_slopes(sfs_res.slopes, n0, n1z).astype(np.float32), roi_m
+        )
+    photo = {m: photo[m] for m in methods}
+    integrability = {m: integrability_residual(n, roi_m) for m, n in photo.items()}
+    exposure = sfs_res.exposure if sfs_res is not None else 1.0
+    explained = {
+        m: S.ratio_residual(n, n0, r_model, roi_m, rr.valid, exposure, o.sfs.max_side)
+        for m, n in photo.items()
+    }
 
     # 5. photo -> texture.
     th, tw = texture_shape
@@ -179,7 +235,7 @@ def capture(
     return CaptureResult(
         expression_warped=warped,
         ratio=rr,
-        method=o.orientation.method,
+        method=chosen,
         normal_photo=photo,
         normal_texture=texture,
         roi_texture=np.where(inside2, roi_t, 0.0).astype(np.float32),
@@ -188,4 +244,7 @@ def capture(
         warp_texture=_stats(map2, lm_texture, lm_photo),
         integrability=integrability,
         sigma_scale=k,
+        ratio_residual=explained,
+        sfs=sfs_res,
+        neutral_shape=shape_src,
     )

@@ -71,6 +71,7 @@ class RatioResult:
 
     raw: np.ndarray  # I'_d / I where valid, 1 elsewhere (before exposure and blur)
     ratio: np.ndarray  # after exposure normalisation, blur and deadband (unclipped)
+    plain: np.ndarray  # after exposure normalisation and blur only (no deadband, unclipped)
     nz: np.ndarray  # z of the wrinkle normal: cos(acos(R N_z) - acos(N_z)); = R when N_z = 1
     valid: np.ndarray  # bool: divided (not dark, inside the expression photo)
     exposure: float  # the factor R was divided by
@@ -150,6 +151,7 @@ def ratio_image(
             exposure = level
     r = np.where(valid, raw / exposure, 1.0)
     r = _masked_blur(r, valid.astype(np.float64), o.blur_sigma)
+    plain = r.copy()
     noise = upper_noise(r[sel]) if sel.any() else 0.0
     deadband = o.deadband if o.deadband is not None else o.deadband_sigmas * noise
     if deadband > 0:
@@ -163,6 +165,7 @@ def ratio_image(
     return RatioResult(
         raw=raw.astype(np.float32),
         ratio=r.astype(np.float32),
+        plain=plain.astype(np.float32),
         nz=nz.astype(np.float32),
         valid=valid,
         exposure=float(exposure),

@@ -60,6 +60,12 @@ def build_report(
         dot = np.einsum("...c,...c->...", n[..., :2], chosen[..., :2])
         leaning = (np.hypot(n[..., 0], n[..., 1]) > 1e-3) & (roi_photo > 0.5)
         methods[m] = {
+            "ratio_residual": result.ratio_residual.get(m),
+            "ratio_residual_over_noise": (
+                result.ratio_residual[m] / rr.noise
+                if m in result.ratio_residual and rr.noise > 0
+                else None
+            ),
             "integrability_residual": result.integrability[m],
             "agrees_with_chosen": float((dot[leaning] > 0).mean()) if leaning.any() else 1.0,
             "tilt_texture": _tilt_stats(result.normal_texture[m], result.roi_texture),
@@ -96,8 +102,16 @@ def build_report(
             "fraction_outside_photo": float(1.0 - result.inside_texture.mean()),
         },
         "orientation": methods,
+        "neutral_shape": result.neutral_shape,
         "sigma_scale": result.sigma_scale,
     }
+    if result.sfs is not None:
+        report["sfs"] = {
+            "start": result.sfs.start,
+            "starts_ratio_residual": result.sfs.starts,
+            "exposure_refit": result.sfs.exposure,
+            "grid_factor": result.sfs.factor,
+        }
     return _round_tree(report)
 
 
@@ -113,7 +127,20 @@ def write_pictures(
     roi: np.ndarray,
 ) -> dict[str, str]:
     """8-bit PNG pictures for the sheet; returns caption -> relative path."""
-    pics = folder / "pictures"
+    out = {}
+    for caption, (rel, img) in picture_images(result, neutral, expression, roi).items():
+        write_image(folder / rel, img, bits=8)
+        out[caption] = rel
+    return out
+
+
+def picture_images(
+    result: CaptureResult,
+    neutral: np.ndarray,
+    expression: np.ndarray,
+    roi: np.ndarray,
+) -> dict[str, tuple[str, np.ndarray]]:
+    """The sheet's pictures: caption -> (relative path, image 0..1)."""
     top = float(max(np.percentile(neutral, 99.5), 1e-6))
     rr = result.ratio
     r_lo = float(min(np.percentile(rr.ratio[rr.valid], 0.5), 0.99)) if rr.valid.any() else 0.5
@@ -152,11 +179,7 @@ def write_pictures(
                 0.5 + 0.5 * result.normal_texture[m],
             )
         )
-    out = {}
-    for caption, name, img in items:  # a dozen pictures
-        write_image(pics / name, img, bits=8)
-        out[caption] = f"pictures/{name}"
-    return out
+    return {caption: (f"pictures/{name}", img) for caption, name, img in items}
 
 
 #: The validator's report style (wrinklepipe.validate.report), plus a highlight for the best row.
@@ -296,6 +319,7 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
     rows = [
         [
             m,
+            _f(methods[m].get("ratio_residual"), 5),
             _f(methods[m]["integrability_residual"], 3),
             _f(methods[m]["agrees_with_chosen"], 3),
             _f(methods[m]["tilt_texture"]["mean_deg"]),
@@ -307,6 +331,7 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
         _table(
             [
                 "method",
+                "ratio residual (lower: explains the photos better)",
                 "integrability residual",
                 "agrees with chosen",
                 "tilt mean (ROI)",

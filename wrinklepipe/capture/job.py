@@ -1,0 +1,428 @@
+"""The ``capture`` job as a plain function: read the session -> capture -> the output files.
+
+:func:`run_capture` reads and checks every input, runs :func:`wrinklepipe.capture.capture`, and
+returns the files of the output folder (images as arrays with their bit depth, text as bytes)
+and the JSON-ready report; it writes nothing. :meth:`CaptureOutput.write` puts the files into a
+folder (the command writes them through :func:`wrinklepipe.atomic.staged_folder`).
+:class:`CaptureJobOptions` holds every option with the command line's defaults.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.atomic import dumps_json, write_bytes
+from wrinklepipe.capture import landmarks as L
+from wrinklepipe.capture.evaluate import errors as truth_errors
+from wrinklepipe.capture.orientation import OrientationOptions
+from wrinklepipe.capture.pipeline import CaptureOptions, CaptureResult, capture
+from wrinklepipe.capture.ratio import RatioOptions, luminance, srgb_to_linear
+from wrinklepipe.capture.report import build_report, picture_images, render_html
+from wrinklepipe.errors import InputError, Problem, input_error
+from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image, write_image
+from wrinklepipe.model import normalize
+
+
+@dataclass(frozen=True)
+class CaptureJobOptions:
+    """Every option of ``wrinklepipe capture`` (the command's defaults come from here)."""
+
+    orientation: str = "auto"
+    state: str = "capture"
+    colorspace: str = "auto"
+    blur: float = 1.0
+    dark: float = 0.02
+    deadband: float | None = None
+    normalize_exposure: bool = True
+    furrow_sigma: float = 3.0
+    scale: float | None = None
+    nz: float = 1.0
+    nz_regions: tuple[str, ...] = ()
+    max_pixels: int | None = None
+
+
+@dataclass(frozen=True)
+class CaptureInputs:
+    """The files of one session (paths as given; ``None``: not given)."""
+
+    neutral: str
+    expression: str
+    neutral_landmarks: str
+    expression_landmarks: str
+    texture_landmarks: str | None = None
+    photo_landmarks: str | None = None
+    size: str | None = None
+    roi: str | None = None
+    neutral_normals: str | None = None
+    truth: str | None = None
+
+    def given(self) -> dict[str, str]:
+        """The inputs that were given, by name (for the report)."""
+        names = (
+            "neutral",
+            "expression",
+            "neutral_landmarks",
+            "expression_landmarks",
+            "texture_landmarks",
+            "photo_landmarks",
+            "roi",
+            "neutral_normals",
+            "truth",
+        )
+        return {n: str(getattr(self, n)) for n in names if getattr(self, n)}
+
+
+@dataclass
+class CaptureOutput:
+    """The output folder's files and the report."""
+
+    images: dict[str, tuple[np.ndarray, int]]  # relative path -> (values 0..1, bits)
+    texts: dict[str, bytes]  # relative path -> bytes
+    report: dict[str, Any]
+    result: CaptureResult | None = field(default=None, repr=False)
+    truth: dict[str, dict] | None = None
+
+    def summary(self, out: Path) -> list[str]:
+        """The lines the command prints."""
+        return _summary(self, out)
+
+    def write(self, folder: Path) -> None:
+        """Write every file under ``folder`` (which exists)."""
+        for rel, (img, bits) in sorted(self.images.items()):
+            (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+            write_image(folder / rel, img, bits=bits)
+        for rel, data in sorted(self.texts.items()):
+            write_bytes(folder / rel, data)
+
+
+def parse_size(text: str | None) -> tuple[int, int] | None:
+    """``N`` or ``WxH`` -> ``(height, width)``."""
+    if text is None:
+        return None
+    try:
+        if "x" in text.lower():
+            w, h = (int(v) for v in text.lower().split("x"))
+        else:
+            w = h = int(text)
+    except ValueError:
+        raise input_error("<arguments>", f"--size must be N or WxH, got {text!r}") from None
+    if w <= 0 or h <= 0 or w * h > 16384 * 16384:
+        raise input_error("<arguments>", f"--size out of range: {text!r}")
+    return h, w
+
+
+def read_photo(path: str, colorspace: str, max_pixels: int | None) -> tuple[np.ndarray, Any]:
+    """Linear luminance of a photo (decoded from sRGB unless linear or tagged so)."""
+    img, info = read_image(path, max_pixels or DEFAULT_MAX_PIXELS)
+    linear = colorspace == "linear"
+    if colorspace == "auto":
+        tag = info.colorspace.lower()
+        linear = info.format in ("half", "float", "double") or "lin" in tag or tag == "raw"
+    if not linear:
+        img = srgb_to_linear(np.clip(img, 0.0, 1.0))
+    return luminance(img), info
+
+
+def read_mask(path: str, shape: tuple[int, int], what: str) -> np.ndarray:
+    """A 0..1 mask of the neutral photo's size (alpha times red when there is alpha)."""
+    m, info = read_image(path)
+    if (info.height, info.width) != shape:
+        raise input_error(
+            path,
+            f"{what} is {info.width} x {info.height} but the neutral photo is "
+            f"{shape[1]} x {shape[0]}",
+        )
+    m = m[..., 0] if m.shape[2] < 4 else m[..., 3] * m[..., 0]
+    if not np.all(np.isfinite(m)):
+        raise input_error(path, f"{what} has non-finite values")
+    return np.clip(m, 0.0, 1.0)
+
+
+def read_neutral_normals(path: str, shape: tuple[int, int], roi: np.ndarray | None) -> np.ndarray:
+    """The neutral face's normals in the neutral photo's view: camera frame, +X right, +Y up,
+    +Z towards the camera; stored ``0.5 + 0.5 n`` (8/16-bit) or as raw ``n`` (float files)."""
+    img, info = read_image(path)
+    if (info.height, info.width) != shape:
+        raise input_error(
+            path,
+            f"neutral normal map is {info.width} x {info.height} but the neutral photo is "
+            f"{shape[1]} x {shape[0]}; render it from the photo's camera at the photo's size",
+        )
+    if img.shape[2] < 3:
+        raise input_error(path, "neutral normal map needs three channels (x, y, z)")
+    v = np.asarray(img[..., :3], np.float64)
+    if not np.all(np.isfinite(v)):
+        raise input_error(path, "neutral normal map has non-finite values")
+    if info.format not in ("half", "float", "double"):
+        v = 2.0 * v - 1.0
+    length = np.linalg.norm(v, axis=-1)
+    inside = np.ones(shape, bool) if roi is None else np.asarray(roi) > 0.5
+    bad = inside & ((length < 0.5) | (v[..., 2] <= 0.0))
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        raise input_error(
+            path,
+            f"{int(bad.sum())} pixel(s) of the ROI are not normals facing the camera (first at "
+            f"x={c}, y={r}: {np.round(v[r, c], 3).tolist()}); expected +Z towards the camera",
+        )
+    return np.where(inside[..., None], normalize(v), np.array([0.0, 0.0, 1.0], np.float32))
+
+
+def _nz_map(o: CaptureJobOptions, shape: tuple[int, int]) -> np.ndarray | float:
+    nz: np.ndarray | float = o.nz
+    for spec in o.nz_regions:
+        if "=" not in spec:
+            raise input_error("<arguments>", f"--nz-region expects MASK=VALUE, got {spec!r}")
+        path, _, val = spec.rpartition("=")
+        try:
+            v = float(val)
+        except ValueError:
+            raise input_error(
+                "<arguments>", f"--nz-region value is not a number: {val!r}"
+            ) from None
+        if not 0 < v <= 1:
+            raise input_error("<arguments>", f"--nz-region value must lie in (0, 1], got {v}")
+        m = read_mask(path, shape, "N_z region mask")
+        nz = np.asarray(nz, np.float32) * (1.0 - m) + v * m
+    return nz
+
+
+def check_options(inputs: CaptureInputs, o: CaptureJobOptions) -> None:
+    """Refuse bad options before any file is read."""
+    if not re.fullmatch(r"[A-Za-z0-9_]+", o.state):
+        raise input_error(
+            "<arguments>", f"--state must be letters, digits and '_' (a manifest name): {o.state!r}"
+        )
+    missing = [
+        flag
+        for flag, val in (
+            ("NEUTRAL", inputs.neutral),
+            ("EXPRESSION", inputs.expression),
+            ("--neutral-landmarks", inputs.neutral_landmarks),
+            ("--expression-landmarks", inputs.expression_landmarks),
+        )
+        if not val
+    ]
+    if missing:
+        raise InputError([Problem("<arguments>", f"missing {m}") for m in missing])
+    checks = [("--blur", o.blur), ("--dark", o.dark), ("--nz", o.nz)]
+    if o.scale is not None:
+        checks.append(("--scale", o.scale))
+    for flag, val in checks:
+        if not np.isfinite(val) or val < 0:
+            raise input_error("<arguments>", f"{flag} must be a finite number >= 0, got {val}")
+    if not 0 < o.nz <= 1:
+        raise input_error("<arguments>", f"--nz must lie in (0, 1], got {o.nz}")
+    if inputs.neutral_normals and (o.nz != 1.0 or o.nz_regions):
+        raise input_error(
+            "<arguments>",
+            "--neutral-normals gives the neutral's shape per pixel; drop --nz / --nz-region",
+        )
+
+
+def _snippet(state: str) -> bytes:
+    return (
+        "# wrinklepipe capture: merge into the character's manifest (copy the maps beside it).\n"
+        "# The captured map holds the wrinkles alone (no base detail), so the manifest needs,\n"
+        "# at its top level (above any [[table]]):\n"
+        "#   states_include_base = false\n\n"
+        f'[[states]]\nname = "{state}"\nmap = "{state}.png"\n\n'
+        f'[[regions]]\nname = "{state}_roi"\nmask = "{state}_roi.png"\nstates = ["{state}"]\n'
+    ).encode()
+
+
+def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None) -> CaptureOutput:
+    """Read, check and capture one session; returns the output files and the report.
+
+    Raises :class:`InputError` (one message per problem, naming the file) for bad inputs.
+    """
+    o = options or CaptureJobOptions()
+    check_options(inputs, o)
+    i0, info0 = read_photo(inputs.neutral, o.colorspace, o.max_pixels)
+    i1, info1 = read_photo(inputs.expression, o.colorspace, o.max_pixels)
+    if (info0.width, info0.height) != (info1.width, info1.height):
+        raise input_error(
+            inputs.expression,
+            f"photo is {info1.width} x {info1.height} but the neutral photo {inputs.neutral} is "
+            f"{info0.width} x {info0.height}; take both with the same camera settings (or crop "
+            "them to one size)",
+        )
+    for path, lum in ((inputs.neutral, i0), (inputs.expression, i1)):
+        top = float(np.nanmax(lum)) if lum.size else 0.0
+        if not np.isfinite(top) or top < o.dark:
+            raise input_error(
+                path,
+                f"photo is all black (brightest linear luminance {top:.4f} is below --dark "
+                f"{o.dark}); nothing to divide",
+            )
+    shape = (info0.height, info0.width)
+    lm_n = L.read_landmarks(inputs.neutral_landmarks).to_pixels(info0.width, info0.height)
+    lm_e = L.read_landmarks(inputs.expression_landmarks).to_pixels(info1.width, info1.height)
+    pn, pe = L.pair(lm_n, lm_e)
+    L.check_inside(lm_n, info0.width, info0.height, "neutral photo")
+    L.check_inside(lm_e, info1.width, info1.height, "expression photo")
+
+    tex_shape = parse_size(inputs.size)
+    if inputs.texture_landmarks:
+        if tex_shape is None:
+            raise input_error("<arguments>", "--size is required with --texture-landmarks")
+        th, tw = tex_shape
+        lm_t = L.read_landmarks(inputs.texture_landmarks).to_pixels(tw, th)
+        lm_p = (
+            L.read_landmarks(inputs.photo_landmarks).to_pixels(info0.width, info0.height)
+            if inputs.photo_landmarks
+            else lm_n
+        )
+        pp, pt = L.pair(lm_p, lm_t)
+        lm_t_names = lm_p.names if lm_p.names is not None and lm_t.names is not None else None
+        L.check_inside(lm_p, info0.width, info0.height, "neutral photo")
+        L.check_inside(lm_t, tw, th, "texture")
+    else:  # identity: the map stays in photo space
+        lm_t_names = None
+        tex_shape = shape
+        w, h = info0.width, info0.height
+        pp = pt = np.array([[0, 0], [w, 0], [0, h], [w, h]], float)
+
+    roi = read_mask(inputs.roi, shape, "ROI mask") if inputs.roi else None
+    nz = _nz_map(o, shape)
+    n0 = (
+        read_neutral_normals(inputs.neutral_normals, shape, roi) if inputs.neutral_normals else None
+    )
+    truth = None
+    if inputs.truth:
+        t, tinfo = read_image(inputs.truth)
+        if (tinfo.height, tinfo.width) != tuple(tex_shape) or t.shape[2] < 3:
+            raise input_error(
+                inputs.truth,
+                f"truth map must be an RGB {tex_shape[1]} x {tex_shape[0]} normal map",
+            )
+        truth = normalize(2.0 * t[..., :3] - 1.0)
+
+    copts = CaptureOptions(
+        ratio=RatioOptions(
+            dark_threshold=o.dark,
+            normalize_exposure=o.normalize_exposure,
+            blur_sigma=o.blur,
+            deadband=o.deadband,
+        ),
+        orientation=OrientationOptions(method=o.orientation, furrow_sigma=o.furrow_sigma),
+        scale=o.scale,
+    )
+    res = capture(i0, i1, pn, pe, pp, pt, tuple(tex_shape), roi, nz, copts, neutral_normals=n0)
+
+    te = None
+    if truth is not None:
+        te = {m: truth_errors(n, truth, res.roi_texture) for m, n in res.normal_texture.items()}
+    state = o.state
+    outputs = {
+        "normal_map": f"{state}.png",
+        "roi_map": f"{state}_roi.png",
+        "manifest_snippet": "manifest_snippet.toml",
+        "texture_size": [int(tex_shape[1]), int(tex_shape[0])],
+        "space": "texture" if inputs.texture_landmarks else "photo",
+    }
+    opts = {
+        "orientation": o.orientation,
+        "blur_sigma": o.blur,
+        "dark_threshold": o.dark,
+        "deadband": o.deadband,
+        "normalize_exposure": o.normalize_exposure,
+        "furrow_sigma": o.furrow_sigma,
+        "nz": o.nz,
+        "nz_regions": list(o.nz_regions),
+        "neutral_shape": "normal map" if n0 is not None else "N_z constant/regions",
+        "colorspace": o.colorspace,
+        "scale": o.scale,
+    }
+    report = build_report(res, inputs.given(), opts, outputs, te)
+    for key, names in (("expression_to_neutral", lm_n.names), ("photo_to_texture", lm_t_names)):
+        worst = report["warps"][key]["leave_one_out_worst_index"]
+        if names is not None and worst is not None:
+            report["warps"][key]["leave_one_out_worst_name"] = names[worst]
+
+    images: dict[str, tuple[np.ndarray, int]] = {
+        f"{state}.png": (0.5 + 0.5 * res.normal, 16),
+        f"{state}_roi.png": (res.roi_texture, 16),
+    }
+    pics = picture_images(res, i0, i1, roi if roi is not None else np.ones(shape))
+    for rel, img in pics.values():
+        images[rel] = (img, 8)
+    texts = {
+        "manifest_snippet.toml": _snippet(state),
+        "report.json": dumps_json(report).encode("utf-8"),
+        "report.html": render_html(report, {c: rel for c, (rel, _) in pics.items()}).encode(),
+    }
+    return CaptureOutput(images, texts, report, res, te)
+
+
+def _summary(self: CaptureOutput, out: Path) -> list[str]:
+    """The lines the command prints (the chosen method, residuals, truth errors if known)."""
+    r = self.report
+    w1 = r["warps"]["expression_to_neutral"]
+    state_png = r["outputs"]["normal_map"]
+    size = r["outputs"]["texture_size"]
+    lines = [
+        f"captured {state_png[:-4]} ({r['method']}) -> {out / state_png} [{size[0]} x {size[1]}]"
+        f"; neutral: {r['neutral_shape']}; leave-one-out landmark residual max "
+        f"{w1['leave_one_out_max_px']} px; clipped {r['ratio']['fraction_clipped']:.3f}, dark "
+        f"{r['ratio']['fraction_dark']:.3f}"
+    ]
+    for m, e in r["orientation"].items():
+        line = f"  {m:<10} ratio residual {e['ratio_residual']:.5f}"
+        t = e.get("truth")
+        if t is not None:
+            line += (
+                f"; angular mean {t['angular']['mean']:.2f} deg, tilt mean {t['tilt']['mean']:.2f}"
+                f" deg, orientation correct {t['orientation_correct']:.3f} (flat map "
+                f"{t['flat']['mean']:.2f} deg)"
+            )
+        lines.append(line)
+    return lines
+
+
+def example_session() -> CaptureOutput:
+    """The synthetic session of :mod:`.synthetic` as files (photos, landmarks as JSON, CSV and
+    UV JSON, ROI, the neutral's normal map, the true texture-space map); ``report["hint"]``
+    is the command to run on it (``DIR`` standing for the folder)."""
+    from wrinklepipe.capture.synthetic import dome_height, make_scene, normal_of
+
+    sc = make_scene()
+    s = float(sc.neutral.shape[0])
+    idx = np.arange(sc.neutral.shape[0]) + 0.5
+    yy, xx = np.meshgrid(idx, idx, indexing="ij")
+    n0 = normal_of(lambda x, y: dome_height(x, y, s), xx, yy)
+    names = [f"p{i:02d}" for i in range(len(sc.lm_neutral))]
+    t_size = sc.truth_texture.shape[0]
+    neutral = {
+        n: [round(float(x), 4), round(float(y), 4)] for n, (x, y) in zip(names, sc.lm_neutral)
+    }
+    lines = ["name,x,y"] + [f"{n},{x:.4f},{y:.4f}" for n, (x, y) in zip(names, sc.lm_expression)]
+    uv = {
+        n: [round(float(x) / t_size, 6), round(float(y) / t_size, 6)]
+        for n, (x, y) in zip(names, sc.lm_texture)
+    }
+    images = {
+        "neutral.png": (np.clip(sc.neutral, 0, 1), 16),
+        "expression.png": (np.clip(sc.expression, 0, 1), 16),
+        "roi.png": (sc.roi, 8),
+        "neutral_normals.png": (0.5 + 0.5 * n0, 16),
+        "truth_texture.png": (0.5 + 0.5 * sc.truth_texture, 16),
+    }
+    texts = {
+        "neutral.json": dumps_json({"points": neutral}).encode(),
+        "expression.csv": ("\n".join(lines) + "\n").encode(),
+        "texture.json": dumps_json({"space": "uv", "points": uv}).encode(),
+    }
+    hint = (
+        "wrote a synthetic session to DIR; try:\n  wrinklepipe capture DIR/neutral.png "
+        "DIR/expression.png --neutral-landmarks DIR/neutral.json --expression-landmarks "
+        f"DIR/expression.csv --texture-landmarks DIR/texture.json --size {t_size} --roi "
+        "DIR/roi.png --neutral-normals DIR/neutral_normals.png --truth DIR/truth_texture.png "
+        "-o captured/"
+    )
+    return CaptureOutput(images, texts, {"hint": hint})

@@ -1,0 +1,432 @@
+"""Shape from shading: the crease height whose Lambertian ratio image matches R.
+
+Under a light at the camera a Lambertian pixel is ``I = C N_z``, so with the neutral surface's
+normal ``n0`` known the ratio image is, for a crease height ``c`` (pixels, along the view axis,
+added to the neutral height ``h0``)::
+
+    R_model = e N1_z / N0_z,   N1_z = 1 / sqrt(1 + |g0 + grad c|^2),   g0 = grad h0
+
+(``e`` the exposure ratio of the two flashes). The method solves for ``c`` over the ROI with
+``c = 0`` outside it (the crease meets the neutral face at the ROI border)::
+
+    min_c  sum_ROI (R_model - R)^2  +  smooth sum |grad c|^2
+
+by Levenberg-Marquardt (Gauss-Newton) steps, each a sparse symmetric system solved by conjugate
+gradients preconditioned with algebraic multigrid (pyamg). The slope field is integrable by
+construction (it is the gradient of ``c``), the border condition ties every crease to the
+neutral, and where the neutral is tilted (``N0_z < 1``) the ratio depends on the *sign* of the
+crease's slope to first order (``R ~ 1 - g0 . grad c``): ridges and valleys are told apart by
+the data, not by a prior. Where the neutral faces the camera (``g0 = 0``) ``c`` and ``-c`` fit
+equally (the concave/convex ambiguity): several starts are solved (zero, the ``integrable``
+prior and its mirror) and the lowest residual wins; a tie (within the noise) keeps the prior's
+sign (creases are dents).
+
+The result's normals, relative to the neutral surface, are the smallest rotation taking ``n0``
+to +Z applied to the expression's normal ``(-(g0 + grad c), 1)``; its tilt from the camera is
+set back to the measured one (``N1_z = R N0_z / e``) so the data's detail is not smoothed by
+the solve. The residual (RMS of ``R_model - R`` over the ROI, also in units of the ratio's noise)
+is reported: a residual near the noise means the height explains the photos.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyamg
+from scipy import ndimage, sparse
+from scipy.sparse import linalg as spla
+from threadpoolctl import threadpool_limits
+
+
+@dataclass(frozen=True)
+class SfsOptions:
+    """Parameters of the shape-from-shading solve."""
+
+    #: Weight of the smoothness term ``|grad c|^2`` relative to the data (R units squared).
+    smooth: float = 2e-4
+    #: Weight of ``c^2`` (pixels^2): creases are local, the face's broad shape is the neutral's.
+    shrink: float = 2e-6
+    #: Gauss-Newton (Levenberg-Marquardt) steps per start (fewer when it has converged).
+    iterations: int = 8
+    #: Photos larger than this (pixels per side) are solved on an integer-downsampled grid and
+    #: the solution's orientation is carried back to every pixel.
+    max_side: int = 320
+    #: Gaussian window (pixels of the solve grid) over which the starts' local residuals are
+    #: compared when they are fused into one more start.
+    fuse_sigma: float = 6.0
+    #: Conjugate-gradient tolerance of each step (relative residual).
+    cg_tol: float = 1e-3
+    cg_maxiter: int = 60
+    #: Estimate the exposure ratio jointly with the height (else R is taken as normalised).
+    fit_exposure: bool = True
+    #: Two starts whose residuals differ by less than this fraction are a tie.
+    tie: float = 0.02
+
+
+@dataclass
+class SfsResult:
+    """The crease height, its slopes and how well it explains R."""
+
+    height: np.ndarray  # [H, W] crease height c (pixels), 0 outside the ROI
+    slopes: np.ndarray  # [H, W, 2] expression slopes p = g0 + grad c, pixel frame (col, row)
+    exposure: float  # the exposure factor fitted (1 when not fitted)
+    residual: float  # RMS of R_model - R over the ROI (R units)
+    starts: dict[str, float]  # residual of every start, by name
+    start: str  # the winning start
+    factor: int  # downsampling factor of the solve grid
+
+
+def neutral_slopes(n0: np.ndarray) -> np.ndarray:
+    """Pixel-frame slopes ``(dh/dcol, dh/drow)`` of a surface with camera-frame normals ``n0``
+    (+Y up, so ``dh/drow = +n_y / n_z``)."""
+    n = np.asarray(n0, np.float64)
+    z = np.maximum(n[..., 2], 1e-3)
+    return np.stack([-n[..., 0] / z, n[..., 1] / z], axis=-1)
+
+
+def slopes_to_normals(p: np.ndarray) -> np.ndarray:
+    """Camera-frame unit normals (+Y up) of pixel-frame slopes ``p`` ``[..., 2]``."""
+    p = np.asarray(p, np.float64)
+    n = np.stack([-p[..., 0], p[..., 1], np.ones(p.shape[:-1])], axis=-1)
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def relative_to(n1: np.ndarray, n0: np.ndarray) -> np.ndarray:
+    """``n1`` turned by the smallest rotation taking ``n0`` to +Z: the wrinkle alone, in the
+    neutral surface's frame (Rodrigues' formula), ``[..., 3]``."""
+    n1 = np.asarray(n1, np.float64)
+    n0 = np.asarray(n0, np.float64)
+    v = np.stack([n0[..., 1], -n0[..., 0], np.zeros(n0.shape[:-1])], axis=-1)  # n0 x z
+    vx = np.cross(v, n1)
+    out = n1 + vx + np.cross(v, vx) / np.maximum(1.0 + n0[..., 2], 1e-6)[..., None]
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+# --- the grid operators ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """Unknowns (ROI pixels), data rows, and the difference operators restricted to them."""
+
+    shape: tuple[int, int]
+    unknown: np.ndarray  # flat indices of the unknown pixels
+    dx: sparse.csr_matrix  # central d/dcol at the unknown pixels, [U, U] (0 outside)
+    dy: sparse.csr_matrix  # central d/drow
+    reg: sparse.csr_matrix  # forward differences (both axes, stacked), [E, U]
+
+
+def _grid(mask: np.ndarray) -> _Grid:
+    h, w = mask.shape
+    flat = np.flatnonzero(mask.ravel())
+    col_of = np.full(h * w, -1, np.int64)
+    col_of[flat] = np.arange(len(flat))
+    r, c = np.divmod(flat, w)
+
+    def neighbour(dr: int, dc: int) -> np.ndarray:
+        rr, cc = r + dr, c + dc
+        ok = (rr >= 0) & (rr < h) & (cc >= 0) & (cc < w)
+        out = np.full(len(flat), -1, np.int64)
+        out[ok] = col_of[rr[ok] * w + cc[ok]]
+        return out  # -1: outside the unknowns (c = 0 there)
+
+    rows = np.arange(len(flat))
+    n = len(flat)
+
+    def central(plus: np.ndarray, minus: np.ndarray) -> sparse.csr_matrix:
+        ip, im = plus >= 0, minus >= 0
+        data = np.concatenate([np.full(ip.sum(), 0.5), np.full(im.sum(), -0.5)])
+        rr = np.concatenate([rows[ip], rows[im]])
+        cc = np.concatenate([plus[ip], minus[im]])
+        return sparse.csr_matrix((data, (rr, cc)), shape=(n, n))
+
+    dx = central(neighbour(0, 1), neighbour(0, -1))
+    dy = central(neighbour(1, 0), neighbour(-1, 0))
+    regs = []
+    for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0)):
+        nb = neighbour(dr, dc)
+        # every edge from an unknown to its neighbour; edges to the outside (c = 0) count once
+        # each way, edges between two unknowns only in the +col / +row direction
+        keep = (nb < 0) | ((dr, dc) in ((0, 1), (1, 0)))
+        k = np.flatnonzero(keep)
+        m = len(k)
+        inside = nb[k] >= 0
+        data = np.concatenate([np.full(m, -1.0), np.ones(inside.sum())])
+        rr = np.concatenate([np.arange(m), np.arange(m)[inside]])
+        cc = np.concatenate([k, nb[k][inside]])
+        regs.append(sparse.csr_matrix((data, (rr, cc)), shape=(m, n)))
+    return _Grid((h, w), flat, dx, dy, sparse.vstack(regs).tocsr())
+
+
+# --- the solve ---------------------------------------------------------------------------------
+
+
+def _model(p_x: np.ndarray, p_y: np.ndarray, inv_nz0: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Model ratio ``N1_z / N0_z`` and its derivatives with respect to the slopes."""
+    n1 = 1.0 / np.sqrt(1.0 + p_x * p_x + p_y * p_y)
+    rho = n1 * inv_nz0
+    d = -(n1**3) * inv_nz0  # d rho / d p = -N1_z^3 p / N0_z
+    return rho, d * p_x, d * p_y
+
+
+def _solve(
+    grid: _Grid,
+    g0x: np.ndarray,
+    g0y: np.ndarray,
+    inv_nz0: np.ndarray,
+    ratio: np.ndarray,
+    weight: np.ndarray,
+    c0: np.ndarray,
+    exposure: float,
+    o: SfsOptions,
+) -> tuple[np.ndarray, float, float]:
+    """Levenberg-Marquardt on the unknown heights; returns (c, exposure, weighted RMS)."""
+    c = c0.copy()
+    lam = o.smooth
+    reg_t_reg = (
+        grid.reg.T @ grid.reg + (o.shrink / max(lam, 1e-30)) * sparse.identity(len(c))
+    ).tocsr()
+    wsum = max(float(weight.sum()), 1e-12)
+
+    def energy(cc: np.ndarray, e: float) -> tuple[float, tuple[np.ndarray, ...]]:
+        px = g0x + grid.dx @ cc
+        py = g0y + grid.dy @ cc
+        rho, drx, dry = _model(px, py, inv_nz0)
+        f = e * rho - ratio
+        return float(weight @ (f * f) + lam * (cc @ (reg_t_reg @ cc))), (px, py, rho, drx, dry, f)
+
+    e = exposure
+    energy_now, st = energy(c, e)
+    mu = 1e-2
+    diag_w = sparse.diags(weight)
+    for _ in range(o.iterations):  # ten Gauss-Newton steps, each one sparse solve
+        px, py, rho, drx, dry, f = st
+        jac = (sparse.diags(e * drx) @ grid.dx + sparse.diags(e * dry) @ grid.dy).tocsr()
+        jtj = (jac.T @ diag_w @ jac + lam * reg_t_reg).tocsr()
+        scale = float(jtj.diagonal().mean()) or 1.0
+        a = (jtj + sparse.identity(jtj.shape[0]) * (mu * scale)).tocsr()
+        b = -(jac.T @ (weight * f) + lam * (reg_t_reg @ c))
+        step, _ = spla.cg(a, b, rtol=o.cg_tol, maxiter=o.cg_maxiter, M=_multigrid(a))
+
+        trial = c + step
+        e_trial = e
+        if o.fit_exposure:
+            _, (_, _, rho_t, *_rest) = energy(trial, e)
+            num = float(weight @ (rho_t * ratio))
+            den = float(weight @ (rho_t * rho_t))
+            if den > 0:
+                e_trial = float(np.clip(num / den, 0.8 * exposure, 1.25 * exposure))
+        energy_trial, st_trial = energy(trial, e_trial)
+        if energy_trial < energy_now:
+            done = energy_now - energy_trial < 1e-4 * energy_now
+            c, e, energy_now, st = trial, e_trial, energy_trial, st_trial
+            mu = max(mu / 3.0, 1e-6)
+            if done:
+                break
+        else:
+            mu *= 10.0
+    f = st[5]
+    return c, e, float(np.sqrt(float(weight @ (f * f)) / wsum))
+
+
+def _downsample(img: np.ndarray, k: int) -> np.ndarray:
+    if k == 1:
+        return img
+    h, w = img.shape[:2]
+    hh, ww = h // k, w // k
+    x = img[: hh * k, : ww * k]
+    return x.reshape((hh, k, ww, k) + img.shape[2:]).mean(axis=(1, 3))
+
+
+def solve_crease(
+    ratio: np.ndarray,
+    n0: np.ndarray,
+    roi: np.ndarray,
+    valid: np.ndarray | None = None,
+    starts: dict[str, np.ndarray] | None = None,
+    options: SfsOptions | None = None,
+) -> SfsResult:
+    """Solve for the crease height of every start; keep the one with the lowest residual.
+
+    ``ratio`` is R (exposure roughly normalised, unclipped), ``n0`` the neutral's camera-frame
+    normals ``[H, W, 3]``, ``roi`` (0..1) the region (c = 0 outside), ``valid`` the pixels that
+    were divided. ``starts`` maps names to initial slope fields ``[H, W, 2]`` (pixel frame, of
+    the crease alone) in preference order (the first wins ties); the zero start is always tried.
+    """
+    o = options or SfsOptions()
+    r_full = np.asarray(ratio, np.float64)
+    h, w = r_full.shape
+    k = max(1, int(np.ceil(max(h, w) / o.max_side)))
+    in_roi = np.asarray(roi, np.float64) > 0.5
+    ok = in_roi if valid is None else in_roi & np.asarray(valid, bool)
+    rr = _downsample(r_full, k)
+    nn = _downsample(np.asarray(n0, np.float64), k)
+    nn = nn / np.linalg.norm(nn, axis=-1, keepdims=True)
+    mask = _downsample(in_roi.astype(np.float64), k) > 0.5
+    wgt = _downsample(ok.astype(np.float64), k)
+    grid = _grid(mask)
+    u = grid.unknown
+    g0 = neutral_slopes(nn)
+    g0x, g0y = g0[..., 0].ravel()[u], g0[..., 1].ravel()[u]
+    inv_nz0 = 1.0 / np.maximum(nn[..., 2].ravel()[u], 1e-3)
+    rv = rr.ravel()[u]
+    wv = np.where(wgt.ravel()[u] > 0.5, 1.0, 0.0)
+    tried: dict[str, tuple[np.ndarray, float, float]] = {}
+    inits: dict[str, np.ndarray] = {}
+    args = (g0x, g0y, inv_nz0, rv, wv)
+    with threadpool_limits(1):  # sparse, memory-bound work: BLAS threads only contend
+        for name, q in (starts or {}).items():  # a few starts
+            qs = _downsample(np.asarray(q, np.float64), k) * k  # slopes per coarse pixel
+            inits[name] = _integrate(grid, qs[..., 0].ravel()[u], qs[..., 1].ravel()[u])
+        if np.abs(g0).max() > 1e-3:  # from the neutral itself (a saddle where it is flat)
+            inits["zero"] = np.zeros(len(u))
+        for name, c0 in inits.items():
+            tried[name] = _solve(grid, *args, c0, 1.0, o)
+        if len(tried) > 1:
+            fused = _fuse(grid, {n: v[0] for n, v in tried.items()}, args, mask.shape, o)
+            tried["fused"] = _solve(grid, *args, fused, 1.0, o)
+    best = min(tried, key=lambda n: tried[n][2])
+    first = next(iter(tried))
+    if tried[first][2] <= tried[best][2] * (1.0 + o.tie):
+        best = first  # a tie keeps the preferred start (the prior's sign)
+    c_small, exposure, resid = tried[best]
+    c = np.zeros(mask.shape)
+    c.ravel()[u] = c_small
+    if k > 1:
+        # back to full resolution: heights scale with the pixel size, bilinear in between
+        rows = (np.arange(h) + 0.5) / k - 0.5
+        cols = (np.arange(w) + 0.5) / k - 0.5
+        yy, xx = np.meshgrid(rows, cols, indexing="ij")
+        c = ndimage.map_coordinates(c, [yy, xx], order=1, mode="nearest") * k
+        c = np.where(in_roi, c, 0.0)
+    d_row, d_col = np.gradient(c)
+    p = neutral_slopes(n0) + np.stack([d_col, d_row], axis=-1)
+    return SfsResult(
+        height=c,
+        slopes=p,
+        exposure=exposure,
+        residual=resid,
+        starts={n: v[2] for n, v in tried.items()},
+        start=best,
+        factor=k,
+    )
+
+
+def _fuse(
+    grid: _Grid,
+    solutions: dict[str, np.ndarray],
+    args: tuple[np.ndarray, ...],
+    shape: tuple[int, int],
+    o: SfsOptions,
+) -> np.ndarray:
+    """One more start: at every pixel the slopes of the solution whose residual is lowest
+    nearby (Gaussian window), integrated (a fusion move: each crease from the start that
+    explains it best)."""
+    g0x, g0y, inv_nz0, rv, wv = args
+    local = []
+    slopes = []
+    for c in solutions.values():  # a few solutions
+        qx, qy = grid.dx @ c, grid.dy @ c
+        rho, *_ = _model(g0x + qx, g0y + qy, inv_nz0)
+        f = np.zeros(shape[0] * shape[1])
+        f[grid.unknown] = wv * (rho - rv) ** 2
+        local.append(ndimage.gaussian_filter(f.reshape(shape), o.fuse_sigma).ravel()[grid.unknown])
+        slopes.append((qx, qy))
+    pick = np.argmin(np.stack(local), axis=0)
+    qx = np.choose(pick, [q[0] for q in slopes])
+    qy = np.choose(pick, [q[1] for q in slopes])
+    return _integrate(grid, qx, qy)
+
+
+def _integrate(grid: _Grid, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
+    """Least-squares height with central-difference slopes ``q`` and ``c = 0`` outside."""
+    a = (grid.dx.T @ grid.dx + grid.dy.T @ grid.dy + 1e-3 * (grid.reg.T @ grid.reg)).tocsr()
+    b = grid.dx.T @ qx + grid.dy.T @ qy
+    x, _ = spla.cg(a, b, rtol=1e-6, maxiter=300, M=_multigrid(a))
+    return x
+
+
+def _multigrid(a: sparse.csr_matrix) -> spla.LinearOperator:
+    """A smoothed-aggregation V-cycle preconditioner, set up deterministically: pyamg estimates
+    spectral radii from a random start drawn from numpy's global generator, which is seeded
+    for the setup and restored after (byte-identical outputs on a rerun)."""
+    state = np.random.get_state()
+    try:
+        np.random.seed(0x5F5)
+        ml = pyamg.smoothed_aggregation_solver(a, symmetry="hermitian", max_coarse=200)
+    finally:
+        np.random.set_state(state)
+    return ml.aspreconditioner(cycle="V")
+
+
+def ratio_of_height(c: np.ndarray, n0: np.ndarray) -> np.ndarray:
+    """The Lambertian ratio image ``N1_z / N0_z`` of the crease height ``c`` on the neutral."""
+    d_row, d_col = np.gradient(np.asarray(c, np.float64))
+    p = neutral_slopes(n0) + np.stack([d_col, d_row], axis=-1)
+    n1z = 1.0 / np.sqrt(1.0 + np.sum(p * p, axis=-1))
+    return n1z / np.maximum(np.asarray(n0, np.float64)[..., 2], 1e-3)
+
+
+def normals_from_slopes(
+    p: np.ndarray, n0: np.ndarray, n1z: np.ndarray | None = None, min_slope: float = 1e-3
+) -> np.ndarray:
+    """The wrinkle normals (relative to ``n0``) of expression slopes ``p``; with ``n1z`` the
+    tilt from the camera is set to the measured ``N1_z`` along ``p``'s direction."""
+    p = np.asarray(p, np.float64)
+    if n1z is not None:
+        z = np.clip(np.asarray(n1z, np.float64), 1e-3, 1.0)
+        t = np.sqrt(1.0 / (z * z) - 1.0)
+        mag = np.hypot(p[..., 0], p[..., 1])
+        use = mag > min_slope
+        p = np.where(use[..., None], p * (t / np.maximum(mag, 1e-12))[..., None], p)
+    return relative_to(slopes_to_normals(p), n0)
+
+
+def expression_normals(m: np.ndarray, n0: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`relative_to`: a wrinkle normal ``m`` (neutral frame) back in the
+    camera frame (the smallest rotation taking +Z to ``n0``)."""
+    n0 = np.asarray(n0, np.float64)
+    return relative_to(m, np.stack([-n0[..., 0], -n0[..., 1], n0[..., 2]], axis=-1))
+
+
+def ratio_residual(
+    normals: np.ndarray,
+    n0: np.ndarray,
+    ratio: np.ndarray,
+    roi: np.ndarray,
+    valid: np.ndarray | None = None,
+    exposure: float = 1.0,
+    max_side: int = SfsOptions.max_side,
+) -> float:
+    """How well a wrinkle normal map explains the photos: its slopes are integrated into a
+    height (least squares, zero outside the ROI), the height's Lambertian ratio image is
+    rendered and compared with R: RMS over the ROI (R units). Comparable across methods: a map
+    that is not integrable, or leans the wrong way, cannot reproduce R once integrated."""
+    r = np.asarray(ratio, np.float64)
+    h, w = r.shape
+    k = max(1, int(np.ceil(max(h, w) / max_side)))
+    in_roi = np.asarray(roi, np.float64) > 0.5
+    ok = in_roi if valid is None else in_roi & np.asarray(valid, bool)
+    nn = _downsample(np.asarray(n0, np.float64), k)
+    nn = nn / np.linalg.norm(nn, axis=-1, keepdims=True)
+    mm = _downsample(np.asarray(normals, np.float64), k)
+    mask = _downsample(in_roi.astype(np.float64), k) > 0.5
+    wv = (_downsample(ok.astype(np.float64), k) > 0.5).ravel()
+    grid = _grid(mask)
+    u = grid.unknown
+    if len(u) == 0:
+        return 0.0
+    n1 = expression_normals(mm, nn)
+    z = np.maximum(n1[..., 2], 1e-3)
+    q = np.stack([-n1[..., 0] / z, n1[..., 1] / z], axis=-1) - neutral_slopes(nn)
+    with threadpool_limits(1):
+        c = _integrate(grid, q[..., 0].ravel()[u] * k, q[..., 1].ravel()[u] * k)
+    g0 = neutral_slopes(nn)
+    rho, *_ = _model(
+        g0[..., 0].ravel()[u] + grid.dx @ c,
+        g0[..., 1].ravel()[u] + grid.dy @ c,
+        1.0 / np.maximum(nn[..., 2].ravel()[u], 1e-3),
+    )
+    f = (exposure * rho - _downsample(r, k).ravel()[u])[wv[u]]
+    return float(np.sqrt(np.mean(f * f))) if f.size else 0.0
