@@ -14,9 +14,9 @@ from scipy import ndimage
 
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
 from wrinklepipe.capture import CaptureOptions, OrientationOptions, capture
+from wrinklepipe.capture import sfs as S
 from wrinklepipe.capture import warp as W
 from wrinklepipe.capture.evaluate import errors
-from wrinklepipe.capture import sfs as S
 from wrinklepipe.capture.orientation import PRIORS, orient
 from wrinklepipe.capture.ratio import ratio_image
 from wrinklepipe.capture.sessions import FOREHEAD, SessionOptions, make_session
