@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wrinklepipe import pipeline
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.io import khronos
 from wrinklepipe.io.gltf_read import read_gltf
 from wrinklepipe.io.usd_read import read_usd
+from wrinklepipe.outputs import folder as output_folder
 from wrinklepipe.presets import jimenez
 
 
@@ -177,7 +177,7 @@ def test_full_disk_leaves_previous_output_intact(source, converted, tmp_path, mo
     out = tmp_path / "prev"
     shutil.copytree(converted, out)
     before = _tree(out)
-    real = pipeline.write_bytes
+    real = output_folder.write_bytes
     calls = {"n": 0}
 
     def failing(path, data, inputs=()):
@@ -186,7 +186,7 @@ def test_full_disk_leaves_previous_output_intact(source, converted, tmp_path, mo
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
         return real(path, data, inputs)
 
-    monkeypatch.setattr(pipeline, "write_bytes", failing)
+    monkeypatch.setattr(output_folder, "write_bytes", failing)
     assert main(["convert", str(source), "-o", str(out), "--force", "--no-validate"]) == 2
     err = capsys.readouterr().err
     assert "No space left on device" in err and "nothing was changed" in err

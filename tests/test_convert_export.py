@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from wrinklepipe.cli import main
+from wrinklepipe.demo.package import demo_package
+from wrinklepipe.export.files import export_files, flip_green
 from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.package import png_pixels
 from wrinklepipe.io.usd_write import write_usd
-from wrinklepipe.pipeline import demo_package, export_files, flip_green
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,8 @@ import pytest
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import InputError
-from wrinklepipe.pipeline import curves_from_weights, expression_cycle, prepare_mesh
+from wrinklepipe.pipeline.drivers import curves_from_weights, expression_cycle
+from wrinklepipe.pipeline.prepare import prepare_mesh
 
 
 def test_curves_from_weights_reads_each_regions_first_state():
@@ -64,7 +65,7 @@ def test_blendshapes_driver_gives_region_and_morph_curves(tmp_path):
     from dataclasses import replace
 
     from wrinklepipe.demo import demo_asset
-    from wrinklepipe.pipeline import evaluate_drivers
+    from wrinklepipe.pipeline.drivers import evaluate_drivers
 
     asset = demo_asset(16)
     spec = {

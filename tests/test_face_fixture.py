@@ -90,7 +90,7 @@ def test_todays_automatic_choice_fails_the_fidelity_budget(fixture):
     truth. Full resolution at scale 1 is within the budget."""
     from wrinklepipe.io.package import encode_state, resize_normals_pd
     from wrinklepipe.normals.encode import decode_pd_slopes
-    from wrinklepipe.pipeline import run_stages
+    from wrinklepipe.pipeline.prepare import run_stages
 
     asset = fixture.asset()
     asset.provenance["auto_resolution"] = ["wrinkle"]

@@ -138,7 +138,7 @@ def test_sixteen_bit_maps(tmp_path):
 @pytest.mark.parametrize("encoding", ["pd", "diff", "full", "composite"])
 def test_demo_decode_error_small(encoding):
     # 8-bit storage of the demo's states: mean error well below the demo budget (0.5 deg)
-    from wrinklepipe.pipeline import demo_package
+    from wrinklepipe.demo.package import demo_package
 
     pkg = demo_package(64, encoding=encoding)
     from wrinklepipe.demo import demo_asset

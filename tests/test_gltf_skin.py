@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from wrinklepipe.demo.package import demo_package
 from wrinklepipe.io import khronos
 from wrinklepipe.io.gltf_read import read_gltf
 from wrinklepipe.io.gltf_write import skin_weights_normalized, write_gltf
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.io.usd_write import write_usd
-from wrinklepipe.pipeline import demo_package
 
 
 @pytest.fixture(scope="module")

@@ -13,13 +13,14 @@ import numpy as np
 import pytest
 
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
+from wrinklepipe.demo.package import demo_package
 from wrinklepipe.errors import InputError
 from wrinklepipe.io import khronos
 from wrinklepipe.io.gltf_read import GltfReadOptions, read_gltf
 from wrinklepipe.io.gltf_write import write_glb, write_gltf
 from wrinklepipe.io.package import EXTENSION, package_from_asset, png_bytes, png_pixels
 from wrinklepipe.paths import SCHEMAS_DIR
-from wrinklepipe.pipeline import demo_package, prepare_mesh
+from wrinklepipe.pipeline.prepare import prepare_mesh
 
 SCHEMA = SCHEMAS_DIR / EXTENSION / "schema" / f"material.{EXTENSION}.schema.json"
 #: Information the Khronos validator emits for any vendor extension: it cannot see inside it
@@ -271,7 +272,7 @@ def test_vertex_ids_beyond_float_precision_refused(pkg, tmp_path):
 
 def test_names_from_inputs_never_leave_the_folder(tmp_path):
     from wrinklepipe.io.package import WeightCurves, safe_name
-    from wrinklepipe.pipeline import curve_files
+    from wrinklepipe.outputs.curves import curve_files
 
     asset = _tiny_asset()
     asset = replace(asset, state_names=("../../evil",))

@@ -11,7 +11,7 @@ from wrinklepipe.io.mesh import load_mesh
 
 @pytest.fixture(scope="module")
 def package():
-    from wrinklepipe.pipeline import demo_package
+    from wrinklepipe.demo.package import demo_package
 
     return demo_package(64)
 

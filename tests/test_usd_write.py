@@ -9,12 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from wrinklepipe.demo.package import demo_package
 from wrinklepipe.errors import InputError
 from wrinklepipe.io.gltf_read import read_gltf
 from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.io.usd_write import API_NAME, register_schema, write_usd
-from wrinklepipe.pipeline import demo_package
 
 pxr = pytest.importorskip("pxr")
 from pxr import Sdf, Usd, UsdShade, UsdValidation  # noqa: E402

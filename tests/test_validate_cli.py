@@ -147,8 +147,8 @@ def test_report_is_byte_identical_on_rerun(capsys, tmp_path):
 
 @needs_gl
 def test_converted_gltf_folder_loads(capsys, tmp_path):
+    from wrinklepipe.demo.package import demo_package
     from wrinklepipe.io.gltf_write import write_gltf
-    from wrinklepipe.pipeline import demo_package
 
     write_gltf(demo_package(64), tmp_path / "out", "demo")
     code, out, err = run(capsys, tmp_path / "out", "--render-size", "128", "--json")
@@ -194,7 +194,7 @@ def test_bench_validate_quick_smoke():
 @pytest.fixture(scope="module")
 def converted(tmp_path_factory):
     from wrinklepipe.demo.source import write_demo_source
-    from wrinklepipe.pipeline import ConvertOptions, convert
+    from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
     root = tmp_path_factory.mktemp("conv")
     manifest = write_demo_source(root / "src", size=128)

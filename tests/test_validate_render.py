@@ -13,10 +13,10 @@ import pytest
 
 from wrinklepipe import model
 from wrinklepipe.demo import demo_asset
+from wrinklepipe.sources.validation import load_input
 from wrinklepipe.validate import ValidateOptions, validate
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate.context import Context
-from wrinklepipe.validate.loader import load_input
 from wrinklepipe.validate.render import Renderer, ortho_front, render_pass
 from wrinklepipe.validate.ship import ShipOptions, ship_asset
 
@@ -109,7 +109,7 @@ def test_ortho_front_maps_the_bounding_box_into_clip_space():
 @pytest.mark.parametrize("policy", ["clamp01", "renormalize"])
 def test_lr_split_layout_renders_like_the_model(policy):
     from wrinklepipe.io.package import PackOptions, package_from_asset
-    from wrinklepipe.pipeline import prepare_mesh
+    from wrinklepipe.pipeline.prepare import prepare_mesh
     from wrinklepipe.validate.loader import input_from_package
 
     a = demo_asset(128, policy=policy)
@@ -195,7 +195,7 @@ def test_diff_gain_is_undone_like_the_package_decoder():
     """A diff map stored with gain 2 (0.5 + 0.5 * 2 (W - B)) decodes to the same face."""
     from wrinklepipe.io.package import PackOptions, package_from_asset
     from wrinklepipe.io.package import decode_state as package_decode
-    from wrinklepipe.pipeline import prepare_mesh
+    from wrinklepipe.pipeline.prepare import prepare_mesh
     from wrinklepipe.validate.loader import input_from_package
 
     a = demo_asset(128, encoding="diff")

@@ -17,13 +17,13 @@ from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
 
 @benchmark("output-write", "glTF/GLB/USD writers and readers on the demo (1024^2 maps)")
 def bench_output(quick: bool = False) -> BenchResult:
+    from wrinklepipe.demo.package import demo_package
     from wrinklepipe.io.gltf_read import read_gltf
     from wrinklepipe.io.gltf_write import glb_bytes, gltf_document, write_gltf
     from wrinklepipe.io.images import write_image
     from wrinklepipe.io.package import png_bytes
     from wrinklepipe.io.usd_read import read_usd
     from wrinklepipe.io.usd_write import build_stage, write_usd
-    from wrinklepipe.pipeline import demo_package
 
     size = 256 if quick else 1024
     repeat = 3 if quick else 5

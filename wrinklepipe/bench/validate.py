@@ -39,10 +39,10 @@ def _interleaved(fns: dict[str, Callable[[], Any]], repeat: int) -> dict[str, fl
 
 @benchmark("validate", "validate-asset on the demo (512^2, 7 poses); wrinkle vs plain shader")
 def bench_validate(quick: bool = False) -> BenchResult:
+    from wrinklepipe.sources.validation import load_input
     from wrinklepipe.validate import ValidateOptions, validate
     from wrinklepipe.validate import gl as glw
     from wrinklepipe.validate.context import expression_weights
-    from wrinklepipe.validate.loader import load_input
     from wrinklepipe.validate.render import Renderer
 
     size = 128 if quick else 512

@@ -56,7 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from wrinklepipe.console import emit_json, err
-    from wrinklepipe.pipeline import ConvertOptions, convert
+    from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
     options = ConvertOptions(
         glb=args.glb,

@@ -53,7 +53,7 @@ def _previous_demo(folder: Path) -> bool:
 def run(args: argparse.Namespace) -> int:
     from wrinklepipe.console import emit_json, err, status
     from wrinklepipe.demo.source import demo_source_dir
-    from wrinklepipe.pipeline import ConvertOptions, convert
+    from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
     out = Path(args.output)
     with status(f"generating the demo character ({args.size}²)"):

@@ -27,7 +27,7 @@ examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from wrinklepipe.pipeline import ENGINE_PRESETS
+    from wrinklepipe.export.presets import ENGINE_PRESETS
 
     p.add_argument("source", metavar="SOURCE", help="convert output folder, .gltf/.glb or USD")
     p.add_argument("--engine", required=True, choices=sorted(ENGINE_PRESETS), help="target")
@@ -38,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from wrinklepipe.console import emit_json, err
-    from wrinklepipe.pipeline import export
+    from wrinklepipe.export.job import export
 
     files, notes = export(args.source, args.output, args.engine, force=args.force)
     if args.json:

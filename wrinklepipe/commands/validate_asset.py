@@ -56,10 +56,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from wrinklepipe.console import emit_json, err, status
+    from wrinklepipe.sources.validation import LoadOptions, load_input
     from wrinklepipe.validate import validate
     from wrinklepipe.validate.config import Config, load_config
     from wrinklepipe.validate.context import ValidateOptions
-    from wrinklepipe.validate.loader import LoadOptions, load_input
     from wrinklepipe.validate.report import print_summary, report_json, write_reports
 
     if args.render_size is not None and not 16 <= args.render_size <= 4096:

@@ -23,6 +23,7 @@ import numpy as np
 from wrinklepipe.document.model import ARRAY_BUFFER, Document, PrimitiveRef
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles, rest_positions
 from wrinklepipe.errors import input_error
+from wrinklepipe.geometry.normals import vertex_normals
 
 VERTEX_ID_ATTRIBUTE = "_WRINKLE_VERTEX_ID"
 #: Largest integer a float32 holds exactly (vertex IDs are FLOAT accessors).
@@ -159,8 +160,6 @@ def add_wrinkle_attributes(doc: Document, refs: list[PrimitiveRef]) -> list[Wrin
         local = doc.accessor(attrs["POSITION"]).astype(np.float64)
         normals = doc.accessor(attrs["NORMAL"]).astype(np.float64) if "NORMAL" in attrs else None
         if normals is None:
-            from wrinklepipe.demo.character import vertex_normals
-
             normals = vertex_normals(local.astype(np.float32), tri.astype(np.uint32))
             attrs["NORMAL"] = doc.add_accessor(np.asarray(normals, np.float32), ARRAY_BUFFER)
             notes.append("added area-weighted NORMAL")

@@ -103,7 +103,7 @@ def load_maps(manifest: Any, size: int | None = None) -> tuple[np.ndarray, np.nd
     (the base's unless ``size``), read as ``convert`` reads them and resampled in PD space."""
     from wrinklepipe.io.package import resize_normals_pd
     from wrinklepipe.masks import resample_masks
-    from wrinklepipe.pipeline import read_maps
+    from wrinklepipe.pipeline.ingest import read_maps
 
     base, states, masks, _ = read_maps(manifest)
     h, w = (size, size) if size else base.shape[:2]

@@ -2,8 +2,9 @@
 
 Public API::
 
-    from wrinklepipe.validate import validate, load_input, ValidateOptions, write_reports
-    inp = load_input(path)                # folder, glTF/GLB, USD, manifest, bundle
+    from wrinklepipe.sources.validation import load_input   # the sources layer, above this one
+    from wrinklepipe.validate import validate, ValidateOptions
+    inp = load_input(path)                # folder, glTF/GLB, USD, manifest, bundle, demo
     report = validate(inp, ValidateOptions())
     report.issues, report.counts, report.exit_code("error")
 """
@@ -14,7 +15,6 @@ from wrinklepipe.validate.catalogue import RULES, RULES_BY_CODE, Issue, Rule
 from wrinklepipe.validate.config import Config, load_config
 from wrinklepipe.validate.context import ValidateOptions
 from wrinklepipe.validate.inputs import ChannelEntry, Texture, ValidationInput
-from wrinklepipe.validate.loader import LoadOptions, load_input
 from wrinklepipe.validate.run import Report, validate
 
 __all__ = [
@@ -23,13 +23,11 @@ __all__ = [
     "ChannelEntry",
     "Config",
     "Issue",
-    "LoadOptions",
     "Report",
     "Rule",
     "Texture",
     "ValidateOptions",
     "ValidationInput",
     "load_config",
-    "load_input",
     "validate",
 ]

@@ -1,7 +1,8 @@
 """What the validator works on: the in-memory asset plus the exact texture bytes that ship.
 
-A :class:`ValidationInput` is built by :mod:`wrinklepipe.validate.loader` from a converted folder,
-a glTF/GLB/USD, a manifest, a corpus bundle or the demo. Rules and the render pass only read it.
+A :class:`ValidationInput` is built by :mod:`wrinklepipe.sources.validation` from a converted
+folder, a glTF/GLB/USD, a manifest, a corpus bundle or the demo. Rules and the render pass only
+read it.
 
 ``asset`` holds float data: when ``has_source`` is true its maps are the *source* (independent of
 the shipped bytes, e.g. the manifest's 16-bit PNGs or the demo's analytic normals), so rules can

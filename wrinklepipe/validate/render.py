@@ -19,6 +19,7 @@ from scipy import ndimage
 
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh
+from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.shading import glsl
 from wrinklepipe.shading.setup import MaskEntry, ShaderSetup
 from wrinklepipe.validate import gl as glw
@@ -296,8 +297,6 @@ def triangle_layer_touch(layers: list[Texture], mesh: Mesh) -> np.ndarray:
 
 
 def _vertex_normals(mesh: Mesh) -> np.ndarray:
-    from wrinklepipe.demo.character import vertex_normals
-
     return vertex_normals(np.asarray(mesh.positions, np.float32), np.asarray(mesh.indices))
 
 

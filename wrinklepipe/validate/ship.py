@@ -4,7 +4,7 @@ A small, fixed packer: 8-bit (or BCn) base, states in the asset's encoding, mask
 RGBA texture. Texels come from :mod:`wrinklepipe.codec` (value mapping v2, the codec's layouts)
 and blocks from :func:`wrinklepipe.normals.compress.encode_bc`, the converter's own encoder, so
 the validator is run on exactly what ``convert`` would ship. Real outputs are loaded by
-:mod:`wrinklepipe.validate.loader`.
+:mod:`wrinklepipe.sources.validation`.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import numpy as np
 from wrinklepipe import codec, model
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.normals import compress as nc
+from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.validate.inputs import ChannelEntry, Texture, ValidationInput
 
 #: Validator format name -> codec storage format of the texels (plain formats store RGBA8).
@@ -140,8 +141,6 @@ def ship_asset(
         for c in range(chunk.shape[0]):
             table.append(ChannelEntry(asset.regions[4 * t + c].name, f"mask_{t}", c))
     if asset.mesh is not None and asset.mesh.tangents is None:
-        from wrinklepipe.pipeline import prepare_mesh
-
         asset = replace(asset, mesh=prepare_mesh(asset.mesh))
     return ValidationInput(
         asset=asset,

@@ -1,0 +1,33 @@
+"""``export``: read a written asset, build one engine's files, write them atomically."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from wrinklepipe.atomic import staged_folder, write_bytes
+from wrinklepipe.errors import input_error
+from wrinklepipe.export.files import export_files
+from wrinklepipe.export.presets import ENGINE_PRESETS
+from wrinklepipe.sources.package import read_package
+
+
+def export(
+    source: str | Path, output: str | Path, engine: str, force: bool = False
+) -> tuple[dict[str, bytes], list[str]]:
+    """Export a written asset for one engine into ``output`` (atomically)."""
+    if engine not in ENGINE_PRESETS:
+        raise input_error(engine, f"unknown engine; expected one of {', '.join(ENGINE_PRESETS)}")
+    source = Path(source)
+    pkg = read_package(source)
+    files, notes = export_files(pkg, engine)
+    inputs = [source] if source.is_dir() else [source, source.parent]
+    try:
+        with staged_folder(output, force=force, inputs=inputs) as tmp:
+            for rel, data in sorted(files.items()):
+                write_bytes(tmp / rel, data)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise input_error(
+            output, f"could not write the export ({reason}); nothing was changed"
+        ) from None
+    return files, notes

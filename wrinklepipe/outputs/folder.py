@@ -1,0 +1,69 @@
+"""The convert folder's files: glTF (+GLB), PNG textures, block-compressed copies, curves, USD.
+
+:func:`build_outputs` returns every file but the USD layers as ``{relative path: bytes}``;
+:func:`write_folder` writes them (and the USD, through usd-core) into a staged folder.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from wrinklepipe.atomic import dumps_json, write_bytes
+from wrinklepipe.io.gltf_write import glb_bytes, gltf_document
+from wrinklepipe.io.package import WrinklePackage, png_bytes
+from wrinklepipe.io.usd_write import write_usd
+from wrinklepipe.outputs.compression import compressed_files
+from wrinklepipe.outputs.curves import curve_files
+
+#: The USD layers convert can add beside the always-written ``.usda``.
+USD_FORMATS: tuple[str, ...] = ("usda", "usdc", "usdz")
+
+
+def build_outputs(
+    pkg: WrinklePackage,
+    glb: bool = False,
+    compressed: bool = True,
+    budget: dict[str, float] | None = None,
+    formats: dict[str, str] | None = None,
+) -> tuple[dict[str, bytes], list[str], dict[str, Any]]:
+    """Every output file as ``{relative path: bytes}`` (except USD, written by usd-core), notes,
+    and the block-format choices. ``glb``: also a self-contained ``NAME.glb``; ``compressed``:
+    DDS + KTX2 copies (:func:`wrinklepipe.outputs.compression.compressed_files`)."""
+    name = pkg.name
+    files: dict[str, bytes] = {}
+    doc, data, images = gltf_document(pkg)
+    doc["buffers"][0]["uri"] = f"{name}.bin"
+    files[f"{name}.gltf"] = dumps_json(doc).encode("utf-8")
+    files[f"{name}.bin"] = data
+    files.update(images)
+    for t in pkg.textures:  # the same PNGs serve glTF and USD
+        files.setdefault(f"textures/{t.name}.png", png_bytes(t.pixels))
+    if glb:
+        gdoc, gdata, _ = gltf_document(pkg, embed_images=True)
+        files[f"{name}.glb"] = glb_bytes(gdoc, gdata)
+    notes: list[str] = []
+    choices: dict[str, Any] = {}
+    if compressed:
+        comp, n, choices = compressed_files(pkg, budget, formats)
+        files.update(comp)
+        notes += n
+    regions = [r["name"] for r in pkg.meta["regions"]]
+    taken: set[str] = set()
+    for c in pkg.curves:
+        files.update(curve_files(c, regions, taken))
+    return files, notes, choices
+
+
+def write_folder(
+    folder: Path, files: dict[str, bytes], pkg: WrinklePackage, usd_format: str = "usda"
+) -> None:
+    """Write ``files`` (sorted) under ``folder``, then ``NAME.usda`` and, when ``usd_format`` is
+    ``usdc`` or ``usdz``, that layer too (textures are the PNGs already in ``files``)."""
+    for rel, data in sorted(files.items()):
+        write_bytes(folder / rel, data)
+    usd_names = [f"{pkg.name}.usda"] + (
+        [f"{pkg.name}.{usd_format}"] if usd_format != "usda" else []
+    )
+    for u in usd_names:
+        write_usd(pkg, folder / u, write_textures=False)

@@ -1,0 +1,205 @@
+"""report.json and report.html: what convert read (hashes), did, wrote, what validation found."""
+
+from __future__ import annotations
+
+import hashlib
+import html
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe import __version__, model
+from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.atomic import dumps_json, write_bytes
+from wrinklepipe.io.package import WrinklePackage, asset_from_package
+
+#: The validator's own page, written beside report.html (with ``validation_files/``).
+VALIDATION_HTML = "validation.html"
+
+
+def sha256(data: bytes) -> str:
+    """Hex SHA-256 of ``data``."""
+    return hashlib.sha256(data).hexdigest()
+
+
+def input_rows(root: Path, files: list[Path]) -> list[dict[str, Any]]:
+    """``{file, bytes, sha256}`` per input (paths relative to ``root`` when under it)."""
+    rows = []
+    for p in files:
+        data = p.read_bytes()
+        rel = p.relative_to(root).as_posix() if root in p.parents else p.name
+        rows.append({"file": rel, "bytes": len(data), "sha256": sha256(data)})
+    return rows
+
+
+def output_rows(folder: Path) -> list[dict[str, Any]]:
+    """``{file, bytes, sha256}`` for every file under ``folder``, sorted by path."""
+    rows = []
+    for p in sorted(folder.rglob("*")):
+        if p.is_file():
+            data = p.read_bytes()
+            rel = p.relative_to(folder).as_posix()
+            rows.append({"file": rel, "bytes": len(data), "sha256": sha256(data)})
+    return rows
+
+
+def decode_errors(asset: WrinkleAsset, pkg: WrinklePackage) -> dict[str, dict[str, float]]:
+    """Angular error (degrees) between each state as given and as decoded from what is stored."""
+    back = asset_from_package(pkg)
+    out = {}
+    for k, name in enumerate(asset.state_names):
+        e = model.angular_error_deg(asset.states[k], back.states[k]).ravel()
+        out[name] = {
+            "mean_deg": round(float(e.mean()), 6),
+            "p99_deg": round(float(np.percentile(e, 99)), 6),
+            "max_deg": round(float(e.max()), 6),
+        }
+    return out
+
+
+def asset_summary(pkg: WrinklePackage) -> dict[str, Any]:
+    """The report's ``asset`` section: the wrinkle setup, texture sizes, mesh and curves."""
+    m = pkg.mesh
+    return {
+        "encoding": pkg.meta["encoding"],
+        "scale": pkg.meta["scale"],
+        "policy": pkg.meta["policy"],
+        "states": [s["name"] for s in pkg.meta["states"]],
+        "regions": [
+            {**r, "mask": e} for r, e in zip(pkg.meta["regions"], pkg.meta["masks"]["table"])
+        ],
+        "mask_layout": pkg.meta["masks"]["layout"],
+        "sizes": {t.name: list(t.pixels.shape) for t in pkg.textures},
+        "vertices": m.vertex_count,
+        "triangles": m.triangle_count,
+        "morph_targets": list(m.morph_names),
+        "curves": [
+            {
+                "name": c.name,
+                "keys": int(c.times.size),
+                "duration_s": float(c.times[-1] - c.times[0]),
+            }
+            for c in pkg.curves
+        ],
+    }
+
+
+def write_report(folder: Path, report: dict[str, Any]) -> None:
+    """``report.json`` and ``report.html`` into ``folder``."""
+    write_bytes(folder / "report.json", dumps_json(report).encode("utf-8"))
+    write_bytes(folder / "report.html", report_html(report).encode("utf-8"))
+
+
+def convert_report(
+    *,
+    manifest: str,
+    inputs: list[dict[str, Any]],
+    pkg: WrinklePackage,
+    pd_scale: dict[str, Any],
+    decode_error: dict[str, dict[str, float]],
+    compression: dict[str, Any],
+    notes: list[str],
+    outputs: list[dict[str, Any]],
+    validation: dict[str, Any],
+) -> dict[str, Any]:
+    """report.json: tool and version, what was read, the asset, what the stages did and chose,
+    what was written (hashes) and what validation found."""
+    return {
+        "tool": "wrinklepipe",
+        "version": __version__,
+        "name": pkg.name,
+        "manifest": manifest,
+        "inputs": inputs,
+        "asset": asset_summary(pkg),
+        "pd_scale": pd_scale,
+        "decode_error": decode_error,
+        "compression": compression,
+        "notes": notes,
+        "outputs": outputs,
+        "validation": validation,
+    }
+
+
+def _validation_html(validation: dict[str, Any], table: Any) -> str:
+    if validation.get("status") != "ran":
+        return f"<p>{html.escape(str(validation.get('reason', 'skipped')))}</p>"
+    counts = validation.get("counts", {})
+    head = ", ".join(f"{v} {k}(s)" for k, v in sorted(counts.items()))
+    rows = [
+        [i.get("severity", ""), i.get("code", ""), i.get("message", ""), i.get("pointer", "")]
+        for i in validation.get("issues", [])
+    ]
+    link = f"<p>The validator's page: <a href='{VALIDATION_HTML}'>{VALIDATION_HTML}</a></p>"
+    return (
+        f"<p>{html.escape(head)}</p>" + link + table(rows, ["severity", "code", "message", "where"])
+    )
+
+
+def report_html(report: dict[str, Any]) -> str:
+    """A static, self-contained HTML summary of report.json (textures linked, not embedded)."""
+    esc = html.escape
+
+    def table(rows: list[list[Any]], head: list[str]) -> str:
+        th = "".join(f"<th>{esc(h)}</th>" for h in head)
+        body = "".join(
+            "<tr>" + "".join(f"<td>{esc(str(c))}</td>" for c in r) + "</tr>" for r in rows
+        )
+        return f"<table><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>"
+
+    a = report["asset"]
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'>",
+        f"<title>wrinklepipe convert: {esc(report['name'])}</title>",
+        "<style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}"
+        "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}"
+        "img{width:128px;image-rendering:pixelated;margin:2px}</style></head><body>",
+        f"<h1>{esc(report['name'])}</h1>",
+        f"<p>encoding <b>{esc(a['encoding'])}</b>, scale {a['scale']}, policy "
+        f"<b>{esc(a['policy'])}</b>; {a['vertices']} vertices, {a['triangles']} triangles, "
+        f"{len(a['morph_targets'])} morph targets.</p>",
+        "<h2>Textures</h2><div>",
+        "".join(
+            f"<figure style='display:inline-block'><img src='{esc(o['file'])}' "
+            # masks keep a region in alpha: show them on black, texels unsmoothed
+            "style='width:160px;background:#000;image-rendering:pixelated' "
+            f"alt='{esc(o['file'])}'><figcaption>{esc(o['file'])}</figcaption></figure>"
+            for o in report["outputs"]
+            if o["file"].startswith("textures/")
+        ),
+        "</div><h2>Regions</h2>",
+        table(
+            [[r["name"], r["side"], json.dumps(r["mask"])] for r in a["regions"]],
+            ["region", "side", "channel table"],
+        ),
+        "<h2>Decode error of the stored states</h2>",
+        table(
+            [
+                [k, v["mean_deg"], v["p99_deg"], v["max_deg"]]
+                for k, v in report["decode_error"].items()
+            ],
+            ["state", "mean deg", "p99 deg", "max deg"],
+        ),
+        "<h2>Stages</h2><ul>",
+        "".join(f"<li>{esc(n)}</li>" for n in report["notes"]),
+        "</ul><h2>Block compression</h2>",
+        table(
+            [[g, c["requested"], c["chosen"]] for g, c in sorted(report["compression"].items())],
+            ["maps", "requested", "chosen"],
+        ),
+        "<h2>Validation</h2>",
+        _validation_html(report["validation"], table),
+        "<h2>Outputs</h2>",
+        table(
+            [[o["file"], o["bytes"], o["sha256"][:16]] for o in report["outputs"]],
+            ["file", "bytes", "sha256"],
+        ),
+        "<h2>Inputs</h2>",
+        table(
+            [[i["file"], i["bytes"], i["sha256"][:16]] for i in report["inputs"]],
+            ["file", "bytes", "sha256"],
+        ),
+        "</body></html>\n",
+    ]
+    return "".join(parts)

@@ -1,0 +1,133 @@
+"""``convert``: manifest -> stages -> one output folder, written atomically.
+
+The composition, in order::
+
+    ingest        manifest + files -> WrinkleAsset           wrinklepipe.pipeline.ingest
+    prepare       resample, mesh (tangents, vertex IDs), PD  wrinklepipe.pipeline.prepare
+    drivers       weight curves [T, R]                       wrinklepipe.pipeline.drivers
+    package       encode + pack                              wrinklepipe.io.package
+    outputs       glTF (+GLB), PNG, DDS/KTX2, curves, USD    wrinklepipe.outputs.folder
+    validate      the validator on what was written          wrinklepipe.pipeline.validation
+    report        report.json + report.html                  wrinklepipe.outputs.report
+
+Everything is written into a temporary sibling folder that is renamed into place only when
+complete (:func:`wrinklepipe.atomic.staged_folder`); inputs are never written; reruns are
+byte-identical.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from wrinklepipe import console  # console.status is looked up per call (tests hook it)
+from wrinklepipe.atomic import staged_folder
+from wrinklepipe.errors import input_error
+from wrinklepipe.io.package import PackOptions, package_from_asset
+from wrinklepipe.manifest import load_manifest
+from wrinklepipe.outputs.folder import USD_FORMATS, build_outputs, write_folder
+from wrinklepipe.outputs.report import (
+    convert_report,
+    decode_errors,
+    input_rows,
+    output_rows,
+    write_report,
+)
+from wrinklepipe.pipeline.drivers import evaluate_drivers
+from wrinklepipe.pipeline.ingest import ingest
+from wrinklepipe.pipeline.prepare import run_stages
+from wrinklepipe.pipeline.validation import validate_output
+
+
+@dataclass(frozen=True)
+class ConvertOptions:
+    """What ``convert`` writes.
+
+    ``glb``: also a self-contained ``NAME.glb``. ``usd_format``: ``"usda"`` (always written) plus
+    ``"usdc"`` or ``"usdz"`` on request. ``force``: replace a non-empty output folder.
+    ``compressed``: DDS + KTX2 copies of the base and states (format chosen against the budget).
+    ``validate``: run :mod:`wrinklepipe.validate` on the written folder (``render``: with its GPU
+    render pass). ``bits``: PNG
+    depth of the base and state maps. ``mask_layout``: None = the manifest's ``formats``.
+    """
+
+    glb: bool = False
+    usd_format: str = "usda"
+    force: bool = False
+    compressed: bool = True
+    validate: bool = True
+    render: bool = True
+    bits: int = 8
+    mask_layout: str | None = None
+
+
+@dataclass
+class ConvertResult:
+    """What convert wrote and found: the folder, report (as written to report.json), exit code."""
+
+    output: Path
+    report: dict[str, Any]
+    exit_code: int
+
+
+def convert(
+    manifest_path: str | Path, output: str | Path, options: ConvertOptions | None = None
+) -> ConvertResult:
+    """Run the whole pipeline on a manifest and write one output folder (atomically)."""
+    opt = options or ConvertOptions()
+    if opt.usd_format not in USD_FORMATS:
+        raise ValueError(f"usd_format must be usda, usdc or usdz, got {opt.usd_format!r}")
+    output = Path(output)
+    manifest = load_manifest(manifest_path)
+    inputs = [manifest.root, *manifest.input_files]
+    try:
+        # The output checks (not an input, empty or --force) run first, before any work.
+        with staged_folder(output, force=opt.force, inputs=inputs) as tmp:
+            with console.status("reading inputs"):
+                asset, notes = ingest(manifest)
+            with console.status("resampling, tangents, vertex IDs"):
+                asset, stage_rep = run_stages(asset, auto_scale=manifest.pd_scale == "auto")
+            notes += stage_rep.notes
+            with console.status("evaluating drivers"):
+                curves, n = evaluate_drivers(asset, manifest.root)
+            notes += n
+            layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
+            pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
+            with console.status("encoding, packing, compressing"):
+                files, n, choices = build_outputs(
+                    pkg, opt.glb, opt.compressed, asset.budget, manifest.formats
+                )
+            notes += n
+            read = input_rows(manifest.root, manifest.input_files)
+            write_folder(tmp, files, pkg, opt.usd_format)
+            with console.status("validating"):
+                validation = (
+                    validate_output(tmp, manifest.path, opt.render, html_page=True)
+                    if opt.validate
+                    else {"status": "skipped", "reason": "--no-validate"}
+                )
+            report = convert_report(
+                manifest=manifest.path.name,
+                inputs=read,
+                pkg=pkg,
+                pd_scale={
+                    "value": stage_rep.pd_scale,
+                    "source": stage_rep.pd_scale_source,
+                    "clipped_texels": stage_rep.clipped_texels,
+                },
+                decode_error=decode_errors(asset, pkg),
+                compression=choices,
+                notes=notes,
+                outputs=output_rows(tmp),
+                validation=validation,
+            )
+            write_report(tmp, report)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        where = f" ({exc.filename})" if exc.filename else ""
+        raise input_error(
+            output, f"conversion stopped: {reason}{where}; nothing was changed"
+        ) from None
+    errors = int(validation.get("counts", {}).get("error", 0))
+    return ConvertResult(output, report, 1 if errors else 0)

@@ -1,0 +1,53 @@
+"""Convert's validation step: :mod:`wrinklepipe.validate` on the folder just written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from wrinklepipe.atomic import write_bytes
+from wrinklepipe.outputs.report import VALIDATION_HTML
+from wrinklepipe.sources.validation import LoadOptions, load_input
+from wrinklepipe.validate import ValidateOptions, validate
+from wrinklepipe.validate.report import html_images
+from wrinklepipe.validate.report import report_html as validation_page
+
+
+def _scrub(obj: Any, replacements: dict[str, str]) -> Any:
+    """Replace machine-specific path prefixes in every string of a JSON-able value."""
+    if isinstance(obj, str):
+        for old, new in replacements.items():
+            obj = obj.replace(old, new)
+        return obj
+    if isinstance(obj, dict):
+        return {k: _scrub(v, replacements) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_scrub(v, replacements) for v in obj]
+    return obj
+
+
+def validate_output(
+    folder: Path, manifest_path: Path | None = None, render: bool = True, html_page: bool = False
+) -> dict[str, Any]:
+    """Run :mod:`wrinklepipe.validate` on a written folder.
+
+    With ``manifest_path`` the shipped textures are compared with the source maps. Only
+    deterministic parts go into the report (counts and issues, no timings); paths are written
+    relative to the output folder (``.``) and the manifest's folder (``<source>``). With
+    ``html_page`` the validator's own page (contact sheet of renders, error heat maps, mask
+    overlay, metrics) is written into the folder as ``validation.html`` + ``validation_files/``.
+    """
+    src = str(manifest_path) if manifest_path is not None else None
+    report = validate(load_input(folder, LoadOptions(source=src)), ValidateOptions(render=render))
+    issues = [i.to_json() for i in report.issues]
+    replacements = {str(folder): "."}
+    if manifest_path is not None:
+        replacements[str(manifest_path.parent)] = "<source>"
+    if html_page:
+        files_dir = Path(VALIDATION_HTML).stem + "_files"
+        for image, data in html_images(report).items():
+            write_bytes(folder / files_dir / image, data)
+        page = _scrub(validation_page(report, files_dir), replacements)
+        write_bytes(folder / VALIDATION_HTML, page.encode("utf-8"))
+    counts = {k: int(v) for k, v in report.counts.items()}
+    return _scrub({"status": "ran", "counts": counts, "issues": issues}, replacements)

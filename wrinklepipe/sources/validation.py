@@ -1,0 +1,325 @@
+"""Turn what ``validate-asset`` is given into a :class:`ValidationInput` (the sources layer).
+
+PATH may be:
+
+- a folder written by ``convert`` (its ``.gltf``/``.glb``; BC5 copies under ``compressed/`` are
+  used as the shipped base and state textures when present, as they are what ships);
+- a ``.gltf``/``.glb`` that carries the ``WRINKLEPIPE_wrinkle_maps`` extension, or a
+  ``.usda``/``.usdc``/``.usdz`` with the ``WrinkleMapsAPI`` schema (read by
+  :mod:`wrinklepipe.io.gltf_read` / :mod:`wrinklepipe.io.usd_read`);
+- a source manifest (``.toml``) before conversion: ingested, then packed as ``convert`` would
+  (8-bit, no resampling), with the manifest's maps kept as the source;
+- a validation bundle (``.wpv``, :func:`wrinklepipe.validate.loader.write_bundle`);
+- ``demo[:ENCODING][@SIZE][+bc]``: the built-in demo shipped in memory.
+
+Every failure is an :class:`~wrinklepipe.errors.InputError` naming the file and what is wrong.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.demo import demo_asset
+from wrinklepipe.document.container import split_glb
+from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.io.gltf_read import read_gltf
+from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.io.package import package_from_asset
+from wrinklepipe.io.usd_read import read_usd
+from wrinklepipe.manifest import load_manifest
+from wrinklepipe.model import ENCODINGS
+from wrinklepipe.normals.dds import read_dds
+from wrinklepipe.pipeline.drivers import evaluate_drivers
+from wrinklepipe.pipeline.ingest import ingest
+from wrinklepipe.pipeline.prepare import prepare_mesh
+from wrinklepipe.validate.inputs import FORMATS, ValidationInput
+from wrinklepipe.validate.loader import (
+    BUNDLE_SUFFIX,
+    EXTENSION,
+    guard_reader,
+    input_from_package,
+    read_bundle,
+)
+from wrinklepipe.validate.ship import ShipOptions, ship_asset
+
+_GLTF = (".gltf", ".glb")
+_USD = (".usd", ".usda", ".usdc", ".usdz")
+
+
+@dataclass(frozen=True)
+class LoadOptions:
+    """``textures``: ``"auto"`` uses compressed copies when a folder has them, ``"png"`` never,
+    ``"compressed"`` requires them. ``source``: a manifest whose maps are the source to compare
+    the shipped textures with (enables the shipping-error rules on converted outputs)."""
+
+    textures: str = "auto"
+    source: str | None = None
+    max_gltf_bytes: int = 512 * 1024 * 1024
+
+
+# ------------------------------------------------------------------------------------------------
+# dispatch
+
+
+def load_input(path: str | Path, options: LoadOptions | None = None) -> ValidationInput:
+    """Load PATH (see the module docstring) for validation."""
+    o = options or LoadOptions()
+    text = str(path)
+    if text == "demo" or text.startswith("demo:") or text.startswith("demo@"):
+        inp = demo_input(text)
+    else:
+        p = Path(path)
+        if not p.exists():
+            raise input_error(p, "not found")
+        suffix = p.suffix.lower()
+        if p.is_dir():
+            inp = _load_folder(p, o)
+        elif suffix in _GLTF:
+            check_gltf_claims_wrinkles(p, o.max_gltf_bytes)
+            inp = _from_reader(p, "gltf")
+        elif suffix in _USD:
+            inp = _from_reader(p, "usd")
+        elif suffix == ".toml":
+            inp = _load_manifest(p)
+        elif suffix == BUNDLE_SUFFIX:
+            inp = read_bundle(p)
+        else:
+            raise input_error(
+                p,
+                f"unsupported file type {suffix or '(no extension)'!r}: expected a convert "
+                "folder, .gltf/.glb, .usda/.usdc/.usdz, a manifest (.toml) or a bundle (.wpv)",
+            )
+    if o.source:
+        inp = _attach_source(inp, Path(o.source))
+    return inp
+
+
+# ------------------------------------------------------------------------------------------------
+# glTF / GLB: does it claim wrinkle data?
+
+
+def _gltf_json(path: Path, max_bytes: int) -> dict[str, Any]:
+    size = path.stat().st_size
+    if size == 0:
+        raise input_error(path, "file is empty")
+    if size > max_bytes:
+        raise input_error(path, f"file is {size} bytes, over the cap of {max_bytes}")
+    raw = path.read_bytes()
+    if raw[:4] == b"glTF":
+        raw, _ = split_glb(raw, str(path))  # the one GLB container parser
+    elif path.suffix.lower() == ".glb":
+        raise input_error(path, "not a GLB file (bad magic)")
+    doc = loads_json(raw, path, "glTF JSON")
+    if not isinstance(doc, dict):
+        raise input_error(path, "glTF JSON must be an object")
+    return doc
+
+
+def check_gltf_claims_wrinkles(path: Path, max_bytes: int = 512 * 1024 * 1024) -> None:
+    """Refuse a glTF/GLB that does not carry the ``WRINKLEPIPE_wrinkle_maps`` extension."""
+    doc = _gltf_json(path, max_bytes)
+    asset = doc.get("asset")
+    if not isinstance(asset, dict) or not isinstance(asset.get("version"), str):
+        raise input_error(path, "not a glTF 2.0 document: missing asset.version", "/asset")
+    used = doc.get("extensionsUsed", [])
+    claims = isinstance(used, list) and EXTENSION in used
+    mats = doc.get("materials", [])
+    if isinstance(mats, list):
+        for m in mats:
+            if isinstance(m, dict) and isinstance(m.get("extensions"), dict):
+                claims = claims or EXTENSION in m["extensions"]
+    if not claims:
+        raise input_error(
+            path,
+            f"carries no wrinkle data: {EXTENSION} is not used (nothing to validate; the "
+            "Khronos glTF-Validator checks plain glTF)",
+            "/extensionsUsed",
+        )
+
+
+def _from_reader(p: Path, kind: str) -> ValidationInput:
+    if kind == "gltf":
+        pkg = guard_reader(lambda: read_gltf(p), p, "the glTF")
+    else:
+        pkg = guard_reader(lambda: read_usd(p), p, "the USD stage")
+    folder = p.parent
+    files = {t.name: str(folder / "textures" / f"{t.name}.png") for t in pkg.textures}
+    files = {k: v for k, v in files.items() if Path(v).exists()}
+    inp = input_from_package(pkg, str(p), kind, files)
+    if kind == "usd":
+        _usd_pointers(inp, p)
+    else:
+        _gltf_pointers(inp, p)
+    return inp
+
+
+def _gltf_pointers(inp: ValidationInput, p: Path) -> None:
+    """JSON pointers to where the extension actually sits (a material's, or the document's)."""
+    try:
+        doc = _gltf_json(p, 1 << 30)
+    except InputError:  # pragma: no cover - the reader already parsed it
+        return
+    ext = f"/extensions/{EXTENSION}"
+    for i, m in enumerate(doc.get("materials", []) or []):
+        if isinstance(m, dict) and EXTENSION in (m.get("extensions") or {}):
+            ext = f"/materials/{i}/extensions/{EXTENSION}"
+            break
+    inp.pointers.update(
+        {
+            "meta": f"{p}#{ext}",
+            "channels": f"{p}#{ext}/masks/table",
+            "masks": f"{p}#{ext}/masks",
+            "expressions": f"{p}#{ext}/expressions",
+            "drivers": f"{p}#{ext}/drivers",
+        }
+    )
+
+
+def _usd_pointers(inp: ValidationInput, p: Path) -> None:
+    """Point issues at prims: the material with WrinkleMapsAPI, its attributes, the mesh."""
+    try:
+        from pxr import Usd, UsdGeom  # usd-core is heavy (~0.3 s): loaded for USD inputs only
+
+        stage = Usd.Stage.Open(str(p))
+        mat = mesh = None
+        for prim in stage.Traverse():
+            if mat is None and "WrinkleMapsAPI" in prim.GetAppliedSchemas():
+                mat = prim.GetPath()
+            if mesh is None and prim.IsA(UsdGeom.Mesh):
+                mesh = prim.GetPath()
+    except Exception:  # noqa: BLE001 - pointers are a convenience; the reader already worked
+        return
+    if mat is not None:
+        inp.pointers.update(
+            {
+                "meta": f"{p}<{mat}>",
+                "channels": f"{p}<{mat}>.wrinkle:maskChannel",
+                "expressions": f"{p}<{mat}>.wrinkle:expressionWeights",
+                "drivers": f"{p}<{mat}>.wrinkle:drivers",
+                "masks": f"{p}<{mat}>",
+            }
+        )
+    if mesh is not None:
+        inp.pointers["mesh"] = f"{p}<{mesh}>"
+
+
+def _load_folder(p: Path, o: LoadOptions) -> ValidationInput:
+    found = (
+        sorted(p.glob("*.gltf"))
+        or sorted(p.glob("*.glb"))
+        or sorted(q for q in p.iterdir() if q.suffix.lower() in _USD)
+    )
+    if not found:
+        manifests = sorted(p.glob("manifest.toml"))
+        if manifests:
+            return _load_manifest(manifests[0])
+        raise input_error(p, "no .gltf/.glb/.usd or manifest.toml in this folder")
+    f = found[0]
+    if f.suffix.lower() in _GLTF:
+        check_gltf_claims_wrinkles(f, o.max_gltf_bytes)
+    inp = _from_reader(f, "gltf" if f.suffix.lower() in _GLTF else "usd")
+    inp.kind = "folder"
+    if o.textures != "png":
+        inp = _use_compressed(inp, p / "compressed", required=o.textures == "compressed")
+    return inp
+
+
+def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> ValidationInput:
+    """Replace base/state textures by the BC copies that ship beside them (DDS)."""
+    if not folder.is_dir():
+        if required:
+            raise input_error(folder, "no compressed/ folder (--textures compressed)")
+        return inp
+    out = []
+    for t in inp.textures:
+        dds = folder / f"{t.name}.dds"
+        if t.role in ("base", "state") and dds.exists():
+            img = guard_reader(lambda dds=dds: read_dds(dds), dds, "the DDS file")
+            fmt = str(img.format).lower()
+            if fmt not in FORMATS:
+                raise input_error(dds, f"unsupported DDS format {img.format!r}")
+            t = replace(
+                t,
+                fmt=fmt,
+                width=int(img.width),
+                height=int(img.height),
+                data=bytes(img.levels[0]),
+                file=str(dds),
+                pointer="",
+                layout="rg" if FORMATS[fmt][0] == 2 else t.layout,
+            )
+        out.append(t)
+    inp.textures = out
+    return inp
+
+
+# ------------------------------------------------------------------------------------------------
+# manifests (before conversion) and the demo
+
+
+def _source_asset(manifest_path: Path) -> WrinkleAsset:
+    m = load_manifest(manifest_path)
+    asset, _ = guard_reader(lambda: ingest(m), manifest_path, "the manifest's files")
+    if asset.mesh is not None:
+        asset = replace(
+            asset, mesh=guard_reader(lambda: prepare_mesh(asset.mesh), manifest_path, "mesh")
+        )
+    return asset
+
+
+def _load_manifest(p: Path) -> ValidationInput:
+    asset = _source_asset(p)
+    pkg = guard_reader(lambda: package_from_asset(asset), p, "the packed asset")
+    inp = input_from_package(pkg, str(p), "manifest")
+    inp.asset = asset
+    inp.has_source = True
+    if asset.drivers:
+        curves, _ = guard_reader(lambda: evaluate_drivers(asset, p.parent), p, "the drivers")
+        inp.weight_curves = {str(c.name): np.asarray(c.values, np.float32) for c in curves}
+    inp.pointers.update({k: str(p) for k in ("meta", "masks", "channels", "textures")})
+    inp.pointers["expressions"] = f"{p} [expressions]"
+    return inp
+
+
+def _attach_source(inp: ValidationInput, manifest: Path) -> ValidationInput:
+    src = _source_asset(manifest)
+    a = inp.asset
+    names = list(src.region_names)
+    missing = [r for r in a.region_names if r not in names]
+    if missing or list(src.state_names) != list(a.state_names):
+        raise input_error(
+            manifest,
+            "does not describe the same asset (regions or states differ): "
+            + ", ".join(missing[:5]),
+        )
+    masks = np.stack([src.masks[names.index(r)] for r in a.region_names])
+    inp.asset = replace(
+        a, base=src.base, states=src.states, masks=masks, budget=src.budget or a.budget
+    )
+    inp.has_source = True
+    return inp
+
+
+def demo_input(spec: str = "demo") -> ValidationInput:
+    """``demo[:ENCODING][@SIZE][+bc]``: the demo shipped in memory (8-bit, or BC5/BC7 ``+bc``)."""
+    rest = spec[4:]
+    compress = rest.endswith("+bc")
+    rest = rest.removesuffix("+bc")
+    size = 256
+    if "@" in rest:
+        rest, s = rest.split("@", 1)
+        if not s.isdigit() or not 16 <= int(s) <= 4096:
+            raise input_error(spec, f"demo size {s!r} must be an integer in 16..4096")
+        size = int(s)
+    enc = rest.lstrip(":") or "pd"
+    if enc not in ENCODINGS:
+        raise input_error(spec, f"unknown encoding {enc!r}; expected one of {', '.join(ENCODINGS)}")
+    inp = ship_asset(demo_asset(size, encoding=enc), ShipOptions(compress=compress))
+    inp.path = spec
+    inp.kind = "demo"
+    return inp
