@@ -116,3 +116,44 @@ def test_todays_automatic_choice_fails_the_fidelity_budget(fixture):
     assert not got.meets(budget)
     assert got.worst_p99() > 10.0
     assert shipped(asset.states, 1.0).meets(budget)
+
+
+@needs_mesh
+def test_the_automatic_choices_keep_the_fixture_within_budget_of_the_truth(fixture):
+    """Every choice on auto (size, mask size, scale, formats) by fidelity: the shipped PNG
+    data is within 1 degree p99 of the exact truth in every pose's active region, the
+    compressed copies within 2.5 degrees."""
+    from wrinklepipe.fidelity import search as fs
+    from wrinklepipe.fidelity import ship
+
+    asset = fixture.asset()
+    poses = fd.expression_poses(asset.region_names, asset.region_state_matrix(), asset.expressions)
+    slopes = model.normal_to_pd(asset.states) - model.normal_to_pd(asset.base)[None]
+    fp = fd.footprint(asset.mesh.uvs, asset.mesh.indices, (1024, 1024))
+    src = fs.Source(asset.base, slopes, asset.masks, poses, asset.region_names, footprint=fp)
+    png_budget, bc_budget = fd.Budget(0.5, 1.0), fd.Budget(1.0, 2.5)
+    choice = fs.search(src, png_budget, bc_budget)
+    assert choice.png.meets(png_budget)
+    assert choice.state_format != "png" and choice.compressed.meets(bc_budget)
+    # independently of the search's own numbers: what it ships, against the exact truth
+    truth = fd.prepare(
+        fixture.base_normal,
+        fixture.wrinkle_slopes,
+        fixture.masks,
+        poses,
+        asset.region_names,
+        footprint=fp,
+    )
+    base_q = ship.base_texels(asset.base)
+    states_q = np.stack([ship.pd_texels(x, choice.pd_scale)[0] for x in choice.states])
+    masks = ship.mask_values(asset.masks, choice.mask_size)
+    png = fd.measure(
+        truth, ship.decode_base(base_q), ship.decode_pd(states_q, choice.pd_scale), masks
+    )
+    assert png.worst_p99() <= 1.0, fd.describe(png)
+    bc_states = np.stack([ship.block_roundtrip(q, choice.state_format) for q in states_q])
+    base = ship.decode_base(base_q)
+    if choice.base_format != "png":
+        base = ship.decode_base(ship.block_roundtrip(base_q[..., :2], choice.base_format), "rg")
+    bc = fd.measure(truth, base, ship.decode_pd(bc_states, choice.pd_scale), masks)
+    assert bc.worst_p99() <= 2.5, fd.describe(bc)

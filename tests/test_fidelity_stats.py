@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wrinklepipe.fidelity import Budget, Stats, weighted_quantile, weighted_stats
+from wrinklepipe.fidelity.stats import weighted_stats_many
 
 
 def brute_quantile(v, w, q):
@@ -74,3 +75,16 @@ def test_weighted_stats_and_budget():
     assert Budget(mean=3.0, p99=3.0).ok(s) and not Budget(p99=2.9).ok(s)
     assert Budget.from_dict({"max_mean_deg": 0.5, "max_p99_deg": 1.0}) == Budget(0.5, 1.0)
     assert weighted_stats(np.array([]), np.array([])) == Stats(0.0, 0.0, 0.0, 0, 0.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 300), st.integers(1, 5), st.integers(0, 2**31))
+def test_many_rows_at_once_equal_one_row_at_a_time(n, g, seed):
+    rng = np.random.default_rng(seed)
+    err = np.round(rng.exponential(1.0, n), 2).astype(np.float32)  # ties
+    w = rng.uniform(0, 1, (g, n)) * (rng.random((g, n)) < 0.7)
+    many = weighted_stats_many(err, w)
+    for row, got in zip(w, many):
+        want = weighted_stats(err, row)
+        assert got.p99 == want.p99 and got.max == want.max and got.texels == want.texels
+        assert got.mean == pytest.approx(want.mean, rel=1e-9, abs=1e-12)

@@ -1,13 +1,13 @@
 """Fidelity: the shipped asset against the full-resolution source, where the wrinkles are.
 
 One measure (DESIGN.md section 8), used by every automatic choice and every check that judges a
-loss: :mod:`.measure` (per pose and region, activation-weighted, the base over the face),
+loss: :mod:`.metric` (per pose and region, activation-weighted, the base over the face),
 :mod:`.stats` (exact weighted percentiles, budgets).
 """
 
 from __future__ import annotations
 
-from wrinklepipe.fidelity.measure import (
+from wrinklepipe.fidelity.metric import (
     Fidelity,
     Pose,
     PoseFidelity,

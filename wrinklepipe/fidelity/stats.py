@@ -14,29 +14,35 @@ def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> floa
     that bin's values are sorted. ``q = 0.5`` with unit weights is the lower median. Texels of
     zero weight never count. Returns 0 when the total weight is 0.
     """
-    v = np.asarray(values, np.float64).ravel()
-    w = np.asarray(weights, np.float64).ravel()
+    v = np.asarray(values).ravel()
+    w = np.asarray(weights).ravel()
     keep = w > 0
     if not keep.all():
         v, w = v[keep], w[keep]
-    total = float(w.sum())
-    if v.size == 0 or total <= 0.0:
+    if v.size == 0:
         return 0.0
-    target = q * total
-    lo, hi = float(v.min()), float(v.max())
+    total = float(w.sum(dtype=np.float64))
+    if total <= 0.0:
+        return 0.0
+    return _quantile(v, w, q, float(v.min()), float(v.max()), total)
+
+
+def _quantile(v: np.ndarray, w: np.ndarray, q: float, lo: float, hi: float, total: float) -> float:
+    """:func:`weighted_quantile` of positive weights whose min, max and sum are known."""
     if hi <= lo:
         return lo
+    target = q * total * (1.0 - 1e-12)  # cumulative sums round; never miss the last texel
     nb = int(min(max(v.size // 64, 16), 1 << 16))
-    b = np.minimum(((v - lo) * (nb / (hi - lo))).astype(np.int64), nb - 1)
+    b = ((v - lo) * (nb / (hi - lo))).astype(np.int64)
+    np.minimum(b, nb - 1, out=b)
     cum = np.cumsum(np.bincount(b, weights=w, minlength=nb))
-    k = int(np.searchsorted(cum, target * (1.0 - 1e-12), side="left"))
-    k = min(k, nb - 1)
+    k = min(int(np.searchsorted(cum, target, side="left")), nb - 1)
     below = float(cum[k - 1]) if k > 0 else 0.0
     sel = b == k
     vb, wb = v[sel], w[sel]
     order = np.argsort(vb, kind="stable")
-    c = below + np.cumsum(wb[order])
-    j = int(np.searchsorted(c, target * (1.0 - 1e-12), side="left"))
+    c = below + np.cumsum(wb[order], dtype=np.float64)
+    j = int(np.searchsorted(c, target, side="left"))
     return float(vb[order][min(j, vb.size - 1)])
 
 
@@ -68,20 +74,57 @@ EMPTY = Stats(0.0, 0.0, 0.0, 0, 0.0)
 
 def weighted_stats(err: np.ndarray, weights: np.ndarray) -> Stats:
     """Weighted mean, p99 and max of ``err`` (degrees) over texels of positive weight."""
-    e = np.asarray(err, np.float64).ravel()
-    w = np.asarray(weights, np.float64).ravel()
+    e = np.asarray(err).ravel()
+    w = np.asarray(weights).ravel()
     keep = w > 0
-    e, w = e[keep], w[keep]
-    total = float(w.sum())
-    if e.size == 0 or total <= 0.0:
+    if not keep.all():
+        e, w = e[keep], w[keep]
+    if e.size == 0:
         return EMPTY
+    total = float(w.sum(dtype=np.float64))
+    if total <= 0.0:
+        return EMPTY
+    lo, hi = float(e.min()), float(e.max())
     return Stats(
-        mean=float(np.dot(e, w) / total),
-        p99=weighted_quantile(e, w, 0.99),
-        max=float(e.max()),
+        mean=float(np.dot(e.astype(np.float64), w.astype(np.float64)) / total),
+        p99=_quantile(e, w, 0.99, lo, hi, total),
+        max=hi,
         texels=int(e.size),
         weight=total,
     )
+
+
+def weighted_stats_many(err: np.ndarray, weights: np.ndarray) -> list[Stats]:
+    """:func:`weighted_stats` of one error array under each row of ``weights`` ``[G, n]`` (the
+    regions of a pose), with one sort for all rows: vectorised weighted percentiles."""
+    e = np.asarray(err).ravel()
+    w = np.asarray(weights, np.float64).reshape(-1, e.size)
+    if e.size == 0:
+        return [EMPTY] * w.shape[0]
+    order = np.argsort(e, kind="stable")
+    es = e[order].astype(np.float64)
+    cw = np.cumsum(w[:, order], axis=1)  # [G, n]
+    total = cw[:, -1]
+    out = []
+    for g in range(w.shape[0]):
+        if total[g] <= 0.0:
+            out.append(EMPTY)
+            continue
+        pos = w[g, order] > 0
+        last = int(np.flatnonzero(pos)[-1])
+        # the first texel where the cumulative weight reaches 99 %: it has a positive weight
+        j = int(np.searchsorted(cw[g], 0.99 * total[g] * (1.0 - 1e-12), side="left"))
+        j = min(j, last)
+        out.append(
+            Stats(
+                mean=float(np.dot(es, w[g, order]) / total[g]),
+                p99=float(es[j]),
+                max=float(es[last]),
+                texels=int(pos.sum()),
+                weight=float(total[g]),
+            )
+        )
+    return out
 
 
 @dataclass(frozen=True)
@@ -109,7 +152,6 @@ class Budget:
         )
 
     def describe(self) -> str:
-        parts = [
-            f"{n} {v:g}" for n, v in (("mean", self.mean), ("p99", self.p99), ("max", self.max))
-        ]
-        return ", ".join(p for p, v in zip(parts, (self.mean, self.p99, self.max)) if v is not None)
+        """``"mean 0.5, p99 1"``: the limits that are set."""
+        items = (("mean", self.mean), ("p99", self.p99), ("max", self.max))
+        return ", ".join(f"{n} {v:g}" for n, v in items if v is not None)

@@ -21,14 +21,14 @@ repeated.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from wrinklepipe import model
-from wrinklepipe.fidelity.stats import Budget, Stats, weighted_stats
+from wrinklepipe.fidelity.stats import Budget, Stats, weighted_stats, weighted_stats_many
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.normals.compress import angle_deg
 
@@ -83,30 +83,74 @@ def _taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return i0, i1, f
 
 
-def sample_at(img: np.ndarray, shape: tuple[int, int], flat: np.ndarray) -> np.ndarray:
-    """``img`` ``[h, w, C]`` sampled at texels ``flat`` (flat indices) of a ``shape`` grid
-    -> ``[n, C]`` float32.
+@dataclass(frozen=True)
+class Reader:
+    """How a map's values become what the measure compares: ``store`` (per texel, before the
+    sampler filters: values -> stored texels, e.g. quantising a candidate) and ``read`` (after
+    filtering: sampled texels -> the quantity, as a shader decodes). Either may be None."""
 
-    Bilinear between texel centres with clamp to edge, the way the render pass samples; on the
-    same grid it is a plain gather.
+    store: Callable[[np.ndarray], np.ndarray] | None = None
+    read: Callable[[np.ndarray], np.ndarray] | None = None
+
+
+def sample_at(
+    img: np.ndarray, shape: tuple[int, int], flat: np.ndarray, reader: Reader | None = None
+) -> np.ndarray:
+    """``img`` ``[h, w, C]`` sampled at texels ``flat`` (flat indices) of a ``shape`` grid
+    -> ``[n, C']`` float32.
+
+    Bilinear between texel centres with clamp to edge, the way the render pass samples (on the
+    same grid a plain gather). With a ``reader``, its ``store`` runs on the texels read only
+    (so a candidate encoding of a large map costs as much as the texels the measure looks at)
+    and its ``read`` on the filtered values.
     """
-    a = np.asarray(img, _F)
+    a = np.asarray(img)
     if a.ndim == 2:
         a = a[..., None]
     h, w = a.shape[:2]
     H, W = shape
     flat = np.asarray(flat, np.int64)
-    rows, cols = flat // W, flat % W
     src = a.reshape(h * w, -1)
+    store = reader.store if reader is not None and reader.store is not None else None
+    read = reader.read if reader is not None and reader.read is not None else None
+
+    def texels(i: np.ndarray) -> np.ndarray:
+        v = src[i] if store is None else store(src[i])
+        return np.asarray(v, _F)
+
     if (h, w) == (H, W):
-        return src[flat]
-    r0, r1, fr = _taps(H, h)
-    c0, c1, fc = _taps(W, w)
-    y0, y1, ty = r0[rows], r1[rows], fr[rows][:, None]
-    x0, x1, tx = c0[cols], c1[cols], fc[cols][:, None]
-    top = src[y0 * w + x0] * (1 - tx) + src[y0 * w + x1] * tx
-    bot = src[y1 * w + x0] * (1 - tx) + src[y1 * w + x1] * tx
-    return (top * (1 - ty) + bot * ty).astype(_F)
+        out = texels(flat)
+    else:
+        rows, cols = flat // W, flat % W
+        r0, r1, fr = _taps(H, h)
+        c0, c1, fc = _taps(W, w)
+        y0, y1, ty = r0[rows], r1[rows], fr[rows][:, None]
+        x0, x1, tx = c0[cols], c1[cols], fc[cols][:, None]
+        n = flat.size
+        v = texels(np.concatenate([y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1]))
+        top = v[:n] * (1 - tx) + v[n : 2 * n] * tx
+        bot = v[2 * n : 3 * n] * (1 - tx) + v[3 * n :] * tx
+        out = top * (1 - ty) + bot * ty
+    return np.asarray(out if read is None else read(out), _F)
+
+
+def taps(shape: tuple[int, int], grid: tuple[int, int], flat: np.ndarray) -> np.ndarray:
+    """Flat texel indices of a ``shape`` map that bilinear sampling at texels ``flat`` of the
+    ``grid`` reads (sorted, unique): what a block-format screen has to encode."""
+    h, w = shape
+    H, W = grid
+    flat = np.asarray(flat, np.int64)
+    mark = np.zeros(h * w, bool)
+    if (h, w) == (H, W):
+        mark[flat] = True
+        return np.flatnonzero(mark)
+    rows, cols = flat // W, flat % W
+    r0, r1, _ = _taps(H, h)
+    c0, c1, _ = _taps(W, w)
+    for ys in (r0[rows], r1[rows]):
+        for xs in (c0[cols], c1[cols]):
+            mark[ys * w + xs] = True
+    return np.flatnonzero(mark)
 
 
 def sample_masks_at(masks: np.ndarray, shape: tuple[int, int], flat: np.ndarray) -> np.ndarray:
@@ -129,6 +173,8 @@ class PoseReference:
     normal: np.ndarray  # [n, 3] the source's blended normal
     weight: np.ndarray  # [n] activation weight sum_k |a_k|
     share: np.ndarray  # [R, n] each region's part: M_r * max_k |w_rk|
+    active: np.ndarray | None = None  # flat indices of every source-active texel (all of them,
+    # also in a coarse reference)
 
 
 @dataclass
@@ -144,7 +190,7 @@ class Reference:
     poses: list[PoseReference]
     footprint: np.ndarray | None = None  # [H, W] bool: the mesh's UV footprint (the face)
     support: np.ndarray | None = None  # [H, W] bool: source-active in some pose
-    _cache: dict[str, Any] = field(default_factory=dict)
+    step: int = 1  # a coarse reference keeps every step-th active texel (and leak texel)
 
     @property
     def texels(self) -> int:
@@ -153,7 +199,62 @@ class Reference:
     @property
     def active_fraction(self) -> float:
         """Fraction of the grid some pose activates (the wrinkles' share of the UV area)."""
-        return float(self.union.size) / self.texels
+        return float(self.union.size * self.step) / self.texels
+
+    def face_texels(self, max_texels: int | None = None) -> np.ndarray:
+        """Flat indices of the footprint's texels (all of them, or whole 4x4 blocks of it, every
+        k-th block, so that about ``max_texels`` remain: a block-format screen's sample)."""
+        H, W = self.shape
+        fp = self.footprint if self.footprint is not None else np.ones((H, W), bool)
+        flat = np.flatnonzero(fp.reshape(-1))
+        if max_texels is None or flat.size <= max_texels:
+            return flat
+        bw = (W + 3) // 4
+        block = (flat // W) // 4 * bw + (flat % W) // 4
+        present = np.zeros(((H + 3) // 4) * bw, bool)
+        present[block] = True
+        rank = (np.cumsum(present) - 1)[block]
+        k = max(1, -(-int(present.sum()) * 16 // max(int(max_texels), 1)))
+        return flat[rank % k == 0]
+
+    def coarse(self, max_texels: int) -> Reference:
+        """A reference on the active texels of every k-th 4x4 block (whole blocks, so a block
+        format screen encodes few blocks), about ``max_texels`` of them; itself when it is
+        small enough. What a search screens candidates with."""
+        n = int(self.union.size)
+        if n <= max_texels:
+            return self
+        W = self.shape[1]
+        bw = (W + 3) // 4
+        block = (self.union // W) // 4 * bw + (self.union % W) // 4
+        present = np.zeros(((self.shape[0] + 3) // 4) * bw, bool)
+        present[block] = True
+        rank = (np.cumsum(present) - 1)[block]  # the k-th block holding active texels
+        k = max(2, -(-n // max(int(max_texels), 1)))
+        keep = np.flatnonzero(rank % k == 0)
+        new_pos = np.full(n, -1, np.int64)
+        new_pos[keep] = np.arange(keep.size)
+        poses = []
+        for pr in self.poses:
+            m = new_pos[pr.sel] >= 0
+            poses.append(
+                PoseReference(
+                    pr.pose,
+                    new_pos[pr.sel[m]],
+                    pr.act[:, m],
+                    pr.normal[m],
+                    pr.weight[m],
+                    pr.share[:, m],
+                    pr.active,
+                )
+            )
+        return replace(self, union=self.union[keep], poses=poses, step=k * self.step)
+
+
+def _regions_on(weights: np.ndarray) -> np.ndarray:
+    """``[R]`` bool: the regions a pose gives a non-zero weight."""
+    w = np.abs(np.asarray(weights, _F))
+    return w > 0 if w.ndim == 1 else (w > 0).any(axis=1)
 
 
 def _activation_weight(act: np.ndarray) -> np.ndarray:
@@ -194,26 +295,21 @@ def prepare(
     flat_b = b.reshape(H * W, 3)
     flat_s = st.reshape(st.shape[0], H * W, -1)
     flat_m = m.reshape(m.shape[0], H * W)
-    # texels some region of some pose touches (masks non-zero where a weight is non-zero)
-    per_pose_active = []
+    on = [_regions_on(p.weights) for p in poses]
+    used = np.flatnonzero(np.any(on, axis=0)) if on else np.zeros(0, np.int64)
+    # texels some weighted region touches: one pass over the masks (then only those texels)
     any_active = np.zeros(H * W, bool)
-    for p in poses:
-        w = np.asarray(p.weights, _F)
-        on = (np.abs(w) > 0) if w.ndim == 1 else (np.abs(w) > 0).any(axis=1)
-        cand = (flat_m[on] > 0).any(axis=0) if on.any() else np.zeros(H * W, bool)
-        per_pose_active.append(cand)
-        any_active |= cand
+    for r in used:
+        any_active |= flat_m[r] > 0
     union = np.flatnonzero(any_active)
-    pos_in_union = np.full(H * W, -1, np.int64)
-    pos_in_union[union] = np.arange(union.size)
     m_u = flat_m[:, union]
     out = []
-    for p, cand in zip(poses, per_pose_active):
-        idx = np.flatnonzero(cand)
-        sel = pos_in_union[idx]
+    for p, o in zip(poses, on):
+        sel = np.flatnonzero((m_u[o] > 0).any(axis=0)) if o.any() else np.zeros(0, np.int64)
         act = model.activations(m_u[:, sel], p.weights, policy)
         keep = np.abs(act).sum(axis=0) > 0
-        sel, idx, act = sel[keep], idx[keep], act[:, keep]
+        sel, act = sel[keep], act[:, keep]
+        idx = union[sel]
         normal = model.combine(flat_b[idx], flat_s[:, idx], act, encoding)
         out.append(
             PoseReference(
@@ -223,6 +319,7 @@ def prepare(
                 normal=normal,
                 weight=_activation_weight(act),
                 share=_region_share(m_u[:, sel], p.weights),
+                active=idx,
             )
         )
     fp = None if footprint is None else np.asarray(footprint, bool).reshape(H, W)
@@ -253,6 +350,8 @@ class Samples:
     base: np.ndarray | None = None  # [n, 3]
     states: np.ndarray | None = None  # [K, n, C]
     masks: np.ndarray | None = None  # [R, n]
+    leaks: list[tuple[np.ndarray, np.ndarray] | None] | None = None  # per pose, with masks
+    readers: dict[str, Reader] = field(default_factory=dict)  # how raw maps are read
     raw: dict[str, np.ndarray] = field(default_factory=dict)  # the arrays, for leak texels
 
 
@@ -261,26 +360,43 @@ def sample(
     base: np.ndarray | None = None,
     states: np.ndarray | None = None,
     masks: np.ndarray | None = None,
+    support: list[np.ndarray] | None | bool = None,
+    states_reader: Reader | None = None,
+    base_reader: Reader | None = None,
 ) -> Samples:
-    """Gather decoded shipped maps (at their own sizes) at the reference's active texels.
+    """Gather shipped maps (at their own sizes) at the reference's active texels.
 
-    ``base`` unit normals ``[hb, wb, 3]``; ``states`` ``[K, hs, ws, C]`` in combine's
-    representation; ``masks`` ``[R, hm, wm]``.
+    ``base`` unit normals ``[hb, wb, 3]`` and ``states`` ``[K, hs, ws, C]`` in combine's
+    representation, or what their :class:`Reader` turns into that; ``masks`` ``[R, hm, wm]``
+    with ``support`` their :func:`leak_support` (None: computed here; False: these masks
+    cannot leak, e.g. they are the source's own).
     """
     s = Samples()
     u = ref.union
     if base is not None:
-        s.base = model.normalize(sample_at(base, ref.shape, u))
-        s.raw["base"] = np.asarray(base, _F)
+        s.base = model.normalize(sample_at(base, ref.shape, u, base_reader))
+        s.raw["base"] = np.asarray(base)
+        s.readers["base"] = base_reader or Reader()
     if states is not None:
-        st = np.asarray(states, _F)
-        s.states = np.stack([sample_at(x, ref.shape, u) for x in st])
+        st = np.asarray(states)
+        s.states = np.stack([sample_at(x, ref.shape, u, states_reader) for x in st])
         if ref.encoding in ("full", "composite"):
             s.states = model.normalize(s.states)
         s.raw["states"] = st
+        s.readers["states"] = states_reader or Reader()
     if masks is not None:
-        s.masks = sample_masks_at(masks, ref.shape, u)
-        s.raw["masks"] = np.asarray(masks, _F)
+        m = np.asarray(masks, _F)
+        s.masks = sample_masks_at(m, ref.shape, u)
+        s.raw["masks"] = m
+        if support is not False:
+            sup = (
+                support
+                if support is not None
+                else leak_support(m, [p.pose for p in ref.poses], ref.policy)
+            )
+            s.leaks = [_leak_texels(ref, pr, m, g) for pr, g in zip(ref.poses, sup)]
+        else:
+            s.leaks = [None] * len(ref.poses)
     return s
 
 
@@ -288,10 +404,11 @@ def merge(*parts: Samples) -> Samples:
     """Later parts override earlier ones (e.g. cached base + masks, then candidate states)."""
     out = Samples()
     for p in parts:
-        for name in ("base", "states", "masks"):
+        for name in ("base", "states", "masks", "leaks"):
             if getattr(p, name) is not None:
                 setattr(out, name, getattr(p, name))
         out.raw.update(p.raw)
+        out.readers.update(p.readers)  # raw maps and their readers travel together
     return out
 
 
@@ -355,49 +472,67 @@ class Fidelity:
         }
 
 
-def _leak(
-    ref: Reference, pr: PoseReference, s: Samples
-) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Texels outside the source's active set that the shipped masks activate: (flat indices,
-    shipped normals there, shipped activation weight)."""
-    masks = s.raw.get("masks")
-    if masks is None or masks.shape[0] == 0:
+def leak_support(masks: np.ndarray, poses: Sequence[Pose], policy: str) -> list[np.ndarray]:
+    """Per pose, the mask-resolution texels a bilinear lookup can see a non-zero activation
+    from (the active texels grown by one): where leaks can be."""
+    m = np.asarray(masks, _F)
+    out = []
+    for p in poses:
+        on = np.abs(model.activations(m, p.weights, policy)).sum(axis=0) > 0
+        g = on.copy()
+        g[1:] |= on[:-1]
+        g[:-1] |= on[1:]
+        g2 = g.copy()
+        g2[:, 1:] |= g[:, :-1]
+        g2[:, :-1] |= g[:, 1:]
+        out.append(g2)
+    return out
+
+
+def _leak_texels(
+    ref: Reference, pr: PoseReference, masks: np.ndarray, support: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Texels outside the source's active set that shipped ``masks`` activate in this pose:
+    (flat indices, shipped activations ``[K, n]``), or None. A coarse reference looks on a
+    lattice of every ``sqrt(step)``-th row and column (as sparse as its active texels)."""
+    if masks.shape[0] == 0 or not support.any():
         return None
     H, W = ref.shape
     hm, wm = masks.shape[1:]
-    act_lo = model.activations(masks, pr.pose.weights, ref.policy)
-    on_lo = np.abs(act_lo).sum(axis=0) > 0
-    if not on_lo.any():
+    st = max(1, int(round(np.sqrt(ref.step))))
+    rows = np.arange(0, H, st)
+    cols = np.arange(0, W, st)
+    cand = support[np.minimum((rows * hm) // H, hm - 1)][:, np.minimum((cols * wm) // W, wm - 1)]
+    act_idx = pr.active if pr.active is not None else ref.union[pr.sel]
+    ar, ac = act_idx // W, act_idx % W
+    on_lattice = (ar % st == 0) & (ac % st == 0)
+    cand[ar[on_lattice] // st, ac[on_lattice] // st] = False
+    lr, lc = np.nonzero(cand)
+    if lr.size == 0:
         return None
-    # a grid texel can see a non-zero mask texel when it lies within one mask texel of it
-    grow = on_lo.copy()
-    grow[1:] |= on_lo[:-1]
-    grow[:-1] |= on_lo[1:]
-    g2 = grow.copy()
-    g2[:, 1:] |= grow[:, :-1]
-    g2[:, :-1] |= grow[:, 1:]
-    rows = np.minimum((np.arange(H) * hm) // H, hm - 1)
-    cols = np.minimum((np.arange(W) * wm) // W, wm - 1)
-    cand = g2[rows][:, cols].reshape(-1)
-    cand[ref.union[pr.sel]] = False
-    idx = np.flatnonzero(cand)
-    if idx.size == 0:
-        return None
-    m_at = sample_masks_at(masks, ref.shape, idx)
-    act = model.activations(m_at, pr.pose.weights, ref.policy)
+    idx = rows[lr] * W + cols[lc]
+    act = model.activations(sample_masks_at(masks, ref.shape, idx), pr.pose.weights, ref.policy)
     keep = np.abs(act).sum(axis=0) > 0
     if not keep.any():
         return None
-    idx, act = idx[keep], act[:, keep]
+    return idx[keep], act[:, keep]
+
+
+def _leak_normals(ref: Reference, s: Samples) -> tuple[np.ndarray, np.ndarray]:
+    """Every pose's leak texels (sorted, unique) and the shipped base and states sampled there
+    once: ``(flat indices, base [n, 3], states [K, n, C])``."""
+    idx = np.unique(np.concatenate([lk[0] for lk in s.leaks if lk is not None]))
     b = s.raw.get("base")
-    base = model.normalize(sample_at(b, ref.shape, idx)) if b is not None else None
-    if base is None:
-        base = ref.base.reshape(-1, 3)[idx]
-    st = s.raw["states"]
-    states = np.stack([sample_at(x, ref.shape, idx) for x in st])
+    base = (
+        model.normalize(sample_at(b, ref.shape, idx, s.readers.get("base")))
+        if b is not None
+        else ref.base.reshape(-1, 3)[idx]
+    )
+    rd = s.readers.get("states")
+    states = np.stack([sample_at(x, ref.shape, idx, rd) for x in s.raw["states"]])
     if ref.encoding in ("full", "composite"):
         states = model.normalize(states)
-    return idx, model.combine(base, states, act, ref.encoding), _activation_weight(act)
+    return idx, base, states
 
 
 def evaluate(
@@ -418,7 +553,10 @@ def evaluate(
     src_base_u = ref.base.reshape(-1, 3)[ref.union]
     out = []
     maps: dict[str, np.ndarray] = {}
-    for pr in ref.poses:
+    leak_at = None
+    if leaks and s.leaks is not None and any(lk is not None for lk in s.leaks):
+        leak_at = _leak_normals(ref, s)
+    for pi, pr in enumerate(ref.poses):
         base = (s.base if s.base is not None else src_base_u)[pr.sel]
         if s.masks is not None:
             act = model.activations(s.masks[:, pr.sel], pr.pose.weights, ref.policy)
@@ -429,20 +567,21 @@ def evaluate(
         w = np.maximum(pr.weight, _activation_weight(act))
         errs, ws = [err], [w]
         n_leak = 0
-        leak = _leak(ref, pr, s) if leaks else None
+        leak = s.leaks[pi] if leak_at is not None else None
         if leak is not None:
-            idx, n_leak_normal, lw = leak
-            lerr = angle_deg(n_leak_normal, ref.base.reshape(-1, 3)[idx])
+            idx, lact = leak
+            pos = np.searchsorted(leak_at[0], idx)
+            shipped = model.combine(leak_at[1][pos], leak_at[2][:, pos], lact, ref.encoding)
+            lerr = angle_deg(shipped, ref.base.reshape(-1, 3)[idx])
             errs.append(lerr)
-            ws.append(lw)
+            ws.append(_activation_weight(lact))
             n_leak = int(idx.size)
         overall = weighted_stats(np.concatenate(errs), np.concatenate(ws))
         per_region: dict[str, Stats] = {}
         if regions:
-            for r, name in enumerate(ref.region_names):
-                share = pr.share[r]
-                if share.any():
-                    per_region[name] = weighted_stats(err, share)
+            on = np.flatnonzero(pr.share.any(axis=1))
+            for r, st in zip(on, weighted_stats_many(err, pr.share[on])):
+                per_region[ref.region_names[r]] = st
         out.append(PoseFidelity(pr.pose.name, overall, per_region, n_leak))
         if error_maps:
             emap = np.zeros(H * W, _F)
@@ -456,13 +595,17 @@ def evaluate(
     return fid
 
 
-def base_fidelity(ref: Reference, base: np.ndarray) -> Stats:
-    """The shipped base (decoded, any size) against the source base over the footprint."""
-    H, W = ref.shape
-    flat = np.flatnonzero(ref.footprint.reshape(-1)) if ref.footprint is not None else None
+def base_fidelity(
+    ref: Reference,
+    base: np.ndarray,
+    flat: np.ndarray | None = None,
+    reader: Reader | None = None,
+) -> Stats:
+    """The shipped base (unit normals, or what ``reader`` makes of its texels; any size)
+    against the source base over the footprint (or at the grid texels ``flat``)."""
     if flat is None:
-        flat = np.arange(H * W)
-    got = model.normalize(sample_at(base, ref.shape, flat))
+        flat = ref.face_texels()
+    got = model.normalize(sample_at(base, ref.shape, flat, reader))
     err = angle_deg(got, ref.base.reshape(-1, 3)[flat])
     return weighted_stats(err, np.ones(err.shape, _F))
 

@@ -1,0 +1,105 @@
+"""Automatic choices by fidelity: the pyramid, the shipped-texel helpers and the searches."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from wrinklepipe import fidelity as fd
+from wrinklepipe import model
+from wrinklepipe.fidelity import pyramid, ship
+from wrinklepipe.fidelity import search as fs
+from wrinklepipe.io.package import _q, encode_state
+from wrinklepipe.masks import resample_masks
+
+
+def test_halving_is_a_lanczos3_filter_that_keeps_linear_ramps():
+    rng = np.random.default_rng(0)
+    x = rng.normal(0, 1, (32, 32, 2)).astype(np.float32)
+    # an independent implementation: full correlation with the 12 taps, every second sample
+    w = pyramid.WEIGHTS
+    want = ndimage.correlate1d(x, w, axis=0, mode="nearest")[1::2]
+    want = ndimage.correlate1d(want, w, axis=1, mode="nearest")[:, 1::2]
+    assert np.abs(pyramid.halve(x) - want).max() < 1e-5
+    # weights sum to 1 and are symmetric: a linear ramp comes back exactly inside the map
+    assert w.sum() == pytest.approx(1.0, abs=1e-6) and np.allclose(w, w[::-1])
+    ramp = np.broadcast_to(np.arange(64, dtype=np.float32)[None, :, None], (64, 64, 1))
+    half = pyramid.halve(ramp)[:, 4:-4, 0]
+    centres = 2 * np.arange(32, dtype=np.float32) + 0.5  # output texel i covers 2i and 2i+1
+    assert np.allclose(half, centres[4:-4][None], atol=1e-4)
+    lv = pyramid.levels(x, 4)
+    assert sorted(lv) == [4, 8, 16, 32]
+
+
+def test_shipped_texels_are_what_the_package_writes():
+    rng = np.random.default_rng(1)
+    base = model.pd_to_normal(rng.normal(0, 0.2, (16, 16, 2)).astype(np.float32))
+    state = model.pd_to_normal(rng.normal(0, 0.5, (16, 16, 2)).astype(np.float32))
+    d = model.normal_to_pd(state) - model.normal_to_pd(base)
+    for scale in (0.5, 1.0):
+        q, clipped = ship.pd_texels(d, scale)
+        assert np.array_equal(q, _q(encode_state(base, state, "pd", scale), 8)[..., :2])
+        assert clipped == int(np.any(np.abs(d) > scale, axis=-1).sum())
+    assert np.array_equal(ship.base_texels(base), _q(0.5 + 0.5 * base, 8))
+
+
+@pytest.mark.parametrize("fmt", ship.BLOCK_FORMATS)
+def test_encoding_only_the_blocks_read_gives_the_whole_map_roundtrip_there(fmt):
+    rng = np.random.default_rng(2)
+    q = np.clip(rng.normal(128, 40, (30, 38, 2)), 0, 255).astype(np.uint8)  # not a multiple of 4
+    full = ship.block_roundtrip(q, fmt)
+    t = rng.choice(q.shape[0] * q.shape[1], 50, replace=False)
+    part = ship.block_roundtrip_at(q, fmt, t)
+    assert np.array_equal(part.reshape(-1, 2)[t], full.reshape(-1, 2)[t])
+
+
+def test_mask_levels_are_box_halvings_stored_in_8_bits():
+    rng = np.random.default_rng(3)
+    m = rng.random((3, 64, 64), dtype=np.float32)
+    lv = ship.mask_levels(m, 8)
+    assert sorted(lv) == [8, 16, 32, 64] and lv[64] is not None
+    for size in (32, 8):
+        want = np.rint(resample_masks(m, size) * 255) / 255
+        assert np.abs(lv[size] - want).max() <= 1 / 255 + 1e-7
+        assert np.mean(lv[size] != want) < 0.001  # ties only
+
+
+def scene(size=64, width=6.0, amp=0.3, seed=4):
+    """One region, one state: sinusoidal creases of ``width`` texels in a band of columns."""
+    rng = np.random.default_rng(seed)
+    base = model.pd_to_normal(rng.normal(0, 0.02, (size, size, 2)).astype(np.float32))
+    x = np.arange(size, dtype=np.float32)
+    slopes = np.zeros((1, size, size, 2), np.float32)
+    slopes[0, :, :, 0] = amp * np.sin(2 * np.pi * x / (2 * width))[None, :]
+    masks = np.zeros((1, size, size), np.float32)
+    masks[0, 8:56, 8:56] = 1.0
+    poses = [fd.Pose("on", np.ones((1, 1), np.float32))]
+    return fs.Source(base, slopes, masks, poses, ["r"])
+
+
+def test_smooth_wrinkles_ship_small_and_fine_ones_ship_at_full_size():
+    smooth = fs.search(scene(width=16.0), fd.Budget(mean=0.5, p99=1.0))
+    assert smooth.wrinkle_size < 64 and smooth.png.meets(fd.Budget(mean=0.5, p99=1.0))
+    fine = fs.search(scene(width=2.0), fd.Budget(mean=0.5, p99=1.0))
+    assert fine.wrinkle_size == 64
+    # the choice is the smallest: half its size is over the budget
+    tried = {t.value: t for t in smooth.tried if t.step == "wrinkle"}
+    assert not tried[smooth.wrinkle_size // 2].ok
+
+
+def test_the_scale_is_the_one_with_the_least_error_and_clipping_counts():
+    src = scene(width=8.0, amp=0.9)
+    choice = fs.search(src, fd.Budget(mean=1.0, p99=2.0), fixed=fs.Fixed(wrinkle=64, mask=64))
+    scales = [t for t in choice.tried if t.step == "pd_scale (full size)"]
+    best = min(scales, key=lambda t: (t.p99, t.mean))
+    assert choice.pd_scale == best.value
+    # clipping at a scale below the largest slope costs more than the coarser steps save
+    assert choice.pd_scale >= 0.9 * 0.75
+    assert choice.clipped_texels == fs.clipped_texels(src.slopes, choice.pd_scale)
+
+
+def test_a_fixed_choice_is_measured_not_searched():
+    choice = fs.search(scene(width=2.0), fd.Budget(p99=1.0), fixed=fs.Fixed(wrinkle=16))
+    assert choice.wrinkle_size == 16 and not choice.png.meets(fd.Budget(p99=1.0))
+    assert not [t for t in choice.tried if t.step == "wrinkle"]

@@ -1,0 +1,55 @@
+"""Benchmark of the automatic choices by fidelity on the 2048² demo.
+
+Baseline (same run): one full-resolution blend of every pose the searches judge
+(:func:`wrinklepipe.model.blend` of the demo's source maps, once per expression). Measured: the
+whole search of :func:`wrinklepipe.fidelity.search.search` (preparing the source, the size,
+PD-scale and mask-size searches, the block-format searches for base and states); the issue asks
+for at most 2x the baseline.
+"""
+
+from __future__ import annotations
+
+from wrinklepipe import model
+from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
+
+
+@benchmark("fidelity", "automatic choices by fidelity (size, scale, masks, formats), demo 2048^2")
+def bench_fidelity(quick: bool = False) -> BenchResult:
+    from wrinklepipe import fidelity as fd
+    from wrinklepipe.demo import demo_asset
+    from wrinklepipe.fidelity import search as fs
+
+    size = 256 if quick else 2048
+    a = demo_asset(size)
+    poses = fd.expression_poses(a.region_names, a.region_state_matrix(), a.expressions)
+    slopes = model.normal_to_pd(a.states) - model.normal_to_pd(a.base)[None]
+    fp = fd.footprint(a.mesh.uvs, a.mesh.indices, (size, size))
+    src = fs.Source(a.base, slopes, a.masks, poses, a.region_names, footprint=fp)
+    budget = fd.Budget.from_dict(a.budget)
+    repeat = 1 if quick else 3
+
+    def blend_all() -> None:
+        for p in poses:
+            model.blend(a.base, slopes, a.masks, p.weights, "pd", a.policy)
+
+    res = BenchResult(
+        "fidelity",
+        f"demo {size}^2, {len(poses)} poses" + (" (quick: limits not checked)" if quick else ""),
+        baseline="full-resolution blend of every pose",
+    )
+    t_blend = median_time(blend_all, repeat, warmup=0)
+    choice = fs.search(src, budget)
+    t_search = median_time(lambda: fs.search(src, budget), repeat, warmup=0)
+    res.rows.append(BenchRow("full-resolution blend of every pose", t_blend))
+    res.rows.append(
+        BenchRow(
+            "automatic searches (size, scale, masks, formats)",
+            t_search,
+            note=f"chose {choice.wrinkle_size}^2 states, {choice.mask_size}^2 masks, scale "
+            f"{choice.pd_scale:g}, base {choice.base_format}, states {choice.state_format}",
+        )
+    )
+    if not quick:
+        res.limits = {"automatic searches (size, scale, masks, formats)": 2.0}
+    res.extra = {"size": size, "poses": len(poses), "choice": choice.to_json()["tried"]}
+    return res.finish()

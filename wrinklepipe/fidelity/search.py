@@ -1,0 +1,458 @@
+"""Automatic choices by fidelity: state size, mask size, PD scale, block formats.
+
+Every candidate is what convert would write (:mod:`.ship`), decoded, and judged by the one
+measure (:mod:`.metric`) against the full-resolution source, inside each pose's active
+region. The searches share their work:
+
+- the source is prepared once (:func:`~wrinklepipe.fidelity.metric.prepare`: the one
+  full-resolution pass over the masks and the poses);
+- every state size comes from one Lanczos-3 pyramid (:mod:`.pyramid`), which is also what
+  convert ships;
+- candidates are screened on a coarse subset of the active texels
+  (:meth:`~wrinklepipe.fidelity.metric.Reference.coarse`) and only the one that passes is
+  confirmed on all of them; samples of what a step does not change are kept.
+
+Order (each step with the choices made so far): a provisional PD scale at full size, the
+smallest state size that meets the budget, the PD scale at that size (the one with the least
+error, clipping included: the tool never fails its own choice), the smallest mask size that
+meets the budget, then the block formats (smallest blocks first) against the budget of the
+compressed copies. A choice fixed in the manifest is measured, not searched.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.fidelity import metric as fm
+from wrinklepipe.fidelity import pyramid, ship
+from wrinklepipe.fidelity.stats import Budget
+
+_F = np.float32
+
+#: Fractions of the largest active slope tried as PD scales (1: nothing clips).
+SCALE_FACTORS: tuple[float, ...] = (1.0, 0.875, 0.75)
+
+
+@dataclass(frozen=True)
+class SearchOptions:
+    """``min_size`` / ``min_mask_size``: the smallest sizes tried. ``formats``: block formats
+    tried (smallest blocks first). ``screen_texels``: active texels a candidate is screened on
+    before it is confirmed on all of them."""
+
+    min_size: int = 16
+    min_mask_size: int = 16
+    formats: tuple[str, ...] = ship.BLOCK_FORMATS
+    screen_texels: int = 60_000
+    scale_factors: tuple[float, ...] = SCALE_FACTORS
+
+
+@dataclass
+class Source:
+    """What the pipeline read, at full resolution: the base as it will ship (unit normals, its
+    own size), the wrinkle-only PD slopes ``[K, H, W, 2]`` on the source grid, the source masks
+    ``[R, h, w]``, the poses, and the mesh's UV footprint on the grid."""
+
+    base: np.ndarray
+    slopes: np.ndarray
+    masks: np.ndarray
+    poses: Sequence[fm.Pose]
+    region_names: Sequence[str]
+    policy: str = "clamp01"
+    footprint: np.ndarray | None = None
+    source_base: np.ndarray | None = None  # the base on the grid, when ``base`` was resampled
+
+
+@dataclass(frozen=True)
+class Fixed:
+    """Choices the manifest fixes (None: automatic). Formats: a block format, or ``"png"``."""
+
+    wrinkle: int | None = None
+    mask: int | None = None
+    scale: float | None = None
+    base_format: str | None = None
+    state_format: str | None = None
+
+
+@dataclass
+class Tried:
+    """One candidate: what was tried, its worst pose (p99, mean degrees), and the verdict."""
+
+    step: str
+    value: Any
+    p99: float
+    mean: float
+    ok: bool
+    screened_only: bool = False
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "step": self.step,
+            "value": self.value,
+            "worst_p99_deg": round(self.p99, 4),
+            "worst_mean_deg": round(self.mean, 4),
+            "ok": self.ok,
+            "screened_only": self.screened_only,
+        }
+
+
+@dataclass
+class Choice:
+    """What the searches chose, the candidates they tried and the final fidelity."""
+
+    wrinkle_size: int
+    mask_size: int
+    pd_scale: float
+    base_format: str  # a block format, or "png" (no compressed copy)
+    state_format: str
+    clipped_texels: list[int]  # per state: texels of the stored map whose slope was clipped
+    png: fm.Fidelity
+    compressed: fm.Fidelity | None
+    states: np.ndarray  # [K, s, s, 2] the slopes to ship (from the pyramid)
+    tried: list[Tried] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    budget: Budget = field(default_factory=Budget)
+    compressed_budget: Budget = field(default_factory=Budget)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "wrinkle": self.wrinkle_size,
+            "mask": self.mask_size,
+            "pd_scale": self.pd_scale,
+            "base_format": self.base_format,
+            "state_format": self.state_format,
+            "clipped_texels": self.clipped_texels,
+            "budget": _budget_json(self.budget),
+            "compressed_budget": _budget_json(self.compressed_budget),
+            "png": self.png.to_json(),
+            "compressed": None if self.compressed is None else self.compressed.to_json(),
+            "tried": [t.to_json() for t in self.tried],
+            "notes": self.notes,
+        }
+
+
+def _budget_json(b: Budget) -> dict[str, float]:
+    return {
+        k: v
+        for k, v in (("max_mean_deg", b.mean), ("max_p99_deg", b.p99), ("max_max_deg", b.max))
+        if v is not None
+    }
+
+
+# ------------------------------------------------------------------------------------------------
+# candidates as decoded shipped data
+
+
+def scale_candidates(max_slope: float, factors: Sequence[float]) -> list[float]:
+    """PD scales to try: ``max_slope`` times each factor, rounded up to a multiple of 1/64
+    (exact in float32 and in every shader), distinct, largest first."""
+    top = max(float(max_slope), 1.0 / 64.0)
+    out = sorted({float(np.ceil(top * f * 64.0) / 64.0) for f in factors}, reverse=True)
+    return [s for s in out if s > 0]
+
+
+def clipped_texels(level: np.ndarray, scale: float) -> list[int]:
+    """Per state: texels whose slope leaves ``[-scale, scale]`` (the one clipped count)."""
+    return [ship.pd_texels(x, scale)[1] for x in level]
+
+
+# ------------------------------------------------------------------------------------------------
+# the search
+
+
+class _Judge:
+    """Evaluates candidates on the coarse and the full reference, keeping what does not change.
+
+    A candidate is a function of the reference it is judged on returning what
+    :func:`~wrinklepipe.fidelity.metric.sample` takes (``base=``, ``states=`` with
+    ``states_reader=``, ``masks=`` with ``support=``), so a block-format candidate encodes only the
+    blocks that reference reads."""
+
+    def __init__(self, ref: fm.Reference, screen_texels: int) -> None:
+        self.fine = ref
+        self.coarse = ref.coarse(screen_texels)
+        self.parts: dict[str, tuple[fm.Samples, fm.Samples | None]] = {}
+        self.makers: dict[str, Candidate] = {}
+
+    @property
+    def screens(self) -> bool:
+        return self.coarse is not self.fine
+
+    def set(self, name: str, make: Candidate) -> None:
+        """Keep samples of a shipped part (the full reference's are made when first needed)."""
+        self.parts[name] = (fm.sample(self.coarse, **make(self.coarse)), None)
+        self.makers[name] = make
+
+    def full(self, name: str) -> fm.Samples:
+        """The full reference's samples of a part."""
+        c, f = self.parts[name]
+        if f is None:
+            f = c if not self.screens else fm.sample(self.fine, **self.makers[name](self.fine))
+            self.parts[name] = (c, f)
+        return f
+
+    def _samples(self, fine: bool) -> list[fm.Samples]:
+        if not fine:
+            return [p[0] for p in self.parts.values()]
+        return [self.full(name) for name in self.parts]
+
+    def run(self, fine: bool, make: Candidate | None = None, regions: bool = False) -> fm.Fidelity:
+        ref = self.fine if fine else self.coarse
+        parts = self._samples(fine)
+        if make is not None:
+            parts.append(fm.sample(ref, **make(ref)))
+        return fm.evaluate(ref, fm.merge(*parts), regions=regions)
+
+    def screen(
+        self, budget: Budget, tried: list[Tried], step: str, value: Any, make: Candidate
+    ) -> bool:
+        f = self.run(False, make)
+        tried.append(Tried(step, value, *f.score(), f.meets(budget), self.screens))
+        return f.meets(budget)
+
+
+Candidate = Callable[[fm.Reference], dict[str, Any]]
+
+
+def _smallest_passing(values: Sequence[Any], passes: Callable[[Any], bool]) -> Any | None:
+    """The smallest of ascending ``values`` for which ``passes`` holds, by bisection (the error
+    falls as a size grows); the largest is taken to pass (the confirmation checks it)."""
+    lo, hi = 0, len(values) - 1
+    if hi < 0:
+        return None
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if passes(values[mid]):
+            hi = mid
+        else:
+            lo = mid + 1
+    return values[lo]
+
+
+def search(
+    src: Source,
+    budget: Budget,
+    compressed_budget: Budget | None = None,
+    fixed: Fixed | None = None,
+    options: SearchOptions | None = None,
+) -> Choice:
+    """Choose state size, mask size, PD scale and block formats by fidelity (module doc)."""
+    o = options or SearchOptions()
+    fx = fixed or Fixed()
+    cbudget = compressed_budget or budget
+    slopes = np.asarray(src.slopes, _F)
+    K, H, W = slopes.shape[:3]
+    if H != W:
+        raise ValueError(f"the searches need square state maps, got {W} x {H}")
+    grid_base = src.source_base if src.source_base is not None else src.base
+    if grid_base.shape[:2] != (H, W):
+        raise ValueError("the source base must be given on the state grid (source_base)")
+    ref = fm.prepare(
+        np.asarray(grid_base, _F),
+        slopes,
+        src.masks,
+        src.poses,
+        src.region_names,
+        "pd",
+        src.policy,
+        src.footprint,
+    )
+    judge = _Judge(ref, o.screen_texels)
+    tried: list[Tried] = []
+    notes: list[str] = []
+    base_texels = ship.base_texels(src.base)
+    png_base = {"base": base_texels, "base_reader": ship.base_reader("rgb")}
+    judge.set("base", lambda r: png_base)
+    mask_lv = ship.mask_levels(src.masks, o.min_mask_size)
+    m0 = int(src.masks.shape[1])
+
+    def masks(m: int) -> Candidate:
+        # the source's own masks cannot leak
+        return lambda r: {"masks": mask_lv[m], "support": None if m != m0 else False}
+
+    judge.set("masks", masks(m0))
+    smallest = min(fx.wrinkle or o.min_size, H)
+    levels = pyramid.levels(slopes, smallest)
+    sizes = sorted(s for s in levels if s >= smallest)
+
+    def states(size: int, scale: float) -> Candidate:
+        return lambda r: {"states": levels[size], "states_reader": ship.pd_reader(scale)}
+
+    def best_scale(size: int, label: str) -> float:
+        u = judge.coarse.union
+        top = max(
+            float(np.abs(fm.sample_at(x, ref.shape, u)).max(initial=0.0)) for x in levels[size]
+        )
+        best: tuple[tuple[float, float], float] | None = None
+        for s in scale_candidates(top, o.scale_factors):
+            f = judge.run(False, states(size, s))
+            tried.append(Tried(label, s, *f.score(), f.meets(budget), judge.screens))
+            if best is None or f.score() < best[0]:
+                best = (f.score(), s)
+        return best[1]
+
+    # 1. a provisional scale at full size (or the manifest's)
+    scale = fx.scale if fx.scale is not None else best_scale(H, "pd_scale (full size)")
+    # 2. the state size: the smallest that meets the budget (screened)
+    if fx.wrinkle is not None:
+        size = fx.wrinkle if fx.wrinkle in levels else H
+        if size != fx.wrinkle:
+            notes.append(f"wrinkle size {fx.wrinkle} is not a halving of {H}: kept {H}")
+    else:
+        size = (
+            _smallest_passing(
+                sizes, lambda s: judge.screen(budget, tried, "wrinkle", s, states(s, scale))
+            )
+            or H
+        )
+    # 3. the scale at that size: the least error, clipping included
+    if fx.scale is None and size != H:
+        scale = best_scale(size, "pd_scale")
+    judge.set("states", states(size, scale))
+    # 4. the mask size: the smallest that meets the budget (screened)
+    mask_size = fx.mask if fx.mask in mask_lv else m0
+    if fx.mask is None:
+        smaller = sorted(m for m in mask_lv if m < m0)
+        mask_size = (
+            _smallest_passing(smaller, lambda m: judge.screen(budget, tried, "mask", m, masks(m)))
+            or m0
+        )
+    judge.set("masks", masks(mask_size))
+    # 5. confirm on every active texel; raise sizes while it is over the budget
+    png = judge.run(True)
+    tried.append(Tried("confirmed (png)", [size, mask_size], *png.score(), png.meets(budget)))
+    while not png.meets(budget) and (
+        (fx.mask is None and mask_size < m0) or (fx.wrinkle is None and size < H)
+    ):
+        if fx.mask is None and mask_size < m0:
+            mask_size *= 2
+            judge.set("masks", masks(mask_size))
+        else:
+            size *= 2
+            if fx.scale is None:
+                scale = best_scale(size, "pd_scale")
+            judge.set("states", states(size, scale))
+        png = judge.run(True)
+        tried.append(Tried("raised (png)", [size, mask_size], *png.score(), png.meets(budget)))
+    if not png.meets(budget):
+        notes.append(
+            f"over the budget ({budget.describe()} degrees inside the active regions) even at "
+            f"{size}^2 states and {mask_size}^2 masks: worst {png.worst.pose} p99 "
+            f"{png.worst.overall.p99:.2f}"
+        )
+    png.base = fm.base_fidelity(ref, base_texels, None, png_base["base_reader"])  # all the face
+    # 6. block formats for the compressed copies (states first, then the base): only the
+    # blocks the reference being judged reads are encoded (blocks are independent)
+    state_q = np.stack([ship.pd_texels(x, scale)[0] for x in levels[size]])
+    face = ref.face_texels(o.screen_texels)
+
+    def reads(r: fm.Reference) -> np.ndarray:
+        part = judge.full("masks") if r is judge.fine else judge.parts["masks"][0]
+        leaks = [lk[0] for lk in (part.leaks or []) if lk is not None]
+        return np.concatenate([r.union, *leaks])
+
+    def state_format(f: str) -> Candidate:
+        def make(r: fm.Reference) -> dict[str, Any]:
+            need = fm.taps(state_q.shape[1:3], ref.shape, reads(r))
+            texels = np.stack([ship.block_roundtrip_at(q, f, need) for q in state_q])
+            return {"states": texels, "states_reader": ship.pd_reader(scale, quantise=False)}
+
+        return make
+
+    def base_format(f: str) -> Candidate:
+        def make(r: fm.Reference) -> dict[str, Any]:
+            need = fm.taps(base_texels.shape[:2], ref.shape, np.concatenate([reads(r), face]))
+            xy = ship.block_roundtrip_at(base_texels[..., :2], f, need)
+            return {"base": xy, "base_reader": ship.base_reader("rg")}
+
+        return make
+
+    state_fmt = _pick_format(
+        judge, fx.state_format, o.formats, cbudget, tried, "state format", state_format
+    )
+    if state_fmt != "png":
+        judge.set("states", state_format(state_fmt))
+    base_fmt = _pick_format(
+        judge,
+        fx.base_format,
+        o.formats,
+        cbudget,
+        tried,
+        "base format",
+        base_format,
+        alone=lambda make: _base_alone(ref, make(judge.coarse), face),
+    )
+    compressed = None
+    if state_fmt != "png" or base_fmt != "png":
+        if base_fmt != "png":
+            judge.set("base", base_format(base_fmt))
+        compressed = judge.run(True)
+        tried.append(
+            Tried(
+                "confirmed (compressed)",
+                [state_fmt, base_fmt],
+                *compressed.score(),
+                compressed.meets(cbudget),
+            )
+        )
+        full_base = judge.full("base")
+        compressed.base = fm.base_fidelity(
+            ref, full_base.raw["base"], face, full_base.readers["base"]
+        )
+        if not compressed.meets(cbudget):
+            notes.append(
+                f"compressed copies over their budget ({cbudget.describe()} degrees) on every "
+                f"active texel: worst {compressed.worst.pose} p99 "
+                f"{compressed.worst.overall.p99:.2f}"
+            )
+    return Choice(
+        wrinkle_size=size,
+        mask_size=mask_size,
+        pd_scale=float(scale),
+        base_format=base_fmt,
+        state_format=state_fmt,
+        clipped_texels=clipped_texels(levels[size], scale),
+        png=png,
+        compressed=compressed,
+        states=levels[size],
+        tried=tried,
+        notes=notes,
+        budget=budget,
+        compressed_budget=cbudget,
+    )
+
+
+def _base_alone(ref: fm.Reference, arrays: dict[str, Any], face: np.ndarray) -> Any:
+    return fm.base_fidelity(ref, arrays["base"], face, arrays.get("base_reader"))
+
+
+def _pick_format(
+    judge: _Judge,
+    fixed: str | None,
+    formats: Sequence[str],
+    budget: Budget,
+    tried: list[Tried],
+    step: str,
+    candidate: Callable[[str], Candidate],
+    alone: Callable[[Candidate], Any] | None = None,
+) -> str:
+    """The first format (smallest blocks first) whose screened candidate meets ``budget``
+    (and, with ``alone``, whose own error over the face does too); ``fixed`` is measured, not
+    chosen."""
+    chosen = fixed not in (None, "auto")
+    for f in [fixed] if chosen else formats:
+        if f == "png":
+            return "png"
+        make = candidate(f)
+        ok = judge.screen(budget, tried, step, f, make)
+        if ok and alone is not None:
+            a = alone(make)
+            ok = budget.ok(a)
+            if not ok:
+                tried.append(Tried(step + " (base alone)", f, a.p99, a.mean, False))
+        if ok or chosen:
+            return f
+    return "png"

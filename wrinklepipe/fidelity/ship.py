@@ -1,0 +1,156 @@
+"""What convert writes, decoded: the stored texels of each candidate the searches try.
+
+The value mappings are :mod:`wrinklepipe.codec`'s (the version ``io.package`` writes:
+:data:`MAPPING_VERSION`); block formats are encoded with :mod:`wrinklepipe.normals.compress`
+and decoded by its independent decoder (texture2ddecoder), exactly as the compressed copies are.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wrinklepipe import codec
+from wrinklepipe.fidelity.metric import Reader
+from wrinklepipe.masks import resample_masks
+from wrinklepipe.normals import compress as nc
+
+_F = np.float32
+
+#: The value mapping io.package writes PD states with (v1: ``0.5 + 0.5 d / s``).
+MAPPING_VERSION = 1
+#: Block formats the searches may pick, smallest blocks first (BC1: 8 bytes per 4x4 block).
+BLOCK_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")
+
+
+def base_texels(base: np.ndarray) -> np.ndarray:
+    """8-bit RGB texels of the base normal map (``0.5 + 0.5 n``)."""
+    q, _ = codec.encode(codec.BASE, codec.normalize(base), "png8", channels=3)
+    return q
+
+
+def decode_base(texels: np.ndarray, layout: str = "rgb") -> np.ndarray:
+    """Unit normals from base texels (``rg``: z rebuilt, as from a two-channel block format)."""
+    return codec.decode(codec.BASE, texels, layout, bits=8)
+
+
+def pd_texels(slopes: np.ndarray, scale: float) -> tuple[np.ndarray, int]:
+    """8-bit PD texels ``[..., 2]`` (R = x, G = y) of slopes at ``scale`` and the clipped count."""
+    q, clipped = codec.encode(
+        "pd", slopes, "rg", param=float(scale), version=MAPPING_VERSION, bits=8, channels=2
+    )
+    return q, int(clipped)
+
+
+def decode_pd(texels: np.ndarray, scale: float) -> np.ndarray:
+    """Slopes ``[..., 2]`` from 8-bit PD texels."""
+    return codec.decode("pd", texels, "rg", param=float(scale), version=MAPPING_VERSION, bits=8)
+
+
+def pd_reader(scale: float, quantise: bool = True) -> Reader:
+    """How the measure reads a PD state: slopes stored as 8-bit texels (``quantise``: the map
+    holds slopes, stored here; otherwise it holds the texels), filtered as texels, decoded as
+    the shader decodes sampled values."""
+    s = float(scale)
+    store = (lambda x: pd_texels(x, s)[0]) if quantise else None
+    read = lambda v: codec.decode_sampled(  # noqa: E731
+        "pd", v * _F(1.0 / 255.0), "rg", bits=8, param=s, version=MAPPING_VERSION
+    )
+    return Reader(store, read)
+
+
+def base_reader(layout: str = "rgb") -> Reader:
+    """How the measure reads base texels (``rg``: two channels, z rebuilt after filtering)."""
+    return Reader(
+        None, lambda v: codec.decode_sampled(codec.BASE, v * _F(1.0 / 255.0), layout, bits=8)
+    )
+
+
+def block_roundtrip(xy: np.ndarray, fmt: str) -> np.ndarray:
+    """Two-channel 8-bit texels ``[H, W, 2]`` through block format ``fmt`` and back (sizes not a
+    multiple of 4 are padded by edge replication, as the compressed copies are)."""
+    q = np.ascontiguousarray(xy[..., :2], np.uint8)
+    h, w = q.shape[:2]
+    qp, _ = nc.pad_to_blocks(q)
+    hp, wp = qp.shape[:2]
+    data = nc.encode_bc(nc.pack_rgba(qp, fmt), fmt)
+    return np.ascontiguousarray(nc.unpack_u8(nc.decode_bc(data, wp, hp, fmt), fmt, 2)[:h, :w])
+
+
+def block_roundtrip_at(xy: np.ndarray, fmt: str, texels: np.ndarray) -> np.ndarray:
+    """Like :func:`block_roundtrip`, but only the 4x4 blocks that hold ``texels`` (flat indices)
+    are encoded and decoded (blocks are independent, so those texels come out as a whole-map
+    roundtrip gives them); every other texel is returned unchanged."""
+    q = np.ascontiguousarray(xy[..., :2], np.uint8)
+    h, w = q.shape[:2]
+    qp, _ = nc.pad_to_blocks(q)
+    hp, wp = qp.shape[:2]
+    bw = wp // 4
+    t = np.asarray(texels, np.int64)
+    mark = np.zeros((hp // 4) * bw, bool)
+    mark[(t // w) // 4 * bw + (t % w) // 4] = True
+    ids = np.flatnonzero(mark)
+    if ids.size == 0:
+        return q.copy()
+    blocks = qp.reshape(hp // 4, 4, bw, 4, 2).transpose(0, 2, 1, 3, 4).reshape(-1, 4, 4, 2)
+    side = int(np.ceil(np.sqrt(ids.size)))
+    pick = np.concatenate([ids, np.repeat(ids[-1:], side * side - ids.size)])
+    tile = blocks[pick].reshape(side, side, 4, 4, 2).transpose(0, 2, 1, 3, 4)
+    tile = np.ascontiguousarray(tile.reshape(side * 4, side * 4, 2))
+    data = nc.encode_bc(nc.pack_rgba(tile, fmt), fmt)
+    dec = nc.unpack_u8(nc.decode_bc(data, side * 4, side * 4, fmt), fmt, 2)
+    dec = dec.reshape(side, 4, side, 4, 2).transpose(0, 2, 1, 3, 4).reshape(-1, 4, 4, 2)
+    out = blocks.copy()
+    out[ids] = dec[: ids.size]
+    out = out.reshape(hp // 4, bw, 4, 4, 2).transpose(0, 2, 1, 3, 4).reshape(hp, wp, 2)
+    return np.ascontiguousarray(out[:h, :w])
+
+
+class MaskLevels(dict):
+    """``{side: masks as shipped}`` (see :func:`mask_levels`); a level is stored in 8 bits the
+    first time it is read."""
+
+    def __init__(self, levels: dict[int, np.ndarray], source: int) -> None:
+        super().__init__(levels)
+        self.source = source
+        self._stored: set[int] = {source}
+
+    def __getitem__(self, size: int) -> np.ndarray:
+        v = super().__getitem__(size)
+        if size not in self._stored:
+            v = _u8_values(v)
+            super().__setitem__(size, v)
+            self._stored.add(size)
+        return v
+
+
+def mask_levels(masks: np.ndarray, min_size: int = 1) -> MaskLevels:
+    """``{side: masks as shipped}``: the source masks as given, and every 2 x 2 box halving of
+    them down to ``min_size`` (a box of boxes is the box of the whole factor, as
+    :func:`wrinklepipe.masks.resample_masks` gives) stored in 8 bits."""
+    m = np.asarray(masks, _F)
+    h = m.shape[1]
+    out = {h: m}
+    acc = m
+    while h % 2 == 0 and h // 2 >= min_size and acc.shape[2] % 2 == 0:
+        r, w = acc.shape[0], acc.shape[2]
+        quad = acc.reshape(r, h // 2, 2, w // 2, 2).sum(axis=(2, 4), dtype=np.float64)
+        acc = (quad * 0.25).astype(_F)
+        h //= 2
+        out[h] = acc
+    return MaskLevels(out, int(m.shape[1]))
+
+
+def _u8_values(m: np.ndarray) -> np.ndarray:
+    return (np.rint(np.clip(m, 0.0, 1.0) * 255.0) / 255.0).astype(_F)
+
+
+def mask_values(masks: np.ndarray, size: int | None = None) -> np.ndarray:
+    """Masks as shipped at ``size`` (None: as given): :func:`mask_levels` for a halving of the
+    source, else :func:`wrinklepipe.masks.resample_masks`; stored in 8 bits."""
+    m = np.asarray(masks, _F)
+    if size is None or size == m.shape[1]:
+        return _u8_values(m)
+    levels = mask_levels(m, size)
+    if size in levels:
+        return levels[size]
+    return _u8_values(resample_masks(m, size))
