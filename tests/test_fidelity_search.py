@@ -10,7 +10,7 @@ from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.fidelity import pyramid, ship
 from wrinklepipe.fidelity import search as fs
-from wrinklepipe.io.package import _q, encode_state
+from wrinklepipe.io.package import encode_base, encode_state
 from wrinklepipe.masks import resample_masks
 
 
@@ -39,9 +39,9 @@ def test_shipped_texels_are_what_the_package_writes():
     d = model.normal_to_pd(state) - model.normal_to_pd(base)
     for scale in (0.5, 1.0):
         q, clipped = ship.pd_texels(d, scale)
-        assert np.array_equal(q, _q(encode_state(base, state, "pd", scale), 8)[..., :2])
+        assert np.array_equal(q, encode_state(base, state, "pd", scale)[..., :2])
         assert clipped == int(np.any(np.abs(d) > scale, axis=-1).sum())
-    assert np.array_equal(ship.base_texels(base), _q(0.5 + 0.5 * base, 8))
+    assert np.array_equal(ship.base_texels(base), encode_base(base))
 
 
 @pytest.mark.parametrize("fmt", ship.BLOCK_FORMATS)

@@ -16,8 +16,8 @@ from wrinklepipe.normals import compress as nc
 
 _F = np.float32
 
-#: The value mapping io.package writes PD states with (v1: ``0.5 + 0.5 d / s``).
-MAPPING_VERSION = 1
+#: The value mapping io.package writes PD states with.
+MAPPING_VERSION = codec.CURRENT_VERSION
 #: Block formats the searches may pick, smallest blocks first (BC1: 8 bytes per 4x4 block).
 BLOCK_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")
 
