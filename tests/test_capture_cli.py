@@ -64,9 +64,9 @@ def test_end_to_end_outputs_report_and_determinism(session, tmp_path, capsys):
         assert key in report["ratio"]
     assert report["ratio"]["exposure_factor"] == pytest.approx(0.93 / 0.9, abs=3e-3)
     means = {m: report["orientation"][m]["truth"]["angular"]["mean"] for m in report["orientation"]}
-    assert set(means) == {"gradient", "furrow", "integrable", "sfs"}
-    # no neutral normals given: auto is the integrable prior, the best of the priors here
-    assert min((m for m in means if m != "sfs"), key=means.get) == "integrable"
+    assert set(means) == {"gradient", "furrow", "integrable"}  # no neutral normals: no sfs
+    # auto is the integrable prior, the best of the priors here
+    assert min(means, key=means.get) == "integrable"
     # every method states how well it explains the photos (lower is better)
     resid = {m: report["orientation"][m]["ratio_residual"] for m in means}
     assert all(v > 0 for v in resid.values())
@@ -109,6 +109,41 @@ def test_orientation_choice_and_photo_space(session, tmp_path):
     assert read_header(tmp_path / "g" / "capture.png").width == 192
     report = json.loads((tmp_path / "g" / "report.json").read_text())
     assert report["method"] == "gradient" and report["outputs"]["space"] == "photo"
+
+
+def test_neutral_normals_choose_the_solve(session, tmp_path):
+    # The example's neutral normal map (the dome seen from the camera, 16-bit 0.5 + 0.5 n):
+    # auto becomes sfs, every method is compared with its ratio residual, and the residual of
+    # the solve is the lowest (it explains the photos best).
+    out = tmp_path / "nn"
+    args = _args(session, out) + ["--neutral-normals", str(session / "neutral_normals.png")]
+    assert main(args) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["method"] == "sfs" and rep["neutral_shape"] == "normal map"
+    resid = {m: v["ratio_residual"] for m, v in rep["orientation"].items()}
+    assert set(resid) == {"gradient", "furrow", "integrable", "sfs"}
+    assert min(resid, key=resid.get) == "sfs"
+    assert rep["sfs"]["start"] in rep["sfs"]["starts_ratio_residual"]
+    truth = rep["orientation"]["sfs"]["truth"]
+    assert truth["tilt"]["mean"] < 0.5 * truth["flat"]["mean"]
+
+
+def test_bad_neutral_normals(session, tmp_path, capsys):
+    write_image(tmp_path / "small.png", np.full((64, 64, 3), 0.5), bits=8)
+    away = np.zeros((192, 192, 3))
+    away[..., 2] = 0.0  # z = -1: facing away from the camera
+    write_image(tmp_path / "away.png", away, bits=8)
+    for name, text in (("small.png", "64 x 64"), ("away.png", "not normals facing the camera")):
+        capsys.readouterr()
+        args = _args(session, tmp_path / "x") + ["--neutral-normals", str(tmp_path / name)]
+        assert main(args) == 2
+        msg = " ".join(capsys.readouterr().err.split())
+        assert name in msg and text in msg and msg.count("error:") == 1
+        assert not (tmp_path / "x").exists()
+    capsys.readouterr()
+    args = _args(session, tmp_path / "x") + ["--neutral-normals", str(tmp_path / "away.png")]
+    assert main(args + ["--nz", "0.9"]) == 2
+    assert "drop --nz" in capsys.readouterr().err
 
 
 # --- bad inputs: one clear message each, exit code 2, nothing written -------------------------

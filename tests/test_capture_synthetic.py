@@ -94,9 +94,9 @@ def test_orientation_priors_compared_and_the_best_is_default(session):
     # without the neutral's normals 'auto' is the integrable prior, the best rule here
     assert OrientationOptions().method == "auto" and res.method == "integrable"
     assert ang["integrable"] == min(ang[m] for m in ("gradient", "furrow", "integrable"))
-    # the shape-from-shading solve (offered, not chosen here) is measured worse on this
-    # flat-facing session without the neutral's normals (5.5 vs 3.0 degrees with shoulders)
-    assert ang["sfs"] > ang["integrable"]
+    # without the neutral's normals the solve is not compared (measured worse here: 5.5 vs
+    # 3.0 degrees with shoulders) unless asked for
+    assert "sfs" not in ang
     best = table["integrable"]
     assert best["orientation_correct"] > 0.75  # measured: 0.83 with shoulders, 0.83 without
     # Full angular error (measured, degrees: 3.06 vs flat 7.42 with shoulders, 3.02 vs 5.39

@@ -44,7 +44,8 @@ class CaptureOptions:
     warp_step: int = 0
     #: Rotate normals into the texture's tangent frame (the photo -> texture map may rotate).
     rotate_normals: bool = True
-    #: Also compute the other orientation methods (for the report's side-by-side comparison).
+    #: Also compute the other orientation methods (for the report's side-by-side comparison;
+    #: ``sfs`` only when the neutral's normals are given).
     compare_methods: bool = True
     #: Factor applied to every Gaussian sigma (ratio blur, structure tensor, furrow scale), which
     #: are given for a photo up to ``SCALE_REFERENCE_PX`` wide; ``None``: ``max(1, width / 384)``
@@ -183,7 +184,13 @@ def capture(
         shape_src = "N_z given" if np.any(np.asarray(nz_neutral) != 1.0) else "facing the camera"
     rr = ratio_image(i0, warped, inside, roi_m, nz_neutral, ratio_opts)
     chosen = resolve_method(o.orientation.method, neutral_normals is not None)
-    methods = METHODS if o.compare_methods else (chosen,)
+    # The comparison runs every prior; the solve only when it can add something (the neutral's
+    # normals are known) or when it was asked for: on a neutral facing the camera it is
+    # measured worse than the integrable prior it starts from, and it is the slow step.
+    compared = METHODS if neutral_normals is not None else PRIORS
+    methods = tuple(m for m in METHODS if m in compared or m == chosen)
+    if not o.compare_methods:
+        methods = (chosen,)
     photo: dict[str, np.ndarray] = {}
     for m in PRIORS:  # the priors (the integrable one also starts the solve)
         if m in methods or (m == "integrable" and "sfs" in methods):
