@@ -12,9 +12,11 @@ def test_capture_benchmark_quick():
     assert "orientation sfs" in steps  # the new method's time beside the others
     assert all(r.median_s > 0 and r.ratio > 0 for r in res.rows)
     acc = res.extra["accuracy_deg"]
-    assert set(acc) == {"gradient", "furrow", "integrable", "sfs"}
-    assert res.extra["default_method"] == "integrable"  # no neutral normals in this session
+    assert set(acc) == {"gradient", "furrow", "integrable"}  # no neutral normals: no solve
+    assert res.extra["default_method"] == "integrable"
     assert acc["integrable"]["tilt_mean"] < 0.5 * res.extra["flat_map_mean_deg"]
     cur = res.extra["curved_forehead"]
-    assert cur["default_method"] == "sfs"  # the neutral's normals are given
-    assert set(cur["accuracy_deg"]) == set(acc)
+    # the neutral's normals are given, but this forehead is nearly flat (N_z down to 0.99):
+    # auto keeps the prior (measured better there), the solve is compared beside it
+    assert cur["default_method"] == "integrable"
+    assert set(cur["accuracy_deg"]) == set(acc) | {"sfs"}

@@ -70,3 +70,14 @@ def test_ratio_residual_ranks_the_true_map_first():
     good = S.ratio_residual(truth, n0, ratio, roi)
     bad = S.ratio_residual(mirrored, n0, ratio, roi)
     assert good < 2e-3 < bad
+
+
+def test_auto_picks_what_was_measured_best():
+    from wrinklepipe.capture.pipeline import resolve_method
+
+    assert resolve_method("auto", None) == "integrable"  # no neutral normals
+    assert resolve_method("auto", np.full(1000, 0.995)) == "integrable"  # nearly flat
+    assert resolve_method("auto", np.linspace(0.8, 1.0, 1000)) == "sfs"  # turned away
+    assert resolve_method("gradient", np.full(10, 0.8)) == "gradient"
+    with pytest.raises(ValueError, match="unknown orientation"):
+        resolve_method("shading", None)

@@ -22,7 +22,8 @@ used, the wrinkle is measured relative to the neutral surface, and ridges are to
 Without it the neutral faces the camera (--nz, --nz-region give constants).
 
 orientation (which way each wrinkle normal leans; the ratio only gives how much):
-  auto        sfs with --neutral-normals, integrable without (default)
+  auto        sfs with --neutral-normals on a neutral turned from the camera (N_z < 0.97
+              somewhere in the ROI), integrable otherwise (default; measured, docs/capture.md)
   sfs         the crease height whose Lambertian ratio image matches R (integrable, zero at
               the ROI border; tells ridges from valleys where the neutral is tilted)
   integrable  a smooth surface's slope flips sign only where R peaks (one dent per crease)
