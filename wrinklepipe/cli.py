@@ -35,6 +35,7 @@ COMMAND_ORDER = (
     "bake",
     "capture",
     "export",
+    "view",
     "bench",
 )
 

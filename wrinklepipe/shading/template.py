@@ -11,6 +11,7 @@ permutations) and reads everything through hooks the target defines:
 ``WP_MASK(l)``     the texel of mask texture ``l`` (vec4; single-channel textures in ``.r``)
 ``WP_W(i)``        weight vector ``i`` of the flat weight array (:mod:`wrinklepipe.shading.setup`)
 ``WP_USED(g)``     lanes of mask group ``g`` that hold a region (``renormalize`` only)
+``WP_REGION_COLOR(i)``  optional: the colour of group lane ``i`` (a region overlay, ``wp_regions``)
 ``WP_DECODE_*``    texel decoding: the codec's generated functions
                    (:func:`wrinklepipe.codec.shaders.decode_source`: ``wp_normal``, ``wp_pd``,
                    ``wp_diff_rgb``), so a layout or value mapping cannot differ from the writer's
@@ -82,6 +83,7 @@ CORE = """\
 // wrinklepipe core: s_k = sum_r M_r w_rk; a_k = policy(s_k); N = combine(B, {W_k, a_k}).
 vec3 wp_n;
 float wp_activity;
+vec3 wp_regions = vec3(0.0, 0.0, 0.0);  // sum_r M_r colour_r where WP_REGION_COLOR is defined
 {
     vec4 wp_s[4];
     wp_s[0] = vec4(0.0, 0.0, 0.0, 0.0);
@@ -107,6 +109,11 @@ float wp_activity;
 #endif
 #if WP_POLICY == WP_POL_RENORMALIZE
         wp_total += dot(wp_m, WP_USED(wp_g));
+#endif
+#ifdef WP_REGION_COLOR
+        int wp_c = 4 * wp_g;
+        wp_regions += wp_m.x * WP_REGION_COLOR(wp_c) + wp_m.y * WP_REGION_COLOR(wp_c + 1);
+        wp_regions += wp_m.z * WP_REGION_COLOR(wp_c + 2) + wp_m.w * WP_REGION_COLOR(wp_c + 3);
 #endif
         WP_LOOP for (int wp_q = 0; wp_q < WP_QUADS; ++wp_q) {
             int wp_i = 4 * (wp_g * WP_QUADS + wp_q);

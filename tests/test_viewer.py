@@ -1,0 +1,181 @@
+"""three.js in a real browser: `wrinklepipe view` rendered by Debian's chromium (headless,
+SwiftShader WebGL2, driven by npm's playwright-core) equals the numpy model.
+
+One page load renders every case: for each encoding x policy the page loads the asset, renders
+the UV buffer (debug mode 2) and the tangent-space normal (debug mode 1, level-0 sampling) at
+several weight sets into float32 targets; Python compares each covered pixel with
+``wrinklepipe.model.blend`` on the shipped texels at the pixel's UV (0.5 degrees mean / 2 degrees
+p99). The animation check reads the region weights the AnimationMixer gives at times t and
+compares them with the curves the glTF stores, interpolated independently (numpy).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import shader_harness as h
+
+from wrinklepipe import model
+from wrinklepipe.demo import demo_asset
+from wrinklepipe.io.gltf_write import write_gltf
+from wrinklepipe.io.package import PackOptions, package_from_asset
+from wrinklepipe.paths import ROOT
+from wrinklepipe.pipeline import expression_cycle, prepare_mesh
+from wrinklepipe.validate.loader import load_input
+from wrinklepipe.view.server import Site, ViewServer, find_asset
+
+ENCODINGS = ["pd", "diff", "full", "composite"]
+POLICIES = ["clamp01", "signed", "additive", "renormalize", "lerp"]
+CHROMIUM = Path("/usr/bin/chromium")
+NODE_MODULES = ROOT / "tools" / "node" / "node_modules"
+SIZE = 160
+
+
+def _missing() -> str:
+    if not CHROMIUM.exists():
+        return "Debian chromium is not installed (ci/bootstrap.sh installs it)"
+    if shutil.which("node") is None:
+        return "node is not installed"
+    for pkg in ("three", "playwright-core"):
+        if not (NODE_MODULES / pkg / "package.json").exists():
+            return f"npm {pkg} is not installed under tools/node (ci/bootstrap.sh installs it)"
+    return ""
+
+
+def _asset(encoding: str):
+    a = demo_asset(128, encoding=encoding)
+    masks = a.masks.copy()
+    masks[2] = np.maximum(masks[2], masks[6])  # overlapping regions: every policy differs
+    return replace(a, masks=masks, mesh=prepare_mesh(a.mesh))
+
+
+def _weight_sets(n_regions: int, policy: str) -> dict[str, list[float]]:
+    lo = model.POLICY_WEIGHT_RANGE[policy].low
+    rng = np.random.default_rng(16)
+    sets = {
+        "neutral": np.zeros(n_regions),
+        "strong": np.full(n_regions, 0.9),
+        "random": rng.uniform(lo, 1.0, n_regions),
+        "negative": np.full(n_regions, max(-0.7, lo)),
+    }
+    return {k: [float(x) for x in v.astype(np.float32)] for k, v in sets.items()}
+
+
+def _write_assets(root: Path) -> dict[str, Path]:
+    """One package per encoding, one .gltf per policy (the extension's policy edited)."""
+    out = {}
+    for enc in ENCODINGS:
+        a = _asset(enc)
+        pkg = package_from_asset(a, PackOptions(), [expression_cycle(a)])
+        folder = root / enc
+        write_gltf(pkg, folder, "demo")
+        doc = json.loads((folder / "demo.gltf").read_text())
+        for pol in POLICIES:
+            ext = doc["materials"][0]["extensions"]["WRINKLEPIPE_wrinkle_maps"]
+            ext["policy"] = pol
+            path = folder / f"demo_{pol}.gltf"
+            path.write_text(json.dumps(doc))
+            out[f"{enc}-{pol}"] = path
+    return out
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    reason = _missing()
+    if reason:
+        pytest.skip(reason)
+    root = tmp_path_factory.mktemp("view_assets")
+    assets = _write_assets(root)
+    out = tmp_path_factory.mktemp("view_out")
+    calls, plan = [], []
+    n_regions = 8
+    for enc in ENCODINGS:
+        for pol in POLICIES:
+            key = f"{enc}-{pol}"
+            url = "/asset/" + assets[key].relative_to(root).as_posix()
+            calls.append({"fn": "load", "args": [url]})
+            if pol == POLICIES[0]:
+                calls.append(
+                    {"fn": "renderDebug", "args": [2, None, SIZE], "file": f"{enc}_uv.f32"}
+                )
+            for name, w in _weight_sets(n_regions, pol).items():
+                file = f"{key}_{name}.f32"
+                calls.append({"fn": "renderDebug", "args": [1, w, SIZE], "file": file})
+                plan.append((key, name, w, file))
+    times = [0.0, 0.25, 0.5, 1.0, 1.6, 2.75, 3.3, 5.9]
+    first = "/asset/" + assets["pd-clamp01"].relative_to(root).as_posix()
+    calls += [{"fn": "load", "args": [first]}, {"fn": "sampleWeights", "args": [0, times]}]
+    folder, gltf = find_asset(root)
+    with ViewServer(Site(folder, gltf, NODE_MODULES / "three")) as srv:
+        job = {
+            "url": srv.url + "?still",
+            "playwright": str(NODE_MODULES / "playwright-core"),
+            "chromium": str(CHROMIUM),
+            "out": str(out),
+            "calls": calls,
+        }
+        (out / "job.json").write_text(json.dumps(job))
+        r = subprocess.run(
+            ["node", str(Path(__file__).parent / "browser_driver.mjs"), str(out / "job.json")],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+    res = json.loads((out / "results.json").read_text())
+    assert r.returncode == 0 and "error" not in res, (r.stderr[-2000:], res.get("error"))
+    errors = [x for x in res["log"] if x.startswith(("error", "pageerror"))]
+    assert not errors, errors
+    return {"assets": assets, "out": out, "plan": plan, "results": res["results"], "times": times}
+
+
+def _image(b, file: str) -> np.ndarray:
+    return np.fromfile(b["out"] / file, np.float32).reshape(SIZE, SIZE, 4)
+
+
+@pytest.mark.parametrize("policy", POLICIES)
+@pytest.mark.parametrize("encoding", ENCODINGS)
+def test_threejs_viewer_renders_the_model(browser, encoding, policy):
+    key = f"{encoding}-{policy}"
+    uvimg = _image(browser, f"{encoding}_uv.f32")
+    cov = uvimg[..., 3] > 0.5
+    assert cov.sum() > 0.2 * SIZE * SIZE  # the face fills the frame
+    inp = load_input(browser["assets"][key])
+    assert inp.asset.policy == policy
+    s = h.samples(inp, uvimg[cov][:, :2].astype(np.float32))
+    d = inp.asset.region_state_matrix()
+    for k, name, w, file in browser["plan"]:
+        if k != key:
+            continue
+        w = np.asarray(w, np.float32)
+        ww = w if policy == "signed" else w[:, None] * d
+        ref = model.blend(s.base, s.states, s.masks, ww, inp.asset.encoding, policy)
+        st = h.compare(_image(browser, file)[cov][None], ref)
+        assert st["mean"] <= 0.5 and st["p99"] <= 2.0, (key, name, st)
+        if name == "strong":  # the wrinkles are really there
+            base_ref = model.blend(s.base, s.states, s.masks, ww * 0, inp.asset.encoding, policy)
+            assert h.compare(_image(browser, file)[cov][None], base_ref)["p99"] > 2.0
+
+
+def test_weights_animation_plays_the_curves(browser):
+    """KHR_animation_pointer channels became tracks of the glTF animation's clip: the weights
+    the mixer gives at t equal the stored curve, linearly interpolated (numpy)."""
+    from wrinklepipe.io.gltf_read import read_gltf
+
+    loads = [r for r in browser["results"] if r["fn"] == "load"]
+    anim = loads[-1]["value"]["animations"]
+    assert anim[0]["tracks"] == 8 and anim[0]["duration"] > 0
+    got = np.asarray(next(r for r in browser["results"] if r["fn"] == "sampleWeights")["value"])
+    curve = read_gltf(browser["assets"]["pd-clamp01"]).curves[0]
+    times = np.asarray(browser["times"])
+    expect = np.stack(
+        [np.interp(times, curve.times, curve.values[:, r]) for r in range(curve.values.shape[1])],
+        axis=1,
+    )
+    assert np.abs(expect).max() > 0.5  # the cycle reaches full expressions
+    np.testing.assert_allclose(got, expect, atol=1e-5)

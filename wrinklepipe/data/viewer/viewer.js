@@ -1,0 +1,303 @@
+// wrinklepipe view: the artist's preview of a converted character (three.js + WrinkleMapsPlugin).
+// Expression sliders set the region weights (sum of expression x its table row), the timeline
+// plays the glTF animations (morph targets and wrinkle weights in one AnimationMixer), the
+// overlay colours each region's mask. `window.wrinklepipe` is the page's scripting interface
+// (the tests use it): load(url), setWeights(w), renderDebug(mode, w), sampleWeights(clip, t).
+
+import * as THREE from 'three';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { RoomEnvironment } from 'three/addons/environments/RoomEnvironment.js';
+import { WrinkleMapsPlugin } from '/plugin/WrinkleMapsPlugin.js';
+
+const $ = ( id ) => document.getElementById( id );
+// ?still: render on demand only (no animation loop, no environment map): for scripted use
+const still = new URLSearchParams( location.search ).has( 'still' );
+const canvas = $( 'view' );
+const renderer = new THREE.WebGLRenderer( { canvas, antialias: true, preserveDrawingBuffer: true } );
+renderer.setPixelRatio( Math.min( window.devicePixelRatio, 2 ) );
+const scene = new THREE.Scene();
+scene.background = new THREE.Color( 0x1b1d21 );
+if ( ! still ) scene.environment = new THREE.PMREMGenerator( renderer ).fromScene( new RoomEnvironment(), 0.04 ).texture;
+const key = new THREE.DirectionalLight( 0xffffff, 1.6 );
+key.position.set( - 1.5, 2.0, 2.5 );
+scene.add( key );
+const camera = new THREE.PerspectiveCamera( 30, 1, 0.01, 100 );
+const controls = new OrbitControls( camera, canvas );
+const clock = new THREE.Clock();
+
+const state = { gltf: null, wrinkles: [], mixer: null, action: null, playing: false, sliders: [] };
+
+function resize() {
+
+	const w = canvas.clientWidth, h = canvas.clientHeight;
+	renderer.setSize( w, h, false );
+	camera.aspect = w / Math.max( h, 1 );
+	camera.updateProjectionMatrix();
+
+}
+
+function frame( object ) {
+
+	const box = new THREE.Box3().setFromObject( object );
+	const size = box.getSize( new THREE.Vector3() ), centre = box.getCenter( new THREE.Vector3() );
+	const r = Math.max( size.x, size.y ) * 0.5 / Math.tan( THREE.MathUtils.degToRad( camera.fov * 0.5 ) );
+	camera.position.set( centre.x, centre.y, box.max.z + r * 1.1 );
+	camera.near = r / 100;
+	camera.far = r * 10 + size.z * 2;
+	camera.updateProjectionMatrix();
+	controls.target.copy( centre );
+	controls.update();
+
+}
+
+async function load( url ) {
+
+	if ( state.gltf ) {
+
+		scene.remove( state.gltf.scene );
+		state.mixer && state.mixer.stopAllAction();
+
+	}
+
+	const loader = new GLTFLoader();
+	loader.register( ( parser ) => new WrinkleMapsPlugin( parser, { renderer } ) );
+	const gltf = await loader.loadAsync( url );
+	state.gltf = gltf;
+	state.wrinkles = gltf.userData.wrinkles || [];
+	scene.add( gltf.scene );
+	resize();
+	frame( gltf.scene );
+	state.mixer = new THREE.AnimationMixer( gltf.scene );
+	state.action = null;
+	buildPanel( gltf );
+	$( 'status' ).textContent = state.wrinkles.length
+		? `${ state.wrinkles[ 0 ].setup.regions.length } regions, ${ state.wrinkles[ 0 ].setup.states.length } states, ${ state.wrinkles[ 0 ].extension.encoding } / ${ state.wrinkles[ 0 ].extension.policy }`
+		: 'no WRINKLEPIPE_wrinkle_maps material';
+	return { wrinkles: state.wrinkles.length, animations: gltf.animations.map( ( a ) => ( { name: a.name, duration: a.duration, tracks: a.tracks.length } ) ) };
+
+}
+
+function expressions() {
+
+	const w = state.wrinkles[ 0 ];
+	if ( ! w ) return [];
+	const ex = w.extension.expressions || [];
+	return Array.isArray( ex ) ? ex : Object.entries( ex ).map( ( [ name, weights ] ) => ( { name, weights } ) );
+
+}
+
+function buildPanel( gltf ) {
+
+	$( 'title' ).textContent = gltf.parser.json.asset && gltf.parser.json.asset.extras && gltf.parser.json.asset.extras.name || 'wrinklepipe';
+	const box = $( 'sliders' );
+	box.textContent = '';
+	state.sliders = expressions().map( ( ex ) => {
+
+		const row = document.createElement( 'div' );
+		row.className = 'slider';
+		const label = document.createElement( 'span' );
+		label.textContent = ex.name;
+		const input = Object.assign( document.createElement( 'input' ), { type: 'range', min: 0, max: 1, step: 0.01, value: 0 } );
+		const value = document.createElement( 'span' );
+		value.textContent = '0.00';
+		input.addEventListener( 'input', () => {
+
+			value.textContent = Number( input.value ).toFixed( 2 );
+			pause();
+			applySliders();
+
+		} );
+		row.append( label, input, value );
+		box.append( row );
+		return { ex, input, value };
+
+	} );
+	const select = $( 'clip' );
+	select.textContent = '';
+	gltf.animations.forEach( ( a, i ) => select.append( new Option( `${ a.name || 'animation ' + i } (${ a.duration.toFixed( 2 ) } s)`, i ) ) );
+
+}
+
+function applySliders() {
+
+	for ( const w of state.wrinkles ) {
+
+		w.weights.fill( 0 );
+		for ( const s of state.sliders ) {
+
+			const a = Number( s.input.value );
+			if ( ! a ) continue;
+			const row = s.ex.weights;
+			w.setup.regions.forEach( ( name, r ) => {
+
+				w.weights[ r ] += a * ( Array.isArray( row ) ? row[ r ] : ( row[ name ] || 0 ) );
+
+			} );
+
+		}
+
+	}
+
+}
+
+function setWeights( weights ) {
+
+	for ( const w of state.wrinkles ) w.weights.set( weights );
+
+}
+
+function clipAction() {
+
+	const i = Number( $( 'clip' ).value || 0 );
+	const clip = state.gltf && state.gltf.animations[ i ];
+	if ( ! clip ) return null;
+	if ( ! state.action || state.action.getClip() !== clip ) {
+
+		state.mixer.stopAllAction();
+		state.action = state.mixer.clipAction( clip );
+		state.action.play();
+		$( 'time' ).max = clip.duration;
+
+	}
+
+	return state.action;
+
+}
+
+function pause() {
+
+	state.playing = false;
+	$( 'play' ).textContent = 'play';
+
+}
+
+$( 'play' ).addEventListener( 'click', () => {
+
+	if ( ! clipAction() ) return;
+	state.playing = ! state.playing;
+	$( 'play' ).textContent = state.playing ? 'pause' : 'play';
+
+} );
+$( 'time' ).addEventListener( 'input', () => {
+
+	if ( ! clipAction() ) return;
+	pause();
+	state.mixer.setTime( Number( $( 'time' ).value ) );
+
+} );
+$( 'neutral' ).addEventListener( 'click', () => {
+
+	for ( const s of state.sliders ) {
+
+		s.input.value = 0;
+		s.value.textContent = '0.00';
+
+	}
+
+	applySliders();
+
+} );
+$( 'regions' ).addEventListener( 'change', () => state.wrinkles.forEach( ( w ) => w.showRegions( $( 'regions' ).checked ) ) );
+$( 'debug' ).addEventListener( 'change', () => state.wrinkles.forEach( ( w ) => w.setDebug( Number( $( 'debug' ).value ), false ) ) );
+window.addEventListener( 'resize', resize );
+
+function animate() {
+
+	const dt = clock.getDelta();
+	if ( state.playing && state.mixer ) {
+
+		state.mixer.update( dt );
+		const t = state.action ? state.action.time : 0;
+		$( 'time' ).value = t;
+		$( 'clock' ).textContent = `${ t.toFixed( 2 ) } s`;
+
+	}
+
+	renderer.render( scene, camera );
+
+}
+
+if ( ! still ) renderer.setAnimationLoop( animate );
+
+// ---------------------------------------------------------------------------------------------
+// scripting interface (tests): exact debug renders read back as float32
+
+function toBase64( array ) {
+
+	const bytes = new Uint8Array( array.buffer, array.byteOffset, array.byteLength );
+	let s = '';
+	for ( let i = 0; i < bytes.length; i += 0x8000 ) s += String.fromCharCode.apply( null, bytes.subarray( i, i + 0x8000 ) );
+	return btoa( s );
+
+}
+
+// Render one frame with the materials in debug `mode` (1 normal, 2 uv + activity), level-0
+// sampling, region weights `weights`, into a float32 target of `size` x `size`.
+function renderDebug( mode, weights, size = 256 ) {
+
+	if ( ! still ) renderer.setAnimationLoop( null );
+	const target = new THREE.WebGLRenderTarget( size, size, { type: THREE.FloatType, format: THREE.RGBAFormat, depthBuffer: true } );
+	for ( const w of state.wrinkles ) w.setDebug( mode, true );
+	if ( weights ) setWeights( weights );
+	const aspect = camera.aspect;
+	camera.aspect = 1;
+	camera.updateProjectionMatrix();
+	const background = scene.background;
+	scene.background = null;
+	renderer.setRenderTarget( target );
+	renderer.setClearColor( 0x000000, 0 );
+	renderer.clear();
+	renderer.render( scene, camera );
+	const out = new Float32Array( size * size * 4 );
+	renderer.readRenderTargetPixels( target, 0, 0, size, size, out );
+	renderer.setRenderTarget( null );
+	scene.background = background;
+	camera.aspect = aspect;
+	camera.updateProjectionMatrix();
+	target.dispose();
+	if ( ! still ) {
+
+		for ( const w of state.wrinkles ) w.setDebug( 0, false );
+		renderer.setAnimationLoop( animate );
+
+	}
+
+	return { size, data: toBase64( out ) };
+
+}
+
+// The region weights the animation `clip` gives at each time (the mixer's own evaluation).
+function sampleWeights( clipIndex, times ) {
+
+	const clip = state.gltf.animations[ clipIndex ];
+	const mixer = new THREE.AnimationMixer( state.gltf.scene );
+	const action = mixer.clipAction( clip );
+	action.play();
+	const out = times.map( ( t ) => {
+
+		mixer.setTime( t );
+		return Array.from( state.wrinkles[ 0 ].weights );
+
+	} );
+	action.stop();
+	mixer.uncacheRoot( state.gltf.scene );
+	return out;
+
+}
+
+async function start() {
+
+	const info = await ( await fetch( '/asset.json' ) ).json();
+	resize();
+	return load( info.gltf );
+
+}
+
+window.wrinklepipe = { ready: start(), load, setWeights, renderDebug, sampleWeights, state, renderer, THREE };
+window.wrinklepipe.ready.catch( ( e ) => {
+
+	$( 'status' ).textContent = String( e );
+	console.error( e );
+
+} );
