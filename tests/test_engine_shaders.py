@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import shader_harness as h
 
-from wrinklepipe import model
+from wrinklepipe import codec, model
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.shading import godot, hlsl
 from wrinklepipe.validate import gl as glw
@@ -143,16 +143,23 @@ def test_unreal_custom_nodes_render_the_model(gpu, encoding, policy):
     assert h.compare(images["all_strong"], refs[None])["p99"] > 2.0
 
 
+def flip_y(g: np.ndarray, versioned: bool, tex) -> np.ndarray:
+    """Stored y texels of the other green convention: ``-t`` under the texture's mapping (normal
+    maps use glTF's ``2 v - 1``, so that is ``255 - q``; v2 pd/diff ``256 - q``), by the codec."""
+    m = codec.mapping(getattr(tex, "mapping", 1) if versioned else 1)
+    return m.encode(-m.decode(g, 8), 8)
+
+
 def test_unreal_reads_and_returns_directx_normals(gpu):
-    """Textures flipped to DirectX (stored G -> 255 - G), output in DirectX: the normal is the
-    model's with y negated, for every encoding (v1 mapping: the flip negates y exactly)."""
+    """Textures converted to DirectX (y negated in each texture's value mapping), output in
+    DirectX: the normal is the model's with y negated, for every encoding."""
     for encoding in ENCODINGS:
         ref_in, refs = _shipped(encoding, "clamp01")
         inp = copy.deepcopy(ref_in)
         for t in inp.textures:
             if t.role in ("base", "state"):
                 px = np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, -1).copy()
-                px[..., 1] = 255 - px[..., 1]
+                px[..., 1] = flip_y(px[..., 1], t.role == "state" and encoding in ("pd", "diff"), t)
                 t.data = px.tobytes()
         setup = replace(
             shader_setup(ref_in),
