@@ -126,7 +126,7 @@ def test_every_core_define_is_set_and_spelled_per_language():
             ("WP_ENC_", "WP_POL_", "WP_GATHER_", "WP_LAYOUT_", "WP_FLIP_B", "WP_FLIP_S")
         )
     )
-    hooks = {"WP_BASE", "WP_STATE", "WP_MASK", "WP_W", "WP_USED", "WP_LOOP"}
+    hooks = {"WP_BASE", "WP_STATE", "WP_MASK", "WP_W", "WP_USED", "WP_LOOP", "WP_REGION_COLOR"}
     hooks |= {"WP_DECODE_BASE", "WP_DECODE_STATE_NORMAL", "WP_DECODE_PD", "WP_DECODE_DIFF"}
     assert used - hooks <= set(d), used - hooks - set(d)
     assert d["WP_SCALE"] == "0.5" and d["WP_POLICY"] == "4" and d["WP_QUADS"] == "1"
