@@ -18,7 +18,7 @@ import pytest
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.io.gltf_write import gltf_document
 from wrinklepipe.io.package import PackOptions, package_from_asset
-from wrinklepipe.pipeline import prepare_mesh
+from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.shading import template as tpl
 from wrinklepipe.shading import threejs
 from wrinklepipe.shading.setup import from_meta

@@ -26,8 +26,9 @@ from wrinklepipe.demo import demo_asset
 from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.paths import ROOT
-from wrinklepipe.pipeline import expression_cycle, prepare_mesh
-from wrinklepipe.validate.loader import load_input
+from wrinklepipe.pipeline.drivers import expression_cycle
+from wrinklepipe.pipeline.prepare import prepare_mesh
+from wrinklepipe.sources.validation import load_input
 from wrinklepipe.view.server import Site, ViewServer, find_asset
 
 ENCODINGS = ["pd", "diff", "full", "composite"]
