@@ -84,38 +84,51 @@ def test_truth_is_the_pd_blend_of_the_exact_slopes(fixture):
 
 
 @needs_mesh
-def test_todays_automatic_choice_fails_the_fidelity_budget(fixture):
-    """pipeline.run_stages' automatic size (its budget over the whole map) and PD scale give a
-    tiny state map for the fixture; inside the active regions the result is far from the
-    truth. Full resolution at scale 1 is within the budget."""
+def test_the_choice_made_before_fidelity_fails_and_run_stages_now_passes(fixture):
+    """The automatic size and scale convert made before the fidelity measure (main @ cdf30a7:
+    ``normals.resample.auto_size`` with its budget over the whole map, where 97 % of the texels
+    are flat, and the 99.9th-percentile power-of-two scale) give a tiny state map; inside the
+    active regions the result is far from the truth. ``run_stages`` now chooses by fidelity and
+    is within the budget."""
     from wrinklepipe.io.package import encode_state, resize_normals_pd
-    from wrinklepipe.normals.encode import decode_pd_slopes
+    from wrinklepipe.normals.compress import Budget as WholeMapBudget
+    from wrinklepipe.normals.encode import auto_pd_scale, decode_pd_slopes
+    from wrinklepipe.normals.resample import auto_size
     from wrinklepipe.pipeline.prepare import run_stages
 
     asset = fixture.asset()
-    asset.provenance["auto_resolution"] = ["wrinkle"]
-    today, _ = run_stages(asset, auto_scale=True)
-    size = today.states.shape[1]
-    assert size <= 128
+    slopes = model.normal_to_pd(asset.states) - model.normal_to_pd(asset.base)[None]
+    weights = [asset.expression_weights({e: 1.0}) for e in sorted(asset.expressions)]
+    before, _ = auto_size(
+        asset.base, slopes, asset.masks, weights, WholeMapBudget(0.5, 1.0), policy="clamp01"
+    )
+    assert before <= 128
+    states_before = np.stack([resize_normals_pd(s, before, before) for s in asset.states])
+    b = resize_normals_pd(asset.base, before, before)
+    scale_before = auto_pd_scale(model.normal_to_pd(states_before) - model.normal_to_pd(b)[None])
+
     poses = fd.expression_poses(asset.region_names, asset.region_state_matrix(), asset.expressions)
     truth = fd.prepare(
         fixture.base_normal, fixture.wrinkle_slopes, fixture.masks, poses, asset.region_names
     )
     budget = fd.Budget.from_dict(ff.BUDGET)
 
-    def shipped(states, scale):
+    def shipped(states, masks, scale):
         n = states.shape[1]
         b = resize_normals_pd(asset.base, n, n)
         st = []
         for k in range(len(states)):
             q = encode_state(b, states[k], "pd", scale)  # 8-bit texels, the codec's mapping
             st.append(decode_pd_slopes(q, scale))
-        return fd.measure(truth, asset.base, np.stack(st), fixture.masks)
+        return fd.measure(truth, asset.base, np.stack(st), masks)
 
-    got = shipped(today.states, today.pd_scale)
+    got = shipped(states_before, asset.masks, scale_before)
     assert not got.meets(budget)
     assert got.worst_p99() > 10.0
-    assert shipped(asset.states, 1.0).meets(budget)
+    asset.provenance["auto_resolution"] = ["wrinkle", "mask"]
+    now, rep = run_stages(asset, auto_scale=True, compressed=False)
+    assert rep.fidelity["wrinkle"] == now.states.shape[1]
+    assert shipped(now.states, now.masks, now.pd_scale).meets(budget)
 
 
 @needs_mesh

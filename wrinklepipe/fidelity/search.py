@@ -155,8 +155,9 @@ def scale_candidates(max_slope: float, factors: Sequence[float]) -> list[float]:
 
 
 def clipped_texels(level: np.ndarray, scale: float) -> list[int]:
-    """Per state: texels whose slope leaves ``[-scale, scale]`` (the one clipped count)."""
-    return [ship.pd_texels(x, scale)[1] for x in level]
+    """Per state: texels stored at the end of the range at ``scale`` (:func:`ship.edge_texels`,
+    the one clipped count)."""
+    return [ship.edge_texels(ship.pd_texels(x, scale)[0]) for x in level]
 
 
 # ------------------------------------------------------------------------------------------------

@@ -65,6 +65,17 @@ def base_reader(layout: str = "rgb") -> Reader:
     )
 
 
+def edge_texels(texels: np.ndarray) -> int:
+    """Texels of a stored 8-bit PD map whose x or y sits at the end of the range (``|t|``
+    within half a step of 1): the clipped texels, counted the same way from any file that
+    holds them (the report, the validator's WP-MAP-004)."""
+    q = np.asarray(texels)[..., :2]
+    m = codec.mapping(MAPPING_VERSION)
+    half = 0.5 / m.centre(8)[1]
+    t = m.decode(q, 8)
+    return int(np.count_nonzero(np.any(np.abs(t) >= 1.0 - half, axis=-1)))
+
+
 def block_roundtrip(xy: np.ndarray, fmt: str) -> np.ndarray:
     """Two-channel 8-bit texels ``[H, W, 2]`` through block format ``fmt`` and back (sizes not a
     multiple of 4 are padded by edge replication, as the compressed copies are)."""

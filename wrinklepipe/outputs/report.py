@@ -103,6 +103,7 @@ def convert_report(
     notes: list[str],
     outputs: list[dict[str, Any]],
     validation: dict[str, Any],
+    fidelity: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """report.json: tool and version, what was read, the asset, what the stages did and chose,
     what was written (hashes) and what validation found."""
@@ -114,6 +115,7 @@ def convert_report(
         "inputs": inputs,
         "asset": asset_summary(pkg),
         "pd_scale": pd_scale,
+        "fidelity": fidelity,
         "decode_error": decode_error,
         "compression": compression,
         "notes": notes,

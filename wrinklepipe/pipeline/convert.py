@@ -21,9 +21,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from wrinklepipe import console  # console.status is looked up per call (tests hook it)
 from wrinklepipe.atomic import staged_folder
 from wrinklepipe.errors import input_error
+from wrinklepipe.fidelity.ship import edge_texels
 from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.outputs.folder import USD_FORMATS, build_outputs, write_folder
@@ -71,6 +74,19 @@ class ConvertResult:
     exit_code: int
 
 
+def clipped_texels(pkg: Any) -> dict[str, int]:
+    """Per PD state: texels stored at the end of the range (:func:`edge_texels`), counted on the
+    shipped 8-bit texels, as the validator counts them (WP-MAP-004)."""
+    if pkg.meta["encoding"] != "pd":
+        return {}
+    tex = {t.name: t for t in pkg.textures}
+    return {
+        s["name"]: edge_texels(tex[s["texture"]].pixels)
+        for s in pkg.meta["states"]
+        if tex[s["texture"]].pixels.dtype == np.uint8
+    }
+
+
 def convert(
     manifest_path: str | Path, output: str | Path, options: ConvertOptions | None = None
 ) -> ConvertResult:
@@ -86,8 +102,13 @@ def convert(
         with staged_folder(output, force=opt.force, inputs=inputs) as tmp:
             with console.status("reading inputs"):
                 asset, notes = ingest(manifest)
-            with console.status("resampling, tangents, vertex IDs"):
-                asset, stage_rep = run_stages(asset, auto_scale=manifest.pd_scale == "auto")
+            with console.status("choosing sizes, scale and formats by fidelity"):
+                asset, stage_rep = run_stages(
+                    asset,
+                    auto_scale=manifest.pd_scale == "auto",
+                    formats=manifest.formats,
+                    compressed=opt.compressed,
+                )
             notes += stage_rep.notes
             with console.status("evaluating drivers"):
                 curves, n = evaluate_drivers(asset, manifest.root)
@@ -95,8 +116,9 @@ def convert(
             layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
             pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
             with console.status("encoding, packing, compressing"):
+                formats = {**manifest.formats, **stage_rep.formats}
                 files, n, choices = build_outputs(
-                    pkg, opt.glb, opt.compressed, asset.budget, manifest.formats
+                    pkg, opt.glb, opt.compressed, asset.budget, formats
                 )
             notes += n
             read = input_rows(manifest.root, manifest.input_files)
@@ -114,8 +136,9 @@ def convert(
                 pd_scale={
                     "value": stage_rep.pd_scale,
                     "source": stage_rep.pd_scale_source,
-                    "clipped_texels": stage_rep.clipped_texels,
+                    "clipped_texels": clipped_texels(pkg),
                 },
+                fidelity=stage_rep.fidelity,
                 decode_error=decode_errors(asset, pkg),
                 compression=choices,
                 notes=notes,

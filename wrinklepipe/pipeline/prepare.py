@@ -1,12 +1,15 @@
 """Prepare: the asset brought to what the package needs.
 
-Resampling to the manifest's resolutions (``"auto"``: the smallest within the error budget), the
-mesh stage (normals, MikkTSpace tangents, spatial-hash vertex IDs) and the PD scale choice.
+Resampling to the manifest's resolutions, the mesh stage (normals, MikkTSpace tangents,
+spatial-hash vertex IDs) and the PD scale; for ``pd`` the automatic choices (``"auto"`` sizes,
+scale and block formats) by fidelity against the full-resolution source
+(:mod:`wrinklepipe.pipeline.auto`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -18,9 +21,8 @@ from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.io.package import resize_normals_pd
-from wrinklepipe.normals.compress import Budget
 from wrinklepipe.normals.encode import auto_pd_scale as _auto_pd_scale
-from wrinklepipe.normals.resample import auto_size
+from wrinklepipe.pipeline import auto
 
 # ------------------------------------------------------------------------------------------------
 # mesh stage
@@ -59,26 +61,6 @@ def auto_pd_scale(slopes: np.ndarray, percentile: float = 99.9) -> float:
     return float(_auto_pd_scale(slopes, percentile))
 
 
-def auto_wrinkle_size(asset: WrinkleAsset) -> tuple[int | None, dict[int, float]]:
-    """Smallest power-of-two state size whose blended error over the expressions meets the
-    budget (:func:`wrinklepipe.normals.resample.auto_size`); None when it cannot be chosen."""
-    if asset.encoding != "pd" or not asset.expressions:
-        return None, {}
-    if asset.policy == "signed":
-        return None, {}
-    h = asset.states.shape[1]
-    base = _resize_normals(asset.base, h)
-    slopes = model.normal_to_pd(asset.states) - model.normal_to_pd(base)[None]
-    masks = asset.masks
-    if masks.shape[1] != h:
-        masks = np.asarray(wm.resample_masks(masks, h), np.float32)
-    weights = [asset.expression_weights({e: 1.0}) for e in sorted(asset.expressions)]
-    b = asset.budget
-    limits = Budget(b.get("max_mean_deg"), b.get("max_p99_deg", 2.0))
-    size, tried = auto_size(base, slopes, masks, weights, limits, policy=asset.policy)
-    return int(size), {int(k): float(v.p99_deg) for k, v in tried.items()}
-
-
 # ------------------------------------------------------------------------------------------------
 # the stages in order
 
@@ -90,35 +72,57 @@ class StageReport:
     notes: list[str] = field(default_factory=list)
     pd_scale: float | None = None
     pd_scale_source: str = ""
-    clipped_texels: dict[str, int] = field(default_factory=dict)
+    fidelity: dict[str, Any] | None = None  # the automatic choices' record (auto.choice_report)
+    formats: dict[str, str] = field(default_factory=dict)  # block formats for the copies
 
 
-def run_stages(asset: WrinkleAsset, auto_scale: bool) -> tuple[WrinkleAsset, StageReport]:
-    """Resample to the target resolutions, prepare the mesh, choose the PD scale."""
+def run_stages(
+    asset: WrinkleAsset,
+    auto_scale: bool,
+    formats: dict[str, str] | None = None,
+    compressed: bool = True,
+) -> tuple[WrinkleAsset, StageReport]:
+    """Resample to the target resolutions, prepare the mesh, choose the PD scale.
+
+    For ``pd`` assets the automatic choices (sizes, scale, block formats) are made by fidelity
+    against the full-resolution source (:mod:`wrinklepipe.pipeline.auto`); other encodings keep
+    the manifest's sizes and the percentile scale.
+    """
     rep = StageReport()
     res = dict(asset.resolution)
-    base, states, masks = asset.base, asset.states, asset.masks
-    if "wrinkle" in asset.provenance.get("auto_resolution", ()):
-        size, tried = auto_wrinkle_size(asset)
-        if size is not None:
-            res["wrinkle"] = size
-            rep.notes.append(
-                "wrinkle resolution auto: "
-                + ", ".join(f"{k}: p99 {v:.2f} deg" for k, v in sorted(tried.items()))
-                + f" -> {size}"
-            )
+    base = asset.base
     if "base" in res and res["base"] != base.shape[0]:
         base = _resize_normals(base, int(res["base"]))
         rep.notes.append(f"base resampled to {res['base']}")
+        asset = replace(asset, base=base)
+    mesh = prepare_mesh(asset.mesh)
+    asset = replace(asset, mesh=mesh)
+    why_not = auto.can_search(asset)
+    if not why_not:
+        applied = auto.auto_choices(asset, formats, auto_scale, compressed)
+        asset = applied.asset
+        rep.notes += applied.notes
+        rep.fidelity = auto.choice_report(applied.choice)
+        rep.formats = applied.formats
+        rep.pd_scale = float(asset.pd_scale)
+        rep.pd_scale_source = (
+            "auto (least error inside the active regions, clipping included)"
+            if auto_scale
+            else "manifest"
+        )
+        rep.notes.extend(mesh.notes)
+        return asset, rep
+    if asset.provenance.get("auto_resolution"):
+        rep.notes.append(f"automatic sizes not searched: {why_not}")
+    states, masks = asset.states, asset.masks
     if "wrinkle" in res and res["wrinkle"] != states.shape[1]:
         states = np.stack([_resize_normals(s, int(res["wrinkle"])) for s in states])
         rep.notes.append(f"wrinkle states resampled to {res['wrinkle']} (PD space)")
     if "mask" in res and res["mask"] != masks.shape[1]:
         masks = np.asarray(wm.resample_masks(masks, int(res["mask"])), np.float32)
         rep.notes.append(f"masks resampled to {res['mask']}")
-    mesh = prepare_mesh(asset.mesh)
     rep.notes.extend(mesh.notes)
-    asset = replace(asset, base=base, states=states, masks=masks, mesh=mesh)
+    asset = replace(asset, states=states, masks=masks)
     if asset.encoding == "pd":
         b = base
         if b.shape[:2] != states.shape[1:3]:
@@ -130,7 +134,4 @@ def run_stages(asset: WrinkleAsset, auto_scale: bool) -> tuple[WrinkleAsset, Sta
         else:
             rep.pd_scale_source = "manifest"
         rep.pd_scale = float(asset.pd_scale)
-        s = np.float32(asset.pd_scale)
-        for k, name in enumerate(asset.state_names):
-            rep.clipped_texels[name] = int(np.count_nonzero(np.any(np.abs(slopes[k]) > s, -1)))
     return asset, rep

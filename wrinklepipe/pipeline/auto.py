@@ -1,0 +1,157 @@
+"""The automatic choices of convert, by fidelity (:mod:`wrinklepipe.fidelity.search`).
+
+``auto_choices(asset, manifest_formats, auto_scale)`` runs the searches on the ingested source
+(full resolution): each state's size (``resolution.wrinkle = "auto"``), the mask size
+(``resolution.mask = "auto"``), the PD scale (``pd_scale = "auto"``) and the block formats of
+the base and the states (``formats.base`` / ``formats.wrinkle``, ``auto`` by default). Choices
+the manifest fixes are measured, not searched. The budget is the manifest's ``[budget]``
+(inside each pose's active region), the compressed copies' the ``compressed_*`` keys (the same
+budget when absent).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+from wrinklepipe import fidelity as fd
+from wrinklepipe import model
+from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.fidelity import search as fs
+from wrinklepipe.fidelity import ship
+from wrinklepipe.io.package import resize_normals_pd
+
+#: Manifest format names that mean "no block-compressed copy".
+_NOT_BLOCK = ("png8", "png16", "exr")
+
+
+@dataclass
+class Applied:
+    """The asset with the choices applied, and the search's record."""
+
+    asset: WrinkleAsset
+    choice: fs.Choice
+    formats: dict[str, str]  # for the compressed copies: {"base": fmt | "png8", "wrinkle": ...}
+    notes: list[str]
+
+
+def can_search(asset: WrinkleAsset) -> str:
+    """Empty when the searches can run on this asset, else why not."""
+    if asset.encoding != "pd":
+        return f"encoding {asset.encoding!r} (the searches are for pd)"
+    if not asset.expressions:
+        return "no expressions to judge poses by"
+    k, h, w = asset.states.shape[:3]
+    if h != w or asset.masks.shape[1] != asset.masks.shape[2]:
+        return "maps that are not square"
+    if asset.mesh is None or asset.mesh.uvs is None:
+        return "no mesh with UVs"
+    return ""
+
+
+def budgets(budget: dict[str, float]) -> tuple[fd.Budget, fd.Budget]:
+    """The PNG budget and the compressed copies' (``compressed_max_*``, else the same)."""
+    png = fd.Budget.from_dict(budget)
+    if png.mean is None and png.p99 is None and png.max is None:
+        png = fd.Budget(0.5, 2.0)
+    comp = fd.Budget.from_dict(budget, "compressed_")
+    if comp.mean is None and comp.p99 is None and comp.max is None:
+        comp = png
+    return png, comp
+
+
+def _fixed_format(want: str | None) -> str | None:
+    if want in (None, "auto"):
+        return None
+    return "png" if want in _NOT_BLOCK else want
+
+
+def auto_choices(
+    asset: WrinkleAsset,
+    formats: dict[str, str] | None = None,
+    auto_scale: bool = True,
+    compressed: bool = True,
+) -> Applied:
+    """Search, then apply: states at the chosen size (from the search's pyramid), masks at the
+    chosen size, the chosen PD scale; the formats to pass to the compressed copies."""
+    formats = formats or {}
+    auto = set(asset.provenance.get("auto_resolution", ()))
+    res = asset.resolution
+    slopes = (
+        model.normal_to_pd(asset.states)
+        - model.normal_to_pd(resize_normals_pd(asset.base, *asset.states.shape[1:3]))[None]
+    )
+    H = asset.states.shape[1]
+    poses = fd.expression_poses(
+        asset.region_names, asset.region_state_matrix(), asset.expressions, asset.policy
+    )
+    mesh = asset.mesh
+    src = fs.Source(
+        base=asset.base,
+        slopes=slopes,
+        masks=asset.masks,
+        poses=poses,
+        region_names=asset.region_names,
+        policy=asset.policy,
+        footprint=fd.footprint(mesh.uvs, mesh.indices, (H, H)),
+        source_base=resize_normals_pd(asset.base, H, H),
+    )
+    fixed = fs.Fixed(
+        wrinkle=None if "wrinkle" in auto else int(res.get("wrinkle", H)),
+        mask=None if "mask" in auto else int(res.get("mask", asset.masks.shape[1])),
+        scale=None if auto_scale else float(asset.pd_scale),
+        base_format="png" if not compressed else _fixed_format(formats.get("base")),
+        state_format="png" if not compressed else _fixed_format(formats.get("wrinkle")),
+    )
+    png_budget, comp_budget = budgets(asset.budget)
+    choice = fs.search(src, png_budget, comp_budget, fixed)
+    notes = list(choice.notes)
+    size, m = choice.wrinkle_size, choice.mask_size
+    states = asset.states
+    if size != H:
+        base_s = resize_normals_pd(asset.base, size, size)  # what the package subtracts
+        states = model.pd_to_normal(model.normal_to_pd(base_s)[None] + choice.states)
+    masks = asset.masks
+    if m != masks.shape[1]:
+        masks = ship.mask_values(masks, m)
+    out = replace(
+        asset,
+        states=states,
+        masks=masks,
+        pd_scale=choice.pd_scale,
+        resolution={**res, "wrinkle": size, "mask": m},
+    )
+    notes.append(describe_choice(choice, auto, auto_scale, formats))
+    return Applied(
+        asset=out,
+        choice=choice,
+        formats={
+            "base": choice.base_format if choice.base_format != "png" else "png8",
+            "wrinkle": choice.state_format if choice.state_format != "png" else "png8",
+        },
+        notes=notes,
+    )
+
+
+def describe_choice(c: fs.Choice, auto: set[str], auto_scale: bool, formats: dict[str, str]) -> str:
+    """One line for the notes: what was chosen (and how) and the fidelity it gives."""
+
+    def how(flag: bool) -> str:
+        return "auto" if flag else "fixed"
+
+    return (
+        f"fidelity choices: states {c.wrinkle_size}^2 ({how('wrinkle' in auto)}), masks "
+        f"{c.mask_size}^2 ({how('mask' in auto)}), pd_scale {c.pd_scale:g} ({how(auto_scale)}), "
+        f"base {c.base_format}, states {c.state_format}; worst pose p99 "
+        f"{c.png.worst_p99():.2f} deg (png)"
+        + (f", {c.compressed.worst_p99():.2f} deg (compressed)" if c.compressed else "")
+        + f" inside the active regions; budget {c.budget.describe()}"
+    )
+
+
+def choice_report(c: fs.Choice) -> dict[str, Any]:
+    """The search's record for report.json (its per-pose fidelity, every candidate tried)."""
+    return c.to_json()
+
+
+__all__ = ["Applied", "auto_choices", "budgets", "can_search", "choice_report"]
