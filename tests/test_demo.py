@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +14,7 @@ from wrinklepipe import model
 from wrinklepipe.cli import main
 from wrinklepipe.demo.character import MORPH_NAMES, generate
 from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.pipeline import convert as convert_module
 from wrinklepipe.presets import jimenez
 
 
@@ -129,6 +132,7 @@ def test_demo_source_is_byte_identical(tmp_path):
 
 
 def test_demo_command(tmp_path, monkeypatch, capsys):
+    """One full run at the smallest size: converted, validated with renders, and told where."""
     monkeypatch.setenv("WRINKLEPIPE_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "demo-out"
     assert main(["demo", "-o", str(out), "--size", "64"]) == 0
@@ -136,9 +140,32 @@ def test_demo_command(tmp_path, monkeypatch, capsys):
     assert (out / "validation.html").is_file()
     assert (out / "validation_files" / "render_anger.png").is_file()
     printed = capsys.readouterr().err
-    assert "report.html" in printed
-    # A rerun replaces its own previous output without --force.
+    assert "report.html" in printed and "valid" in printed
+
+
+def test_demo_rerun_replaces_its_own_output_only(tmp_path, monkeypatch, capsys):
+    """A rerun replaces the previous demo without --force; another non-empty folder is refused
+    and left as it was. (About the folder, so validation is off here; the run above has it.)"""
+    monkeypatch.setenv("WRINKLEPIPE_CACHE", str(tmp_path / "cache"))
+    real = convert_module.convert
+    monkeypatch.setattr(
+        convert_module, "convert", lambda m, o, opt: real(m, o, replace(opt, validate=False))
+    )
+    out = tmp_path / "demo-out"
     assert main(["demo", "-o", str(out), "--size", "64"]) == 0
+    first = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert json.loads(first["report.json"])["validation"]["status"] == "skipped"
+    (out / "demo_head.gltf").write_text("edited since")
+    assert main(["demo", "-o", str(out), "--size", "64"]) == 0
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == first
+    other = tmp_path / "mine"
+    other.mkdir()
+    (other / "notes.txt").write_text("keep")
+    capsys.readouterr()
+    assert main(["demo", "-o", str(other), "--size", "64"]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert [p.name for p in other.iterdir()] == ["notes.txt"]
+    assert (other / "notes.txt").read_text() == "keep"
 
 
 @pytest.fixture

@@ -61,17 +61,6 @@ class VertexIdOptions:
     coarse_factor: float | None = None
 
 
-def resolve_tolerance(positions: np.ndarray, options: VertexIdOptions) -> float:
-    """The absolute tolerance for ``positions`` (Chebyshev distance, mesh units)."""
-    if options.tolerance is not None:
-        return float(options.tolerance)
-    if len(positions) == 0:
-        return 0.0
-    p = np.asarray(positions, dtype=np.float64)
-    diag = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
-    return diag * float(options.relative_tolerance)
-
-
 def _first_appearance(labels: np.ndarray, n_labels: int) -> np.ndarray:
     """Renumber arbitrary non-negative labels ``< n_labels`` to 0..k-1 by first appearance."""
     n = len(labels)

@@ -102,11 +102,6 @@ def pack_rgba(q: np.ndarray, fmt: str, out: np.ndarray | None = None) -> np.ndar
     return out
 
 
-def pack_xy(values01: np.ndarray, fmt: str) -> np.ndarray:
-    """values01 [H, W, 2 or 3] -> 8-bit texels (round to nearest) in ``fmt``'s RGBA layout."""
-    return pack_rgba(enc.quantize(values01, 8), fmt)
-
-
 def encode_bc(rgba: np.ndarray, fmt: str) -> bytes:
     """Compress RGBA8 [H, W, 4] (H, W multiples of 4) with etcpak; returns the block data."""
     check_format(fmt)
@@ -174,11 +169,6 @@ def unpack_u8(
             ix, iy = {2: 0, 1: 1, 3: 3}[ix], {2: 0, 1: 1, 3: 3}[iy]
         idx = [ix, iy]
     return a[..., idx]
-
-
-def unpack_xy(rgba: np.ndarray, fmt: str) -> np.ndarray:
-    """values01 [H, W, 2] (x, y) from decoded RGBA8 (bc3nm: x from alpha, y from green)."""
-    return enc.dequantize(np.ascontiguousarray(unpack_u8(rgba, fmt, 2)))
 
 
 # ------------------------------------------------------------------------------------------

@@ -171,22 +171,36 @@ def _to_srgb(img: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
 
 
-def html_images(report: Report) -> dict[str, bytes]:
-    """File name -> PNG bytes of every picture the HTML shows."""
-    im = report.images
-    files: dict[str, bytes] = {}
-    for key, arr in sorted(im.items()):
+#: Pictures of the HTML page: image key (or key prefix ending in /) -> heat-map range in
+#: degrees (None: the image itself, in sRGB).
+_PICTURES: tuple[tuple[str, float | None], ...] = (
+    ("render/", None),
+    ("mask_overlay", None),
+    ("gpu_error/", 2.0),
+    ("change/", 10.0),
+    ("shipping_error/", 5.0),
+)
+
+
+def _html_pictures(report: Report) -> dict[str, tuple[str, float | None]]:
+    """File name -> (image key, heat-map range or None) of every picture the HTML shows."""
+    out: dict[str, tuple[str, float | None]] = {}
+    for key in sorted(report.images):
         if key.startswith("_"):
             continue
-        name = key.replace("/", "_") + ".png"
-        if key.startswith("render/") or key == "mask_overlay":
-            files[name] = _png(_to_srgb(arr))
-        elif key.startswith("gpu_error/"):
-            files[name] = _png(heat(arr, 2.0))
-        elif key.startswith("change/"):
-            files[name] = _png(heat(arr, 10.0))
-        elif key.startswith("shipping_error/"):
-            files[name] = _png(heat(arr, 5.0))
+        for prefix, vmax in _PICTURES:
+            if key == prefix or (prefix.endswith("/") and key.startswith(prefix)):
+                out[key.replace("/", "_") + ".png"] = (key, vmax)
+                break
+    return out
+
+
+def html_images(report: Report) -> dict[str, bytes]:
+    """File name -> PNG bytes of every picture the HTML shows."""
+    files: dict[str, bytes] = {}
+    for name, (key, vmax) in _html_pictures(report).items():
+        arr = report.images[key]
+        files[name] = _png(_to_srgb(arr) if vmax is None else heat(arr, vmax))
     return files
 
 
@@ -228,7 +242,7 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
         parts.append("</table>")
     else:
         parts.append("<p>No issues.</p>")
-    images = html_images(report)
+    images = _html_pictures(report)  # names only: the PNGs are encoded once, by html_images
 
     def fig(name: str, caption: str) -> str:
         if name not in images:
