@@ -55,3 +55,23 @@ class ProblemList:
     def raise_if_any(self) -> None:
         if self.problems:
             raise InputError(self.problems)
+
+
+_PYTHON_CONVERSIONS = ("could not convert", "invalid literal", "cannot convert", "math domain")
+
+
+def plain_reason(exc: BaseException) -> str:
+    """A Python exception from reading a malformed structure, in words a user can act on (never
+    "'list' object has no attribute 'get'"). Messages of other kinds are kept."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if isinstance(exc, KeyError):
+        return f"the member {exc.args[0]!r} is missing" if exc.args else "a member is missing"
+    if isinstance(exc, IndexError):
+        return "an index points past the end of its array"
+    if isinstance(exc, (TypeError, AttributeError)):
+        return "a member has the wrong type"
+    if isinstance(exc, ValueError) and (not text or text.startswith(_PYTHON_CONVERSIONS)):
+        return "a value is not a number or out of range"
+    if isinstance(exc, (OverflowError, ZeroDivisionError)):
+        return "a number is out of range"
+    return text or type(exc).__name__

@@ -175,13 +175,19 @@ def _plural(words: str) -> str:
     return words
 
 
+def _shown(value: Any) -> str:
+    """A value as the user wrote it, cut short when it is long."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def _schema_message(error: Any) -> str:
     """One schema error as "what is wrong; what is allowed"."""
     v, inst, sch = error.validator, error.instance, error.schema
     if v in ("enum", "const", "oneOf", "anyOf", "type", "pattern"):
-        return f"{inst!r} is not allowed; expected {allowed(sch)}"
+        return f"{_shown(inst)} is not allowed; expected {allowed(sch)}"
     if v in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
-        return f"{inst!r} is out of range; expected {allowed(sch)}"
+        return f"{_shown(inst)} is out of range; expected {allowed(sch)}"
     if v == "minItems":
         return f"needs at least {sch['minItems']} entries, has {len(inst)}"
     if v == "maxItems":

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.asset import Mesh
-from wrinklepipe.errors import input_error
+from wrinklepipe.errors import input_error, plain_reason
 from wrinklepipe.io.confine import confine
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import (
@@ -391,8 +391,8 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
             "drivers": [dict(d) for d in ext.get("drivers", [])],
             "weights": [float(w) for w in ext.get("weights", [0.0] * len(regions))],
         }
-    except (KeyError, TypeError) as exc:
-        raise r.err(f"extension block is missing or has a malformed key: {exc}", pkey) from None
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise r.err(f"malformed extension block: {plain_reason(exc)}", pkey) from None
     for i, e in enumerate(meta["masks"]["table"]):
         t = e.get("layer", e.get("texture"))
         if not isinstance(t, int) or not 0 <= t < len(mask_names):

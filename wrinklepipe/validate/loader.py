@@ -18,7 +18,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.atomic import write_output
-from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.errors import InputError, input_error, plain_reason
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import asset_from_package, mapping_version
 from wrinklepipe.validate.inputs import CHANNELS, ChannelEntry, Texture, ValidationInput
@@ -50,8 +50,7 @@ def guard_reader(fn: Any, path: Path, what: str) -> Any:
     except (MemoryError, KeyboardInterrupt):
         raise
     except Exception as exc:  # noqa: BLE001 - foreign readers: report, never crash
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise input_error(path, f"cannot read {what}: {msg}") from None
+        raise input_error(path, f"cannot read {what}: {plain_reason(exc)}") from None
 
 
 # ------------------------------------------------------------------------------------------------

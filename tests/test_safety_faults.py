@@ -1,0 +1,139 @@
+"""Issue 11, fault test: ``kill -9`` at 10 random moments of ``convert`` and of ``export``.
+
+Each kill leaves the output either absent or complete (byte-identical to an undisturbed run),
+never partial; whatever the kill left beside it (a staging folder, a lock file) is gone after
+the next run, and nothing else is there. The moments are drawn (seeded, so CI is reproducible)
+over the whole run, denser where the files are written.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from wrinklepipe import atomic
+from wrinklepipe.cli import main
+from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.paths import ROOT
+
+KILLS = 10
+
+
+@pytest.fixture(scope="module")
+def source(tmp_path_factory) -> Path:
+    return write_demo_source(tmp_path_factory.mktemp("src") / "demo", size=16)
+
+
+def _tree(folder: Path) -> dict[str, bytes]:
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+def _popen(args: list[str]) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen(
+        [sys.executable, "-m", "wrinklepipe", *args],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+
+
+def _timed_run(args: list[str], parent: Path, out: Path) -> tuple[float, float, float]:
+    """An undisturbed run: seconds until its staging folder appears, until the output does,
+    and until it ends (the moments a kill is drawn from)."""
+    t0 = time.monotonic()
+    proc = _popen(args)
+    staged = published = None
+    while proc.poll() is None:
+        now = time.monotonic() - t0
+        if staged is None and any(parent.glob(f".*{atomic.STAGING_SUFFIX}")):
+            staged = now
+        if published is None and out.exists():
+            published = now
+        time.sleep(0.002)
+    end = time.monotonic() - t0
+    assert proc.returncode == 0
+    return staged or 0.0, published or end, end
+
+
+def _staged(parent: Path, name: str) -> bool:
+    return any(parent.glob(f".{name}.*{atomic.STAGING_SUFFIX}"))
+
+
+def _kill_plan(seed: int, staged: float, published: float, end: float) -> list[tuple[str, float]]:
+    """Half the kills at a random moment of the whole run (from its start), half at a random
+    moment of the writing phase (from the moment its staging folder appears: robust to how
+    long the interpreter takes to start on a loaded machine)."""
+    rng = random.Random(seed)
+    plan = [("run", rng.uniform(0.0, end)) for _ in range(KILLS // 2)]
+    plan += [("writing", rng.uniform(0.0, published - staged + 0.02)) for _ in range(KILLS // 2)]
+    rng.shuffle(plan)
+    return plan
+
+
+def _fault_cycle(args_for, parent: Path, rerun, seed: int) -> list[str]:
+    """Kill at each moment, check absent-or-complete, run again, check no leftovers."""
+    reference = parent / "reference"
+    staged, published, end = _timed_run(args_for(reference), parent, reference)
+    want = _tree(reference)
+    outcomes = []
+    for i, (phase, delay) in enumerate(_kill_plan(seed, staged, published, end)):
+        out = parent / f"out{i}"
+        proc = _popen(args_for(out))
+        if phase == "writing":
+            deadline = time.monotonic() + 120
+            while not _staged(parent, out.name) and proc.poll() is None:
+                assert time.monotonic() < deadline
+                time.sleep(0.001)
+        time.sleep(delay)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        left = sorted(p.name for p in parent.iterdir() if p.name.startswith(f".{out.name}."))
+        state = "complete" if out.exists() else "absent"
+        if out.exists():
+            assert _tree(out) == want, f"kill {i} ({phase} +{delay:.3f} s) left a partial output"
+        outcomes.append(f"{phase}: {state}" + (" + leftovers" if left else ""))
+        assert rerun(out, out.exists()) == 0
+        assert _tree(out) == want
+        assert sorted(p.name for p in parent.iterdir()) == sorted(
+            ["reference", *(f"out{j}" for j in range(i + 1))]
+        ), f"leftovers after the run following kill {i}"
+    return outcomes
+
+
+def test_kill_9_during_convert(source, tmp_path):
+    def args_for(out: Path) -> list[str]:
+        return ["convert", str(source), "-o", str(out), "--no-render"]
+
+    def rerun(out: Path, exists: bool) -> int:
+        return main([*args_for(out), *(["--force"] if exists else [])])
+
+    outcomes = _fault_cycle(args_for, tmp_path, rerun, seed=11)
+    assert len(outcomes) == KILLS
+    assert any("leftovers" in o for o in outcomes)  # the kills did land while it was writing
+
+
+def test_kill_9_during_export(source, tmp_path_factory):
+    converted = tmp_path_factory.mktemp("conv") / "asset"
+    assert main(["convert", str(source), "-o", str(converted), "--no-validate"]) == 0
+    parent = tmp_path_factory.mktemp("export")
+
+    def args_for(out: Path) -> list[str]:
+        return ["export", str(converted), "--engine", "unreal", "-o", str(out)]
+
+    def rerun(out: Path, exists: bool) -> int:
+        return main([*args_for(out), *(["--force"] if exists else [])])
+
+    outcomes = _fault_cycle(args_for, parent, rerun, seed=12)
+    assert len(outcomes) == KILLS
