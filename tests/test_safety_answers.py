@@ -257,3 +257,42 @@ def test_names_must_be_safe_file_stems(source, tmp_path, capsys, name):
     (err,) = _errors(capsys)
     assert "[name]" in err and "safe file stem" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_validate_asset_on_a_manifest_judges_what_convert_ships(source, tmp_path, capsys):
+    """The general form of defect 10: steep wrinkles (60-degree slopes) need PD scale 2, which
+    convert chooses (pd_scale = "auto"); validate-asset on the same manifest judged them at
+    scale 1 and reported clipping errors convert never had. It now runs convert's stages."""
+    src = _copy(source.parent, tmp_path)
+    n = np.zeros((32, 32, 3), np.float32)
+    n[..., 2] = 1.0
+    tilt = np.radians(60.0)
+    n[8:24, 8:24] = (np.sin(tilt), 0.0, np.cos(tilt))
+    write_image(src / "wrinkle_stretch.png", n * 0.5 + 0.5, bits=16)
+    m = str(src / "manifest.toml")
+    out = tmp_path / "out"
+    convert_code = main(["convert", m, "-o", str(out), "--no-render"])
+    report = json.loads((out / "report.json").read_text())
+    assert report["pd_scale"]["value"] == 2.0
+    assert main(["validate-asset", m, "--no-render", "--json"]) == convert_code == 0
+    codes = {i["code"] for i in json.loads(capsys.readouterr().out)["issues"]}
+    assert "WP-MAP-004" not in codes  # no clipping at the scale convert chose
+
+
+def test_auto_pd_scale_meets_the_clipping_rule_on_every_map():
+    """Convert's automatic PD scale and the validator's clipping rule (WP-MAP-004: at most 0.1%
+    of a map's texels stored at 0 or 255) are one criterion: judged per map (pooling the states
+    let one map clip 0.18%: the demo at 128 failed its own validation) and counting the slopes
+    that round to the edge in 8 bits."""
+    from wrinklepipe.normals import encode as enc
+
+    flat = np.zeros((2, 100, 100, 2), np.float32)
+    steep = flat.copy()
+    steep[1].reshape(-1, 2)[:15, 0] = 0.3  # 0.15% of map 1 beyond 0.25; 0.075% of the pair
+    assert enc.auto_pd_scale(steep[1]) == 0.5
+    assert enc.auto_pd_scale(steep) == 0.5  # the stack: the steepest map decides
+    edge = flat[0].copy()
+    edge.reshape(-1, 2)[:, 0] = 0.25 * (1 - 0.5 / 255)  # below 0.25, but stored as 255
+    assert enc.auto_pd_scale(edge) == 0.5
+    q, _, _ = enc.encode_pd_u8(np.dstack([edge, np.ones((100, 100, 1))]), 0.25)
+    assert q.max() == 255  # which is why

@@ -76,18 +76,24 @@ def normal_slopes(normals: np.ndarray) -> np.ndarray:
 
 
 def auto_pd_scale(normals_or_slopes: np.ndarray, percentile: float = 99.9) -> float:
-    """The smallest power of two >= the ``percentile`` of per-texel ``max(|x/z|, |y/z|)``.
+    """The smallest power of two ``s`` at which at most ``100 - percentile`` % of the texels of
+    *every* map reach the edge of the stored range: ``max(|x/z|, |y/z|) >= s (1 - 1/255)``, the
+    texels an 8-bit map stores as 0 or 255 (what the validator counts as clipped, WP-MAP-004).
 
-    Accepts unit normals ``[..., 3]`` or slopes ``[..., 2]``. Clamped to
-    [``MIN_PD_SCALE``, ``MAX_PD_SCALE``]. A flat map gives ``MIN_PD_SCALE``.
+    Accepts unit normals ``[..., 3]`` or slopes ``[..., 2]``; a stack of maps ``[K, H, W, c]``
+    is judged map by map (the scale serves the steepest). Clamped to [``MIN_PD_SCALE``,
+    ``MAX_PD_SCALE``]. A flat map gives ``MIN_PD_SCALE``.
     """
     a = np.asarray(normals_or_slopes, dtype=_F)
     d = normal_slopes(a) if a.shape[-1] == 3 else a
-    m = np.max(np.abs(d), axis=-1).ravel()
-    m = m[np.isfinite(m)]
-    if m.size == 0:
-        return MIN_PD_SCALE
-    p = float(np.percentile(m, percentile))
+    m = np.max(np.abs(d), axis=-1)
+    maps = m.reshape(m.shape[0], -1) if m.ndim == 3 else m.reshape(1, -1)
+    p = 0.0
+    for row in maps:  # K maps, not texels
+        row = row[np.isfinite(row)]
+        if row.size:
+            p = max(p, float(np.percentile(row, percentile)))
+    p /= 1.0 - 1.0 / 255.0  # a slope this close below s still rounds to the edge in 8 bits
     if p <= MIN_PD_SCALE:
         return MIN_PD_SCALE
     s = 2.0 ** math.ceil(math.log2(p))

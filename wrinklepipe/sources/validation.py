@@ -7,8 +7,9 @@ PATH may be:
 - a ``.gltf``/``.glb`` that carries the ``WRINKLEPIPE_wrinkle_maps`` extension, or a
   ``.usda``/``.usdc``/``.usdz`` with the ``WrinkleMapsAPI`` schema (read by
   :mod:`wrinklepipe.io.gltf_read` / :mod:`wrinklepipe.io.usd_read`);
-- a source manifest (``.toml``) before conversion: ingested, then packed as ``convert`` would
-  (8-bit, no resampling), with the manifest's maps kept as the source;
+- a source manifest (``.toml``) before conversion: ingested and run through the stages
+  ``convert`` runs (resampling, PD scale), then packed as it would (8-bit), with the manifest's
+  maps kept as the source: validate-asset and convert judge the same thing;
 - a validation bundle (``.wpv``, :func:`wrinklepipe.validate.loader.write_bundle`);
 - ``demo[:ENCODING][@SIZE][+bc]``: the built-in demo shipped in memory.
 
@@ -36,7 +37,7 @@ from wrinklepipe.model import ENCODINGS
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest
-from wrinklepipe.pipeline.prepare import prepare_mesh
+from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.validate.inputs import FORMATS, ValidationInput
 from wrinklepipe.validate.loader import (
     BUNDLE_SUFFIX,
@@ -262,10 +263,18 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
 # manifests (before conversion) and the demo
 
 
-def _source_asset(manifest_path: Path) -> WrinkleAsset:
+def _source_asset(manifest_path: Path, stages: bool = False) -> WrinkleAsset:
+    """The manifest's asset as read (the full-resolution source), or with ``stages`` after the
+    very stages ``convert`` runs (resampling, mesh preparation, the PD scale choice), so that
+    validating a manifest judges what convert would ship."""
     m = load_manifest(manifest_path)
     asset, _ = guard_reader(lambda: ingest(m), manifest_path, "the manifest's files")
-    if asset.mesh is not None:
+    if stages:
+        auto = m.pd_scale == "auto"
+        asset, _ = guard_reader(
+            lambda: run_stages(asset, auto_scale=auto), manifest_path, "the stages"
+        )
+    elif asset.mesh is not None:
         asset = replace(
             asset, mesh=guard_reader(lambda: prepare_mesh(asset.mesh), manifest_path, "mesh")
         )
@@ -273,7 +282,7 @@ def _source_asset(manifest_path: Path) -> WrinkleAsset:
 
 
 def _load_manifest(p: Path) -> ValidationInput:
-    asset = _source_asset(p)
+    asset = _source_asset(p, stages=True)
     pkg = guard_reader(lambda: package_from_asset(asset), p, "the packed asset")
     inp = input_from_package(pkg, str(p), "manifest")
     inp.asset = asset
