@@ -13,7 +13,6 @@ from pathlib import Path
 
 import pytest
 
-import wrinklepipe.console
 from wrinklepipe import atomic
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
@@ -34,17 +33,18 @@ def _tree(folder: Path) -> dict[str, bytes]:
 
 
 def _during_run(monkeypatch, action) -> None:
-    """Run ``action`` once, in the middle of the next command's work (its first status step)."""
-    real = wrinklepipe.console.status
+    """Run ``action`` once in the middle of the next command: right after it has created its
+    staging folder (its work and the final rename are still ahead)."""
+    real = atomic._Staging.__init__
     done = []
 
-    def status(message: str):
+    def init(self, parent, name):
+        real(self, parent, name)
         if not done:
-            done.append(message)
+            done.append(name)
             action()
-        return real(message)
 
-    monkeypatch.setattr(wrinklepipe.console, "status", status)
+    monkeypatch.setattr(atomic._Staging, "__init__", init)
 
 
 def _convert(source: Path, out: Path, *extra: str) -> int:
