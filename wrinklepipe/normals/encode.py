@@ -77,8 +77,8 @@ def normal_slopes(normals: np.ndarray) -> np.ndarray:
 
 def auto_pd_scale(normals_or_slopes: np.ndarray, percentile: float = 99.9) -> float:
     """The smallest power of two ``s`` at which at most ``100 - percentile`` % of the texels of
-    *every* map reach the edge of the stored range: ``max(|x/z|, |y/z|) >= s (1 - 1/255)``, the
-    texels an 8-bit map stores as 0 or 255 (what the validator counts as clipped, WP-MAP-004).
+    *every* map reach the edge of the stored range: ``max(|x/z|, |y/z|) >= s (1 - 0.5/127)``, the
+    texels an 8-bit map stores at its extremes (what the validator counts as clipped, WP-MAP-004).
 
     Accepts unit normals ``[..., 3]`` or slopes ``[..., 2]``; a stack of maps ``[K, H, W, c]``
     is judged map by map (the scale serves the steepest). Clamped to [``MIN_PD_SCALE``,
@@ -93,7 +93,7 @@ def auto_pd_scale(normals_or_slopes: np.ndarray, percentile: float = 99.9) -> fl
         row = row[np.isfinite(row)]
         if row.size:
             p = max(p, float(np.percentile(row, percentile)))
-    p /= 1.0 - 1.0 / 255.0  # a slope this close below s still rounds to the edge in 8 bits
+    p /= 1.0 - 0.5 / 127.0  # half an 8-bit step (128 + 127 t) below s still rounds to the edge
     if p <= MIN_PD_SCALE:
         return MIN_PD_SCALE
     s = 2.0 ** math.ceil(math.log2(p))
