@@ -10,6 +10,7 @@ from the PNG header and capped before any pixel is decoded. Every problem is an
 from __future__ import annotations
 
 import base64
+import json
 import struct
 import urllib.parse
 from dataclasses import dataclass
@@ -174,10 +175,17 @@ class _Reader:
         if not isinstance(i, int) or not 0 <= i < len(accs):
             raise self.err(f"accessor {i} does not exist", "/accessors")
         a = accs[i]
+        if not isinstance(a, dict):
+            raise self.err("accessor must be an object", key)
         if "sparse" in a:
             raise self.err("sparse accessors are not supported", key)
-        dtype = np.dtype(_COMPONENTS[a["componentType"]]).newbyteorder("<")
-        width, count = _WIDTH[a["type"]], int(a["count"])
+        try:
+            dtype = np.dtype(_COMPONENTS[a["componentType"]]).newbyteorder("<")
+            width, count = _WIDTH[a["type"]], int(a["count"])
+        except (KeyError, TypeError, ValueError):
+            raise self.err("accessor has a bad componentType, type or count", key) from None
+        if count < 0:
+            raise self.err(f"accessor count {count} is negative", key)
         if "bufferView" not in a:
             return np.zeros((count, width), dtype).squeeze(-1 if width == 1 else ())
         data, stride = self.view(int(a["bufferView"]))
@@ -230,7 +238,17 @@ def _texture_image(r: _Reader, tex_index: int, key: str) -> int:
 
 
 def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> WrinklePackage:
-    """Load a wrinklepipe .gltf/.glb as a :class:`WrinklePackage` (mesh, stored textures, meta)."""
+    """Load a wrinklepipe .gltf/.glb as a :class:`WrinklePackage` (mesh, stored textures, meta).
+
+    Raises :class:`InputError` naming the file (and JSON pointer) for anything malformed."""
+    try:
+        return _read_gltf(path, options)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
+        # Safety net for structures the specific checks did not foresee: still one clear line.
+        raise input_error(path, f"malformed glTF: {plain_reason(exc)}") from None
+
+
+def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> WrinklePackage:
     r = _Reader(Path(path), options or GltfReadOptions())
     doc = r.doc
     mats = doc.get("materials", [])
@@ -393,6 +411,10 @@ def read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrink
         }
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
         raise r.err(f"malformed extension block: {plain_reason(exc)}", pkey) from None
+    try:
+        json.dumps(meta, allow_nan=False)
+    except ValueError:
+        raise r.err("the extension block holds a NaN or infinite number", pkey) from None
     for i, e in enumerate(meta["masks"]["table"]):
         t = e.get("layer", e.get("texture"))
         if not isinstance(t, int) or not 0 <= t < len(mask_names):
