@@ -394,9 +394,11 @@ def test_fuzz_gltf_mesh(skeletons, capsys, data):
         _replace(work / "mesh" / "mesh.gltf", text)
         g = str(work / "mesh" / "mesh.gltf")
         out = work / "w.npy"
-        verb = data.draw(st.sampled_from(["vertex-ids", "dynamic"]), label="verb")
+        verb = data.draw(st.sampled_from(["vertex-ids", "dynamic", "inspect"]), label="verb")
         if verb == "vertex-ids":
             _check_law(capsys, work, out, lambda: main(["vertex-ids", g, "-o", str(out)]))
+        elif verb == "inspect":
+            _check_law(capsys, work, None, lambda: main(["inspect", g, "--json"]))
         else:
             args = ["dynamic", g, "--morph", "brow_furrow=1", "-o", str(out)]
             _check_law(capsys, work, out, lambda: main(args))
@@ -460,12 +462,15 @@ def test_fuzz_glb(skeletons, capsys, data):
     try:
         p = work / "head.glb"
         p.write_bytes(bytes(glb))
-        verb = data.draw(st.sampled_from(["vertex-ids", "dynamic", "validate-asset"]), label="verb")
+        verb = data.draw(
+            st.sampled_from(["vertex-ids", "dynamic", "validate-asset", "inspect"]), label="verb"
+        )
         out = work / "w.npy"
         args = {
             "vertex-ids": ["vertex-ids", str(p), "-o", str(out)],
             "dynamic": ["dynamic", str(p), "--morph", "brow_furrow=1", "-o", str(out)],
             "validate-asset": ["validate-asset", str(p), "--no-render"],
+            "inspect": ["inspect", str(p)],
         }[verb]
         _check_law(capsys, work, out, lambda: main(args))
     finally:

@@ -96,6 +96,17 @@ def print_summary(s: dict[str, Any]) -> None:
     )
 
 
+def _summary(file: str, read: Any, summarize: Any) -> dict[str, Any]:
+    """One file's summary; a structure the reader's checks did not foresee (an index into a
+    missing array, a wrong type) is one message naming the file, not a traceback."""
+    from wrinklepipe.errors import input_error, plain_reason
+
+    try:
+        return summarize(read(file))
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
+        raise input_error(file, f"malformed glTF: {plain_reason(exc)}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     from wrinklepipe.document import read_document
     from wrinklepipe.document.inspect import diff, summary
@@ -105,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
         raise input_error("<arguments>", f"--diff needs two files, got {len(args.files)}")
     if not args.diff and len(args.files) != 1:
         raise input_error("<arguments>", "give one file (or two with --diff)")
-    summaries = [summary(read_document(f)) for f in args.files]
+    summaries = [_summary(f, read_document, summary) for f in args.files]
     if not args.diff:
         if args.json:
             emit_json(summaries[0])

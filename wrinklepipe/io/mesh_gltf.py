@@ -252,7 +252,7 @@ def read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) -
     """
     try:
         return _read_gltf_meshes(path, options)
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
         # Safety net for structures the specific checks did not foresee: still one clear line.
         del exc  # Python's wording ("'list' object has no attribute") helps nobody
         raise input_error(
