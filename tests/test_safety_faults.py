@@ -3,7 +3,8 @@
 Each kill leaves the output either absent or complete (byte-identical to an undisturbed run),
 never partial; whatever the kill left beside it (a staging folder, a lock file) is gone after
 the next run, and nothing else is there. The moments are drawn (seeded, so CI is reproducible)
-over the whole run, denser where the files are written.
+over the whole run, denser where the files are written. The ten runs go at once, into one
+parent folder (so the live ones also meet the dead ones' leftovers), each on its own clock.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import random
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -82,33 +84,47 @@ def _kill_plan(seed: int, staged: float, published: float, end: float) -> list[t
     return plan
 
 
+def _kill_at(proc: subprocess.Popen, parent: Path, name: str, phase: str, delay: float) -> None:
+    if phase == "writing":
+        deadline = time.monotonic() + 300
+        while not _staged(parent, name) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.001)
+    time.sleep(delay)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+
+
 def _fault_cycle(args_for, parent: Path, rerun, seed: int) -> list[str]:
-    """Kill at each moment, check absent-or-complete, run again, check no leftovers."""
+    """The 10 runs at once (each killed at its own moment, on its own clock), then for each:
+    absent or complete; the next run succeeds; no leftovers at all at the end."""
     reference = parent / "reference"
     staged, published, end = _timed_run(args_for(reference), parent, reference)
     want = _tree(reference)
+    plan = _kill_plan(seed, staged, published, end)
+    outs = [parent / f"out{i}" for i in range(len(plan))]
+    procs = [_popen(args_for(out)) for out in outs]
+    killers = [
+        threading.Thread(target=_kill_at, args=(proc, parent, out.name, phase, delay))
+        for proc, out, (phase, delay) in zip(procs, outs, plan)
+    ]
+    for k in killers:
+        k.start()
+    for k in killers:
+        k.join()
     outcomes = []
-    for i, (phase, delay) in enumerate(_kill_plan(seed, staged, published, end)):
-        out = parent / f"out{i}"
-        proc = _popen(args_for(out))
-        if phase == "writing":
-            deadline = time.monotonic() + 120
-            while not _staged(parent, out.name) and proc.poll() is None:
-                assert time.monotonic() < deadline
-                time.sleep(0.001)
-        time.sleep(delay)
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
-        left = sorted(p.name for p in parent.iterdir() if p.name.startswith(f".{out.name}."))
-        state = "complete" if out.exists() else "absent"
+    for i, (out, (phase, delay)) in enumerate(zip(outs, plan)):
+        left = any(p.name.startswith(f".{out.name}.") for p in parent.iterdir())
         if out.exists():
             assert _tree(out) == want, f"kill {i} ({phase} +{delay:.3f} s) left a partial output"
-        outcomes.append(f"{phase}: {state}" + (" + leftovers" if left else ""))
+        outcomes.append(
+            f"{phase}: {'complete' if out.exists() else 'absent'}" + (" + leftovers" * left)
+        )
+    for out in outs:
         assert rerun(out, out.exists()) == 0
         assert _tree(out) == want
-        assert sorted(p.name for p in parent.iterdir()) == sorted(
-            ["reference", *(f"out{j}" for j in range(i + 1))]
-        ), f"leftovers after the run following kill {i}"
+    assert sorted(p.name for p in parent.iterdir()) == sorted(
+        ["reference", *(o.name for o in outs)]
+    ), "leftovers after the next runs"
     return outcomes
 
 
