@@ -28,6 +28,7 @@ COMMAND_ORDER = (
     "convert",
     "validate-asset",
     "inspect",
+    "batch",
     "encode-normals",
     "pack-masks",
     "vertex-ids",

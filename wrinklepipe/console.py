@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
+from contextvars import ContextVar
 from typing import Any, TypeVar
 
 from rich.console import Console
@@ -38,10 +40,29 @@ def track(items: Iterable[T], description: str, total: int | None = None) -> Ite
         yield from progress.track(items, description=description, total=total)
 
 
-def status(message: str) -> Any:
-    """A spinner for a single long step (no-op context when stderr is not a terminal)."""
-    if err.is_terminal:
-        return err.status(message)
-    import contextlib
+#: Who hears about each step :func:`status` announces (``wrinklepipe batch`` forwards them from
+#: its worker processes as per-asset progress). Per context, so threads do not mix them up.
+_STAGE_LISTENER: ContextVar[Callable[[str], None] | None] = ContextVar(
+    "wrinklepipe_stage_listener", default=None
+)
 
+
+@contextlib.contextmanager
+def stage_listener(listener: Callable[[str], None]) -> Iterator[None]:
+    """Call ``listener(message)`` for every :func:`status` step inside the block."""
+    token = _STAGE_LISTENER.set(listener)
+    try:
+        yield
+    finally:
+        _STAGE_LISTENER.reset(token)
+
+
+def status(message: str) -> Any:
+    """A spinner for a single long step (no-op context when stderr is not a terminal); the
+    step is also told to the :func:`stage_listener` of the current context, if any."""
+    listener = _STAGE_LISTENER.get()
+    if listener is not None:
+        listener(message)
+    if err.is_terminal and listener is None:
+        return err.status(message)
     return contextlib.nullcontext()

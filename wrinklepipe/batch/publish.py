@@ -1,0 +1,65 @@
+"""Write a finished run's reports (JSON summary, JUnit, SARIF) and print its tally: shared by
+``wrinklepipe batch`` and ``wrinklepipe validate-asset`` over a folder of outputs."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rich.console import Console
+
+from wrinklepipe.atomic import dumps_json, write_bytes
+from wrinklepipe.batch import reports
+from wrinklepipe.batch.plan import BatchPlan
+from wrinklepipe.batch.run import BatchRun
+
+
+def publish(
+    run: BatchRun,
+    plan: BatchPlan,
+    *,
+    command: str,
+    engine: str,
+    console: Console,
+    summary_path: str | None = None,
+    junit_path: str | None = None,
+    sarif_path: str | None = None,
+) -> dict[str, Any]:
+    """Write the requested reports (atomically, never over an input) and print the tally;
+    returns the JSON summary."""
+    doc = reports.summary(
+        run.results,
+        command=command,
+        root=plan.root,
+        output=plan.output,
+        engine=engine,
+        seconds=run.seconds,
+        cache=run.cache.to_json() if run.cache else None,
+    )
+    inputs = [j.manifest for j in plan.jobs if j.kind == "convert"]
+    if summary_path:
+        write_bytes(summary_path, dumps_json(doc).encode("utf-8"), inputs)
+    if junit_path:
+        suite = f"wrinklepipe {command}"
+        write_bytes(
+            junit_path, reports.junit_xml(run.results, suite=suite, seconds=run.seconds), inputs
+        )
+    if sarif_path:
+        log = reports.sarif_log(run.results, root=plan.root, output=plan.output, command=command)
+        write_bytes(sarif_path, dumps_json(log).encode("utf-8"), inputs)
+    c = doc["counts"]
+    parts = [f"{c['assets']} assets", f"[green]{c['passed']} passed[/]"]
+    if c["failed"]:
+        parts.append(f"[yellow]{c['failed']} failed validation[/]")
+    if c["error"]:
+        parts.append(f"[bold red]{c['error']} could not run[/]")
+    how = []
+    for source, label in (
+        ("converted", "converted"),
+        ("cache", "from cache"),
+        ("validated", "validated"),
+    ):
+        if c[source]:
+            how.append(f"{c[source]} {label}")
+    tail = f" ({', '.join(how)})" if how else ""
+    console.print(f"{', '.join(parts)}{tail} in {run.seconds:.1f} s on {engine}", highlight=False)
+    return doc

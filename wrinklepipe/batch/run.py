@@ -1,0 +1,165 @@
+"""Run a plan: serve what the cache holds, send the rest to an engine, store what it converts.
+
+For every convert job, with a cache: hash the inputs (:func:`asset_key`); a complete entry is
+restored into the output folder (hashes checked) and the asset never reaches an engine. The
+others run on the engine; each one that was written (exit 0 or 1) is stored, unless its inputs
+changed while it ran (the key is taken again afterwards). Then the cache is trimmed to its cap.
+An asset that cannot be hashed (a broken manifest) fails on its own, like any other.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from wrinklepipe.batch.cache import Cache, CacheMiss, Entry
+from wrinklepipe.batch.fingerprint import asset_key
+from wrinklepipe.batch.plan import BatchPlan, Job
+from wrinklepipe.batch.results import AssetResult, counts_of, status_for, worst_exit_code
+from wrinklepipe.errors import InputError
+
+_CACHED_FIELDS = ("name", "issues", "validation", "stages", "seconds", "worker")
+
+
+@dataclass
+class CacheStats:
+    folder: str
+    hits: int = 0
+    misses: int = 0
+    stored: int = 0
+    unusable: int = 0  # entries that went away or were altered while being restored
+    evicted: int = 0
+    bytes: int = 0
+    max_bytes: int | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class BatchRun:
+    """The results in plan order, the batch's exit code, wall time and the cache's numbers."""
+
+    results: list[AssetResult]
+    seconds: float
+    cache: CacheStats | None = None
+    submitted: list[str] = field(default_factory=list)  # job ids an engine ran
+
+    @property
+    def exit_code(self) -> int:
+        return worst_exit_code(self.results)
+
+
+def _error(job: Job, exc: BaseException) -> AssetResult:
+    if isinstance(exc, InputError):
+        problems = [{"file": p.file, "key": p.key, "message": p.message} for p in exc.problems]
+    else:
+        problems = [
+            {
+                "file": job.manifest_rel,
+                "key": "",
+                "message": f"could not hash the inputs ({type(exc).__name__}: {exc})",
+            }
+        ]
+    return AssetResult(
+        id=job.id,
+        manifest=job.manifest_rel,
+        output=job.id,
+        status="error",
+        source="none",
+        fail_on=job.options.fail_on,
+        problems=problems,
+    )
+
+
+def _from_entry(job: Job, entry: Entry, seconds: float) -> AssetResult:
+    stored = entry.result
+    issues = list(stored.get("issues", []))
+    return AssetResult(
+        id=job.id,
+        manifest=job.manifest_rel,
+        output=job.id,
+        status=status_for(issues, job.options.fail_on),
+        source="cache",
+        name=str(stored.get("name", "")),
+        fail_on=job.options.fail_on,
+        seconds=round(seconds, 4),
+        issues=issues,
+        counts=counts_of(issues),
+        key=entry.key,
+        validation=str(stored.get("validation", "")),
+    )
+
+
+def run_plan(
+    plan: BatchPlan,
+    engine: Any,
+    cache: Cache | None = None,
+    on_stage: Callable[[str, str], None] | None = None,
+    on_done: Callable[[AssetResult], None] | None = None,
+) -> BatchRun:
+    """Run every job of ``plan`` (see the module docstring)."""
+    t0 = time.perf_counter()
+    stage = on_stage or (lambda _job, _stage: None)
+    done = on_done or (lambda _result: None)
+    results: dict[str, AssetResult] = {}
+    keys: dict[str, str] = {}
+    stats = CacheStats(str(cache.root), max_bytes=cache.max_bytes) if cache else None
+    to_run: list[Job] = []
+    for job in plan.jobs:
+        if cache is None or job.kind != "convert":
+            to_run.append(job)
+            continue
+        t1 = time.perf_counter()
+        stage(job.id, "hashing inputs")
+        try:
+            key, _ = asset_key(job.manifest, job.options)
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001 - a manifest that cannot be read fails alone
+            results[job.id] = _error(job, exc)
+            done(results[job.id])
+            continue
+        keys[job.id] = key
+        entry = cache.lookup(key)
+        if entry is not None:
+            try:
+                stage(job.id, "restoring from the cache")
+                cache.restore(entry, job.output, force=job.force, inputs=[job.manifest.parent])
+            except CacheMiss:
+                stats.unusable += 1
+            except InputError as exc:
+                results[job.id] = _error(job, exc)
+                done(results[job.id])
+                continue
+            else:
+                stats.hits += 1
+                results[job.id] = _from_entry(job, entry, time.perf_counter() - t1)
+                done(results[job.id])
+                continue
+        stats.misses += 1
+        to_run.append(job)
+
+    by_id = {j.id: j for j in to_run}
+    for result in engine.run(to_run, stage):
+        job = by_id[result.id]
+        key = keys.get(job.id)
+        if cache is not None and key and result.status != "error":
+            result.key = key
+            try:
+                same = asset_key(job.manifest, job.options)[0] == key
+            except Exception:  # noqa: BLE001 - inputs vanished meanwhile: do not store
+                same = False
+            if same:
+                fields = {f: getattr(result, f) for f in _CACHED_FIELDS}
+                if cache.put(key, job.output, fields) is not None:
+                    stats.stored += 1
+        results[result.id] = result
+        done(result)
+    if cache is not None:
+        stats.evicted = len(cache.evict(keep=keys.values()))
+        stats.bytes = cache.size()
+    ordered = [results[j.id] for j in plan.jobs]
+    return BatchRun(ordered, time.perf_counter() - t0, stats, [j.id for j in to_run])

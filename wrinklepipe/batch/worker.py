@@ -1,0 +1,206 @@
+"""One asset, run where a worker runs it (a local process or a Dask worker): convert it, or
+validate an existing output, and turn whatever happens into an :class:`AssetResult`.
+
+Nothing here raises: a bad input becomes ``status="error"`` with its problems, an unexpected
+exception too (with the exception's type and message), so one asset never takes the others down.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from wrinklepipe.batch.plan import Job
+from wrinklepipe.batch.results import AssetResult, counts_of, status_for
+from wrinklepipe.console import stage_listener
+from wrinklepipe.errors import InputError
+from wrinklepipe.io.package import png_compression
+from wrinklepipe.pipeline import convert
+
+
+def _ignore(_stage: str) -> None:
+    pass
+
+
+def _replace_prefix(obj: Any, old: str, new: str) -> Any:
+    """``old`` -> ``new`` in every string of a JSON-like value (absolute paths -> relative)."""
+    if isinstance(obj, str):
+        return obj.replace(old, new)
+    if isinstance(obj, dict):
+        return {k: _replace_prefix(v, old, new) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_replace_prefix(v, old, new) for v in obj]
+    return obj
+
+
+class _Stages:
+    """Seconds per stage from the stage announcements, forwarded to ``emit``."""
+
+    def __init__(self, emit: Callable[[str], None]) -> None:
+        self.emit = emit
+        self.seconds: dict[str, float] = {}
+        self.current: str | None = None
+        self.since = time.perf_counter()
+
+    def __call__(self, stage: str) -> None:
+        self.close()
+        self.current, self.since = stage, time.perf_counter()
+        self.emit(stage)
+
+    def close(self) -> None:
+        now = time.perf_counter()
+        if self.current is not None:
+            self.seconds[self.current] = round(
+                self.seconds.get(self.current, 0.0) + now - self.since, 4
+            )
+        self.current, self.since = None, now
+
+
+def _problems(exc: InputError, job: Job) -> list[dict[str, str]]:
+    out = []
+    for p in exc.problems:
+        out.append({"file": _relative(p.file, job), "key": p.key, "message": p.message})
+    return out
+
+
+def _relative(file: str, job: Job) -> str:
+    """A problem's file as the user knows it: relative to the manifest's folder when inside."""
+    try:
+        return (
+            Path(job.manifest_rel).parent / Path(file).relative_to(job.manifest.parent)
+        ).as_posix()
+    except ValueError:
+        return str(file)
+
+
+def _crash(exc: BaseException, job: Job, what: str) -> list[dict[str, str]]:
+    last = traceback.extract_tb(exc.__traceback__)[-1:] if exc.__traceback__ else []
+    where = f" at {Path(last[0].filename).name}:{last[0].lineno}" if last else ""
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return [
+        {
+            "file": job.manifest_rel,
+            "key": "",
+            "message": f"{what} failed unexpectedly ({type(exc).__name__}: {msg}{where}); "
+            "please report",
+        }
+    ]
+
+
+def _convert(job: Job, stages: _Stages) -> AssetResult:
+    base = AssetResult(
+        id=job.id,
+        manifest=job.manifest_rel,
+        output=job.id,
+        status="error",
+        source="none",
+        fail_on=job.options.fail_on,
+        worker=socket.gethostname(),
+    )
+    try:
+        with stage_listener(stages), png_compression(job.options.png_level):
+            res = convert(job.manifest, job.output, job.options.convert_options(job.force))
+    except InputError as exc:
+        base.problems = _problems(exc, job)
+        return base
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - one asset's crash must not stop the others
+        base.problems = _crash(exc, job, "conversion")
+        return base
+    validation = res.report.get("validation", {})
+    issues = list(validation.get("issues", []))
+    base.name = str(res.report.get("name", ""))
+    base.source = "converted"
+    base.validation = str(validation.get("status", ""))
+    base.issues = issues
+    base.counts = counts_of(issues)
+    base.status = status_for(issues, job.options.fail_on)
+    return base
+
+
+def _validate(job: Job, stages: _Stages) -> AssetResult:
+    from wrinklepipe.validate import ValidateOptions, validate
+    from wrinklepipe.validate.config import Config, load_config
+    from wrinklepipe.validate.loader import LoadOptions, load_input
+
+    params: dict[str, Any] = dict(job.params)
+    base = AssetResult(
+        id=job.id,
+        manifest=job.manifest_rel,
+        output=job.id,
+        status="error",
+        source="none",
+        fail_on=job.options.fail_on,
+        worker=socket.gethostname(),
+    )
+    try:
+        config = load_config(params["config"]) if params.get("config") else Config()
+        options = config.validate_options(ValidateOptions(render=job.options.render))
+        if params.get("render_size"):
+            from dataclasses import replace
+
+            options = replace(options, render_size=int(params["render_size"]))
+        config = Config(config.ignore, config.severity, {})
+        stages("loading")
+        inp = load_input(job.output, LoadOptions(textures=params.get("textures", "auto")))
+        stages("validating")
+        report = validate(inp, options, config)
+    except InputError as exc:
+        base.problems = _problems(exc, job)
+        return base
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - one asset's crash must not stop the others
+        base.problems = _crash(exc, job, "validation")
+        return base
+    issues = _replace_prefix([i.to_json() for i in report.issues], str(job.output), ".")
+    base.name = str(report.input.get("name", ""))
+    base.source = "validated"
+    base.validation = "ran"
+    base.issues = issues
+    base.counts = counts_of(issues)
+    base.status = status_for(issues, job.options.fail_on)
+    return base
+
+
+def run_job(job: Job, emit: Callable[[str], None] = _ignore) -> AssetResult:
+    """Run one job; ``emit(stage)`` is told each stage as it starts. Never raises (but for
+    KeyboardInterrupt / SystemExit)."""
+    t0 = time.perf_counter()
+    stages = _Stages(emit)
+    result = _validate(job, stages) if job.kind == "validate" else _convert(job, stages)
+    stages.close()
+    result.stages = stages.seconds
+    result.seconds = round(time.perf_counter() - t0, 4)
+    return result
+
+
+# ------------------------------------------------------------------------------------------------
+# entry points of the engines
+
+
+def child_main(job: Job, conn: Any) -> None:
+    """A local worker process: run one job, sending ``("stage", name)`` messages and finally
+    ``("done", result)`` through ``conn``."""
+    try:
+        result = run_job(job, lambda stage: conn.send(("stage", stage)))
+        conn.send(("done", result))
+    finally:
+        conn.close()
+
+
+def dask_main(job: Job) -> AssetResult:
+    """A Dask task: run one job, publishing stages as ``wrinklepipe-batch`` worker events."""
+    from distributed import get_worker  # deferred: only Dask workers call this
+
+    worker = get_worker()
+
+    def emit(stage: str) -> None:
+        worker.log_event("wrinklepipe-batch", {"job": job.id, "stage": stage})
+
+    return run_job(job, emit)

@@ -1,0 +1,171 @@
+"""``wrinklepipe batch``: convert many manifests, with a cache, locally or on a Dask cluster."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from wrinklepipe.errors import input_error
+
+NAME = "batch"
+HELP = "convert many manifests (folders, globs, a batch file): cache, workers, Dask, CI reports"
+DESCRIPTION = """\
+Convert and validate every manifest of SOURCE... into OUT, one folder per asset: the manifest's
+path relative to the batch root (chars/ada/manifest.toml -> OUT/chars/ada). SOURCE is a
+manifest, a folder (searched for .toml files declaring schema = "wrinklepipe/manifest@1"), a
+glob ('chars/**/manifest.toml') or one batch file (TOML, schema "wrinklepipe/batch@1",
+schemas/batch.schema.json) listing manifests with per-asset options.
+
+Each asset runs on its own: one that fails never stops or changes the others. Unchanged assets
+are restored from a content-addressed cache (keyed by every input byte, the options and the
+tool), the rest run in --jobs local processes or on a Dask cluster (--scheduler); the outputs
+are byte-identical either way. Reports for CI: --summary (JSON), --junit, --sarif.
+
+Options given here apply to every asset and win over the batch file's.
+
+exit codes: the worst asset's: 0 all written and valid, 1 some failed validation, 2 some could
+not run (or the batch could not start: bad sources, output collisions; nothing written).
+
+examples:
+  wrinklepipe batch chars/ -o build/chars --junit junit.xml --sarif wrinkles.sarif
+  wrinklepipe batch 'chars/**/manifest.toml' -o build --jobs 4 --force
+  wrinklepipe batch studio-batch.toml --scheduler tcp://farm:8786 --summary summary.json
+"""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "sources", nargs="+", metavar="SOURCE", help="manifests, folders, globs or a batch file"
+    )
+    p.add_argument(
+        "-o", "--output", metavar="OUT", help="output folder (default: the batch file's)"
+    )
+    p.add_argument(
+        "--root", metavar="DIR", help="batch root: outputs are manifest paths relative to it"
+    )
+    p.add_argument("--force", action="store_true", help="replace existing non-empty output folders")
+    run = p.add_argument_group("where it runs")
+    where = run.add_mutually_exclusive_group()
+    where.add_argument(
+        "-j", "--jobs", type=int, metavar="N", help="local worker processes (default: the cores)"
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on the Dask scheduler at ADDRESS (tcp://host:8786)",
+    )
+    run.add_argument(
+        "--timeout", type=float, metavar="S", help="local workers: fail an asset after S seconds"
+    )
+    cache = p.add_argument_group("cache")
+    cache.add_argument(
+        "--no-cache", action="store_true", help="convert everything; do not read or fill the cache"
+    )
+    cache.add_argument(
+        "--cache", metavar="DIR", help="cache folder (default: $WRINKLEPIPE_CACHE/batch)"
+    )
+    cache.add_argument(
+        "--cache-size",
+        metavar="SIZE",
+        default="20G",
+        help="size cap, least recently used evicted first (default 20G)",
+    )
+    conv = p.add_argument_group("conversion (every asset; win over the batch file)")
+    conv.add_argument("--glb", action="store_const", const=True, help="also write NAME.glb")
+    usd = conv.add_mutually_exclusive_group()
+    usd.add_argument(
+        "--usdc", dest="usd", action="store_const", const="usdc", help="also write NAME.usdc"
+    )
+    usd.add_argument(
+        "--usdz", dest="usd", action="store_const", const="usdz", help="also write NAME.usdz"
+    )
+    conv.add_argument("--bits", type=int, choices=(8, 16), help="PNG bits of normal maps (8)")
+    conv.add_argument(
+        "--mask-layout",
+        choices=("rgba", "array", "lr-split", "jimenez8", "metahuman"),
+        help="mask packing",
+    )
+    conv.add_argument(
+        "--no-compress", dest="compress", action="store_const", const=False, help="skip DDS/KTX2"
+    )
+    conv.add_argument(
+        "--no-validate", dest="validate", action="store_const", const=False, help="skip validation"
+    )
+    conv.add_argument(
+        "--no-render",
+        dest="render",
+        action="store_const",
+        const=False,
+        help="validate without rendering",
+    )
+    conv.add_argument(
+        "--png-level",
+        type=int,
+        choices=range(10),
+        metavar="0-9",
+        help="zlib level of PNGs (default 6)",
+    )
+    conv.add_argument(
+        "--fail-on",
+        choices=("error", "warning", "info"),
+        help="severity that fails an asset (error)",
+    )
+    rep = p.add_argument_group("reports")
+    rep.add_argument("--json", action="store_true", help="print the JSON summary on stdout")
+    rep.add_argument("--summary", metavar="FILE", help="write the JSON summary to FILE")
+    rep.add_argument("--junit", metavar="FILE", help="write JUnit XML (one test case per asset)")
+    rep.add_argument("--sarif", metavar="FILE", help="write SARIF 2.1.0 (validation issues)")
+
+
+def _cli_options(args: argparse.Namespace) -> dict[str, Any]:
+    names = (
+        "glb",
+        "usd",
+        "bits",
+        "mask_layout",
+        "compress",
+        "validate",
+        "render",
+        "png_level",
+        "fail_on",
+    )
+    return {n: getattr(args, n) for n in names if getattr(args, n) is not None}
+
+
+def run(args: argparse.Namespace) -> int:
+    from wrinklepipe.batch import Cache, DaskEngine, LocalEngine, parse_size, plan_batch, run_plan
+    from wrinklepipe.batch.progress import BatchProgress
+    from wrinklepipe.batch.publish import publish
+    from wrinklepipe.console import emit_json, err
+    from wrinklepipe.demo.source import cache_root
+
+    if args.jobs is not None and args.jobs < 1:
+        raise input_error("--jobs", f"{args.jobs} is not a number of workers (1 or more)")
+    if args.timeout is not None and args.scheduler:
+        raise input_error("--timeout", "applies to local workers; Dask has its own limits")
+    plan = plan_batch(
+        args.sources, args.output, root=args.root, cli_options=_cli_options(args), force=args.force
+    )
+    cache = None
+    if not args.no_cache:
+        folder = Path(args.cache) if args.cache else cache_root() / "batch"
+        cache = Cache(folder, parse_size(args.cache_size))
+    engine = DaskEngine(args.scheduler) if args.scheduler else LocalEngine(args.jobs, args.timeout)
+    with BatchProgress(
+        err, len(plan.jobs), f"wrinklepipe batch: {len(plan.jobs)} assets"
+    ) as progress:
+        result = run_plan(plan, engine, cache, progress.stage, progress.done)
+    doc = publish(
+        result,
+        plan,
+        command="batch",
+        engine=engine.description,
+        console=err,
+        summary_path=args.summary,
+        junit_path=args.junit,
+        sarif_path=args.sarif,
+    )
+    if args.json:
+        emit_json(doc)
+    return result.exit_code
