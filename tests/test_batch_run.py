@@ -124,7 +124,11 @@ def test_batch_isolation_reports_cache_and_localcluster(studio, tmp_path):
     plan = plan_batch([str(batch_file)])
     assert [j.id for j in plan.jobs] == sorted([*GOOD, BROKEN])
     opts = {j.id: j.options for j in plan.jobs}
-    assert opts["chars/ada/manifest"].render and opts["chars/cy/manifest"].glb and not opts["chars/bo/manifest"].render
+    assert (
+        opts["chars/ada/manifest"].render
+        and opts["chars/cy/manifest"].glb
+        and not opts["chars/bo/manifest"].render
+    )
     assert not opts["npc/gus/manifest"].compress and opts["chars/ada/manifest"].compress
     engine = Recording(LocalEngine(jobs=1))
     run = run_plan(plan, engine, cache)
@@ -269,7 +273,11 @@ def test_real_gltf_mesh_with_external_buffer_is_keyed_and_reconverted(studio, tm
     # regions land on the right, and validation says so (the asset fails, exit 1).
     assert main(["batch", *args]) == 1
     first = row()
-    assert (first["id"], first["source"], first["status"]) == ("mirror/manifest", "converted", "failed")
+    assert (first["id"], first["source"], first["status"]) == (
+        "mirror/manifest",
+        "converted",
+        "failed",
+    )
     assert "WP-MASK-005" in {i["code"] for i in first["issues"] if i["severity"] == "error"}
     assert main(["batch", *args, "--force"]) == 1  # the failed output is cached like any other
     assert (row()["source"], row()["issues"]) == ("cache", first["issues"])

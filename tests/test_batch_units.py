@@ -228,11 +228,11 @@ def test_parse_size():
 
 def _crashing_child(job, conn):
     """Runs in a worker process: the job named 'crash' dies by SIGSEGV, 'hang' sleeps."""
+    conn.send(("stage", "working"))
     if job.id == "crash":
         os.kill(os.getpid(), signal.SIGSEGV)
     if job.id == "hang":
         time.sleep(60)
-    conn.send(("stage", "working"))
     conn.send(("done", Result(job.id, job.manifest_rel, job.id, "passed", "converted")))
     conn.close()
 

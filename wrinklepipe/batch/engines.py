@@ -8,8 +8,9 @@ the outputs are byte-identical whichever engine ran them.
 
 **Local** (``--jobs N``): every asset runs in a process of its own, forked from a
 ``multiprocessing`` fork server that has imported wrinklepipe once, at most N at a time. A
-process that dies (a crash in a native library, the OOM killer) or overruns ``timeout`` fails
-its own asset only; memory goes back to the system after every asset.
+process that dies (a crash in a native library, the OOM killer) or overruns ``timeout`` (counted
+from its first message, so the fork server's own start-up is not charged to an asset) fails its
+own asset only; memory goes back to the system after every asset.
 
 **Dask** (``--scheduler ADDRESS``): the jobs are submitted to the cluster's scheduler as tasks;
 stages come back as worker events (``Worker.log_event`` / ``Client.subscribe_topic``). A task
@@ -101,7 +102,7 @@ class LocalEngine:
                     )
                     proc.start()
                     send.close()
-                    running[recv] = (proc, job, time.monotonic())
+                    running[recv] = (proc, job, float("inf"))  # the clock starts at its hello
                     on_stage(job.id, "starting")
                 ready = multiprocessing.connection.wait(list(running), timeout=self._wait())
                 for conn in ready:
@@ -115,6 +116,8 @@ class LocalEngine:
                         yield _lost(job, f"the worker process died ({_exit_text(proc.exitcode)})")
                         continue
                     if kind == "stage":
+                        if running[conn][2] == float("inf"):
+                            running[conn] = (proc, job, time.monotonic())
                         on_stage(job.id, payload)
                     else:
                         proc.join()

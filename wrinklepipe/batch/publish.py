@@ -7,7 +7,7 @@ from typing import Any
 
 from rich.console import Console
 
-from wrinklepipe.atomic import dumps_json, write_bytes
+from wrinklepipe.atomic import dumps_json, write_output
 from wrinklepipe.batch import reports
 from wrinklepipe.batch.plan import BatchPlan
 from wrinklepipe.batch.run import BatchRun
@@ -24,7 +24,7 @@ def publish(
     junit_path: str | None = None,
     sarif_path: str | None = None,
 ) -> dict[str, Any]:
-    """Write the requested reports (atomically, never over an input) and print the tally;
+    """Write the requested reports (locked, atomically, never over an input), print the tally;
     returns the JSON summary."""
     doc = reports.summary(
         run.results,
@@ -37,15 +37,15 @@ def publish(
     )
     inputs = [j.manifest for j in plan.jobs if j.kind == "convert"]
     if summary_path:
-        write_bytes(summary_path, dumps_json(doc).encode("utf-8"), inputs)
+        write_output(summary_path, dumps_json(doc).encode("utf-8"), inputs)
     if junit_path:
         suite = f"wrinklepipe {command}"
-        write_bytes(
+        write_output(
             junit_path, reports.junit_xml(run.results, suite=suite, seconds=run.seconds), inputs
         )
     if sarif_path:
         log = reports.sarif_log(run.results, root=plan.root, output=plan.output, command=command)
-        write_bytes(sarif_path, dumps_json(log).encode("utf-8"), inputs)
+        write_output(sarif_path, dumps_json(log).encode("utf-8"), inputs)
     c = doc["counts"]
     parts = [f"{c['assets']} assets", f"[green]{c['passed']} passed[/]"]
     if c["failed"]:

@@ -188,6 +188,7 @@ def child_main(job: Job, conn: Any) -> None:
     """A local worker process: run one job, sending ``("stage", name)`` messages and finally
     ``("done", result)`` through ``conn``."""
     try:
+        conn.send(("stage", "started"))
         result = run_job(job, lambda stage: conn.send(("stage", stage)))
         conn.send(("done", result))
     finally:
