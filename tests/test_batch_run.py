@@ -194,6 +194,30 @@ def test_batch_isolation_reports_cache_and_localcluster(studio, tmp_path):
     for res in sarif_run["results"]:
         assert rule_ids[res["ruleIndex"]] == res["ruleId"]
 
+    # -- validate-asset over the folder of outputs (a copy, one asset's texture damaged) --------
+    outs = tmp_path / "outs"
+    shutil.copytree(plan.output, outs)
+    damaged = outs / "chars/bo/manifest/textures/base_normal.png"
+    damaged.write_bytes(damaged.read_bytes()[:100])  # a truncated PNG
+    v = tmp_path / "v"
+    code = main(
+        ["validate-asset", str(outs), "--no-render", "--jobs", "2", "--report", str(v / "s.json")]
+        + ["--junit", str(v / "j.xml"), "--sarif", str(v / "v.sarif")]
+    )
+    assert code == 2  # the worst asset's: the damaged one could not be read
+    vs = {a["id"]: a for a in json.loads((v / "s.json").read_text())["assets"]}
+    assert set(vs) == set(GOOD)
+    assert vs["chars/bo/manifest"]["status"] == "error"
+    [problem] = vs["chars/bo/manifest"]["problems"]
+    assert problem["file"].startswith("chars/bo/manifest/bo.gltf")  # relative to the folder
+    assert "cannot decode image" in problem["message"]
+    assert {vs[g]["status"] for g in GOOD if g != "chars/bo/manifest"} == {"passed"}
+    assert {vs[g]["source"] for g in GOOD if g != "chars/bo/manifest"} == {"validated"}
+    xmlschema.XMLSchema(SCHEMAS / "junit-10.xsd").validate(v / "j.xml")
+    jsonschema.Draft4Validator(
+        json.loads((SCHEMAS / "sarif-schema-2.1.0.json").read_text())
+    ).validate(json.loads((v / "v.sarif").read_text()))
+
     # -- 2. rerun: everything from the cache, nothing converted ------------------------------
     plan2 = plan_batch([str(batch_file)], force=True)
     engine2 = Recording(LocalEngine(jobs=2))

@@ -226,7 +226,7 @@ def test_parse_size():
 # the local engine: one crash fails one asset
 
 
-def _crashing_child(job, conn):
+def _crashing_child(job, conn, threads=None):
     """Runs in a worker process: the job named 'crash' dies by SIGSEGV, 'hang' sleeps."""
     conn.send(("stage", "working"))
     if job.id == "crash":
@@ -324,3 +324,17 @@ def test_exit_code_is_the_worst_assets():
     assert worst_exit_code(_results()) == 2
     assert worst_exit_code(_results()[:2]) == 1
     assert worst_exit_code(_results()[:1]) == 0 and worst_exit_code([]) == 0
+
+
+def test_bench_limit_against_a_second_reference():
+    from wrinklepipe.bench import BenchResult, BenchRow
+
+    r = BenchResult("b", "d", baseline="one")
+    r.rows = [BenchRow("one", 10.0), BenchRow("two", 5.0), BenchRow("cached", 0.4)]
+    r.limits_to = {"cached": ("two", 0.05)}
+    r.finish()
+    assert r.ratio_to("cached", "two") == pytest.approx(0.08)
+    assert r.failures() == ["b: cached is 0.08x two > 0.05x"]
+    assert r.limit_text("cached") == "<= 0.05x two (is 0.08x)"
+    r.rows[2].median_s = 0.2
+    assert r.failures() == []

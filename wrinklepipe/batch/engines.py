@@ -74,22 +74,38 @@ def _lost(job: Job, message: str) -> AssetResult:
 
 class LocalEngine:
     """``jobs`` worker processes on this machine; ``timeout``: seconds per asset (None: none).
-    ``target(job, conn)`` is what each process runs (default :func:`worker.child_main`)."""
+    ``target(job, conn, threads)`` is what each process runs (default
+    :func:`worker.child_main`)."""
 
     def __init__(
         self,
         jobs: int | None = None,
         timeout: float | None = None,
-        target: Callable[[Job, Any], None] | None = None,
+        target: Callable[[Job, Any, int], None] | None = None,
     ) -> None:
         self.jobs = max(1, int(jobs or cpu_count()))
         self.timeout = timeout
         self.target = target or worker.child_main
+        #: threads each worker's thread pools (llvmpipe, OpenImageIO) may use: the cores shared
+        #: out, so N workers do not start N x cores threads
+        self.threads = max(1, cpu_count() // self.jobs)
         self.description = f"{self.jobs} local worker process{'es' if self.jobs > 1 else ''}"
 
-    def run(self, jobs: Sequence[Job], on_stage: StageFn) -> Iterator[AssetResult]:
+    @staticmethod
+    def _context() -> Any:
         ctx = multiprocessing.get_context("forkserver")
         ctx.set_forkserver_preload(_PRELOAD)
+        return ctx
+
+    @classmethod
+    def warm(cls) -> None:
+        """Start the fork server (and its imports) now rather than with the first asset."""
+        proc = cls._context().Process(target=_nothing)
+        proc.start()
+        proc.join()
+
+    def run(self, jobs: Sequence[Job], on_stage: StageFn) -> Iterator[AssetResult]:
+        ctx = self._context()
         pending = deque(jobs)
         running: dict[Any, tuple[Any, Job, float]] = {}
         try:
@@ -98,7 +114,9 @@ class LocalEngine:
                     job = pending.popleft()
                     recv, send = ctx.Pipe(duplex=False)
                     proc = ctx.Process(
-                        target=self.target, args=(job, send), name=f"wrinklepipe {job.id}"
+                        target=self.target,
+                        args=(job, send, self.threads),
+                        name=f"wrinklepipe {job.id}",
                     )
                     proc.start()
                     send.close()
@@ -144,6 +162,10 @@ class LocalEngine:
             proc.join()
             conn.close()
             yield _lost(job, f"stopped after the {self.timeout:g} s timeout (--timeout)")
+
+
+def _nothing() -> None:
+    pass
 
 
 def _exit_text(code: int | None) -> str:

@@ -7,12 +7,16 @@ exception too (with the exception's type and message), so one asset never takes 
 
 from __future__ import annotations
 
+import os
 import socket
 import time
 import traceback
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
+
+import OpenImageIO
 
 from wrinklepipe.batch.plan import Job
 from wrinklepipe.batch.results import AssetResult, counts_of, status_for
@@ -68,11 +72,14 @@ def _problems(exc: InputError, job: Job) -> list[dict[str, str]]:
 
 
 def _relative(file: str, job: Job) -> str:
-    """A problem's file as the user knows it: relative to the manifest's folder when inside."""
+    """A problem's file as the user knows it: relative to the batch root when inside (the
+    manifest's folder for a conversion, the output folder for a validation)."""
+    if job.kind == "validate":
+        base, prefix = job.output, Path(job.id)
+    else:
+        base, prefix = job.manifest.parent, Path(job.manifest_rel).parent
     try:
-        return (
-            Path(job.manifest_rel).parent / Path(file).relative_to(job.manifest.parent)
-        ).as_posix()
+        return (prefix / Path(file).relative_to(base)).as_posix()
     except ValueError:
         return str(file)
 
@@ -140,10 +147,10 @@ def _validate(job: Job, stages: _Stages) -> AssetResult:
     )
     try:
         config = load_config(params["config"]) if params.get("config") else Config()
-        options = config.validate_options(ValidateOptions(render=job.options.render))
+        options = config.validate_options(ValidateOptions())  # as validate-asset does
+        if not job.options.render:
+            options = replace(options, render=False)
         if params.get("render_size"):
-            from dataclasses import replace
-
             options = replace(options, render_size=int(params["render_size"]))
         config = Config(config.ignore, config.severity, {})
         stages("loading")
@@ -184,9 +191,18 @@ def run_job(job: Job, emit: Callable[[str], None] = _ignore) -> AssetResult:
 # entry points of the engines
 
 
-def child_main(job: Job, conn: Any) -> None:
+def limit_threads(threads: int) -> None:
+    """Let this process's thread pools use ``threads`` threads: llvmpipe (read when the GL
+    context is made, so before any) and OpenImageIO's."""
+    os.environ["LP_NUM_THREADS"] = str(threads)
+    OpenImageIO.attribute("threads", int(threads))
+
+
+def child_main(job: Job, conn: Any, threads: int | None = None) -> None:
     """A local worker process: run one job, sending ``("stage", name)`` messages and finally
-    ``("done", result)`` through ``conn``."""
+    ``("done", result)`` through ``conn``; ``threads`` caps its thread pools."""
+    if threads:
+        limit_threads(threads)
     try:
         conn.send(("stage", "started"))
         result = run_job(job, lambda stage: conn.send(("stage", stage)))

@@ -35,6 +35,8 @@ class BenchResult:
     rows: list[BenchRow] = field(default_factory=list)
     limits: dict[str, float] = field(default_factory=dict)  # step -> max ratio to the baseline
     limits_s: dict[str, float] = field(default_factory=dict)  # step -> max median seconds
+    #: step -> (another step, max ratio of the two medians): a limit against a second reference
+    limits_to: dict[str, tuple[str, float]] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
 
     def finish(self) -> BenchResult:
@@ -54,7 +56,17 @@ class BenchResult:
             row = next((r for r in self.rows if r.step == step), None)
             if row is not None and not row.median_s <= seconds:
                 out.append(f"{self.name}: {step} {row.median_s:.4g} s > {seconds:g} s")
+        for step, (ref, limit) in self.limits_to.items():
+            ratio = self.ratio_to(step, ref)
+            if ratio is not None and not ratio <= limit:
+                out.append(f"{self.name}: {step} is {ratio:.3g}x {ref} > {limit:g}x")
         return out
+
+    def ratio_to(self, step: str, ref: str) -> float | None:
+        """Median of ``step`` over the median of ``ref`` (None when either is missing)."""
+        a = next((r.median_s for r in self.rows if r.step == step), None)
+        b = next((r.median_s for r in self.rows if r.step == ref), None)
+        return None if a is None or not b else a / b
 
     def limit_text(self, step: str) -> str:
         """How the limits on ``step`` read in a table: ``<= 4x``, ``<= 2 ms``, both, or ''."""
@@ -64,6 +76,11 @@ class BenchResult:
         if step in self.limits_s:
             s = self.limits_s[step]
             parts.append(f"<= {s * 1e3:g} ms" if s < 1 else f"<= {s:g} s")
+        if step in self.limits_to:
+            ref, limit = self.limits_to[step]
+            ratio = self.ratio_to(step, ref)
+            got = f" (is {ratio:.3g}x)" if ratio is not None else ""
+            parts.append(f"<= {limit:g}x {ref}{got}")
         return ", ".join(parts)
 
     def to_json(self) -> dict[str, Any]:
@@ -83,6 +100,7 @@ class BenchResult:
             ],
             "limits": self.limits,
             "limits_s": self.limits_s,
+            "limits_to": {k: list(v) for k, v in self.limits_to.items()},
             "failures": self.failures(),
             "extra": self.extra,
         }

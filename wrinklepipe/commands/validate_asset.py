@@ -12,20 +12,30 @@ HELP = "check a converted folder, glTF/GLB/USD or manifest: rules, GPU render pa
 DESCRIPTION = """\
 Validate a wrinkle asset: a folder written by `convert`, a .gltf/.glb with the
 WRINKLEPIPE_wrinkle_maps extension, a .usda/.usdc/.usdz with the WrinkleMapsAPI schema, a
-source manifest (.toml), a validation bundle (.wpv) or `demo[:ENCODING][@SIZE][+bc]`.
+source manifest (.toml), a validation bundle (.wpv) or `demo[:ENCODING][@SIZE][+bc]`; or a
+folder of outputs (a `batch` OUT, a build tree): every asset folder beneath it is validated on
+its own (--jobs at a time), with a JSON summary (--report), JUnit (--junit) and SARIF (--sarif).
 
 Runs every rule of docs/ISSUES.md, then renders neutral and every expression with the GLSL
 shaders on a headless EGL context (llvmpipe without a GPU) and compares the normal buffer with
 the numpy model at the same pixels.
 
-exit codes: 0 clean, 1 issues at or above --fail-on (default: error), 2 could not run.
+exit codes: 0 clean, 1 issues at or above --fail-on (default: error), 2 could not run (over a
+folder of outputs: the worst asset's).
 """
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("path", metavar="PATH", help="folder, .gltf/.glb, .usd*, manifest, .wpv, demo")
     p.add_argument("--json", action="store_true", help="print the JSON report on stdout")
-    p.add_argument("--report", metavar="FILE", help="write the JSON report to FILE")
+    p.add_argument(
+        "--report", metavar="FILE", help="write the JSON report (a folder of outputs: summary)"
+    )
+    p.add_argument("--junit", metavar="FILE", help="write JUnit XML (one test case per asset)")
+    p.add_argument("--sarif", metavar="FILE", help="write SARIF 2.1.0 (the validation issues)")
+    p.add_argument(
+        "-j", "--jobs", type=int, metavar="N", help="a folder of outputs: worker processes (cores)"
+    )
     p.add_argument(
         "--html", metavar="FILE", help="write an HTML report (images in FILE's <stem>_files/)"
     )
@@ -54,7 +64,48 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _run_folder(args: argparse.Namespace, folders: list) -> int:
+    """validate-asset over a folder of outputs: one job per asset on the local engine."""
+    from pathlib import Path
+
+    from wrinklepipe.batch import AssetOptions, LocalEngine, run_plan
+    from wrinklepipe.batch.folders import plan_validation
+    from wrinklepipe.batch.progress import BatchProgress
+    from wrinklepipe.batch.publish import publish
+    from wrinklepipe.console import emit_json, err
+
+    for flag, value in (("--html", args.html), ("--source", args.source)):
+        if value:
+            raise input_error(flag, f"takes one asset, not a folder of {len(folders)} outputs")
+    if args.jobs is not None and args.jobs < 1:
+        raise input_error("--jobs", f"{args.jobs} is not a number of workers (1 or more)")
+    options = AssetOptions(render=not args.no_render, fail_on=args.fail_on)
+    params = {"config": args.config, "textures": args.textures, "render_size": args.render_size}
+    plan = plan_validation(Path(args.path), folders, options, params)
+    engine = LocalEngine(args.jobs)
+    title = f"wrinklepipe validate-asset: {len(plan.jobs)} assets"
+    with BatchProgress(err, len(plan.jobs), title) as progress:
+        result = run_plan(plan, engine, None, progress.stage, progress.done)
+    doc = publish(
+        result,
+        plan,
+        command="validate-asset",
+        engine=engine.description,
+        console=err,
+        summary_path=args.report,
+        junit_path=args.junit,
+        sarif_path=args.sarif,
+    )
+    if args.json:
+        emit_json(doc)
+    return result.exit_code
+
+
 def run(args: argparse.Namespace) -> int:
+    import time
+    from pathlib import Path
+
+    from wrinklepipe.batch.folders import output_folders
     from wrinklepipe.console import emit_json, err, status
     from wrinklepipe.sources.validation import LoadOptions, load_input
     from wrinklepipe.validate import validate
@@ -64,6 +115,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.render_size is not None and not 16 <= args.render_size <= 4096:
         raise input_error("--render-size", f"{args.render_size} is not in 16..4096")
+    if Path(args.path).is_dir() and (folders := output_folders(Path(args.path))):
+        return _run_folder(args, folders)
+    t0 = time.perf_counter()
     config = load_config(args.config) if args.config else Config()
     options = config.validate_options(ValidateOptions())
     if args.no_render:
@@ -93,4 +147,29 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         emit_json(report_json(report, args.fail_on))
     print_summary(report, err, args.fail_on)
+    if args.junit or args.sarif:
+        _one_asset_reports(args, report, time.perf_counter() - t0)
     return report.exit_code(args.fail_on)
+
+
+def _one_asset_reports(args: argparse.Namespace, report: object, seconds: float) -> None:
+    """JUnit / SARIF for one validated asset (the same reports as over a folder)."""
+    from pathlib import Path
+
+    from wrinklepipe.batch.folders import single_result
+    from wrinklepipe.batch.publish import publish
+    from wrinklepipe.batch.run import BatchRun
+    from wrinklepipe.console import err
+
+    issues = [i.to_json() for i in report.issues]
+    name = str(report.input.get("name", ""))
+    result, plan = single_result(issues, Path(args.path), name, args.fail_on, seconds)
+    publish(
+        BatchRun([result], seconds),
+        plan,
+        command="validate-asset",
+        engine="this process",
+        console=err,
+        junit_path=args.junit,
+        sarif_path=args.sarif,
+    )
