@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -192,22 +193,17 @@ def test_two_real_converts_into_one_output(source, tmp_path):
 
 # 4 ----------------------------------------------------------------------------------------------
 
-_FAKE_WP = """#!/usr/bin/env bash
-# records what the CI script asks for; writes the output folder like convert would
-if [ "$1" = convert ]; then
-  [ -e "$4" ] && [ "$5" != --force ] && exit 2
-  mkdir -p "$4" && echo "$2" > "$4/source.txt"
-fi
-exit 0
-"""
-
 
 def _git(repo: Path, *args: str) -> None:
     subprocess.run(["git", "-C", str(repo), *args], check=True, capture_output=True)
 
 
 def test_ci_outputs_are_unique_by_construction(tmp_path):
-    """Defect 4: ``chars/good`` and ``props/good`` both went to ``$OUT/good``."""
+    """Defect 4: ``chars/good`` and ``props/good`` both went to ``$OUT/good``. The script now
+    hands the changed manifests to ``wrinklepipe batch``, whose outputs are the manifest paths
+    without ``.toml``; outputs that would meet stop the batch before anything is written."""
+    from wrinklepipe.batch import plan_batch
+
     repo = tmp_path / "repo"
     repo.mkdir()
     _git(repo, "init", "-q", "-b", "main")
@@ -233,19 +229,21 @@ def test_ci_outputs_are_unique_by_construction(tmp_path):
         (repo / rel).write_text('schema = "wrinklepipe/manifest@1"\n')
     _git(repo, "add", ".")
     _git(repo, "-c", "user.email=a@b", "-c", "user.name=a", "commit", "-q", "-m", "1")
-    fake = tmp_path / "wp"
-    fake.write_text(_FAKE_WP)
-    fake.chmod(0o755)
-    env = {**os.environ, "BASE": "HEAD~1", "OUT": str(tmp_path / "out"), "WRINKLEPIPE": str(fake)}
+    out = tmp_path / "out"
+    plan = plan_batch([str(repo / "chars"), str(repo / "props")], out, root=repo)
+    assert [j.output for j in plan.jobs] == [
+        out / "chars/good/manifest",
+        out / "props/good/manifest",
+    ]
+    wp = shutil.which("wrinklepipe", path=str(Path(sys.executable).parent))
+    env = {**os.environ, "BASE": "HEAD~1", "OUT": str(out), "WRINKLEPIPE": wp}
+    env["REPORTS"] = str(tmp_path / "reports")
     script = ROOT / "ci" / "asset_conversion.sh"
     res = subprocess.run(["bash", str(script)], cwd=repo, env=env, capture_output=True, text=True)
-    out = tmp_path / "out"
-    assert (out / "chars/good/manifest/source.txt").read_text() == "chars/good/manifest.toml\n"
-    assert (out / "props/good/manifest/source.txt").read_text() == "props/good/manifest.toml\n"
     # x.toml -> out/x and x/manifest.toml -> out/x/manifest would nest: an error, not an overwrite
-    assert res.returncode == 1
-    assert "output collision" in res.stdout and "x/manifest.toml" in res.stdout
-    assert not (out / "x/manifest").exists()
+    assert res.returncode == 2
+    assert "lies inside 'x', the output of x.toml" in " ".join(res.stderr.split())
+    assert not out.exists() or not any(out.iterdir())
 
 
 # 5 ----------------------------------------------------------------------------------------------
