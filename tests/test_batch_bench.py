@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from wrinklepipe.bench import load_all
 
 
@@ -13,3 +15,18 @@ def test_batch_bench_quick_runs():
     assert res.extra["converted_in_cached_rerun"] == 0
     assert res.extra["statuses"] == ["passed"]
     assert res.rows[0].ratio == 1.0 and res.failures() == []
+
+
+def test_convert_bench_quick_runs():
+    res = load_all()["convert"][1](True)
+    steps = [r.step for r in res.rows]
+    assert steps[:4] == [
+        "decode inputs + encode outputs",
+        "decode inputs (ingest)",
+        "encode outputs (PNG, BC, glTF, USD)",
+        "convert (whole)",
+    ]
+    assert "convert: validating" in steps and steps[-1] == "auto_wrinkle_size (alone)"
+    base = res.rows[0].median_s
+    assert base == pytest.approx(res.rows[1].median_s + res.rows[2].median_s)
+    assert res.rows[3].ratio > 1  # converting costs more than its I/O alone

@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 from wrinklepipe.io.package import DEFAULT_PNG_LEVEL
-from wrinklepipe.pipeline import ConvertOptions
+from wrinklepipe.pipeline.convert import ConvertOptions
 
 USD_FORMATS = ("usda", "usdc", "usdz")
 MASK_LAYOUTS = ("rgba", "array", "lr-split", "jimenez8", "metahuman")
@@ -42,6 +42,7 @@ class AssetOptions:
             render=self.render,
             bits=self.bits,
             mask_layout=self.mask_layout,
+            png_level=self.png_level,
         )
 
     def output_fields(self) -> dict[str, Any]:

@@ -22,8 +22,7 @@ from wrinklepipe.batch.plan import Job
 from wrinklepipe.batch.results import AssetResult, counts_of, status_for
 from wrinklepipe.console import stage_listener
 from wrinklepipe.errors import InputError
-from wrinklepipe.io.package import png_compression
-from wrinklepipe.pipeline import convert
+from wrinklepipe.pipeline.convert import convert
 
 
 def _ignore(_stage: str) -> None:
@@ -109,7 +108,7 @@ def _convert(job: Job, stages: _Stages) -> AssetResult:
         worker=socket.gethostname(),
     )
     try:
-        with stage_listener(stages), png_compression(job.options.png_level):
+        with stage_listener(stages):
             res = convert(job.manifest, job.output, job.options.convert_options(job.force))
     except InputError as exc:
         base.problems = _problems(exc, job)
@@ -131,9 +130,9 @@ def _convert(job: Job, stages: _Stages) -> AssetResult:
 
 
 def _validate(job: Job, stages: _Stages) -> AssetResult:
+    from wrinklepipe.sources.validation import LoadOptions, load_input
     from wrinklepipe.validate import ValidateOptions, validate
     from wrinklepipe.validate.config import Config, load_config
-    from wrinklepipe.validate.loader import LoadOptions, load_input
 
     params: dict[str, Any] = dict(job.params)
     base = AssetResult(

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from wrinklepipe.io.package import DEFAULT_PNG_LEVEL
+
 NAME = "convert"
 HELP = "convert a source manifest into glTF + USD + textures + weight curves + report"
 DESCRIPTION = """\
@@ -51,6 +53,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-compress", action="store_true", help="skip DDS/KTX2 textures")
     p.add_argument("--no-validate", action="store_true", help="skip validating the output")
     p.add_argument("--no-render", action="store_true", help="validate without the GPU render pass")
+    p.add_argument(
+        "--png-level",
+        type=int,
+        choices=range(10),
+        default=DEFAULT_PNG_LEVEL,
+        metavar="0-9",
+        help=f"zlib level of the PNGs (default {DEFAULT_PNG_LEVEL}; 9: a few %% smaller, slower)",
+    )
     p.add_argument("--json", action="store_true", help="print report.json on stdout")
 
 
@@ -67,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
         render=not args.no_render,
         bits=args.bits,
         mask_layout=args.mask_layout,
+        png_level=args.png_level,
     )
     result = convert(args.manifest, args.output, options)
     if args.json:

@@ -11,7 +11,7 @@ studio keeps characters::
     chars/ed/manifest.toml      composite, renormalize
     chars/fay/manifest.toml     pd, lerp (Reis)
     npc/gus/manifest.toml       pd, renormalize
-    npc/hal/lod1.toml           pd, clamp01, lr-split masks (a second manifest name)
+    npc/hal/lod1.toml           pd, clamp01, the jimenez8 mask layout (a second manifest name)
 
 Variant ``i`` has map size ``sizes[i % len(sizes)]``.
 """
@@ -34,7 +34,7 @@ VARIANTS: tuple[tuple[str, str, str, str | None], ...] = (
     ("chars/ed/manifest.toml", "composite", "renormalize", None),
     ("chars/fay/manifest.toml", "pd", "lerp", None),
     ("npc/gus/manifest.toml", "pd", "renormalize", None),
-    ("npc/hal/lod1.toml", "pd", "clamp01", "lr-split"),
+    ("npc/hal/lod1.toml", "pd", "clamp01", "jimenez8"),
 )
 
 

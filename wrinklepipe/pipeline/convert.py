@@ -27,7 +27,12 @@ from wrinklepipe import console  # console.status is looked up per call (tests h
 from wrinklepipe.atomic import staged_folder
 from wrinklepipe.errors import input_error
 from wrinklepipe.fidelity.ship import edge_texels
-from wrinklepipe.io.package import PackOptions, package_from_asset
+from wrinklepipe.io.package import (
+    DEFAULT_PNG_LEVEL,
+    PackOptions,
+    package_from_asset,
+    png_compression,
+)
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.outputs.folder import USD_FORMATS, build_outputs, write_folder
 from wrinklepipe.outputs.report import (
@@ -53,6 +58,8 @@ class ConvertOptions:
     ``validate``: run :mod:`wrinklepipe.validate` on the written folder (``render``: with its GPU
     render pass). ``bits``: PNG
     depth of the base and state maps. ``mask_layout``: None = the manifest's ``formats``.
+    ``png_level``: zlib level of every PNG written (textures, the validator's pictures); the
+    same level gives the same bytes.
     """
 
     glb: bool = False
@@ -63,6 +70,7 @@ class ConvertOptions:
     render: bool = True
     bits: int = 8
     mask_layout: str | None = None
+    png_level: int = DEFAULT_PNG_LEVEL
 
 
 @dataclass
@@ -99,9 +107,13 @@ def convert(
     inputs = [manifest.root, *manifest.input_files]
     try:
         # The output checks (not an input, empty or --force) run first, before any work.
-        with staged_folder(output, force=opt.force, inputs=inputs) as tmp:
+        with (
+            staged_folder(output, force=opt.force, inputs=inputs) as tmp,
+            png_compression(opt.png_level),
+        ):
             with console.status("reading inputs"):
                 asset, notes = ingest(manifest)
+            source = asset  # as read: what validation measures the shipped maps against
             with console.status("choosing sizes, scale and formats by fidelity"):
                 asset, stage_rep = run_stages(
                     asset,
@@ -125,7 +137,7 @@ def convert(
             write_folder(tmp, files, pkg, opt.usd_format)
             with console.status("validating"):
                 validation = (
-                    validate_output(tmp, manifest.path, opt.render, html_page=True)
+                    validate_output(tmp, manifest.path, opt.render, html_page=True, source=source)
                     if opt.validate
                     else {"status": "skipped", "reason": "--no-validate"}
                 )

@@ -5,9 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.atomic import write_bytes
 from wrinklepipe.outputs.report import VALIDATION_HTML
-from wrinklepipe.sources.validation import LoadOptions, load_input
+from wrinklepipe.sources.validation import LoadOptions, attach_source, load_input
 from wrinklepipe.validate import ValidateOptions, validate
 from wrinklepipe.validate.report import html_images
 from wrinklepipe.validate.report import report_html as validation_page
@@ -27,7 +28,11 @@ def _scrub(obj: Any, replacements: dict[str, str]) -> Any:
 
 
 def validate_output(
-    folder: Path, manifest_path: Path | None = None, render: bool = True, html_page: bool = False
+    folder: Path,
+    manifest_path: Path | None = None,
+    render: bool = True,
+    html_page: bool = False,
+    source: WrinkleAsset | None = None,
 ) -> dict[str, Any]:
     """Run :mod:`wrinklepipe.validate` on a written folder.
 
@@ -36,9 +41,16 @@ def validate_output(
     relative to the output folder (``.``) and the manifest's folder (``<source>``). With
     ``html_page`` the validator's own page (contact sheet of renders, error heat maps, mask
     overlay, metrics) is written into the folder as ``validation.html`` + ``validation_files/``.
+    ``source``: the asset ``convert`` ingested from the manifest (its maps at source resolution),
+    used instead of reading and decoding the manifest's files again; the written folder itself
+    is always read back, so the validator judges the bytes that were written.
     """
-    src = str(manifest_path) if manifest_path is not None else None
-    report = validate(load_input(folder, LoadOptions(source=src)), ValidateOptions(render=render))
+    if source is not None and manifest_path is not None:
+        inp = attach_source(load_input(folder, LoadOptions()), source, manifest_path)
+    else:
+        src = str(manifest_path) if manifest_path is not None else None
+        inp = load_input(folder, LoadOptions(source=src))
+    report = validate(inp, ValidateOptions(render=render))
     issues = [i.to_json() for i in report.issues]
     replacements = {str(folder): "."}
     if manifest_path is not None:

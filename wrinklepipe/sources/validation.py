@@ -296,7 +296,16 @@ def _load_manifest(p: Path) -> ValidationInput:
 
 
 def _attach_source(inp: ValidationInput, manifest: Path) -> ValidationInput:
-    src = _source_asset(manifest)
+    m = load_manifest(manifest)
+    src, _ = guard_reader(lambda: ingest(m), manifest, "the manifest's files")
+    return attach_source(inp, src, manifest)
+
+
+def attach_source(inp: ValidationInput, src: WrinkleAsset, manifest: Path) -> ValidationInput:
+    """Use ``src`` (an ingested asset at its source resolution: base, states, masks, budget) as
+    the source the shipped textures are measured against. ``convert`` passes the asset it has
+    just ingested, so the validator neither re-reads nor re-decodes the source files; the
+    shipped side is still what was read back from the written folder."""
     a = inp.asset
     names = list(src.region_names)
     missing = [r for r in a.region_names if r not in names]

@@ -1,0 +1,85 @@
+"""The faster convert: validation reuses the asset convert ingested (no second read and decode
+of the source files) and still judges the written folder; PNGs at a chosen zlib level, the
+same bytes on every run."""
+
+from __future__ import annotations
+
+import json
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.io.package import DEFAULT_PNG_LEVEL, png_bytes, png_compression, png_level
+from wrinklepipe.pipeline import validation as pv
+from wrinklepipe.pipeline.convert import ConvertOptions, convert
+
+
+@pytest.fixture(scope="module")
+def manifest(tmp_path_factory) -> Path:
+    return write_demo_source(tmp_path_factory.mktemp("src") / "demo", 32)
+
+
+def _idat(png: bytes) -> bytes:
+    i = png.index(b"IDAT")
+    n = int.from_bytes(png[i - 4 : i], "big")
+    return png[i + 4 : i + 4 + n]
+
+
+def test_png_level_context_and_default():
+    px = (np.arange(64 * 64 * 3, dtype=np.uint32) % 251).astype(np.uint8).reshape(64, 64, 3)
+    assert png_level() == DEFAULT_PNG_LEVEL == 6
+    with png_compression(1):
+        assert png_level() == 1
+        fast = png_bytes(px)
+    assert png_level() == 6
+    # the IDAT stream is zlib at the level asked for: the same bytes as zlib itself makes
+    rows = np.concatenate([np.full((64, 1), 2, np.uint8), px.reshape(64, -1)], axis=1)
+    rows[1:, 1:] = px.reshape(64, -1)[1:] - px.reshape(64, -1)[:-1]
+    assert _idat(fast) == zlib.compress(rows.tobytes(), 1)
+    assert _idat(png_bytes(px, level=9)) == zlib.compress(rows.tobytes(), 9)
+    with pytest.raises(ValueError):
+        with png_compression(10):
+            pass
+
+
+def test_validation_reuses_the_ingested_source_and_judges_the_written_folder(
+    manifest, tmp_path, monkeypatch
+):
+    out = tmp_path / "out"
+    reads = []
+    real = pv.load_input
+
+    def counting(path, options=None):
+        reads.append((Path(path), options))
+        return real(path, options)
+
+    monkeypatch.setattr(pv, "load_input", counting)
+    result = convert(manifest, out, ConvertOptions(render=False))
+    # one read: the written folder (in its staging place), not the manifest's source files
+    assert len(reads) == 1 and reads[0][1].source is None
+    assert reads[0][0].name == out.name and reads[0][0].parent != manifest.parent
+    # the same judgement as reading the source again from the manifest
+    again = pv.validate_output(out, manifest, render=False)
+    got = json.loads((out / "report.json").read_text())["validation"]
+    assert got == json.loads(json.dumps(again).replace(str(manifest.parent), "<source>"))
+    assert result.report["validation"]["status"] == "ran"
+
+
+def test_png_level_changes_bytes_not_pixels_and_reruns_are_identical(manifest, tmp_path):
+    from wrinklepipe.io.package import png_pixels
+
+    a, b, c = (tmp_path / n for n in "abc")
+    convert(manifest, a, ConvertOptions(validate=False, compressed=False))
+    convert(manifest, b, ConvertOptions(validate=False, compressed=False))
+    convert(manifest, c, ConvertOptions(validate=False, compressed=False, png_level=9))
+    tex = sorted(p.relative_to(a) for p in (a / "textures").glob("*.png"))
+    assert tex
+    for rel in tex:
+        assert (a / rel).read_bytes() == (b / rel).read_bytes()
+        assert np.array_equal(
+            png_pixels((a / rel).read_bytes()), png_pixels((c / rel).read_bytes())
+        )
+    assert any((a / r).read_bytes() != (c / r).read_bytes() for r in tex)

@@ -1,0 +1,115 @@
+"""Benchmark ``convert``: the 2048^2 demo's whole conversion against the I/O it cannot avoid.
+
+Baseline (same run): **decoding its inputs** (``ingest``: the 16-bit maps, the masks, the mesh)
+plus **encoding its outputs** (the shipped package read back from the folder convert wrote,
+encoded again: every PNG at the level convert writes, every block-compressed map in the format
+convert chose, the glTF JSON and buffer, the USD layer). Steps:
+
+* ``convert (whole)``: ``convert`` with its defaults (validation and render pass included);
+  limit 3x the baseline;
+* ``convert: <stage>``: the stages of that run, from its own stage announcements (``validating``
+  includes writing the folder);
+* ``auto_wrinkle_size``: the automatic wrinkle-size search alone (inside ``convert`` when the
+  manifest says ``wrinkle = "auto"``, as the demo's does).
+
+Each step runs once (a 2048 convert is a minute of work).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from wrinklepipe.bench import BenchResult, BenchRow, benchmark
+from wrinklepipe.console import stage_listener
+from wrinklepipe.demo.source import demo_source_dir
+from wrinklepipe.io.gltf_write import gltf_document
+from wrinklepipe.io.package import png_bytes
+from wrinklepipe.io.usd_write import write_usd
+from wrinklepipe.manifest import load_manifest
+from wrinklepipe.normals.compress import encode_bc, pack_rgba, pad_to_blocks
+from wrinklepipe.pipeline.convert import convert
+from wrinklepipe.pipeline.ingest import ingest
+from wrinklepipe.pipeline.prepare import auto_wrinkle_size
+from wrinklepipe.sources.package import read_package
+
+BASELINE = "decode inputs + encode outputs"
+WHOLE = "convert (whole)"
+_BLOCK = ("bc1", "bc3nm", "bc5", "bc7")
+_GROUP = {"base_normal": "base", "state": "wrinkle"}
+
+
+def _timed(fn: Callable[[], Any]) -> tuple[float, Any]:
+    t0 = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - t0, out
+
+
+def _encode_outputs(pkg: Any, chosen: dict[str, str], folder: Path) -> None:
+    for t in pkg.textures:
+        png_bytes(t.pixels)
+        fmt = chosen.get(_GROUP.get(t.role, ""), "png")
+        if fmt in _BLOCK and t.bits == 8:
+            padded, _ = pad_to_blocks(t.pixels[..., :2])
+            encode_bc(pack_rgba(padded, fmt), fmt)
+    gltf_document(pkg)
+    write_usd(pkg, folder / f"{pkg.name}.usda", write_textures=False)
+
+
+@benchmark("convert", "convert the 2048^2 demo against decoding its inputs + encoding its outputs")
+def bench_convert(quick: bool = False) -> BenchResult:
+    size = 64 if quick else 2048
+    load_before = os.getloadavg()
+    manifest = demo_source_dir(size)
+    stages: dict[str, float] = {}
+    current: list[Any] = [None, 0.0]
+
+    def on_stage(name: str) -> None:
+        now = time.perf_counter()
+        if current[0] is not None:
+            stages[current[0]] = stages.get(current[0], 0.0) + now - current[1]
+        current[:] = [name, now]
+
+    with tempfile.TemporaryDirectory() as work:
+        w = Path(work)
+        t0 = time.perf_counter()
+        with stage_listener(on_stage):
+            result = convert(manifest, w / "out")
+        t_convert = time.perf_counter() - t0
+        on_stage("")
+        m = load_manifest(manifest)
+        t_decode, (asset, _) = _timed(lambda: ingest(m))
+        pkg = read_package(w / "out")
+        chosen = {g: c["chosen"] for g, c in result.report.get("compression", {}).items()}
+        (w / "enc").mkdir()
+        t_encode, _ = _timed(lambda: _encode_outputs(pkg, chosen, w / "enc"))
+        t_auto, (auto, _) = _timed(lambda: auto_wrinkle_size(asset))
+    res = BenchResult(
+        "convert",
+        f"demo at {size}^2 (wrinkle = auto, validation with the render pass)"
+        + (" (quick)" if quick else ""),
+        baseline=BASELINE,
+    )
+    res.rows = [
+        BenchRow(BASELINE, t_decode + t_encode),
+        BenchRow("decode inputs (ingest)", t_decode),
+        BenchRow("encode outputs (PNG, BC, glTF, USD)", t_encode),
+        BenchRow(WHOLE, t_convert),
+        *[BenchRow(f"convert: {k}", v) for k, v in stages.items() if k],
+        BenchRow("auto_wrinkle_size (alone)", t_auto, note=f"chose {auto}"),
+    ]
+    if not quick:
+        res.limits = {WHOLE: 3.0}
+    res.extra = {
+        "size": size,
+        "compression": chosen,
+        "auto_wrinkle_size": auto,
+        "cores": os.cpu_count(),
+        "load_average_before": [round(x, 2) for x in load_before],
+        "load_average_after": [round(x, 2) for x in os.getloadavg()],
+    }
+    return res.finish()
