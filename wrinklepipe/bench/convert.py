@@ -8,9 +8,7 @@ convert chose, the glTF JSON and buffer, the USD layer). Steps:
 * ``convert (whole)``: ``convert`` with its defaults (validation and render pass included);
   limit 3x the baseline;
 * ``convert: <stage>``: the stages of that run, from its own stage announcements (``validating``
-  includes writing the folder);
-* ``auto_wrinkle_size``: the automatic wrinkle-size search alone (inside ``convert`` when the
-  manifest says ``wrinkle = "auto"``, as the demo's does).
+  includes writing the folder; the automatic choices, fidelity's, are their own stage).
 
 Each step runs once (a 2048 convert is a minute of work).
 """
@@ -34,7 +32,6 @@ from wrinklepipe.manifest import load_manifest
 from wrinklepipe.normals.compress import encode_bc, pack_rgba, pad_to_blocks
 from wrinklepipe.pipeline.convert import convert
 from wrinklepipe.pipeline.ingest import ingest
-from wrinklepipe.pipeline.prepare import auto_wrinkle_size
 from wrinklepipe.sources.package import read_package
 
 BASELINE = "decode inputs + encode outputs"
@@ -82,12 +79,11 @@ def bench_convert(quick: bool = False) -> BenchResult:
         t_convert = time.perf_counter() - t0
         on_stage("")
         m = load_manifest(manifest)
-        t_decode, (asset, _) = _timed(lambda: ingest(m))
+        t_decode, _ = _timed(lambda: ingest(m))
         pkg = read_package(w / "out")
         chosen = {g: c["chosen"] for g, c in result.report.get("compression", {}).items()}
         (w / "enc").mkdir()
         t_encode, _ = _timed(lambda: _encode_outputs(pkg, chosen, w / "enc"))
-        t_auto, (auto, _) = _timed(lambda: auto_wrinkle_size(asset))
     res = BenchResult(
         "convert",
         f"demo at {size}^2 (wrinkle = auto, validation with the render pass)"
@@ -100,14 +96,12 @@ def bench_convert(quick: bool = False) -> BenchResult:
         BenchRow("encode outputs (PNG, BC, glTF, USD)", t_encode),
         BenchRow(WHOLE, t_convert),
         *[BenchRow(f"convert: {k}", v) for k, v in stages.items() if k],
-        BenchRow("auto_wrinkle_size (alone)", t_auto, note=f"chose {auto}"),
     ]
     if not quick:
         res.limits = {WHOLE: 3.0}
     res.extra = {
         "size": size,
         "compression": chosen,
-        "auto_wrinkle_size": auto,
         "cores": os.cpu_count(),
         "load_average_before": [round(x, 2) for x in load_before],
         "load_average_after": [round(x, 2) for x in os.getloadavg()],
