@@ -15,9 +15,10 @@ log() { printf '\033[1m[wrinklepipe setup]\033[0m %s\n' "$*" >&2; }
 # 1. Debian packages for headless OpenGL (EGL + Mesa llvmpipe), the HLSL -> SPIR-V -> GLSL
 #    compilers the shader tests use (glslang-tools, spirv-cross), chromium (the browser the
 #    three.js viewer's tests drive, headless) and Node.js for the npm tools.
-#    WRINKLEPIPE_BLENDER=1 also installs Debian's blender (the Blender export script's test).
+#    WRINKLEPIPE_BLENDER=1 also installs Debian's blender (the Blender export script's test) and
+#    python3-numpy (its glTF importer needs it).
 APT_PKGS="libegl1 libgl1 libgl1-mesa-dri glslang-tools spirv-cross chromium"
-if [ "${WRINKLEPIPE_BLENDER:-0}" = 1 ]; then APT_PKGS="$APT_PKGS blender"; fi
+if [ "${WRINKLEPIPE_BLENDER:-0}" = 1 ]; then APT_PKGS="$APT_PKGS blender python3-numpy"; fi
 command -v npm >/dev/null 2>&1 || APT_PKGS="$APT_PKGS nodejs npm"
 if ! command -v python3 >/dev/null 2>&1; then
   APT_PKGS="$APT_PKGS python3 python3-venv"

@@ -9,9 +9,8 @@ import pytest
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo.package import demo_package
-from wrinklepipe.export.files import export_files, flip_green
+from wrinklepipe.export.textures import to_directx
 from wrinklepipe.io.gltf_write import write_gltf
-from wrinklepipe.io.package import png_pixels
 from wrinklepipe.io.usd_write import write_usd
 
 
@@ -28,58 +27,26 @@ def written(pkg, tmp_path_factory):
     return folder
 
 
-def test_flip_green_negates_y_exactly(pkg):
-    flipped = flip_green(pkg)
-    for t, f in zip(pkg.textures, flipped.textures):
+def test_directx_negates_y_in_each_maps_value_mapping(pkg):
+    from wrinklepipe import codec
+
+    flipped = to_directx(pkg)
+    version = int(pkg.meta.get("mapping", 1))
+    for t, f in zip(pkg.textures, flipped.textures, strict=True):
         if t.role == "mask":
             assert np.array_equal(t.pixels, f.pixels)
             continue
-        assert np.array_equal(f.pixels[..., 1], 255 - t.pixels[..., 1])
         assert np.array_equal(f.pixels[..., [0, 2]], t.pixels[..., [0, 2]])
-    # decoded: y -> -y (0.5 + 0.5 (-y) = 1 - (0.5 + 0.5 y))
-    q = pkg.texture("base_normal").pixels[..., 1].astype(np.float64)
-    y = 2 * q / 255 - 1
-    y_dx = 2 * (255 - q) / 255 - 1
-    assert np.allclose(y_dx, -y, atol=1e-12)
-    # its own inverse
-    back = flip_green(flipped)
-    assert all(np.array_equal(a.pixels, b.pixels) for a, b in zip(pkg.textures, back.textures))
-
-
-def test_unreal_preset(pkg):
-    files, notes = export_files(pkg, "unreal")
-    setup = json.loads(files["unreal/wrinkle_setup.json"])
-    assert setup["convention"] == "directx"
-    assert "unreal/wrinkle.hlsl" in files
-    assert not any(f.endswith(".gltf") for f in files)
-    base = setup["base"]
-    if base.endswith(".dds"):
-        from wrinklepipe.normals import compress, dds
-
-        img = dds.read_dds(files[base])
-        assert img.format == "bc5"
-        rgba = compress.decode_bc(img.levels[0], img.width, img.height, "bc5")
-        g_src = pkg.texture("base_normal").pixels[..., 1].astype(int)
-        # BC5 keeps G within a few levels of 255 - G (the DirectX green)
-        assert np.abs(rgba[..., 1].astype(int) - (255 - g_src)).max() <= 8
-    else:
-        px = png_pixels(files[base])
-        assert np.array_equal(px[..., 1], 255 - pkg.texture("base_normal").pixels[..., 1])
-        assert any("compression" in n for n in notes)
-    # masks are never converted
-    assert np.array_equal(png_pixels(files["unreal/mask_0.png"]), pkg.texture("mask_0").pixels)
-
-
-@pytest.mark.parametrize("engine, shader", [("unity", "hlsl"), ("godot", "glsl"), ("blender", "")])
-def test_plus_y_presets_keep_the_maps(pkg, engine, shader):
-    files, _ = export_files(pkg, engine)
-    setup = json.loads(files[f"{engine}/wrinkle_setup.json"])
-    assert setup["convention"] == "opengl"
-    assert "demo.gltf" in files and "demo.bin" in files
-    for t in pkg.textures:
-        assert np.array_equal(png_pixels(files[f"{engine}/{t.name}.png"]), t.pixels), t.name
-    assert (f"{engine}/wrinkle.{shader}" in files) == bool(shader)
-    assert setup["masks"]["table"] == pkg.meta["masks"]["table"]
+        q = t.pixels[..., 1].astype(np.int64)
+        if t.role == "state" and pkg.meta["encoding"] in ("pd", "diff") and version == 2:
+            expect = np.clip(256 - q, 0, 255)  # v2: 128 + 127 t, so -t is 256 - q
+        else:
+            expect = 255 - q  # normal maps: 2 v - 1
+        assert np.array_equal(f.pixels[..., 1], expect), t.name
+        m = codec.mapping(version if t.role == "state" else 1)
+        y = m.decode(t.pixels[..., 1], 8)
+        inner = np.abs(y) < 1  # the one texel of v2 that is never written (q = 0) aside
+        np.testing.assert_array_equal(m.decode(f.pixels[..., 1], 8)[inner], -y[inner])
 
 
 def test_cli_from_folder_and_usdz_agree(written, tmp_path):

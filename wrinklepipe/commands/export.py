@@ -1,4 +1,4 @@
-"""``wrinklepipe export``: engine presets over a converted asset (a thin layer over the writers)."""
+"""``wrinklepipe export``: a converted asset as a complete engine folder (a thin layer)."""
 
 from __future__ import annotations
 
@@ -7,18 +7,22 @@ import argparse
 NAME = "export"
 HELP = "export a converted asset for Unreal, Unity, Godot or Blender"
 DESCRIPTION = """\
-Read what `convert` wrote (the output folder, a .gltf/.glb or a .usda/.usdc/.usdz) and write the
-wrinkle maps the way an engine wants them:
+Read what `convert` wrote (the output folder, a .gltf/.glb or a .usda/.usdc/.usdz) and write one
+folder an engine imports: the mesh (glTF), the textures in the engine's format and green
+convention, the wrinkle shader generated from wrinklepipe's template (the whole model), the code
+that drives the region weights, the weight curves named the engine's way, wrinkle_setup.json
+and a README with the import steps:
 
-  unreal   DirectX normal maps (green flipped: stored G -> 255 - G) as BC5 .dds (a note says
-           when BC5 exceeds the error budget), masks as PNG, HLSL combine function
-  unity    OpenGL (+Y) PNGs + the glTF (for glTFast / UnityGLTF), HLSL combine function
-  godot    OpenGL (+Y) PNGs + the glTF, GLSL combine function
-  blender  OpenGL (+Y) PNGs + the glTF
+  unreal   glTF for Interchange; DirectX (-Y) BC5 .dds with mip chains (PNG with a note when
+           BC5 is over the budget); two material Custom nodes (WP_Decode, WP_Wrinkle); one
+           scalar parameter per region, curves as a CurveTable CSV
+  unity    glTF; +Y texture-array strips; Shader Graph Custom Function WrinkleMaps.hlsl;
+           WrinkleWeights.cs plays the curves
+  godot    glTF; +Y texture-array strips; wrinkle.gdshader; wrinkle_weights.gd
+  blender  glTF; +Y PNGs; build_wrinkles.py builds the node group, drivers and keys
 
-Every preset writes ENGINE/wrinkle_setup.json (files, convention, encoding, scale, policy,
-channel table, regions, expressions) and the weight curves as CSV/JSON. Masks are never
-converted. The folder is written atomically; --force replaces a non-empty OUT.
+An asset a target cannot express is refused with one message (exit 2, nothing written). The
+folder is written atomically and byte-identical on a rerun; --force replaces a non-empty OUT.
 
 examples:
   wrinklepipe export build/demo --engine unreal -o build/demo_unreal

@@ -1,101 +1,336 @@
-"""A packed asset -> the files of one engine's export (``{relative path: bytes}``)."""
+"""A packed asset -> the files of one engine's export (``{relative path: bytes}``) and notes.
+
+Every engine gets, in one flat folder (subfolders ``textures/`` and ``curves/`` only): the mesh as
+glTF (Unreal: for its Interchange importer), the textures in the engine's format and green
+convention, the wrinkle shader generated from the one template (:mod:`wrinklepipe.shading`),
+the engine-side code that drives the weights, the weight curves named the engine's way,
+``wrinkle_setup.json`` (files, encoding, policy, the shader's slot table) and a README with the
+import steps. A combination an engine cannot express is refused with one message.
+"""
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from wrinklepipe import codec
 from wrinklepipe.atomic import dumps_json
-from wrinklepipe.export.presets import ENGINE_PRESETS
-from wrinklepipe.export.shaders import GLSL, HLSL
-from wrinklepipe.io.gltf_write import gltf_document
-from wrinklepipe.io.package import WrinklePackage, png_bytes
-from wrinklepipe.outputs.compression import compressed_files
-from wrinklepipe.outputs.curves import curve_files, format_float32
+from wrinklepipe.errors import input_error
+from wrinklepipe.export import readme
+from wrinklepipe.export.gltf import plain_gltf
+from wrinklepipe.export.presets import ENGINE_PRESETS, EnginePreset
+from wrinklepipe.export.textures import (
+    block_dds,
+    mapping_version,
+    rgba_masks,
+    strip_png,
+    to_8bit_states,
+    to_directx,
+)
+from wrinklepipe.io.package import WrinklePackage, png_bytes, safe_name
+from wrinklepipe.normals.compress import Budget
+from wrinklepipe.outputs.curves import format_float32
+from wrinklepipe.shading import godot, hlsl
+from wrinklepipe.shading.setup import ShaderSetup, from_meta
+
+RUNTIME_DIR = Path(__file__).resolve().parent.parent / "data" / "engines"
+#: Error budget for block-compressed copies (the manifest's default budget).
+BUDGET = Budget(max_mean_deg=0.5, max_p99_deg=2.0)
 
 
-def flip_green(pkg: WrinklePackage) -> WrinklePackage:
-    """OpenGL <-> DirectX: stored green ``q -> top - q`` on the base and state maps.
+@dataclass
+class Export:
+    """What is being built: the package as the engine gets it, files, notes, names."""
 
-    For every encoding this negates the tangent-space y: ``0.5 + 0.5 (-y) = 1 - (0.5 + 0.5 y)``
-    (base, ``full``, ``composite``), likewise the PD slope ``d.y`` and the ``diff`` delta's y.
-    Exact on integers, and its own inverse. Masks are unchanged.
-    """
-    out = []
-    for t in pkg.textures:
-        if t.role in ("base_normal", "state"):
-            px = t.pixels.copy()
-            top = np.iinfo(px.dtype).max
-            px[..., 1] = top - px[..., 1]
-            t = replace(t, pixels=px)
-        out.append(t)
-    return replace(pkg, textures=out)
+    pkg: WrinklePackage
+    preset: EnginePreset
+    files: dict[str, bytes] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    setup: dict[str, Any] = field(default_factory=dict)
+    names: list[str] = field(default_factory=list)  # per region: parameter / curve name
+
+
+def _names(regions: list[str], style: str) -> list[str]:
+    taken: set[str] = set()
+    if style == "region":
+        return list(regions)
+    if style == "snake":
+        return [hlsl.identifier(r.lower(), taken) for r in regions]
+    return [hlsl.identifier(r, taken) for r in regions]
+
+
+def _mapping_affine(pkg: WrinklePackage, bits: int) -> dict[str, float]:
+    """``t = v * mul + add`` for a sampled state texel (Blender's nodes use it)."""
+    m = codec.mapping(mapping_version(pkg) if pkg.meta["encoding"] in ("pd", "diff") else 1)
+    mul, add = m.affine(bits)
+    return {"mul": float(mul), "add": float(add), "clampMin": -1.0 if m.version >= 2 else None}
+
+
+def _curves(ex: Export) -> list[str]:
+    """``curves/NAME.json`` (all engines) and, for Unreal, ``curves/NAME.csv`` as a CurveTable
+    (first row the key times, then one row per curve, named like the material parameters)."""
+    paths = []
+    taken: set[str] = set()
+    regions = [r["name"] for r in ex.pkg.meta["regions"]]
+    for c in ex.pkg.curves:
+        stem = safe_name(c.name, taken)
+        values = np.asarray(c.values, np.float32)
+        js = {
+            "name": c.name,
+            "regions": ex.names,
+            "regionNames": regions,
+            "regionCount": len(regions),
+            "times": [float(np.float32(t)) for t in c.times],
+            "values": [float(v) for v in values.reshape(-1)],
+            "interpolation": "linear",
+        }
+        ex.files[f"curves/{stem}.json"] = dumps_json(js).encode("utf-8")
+        paths.append(f"curves/{stem}.json")
+        if ex.preset.name == "unreal":
+            rows = ["---," + ",".join(format_float32(t) for t in c.times)]
+            for r, name in enumerate(ex.names):
+                rows.append(name + "," + ",".join(format_float32(v) for v in values[:, r]))
+            ex.files[f"curves/{stem}.csv"] = ("\n".join(rows) + "\n").encode("utf-8")
+            paths.append(f"curves/{stem}.csv")
+    return paths
+
+
+def _layout(channels: int) -> str:
+    return "rgb" if channels >= 3 else "rg"
+
+
+def _shader_setup(ex: Export, base_layout: str, state_layout: str, bits: int) -> ShaderSetup:
+    pkg = ex.pkg
+    chans = [pkg.texture(n).pixels.shape[-1] for n in pkg.meta["masks"]["textures"]]
+    conv = ex.preset.convention
+    setup = from_meta(pkg.meta, chans, base_layout, state_layout, bits, conv, conv)
+    problems = setup.problems()
+    if problems:
+        raise input_error(pkg.name, f"cannot export for {ex.preset.name}: " + "; ".join(problems))
+    return setup
+
+
+def _same_size(ex: Export, role: str, names: list[str]) -> None:
+    shapes = {ex.pkg.texture(n).pixels.shape for n in names}
+    if len(shapes) > 1:
+        raise input_error(
+            ex.pkg.name,
+            f"cannot export for {ex.preset.name}: the {role} textures differ in size or channels "
+            f"({sorted(shapes)}); a texture array needs one size",
+        )
+
+
+# ------------------------------------------------------------------------------------------------
+# per engine
+
+
+def _unreal(ex: Export) -> None:
+    pkg = ex.pkg
+    meta = pkg.meta
+    mesh, _ = plain_gltf(pkg, keep_normal=False)
+    ex.files.update(mesh)
+    ex.notes.append("normal maps converted to DirectX (-Y): y negated in each map's value mapping")
+    base = next(t for t in pkg.textures if t.role == "base_normal")
+    res = block_dds(pkg, base, "bc5", BUDGET)
+    if res.data is not None:
+        ex.files["textures/base_normal.dds"] = res.data
+        ex.setup["base"] = {
+            "file": "textures/base_normal.dds",
+            "format": "bc5",
+            "levels": res.levels,
+        }
+        base_layout = "rg"
+    else:
+        ex.files["textures/base_normal.png"] = png_bytes(base.pixels)
+        ex.setup["base"] = {"file": "textures/base_normal.png", "format": "png"}
+        base_layout = _layout(base.pixels.shape[-1])
+        ex.notes.append(
+            f"base: BC5 is over the error budget (mean {res.mean_deg:.2f}, p99 "
+            f"{res.p99_deg:.2f} deg against the stored map; budget {BUDGET.max_mean_deg} / "
+            f"{BUDGET.max_p99_deg}): shipped as PNG"
+        )
+    states = [pkg.texture(s["texture"]) for s in meta["states"]]
+    results = []
+    if meta["encoding"] != "diff":
+        results = [block_dds(pkg, t, "bc5", BUDGET) for t in states]
+    if results and all(r.data is not None for r in results):
+        ex.setup["states"] = []
+        for s, t, r in zip(meta["states"], states, results, strict=True):
+            ex.files[f"textures/{t.name}.dds"] = r.data
+            ex.setup["states"].append(
+                {
+                    "name": s["name"],
+                    "file": f"textures/{t.name}.dds",
+                    "format": "bc5",
+                    "levels": r.levels,
+                }
+            )
+        state_layout, bits = "rg", 8
+    else:
+        ex.setup["states"] = []
+        for s, t in zip(meta["states"], states, strict=True):
+            ex.files[f"textures/{t.name}.png"] = png_bytes(t.pixels)
+            ex.setup["states"].append(
+                {"name": s["name"], "file": f"textures/{t.name}.png", "format": "png"}
+            )
+        state_layout, bits = _layout(states[0].pixels.shape[-1]), states[0].bits
+        if meta["encoding"] == "diff":
+            ex.notes.append("states: diff maps hold three deltas (BC5 holds two): shipped as PNG")
+        else:
+            worst = max(results, key=lambda r: r.p99_deg)
+            ex.notes.append(
+                f"states: BC5 is over the error budget (worst p99 {worst.p99_deg:.2f} deg): "
+                "shipped as PNG"
+            )
+    masks = meta["masks"]["textures"]
+    for n in masks:
+        ex.files[f"textures/{n}.png"] = png_bytes(pkg.texture(n).pixels)
+    ex.setup["masks"] = {
+        "layout": meta["masks"]["layout"],
+        "files": [f"textures/{n}.png" for n in masks],
+        "table": meta["masks"]["table"],
+    }
+    setup = _shader_setup(ex, base_layout, state_layout, bits)
+    try:
+        nodes = hlsl.unreal_nodes(setup)
+    except ValueError as exc:
+        raise input_error(pkg.name, f"cannot export for unreal: {exc}") from None
+    ex.names = [n for n, _ in nodes.region_inputs]
+    ex.files["WP_Decode.hlsl"] = nodes.decode.code.encode("utf-8")
+    ex.files["WP_Wrinkle.hlsl"] = nodes.wrinkle.code.encode("utf-8")
+    ex.setup["unreal"] = {
+        "nodes": [
+            {
+                "description": n.description,
+                "output": n.output,
+                "code": f"{n.description}.hlsl",
+                "inputs": [{"name": a, "connect": b} for a, b in n.inputs],
+            }
+            for n in (nodes.decode, nodes.wrinkle)
+        ]
+    }
+    ex.setup["shader"] = setup
+
+
+def _arrays(ex: Export) -> ShaderSetup:
+    """Unity and Godot: the glTF with its base normal map, states and masks as array strips."""
+    pkg = ex.pkg
+    meta = pkg.meta
+    mesh, base_uri = plain_gltf(pkg, keep_normal=True)
+    ex.files.update(mesh)
+    states = [s["texture"] for s in meta["states"]]
+    masks = meta["masks"]["textures"]
+    _same_size(ex, "state", states)
+    _same_size(ex, "mask", masks)
+    ex.files["textures/wrinkle_states.png"] = strip_png([pkg.texture(n).pixels for n in states])
+    ex.files["textures/wrinkle_masks.png"] = strip_png([pkg.texture(n).pixels for n in masks])
+    ex.setup["base"] = {"file": base_uri, "format": "png"}
+    ex.setup["states"] = [
+        {"name": s["name"], "file": "textures/wrinkle_states.png", "layer": k}
+        for k, s in enumerate(meta["states"])
+    ]
+    ex.setup["statesArray"] = {"file": "textures/wrinkle_states.png", "layers": len(states)}
+    ex.setup["masks"] = {
+        "layout": meta["masks"]["layout"],
+        "file": "textures/wrinkle_masks.png",
+        "layers": len(masks),
+        "table": meta["masks"]["table"],
+    }
+    st = pkg.texture(states[0])
+    # the engines compress imported normal maps to two channels: read x, y and rebuild z
+    setup = _shader_setup(ex, "rg", _layout(st.pixels.shape[-1]), st.bits)
+    ex.setup["shader"] = setup
+    return setup
+
+
+def _unity(ex: Export) -> None:
+    ex.names = _names([r["name"] for r in ex.pkg.meta["regions"]], "region")
+    _arrays(ex)
+    setup = ex.setup["shader"]
+    ex.files["WrinkleMaps.hlsl"] = hlsl.unity_file(setup, f"WRINKLEPIPE_{ex.pkg.name}").encode()
+    ex.files["WrinkleWeights.cs"] = (RUNTIME_DIR / "unity" / "WrinkleWeights.cs").read_bytes()
+
+
+def _godot(ex: Export) -> None:
+    ex.names = _names([r["name"] for r in ex.pkg.meta["regions"]], "snake")
+    _arrays(ex)
+    ex.files["wrinkle.gdshader"] = godot.godot_shader(ex.setup["shader"]).encode("utf-8")
+    ex.files["wrinkle_weights.gd"] = (RUNTIME_DIR / "godot" / "wrinkle_weights.gd").read_bytes()
+
+
+def _blender(ex: Export) -> None:
+    pkg = ex.pkg
+    meta = pkg.meta
+    ex.names = ["wp_" + n for n in _names([r["name"] for r in meta["regions"]], "identifier")]
+    mesh, base_uri = plain_gltf(pkg, keep_normal=True)
+    ex.files.update(mesh)
+    ex.setup["base"] = {"file": base_uri, "format": "png"}
+    ex.setup["states"] = []
+    for s in meta["states"]:
+        t = pkg.texture(s["texture"])
+        ex.files[f"textures/{t.name}.png"] = png_bytes(t.pixels)
+        ex.setup["states"].append({"name": s["name"], "file": f"textures/{t.name}.png"})
+    masks = meta["masks"]["textures"]
+    for n in masks:
+        ex.files[f"textures/{n}.png"] = png_bytes(pkg.texture(n).pixels)
+    ex.setup["masks"] = {
+        "layout": meta["masks"]["layout"],
+        "files": [f"textures/{n}.png" for n in masks],
+        "table": meta["masks"]["table"],
+    }
+    st = pkg.texture(meta["states"][0]["texture"])
+    base = next(t for t in pkg.textures if t.role == "base_normal")
+    ex.setup["shader"] = _shader_setup(
+        ex, _layout(base.pixels.shape[-1]), _layout(st.pixels.shape[-1]), st.bits
+    )
+    ex.setup["stateMapping"] = _mapping_affine(pkg, st.bits)
+    ex.files["build_wrinkles.py"] = (RUNTIME_DIR / "blender" / "build_wrinkles.py").read_bytes()
+
+
+_ENGINES = {"unreal": _unreal, "unity": _unity, "godot": _godot, "blender": _blender}
 
 
 def export_files(pkg: WrinklePackage, engine: str) -> tuple[dict[str, bytes], list[str]]:
-    """The files of an engine export as ``{relative path: bytes}`` and notes."""
+    """The files of an engine export as ``{relative path: bytes}`` and the notes."""
     preset = ENGINE_PRESETS[engine]
-    notes: list[str] = []
-    files: dict[str, bytes] = {}
-    if preset.gltf:
-        doc, data, images = gltf_document(pkg)
-        doc["buffers"][0]["uri"] = f"{pkg.name}.bin"
-        files[f"{pkg.name}.gltf"] = dumps_json(doc).encode("utf-8")
-        files[f"{pkg.name}.bin"] = data
-        files.update(images)
-    shipped = flip_green(pkg) if preset.convention == "directx" else pkg
+    work = rgba_masks(pkg) if engine == "unreal" else pkg
+    work = to_8bit_states(work) if engine in ("unity", "godot") else work
     if preset.convention == "directx":
-        notes.append("normal maps converted to DirectX (-Y): stored green q -> 255 - q")
-    tex_files: dict[str, str] = {}
-    compressed: dict[str, bytes] = {}
-    if preset.normal_format == "bc5":
-        compressed, n, _ = compressed_files(shipped, {}, {"base": "bc5", "wrinkle": "bc5"})
-        notes += n
-    for t in shipped.textures:
-        dds = f"compressed/{t.name}.dds"
-        if dds in compressed:
-            rel = f"{engine}/{t.name}.dds"
-            files[rel] = compressed[dds]
-        else:
-            rel = f"{engine}/{t.name}.png"
-            files[rel] = png_bytes(t.pixels)
-        tex_files[t.name] = rel
-    meta = shipped.meta
+        work = to_directx(work)
+    ex = Export(work, preset)
+    if work is not pkg and engine == "unreal" and work.meta["masks"] != pkg.meta["masks"]:
+        ex.notes.append("masks: the array layout repacked four to an RGBA texture (exact)")
+    if engine in ("unity", "godot") and any(
+        t.bits == 16 for t in pkg.textures if t.role == "state"
+    ):
+        ex.notes.append("states: 16-bit maps re-encoded at 8 bits (the engine imports PNG at 8)")
+    _ENGINES[engine](ex)
+    setup: ShaderSetup = ex.setup.pop("shader")
+    shader = setup.to_json()
+    shader["slotFlat"] = [s for slots in shader["slots"] for s in slots]
+    shader["slotOffsets"] = list(np.cumsum([0] + [len(s) for s in shader["slots"]]).tolist())
+    meta = work.meta
     regions = [r["name"] for r in meta["regions"]]
-    taken: set[str] = set()
-    curve_paths = []
-    for c in pkg.curves:
-        for rel, data in curve_files(c, regions, taken).items():
-            files[f"{engine}/{rel}"] = data
-            if rel.endswith(".csv"):
-                curve_paths.append(f"{engine}/{rel}")
-    setup = {
+    doc = {
         "engine": engine,
+        "title": preset.title,
         "convention": preset.convention,
         "encoding": meta["encoding"],
         "scale": meta["scale"],
+        "mapping": int(meta.get("mapping", 1)),
         "policy": meta["policy"],
-        "base": tex_files["base_normal"],
-        "states": [{"name": s["name"], "file": tex_files[s["texture"]]} for s in meta["states"]],
-        "masks": {
-            "layout": meta["masks"]["layout"],
-            "files": [tex_files[n] for n in meta["masks"]["textures"]],
-            "table": meta["masks"]["table"],
-        },
-        "regions": meta["regions"],
+        "mesh": f"{pkg.name}.gltf",
+        **ex.setup,
+        "regions": [{**r, "parameter": n} for r, n in zip(meta["regions"], ex.names, strict=True)],
+        "regionNames": regions,
         "expressions": meta["expressions"],
-        "curves": curve_paths,
-        "notes": notes,
+        "shader": shader,
+        "curves": _curves(ex),
+        "notes": ex.notes,
     }
-    files[f"{engine}/wrinkle_setup.json"] = dumps_json(setup).encode("utf-8")
-    if preset.shader and meta["encoding"] == "pd":
-        template = HLSL if preset.shader == "hlsl" else GLSL
-        text = template.format(
-            policy=meta["policy"],
-            convention=preset.convention,
-            scale=format_float32(meta["scale"]),
-            k=len(meta["states"]),
-        )
-        files[f"{engine}/wrinkle.{preset.shader}"] = text.encode("utf-8")
-    return files, notes
+    ex.files["wrinkle_setup.json"] = dumps_json(doc).encode("utf-8")
+    ex.files["README.md"] = readme.readme(doc, sorted(ex.files)).encode("utf-8")
+    return ex.files, ex.notes

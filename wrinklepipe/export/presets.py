@@ -1,4 +1,4 @@
-"""Engine presets: green convention, normal-map container, extra files per engine."""
+"""Engine presets: what each engine gets and in which convention."""
 
 from __future__ import annotations
 
@@ -7,18 +7,27 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class EnginePreset:
-    """How one engine wants the data: green convention, normal-map container, extra files."""
+    """How one engine wants a wrinkle asset.
+
+    ``convention``: green of the normal maps it samples and of the normal its material takes.
+    ``textures``: ``dds`` (base and states block-compressed with mip chains, masks as RGBA PNG),
+    ``arrays`` (states and masks as vertical strips for the engine's Texture2DArray importer),
+    ``images`` (one PNG per state and mask). ``gltf_base``: the glTF keeps the base normal map
+    (the engine's material samples it from the imported mesh) or not (it ships as the DDS).
+    ``curve_names``: how weight curves and parameters are named.
+    """
 
     name: str
+    title: str
     convention: str  # "opengl" (+Y) | "directx" (-Y)
-    normal_format: str  # "png" | "bc5" (DDS, PNG if the compression stage is missing)
-    gltf: bool  # also ship the glTF (mesh + +Y maps) for the engine's glTF importer
-    shader: str  # "hlsl" | "glsl" | ""
+    textures: str  # "dds" | "arrays" | "images"
+    gltf_base: bool
+    curve_names: str  # "identifier" | "snake" | "region"
 
 
 ENGINE_PRESETS: dict[str, EnginePreset] = {
-    "unreal": EnginePreset("unreal", "directx", "bc5", False, "hlsl"),
-    "unity": EnginePreset("unity", "opengl", "png", True, "hlsl"),
-    "godot": EnginePreset("godot", "opengl", "png", True, "glsl"),
-    "blender": EnginePreset("blender", "opengl", "png", True, ""),
+    "unreal": EnginePreset("unreal", "Unreal Engine 5", "directx", "dds", False, "identifier"),
+    "unity": EnginePreset("unity", "Unity (Shader Graph)", "opengl", "arrays", True, "region"),
+    "godot": EnginePreset("godot", "Godot 4", "opengl", "arrays", True, "snake"),
+    "blender": EnginePreset("blender", "Blender", "opengl", "images", True, "identifier"),
 }

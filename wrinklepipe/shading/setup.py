@@ -250,6 +250,8 @@ class ShaderSetup:
             "split": list(self.split) if self.split else None,
             "convention": self.base_convention,
             "output": self.output,
+            "baseLayout": self.base_layout,
+            "stateLayout": self.state_layout,
         }
 
 

@@ -1,0 +1,96 @@
+"""The mesh an engine imports: the asset's glTF without the wrinkle extension.
+
+Engines run the wrinkle model in their own material (the export's shader files), so the glTF they
+import carries the mesh, skin, morph targets, the morph-weight animations and (where the engine's
+material samples it from there) the base normal map; the wrinkle states, masks and the
+``KHR_animation_pointer`` weight channels live in the export's own files instead, so no texture
+ships twice. The result still passes the Khronos glTF-Validator (tested).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from wrinklepipe.atomic import dumps_json
+from wrinklepipe.io.gltf_write import gltf_document
+from wrinklepipe.io.package import EXTENSION, WrinklePackage
+
+POINTER = "KHR_animation_pointer"
+
+
+def _drop_pointer_channels(doc: dict[str, Any]) -> None:
+    anims = []
+    for a in doc.get("animations", []):
+        channels = [c for c in a["channels"] if c["target"].get("path") != "pointer"]
+        used = sorted({c["sampler"] for c in channels})
+        remap = {old: new for new, old in enumerate(used)}
+        if not channels:
+            continue
+        anims.append(
+            {
+                **a,
+                "samplers": [a["samplers"][i] for i in used],
+                "channels": [{**c, "sampler": remap[c["sampler"]]} for c in channels],
+            }
+        )
+    if anims:
+        doc["animations"] = anims
+    else:
+        doc.pop("animations", None)
+
+
+def _keep_textures(
+    doc: dict[str, Any], images: dict[str, bytes], keep_normal: bool
+) -> dict[str, bytes]:
+    """Keep only the textures the core materials reference; returns the images still used."""
+    keep: list[int] = []
+    for m in doc.get("materials", []):
+        nt = m.get("normalTexture")
+        if nt is None:
+            continue
+        if not keep_normal:
+            m.pop("normalTexture")
+            continue
+        if nt["index"] not in keep:
+            keep.append(nt["index"])
+    textures = doc.get("textures", [])
+    new_tex = [textures[i] for i in keep]
+    remap = {old: new for new, old in enumerate(keep)}
+    for m in doc.get("materials", []):
+        if "normalTexture" in m:
+            m["normalTexture"] = {**m["normalTexture"], "index": remap[m["normalTexture"]["index"]]}
+    img_keep = sorted({t["source"] for t in new_tex})
+    img_remap = {old: new for new, old in enumerate(img_keep)}
+    all_images = doc.get("images", [])
+    for t in new_tex:
+        t["source"] = img_remap[t["source"]]
+    kept_images = [all_images[i] for i in img_keep]
+    uris = {im.get("uri") for im in kept_images}
+    for key in ("textures", "images"):
+        doc.pop(key, None)
+    if new_tex:
+        doc["textures"] = new_tex
+        doc["images"] = kept_images
+    else:
+        doc.pop("samplers", None)
+    return {u: b for u, b in images.items() if u in uris}
+
+
+def plain_gltf(pkg: WrinklePackage, keep_normal: bool = True) -> tuple[dict[str, bytes], str]:
+    """``{relative path: bytes}`` of ``NAME.gltf`` + ``NAME.bin`` (+ the base normal PNG when
+    ``keep_normal``) and the base image's path (empty without it)."""
+    doc, data, images = gltf_document(pkg)
+    doc["buffers"][0]["uri"] = f"{pkg.name}.bin"
+    for m in doc.get("materials", []):
+        (m.get("extensions") or {}).pop(EXTENSION, None)
+        if "extensions" in m and not m["extensions"]:
+            m.pop("extensions")
+    _drop_pointer_channels(doc)
+    images = _keep_textures(doc, images, keep_normal)
+    used = [e for e in doc.get("extensionsUsed", []) if e not in (EXTENSION, POINTER)]
+    doc.pop("extensionsUsed", None)
+    if used:
+        doc["extensionsUsed"] = used
+    files = {f"{pkg.name}.gltf": dumps_json(doc).encode("utf-8"), f"{pkg.name}.bin": data}
+    files.update(images)
+    return files, next(iter(images), "")

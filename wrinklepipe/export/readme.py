@@ -1,0 +1,128 @@
+"""The README of an engine export: what is in the folder and how to import it."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def _files(files: list[str]) -> str:
+    return "\n".join(f"- `{f}`" for f in files if f != "README.md")
+
+
+def _common(doc: dict[str, Any]) -> str:
+    notes = "\n".join(f"- {n}" for n in doc["notes"]) or "- none"
+    states = ", ".join(s["name"] for s in doc["states"])
+    return (
+        f"Encoding `{doc['encoding']}` (scale {doc['scale']}, value mapping v{doc['mapping']}), "
+        f"policy `{doc['policy']}`, {len(doc['states'])} states ({states}), "
+        f"{len(doc['regions'])} regions, normal maps in the {doc['convention']} convention "
+        f"({'+Y' if doc['convention'] == 'opengl' else '-Y'}).\n\n"
+        "The shader is wrinklepipe's one template (the numpy model `wrinklepipe.model`, "
+        "rendered equal to it in wrinklepipe's tests); `wrinkle_setup.json` describes everything "
+        "(files, the channel table, the slot table that places each region weight in the "
+        "shader's weight array). Region weights are one number per region, in "
+        "`wrinkle_setup.json`'s region order; `parameter` is each region's name in this "
+        "engine. Curves: `curves/NAME.json` (times, then the weights of every region per key).\n\n"
+        f"Notes:\n{notes}\n"
+    )
+
+
+def _unreal(doc: dict[str, Any]) -> str:
+    n_masks = len(doc["masks"]["files"])
+    return f"""\
+## Import into Unreal Engine 5
+
+1. Import `{doc["mesh"]}` (Interchange glTF importer: skeletal mesh with its morph targets and
+   animations; its material has no textures, the wrinkle material replaces it).
+2. Import the textures in `textures/`. For `base_normal` and the `wrinkle_*` maps set
+   Compression Settings **Normalmap (BC5)** for `.dds` files (they are BC5 with full mip chains;
+   set Mip Gen Settings **LeaveExistingMips**), sRGB **off**, and do **not** flip the green
+   channel: they are already DirectX (-Y). `.png` maps: sRGB off, Compression **Masks (no sRGB)**
+   or VectorDisplacementmap. The {n_masks} mask textures: sRGB off, Compression **Masks**.
+3. Make a Material Function (or edit the face material) with two **Custom** nodes:
+   - `WP_Decode`: Output Type Float 1, no inputs, Code = the contents of `WP_Decode.hlsl`.
+   - `WP_Wrinkle`: Output Type Float 3, Code = the contents of `WP_Wrinkle.hlsl`, inputs in
+     this order (names exactly as listed in `wrinkle_setup.json` `unreal.nodes[1].inputs`):
+     `UV` (TexCoord 0), `Base`, `State0`..., `Mask0`... (Texture Object nodes holding the
+     textures of `wrinkle_setup.json` in order), one scalar per region (a Scalar Parameter named
+     like the input), and `Decode` (the WP_Decode node's output).
+   Connect `WP_Wrinkle` to the material's **Normal** (tangent space). With many textures set
+   the Texture Objects' Sampler Source to Shared: Wrap.
+4. Drive the region scalar parameters: import `curves/NAME.csv` as a **CurveTable** (one row per
+   region, named like the parameters) and set the parameters from it in the Animation Blueprint
+   or a Sequencer track, or add Material curves of the same names to the morph animation.
+"""
+
+
+def _unity(doc: dict[str, Any]) -> str:
+    return f"""\
+## Import into Unity (URP/HDRP Shader Graph)
+
+1. Import `{doc["mesh"]}` with glTFast or UnityGLTF (mesh, blend shapes, animation clip).
+2. Textures: `{doc["base"]["file"]}` (the base normal map) and `textures/wrinkle_states.png` /
+   `textures/wrinkle_masks.png` (texture arrays: Texture Shape **2D Array**, Columns 1, Rows
+   {doc["statesArray"]["layers"]} / {doc["masks"]["layers"]}). All three: Texture Type Default, sRGB
+   **off**, Generate Mip Maps on, Compression None or High Quality, Wrap Mode Clamp.
+3. In the face's Shader Graph add a **Custom Function** node: Type File, Source
+   `WrinkleMaps.hlsl`, Name `WrinkleNormal`, Precision Float; inputs UV (Vector 2), BaseMap
+   (Texture 2D), States (Texture 2D Array), Masks (Texture 2D Array), Sampler (Sampler State);
+   outputs NormalTS (Vector 3), Activity (Float). Connect NormalTS to the Fragment **Normal
+   (Tangent Space)** block (the graph's Fragment Normal Space: Tangent).
+4. Add `WrinkleWeights.cs` to the face: Setup = `wrinkle_setup.json`, Curve = a
+   `curves/NAME.json`, Target = the face's Renderer; set Sync to its Animator to play the
+   wrinkles in step with the blend-shape clip, or write `Weights[r]` from your own code.
+"""
+
+
+def _godot(doc: dict[str, Any]) -> str:
+    return f"""\
+## Import into Godot 4
+
+1. Put the folder in the project and let Godot import `{doc["mesh"]}` (mesh, blend shapes and
+   animations in an AnimationPlayer).
+2. Re-import `textures/wrinkle_states.png` and `textures/wrinkle_masks.png` as **Texture2DArray**
+   (Import As, Slices Vertical {doc["statesArray"]["layers"]} / {doc["masks"]["layers"]}), Compress
+   Mode Lossless, Mipmaps on. The base normal map `{doc["base"]["file"]}` may stay a normal map.
+3. Give the face surface a **ShaderMaterial** with `wrinkle.gdshader`; set `wp_base` to the base
+   normal map, `wp_states` / `wp_masks` to the two arrays and `wp_albedo` to the colour map.
+4. Add a Node with `wrinkle_weights.gd`: mesh = the face, setup_path = `wrinkle_setup.json`,
+   curve_path = a `curves/NAME.json`, animation_player = the imported AnimationPlayer (so the
+   wrinkles follow the blend-shape animation), or set `weights[r]` from your own code.
+   `wp_show_regions` on the material shows where wrinkles are active.
+"""
+
+
+def _blender(doc: dict[str, Any]) -> str:
+    return f"""\
+## Import into Blender
+
+Run the script (it imports `{doc["mesh"]}` when the scene has no mesh yet, builds the
+`WrinklePipe` node group from `wrinkle_setup.json`, puts it between the face material's UVs and
+its Normal Map node, adds one custom property per region on the object with a driver into the
+group, and keys those properties from `curves/*.json`):
+
+```sh
+blender -b --python-exit-code 1 --python build_wrinkles.py -- wrinkle_setup.json --save face.blend
+```
+
+or from Blender's Scripting workspace: open `build_wrinkles.py` and Run Script (it looks for
+`wrinkle_setup.json` next to itself). The region weights are the object's custom properties
+`wp_<region>`; the node group's inputs are the same weights, so any rig can drive them.
+"""
+
+
+def readme(doc: dict[str, Any], files: list[str]) -> str:
+    """README.md for an export described by ``doc`` (``wrinkle_setup.json``)."""
+    steps = {"unreal": _unreal, "unity": _unity, "godot": _godot, "blender": _blender}[
+        doc["engine"]
+    ]
+    return (
+        f"# {doc['mesh'].rsplit('.', 1)[0]} for {doc['title']}\n\n"
+        "Written by `wrinklepipe export`.\n\n"
+        + _common(doc)
+        + "\n"
+        + steps(doc)
+        + "\n## Files\n\n"
+        + _files(files + ["README.md"])
+        + "\n"
+    )
