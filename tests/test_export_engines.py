@@ -367,3 +367,53 @@ def test_blender_script_builds_the_node_group(exports, tmp_path):
     assert summary["wrinklepipe"] == "ok" and summary["drivers"] == 8 and summary["keys"] > 8
     assert summary["object"] == "demo" and summary["material"] == "demo_skin"  # the glTF's face
     assert (tmp_path / "face.blend").exists()
+
+
+DATA = ROOT.parent / "shared" / "data"
+
+
+@pytest.mark.shared
+def test_a_real_skinned_character_exports_for_every_engine(tmp_path):
+    """CesiumMan (../shared/data, a skinned Khronos sample) with the fidelity fixture's
+    wrinkles: every engine's folder is complete, the skin survives, the glTF validates."""
+    from wrinklepipe.demo import face_fixture as ff
+
+    mesh = DATA / ff.MESH_RELPATH
+    if not mesh.is_file():
+        pytest.skip("../shared/data is absent")
+    a = ff.build_fixture(mesh, 256).asset()
+    a = replace(a, mesh=prepare_mesh(a.mesh))
+    pkg = package_from_asset(a, PackOptions(), [expression_cycle(a)])
+    src = tmp_path / "cesium"
+    write_gltf(pkg, src, "cesium_face")
+    for engine in ENGINES:
+        files, notes = export(src, tmp_path / engine, engine)
+        setup = json.loads(files["wrinkle_setup.json"])
+        doc = json.loads(files[setup["mesh"]])
+        assert doc.get("skins"), engine  # the skeleton survives
+        assert len(setup["regions"]) == 8 and setup["shader"]["slots"]
+        if VALIDATOR.exists():
+            r = subprocess.run(
+                [str(VALIDATOR), str(tmp_path / engine / setup["mesh"]), "-o"],
+                capture_output=True,
+                text=True,
+            )
+            assert json.loads(r.stdout)["issues"]["numErrors"] == 0, engine
+        if engine == "blender" and shutil.which("blender"):
+            r = subprocess.run(
+                [
+                    "blender",
+                    "-b",
+                    "--factory-startup",
+                    "--python-exit-code",
+                    "1",
+                    "--python",
+                    str(tmp_path / engine / "build_wrinkles.py"),
+                ],
+                capture_output=True,
+                text=True,
+                timeout=300,
+            )
+            assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+            line = next(x for x in r.stdout.splitlines() if x.startswith('{"wrinklepipe"'))
+            assert json.loads(line)["drivers"] == 8

@@ -68,6 +68,22 @@ def _weight_sets(n_regions: int, policy: str) -> dict[str, list[float]]:
     return {k: [float(x) for x in v.astype(np.float32)] for k, v in sets.items()}
 
 
+DATA = ROOT.parent / "shared" / "data"
+
+
+def _real_character(root: Path) -> Path | None:
+    """CesiumMan (../shared/data: a skinned Khronos sample) with the fidelity fixture's wrinkles."""
+    from wrinklepipe.demo import face_fixture as ff
+
+    mesh = DATA / ff.MESH_RELPATH
+    if not mesh.is_file():
+        return None
+    a = ff.build_fixture(mesh, 256).asset()
+    a = replace(a, mesh=prepare_mesh(a.mesh))
+    write_gltf(package_from_asset(a, PackOptions(), [expression_cycle(a)]), root / "real", "cesium")
+    return root / "real" / "cesium.gltf"
+
+
 def _write_assets(root: Path) -> dict[str, Path]:
     """One package per encoding, one .gltf per policy (the extension's policy edited)."""
     out = {}
@@ -109,6 +125,14 @@ def browser(tmp_path_factory):
                 file = f"{key}_{name}.f32"
                 calls.append({"fn": "renderDebug", "args": [1, w, SIZE], "file": file})
                 plan.append((key, name, w, file))
+    real = _real_character(root)
+    if real is not None:
+        calls.append({"fn": "load", "args": ["/asset/" + real.relative_to(root).as_posix()]})
+        calls.append({"fn": "focusWrinkles", "args": []})
+        calls.append({"fn": "renderDebug", "args": [2, None, SIZE], "file": "real_uv.f32"})
+        for name, w in _weight_sets(8, "clamp01").items():
+            calls.append({"fn": "renderDebug", "args": [1, w, SIZE], "file": f"real_{name}.f32"})
+            plan.append(("real", name, w, f"real_{name}.f32"))
     times = [0.0, 0.25, 0.5, 1.0, 1.6, 2.75, 3.3, 5.9]
     first = "/asset/" + assets["pd-clamp01"].relative_to(root).as_posix()
     calls += [{"fn": "load", "args": [first]}, {"fn": "sampleWeights", "args": [0, times]}]
@@ -132,7 +156,14 @@ def browser(tmp_path_factory):
     assert r.returncode == 0 and "error" not in res, (r.stderr[-2000:], res.get("error"))
     errors = [x for x in res["log"] if x.startswith(("error", "pageerror"))]
     assert not errors, errors
-    return {"assets": assets, "out": out, "plan": plan, "results": res["results"], "times": times}
+    return {
+        "assets": assets,
+        "real": real,
+        "out": out,
+        "plan": plan,
+        "results": res["results"],
+        "times": times,
+    }
 
 
 def _image(b, file: str) -> np.ndarray:
@@ -161,6 +192,35 @@ def test_threejs_viewer_renders_the_model(browser, encoding, policy):
         if name == "strong":  # the wrinkles are really there
             base_ref = model.blend(s.base, s.states, s.masks, ww * 0, inp.asset.encoding, policy)
             assert h.compare(_image(browser, file)[cov][None], base_ref)["p99"] > 2.0
+
+
+@pytest.mark.shared
+def test_threejs_viewer_renders_a_real_skinned_character(browser):
+    """CesiumMan (skinned, real UV layout) through GLTFLoader's SkinnedMesh path: the debug
+    normal at every covered pixel equals numpy; the face's wrinkles move it."""
+    if browser["real"] is None:
+        pytest.skip("../shared/data is absent")
+    uvimg = _image(browser, "real_uv.f32")
+    cov = uvimg[..., 3] > 0.5
+    assert cov.sum() > 0.05 * SIZE * SIZE
+    inp = load_input(browser["real"])
+    s = h.samples(inp, uvimg[cov][:, :2].astype(np.float32))
+    d = inp.asset.region_state_matrix()
+    moved = 0.0
+    for k, name, w, file in browser["plan"]:
+        if k != "real":
+            continue
+        ww = np.asarray(w, np.float32)[:, None] * d
+        ref = model.blend(s.base, s.states, s.masks, ww, inp.asset.encoding, inp.asset.policy)
+        img = _image(browser, file)[cov][None]
+        st = h.compare(img, ref)
+        assert st["mean"] <= 0.5 and st["p99"] <= 2.0, (name, st)
+        if name == "strong":
+            base_ref = model.blend(s.base, s.states, s.masks, ww * 0, "pd", inp.asset.policy)
+            moved = h.compare(img, base_ref)["max"]
+    assert moved > 2.0  # the viewer found the face, and its wrinkles are there
+    focus = next(r for r in browser["results"] if r["fn"] == "focusWrinkles")
+    assert focus["value"] > 0
 
 
 def test_weights_animation_plays_the_curves(browser):

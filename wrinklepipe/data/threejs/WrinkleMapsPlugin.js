@@ -21,7 +21,8 @@
 // AnimationMixer plays the face and its wrinkles in step.
 //
 // Options: renderer (required: the arrays are built on the GPU); debug: 0 normal shading,
-// 1 output the tangent-space normal (gl_FragColor = vec4(N, 1)), 2 output (uv, sum |a_k|, 1);
+// 1 output the tangent-space normal (gl_FragColor = vec4(N, 1)), 2 output (uv, sum |a_k|, 1),
+// 3 output (view-space position, sum |a_k|);
 // exact: sample level 0 without mipmaps (what wrinklepipe's numpy reference does).
 
 import {
@@ -87,6 +88,8 @@ const DEBUG_OUTPUT = `
 	gl_FragColor = vec4( wp_n, 1.0 );
 #elif WP_DEBUG == 2
 	gl_FragColor = vec4( wp_uv, wp_activity, 1.0 );
+#elif WP_DEBUG == 3
+	gl_FragColor = vec4( - vViewPosition, wp_activity );
 #endif
 `;
 

@@ -198,6 +198,7 @@ $( 'neutral' ).addEventListener( 'click', () => {
 	applySliders();
 
 } );
+$( 'focus' ).addEventListener( 'click', () => focusWrinkles() );
 $( 'regions' ).addEventListener( 'change', () => state.wrinkles.forEach( ( w ) => w.showRegions( $( 'regions' ).checked ) ) );
 $( 'debug' ).addEventListener( 'change', () => state.wrinkles.forEach( ( w ) => w.setDebug( Number( $( 'debug' ).value ), false ) ) );
 window.addEventListener( 'resize', resize );
@@ -267,6 +268,83 @@ function renderDebug( mode, weights, size = 256 ) {
 
 }
 
+// Point the camera at where the wrinkles are: render the activation (debug mode 3: view-space
+// position and sum |a_k|) from 14 directions at low resolution with every region weight 1
+// (or `weights`), keep the direction that sees the most active pixels, and frame their
+// positions. Returns the number of active pixels seen.
+function focusWrinkles( weights ) {
+
+	if ( ! state.wrinkles.length ) return 0;
+	const n = state.wrinkles[ 0 ].weights.length;
+	const saved = Array.from( state.wrinkles[ 0 ].weights );
+	const w = weights || new Array( n ).fill( 1 );
+	const box = new THREE.Box3().setFromObject( state.gltf.scene );
+	const centre = box.getCenter( new THREE.Vector3() );
+	const radius = box.getSize( new THREE.Vector3() ).length() * 0.5;
+	const dirs = [];
+	for ( const x of [ - 1, 0, 1 ] ) for ( const y of [ - 1, 0, 1 ] ) for ( const z of [ - 1, 0, 1 ] ) {
+
+		const k = Math.abs( x ) + Math.abs( y ) + Math.abs( z );
+		if ( k === 1 || k === 3 ) dirs.push( new THREE.Vector3( x, y, z ).normalize() );
+
+	}
+
+	const size = 64;
+	let best = null;
+	for ( const d of dirs ) {
+
+		camera.position.copy( centre ).addScaledVector( d, radius * 3 );
+		if ( Math.abs( d.y ) > 0.9 ) camera.up.set( 0, 0, - Math.sign( d.y ) );
+		else camera.up.set( 0, 1, 0 );
+		camera.lookAt( centre );
+		camera.near = radius * 0.5;
+		camera.far = radius * 6;
+		camera.updateMatrixWorld();
+		const img = new Float32Array( atob_f32( renderDebug( 3, w, size ).data ) );
+		const pts = [];
+		for ( let i = 0; i < size * size; i ++ ) {
+
+			if ( img[ i * 4 + 3 ] > 1e-4 ) pts.push( new THREE.Vector3( img[ i * 4 ], img[ i * 4 + 1 ], img[ i * 4 + 2 ] ).applyMatrix4( camera.matrixWorld ) );
+
+		}
+
+		if ( ! best || pts.length > best.pts.length ) best = { d, pts, up: camera.up.clone() };
+
+	}
+
+	setWeights( saved );
+	if ( ! best.pts.length ) {
+
+		frame( state.gltf.scene );
+		return 0;
+
+	}
+
+	const focus = new THREE.Box3().setFromPoints( best.pts );
+	const c = focus.getCenter( new THREE.Vector3() );
+	const r = Math.max( focus.getSize( new THREE.Vector3() ).length() * 0.6, radius * 0.05 );
+	const dist = r / Math.tan( THREE.MathUtils.degToRad( camera.fov * 0.5 ) );
+	camera.up.copy( best.up );
+	camera.position.copy( c ).addScaledVector( best.d, dist );
+	camera.near = dist / 50;
+	camera.far = dist + radius * 4;
+	camera.lookAt( c );
+	camera.updateProjectionMatrix();
+	controls.target.copy( c );
+	controls.update();
+	return best.pts.length;
+
+}
+
+function atob_f32( b64 ) {
+
+	const s = atob( b64 );
+	const bytes = new Uint8Array( s.length );
+	for ( let i = 0; i < s.length; i ++ ) bytes[ i ] = s.charCodeAt( i );
+	return bytes.buffer;
+
+}
+
 // The region weights the animation `clip` gives at each time (the mixer's own evaluation).
 function sampleWeights( clipIndex, times ) {
 
@@ -294,7 +372,7 @@ async function start() {
 
 }
 
-window.wrinklepipe = { ready: start(), load, setWeights, renderDebug, sampleWeights, state, renderer, THREE };
+window.wrinklepipe = { ready: start(), load, setWeights, renderDebug, focusWrinkles, sampleWeights, state, renderer, THREE };
 window.wrinklepipe.ready.catch( ( e ) => {
 
 	$( 'status' ).textContent = String( e );
