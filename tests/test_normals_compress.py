@@ -96,10 +96,13 @@ def test_fused_pd_path_equals_plain_calls(demo, fmt):
     n = demo.wrinkled_normal(1)[:, :200].astype(np.float32)  # 256 x 200
     s = 1.0
     q, _, clipped = enc.encode_pd_u8(n, s)
-    data = cmp.encode_bc(cmp.pack_rgba(q, fmt), fmt)
+    # the BC4-based encoders fit the unrounded texels 128 + 127 t
+    t = np.clip(n[..., :2] / n[..., 2:3] / s, -1, 1)
+    targets = (128 + 127 * t).astype(np.float32)
+    data = cmp.encode_bc(cmp.pack_rgba(q, fmt), fmt, targets)
     angles = np.empty(n.shape[:2], np.float32)
     r = cmp.pd_compress_check(n, s, fmt, angles_out=angles)
-    assert r.data == data  # chunked compression == one call
+    assert r.data == data  # chunked packing == one call
     assert r.clipped == clipped == enc.pd_clipped_count(n, s)
     dec = enc.decode_pd(cmp.unpack_u8(cmp.decode_bc(data, 200, 256, fmt), fmt), s)
     chord = np.linalg.norm(dec.astype(np.float64) - n, axis=-1)
@@ -137,17 +140,23 @@ def test_written_dds_decoded_independently_gives_the_measured_texels(
         xy = px[..., [3, 1]]
     else:
         xy = px[..., :2]
-    # decoders may round BC4-style interpolation differently by one step
+    # decoders may round the interpolants differently by one step: BC4-style blocks rarely
+    # differ; BC1's 1/3 and 2/3 colours are rounded by OpenImageIO, truncated by
+    # texture2ddecoder (one level on many texels; the reported error still agrees, below)
     diff = np.abs(xy.astype(int) - check.decoded.astype(int))
     assert diff.max() <= 1
-    assert np.mean(diff > 0) < 0.2
+    if fmt != "bc1":
+        assert np.mean(diff > 0) < 0.2
     # the error the check reported is what the independently decoded texels give
     n = demo.wrinkle_only_normal(1).astype(np.float32)
     s = enc.auto_pd_scale(n)
     ind = enc.decode_pd(xy.astype(np.uint8), s)
     e = cmp.angular_error_stats(ind, n)
-    assert e.mean_deg == pytest.approx(check.error.mean_deg, abs=0.02)
-    assert e.p99_deg == pytest.approx(check.error.p99_deg, abs=0.1)
+    # BC1's interpolated colours round differently in the two decoders (one level on about a
+    # third of the texels of this smooth map: 0.2 degrees at its PD scale); the others agree
+    tol = (0.25, 0.2) if fmt == "bc1" else (0.02, 0.1)
+    assert e.mean_deg == pytest.approx(check.error.mean_deg, abs=tol[0])
+    assert e.p99_deg == pytest.approx(check.error.p99_deg, abs=tol[1])
 
 
 def test_choose_format_picks_smallest_within_budget(demo_checks):

@@ -259,9 +259,15 @@ def test_bench_normals_quick_smoke():
 
     r = bench_normals(True)
     steps = {row.step for row in r.rows}
-    assert "bare etcpak.compress_bc5" in steps and "whole (fused, no read)" in steps
+    assert "bare BC5 encoder (normals.bc4.encode_bc5)" in steps
+    assert "whole (fused, no read)" in steps
     assert all(row.mpix_per_s and row.mpix_per_s > 0 for row in r.rows)
     assert 0 < r.extra["error"]["mean_deg"] < 10.0
+    demo = r.extra["bc5"]["demo base"]
+    assert set(demo) >= {"ours", "exhaustive", "etcpak", "quicktex", "ispc_texcomp"}
+    assert demo["ours"]["mean_deg"] <= 1.03 * demo["exhaustive"]["mean_deg"]
+    assert demo["ours"]["mean_deg"] < demo["etcpak"]["mean_deg"]
+    assert set(r.extra["formats"]) == {"bc1", "bc3", "bc7"}
 
 
 def test_uastc_ktx2_when_basis_universal_is_installed(tmp_path, demo_files):
@@ -275,12 +281,13 @@ def test_uastc_ktx2_when_basis_universal_is_installed(tmp_path, demo_files):
     r = json.loads(rep.read_text())
     chk = r["checks"][0]
     assert chk["format"] == "uastc" and chk["error"]["p99_deg"] <= 5.0
-    # about as good as BC5 on the same map (both keep 8-bit-ish precision per channel)
+    # the same order as BC5 on the same map (both keep 8-bit-ish precision per channel);
+    # BC5 from the near-exhaustive BC4 encoder is about twice as accurate as basisu's UASTC
     bc5 = tmp_path / "b.dds"
     rep5 = tmp_path / "b.json"
     _cli(folder / "compress.png", "--base", folder / "base.png", "-o", bc5, "--report", rep5)
     e5 = json.loads(rep5.read_text())["checks"][0]["error"]["mean_deg"]
-    assert chk["error"]["mean_deg"] < 2 * e5
+    assert e5 < chk["error"]["mean_deg"] < 3 * e5
 
 
 def test_uastc_refused_for_dds(tmp_path, demo_files, capsys):

@@ -1,29 +1,54 @@
-"""``wrinklepipe bench normals``: 4096^2 normal map -> PD -> BC5 -> decode -> error report.
+"""``wrinklepipe bench normals``: the BC5 encoder against the exhaustive search and the PyPI
+encoders, and the whole 4096^2 map -> PD -> BC5 -> decode -> error path against the encoder.
 
-Steps are timed one by one (each over the whole map) and as the fused whole
-(:func:`wrinklepipe.normals.compress.pd_compress_check`, what ``encode-normals`` runs), with the
-bare ``etcpak.compress_bc5`` call on the same packed map as the same-run baseline. The file
-read is timed and shown but is not part of "whole". Limit: whole <= 4x the bare codec call.
-Repeats are interleaved (baseline, whole, steps, baseline, ...) so load from other processes
-hits all rows alike; the median of each row is reported, and each row's note adds its process
-CPU time and best wall time, each as a ratio to the bare call (CPU time does not depend on
-what else the machine runs; the fused whole spends about 3.5x the codec's CPU, and with two
-cores free finishes in well under 4x its wall time).
+Quality, in the same run, every encoder on the same 256^2 crops (64^2 of the 256^2 demo in
+the quick run): the demo's 1024^2 base (pores and the scar), and the busiest window of
+DamagedHelmet's normal map from ``../shared/data`` when it is present. Decoded by
+texture2ddecoder; degrees against the float source (demo) or the 8-bit map itself (the real
+map's source is 8-bit; z rebuilt from its x, y). Encoders: ours
+(:func:`wrinklepipe.normals.bc4.encode_bc5`), the exhaustive endpoint search
+(:func:`~wrinklepipe.normals.bc4.reference_bc4`), etcpak, quicktex, ispc_texcomp; each row's
+time is its median encode time and its note the mean / p99. BC1, BC3nm and BC7 normal maps
+(z in B where the format has it) are compared per library the same way on the demo crop;
+``extra["formats"]`` holds every number, ``extra["choice"]`` the encoder each format uses.
+
+Speed: the fused path (:func:`wrinklepipe.normals.compress.pd_compress_check`) on a 4096^2 PD
+map as a ratio to the bare BC5 encoder on the same packed texels (the baseline). Repeats are
+interleaved so load from other processes hits all rows alike; medians are reported.
 """
 
 from __future__ import annotations
 
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import etcpak
+import ispc_texcomp
 import numpy as np
+import quicktex
+import quicktex.s3tc.bc1 as quicktex_bc1
+import quicktex.s3tc.bc3 as quicktex_bc3
+import quicktex.s3tc.bc5 as quicktex_bc5
+import texture2ddecoder
 
+from wrinklepipe import codec
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark
+from wrinklepipe.normals import bc4
+from wrinklepipe.normals import compress as cmp
+from wrinklepipe.paths import ROOT
 
 SIZE = 4096
 QUICK_SIZE = 512
+HELMET = ROOT.parent / "shared" / "data" / "gltf-samples" / "DamagedHelmet"
+#: The encoder each block format uses (what :func:`compress.encode_bc` calls), and why.
+CHOICE = {
+    "bc5": "wrinklepipe.normals.bc4 (lowest mean and p99 after the exhaustive search)",
+    "bc3nm": "alpha (x): wrinklepipe.normals.bc4; colour (y): quicktex level 5",
+    "bc1": "quicktex level 5 (lowest error; ispc_texcomp and etcpak trail)",
+    "bc7": "ispc_texcomp 'basic' (lowest error; etcpak's bc7enc trails)",
+}
 
 
 def bench_map(size: int) -> np.ndarray:
@@ -46,97 +71,252 @@ def bench_map(size: int) -> np.ndarray:
     return height_to_normal(h).astype(np.float32)
 
 
-@benchmark("normals", "4096^2 map -> PD -> BC5 -> decode -> error; whole <= 4x bare BC5")
+def _helmet_texels(tmp: Path) -> np.ndarray | None:
+    """DamagedHelmet's normal texture (8-bit RGB), or None without ../shared."""
+    glb = HELMET / "glTF-Binary" / "DamagedHelmet.glb"
+    if not glb.exists():
+        return None
+    import OpenImageIO as oiio
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(str(glb))
+    mat = next(m for m in g.materials if m.normalTexture is not None)
+    img = g.images[g.textures[mat.normalTexture.index].source]
+    bv = g.bufferViews[img.bufferView]
+    start = bv.byteOffset or 0
+    path = tmp / ("helmet_normal.jpg" if "jpeg" in (img.mimeType or "") else "helmet_normal.png")
+    path.write_bytes(g.binary_blob()[start : start + bv.byteLength])
+    return np.asarray(oiio.ImageBuf(str(path)).get_pixels(oiio.UINT8))[..., :3]
+
+
+def _busiest(texels: np.ndarray, size: int) -> np.ndarray:
+    h, w = texels.shape[:2]
+    best, where = -1.0, (0, 0)
+    for y in range(0, h - size + 1, size // 2):
+        for x in range(0, w - size + 1, size // 2):
+            v = float(texels[y : y + size, x : x + size, :2].astype(np.float32).std())
+            if v > best:
+                best, where = v, (y, x)
+    return texels[where[0] : where[0] + size, where[1] : where[1] + size]
+
+
+def _stats(n: np.ndarray, ref: np.ndarray) -> dict[str, float]:
+    a = cmp.angle_deg(n.astype(np.float32), ref.astype(np.float32)).astype(np.float64).ravel()
+    return {
+        "mean_deg": round(float(a.mean()), 4),
+        "p99_deg": round(float(np.percentile(a, 99, method="inverted_cdf")), 4),
+    }
+
+
+def _rgba(q: np.ndarray) -> np.ndarray:
+    h, w, c = q.shape
+    out = np.zeros((h, w, 4), np.uint8)
+    out[..., :c] = q
+    out[..., 3] = 255
+    return out
+
+
+def _bc5_encoders(targets: np.ndarray) -> dict[str, Callable[[], bytes]]:
+    h, w = targets.shape[:2]
+    q = np.clip(np.floor(targets + 0.5), 0, 255).astype(np.uint8)
+    rgba = _rgba(q)
+    rg = np.ascontiguousarray(q)
+
+    def exhaustive() -> bytes:
+        x, y = bc4.reference_bc4(targets[..., 0]), bc4.reference_bc4(targets[..., 1])
+        return np.concatenate([x, y], axis=1).tobytes()
+
+    def quick() -> bytes:
+        tex = quicktex.RawTexture.frombytes(rgba.tobytes(), w, h)
+        return bytes(quicktex_bc5.BC5Encoder(0, 1).encode(tex).tobytes())
+
+    return {
+        "ours": lambda: bc4.encode_bc5(targets[..., 0], targets[..., 1]),
+        "exhaustive": exhaustive,
+        "etcpak": lambda: etcpak.compress_bc5(rgba, w, h),
+        "quicktex": quick,
+        "ispc_texcomp": lambda: ispc_texcomp.compress_blocks_bc5(
+            ispc_texcomp.RGBASurface(rg.tobytes(), w, h, w * 2)
+        ),
+    }
+
+
+def _decode(fmt: str, data: bytes, h: int, w: int) -> np.ndarray:
+    fn = getattr(texture2ddecoder, f"decode_{fmt}")
+    return np.frombuffer(fn(data, w, h), np.uint8).reshape(h, w, 4)[..., [2, 1, 0, 3]]
+
+
+def _timed(fn: Callable[[], bytes], repeat: int) -> tuple[bytes, float]:
+    times, data = [], b""
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        data = fn()
+        times.append(time.perf_counter() - t0)
+    return data, float(np.median(times))
+
+
+def _bc5_quality(res: BenchResult, crops: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for crop, (targets, ref) in crops.items():
+        h, w = targets.shape[:2]
+        out[crop] = {}
+        for name, fn in _bc5_encoders(targets).items():
+            data, sec = _timed(fn, 1 if name == "exhaustive" else 3)
+            dec = _decode("bc5", data, h, w)
+            s = _stats(codec.decode("full", dec[..., :2], "rg"), ref) | {"seconds": round(sec, 4)}
+            out[crop][name] = s
+            res.rows.append(
+                BenchRow(
+                    step=f"BC5 {crop}: {name}",
+                    median_s=sec,
+                    mpix_per_s=h * w / 1e6 / sec,
+                    note=f"mean {s['mean_deg']:.4f} p99 {s['p99_deg']:.4f} deg",
+                )
+            )
+        ours, ex = out[crop]["ours"], out[crop]["exhaustive"]
+        out[crop]["ours_vs_exhaustive"] = {
+            "mean_ratio": round(ours["mean_deg"] / max(ex["mean_deg"], 1e-12), 4),
+            "p99_ratio": round(ours["p99_deg"] / max(ex["p99_deg"], 1e-12), 4),
+        }
+    res.extra["bc5"] = out
+
+
+def _format_quality(res: BenchResult, q: np.ndarray, ref: np.ndarray) -> None:
+    """BC1 / BC3nm / BC7 normal maps (the codec's layouts) per library, on the demo crop."""
+    h, w = q.shape[:2]
+    rgb = _rgba(q)  # x, y, z in R, G, B
+    nm = np.zeros((h, w, 4), np.uint8)
+    nm[..., 0], nm[..., 1], nm[..., 3] = 255, q[..., 1], q[..., 0]  # DXT5nm
+    surf = ispc_texcomp.RGBASurface
+    qt = quicktex.RawTexture.frombytes
+
+    def bc3_ours() -> bytes:
+        return cmp.encode_bc(nm, "bc3nm")
+
+    cases: dict[str, dict[str, Callable[[], bytes]]] = {
+        "bc1": {
+            "etcpak": lambda: etcpak.compress_bc1(rgb, w, h),
+            "quicktex": lambda: bytes(
+                quicktex_bc1.BC1Encoder(cmp.QUICKTEX_LEVEL)
+                .encode(qt(rgb.tobytes(), w, h))
+                .tobytes()
+            ),
+            "ispc_texcomp": lambda: ispc_texcomp.compress_blocks_bc1(
+                surf(rgb.tobytes(), w, h, w * 4)
+            ),
+        },
+        "bc3": {
+            "etcpak": lambda: etcpak.compress_bc3(nm, w, h),
+            "quicktex": lambda: bytes(
+                quicktex_bc3.BC3Encoder(cmp.QUICKTEX_LEVEL).encode(qt(nm.tobytes(), w, h)).tobytes()
+            ),
+            "ispc_texcomp": lambda: ispc_texcomp.compress_blocks_bc3(
+                surf(nm.tobytes(), w, h, w * 4)
+            ),
+            "ours (bc4 alpha + quicktex colour)": bc3_ours,
+        },
+        "bc7": {
+            "etcpak": lambda: etcpak.compress_bc7(rgb, w, h, None),
+            "ispc_texcomp": lambda: ispc_texcomp.compress_blocks_bc7(
+                surf(rgb.tobytes(), w, h, w * 4),
+                ispc_texcomp.BC7EncSettings.from_profile(cmp.ISPC_BC7_PROFILE),
+            ),
+        },
+    }
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for fmt, encs in cases.items():
+        out[fmt] = {}
+        for name, fn in encs.items():
+            data, sec = _timed(fn, 1)
+            dec = _decode(fmt, data, h, w)
+            if fmt == "bc3":
+                n = codec.decode("full", dec, "ag")
+            else:
+                n = codec.decode("full", dec[..., :3], "rgb")
+            s = _stats(n, ref) | {"seconds": round(sec, 4)}
+            out[fmt][name] = s
+            res.rows.append(
+                BenchRow(
+                    step=f"{'BC3nm' if fmt == 'bc3' else fmt.upper()} demo: {name}",
+                    median_s=sec,
+                    mpix_per_s=h * w / 1e6 / sec,
+                    note=f"mean {s['mean_deg']:.3f} p99 {s['p99_deg']:.3f} deg",
+                )
+            )
+    res.extra["formats"] = out
+    res.extra["choice"] = dict(CHOICE)
+
+
+@benchmark("normals", "BC5 vs exhaustive/etcpak/quicktex/ispc on 256^2 crops; 4096^2 fused path")
 def bench_normals(quick: bool) -> BenchResult:
+    from wrinklepipe.demo import character
     from wrinklepipe.io.images import write_image
-    from wrinklepipe.normals import compress as cmp
     from wrinklepipe.normals import encode as enc
     from wrinklepipe.normals._chunks import threads as _threads
     from wrinklepipe.normals.read import ReadOptions, read_normal_map
 
     size = QUICK_SIZE if quick else SIZE
-    repeat = 3 if quick else 7
+    crop = 64 if quick else 256
+    repeat = 2 if quick else 3
     mp = size * size / 1e6
+    res = BenchResult(
+        name="normals",
+        description=f"BC5 quality on {crop}^2 crops; {size}^2 PD -> BC5 -> decode -> error",
+        baseline="bare BC5 encoder (normals.bc4.encode_bc5)",
+        limits={} if quick else {"whole (fused, no read)": 1.5},
+    )
     with tempfile.TemporaryDirectory() as tmp:
+        # --- quality on crops
+        demo = character.generate(256 if quick else 1024).base_normal.astype(np.float32)
+        y0 = 96 if quick else 384
+        n = demo[y0 : y0 + crop, y0 : y0 + crop]
+        crops = {"demo base": ((np.float32(127.5) + np.float32(127.5) * n[..., :2]), n)}
+        helmet = _helmet_texels(Path(tmp))
+        if helmet is not None:
+            q = _busiest(helmet, crop)
+            crops["DamagedHelmet"] = (q[..., :2].astype(np.float32), codec.decode("full", q, "rg"))
+        _bc5_quality(res, crops)
+        q8, _ = codec.encode("full", n, "png8", channels=3)
+        _format_quality(res, q8, n)
+
+        # --- the fused path on the big map, against the bare encoder
         src = Path(tmp) / "normal16.png"
         write_image(src, bench_map(size) * np.float32(0.5) + np.float32(0.5), bits=16)
         opts = ReadOptions(convention="opengl", detect=False)
         normals = read_normal_map(src, opts).normals
         scale = enc.auto_pd_scale(normals)
         rgba, _ = cmp.pd_pack(normals, scale, "bc5")
-        data = etcpak.compress_bc5(rgba, size, size)
-        bgra = cmp.decode_bc_bgra(data, size, size, "bc5")
-        # the file read is slow and not part of the limit: timed twice, outside the loop
-        read_times = []
-        for _ in range(2):
-            t0 = time.perf_counter()
-            read_normal_map(src, opts)
-            read_times.append(time.perf_counter() - t0)
+        t = np.clip(normals[..., :2] / normals[..., 2:3] / np.float32(scale), -1, 1)
+        targets = (np.float32(128) + np.float32(127) * t).astype(np.float32)
+        base_name = "bare BC5 encoder (normals.bc4.encode_bc5)"
         steps = {
-            "bare etcpak.compress_bc5": lambda: etcpak.compress_bc5(rgba, size, size),
-            "PD encode + pack": lambda: cmp.pd_pack(normals, scale, "bc5"),
-            "BC5 encode": lambda: cmp.encode_bc(rgba, "bc5"),
-            "decode (texture2ddecoder)": lambda: cmp.decode_bc_bgra(data, size, size, "bc5"),
-            "error report": lambda: cmp.pd_decode_error(bgra, normals, scale, "bc5"),
+            base_name: lambda: bc4.encode_bc5(targets[..., 0], targets[..., 1]),
             "whole (fused, no read)": lambda: cmp.pd_compress_check(normals, scale, "bc5"),
         }
         times: dict[str, list[float]] = {k: [] for k in steps}
-        cpu: dict[str, list[float]] = {k: [] for k in steps}
-        for fn in steps.values():  # warm-up
-            fn()
         for _ in range(repeat):
             for name, fn in steps.items():
-                c0, t0 = time.process_time(), time.perf_counter()
+                t0 = time.perf_counter()
                 fn()
                 times[name].append(time.perf_counter() - t0)
-                cpu[name].append(time.process_time() - c0)
         check = cmp.pd_compress_check(normals, scale, "bc5")
-    res = BenchResult(
-        name="normals",
-        description=f"{size}^2 normal map -> PD -> BC5 -> decode -> error report",
-        baseline="bare etcpak.compress_bc5",
-        # the limit is about the 4096^2 run; at the quick size fixed costs dominate
-        limits={} if quick else {"whole (fused, no read)": 4.0},
-    )
-    res.rows.append(
-        BenchRow(
-            step="read 16-bit PNG (excluded)",
-            median_s=float(np.median(read_times)),
-            mpix_per_s=mp / float(np.median(read_times)),
-            note="OpenImageIO decode + normal decode; not part of 'whole'",
-        )
-    )
-    base_cpu = float(np.median(cpu["bare etcpak.compress_bc5"]))
-    base_min = float(np.min(times["bare etcpak.compress_bc5"]))
+        etc_t0 = time.perf_counter()
+        etcpak.compress_bc5(rgba, size, size)
+        etc_s = time.perf_counter() - etc_t0
     for name, ts in times.items():
         med = float(np.median(ts))
-        c = float(np.median(cpu[name]))
-        note = (
-            f"cpu {c * 1e3:.0f} ms ({c / base_cpu:.2f}x bare), "
-            f"best wall {np.min(ts) * 1e3:.0f} ms ({np.min(ts) / base_min:.2f}x bare)"
+        res.rows.append(
+            BenchRow(step=name, median_s=med, mpix_per_s=mp / med, note=f"best {min(ts):.3f} s")
         )
-        res.rows.append(BenchRow(step=name, median_s=med, mpix_per_s=mp / med, note=note))
-    serial = sum(
-        float(np.median(times[k]))
-        for k in ("PD encode + pack", "BC5 encode", "decode (texture2ddecoder)", "error report")
+    res.extra.update(
+        {
+            "threads": _threads(),
+            "size": size,
+            "scale": scale,
+            "clipped": check.clipped,
+            "error": check.error.to_json(),
+            "bytes": len(check.data),
+            "etcpak_bc5_seconds": round(etc_s, 4),
+        }
     )
-    res.rows.append(
-        BenchRow(
-            step="sum of the separate steps",
-            median_s=serial,
-            mpix_per_s=mp / serial,
-            note="the same work unfused, for comparison",
-        )
-    )
-    whole = "whole (fused, no read)"
-    res.extra = {
-        "cpu_ratio_whole": float(np.median(cpu[whole])) / base_cpu,
-        "best_wall_ratio_whole": float(np.min(times[whole])) / base_min,
-        "threads": _threads(),
-        "size": size,
-        "scale": scale,
-        "clipped": check.clipped,
-        "error": check.error.to_json(),
-        "bytes": len(check.data),
-    }
     return res.finish()

@@ -1,7 +1,9 @@
 """Block compression of normal and wrinkle maps, and how much it costs in degrees.
 
-Encoders are etcpak's (from PyPI); decoding uses texture2ddecoder (which returns BGRA; this
-module hands back RGBA). etcpak's own decoders crash on some inputs and are never used.
+Encoders (each the lowest-error one measured by ``wrinklepipe bench normals``): BC5 and the
+alpha half of BC3nm by :mod:`wrinklepipe.normals.bc4` (vectorised numpy, within ~2 % of an
+exhaustive endpoint search), BC1 and BC3nm's colour half by quicktex, BC7 by ispc_texcomp.
+Decoding uses texture2ddecoder (which returns BGRA; this module hands back RGBA).
 Channel layouts are the codec's (:mod:`wrinklepipe.codec.formats`):
 
 ``bc5``    3Dc / ATI2: R = x, G = y, each an independent 8-bit-endpoint BC4 block (8 bpp).
@@ -31,12 +33,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import etcpak
+import ispc_texcomp
 import numpy as np
+import quicktex
+import quicktex.s3tc.bc1 as quicktex_bc1
+import quicktex.s3tc.bc3 as quicktex_bc3
 import texture2ddecoder
 
 from wrinklepipe import codec
-from wrinklepipe.normals import _chunks
+from wrinklepipe.normals import _chunks, bc4
 from wrinklepipe.normals import encode as enc
 from wrinklepipe.normals._chunks import map_rows, pool, threads
 
@@ -102,8 +107,23 @@ def pack_rgba(q: np.ndarray, fmt: str, out: np.ndarray | None = None) -> np.ndar
     return out
 
 
-def encode_bc(rgba: np.ndarray, fmt: str) -> bytes:
-    """Compress RGBA8 [H, W, 4] (H, W multiples of 4) with etcpak; returns the block data."""
+#: quicktex's preset level for BC1 and BC3's colour blocks (its default; 18 is ~30x slower for
+#: ~2 % less error on the maps of the bench).
+QUICKTEX_LEVEL = 5
+#: ispc_texcomp's BC7 profile ("basic": the lowest error of its opaque profiles).
+ISPC_BC7_PROFILE = "basic"
+
+
+def encode_bc(rgba: np.ndarray, fmt: str, targets: np.ndarray | None = None) -> bytes:
+    """Compress RGBA8 [H, W, 4] (H, W multiples of 4) in the layout of ``fmt``; returns the
+    block data (row-major blocks).
+
+    Encoders, each the lowest-error one measured in ``wrinklepipe bench normals``: BC5 and
+    BC3nm's alpha (x) half by :mod:`wrinklepipe.normals.bc4` (near the exhaustive search);
+    BC1 and BC3nm's colour half by quicktex; BC7 by ispc_texcomp. ``targets`` ([H, W, C]
+    float texel values, the unrounded map) lets the BC4-based encoders fit the source instead
+    of its 8-bit rounding: BC5 reads x, y from its two components, BC3nm x from the first.
+    """
     check_format(fmt)
     a = np.ascontiguousarray(rgba, dtype=np.uint8)
     if a.ndim != 3 or a.shape[2] != 4:
@@ -112,12 +132,23 @@ def encode_bc(rgba: np.ndarray, fmt: str) -> bytes:
     if h % 4 or w % 4 or h == 0 or w == 0:
         raise ValueError(f"block formats need sizes that are multiples of 4, got {w} x {h}")
     if fmt == "bc5":
-        return etcpak.compress_bc5(a, w, h)
+        if targets is not None:
+            return bc4.encode_bc5(targets[..., 0], targets[..., 1])
+        return bc4.encode_bc5(a[..., 0], a[..., 1])
     if fmt == "bc1":
-        return etcpak.compress_bc1(a, w, h)
+        tex = quicktex.RawTexture.frombytes(a.tobytes(), w, h)
+        return bytes(quicktex_bc1.BC1Encoder(QUICKTEX_LEVEL).encode(tex).tobytes())
     if fmt == "bc3nm":
-        return etcpak.compress_bc3(a, w, h)
-    return etcpak.compress_bc7(a, w, h, None)  # bc7 and bc7xy
+        tex = quicktex.RawTexture.frombytes(a.tobytes(), w, h)
+        blocks = np.frombuffer(
+            quicktex_bc3.BC3Encoder(QUICKTEX_LEVEL).encode(tex).tobytes(), np.uint8
+        ).reshape(-1, 16)
+        blocks = blocks.copy()
+        blocks[:, :8] = bc4.bc4_blocks(a[..., 3] if targets is None else targets[..., 0])
+        return blocks.tobytes()
+    surface = ispc_texcomp.RGBASurface(a.tobytes(), w, h, w * 4)
+    settings = ispc_texcomp.BC7EncSettings.from_profile(ISPC_BC7_PROFILE)
+    return bytes(ispc_texcomp.compress_blocks_bc7(surface, settings))  # bc7 and bc7xy
 
 
 def block_data_size(fmt: str, width: int, height: int) -> int:
@@ -480,9 +511,9 @@ def choose_format(checks: Sequence[FormatCheck], budget: Budget) -> FormatCheck 
 
 
 # ------------------------------------------------------------------------------------------
-# the fused PD path (what `encode-normals` and the benchmark run): normals -> 8-bit PD -> BCn
-# -> independent decode -> angle to the source, one row chunk at a time on two threads, so the
-# codec calls of one thread overlap the numpy work of the other and temporaries stay in cache.
+# the fused PD path (what the benchmark runs): normals -> 8-bit PD -> BCn -> independent decode
+# -> angle to the source; packing and measuring one row chunk at a time on the threads (the
+# temporaries stay in cache), the encoder once over the whole map.
 
 #: Byte position of x and y inside a little-endian RGBA8 texel (R = 0 ... A = 3) per format,
 #: the constant bytes around them, and where texture2ddecoder's BGRA output puts x and y.
@@ -538,7 +569,9 @@ def _byte_plane(v: np.ndarray, byte: int, out: np.ndarray, centre: float) -> np.
     return out
 
 
-def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str, version: int) -> tuple[np.ndarray, int]:
+def _pd_pack_chunk(
+    p: np.ndarray, s: float, fmt: str, version: int, targets: np.ndarray | None = None
+) -> tuple[np.ndarray, int]:
     """8-bit PD texels of normal planes, packed as RGBA8 for ``fmt``; clipped count.
 
     ``q = floor(c + h t + 0.5)`` with the mapping's centre ``c`` and steps ``h``, t clipped to
@@ -565,10 +598,14 @@ def _pd_pack_chunk(p: np.ndarray, s: float, fmt: str, version: int) -> tuple[np.
         b = np.abs(uy, out=_ws("f3", shape))
         np.maximum(a, b, out=a)
         clipped = int(np.count_nonzero(np.greater(a, lim, out=_ws("m", shape, np.bool_))))
-    # quantise: floor(clip(c + u + 0.5, c - h, c + h + 0.5)), capped at c + h
-    for u in (ux, uy):
+    # quantise: floor(clip(c + u + 0.5, c - h, c + h + 0.5)), capped at c + h; ``targets``
+    # receives the unrounded texels c + h t (t clipped), which the BC4-based encoders fit
+    for ch, u in enumerate((ux, uy)):
         u += _F(c + 0.5)
         np.clip(u, _F(c - half), _F(c + half + 0.5), out=u)
+        if targets is not None:
+            np.subtract(u, _F(0.5), out=targets[..., ch])
+            np.maximum(targets[..., ch], _F(c - half), out=targets[..., ch])
         np.floor(u, out=u)
         np.minimum(u, _F(c + half), out=u)
     px, py, const = _PACK[fmt]
@@ -625,17 +662,6 @@ def _pd_measure_chunk(
     np.sqrt(dx, out=dx)
     # |a - b| / 2 <= 1 for unit vectors; a NaN here (non-unit input) counts as 180 degrees
     return np.arcsin(dx, out=out)
-
-
-def _pd_chunk(
-    nc: np.ndarray, s: float, fmt: str, width: int, out: np.ndarray, version: int
-) -> tuple[bytes, int, np.ndarray]:
-    """One row chunk of the fused path: returns (block data, clipped texels, half-angles)."""
-    p = _half_planes(nc)
-    rgba, clipped = _pd_pack_chunk(p, s, fmt, version)
-    data = encode_bc(rgba, fmt)
-    raw = decode_bc_bgra(data, width, nc.shape[0], fmt)
-    return data, clipped, _pd_measure_chunk(raw, p, s, fmt, out, version)
 
 
 def pd_pack(
@@ -699,9 +725,9 @@ def pd_compress_check(
     """PD-encode unit normals [H, W, 3] to 8 bits, block-compress, decode, measure.
 
     The same texels as :func:`encode.encode_pd_u8` then :func:`pack_rgba`, :func:`encode_bc`
-    and :func:`decode_bc`, fused per row chunk: block rows are independent, so compressing
-    chunk by chunk gives the same bytes as one call, and one thread's codec call overlaps the
-    other's numpy work. ``angles_out`` ([H, W] float32) receives per-texel angles in degrees.
+    and :func:`decode_bc`: packing and measuring are fused per row chunk on the threads, the
+    encoder runs once over the whole map (BC5 / BC3nm fit the unrounded texels).
+    ``angles_out`` ([H, W] float32) receives per-texel angles in degrees.
     """
     check_format(fmt)
     n = np.asarray(normals, dtype=_F)
@@ -720,14 +746,24 @@ def pd_compress_check(
     hp, wp = n.shape[:2]
     half = np.empty((hp, wp), dtype=_F)
 
-    def work(rows: slice) -> tuple[bytes, int, float]:
-        data, clipped, ang = _pd_chunk(n[rows], s, fmt, wp, half[rows], version)
-        return data, clipped, float(ang.sum())  # float32 pairwise sum, while in cache
+    rgba = np.empty((hp, wp, 4), dtype=np.uint8)
+    targets = np.empty((hp, wp, 2), dtype=_F)
+
+    def work(rows: slice) -> int:
+        packed, clipped = _pd_pack_chunk(_half_planes(n[rows]), s, fmt, version, targets[rows])
+        rgba[rows] = packed
+        return clipped
 
     results = map_rows(work, hp, wp)
-    data = b"".join(r[0] for r in results)
-    clipped = sum(r[1] for r in results)
-    total: float | None = sum(r[2] for r in results)
+    clipped = sum(results)
+    data = encode_bc(rgba, fmt, targets)  # one call: the encoder's choices see the whole map
+    bgra = decode_bc_bgra(data, wp, hp, fmt)
+
+    def measure(rows: slice) -> float:
+        ang = _pd_measure_chunk(bgra[rows], _half_planes(n[rows]), s, fmt, half[rows], version)
+        return float(ang.sum())  # float32 pairwise sum, while in cache
+
+    total: float | None = sum(map_rows(measure, hp, wp))
     if padded:
         clipped = enc.pd_clipped_count(src, s)
         half = np.ascontiguousarray(half[:h, :w])

@@ -1,0 +1,366 @@
+"""BC4 / BC5 encoding near the quality limit, in vectorised numpy.
+
+A BC4 block stores two 8-bit endpoints and a 3-bit index per texel. With ``e0 > e1`` the
+palette is the endpoints and six interpolants ``lo + floor(j r / 7)`` (``lo = e1``,
+``r = e0 - e1``, j = 1..6); with ``e0 <= e1`` it is the endpoints, four interpolants
+``lo + floor(j r / 5)``, 0 and 255. Interpolants are truncated as texture2ddecoder and Mesa
+decode them (hardware that interpolates in float is within one level). BC5 is two BC4 blocks
+(R, then G); a DXT5nm block's alpha half is a BC4 block too.
+
+The encoder minimises each block's squared error to *float* targets in texel units (0..255):
+an 8-bit map's own texels, or the unrounded texels of a map still in floating point (closer to
+the source). All blocks are searched together, one candidate endpoint pair at a time:
+
+1. pairs just inside the block's range: ``lo`` in ``min + [0, 2]``, ``hi`` in ``max - [0, 2]``;
+2. least-squares endpoints for index assignments that put the block's extremes on inner
+   palette positions (extended palettes: a cluster then lands exactly on an interpolant), then
+   two Lloyd rounds (reassign indices, refit), each fit rounded four ways;
+3. two rounds of moving either endpoint by one level;
+4. the hard blocks (the 5 % with the largest error, and every block holding one of the 3 %
+   worst texels) get every pair up to 16 levels outside their range (and up to 8 inside),
+   scored by squared error plus every texel's excess over that 3 % threshold: a little
+   mean error is traded for a lower tail, so the p99 ends below the exhaustive search's;
+5. the six-value mode for blocks that reach 0 or 255 (its palette holds both extremes).
+
+Candidates are scored with one rounded index guess per texel (offset by the interpolants'
+mean truncation); the chosen pair then gets exact nearest indices. :func:`reference_bc4` is the
+exhaustive search the tests and ``wrinklepipe bench normals`` compare with (slow; small crops).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from wrinklepipe.normals._chunks import pool, threads
+
+_F = np.float32
+#: Mean truncation of the 8-value palette's interpolants (floor of j r / 7), in levels.
+_TRUNC = _F(0.43)
+#: Blocks per vectorised batch of the search (every [16, N] temporary stays in the cache).
+BATCH = 4096
+#: Step 2: (palette position of the block's minimum, of its maximum) for the extended fits.
+_EXTENDED = ((0, 6), (1, 7), (1, 6), (0, 5), (2, 7), (2, 6), (1, 5))
+#: Step 4: fraction of blocks refined, levels searched outside / inside their range.
+HARD_FRACTION = 0.05
+HARD_QUANTILE = 0.97
+HARD_PENALTY = 1.0
+HARD_OUTSIDE = 16
+HARD_INSIDE = 8.0
+
+
+def blocks_of(plane: np.ndarray) -> np.ndarray:
+    """[H, W] (multiples of 4) -> [16, N] texel columns, blocks in row-major block order."""
+    h, w = plane.shape
+    return np.ascontiguousarray(
+        plane.reshape(h // 4, 4, w // 4, 4).transpose(1, 3, 0, 2).reshape(16, -1)
+    )
+
+
+class _Scorer:
+    """Approximate squared error of 8-value palettes for a batch of blocks ``x`` [16, N]."""
+
+    def __init__(self, x: np.ndarray) -> None:
+        self.x = x
+        self.u = np.empty_like(x)
+        self.j = np.empty_like(x)
+
+    def tail8(self, lo: np.ndarray, r: np.ndarray, tau: float, lam: float) -> np.ndarray:
+        """:meth:`sse8` plus ``lam`` times each texel's excess over ``tau``."""
+        e = self._errors(lo, r)
+        total = e.sum(axis=0)
+        e -= _F(tau)
+        np.maximum(e, _F(0), out=e)
+        total += _F(lam) * e.sum(axis=0)
+        return total
+
+    def sse8(self, lo: np.ndarray, r: np.ndarray) -> np.ndarray:
+        return self._errors(lo, r).sum(axis=0)
+
+    def _errors(self, lo: np.ndarray, r: np.ndarray) -> np.ndarray:
+        u, j = self.u, self.j
+        np.subtract(self.x, lo, out=u)
+        np.add(u, _TRUNC, out=j)
+        j *= _F(7) / np.maximum(r, _F(1))
+        np.rint(j, out=j)
+        np.clip(j, _F(0), _F(7), out=j)
+        j *= r
+        j /= _F(7)  # j r is an exact integer; the quotient's floor is exact too
+        np.floor(j, out=j)
+        np.subtract(u, j, out=j)
+        j *= j
+        return j
+
+
+def _exact8(x: np.ndarray, lo: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact squared error and nearest palette position j (0 = lo .. 7 = hi), 8-value mode."""
+    u = x - lo
+    j0 = np.floor(u * (_F(7) / np.maximum(r, _F(1))))
+    np.clip(j0, _F(0), _F(7), out=j0)
+    best = bj = None
+    for dj in (0, 1, 2):  # the truncated palette's nearest entry is j0, j0 + 1 or j0 + 2
+        j = np.minimum(j0 + _F(dj), _F(7))
+        e = u - np.floor(j * r / _F(7))
+        e *= e
+        if best is None:
+            best, bj = e, j
+        else:
+            m = e < best
+            np.copyto(best, e, where=m)
+            np.copyto(bj, j, where=m)
+    return best.sum(axis=0), bj
+
+
+def _exact6(x: np.ndarray, lo: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact squared error and BC4 code of 6-value palettes (lo, 4 interpolants, hi, 0, 255)."""
+    u = x - lo
+    j0 = np.floor(u * (_F(5) / np.maximum(r, _F(1))))
+    np.clip(j0, _F(0), _F(5), out=j0)
+    best = bc = None
+    for dj in (0, 1, 2):
+        j = np.minimum(j0 + _F(dj), _F(5))
+        e = u - np.floor(j * r / _F(5))
+        e *= e
+        code = np.where(j == 0, _F(0), np.where(j == 5, _F(1), j + _F(1)))
+        if best is None:
+            best, bc = e, code
+        else:
+            m = e < best
+            np.copyto(best, e, where=m)
+            np.copyto(bc, code, where=m)
+    for value, code in ((0.0, 6.0), (255.0, 7.0)):
+        e = (x - _F(value)) ** 2
+        m = e < best
+        np.copyto(best, e, where=m)
+        np.copyto(bc, _F(code), where=m)
+    return best.sum(axis=0), bc
+
+
+def _search(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Steps 1-3: endpoints (lo, hi) [N] of the 8-value mode for a batch ``x`` [16, N]."""
+    sc = _Scorer(x)
+    xmin, xmax = x.min(axis=0), x.max(axis=0)
+    mn, mx = np.floor(xmin), np.ceil(xmax)
+    best = np.full(x.shape[1], np.inf, _F)
+    blo, bhi = mn.copy(), mx.copy()
+
+    def consider(lo: np.ndarray, hi: np.ndarray) -> None:
+        np.clip(lo, 0, 255, out=lo)
+        np.clip(hi, 0, 255, out=hi)
+        r = hi - lo
+        e = sc.sse8(lo, r)
+        m = (r >= 0) & (e < best)
+        np.copyto(best, e, where=m)
+        np.copyto(blo, lo, where=m)
+        np.copyto(bhi, hi, where=m)
+
+    def fit(j: np.ndarray) -> None:
+        """Least-squares endpoints for palette positions ``j`` [16, N], rounded four ways."""
+        w = j * _F(1.0 / 7.0)
+        v = _F(1) - w
+        a, b, c = (v * v).sum(axis=0), (v * w).sum(axis=0), (w * w).sum(axis=0)
+        p, q = (v * x).sum(axis=0), (w * x).sum(axis=0)
+        det = a * c - b * b
+        ok = det > _F(1e-3)
+        dd = np.where(ok, det, _F(1))
+        lo = np.where(ok, (c * p - b * q) / dd, blo) + _TRUNC
+        hi = np.where(ok, (a * q - b * p) / dd, bhi) + _TRUNC
+        for fl in (np.floor, np.ceil):
+            for fh in (np.floor, np.ceil):
+                consider(fl(lo), fh(hi))
+
+    for a in range(3):
+        for b in range(3):
+            consider(mn + _F(a), mx - _F(b))
+    frac = (x - xmin) / np.maximum(xmax - xmin, _F(1e-6))
+    for j0, j1 in _EXTENDED:
+        fit(np.rint(frac * _F(j1 - j0)) + _F(j0))
+    for _ in range(2):
+        fit(_exact8(x, blo, bhi - blo)[1])
+    for _ in range(2):
+        lo0, hi0 = blo.copy(), bhi.copy()
+        for dl in (-1, 0, 1):
+            for dh in (-1, 0, 1):
+                if dl or dh:
+                    consider(lo0 + _F(dl), hi0 + _F(dh))
+    return blo, bhi
+
+
+def _exact8_tail(
+    x: np.ndarray, lo: np.ndarray, r: np.ndarray, tau: float, lam: float
+) -> np.ndarray:
+    """Squared error plus ``lam`` times each texel's excess over ``tau`` (a tail penalty)."""
+    u = x - lo
+    j0 = np.floor(u * (_F(7) / np.maximum(r, _F(1))))
+    np.clip(j0, _F(0), _F(7), out=j0)
+    best = None
+    for dj in (0, 1, 2):
+        j = np.minimum(j0 + _F(dj), _F(7))
+        e = u - np.floor(j * r / _F(7))
+        e *= e
+        best = e if best is None else np.minimum(best, e)
+    return best.sum(axis=0) + _F(lam) * np.maximum(best - _F(tau), _F(0)).sum(axis=0)
+
+
+def _window(
+    x: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    outside: int,
+    inside: np.ndarray,
+    score: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+) -> None:
+    """Every pair with ``lo`` in ``[min - outside, min + inside]`` and ``hi`` in
+    ``[max - inside, max + outside]``, scored by ``score(x, lo, r)``; keeps the best (in
+    place). Each ``lo`` offset works on the blocks it is valid for only."""
+    best = score(x, lo, hi - lo)
+    xmin, xmax = x.min(axis=0), x.max(axis=0)
+    fmn, cmx = np.floor(xmin), np.ceil(xmax)
+    top = int(np.ceil(float(inside.max()))) if inside.size else 0
+    for dl in range(-outside, top + 1):
+        l_all = np.clip(fmn + _F(dl), 0, 255)
+        sel = np.flatnonzero(l_all <= xmin + inside)
+        if sel.size == 0:
+            continue
+        xs = np.ascontiguousarray(x[:, sel])
+        l2, b2, lo2, hi2 = l_all[sel], best[sel], lo[sel], hi[sel]
+        lim = xmax[sel] - inside[sel]
+        for dh in range(-top, outside + 1):
+            h2 = np.clip(cmx[sel] + _F(dh), 0, 255)
+            ok = (h2 >= l2) & (h2 >= lim)
+            if not ok.any():
+                continue
+            e = score(xs, l2, h2 - l2)
+            m = ok & (e < b2)
+            np.copyto(b2, e, where=m)
+            np.copyto(lo2, l2, where=m)
+            np.copyto(hi2, h2, where=m)
+        best[sel], lo[sel], hi[sel] = b2, lo2, hi2
+
+
+def _refine_hard(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Step 4 (in place): the hard blocks' pairs are searched again, scored by squared error
+    plus ``HARD_PENALTY`` times every texel's excess over the ``HARD_QUANTILE`` texel error,
+    which trades a little mean error for a lower tail (p99)."""
+    sse, j = _exact8(x, lo, hi - lo)
+    if sse.size == 0:
+        return
+    err = x - (lo + np.floor(j * (hi - lo) / _F(7)))
+    err *= err
+    cut = max(float(np.quantile(sse, 1.0 - HARD_FRACTION)), 16.0)
+    tau = max(float(np.quantile(err, HARD_QUANTILE)), 4.0)
+    idx = np.flatnonzero((sse > cut) | (err.max(axis=0) >= tau))
+    if idx.size == 0:
+        return
+    xs = np.ascontiguousarray(x[:, idx])
+    l2, h2 = lo[idx].copy(), hi[idx].copy()
+    inside = np.minimum(np.sqrt(sse[idx]), _F(HARD_INSIDE))
+
+    def score(xb: np.ndarray, lb: np.ndarray, rb: np.ndarray) -> np.ndarray:
+        return _Scorer(xb).tail8(lb, rb, tau, HARD_PENALTY)
+
+    _window(xs, l2, h2, HARD_OUTSIDE, inside, score)
+    # the scorer's guess, confirmed with exact indices
+    before = _exact8_tail(xs, lo[idx], hi[idx] - lo[idx], tau, HARD_PENALTY)
+    keep = _exact8_tail(xs, l2, h2 - l2, tau, HARD_PENALTY) < before
+    lo[idx[keep]], hi[idx[keep]] = l2[keep], h2[keep]
+
+
+def _pack(e0: np.ndarray, e1: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """[N] endpoints and [16, N] codes -> [N, 8] uint8 BC4 blocks."""
+    c = codes.astype(np.uint64)
+    bits = np.zeros(c.shape[1], np.uint64)
+    for k in range(16):
+        bits |= c[k] << np.uint64(3 * k)
+    out = np.empty((c.shape[1], 8), np.uint8)
+    out[:, 0] = e0
+    out[:, 1] = e1
+    out[:, 2:] = bits.astype("<u8").view(np.uint8).reshape(-1, 8)[:, :6]
+    return out
+
+
+def _blocks(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Exact indices for the chosen pairs, the six-value mode where it wins, packed."""
+    r = hi - lo
+    sse8, j = _exact8(x, lo, r)
+    codes = np.where(j == 7, _F(0), np.where(j == 0, _F(1), _F(8) - j))
+    codes = np.where(r == 0, _F(0), codes)  # lo == hi: six-value mode, every texel e0
+    e0, e1 = hi.copy(), lo.copy()
+    edge = (x.min(axis=0) < 8) | (x.max(axis=0) > 247)
+    if edge.any():
+        xe = x[:, edge]
+        inner = (xe > 4) & (xe < 251)
+        lo6 = np.floor(np.where(inner, xe, _F(255)).min(axis=0))
+        hi6 = np.ceil(np.where(inner, xe, _F(0)).max(axis=0))
+        none = ~inner.any(axis=0)
+        lo6 = np.where(none, _F(0), lo6)
+        hi6 = np.maximum(np.where(none, _F(0), hi6), lo6)
+        s6, c6 = _exact6(xe, lo6, hi6 - lo6)
+        better = s6 < sse8[edge]
+        idx = np.flatnonzero(edge)[better]
+        e0[idx], e1[idx] = lo6[better], hi6[better]
+        codes[:, idx] = c6[:, better]
+    return _pack(e0.astype(np.uint8), e1.astype(np.uint8), codes)
+
+
+def _targets(values: np.ndarray) -> np.ndarray:
+    v = np.asarray(values)
+    if v.ndim != 2:
+        raise ValueError(f"BC4 encodes one channel [H, W], got shape {v.shape}")
+    h, w = v.shape
+    if h % 4 or w % 4 or h == 0 or w == 0:
+        raise ValueError(f"block formats need sizes that are multiples of 4, got {w} x {h}")
+    return blocks_of(np.clip(v.astype(_F), _F(0), _F(255)))
+
+
+def bc4_blocks(values: np.ndarray) -> np.ndarray:
+    """BC4 blocks [N, 8] (row-major block order) of one channel ``values`` [H, W] (multiples
+    of 4): uint8 texels, or float targets in texel units 0..255."""
+    x = _targets(values)
+    n = x.shape[1]
+    lo, hi = np.empty(n, _F), np.empty(n, _F)
+    for s in range(0, n, BATCH):
+        lo[s : s + BATCH], hi[s : s + BATCH] = _search(np.ascontiguousarray(x[:, s : s + BATCH]))
+    _refine_hard(x, lo, hi)
+    return _blocks(x, lo, hi)
+
+
+def encode_bc4(values: np.ndarray) -> bytes:
+    """BC4 data of one channel [H, W] (see :func:`bc4_blocks`)."""
+    return bc4_blocks(values).tobytes()
+
+
+def encode_bc5(x: np.ndarray, y: np.ndarray) -> bytes:
+    """BC5 data of two channels [H, W] (R = ``x``, G = ``y``; texels or float targets); the two
+    channels are encoded on two threads."""
+    if threads() > 1:
+        bx, by = pool().map(bc4_blocks, (x, y))
+    else:
+        bx, by = bc4_blocks(x), bc4_blocks(y)
+    return np.concatenate([bx, by], axis=1).tobytes()
+
+
+def reference_bc4(values: np.ndarray, outside: int = 32) -> np.ndarray:
+    """The exhaustive endpoint search (tests and benchmarks only: slow, use small crops).
+
+    For each block, every 8-value pair with ``lo`` from ``outside`` levels below the block's
+    minimum up to ``min + sqrt(E)`` and ``hi`` from ``max - sqrt(E)`` up to ``outside`` above
+    its maximum, exactly scored, where ``E`` is the error :func:`bc4_blocks` reached (a palette
+    whose nearest entry misses the block's extreme texel by more than ``sqrt(E)`` cannot beat
+    ``E``, so no pair within the outside window is left out), plus the six-value mode as
+    :func:`bc4_blocks` tries it. Returns BC4 blocks [N, 8] like :func:`bc4_blocks`.
+    """
+    x = _targets(values)
+    n = x.shape[1]
+    lo, hi = np.empty(n, _F), np.empty(n, _F)
+    for s in range(0, n, BATCH):
+        lo[s : s + BATCH], hi[s : s + BATCH] = _search(np.ascontiguousarray(x[:, s : s + BATCH]))
+    _refine_hard(x, lo, hi)
+    sse, _ = _exact8(x, lo, hi - lo)
+
+    def score(xb: np.ndarray, lb: np.ndarray, rb: np.ndarray) -> np.ndarray:
+        return _exact8(xb, lb, rb)[0]
+
+    _window(x, lo, hi, outside, np.sqrt(sse), score)
+    return _blocks(x, lo, hi)
