@@ -179,3 +179,12 @@ def test_bc5_within_3_percent_of_exhaustive_on_real_normal_maps(tmp_path, name):
     # the source is 8-bit: BC5 reproduces its x, y (z rebuilt), measured against that normal
     ref = codec.decode("full", q[..., :2], "rg")
     _assert_near_limit(_near_limit(q[..., :2].astype(np.float32), ref))
+
+
+def test_every_block_is_encoded_on_its_own(demo_base):
+    """Blocks are independent: a map's blocks encode the same alone as in the whole map (so a
+    map can be encoded in pieces, and the fidelity search encodes only the blocks it reads)."""
+    v = np.float32(127.5) + np.float32(127.5) * demo_base[448:512, 448:512, 0]
+    whole = bc4.bc4_blocks(v).reshape(16, 16, 8)
+    part = bc4.bc4_blocks(v[16:32, 8:40]).reshape(4, 8, 8)
+    assert np.array_equal(part, whole[4:8, 2:10])
