@@ -409,6 +409,26 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
             "drivers": [dict(d) for d in ext.get("drivers", [])],
             "weights": [float(w) for w in ext.get("weights", [0.0] * len(regions))],
         }
+        compressed = []
+        for i, c in enumerate(ext.get("compressed", [])):
+            key = f"{pkey}/compressed/{i}"
+            src = _texture_image(r, c["texture"]["index"], key)
+            if src not in by_image:
+                raise r.err("a compressed copy of a texture the extension does not use", key)
+            ktx2, dds = (list(c.get("uris", [])) + ["", ""])[:2]
+            compressed.append(
+                {
+                    "texture": by_image[src],
+                    "format": str(c["format"]),
+                    "layout": str(c["layout"]),
+                    "mapping": int(c.get("mapping", 1)),
+                    "levels": int(c.get("levels", 1)),
+                    "ktx2": str(ktx2),
+                    "dds": str(dds),
+                }
+            )
+        if compressed:
+            meta["compressed"] = compressed
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
         raise r.err(f"malformed extension block: {plain_reason(exc)}", pkey) from None
     try:

@@ -264,6 +264,18 @@ def gltf_document(
         "weights": [float(w) for w in meta["weights"]],
         "vertexIdAttribute": VERTEX_ID_ATTRIBUTE,
     }
+    if meta.get("compressed"):  # block-compressed copies shipped beside the PNGs
+        ext["compressed"] = [
+            {
+                "texture": {"index": tex_index[c["texture"]]},
+                "format": c["format"],
+                "layout": c["layout"],
+                "mapping": int(c["mapping"]),
+                "levels": int(c["levels"]),
+                "uris": [c["ktx2"], c["dds"]],
+            }
+            for c in meta["compressed"]
+        ]
     animations = []
     for c in pkg.curves:
         times = np.asarray(c.times, np.float32)

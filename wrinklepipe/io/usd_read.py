@@ -66,6 +66,29 @@ def _asset_bytes(layer_path: Path, asset: Any, file: str, key: str, opt: UsdRead
     return data
 
 
+def _compressed(prim: Any, mapping: int) -> list[dict[str, Any]]:
+    """The records of the block-compressed copies (``wrinkle:compressed*``), if authored."""
+
+    def get(name: str) -> list[Any]:
+        a = prim.GetAttribute(f"wrinkle:{name}")
+        return list(a.Get()) if a and a.HasAuthoredValue() else []
+
+    names = [str(n) for n in get("compressedTextures")]
+    fmts, lays, levels = get("compressedFormats"), get("compressedLayouts"), get("compressedLevels")
+    return [
+        {
+            "texture": n,
+            "format": str(f),
+            "layout": str(lay),
+            "mapping": 1 if n == "base_normal" else mapping,
+            "levels": int(lv),
+            "ktx2": f"compressed/{n}.ktx2",
+            "dds": f"compressed/{n}.dds",
+        }
+        for n, f, lay, lv in zip(names, fmts, lays, levels)
+    ]
+
+
 def _mapping(prim: Any) -> int:
     """``wrinkle:mapping`` (the value-mapping version); stages written before it hold v1."""
     a = prim.GetAttribute("wrinkle:mapping")
@@ -295,6 +318,9 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         "drivers": drivers,
         "weights": [float(w) for w in (default if default is not None else [0.0] * r)],
     }
+    comp = _compressed(mat_prim, meta["mapping"])
+    if comp:
+        meta["compressed"] = comp
     fps = stage.GetTimeCodesPerSecond()
 
     def curve(attr: Any, name: str) -> WeightCurves | None:

@@ -65,6 +65,10 @@ API_ATTRIBUTES: dict[str, str] = {
     "wrinkle:drivers": "string",
     "wrinkle:weights": "float[]",
     "wrinkle:weightCurve": "token",
+    "wrinkle:compressedTextures": "token[]",
+    "wrinkle:compressedFormats": "token[]",
+    "wrinkle:compressedLayouts": "token[]",
+    "wrinkle:compressedLevels": "int[]",
 }
 
 
@@ -367,6 +371,12 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
         "wrinkle:expressionWeights": Vt.DoubleArray.FromNumpy(expr),
         "wrinkle:drivers": json.dumps(meta.get("drivers", []), sort_keys=True),
     }
+    comp = meta.get("compressed") or []
+    if comp:  # the block-compressed copies beside the PNGs (compressed/NAME.ktx2 and .dds)
+        values["wrinkle:compressedTextures"] = Vt.TokenArray([c["texture"] for c in comp])
+        values["wrinkle:compressedFormats"] = Vt.TokenArray([c["format"] for c in comp])
+        values["wrinkle:compressedLayouts"] = Vt.TokenArray([c["layout"] for c in comp])
+        values["wrinkle:compressedLevels"] = Vt.IntArray([int(c["levels"]) for c in comp])
     for attr_name, value in values.items():
         attrs[attr_name].Set(value)
     if [str(e.get("region")) for e in table] != names:

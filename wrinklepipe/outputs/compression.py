@@ -1,19 +1,30 @@
-"""The block-format choice: DDS + KTX2 copies of the base and PD state maps within the budget."""
+"""The block-format choice: DDS + KTX2 copies of the base and the states within the budget.
+
+The copies themselves (layouts, encoders, mips, containers) are
+:mod:`wrinklepipe.normals.copies`; this module is what the folder and the engine exports call.
+"""
 
 from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from wrinklepipe.io.package import WrinklePackage
-from wrinklepipe.normals import compress as nc
-from wrinklepipe.normals.dds import dds_bytes
-from wrinklepipe.normals.ktx2 import ktx2_bytes
+from wrinklepipe.normals import copies as nc
 
-#: Block formats tried for a two-channel normal map when the manifest says ``auto``.
-AUTO_FORMATS: tuple[str, ...] = ("bc5", "bc3nm", "bc7", "bc1")
-_BLOCK = ("bc5", "bc1", "bc3nm", "bc7")
+#: Block formats ``auto`` tries (smallest blocks first; ``bc7xy`` only when asked for).
+AUTO_FORMATS: tuple[str, ...] = nc.AUTO_FORMATS
+
+
+def compressed_copies(
+    pkg: WrinklePackage,
+    budget: dict[str, float] | None = None,
+    formats: dict[str, str] | None = None,
+) -> tuple[list[nc.Copy], list[str], dict[str, Any]]:
+    """The copies of the base and every state (:func:`wrinklepipe.normals.copies.compressed_copies`:
+    the manifest's ``formats.base`` / ``formats.wrinkle``, ``auto`` = the smallest format whose
+    every map of the group meets the budget; all states share one format), notes, and the
+    per-group choices for the report."""
+    return nc.compressed_copies(pkg, budget, formats)
 
 
 def compressed_files(
@@ -21,98 +32,7 @@ def compressed_files(
     budget: dict[str, float] | None = None,
     formats: dict[str, str] | None = None,
 ) -> tuple[dict[str, bytes], list[str], dict[str, Any]]:
-    """Block-compressed copies (DDS + KTX2) of the base and the PD state maps.
-
-    For each map the format is the manifest's ``formats.base`` / ``formats.wrinkle``; ``auto``
-    (default) tries :data:`AUTO_FORMATS` and keeps the smallest that meets the budget for every
-    map of the group (error of the decoded map against the stored 8-bit map, measured by
-    :func:`wrinklepipe.normals.compress.compress_and_check`); all states share one format. When
-    no format passes, the group ships as PNG only and a note says why.
-    Returns (files, notes, per-map choices for the report).
-    """
-    files: dict[str, bytes] = {}
-    notes: list[str] = []
-    choices: dict[str, Any] = {}
-    budget = budget or {}
-    limits = nc.Budget(budget.get("max_mean_deg"), budget.get("max_p99_deg", 2.0))
-    formats = formats or {}
-    meta = pkg.meta
-    lut = np.arange(256, dtype=np.float32) / np.float32(255.0)
-    groups: list[tuple[str, str, Any, list[Any]]] = [
-        (
-            "base",
-            formats.get("base", "auto"),
-            nc.decoder_for("full"),
-            [t for t in pkg.textures if t.role == "base_normal"],
-        ),
-    ]
-    if meta["encoding"] == "pd":  # every state ships in one format (shaders sample them alike)
-        groups.append(
-            (
-                "wrinkle",
-                formats.get("wrinkle", "auto"),
-                nc.decoder_for("pd", scale=float(meta["scale"])),
-                [t for t in pkg.textures if t.role == "state"],
-            )
-        )
-    else:
-        notes.append(f"{meta['encoding']} states ship as PNG only (block copies are for pd)")
-    for group, want, decode, maps in groups:
-        if any(t.bits != 8 for t in maps):
-            notes.append(f"{group}: 16-bit maps ship as PNG only (block formats are 8-bit)")
-        maps = [t for t in maps if t.bits == 8]
-        if not maps or (want not in _BLOCK and want != "auto"):
-            continue
-        # Smallest blocks first (BC1: 8 bytes; then BC5, BC3nm, BC7: 16), stop at the first
-        # format every map of the group passes with: that is the smallest that meets the budget.
-        candidates = (
-            tuple(
-                sorted(
-                    AUTO_FORMATS, key=lambda f: (nc.block_data_size(f, 4, 4), AUTO_FORMATS.index(f))
-                )
-            )
-            if want == "auto"
-            else (want,)
-        )
-        references = []
-        for t in maps:
-            stored = t.pixels[..., :2]
-            references.append((stored, decode(lut[stored], slice(0, stored.shape[0]))))
-        checks: dict[str, list[Any]] = {}
-        for f in candidates:
-            checks[f] = [
-                nc.compress_and_check(st, ref, f, decode, limits, keep_decoded=False)
-                for st, ref in references
-            ]
-            if all(c.verdict == "pass" for c in checks[f]):
-                break
-        candidates = tuple(checks)
-        passing = [f for f in candidates if all(c.verdict == "pass" for c in checks[f])]
-        if want != "auto":
-            pick = want
-            if not passing:
-                notes.append(f"{group}: {want} as requested, over the error budget")
-        elif passing:
-            pick = passing[0]
-        else:
-            pick = None
-            best = min(candidates, key=lambda f: max(c.error.mean_deg for c in checks[f]))
-            worst = max(checks[best], key=lambda c: c.error.mean_deg)
-            notes.append(
-                f"{group}: no block format meets the budget (best {best}: mean "
-                f"{worst.error.mean_deg:.2f}, p99 {worst.error.p99_deg:.2f} deg); PNG only"
-            )
-        choices[group] = {
-            "requested": want,
-            "chosen": pick or "png",
-            "checks": {
-                f: {t.name: c.to_json() for t, c in zip(maps, cs)} for f, cs in checks.items()
-            },
-        }
-        if pick is None:
-            continue
-        for t, c in zip(maps, checks[pick]):
-            h, w = t.pixels.shape[:2]
-            files[f"compressed/{t.name}.dds"] = dds_bytes(pick, w, h, [c.data])
-            files[f"compressed/{t.name}.ktx2"] = ktx2_bytes(pick, w, h, [c.data])
-    return files, notes, choices
+    """Like :func:`compressed_copies`, as ``{relative path: bytes}`` (``compressed/NAME.dds``
+    and ``compressed/NAME.ktx2``, full mip chains), notes and choices."""
+    made, notes, choices = compressed_copies(pkg, budget, formats)
+    return nc.files(made), notes, choices

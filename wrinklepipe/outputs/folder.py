@@ -13,7 +13,9 @@ from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.io.gltf_write import glb_bytes, gltf_document
 from wrinklepipe.io.package import WrinklePackage, png_bytes
 from wrinklepipe.io.usd_write import write_usd
-from wrinklepipe.outputs.compression import compressed_files
+from wrinklepipe.normals.copies import files as copy_files
+from wrinklepipe.normals.copies import records as copy_records
+from wrinklepipe.outputs.compression import compressed_copies
 from wrinklepipe.outputs.curves import curve_files
 
 #: The USD layers convert can add beside the always-written ``.usda``.
@@ -29,9 +31,17 @@ def build_outputs(
 ) -> tuple[dict[str, bytes], list[str], dict[str, Any]]:
     """Every output file as ``{relative path: bytes}`` (except USD, written by usd-core), notes,
     and the block-format choices. ``glb``: also a self-contained ``NAME.glb``; ``compressed``:
-    DDS + KTX2 copies (:func:`wrinklepipe.outputs.compression.compressed_files`)."""
+    DDS + KTX2 copies (:func:`wrinklepipe.outputs.compression.compressed_copies`), recorded in
+    the package's ``meta["compressed"]`` (in place) before the glTF is written."""
     name = pkg.name
     files: dict[str, bytes] = {}
+    notes: list[str] = []
+    choices: dict[str, Any] = {}
+    if compressed:  # first: the glTF extension and the USD schema record the copies
+        made, n, choices = compressed_copies(pkg, budget, formats)
+        files.update(copy_files(made))
+        notes += n
+        pkg.meta["compressed"] = copy_records(made)  # the USD layers written next read it too
     doc, data, images = gltf_document(pkg)
     doc["buffers"][0]["uri"] = f"{name}.bin"
     files[f"{name}.gltf"] = dumps_json(doc).encode("utf-8")
@@ -42,12 +52,6 @@ def build_outputs(
     if glb:
         gdoc, gdata, _ = gltf_document(pkg, embed_images=True)
         files[f"{name}.glb"] = glb_bytes(gdoc, gdata)
-    notes: list[str] = []
-    choices: dict[str, Any] = {}
-    if compressed:
-        comp, n, choices = compressed_files(pkg, budget, formats)
-        files.update(comp)
-        notes += n
     regions = [r["name"] for r in pkg.meta["regions"]]
     taken: set[str] = set()
     for c in pkg.curves:

@@ -230,12 +230,24 @@ def _load_folder(p: Path, o: LoadOptions) -> ValidationInput:
     return inp
 
 
+def _copy_layout(record: dict | None, fmt: str, png_layout: str) -> str:
+    """Where a compressed copy keeps x, y (and z): the layout the extension / USD records for
+    it; without a record, the codec's convention for the container's format (BC5: rg; a BC3
+    normal map is DXT5nm: ag; BC1 / BC7: the PNG's layout, z in B for a normal map)."""
+    if record is not None and record.get("layout") in ("rgb", "rg", "ag"):
+        return str(record["layout"])
+    if fmt == "bc3":
+        return "ag"
+    return "rg" if FORMATS[fmt][0] == 2 else png_layout
+
+
 def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> ValidationInput:
     """Replace base/state textures by the BC copies that ship beside them (DDS)."""
     if not folder.is_dir():
         if required:
             raise input_error(folder, "no compressed/ folder (--textures compressed)")
         return inp
+    recorded = {str(c["texture"]): c for c in inp.extra.get("compressed", [])}
     out = []
     for t in inp.textures:
         dds = folder / f"{t.name}.dds"
@@ -252,7 +264,7 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
                 data=bytes(img.levels[0]),
                 file=str(dds),
                 pointer="",
-                layout="rg" if FORMATS[fmt][0] == 2 else t.layout,
+                layout=_copy_layout(recorded.get(t.name), fmt, t.layout),
             )
         out.append(t)
     inp.textures = out

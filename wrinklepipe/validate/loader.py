@@ -121,6 +121,7 @@ def input_from_package(
         has_source=False,
         path=path,
         kind=kind,
+        extra={"compressed": [dict(c) for c in meta.get("compressed", [])]},
         pointers={
             "meta": f"{path}#/extensions/{EXTENSION}" if kind == "gltf" else path,
             "mesh": f"{path}#/meshes/0" if kind == "gltf" else path,

@@ -172,7 +172,8 @@ def check_maps(ctx: Context) -> list[Issue]:
         if a.encoding == "pd":
             # texels at the edge of the cone: |t| within half a step of 1
             half = 0.5 / codec.mapping(t.mapping).centre(t.bits or 8)[1]
-            edge = np.abs(tx.signed_values(v[..., [0, 1]], t, "pd")) >= 1.0 - half
+            xy = v[..., list(codec.layout(layout).components[:2])]  # DXT5nm: x in A
+            edge = np.abs(tx.signed_values(xy, t, "pd")) >= 1.0 - half
             clipped = int(edge.any(axis=-1).sum())
             total = v.shape[0] * v.shape[1]
             ctx.metrics.setdefault("pd_clipped_texels", {})[t.name] = clipped

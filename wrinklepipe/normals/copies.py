@@ -1,0 +1,232 @@
+"""Block-compressed copies of a package's maps: choose, encode with mips, measure, write.
+
+What ``convert`` ships beside its PNGs (``compressed/NAME.dds`` and ``compressed/NAME.ktx2``),
+made from the stored 8-bit texels (the PNGs the glTF references):
+
+- each format stores a map in the codec's layout (:mod:`wrinklepipe.codec.formats`): a normal
+  map (the base, ``full`` and ``composite`` states) keeps x, y, z in R, G, B in BC1 and BC7 (what
+  every RGB reader expects), x, y in BC5 (z rebuilt), x in A and y in G in BC3nm; ``pd`` slopes
+  take R, G (A, G in BC3nm); ``diff`` maps need BC1 or BC7;
+- the check decodes the blocks with texture2ddecoder, reads them with that layout and reports the
+  angle to the uncompressed map (:func:`compress.compress_and_check`); ``auto`` keeps the
+  smallest format whose every map of the group meets the budget (all states share one format);
+- every level of the full mip chain is stored like level 0 (:mod:`wrinklepipe.normals.mips`:
+  PD slopes and diff deltas averaged, normals averaged and renormalised);
+- DDS records the DXGI format (DX10 header for BC5 / BC7) and the DX10 alpha mode; KTX2 the
+  vkFormat, the DFD and ``KTXswizzle``; :func:`records` is what the glTF extension and the USD
+  schema record per copy (format, layout, mapping, levels, files).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe import codec
+from wrinklepipe.normals import compress as cmp
+from wrinklepipe.normals import mips
+from wrinklepipe.normals.dds import dds_bytes
+from wrinklepipe.normals.ktx2 import ktx2_bytes
+
+#: Formats ``auto`` tries, smallest blocks first (BC1: 8 bytes; then BC5, BC3nm, BC7: 16).
+AUTO_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")
+#: What a manifest's ``formats.base`` / ``formats.wrinkle`` may name.
+REQUESTABLE: tuple[str, ...] = ("auto", *cmp.FORMATS)
+
+
+@dataclass
+class Copy:
+    """One compressed map: its format, layout, every mip level and the level-0 check."""
+
+    texture: str
+    encoding: str
+    format: str
+    layout: str
+    mapping: int
+    width: int
+    height: int
+    levels: list[bytes]
+    check: cmp.FormatCheck
+
+    def files(self) -> dict[str, bytes]:
+        w, h = self.width, self.height
+        return {
+            f"compressed/{self.texture}.dds": dds_bytes(self.format, w, h, self.levels),
+            f"compressed/{self.texture}.ktx2": ktx2_bytes(
+                self.format, w, h, self.levels, layout=self.layout
+            ),
+        }
+
+    def record(self) -> dict[str, Any]:
+        """The extension / USD record of this copy."""
+        return {
+            "texture": self.texture,
+            "format": self.format,
+            "layout": self.layout,
+            "mapping": self.mapping,
+            "levels": len(self.levels),
+            "dds": f"compressed/{self.texture}.dds",
+            "ktx2": f"compressed/{self.texture}.ktx2",
+        }
+
+
+@dataclass(frozen=True)
+class _Map:
+    name: str
+    encoding: str
+    texels: np.ndarray  # stored texels [H, W, >= 3] (uint8)
+    param: float
+    version: int
+
+
+def _components(m: _Map, fmt: str) -> np.ndarray:
+    """The map's texel components in ``fmt``'s layout (z kept where the layout stores it)."""
+    lay = codec.storage_format(fmt).layout_for(m.encoding)
+    return np.ascontiguousarray(m.texels[..., : 3 if lay.stores_z else 2])
+
+
+def _decoder(m: _Map, base: np.ndarray | None):  # noqa: ANN202 - compress.decoder_for's type
+    enc = "full" if m.encoding == "composite" else m.encoding
+    scale = m.param if enc == "pd" else 1.0
+    gain = m.param if enc == "diff" else 1.0
+    return cmp.decoder_for(enc, scale, gain, base, m.version)
+
+
+def _check(m: _Map, fmt: str, budget: cmp.Budget, base: np.ndarray | None) -> cmp.FormatCheck:
+    q = _components(m, fmt)
+    decode = _decoder(m, base)
+    reference = decode(q, slice(0, q.shape[0]))  # what the uncompressed map decodes to
+    return cmp.compress_and_check(q, reference, fmt, decode, budget, keep_decoded=False)
+
+
+def _quantity(m: _Map) -> np.ndarray:
+    """The map's quantity decoded from its stored texels (mips are filtered in it)."""
+    e = codec.encoding(m.encoding)
+    where = "rg" if e.components == 2 else "rgb"
+    return codec.decode(e, m.texels[..., : e.components], where, param=m.param, version=m.version)
+
+
+def _copy(m: _Map, fmt: str, check: cmp.FormatCheck, with_mips: bool) -> Copy:
+    h, w = m.texels.shape[:2]
+    levels = [check.data]
+    if with_mips and max(h, w) > 1:
+        levels += mips.block_levels(m.encoding, _quantity(m), fmt, m.param, m.version)
+    lay = codec.storage_format(fmt).layout_for(m.encoding).name
+    return Copy(m.name, m.encoding, fmt, lay, m.version, w, h, levels, check)
+
+
+def compressed_copies(
+    pkg: Any,
+    budget: dict[str, float] | None = None,
+    formats: dict[str, str] | None = None,
+    with_mips: bool = True,
+) -> tuple[list[Copy], list[str], dict[str, Any]]:
+    """Compressed copies of the base and the states of a
+    :class:`~wrinklepipe.io.package.WrinklePackage`.
+
+    ``formats``: ``{"base": ..., "wrinkle": ...}`` from the manifest (``auto`` by default, or a
+    format of :data:`REQUESTABLE`). Returns the copies, notes and the per-group choices for the
+    report (requested, chosen, layout, levels and every check tried).
+    """
+    budget = budget or {}
+    limits = cmp.Budget(budget.get("max_mean_deg"), budget.get("max_p99_deg", 2.0))
+    formats = formats or {}
+    meta = pkg.meta
+    enc = str(meta["encoding"])
+    version = int(meta.get("mapping", codec.LEGACY_VERSION))
+    param = float(meta.get("scale", 1.0))
+    base_tex = next((t for t in pkg.textures if t.role == "base_normal"), None)
+    groups: list[tuple[str, str, list[_Map]]] = []
+    if base_tex is not None:
+        groups.append(
+            (
+                "base",
+                formats.get("base", "auto"),
+                [_Map(base_tex.name, "full", base_tex.pixels, 1.0, 1)],
+            )
+        )
+    states = [t for t in pkg.textures if t.role == "state"]
+    groups.append(
+        (
+            "wrinkle",
+            formats.get("wrinkle", "auto"),
+            [_Map(t.name, enc, t.pixels, param, version) for t in states],
+        )
+    )
+    copies: list[Copy] = []
+    notes: list[str] = []
+    choices: dict[str, Any] = {}
+    base_normals = None
+    for group, want, maps in groups:
+        if not maps:
+            continue
+        if want not in REQUESTABLE:  # png8 / png16 / exr: the group ships as its PNG only
+            continue
+        if any(m.texels.dtype != np.uint8 for m in maps):
+            notes.append(f"{group}: 16-bit maps ship as PNG only (block formats are 8-bit)")
+            continue
+        base = None
+        if maps[0].encoding == "diff":
+            if base_normals is None and base_tex is not None:
+                base_normals = codec.decode("full", base_tex.pixels[..., :3], "rgb")
+            base = base_normals
+            if base is not None and base.shape[:2] != maps[0].texels.shape[:2]:
+                notes.append(f"{group}: diff states at another size than the base; PNG only")
+                continue
+        holds = [f for f in cmp.FORMATS if codec.storage_format(f).holds(maps[0].encoding)]
+        if want != "auto" and want not in holds:
+            notes.append(f"{group}: {want} cannot hold {maps[0].encoding} maps; PNG only")
+            continue
+        candidates = [f for f in AUTO_FORMATS if f in holds] if want == "auto" else [want]
+        checks: dict[str, list[cmp.FormatCheck]] = {}
+        for f in candidates:
+            checks[f] = [_check(m, f, limits, base) for m in maps]
+            if want == "auto" and all(c.verdict == "pass" for c in checks[f]):
+                break
+        passing = [f for f in checks if all(c.verdict == "pass" for c in checks[f])]
+        pick: str | None
+        if want != "auto":
+            pick = want
+            if not passing:
+                notes.append(f"{group}: {want} as requested, over the error budget")
+        elif passing:
+            pick = passing[0]
+        else:
+            pick = None
+            best = min(checks, key=lambda f: max(c.error.mean_deg for c in checks[f]))
+            worst = max(checks[best], key=lambda c: c.error.mean_deg)
+            notes.append(
+                f"{group}: no block format meets the budget (best {best}: mean "
+                f"{worst.error.mean_deg:.2f}, p99 {worst.error.p99_deg:.2f} deg); PNG only"
+            )
+        made = (
+            []
+            if pick is None
+            else [_copy(m, pick, c, with_mips) for m, c in zip(maps, checks[pick])]
+        )
+        copies += made
+        choices[group] = {
+            "requested": want,
+            "chosen": pick or "png",
+            "layout": made[0].layout if made else None,
+            "levels": len(made[0].levels) if made else 0,
+            "checks": {
+                f: {m.name: c.to_json() for m, c in zip(maps, cs)} for f, cs in checks.items()
+            },
+        }
+    return copies, notes, choices
+
+
+def files(copies: list[Copy]) -> dict[str, bytes]:
+    """``{relative path: bytes}`` of every copy's DDS and KTX2."""
+    out: dict[str, bytes] = {}
+    for c in copies:
+        out.update(c.files())
+    return out
+
+
+def records(copies: list[Copy]) -> list[dict[str, Any]]:
+    """What the glTF extension / USD schema record of the copies (sorted by texture)."""
+    return [c.record() for c in sorted(copies, key=lambda c: c.texture)]
