@@ -84,6 +84,31 @@ def _real_character(root: Path) -> Path | None:
     return root / "real" / "cesium.gltf"
 
 
+def _with_occluder(gltf: Path) -> Path:
+    """The asset plus a second part with a plain material (no wrinkles) in front of the face:
+    a two-material scene, as characters are."""
+    doc = json.loads(gltf.read_text())
+    doc["materials"].append(
+        {"name": "visor", "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1]}}
+    )
+    prim = dict(doc["meshes"][0]["primitives"][0])
+    prim.pop("targets", None)
+    prim["material"] = len(doc["materials"]) - 1
+    doc["meshes"].append({"name": "visor", "primitives": [prim]})
+    doc["nodes"].append(
+        {
+            "name": "visor",
+            "mesh": len(doc["meshes"]) - 1,
+            "translation": [0.0, 0.05, 0.3],
+            "scale": [0.35, 0.2, 0.35],
+        }
+    )
+    doc["scenes"][doc.get("scene", 0)]["nodes"].append(len(doc["nodes"]) - 1)
+    out = gltf.with_name("demo_multi.gltf")
+    out.write_text(json.dumps(doc))
+    return out
+
+
 def _write_assets(root: Path) -> dict[str, Path]:
     """One package per encoding, one .gltf per policy (the extension's policy edited)."""
     out = {}
@@ -125,6 +150,12 @@ def browser(tmp_path_factory):
                 file = f"{key}_{name}.f32"
                 calls.append({"fn": "renderDebug", "args": [1, w, SIZE], "file": file})
                 plan.append((key, name, w, file))
+    multi = _with_occluder(assets["pd-clamp01"])
+    calls.append({"fn": "load", "args": ["/asset/" + multi.relative_to(root).as_posix()]})
+    calls.append({"fn": "renderDebug", "args": [2, None, SIZE], "file": "multi_uv.f32"})
+    for name, w in _weight_sets(8, "clamp01").items():
+        calls.append({"fn": "renderDebug", "args": [1, w, SIZE], "file": f"multi_{name}.f32"})
+        plan.append(("multi", name, w, f"multi_{name}.f32"))
     real = _real_character(root)
     if real is not None:
         calls.append({"fn": "load", "args": ["/asset/" + real.relative_to(root).as_posix()]})
@@ -158,6 +189,7 @@ def browser(tmp_path_factory):
     assert not errors, errors
     return {
         "assets": assets,
+        "multi": multi,
         "real": real,
         "out": out,
         "plan": plan,
@@ -192,6 +224,25 @@ def test_threejs_viewer_renders_the_model(browser, encoding, policy):
         if name == "strong":  # the wrinkles are really there
             base_ref = model.blend(s.base, s.states, s.masks, ww * 0, inp.asset.encoding, policy)
             assert h.compare(_image(browser, file)[cov][None], base_ref)["p99"] > 2.0
+
+
+def test_only_the_wrinkled_material_writes_the_debug_buffers(browser):
+    """A second part with a plain material in front of the face: in debug renders it occludes
+    and writes 0, so every pixel read back is the wrinkled material's and equals numpy."""
+    uvimg = _image(browser, "multi_uv.f32")
+    plain = _image(browser, "pd_uv.f32")
+    cov = uvimg[..., 3] > 0.5
+    assert 0 < cov.sum() < (plain[..., 3] > 0.5).sum()  # the visor hides part of the face
+    inp = load_input(browser["multi"])
+    s = h.samples(inp, uvimg[cov][:, :2].astype(np.float32))
+    d = inp.asset.region_state_matrix()
+    for k, name, w, file in browser["plan"]:
+        if k != "multi":
+            continue
+        ww = np.asarray(w, np.float32)[:, None] * d
+        ref = model.blend(s.base, s.states, s.masks, ww, "pd", "clamp01")
+        st = h.compare(_image(browser, file)[cov][None], ref)
+        assert st["mean"] <= 0.5 and st["p99"] <= 2.0, (name, st)
 
 
 @pytest.mark.shared

@@ -233,8 +233,42 @@ function toBase64( array ) {
 
 }
 
-// Render one frame with the materials in debug `mode` (1 normal, 2 uv + activity), level-0
-// sampling, region weights `weights`, into a float32 target of `size` x `size`.
+// In debug renders every material without wrinkles writes 0 (it still occludes): what is read
+// back is the wrinkled material's output only. Skinned and morphed meshes keep deforming.
+const blank = new THREE.MeshBasicMaterial();
+blank.onBeforeCompile = ( shader ) => {
+
+	shader.fragmentShader = shader.fragmentShader.replace( '#include <dithering_fragment>', 'gl_FragColor = vec4( 0.0 );' );
+
+};
+
+function swapOthers( on ) {
+
+	const wrinkled = new Set( state.wrinkles.flatMap( ( w ) => w.materials ) );
+	state.gltf.scene.traverse( ( o ) => {
+
+		if ( ! o.isMesh ) return;
+		if ( on ) {
+
+			const list = Array.isArray( o.material ) ? o.material : [ o.material ];
+			if ( list.some( ( m ) => wrinkled.has( m ) ) ) return;
+			o.userData.wpMaterial = o.material;
+			o.material = Array.isArray( o.material ) ? o.material.map( () => blank ) : blank;
+
+		} else if ( o.userData.wpMaterial ) {
+
+			o.material = o.userData.wpMaterial;
+			delete o.userData.wpMaterial;
+
+		}
+
+	} );
+
+}
+
+// Render one frame with the materials in debug `mode` (1 normal, 2 uv + activity, 3 view-space
+// position + activity), level-0 sampling, region weights `weights`, into a float32 target of
+// `size` x `size`; materials without wrinkles write 0.
 function renderDebug( mode, weights, size = 256 ) {
 
 	if ( ! still ) renderer.setAnimationLoop( null );
@@ -249,7 +283,9 @@ function renderDebug( mode, weights, size = 256 ) {
 	renderer.setRenderTarget( target );
 	renderer.setClearColor( 0x000000, 0 );
 	renderer.clear();
+	swapOthers( true );
 	renderer.render( scene, camera );
+	swapOthers( false );
 	const out = new Float32Array( size * size * 4 );
 	renderer.readRenderTargetPixels( target, 0, 0, size, size, out );
 	renderer.setRenderTarget( null );
