@@ -16,7 +16,7 @@ the source). All blocks are searched together, one candidate endpoint pair at a 
    palette positions (extended palettes: a cluster then lands exactly on an interpolant), then
    two Lloyd rounds (reassign indices, refit), each fit rounded four ways;
 3. two rounds of moving either endpoint by one level;
-4. the hard blocks (those with a texel 2.5 levels or more off) get every pair up to 16 levels
+4. the hard blocks (those with a texel 2 levels or more off) get every pair up to 16 levels
    outside their range (and up to 8 inside), scored by squared error plus every texel's
    excess over that threshold: a little mean error is traded for a lower tail, so the p99
    ends at or below the exhaustive search's;
@@ -42,10 +42,10 @@ _TRUNC = _F(0.43)
 BATCH = 4096
 #: Step 2: (palette position of the block's minimum, of its maximum) for the extended fits.
 _EXTENDED = ((0, 6), (1, 7), (1, 6), (0, 5), (2, 7), (2, 6), (1, 5))
-#: Step 4: a block is hard when a texel misses by 2.5 levels or more (squared error 6.25); its
+#: Step 4: a block is hard when a texel misses by 2 levels or more (squared error 4); its
 #: pairs are then scored with every texel's excess over that times ``HARD_PENALTY``; levels
 #: searched outside / inside its range.
-HARD_TEXEL_ERROR = 6.25
+HARD_TEXEL_ERROR = 4.0
 HARD_PENALTY = 1.0
 HARD_OUTSIDE = 16
 HARD_INSIDE = 8.0
