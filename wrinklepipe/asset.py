@@ -13,6 +13,19 @@ from typing import Any
 import numpy as np
 
 
+@dataclass(frozen=True)
+class MeshPart:
+    """Where a run of a merged mesh's vertices comes from: vertices ``start .. start + count``
+    are, in order, the vertices of the source primitive at ``pointer`` (a glTF JSON pointer
+    such as ``/meshes/2/primitives/0``) instanced by node ``node``."""
+
+    name: str
+    pointer: str
+    start: int
+    count: int
+    node: int | None = None
+
+
 @dataclass
 class Mesh:
     """A triangulated render mesh (vertices split where UVs or normals are discontinuous)."""
@@ -32,6 +45,8 @@ class Mesh:
     colors: np.ndarray | None = None  # [V, 4] float32 (rest-pose wrinkle bias lives here)
     name: str = "mesh"
     notes: list[str] = field(default_factory=list)  # what ingest did (triangulated, xatlas UVs...)
+    #: The source primitives the vertices come from (a glTF document's wrinkled primitives).
+    parts: tuple[MeshPart, ...] = ()
 
     @property
     def vertex_count(self) -> int:

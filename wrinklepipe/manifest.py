@@ -49,10 +49,12 @@ class Manifest:
 
     path: Path
     name: str
-    base: Path
+    base: Path | None  # None: the wrinkled glTF material's own normalTexture
     states: list[StateSpec]
     regions: list[RegionSpec]
     mesh: Path | None = None
+    material: str | list[str] | None = None  # the wrinkled glTF material(s); None: the only one
+    meshes: tuple[str, ...] = ()  # restrict the wrinkled primitives to these meshes / nodes
     convention: str = "auto"
     encoding: str = "pd"
     policy: str = "clamp01"
@@ -74,7 +76,7 @@ class Manifest:
         """Every file the manifest reads (the manifest itself included)."""
         files = [
             self.path,
-            self.base,
+            *([self.base] if self.base is not None else []),
             *(s.map for s in self.states),
             *(r.mask for r in self.regions),
         ]
@@ -258,7 +260,7 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
     m = Manifest(
         path=path.resolve(),
         name=data["name"],
-        base=root / data["base"],
+        base=(root / data["base"]) if "base" in data else None,
         states=[StateSpec(s["name"], root / s["map"]) for s in data["states"]],
         regions=[
             RegionSpec(
@@ -271,6 +273,8 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
             for r in data["regions"]
         ],
         mesh=(root / data["mesh"]) if "mesh" in data else None,
+        material=data.get("material"),
+        meshes=tuple(data.get("meshes", ())),
         convention=data.get("convention", "auto"),
         encoding=data.get("encoding", "pd"),
         policy=data.get("policy", "clamp01"),
@@ -365,9 +369,26 @@ def _semantic_problems(m: Manifest, file: str, problems: ProblemList, check_file
         problems.add(
             file, f"unsupported mesh format {m.mesh.suffix!r} ({', '.join(MESH_SUFFIXES)})", "mesh"
         )
+    _document_problems(m, file, problems)
     _driver_problems(m, file, problems)
     if check_files:
         _file_problems(m, file, problems)
+
+
+def _document_problems(m: Manifest, file: str, problems: ProblemList) -> None:
+    """``material``, ``meshes`` and an omitted ``base`` select parts of a glTF document."""
+    gltf = m.mesh is not None and m.mesh.suffix.lower() in (".gltf", ".glb")
+    what = f"a {m.mesh.suffix} mesh" if m.mesh is not None else "no mesh"
+    if m.base is None and not gltf:
+        problems.add(
+            file,
+            f"missing required key (the base normal map may be omitted only with a .gltf/.glb "
+            f"mesh, whose wrinkled material's normalTexture is then the base; here: {what})",
+            "base",
+        )
+    for key, value in (("material", m.material), ("meshes", m.meshes)):
+        if value and not gltf:
+            problems.add(file, f"selects parts of a .gltf/.glb mesh; here: {what}", key)
 
 
 def _driver_problems(m: Manifest, file: str, problems: ProblemList) -> None:

@@ -15,8 +15,10 @@
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -97,6 +99,136 @@ def wrinkled_primitives(doc: Document, materials: list[int]) -> list[PrimitiveRe
         for r in doc.primitives()
         if r.material in materials and int(doc.primitive(r).get("mode", 4)) in (4, 5, 6)
     ]
+
+
+def mesh_listing(doc: Document, materials: list[int]) -> str:
+    """``'Head' (nodes 'Head'; primitives 1)``: the meshes with primitives of ``materials``."""
+    parts = []
+    for mi in range(len(doc.array("meshes"))):
+        prims = [r.primitive for r in doc.primitives() if r.mesh == mi and r.material in materials]
+        if prims:
+            nodes = ", ".join(repr(doc.node_name(n)) for n in doc.mesh_nodes(mi)) or "no node"
+            parts.append(
+                f"{doc.mesh_name(mi)!r} (nodes {nodes}; primitives {', '.join(map(str, prims))})"
+            )
+    return "; ".join(parts) or "none"
+
+
+def restrict_to_meshes(
+    doc: Document,
+    refs: list[PrimitiveRef],
+    names: tuple[str, ...] | list[str],
+    materials: list[int],
+    manifest: str | Path = "",
+) -> list[PrimitiveRef]:
+    """The primitives of ``refs`` whose mesh, or a node instancing it, is named in ``names``.
+
+    A name that matches no mesh or node with a wrinkled-material primitive is one clear
+    :class:`~wrinklepipe.errors.InputError` listing the meshes (and nodes) that have one."""
+    file = str(manifest or doc.file)
+    keep: set[int] = set()
+    mats = ", ".join(repr(doc.material_name(m)) for m in materials)
+    for k, name in enumerate(names):
+        hits = {
+            r.mesh
+            for r in refs
+            if doc.mesh_name(r.mesh) == name
+            or any(doc.node_name(n) == name for n in doc.mesh_nodes(r.mesh))
+        }
+        if not hits:
+            raise input_error(
+                file,
+                f"no mesh or node {name!r} in {doc.path.name} has a primitive using {mats} "
+                f"(meshes using it: {mesh_listing(doc, materials)})",
+                f"meshes[{k}]",
+            )
+        keep |= hits
+    return [r for r in refs if r.mesh in keep]
+
+
+def clone_shared_materials(
+    doc: Document, refs: list[PrimitiveRef]
+) -> tuple[list[PrimitiveRef], list[int], list[str]]:
+    """Give the wrinkled primitives their own copy of a material other primitives also use.
+
+    The clone (every property and extension of the source material, named ``"NAME
+    (wrinkled)"``) is appended to ``materials``; only the wrinkled primitives point at it, so
+    the rest of the document is unchanged. Returns the updated refs, the wrinkled material
+    indices and notes."""
+    wrinkled = {(r.mesh, r.primitive) for r in refs}
+    materials = list(dict.fromkeys(r.material for r in refs if r.material is not None))
+    clones: dict[int, int] = {}
+    notes: list[str] = []
+    for m in materials:
+        others = [
+            r for r in doc.primitives() if r.material == m and (r.mesh, r.primitive) not in wrinkled
+        ]
+        if not others:
+            continue
+        mat: dict[str, Any] = copy.deepcopy(doc.array("materials")[m])
+        mat["name"] = f"{doc.material_name(m)} (wrinkled)"
+        doc.gltf["materials"].append(mat)
+        clones[m] = len(doc.gltf["materials"]) - 1
+        notes.append(
+            f"material {doc.material_name(m)!r} is shared with {len(others)} primitive(s) outside "
+            f"the wrinkled meshes: cloned as {mat['name']!r} (materials[{clones[m]}]) for the "
+            "wrinkled primitives; the others keep the original"
+        )
+    out = []
+    for r in refs:
+        if r.material in clones:
+            doc.primitive(r)["material"] = clones[r.material]
+            r = PrimitiveRef(r.mesh, r.primitive, clones[r.material])
+        out.append(r)
+    return out, [clones.get(m, m) for m in materials], notes
+
+
+#: Properties of the material convert creates for a document without any (the demo's look).
+DEFAULT_MATERIAL: dict[str, Any] = {
+    "pbrMetallicRoughness": {
+        "baseColorFactor": [0.8, 0.62, 0.52, 1.0],
+        "metallicFactor": 0.0,
+        "roughnessFactor": 0.55,
+    },
+}
+
+
+@dataclass
+class Selection:
+    """What gets wrinkled: material indices (clones included) and their triangle primitives."""
+
+    materials: list[int]
+    refs: list[PrimitiveRef]
+    notes: list[str] = field(default_factory=list)
+
+
+def select_wrinkled(
+    doc: Document,
+    material: str | list[str] | None,
+    meshes: tuple[str, ...] | list[str] = (),
+    manifest: str | Path = "",
+    name: str = "",
+) -> Selection:
+    """The manifest's ``material`` (+ optional ``meshes`` restriction) -> a :class:`Selection`.
+
+    A document without materials (and no ``material`` named) gets one, ``NAME_skin``, for its
+    triangle primitives without a material (noted). Shared materials are cloned for a
+    restricted set of primitives (:func:`clone_shared_materials`)."""
+    notes: list[str] = []
+    if material is None and not doc.array("materials"):
+        mat = {"name": f"{name or doc.path.stem}_skin", **copy.deepcopy(DEFAULT_MATERIAL)}
+        doc.gltf["materials"] = [mat]
+        for r in doc.primitives():
+            if r.material is None and int(doc.primitive(r).get("mode", 4)) in (4, 5, 6):
+                doc.primitive(r)["material"] = 0
+        notes.append(f"the document has no material: added {mat['name']!r} for its primitives")
+    chosen = select_materials(doc, material, manifest)
+    refs = wrinkled_primitives(doc, chosen)
+    if meshes:
+        refs = restrict_to_meshes(doc, refs, meshes, chosen, manifest)
+        refs, chosen, n = clone_shared_materials(doc, refs)
+        notes += n
+    return Selection(chosen, refs, notes)
 
 
 @dataclass
@@ -187,3 +319,63 @@ def add_wrinkle_attributes(doc: Document, refs: list[PrimitiveRef]) -> list[Wrin
         notes.append(f"added {VERTEX_ID_ATTRIBUTE} (shared across the wrinkled primitives)")
         parts.append(WrinkledPart(r, wp, tri, uvs, vid, notes))
     return parts
+
+
+TEXTURE_TRANSFORM = "KHR_texture_transform"
+
+
+def material_normal_texture(
+    doc: Document, materials: list[int], manifest: str | Path = ""
+) -> dict[str, Any]:
+    """The ``normalTexture`` the wrinkled materials share, when it is to be the base map.
+
+    Refused, each with one message: a material without one, materials with different ones,
+    a ``KHR_texture_transform`` on it or ``texCoord`` other than 0 (masks and states are laid
+    out on TEXCOORD_0 without a transform), a ``scale`` other than 1 (the wrinkle shaders read
+    the base unscaled)."""
+    file = str(manifest or doc.file)
+    infos = []
+    for m in materials:
+        info = doc.array("materials")[m].get("normalTexture")
+        name = doc.material_name(m)
+        if not isinstance(info, dict) or not isinstance(info.get("index"), int):
+            raise input_error(
+                file,
+                f"base is omitted but the wrinkled material {name!r} of {doc.path.name} has no "
+                'normalTexture; name the base normal map with base = "FILE"',
+                "base",
+            )
+        where = f"{doc.path.name} /materials/{m}/normalTexture"
+        if TEXTURE_TRANSFORM in (info.get("extensions") or {}):
+            raise input_error(
+                file,
+                f"{where} (the base) has {TEXTURE_TRANSFORM}; wrinkle masks and states are "
+                "looked up on untransformed TEXCOORD_0: bake the transform into the UVs or give "
+                'base = "FILE"',
+                "base",
+            )
+        if info.get("texCoord", 0) != 0:
+            raise input_error(
+                file,
+                f"{where} (the base) uses TEXCOORD_{info['texCoord']}; wrinkle maps use TEXCOORD_0",
+                "base",
+            )
+        if info.get("scale", 1.0) != 1.0:
+            raise input_error(
+                file,
+                f"{where} (the base) has scale {info['scale']}; the wrinkle shaders read the base "
+                'unscaled: bake the scale into the map or give base = "FILE"',
+                "base",
+            )
+        infos.append(info)
+    if any(i["index"] != infos[0]["index"] for i in infos):
+        raise input_error(
+            file,
+            "base is omitted but the wrinkled materials use different normal textures ("
+            + ", ".join(
+                f"{doc.material_name(m)!r}: texture {i['index']}" for m, i in zip(materials, infos)
+            )
+            + '); name the base normal map with base = "FILE"',
+            "base",
+        )
+    return infos[0]

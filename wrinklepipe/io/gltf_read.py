@@ -13,6 +13,7 @@ import base64
 import json
 import struct
 import urllib.parse
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
@@ -227,13 +228,21 @@ class _Reader:
         return name, png_pixels(data, f"{self.file} {key}")
 
 
-def _texture_image(r: _Reader, tex_index: int, key: str) -> int:
-    texs = r.doc.get("textures", [])
+def _texture_image(
+    doc: dict[str, Any], err: Callable[[str, str], Exception], tex_index: int, key: str
+) -> int:
+    """The image a texture shows (``KHR_texture_basisu`` / ``EXT_texture_webp`` source first)."""
+    texs = doc.get("textures", [])
     if not isinstance(tex_index, int) or not 0 <= tex_index < len(texs):
-        raise r.err(f"texture {tex_index} does not exist", key)
+        raise err(f"texture {tex_index} does not exist", key)
+    ext = texs[tex_index].get("extensions") or {}
+    for name in ("KHR_texture_basisu", "EXT_texture_webp"):
+        src = (ext.get(name) or {}).get("source") if isinstance(ext, dict) else None
+        if isinstance(src, int):
+            return src
     src = texs[tex_index].get("source")
     if src is None:
-        raise r.err(f"texture {tex_index} has no source image", key)
+        raise err(f"texture {tex_index} has no source image", key)
     return int(src)
 
 
@@ -257,7 +266,6 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
             f"no {EXTENSION} extension on materials[0]: not a wrinklepipe asset", "/materials/0"
         )
     ext = mats[0]["extensions"][EXTENSION]
-    pkey = f"/materials/0/extensions/{EXTENSION}"
 
     # -- mesh -------------------------------------------------------------------------------
     meshes = doc.get("meshes", [])
@@ -341,6 +349,44 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
                 "attribute counts differ from POSITION", "/meshes/0/primitives/0/attributes"
             )
 
+    name = str(
+        doc.get("scenes", [{}])[doc.get("scene", 0)].get("name")
+        or doc.get("nodes", [{}])[0].get("name")
+        or Path(path).stem
+    )
+    return package_from_gltf(
+        doc,
+        0,
+        mesh,
+        r.image,
+        r.accessor,
+        r.err,
+        name,
+        {0: list(range(len(mesh.morph_names)))},
+    )
+
+
+def package_from_gltf(
+    doc: dict[str, Any],
+    material: int,
+    mesh: Mesh,
+    image: Callable[[int], tuple[str, np.ndarray]],
+    accessor: Callable[[int], np.ndarray],
+    err: Callable[[str, str], Exception],
+    name: str,
+    morph_nodes: dict[int, list[int]],
+) -> WrinklePackage:
+    """The package a glTF's wrinkled material ``material`` describes, over the render ``mesh``.
+
+    ``image(i)`` returns image ``i``'s (name, stored pixels); ``accessor(i)`` an accessor's
+    values; ``err(message, pointer)`` the error to raise. ``morph_nodes`` maps each node whose
+    morph-weight channel plays a curve's blendshape inputs to the column of ``mesh.morph_names``
+    of each of its targets (-1: none)."""
+    mats = doc.get("materials", [])
+    mat = mats[material]
+    ext = mat["extensions"][EXTENSION]
+    pkey = f"/materials/{material}/extensions/{EXTENSION}"
+    mkey = f"/materials/{material}"
     # -- textures ---------------------------------------------------------------------------
     textures: list[PackedTexture] = []
     by_image: dict[int, str] = {}
@@ -348,21 +394,21 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
 
     def tex(info: Any, key: str, role: str) -> str:
         if not isinstance(info, dict) or "index" not in info:
-            raise r.err("expected a textureInfo object with 'index'", key)
-        src = _texture_image(r, info["index"], key)
+            raise err("expected a textureInfo object with 'index'", key)
+        src = _texture_image(doc, err, info["index"], key)
         if src not in by_image:
-            name, px = r.image(src)
+            name, px = image(src)
             name = safe_name(name, taken)
             textures.append(PackedTexture(name, px, role))
             by_image[src] = name
         return by_image[src]
 
-    if "normalTexture" not in mats[0]:
-        raise r.err("material has no normalTexture (the base normal map)", "/materials/0")
-    base_name = tex(mats[0]["normalTexture"], "/materials/0/normalTexture", "base_normal")
+    if "normalTexture" not in mat:
+        raise err("material has no normalTexture (the base normal map)", mkey)
+    base_name = tex(mat["normalTexture"], f"{mkey}/normalTexture", "base_normal")
     if base_name != "base_normal":
         if "base_normal" in taken:
-            raise r.err("an image other than the base normal map is named 'base_normal'")
+            raise err("an image other than the base normal map is named 'base_normal'")
         textures[-1].name = "base_normal"
         taken.add("base_normal")
         by_image = {k: ("base_normal" if v == base_name else v) for k, v in by_image.items()}
@@ -387,7 +433,7 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
         expressions = {}
         for e in ext.get("expressions", []):
             if len(e["weights"]) != len(region_names):
-                raise r.err(
+                raise err(
                     f"expression {e['name']!r} has {len(e['weights'])} weights for "
                     f"{len(region_names)} regions",
                     f"{pkey}/expressions",
@@ -412,9 +458,9 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
         compressed = []
         for i, c in enumerate(ext.get("compressed", [])):
             key = f"{pkey}/compressed/{i}"
-            src = _texture_image(r, c["texture"]["index"], key)
+            src = _texture_image(doc, err, c["texture"]["index"], key)
             if src not in by_image:
-                raise r.err("a compressed copy of a texture the extension does not use", key)
+                raise err("a compressed copy of a texture the extension does not use", key)
             ktx2, dds = (list(c.get("uris", [])) + ["", ""])[:2]
             compressed.append(
                 {
@@ -430,15 +476,15 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
         if compressed:
             meta["compressed"] = compressed
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
-        raise r.err(f"malformed extension block: {plain_reason(exc)}", pkey) from None
+        raise err(f"malformed extension block: {plain_reason(exc)}", pkey) from None
     try:
         json.dumps(meta, allow_nan=False)
     except ValueError:
-        raise r.err("the extension block holds a NaN or infinite number", pkey) from None
+        raise err("the extension block holds a NaN or infinite number", pkey) from None
     for i, e in enumerate(meta["masks"]["table"]):
         t = e.get("layer", e.get("texture"))
         if not isinstance(t, int) or not 0 <= t < len(mask_names):
-            raise r.err(
+            raise err(
                 f"channel table entry {i} points at mask texture {t!r}, which does not exist",
                 f"{pkey}/masks/table/{i}",
             )
@@ -449,31 +495,38 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
     for i, wc in enumerate(ext.get("weightCurves", [])):
         ai = wc.get("animation")
         if not isinstance(ai, int) or not 0 <= ai < len(anims):
-            raise r.err(f"animation {ai!r} does not exist", f"{pkey}/weightCurves/{i}")
+            raise err(f"animation {ai!r} does not exist", f"{pkey}/weightCurves/{i}")
         anim = anims[ai]
         pointer = [
             ch for ch in anim.get("channels", []) if ch.get("target", {}).get("path") == "pointer"
         ]
         if not pointer:
-            raise r.err("animation has no KHR_animation_pointer channel", f"/animations/{ai}")
+            raise err("animation has no KHR_animation_pointer channel", f"/animations/{ai}")
         s = anim["samplers"][pointer[0]["sampler"]]
-        times = r.accessor(s["input"]).astype(np.float32)
-        vals = r.accessor(s["output"]).astype(np.float32).reshape(-1)
+        times = accessor(s["input"]).astype(np.float32)
+        vals = accessor(s["output"]).astype(np.float32).reshape(-1)
         morph = None
         for ch in anim.get("channels", []):
             tgt = ch.get("target", {})
-            if tgt.get("path") == "weights" and tgt.get("node") == 0:
-                ms = anim["samplers"][ch["sampler"]]
-                mv = r.accessor(ms["output"]).astype(np.float32).reshape(-1)
-                n_m = len(mesh.morph_names)
-                if not n_m or mv.size != times.size * n_m:
-                    raise r.err(
-                        f"morph weights: {mv.size} values for {times.size} keys x {n_m} targets",
-                        f"/animations/{ai}",
-                    )
-                morph = mv.reshape(times.size, n_m)
+            node = tgt.get("node")
+            columns = morph_nodes.get(node) if isinstance(node, int) else None
+            if tgt.get("path") != "weights" or columns is None:
+                continue
+            ms = anim["samplers"][ch["sampler"]]
+            mv = accessor(ms["output"]).astype(np.float32).reshape(-1)
+            n_m = len(columns)
+            if not n_m or mv.size != times.size * n_m:
+                raise err(
+                    f"morph weights: {mv.size} values for {times.size} keys x {n_m} targets",
+                    f"/animations/{ai}",
+                )
+            if morph is None:
+                morph = np.zeros((times.size, len(mesh.morph_names)), np.float32)
+            cols = np.asarray(columns, np.int64)
+            keep = cols >= 0
+            morph[:, cols[keep]] = mv.reshape(times.size, n_m)[:, keep]
         if vals.size != times.size * len(regions):
-            raise r.err(
+            raise err(
                 f"animation output has {vals.size} values, expected {times.size} x {len(regions)}",
                 f"/animations/{ai}",
             )
@@ -485,9 +538,4 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
                 morph,
             )
         )
-    name = str(
-        doc.get("scenes", [{}])[doc.get("scene", 0)].get("name")
-        or doc.get("nodes", [{}])[0].get("name")
-        or Path(path).stem
-    )
     return WrinklePackage(name, mesh, textures, meta, curves)

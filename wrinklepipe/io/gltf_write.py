@@ -172,6 +172,140 @@ def _skin(m: Any, buf: _Buffer, attrs: dict[str, int]) -> dict[str, Any] | None:
     return {"joints": list(range(1, n + 1)), "inverseBindMatrices": acc, "_nodes": nodes}
 
 
+def weights_pointer(material: int) -> str:
+    """The ``KHR_animation_pointer`` path of the extension's weights on material ``material``."""
+    return f"/materials/{material}/extensions/{EXTENSION}/weights"
+
+
+def extension_block(
+    meta: dict[str, Any], tex_index: dict[str, int], vertex_id_attribute: str = VERTEX_ID_ATTRIBUTE
+) -> dict[str, Any]:
+    """The ``WRINKLEPIPE_wrinkle_maps`` JSON of a package's ``meta`` (textures by glTF index)."""
+    region_names = [r["name"] for r in meta["regions"]]
+    return {
+        "encoding": meta["encoding"],
+        "scale": float(meta["scale"]),
+        "mapping": int(meta.get("mapping", 1)),
+        "policy": meta["policy"],
+        "states": [
+            {"name": s["name"], "texture": {"index": tex_index[s["texture"]]}}
+            for s in meta["states"]
+        ],
+        "masks": {
+            "layout": meta["masks"]["layout"],
+            "textures": [{"index": tex_index[n]} for n in meta["masks"]["textures"]],
+            "table": [dict(e) for e in meta["masks"]["table"]],
+        },
+        "regions": [
+            {
+                "name": r["name"],
+                "side": r.get("side", "center"),
+                "states": list(r.get("states", [])),
+            }
+            for r in meta["regions"]
+        ],
+        "expressions": [
+            {
+                "name": e,
+                "weights": [float(row.get(rn, 0.0)) for rn in region_names],
+            }
+            for e, row in meta.get("expressions", {}).items()
+        ],
+        "drivers": list(meta.get("drivers", [])),
+        "weights": [float(w) for w in meta["weights"]],
+        "vertexIdAttribute": vertex_id_attribute,
+        **_compressed_block(meta, tex_index),
+    }
+
+
+def _compressed_block(meta: dict[str, Any], tex_index: dict[str, int]) -> dict[str, Any]:
+    """``compressed``: the block-compressed copies shipped beside the PNGs (none: no key)."""
+    if not meta.get("compressed"):
+        return {}
+    return {
+        "compressed": [
+            {
+                "texture": {"index": tex_index[c["texture"]]},
+                "format": c["format"],
+                "layout": c["layout"],
+                "mapping": int(c["mapping"]),
+                "levels": int(c["levels"]),
+                "uris": [c["ktx2"], c["dds"]],
+            }
+            for c in meta["compressed"]
+        ]
+    }
+
+
+@dataclass(frozen=True)
+class MorphChannel:
+    """A node whose morph weights a blendshapes curve animates: ``columns[i]`` is the column of
+    the curve's ``morph_weights`` that drives the node's mesh target ``i`` (-1: held at 0)."""
+
+    node: int
+    columns: np.ndarray
+
+
+def curve_animations(
+    curves: list[Any],
+    regions: int,
+    accessor: Any,
+    pointers: list[str],
+    morphs: list[MorphChannel],
+    where: str = "",
+) -> list[dict[str, Any]]:
+    """One glTF animation per weight curve: a LINEAR sampler of the region weights played
+    through ``KHR_animation_pointer`` at each of ``pointers``, plus (for a curve with morph
+    weights) one ``weights`` channel per node of ``morphs``. ``accessor(array, minmax)`` adds
+    an accessor and returns its index."""
+    animations = []
+    for c in curves:
+        times = np.asarray(c.times, np.float32)
+        values = np.asarray(c.values, np.float32)
+        if values.shape != (times.shape[0], regions):
+            raise input_error(
+                where,
+                f"weight curve {c.name!r}: values {values.shape} do not match "
+                f"{times.shape[0]} keys x {regions} regions",
+            )
+        t_acc = accessor(times, True)
+        samplers = [
+            {
+                "input": t_acc,
+                "output": accessor(values.reshape(-1), False),
+                "interpolation": "LINEAR",
+            }
+        ]
+        channels = [
+            {
+                "sampler": 0,
+                "target": {
+                    "path": "pointer",
+                    "extensions": {POINTER_EXTENSION: {"pointer": p}},
+                },
+            }
+            for p in pointers
+        ]
+        if c.morph_weights is not None:
+            mw = np.asarray(c.morph_weights, np.float32)
+            width = max((int(m.columns.max(initial=-1)) + 1 for m in morphs), default=0)
+            if mw.ndim != 2 or mw.shape[0] != times.shape[0] or mw.shape[1] < width or not morphs:
+                raise input_error(
+                    where,
+                    f"weight curve {c.name!r}: morph weights {mw.shape} do not match "
+                    f"{times.shape[0]} keys x the morph targets",
+                )
+            padded = np.concatenate([mw, np.zeros((mw.shape[0], 1), np.float32)], axis=1)
+            for m in morphs:
+                out = accessor(np.ascontiguousarray(padded[:, m.columns]).reshape(-1), False)
+                samplers.append({"input": t_acc, "output": out, "interpolation": "LINEAR"})
+                channels.append(
+                    {"sampler": len(samplers) - 1, "target": {"node": m.node, "path": "weights"}}
+                )
+        animations.append({"name": c.name, "samplers": samplers, "channels": channels})
+    return animations
+
+
 def gltf_document(
     pkg: WrinklePackage, options: GltfOptions | None = None, embed_images: bool = False
 ) -> tuple[dict[str, Any], bytes, dict[str, bytes]]:
@@ -229,88 +363,15 @@ def gltf_document(
         textures.append({"sampler": 0, "source": len(images) - 1, "name": t.name})
         tex_index[t.name] = len(textures) - 1
 
-    meta = pkg.meta
-    region_names = [r["name"] for r in meta["regions"]]
-    ext: dict[str, Any] = {
-        "encoding": meta["encoding"],
-        "scale": float(meta["scale"]),
-        "mapping": int(meta.get("mapping", 1)),
-        "policy": meta["policy"],
-        "states": [
-            {"name": s["name"], "texture": {"index": tex_index[s["texture"]]}}
-            for s in meta["states"]
-        ],
-        "masks": {
-            "layout": meta["masks"]["layout"],
-            "textures": [{"index": tex_index[n]} for n in meta["masks"]["textures"]],
-            "table": [dict(e) for e in meta["masks"]["table"]],
-        },
-        "regions": [
-            {
-                "name": r["name"],
-                "side": r.get("side", "center"),
-                "states": list(r.get("states", [])),
-            }
-            for r in meta["regions"]
-        ],
-        "expressions": [
-            {
-                "name": e,
-                "weights": [float(row.get(rn, 0.0)) for rn in region_names],
-            }
-            for e, row in meta.get("expressions", {}).items()
-        ],
-        "drivers": list(meta.get("drivers", [])),
-        "weights": [float(w) for w in meta["weights"]],
-        "vertexIdAttribute": VERTEX_ID_ATTRIBUTE,
-    }
-    if meta.get("compressed"):  # block-compressed copies shipped beside the PNGs
-        ext["compressed"] = [
-            {
-                "texture": {"index": tex_index[c["texture"]]},
-                "format": c["format"],
-                "layout": c["layout"],
-                "mapping": int(c["mapping"]),
-                "levels": int(c["levels"]),
-                "uris": [c["ktx2"], c["dds"]],
-            }
-            for c in meta["compressed"]
-        ]
-    animations = []
-    for c in pkg.curves:
-        times = np.asarray(c.times, np.float32)
-        values = np.asarray(c.values, np.float32)
-        if values.shape != (times.shape[0], len(region_names)):
-            raise input_error(
-                pkg.name,
-                f"weight curve {c.name!r}: values {values.shape} do not match "
-                f"{times.shape[0]} keys x {len(region_names)} regions",
-            )
-        t_acc = buf.accessor(times, minmax=True)
-        samplers = [
-            {"input": t_acc, "output": buf.accessor(values.reshape(-1)), "interpolation": "LINEAR"}
-        ]
-        channels = [
-            {
-                "sampler": 0,
-                "target": {
-                    "path": "pointer",
-                    "extensions": {POINTER_EXTENSION: {"pointer": WEIGHTS_POINTER}},
-                },
-            }
-        ]
-        if c.morph_weights is not None:
-            mw = np.asarray(c.morph_weights, np.float32)
-            if mw.shape != (times.shape[0], len(m.morph_names)) or not len(m.morph_names):
-                raise input_error(
-                    pkg.name,
-                    f"weight curve {c.name!r}: morph weights {mw.shape} do not match "
-                    f"{times.shape[0]} keys x {len(m.morph_names)} morph targets",
-                )
-            out = buf.accessor(mw.reshape(-1))
-            samplers.append({"input": t_acc, "output": out, "interpolation": "LINEAR"})
-            channels.append({"sampler": 1, "target": {"node": 0, "path": "weights"}})
-        animations.append({"name": c.name, "samplers": samplers, "channels": channels})
+    ext = extension_block(pkg.meta, tex_index)
+    animations = curve_animations(
+        pkg.curves,
+        len(pkg.meta["regions"]),
+        lambda a, minmax: buf.accessor(a, minmax=minmax),
+        [WEIGHTS_POINTER],
+        [MorphChannel(0, np.arange(len(m.morph_names)))] if len(m.morph_names) else [],
+        pkg.name,
+    )
     if animations:
         ext["weightCurves"] = [{"name": c.name, "animation": i} for i, c in enumerate(pkg.curves)]
 

@@ -2,14 +2,24 @@
 
 :func:`build_outputs` returns every file but the USD layers as ``{relative path: bytes}``;
 :func:`write_folder` writes them (and the USD, through usd-core) into a staged folder.
+
+The glTF: for a glTF source, the source document with the wrinkle data added
+(:func:`wrinklepipe.document.wrinkle_maps.add_wrinkle_maps`, written by
+:func:`wrinklepipe.document.write.document_files`: every untouched element as it was, images
+byte for byte); for other sources (OBJ, USD) a new document of the package
+(:func:`wrinklepipe.io.gltf_write.gltf_document`).
 """
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 from typing import Any
 
 from wrinklepipe.atomic import dumps_json, write_bytes
+from wrinklepipe.document.model import Document
+from wrinklepipe.document.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
+from wrinklepipe.document.write import document_files
 from wrinklepipe.io.gltf_write import glb_bytes, gltf_document
 from wrinklepipe.io.package import WrinklePackage, png_bytes
 from wrinklepipe.io.usd_write import write_usd
@@ -22,17 +32,35 @@ from wrinklepipe.outputs.curves import curve_files
 USD_FORMATS: tuple[str, ...] = ("usda", "usdc", "usdz")
 
 
+def document_outputs(
+    source: Document, target: WrinkleTarget, pkg: WrinklePackage, glb: bool
+) -> tuple[dict[str, bytes], list[str]]:
+    """``NAME.gltf`` + ``NAME.bin`` + images (and ``NAME.glb``): the source document with the
+    package's wrinkle data added (the source document object is left as it was)."""
+    doc = copy.copy(source)
+    doc.gltf = copy.deepcopy(source.gltf)
+    doc.views = list(source.views)
+    doc.images = dict(source.images)
+    notes = add_wrinkle_maps(doc, target, pkg)
+    files = document_files(doc, pkg.name, glb=False)
+    if glb:
+        files.update(document_files(doc, pkg.name, glb=True))
+    return files, notes
+
+
 def build_outputs(
     pkg: WrinklePackage,
     glb: bool = False,
     compressed: bool = True,
     budget: dict[str, float] | None = None,
     formats: dict[str, str] | None = None,
+    source: tuple[Document, WrinkleTarget] | None = None,
 ) -> tuple[dict[str, bytes], list[str], dict[str, Any]]:
     """Every output file as ``{relative path: bytes}`` (except USD, written by usd-core), notes,
     and the block-format choices. ``glb``: also a self-contained ``NAME.glb``; ``compressed``:
     DDS + KTX2 copies (:func:`wrinklepipe.outputs.compression.compressed_copies`), recorded in
-    the package's ``meta["compressed"]`` (in place) before the glTF is written."""
+    the package's ``meta["compressed"]`` (in place) before the glTF is written; ``source``: the
+    glTF source document and where its wrinkle data goes (see the module doc)."""
     name = pkg.name
     files: dict[str, bytes] = {}
     notes: list[str] = []
@@ -42,16 +70,21 @@ def build_outputs(
         files.update(copy_files(made))
         notes += n
         pkg.meta["compressed"] = copy_records(made)  # the USD layers written next read it too
-    doc, data, images = gltf_document(pkg)
-    doc["buffers"][0]["uri"] = f"{name}.bin"
-    files[f"{name}.gltf"] = dumps_json(doc).encode("utf-8")
-    files[f"{name}.bin"] = data
-    files.update(images)
+    if source is not None:
+        got, n = document_outputs(source[0], source[1], pkg, glb)
+        files.update(got)
+        notes += n
+    else:
+        doc, data, images = gltf_document(pkg)
+        doc["buffers"][0]["uri"] = f"{name}.bin"
+        files[f"{name}.gltf"] = dumps_json(doc).encode("utf-8")
+        files[f"{name}.bin"] = data
+        files.update(images)
+        if glb:
+            gdoc, gdata, _ = gltf_document(pkg, embed_images=True)
+            files[f"{name}.glb"] = glb_bytes(gdoc, gdata)
     for t in pkg.textures:  # the same PNGs serve glTF and USD
         files.setdefault(f"textures/{t.name}.png", png_bytes(t.pixels))
-    if glb:
-        gdoc, gdata, _ = gltf_document(pkg, embed_images=True)
-        files[f"{name}.glb"] = glb_bytes(gdoc, gdata)
     regions = [r["name"] for r in pkg.meta["regions"]]
     taken: set[str] = set()
     for c in pkg.curves:

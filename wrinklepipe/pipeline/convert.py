@@ -43,7 +43,7 @@ from wrinklepipe.outputs.report import (
     write_report,
 )
 from wrinklepipe.pipeline.drivers import evaluate_drivers
-from wrinklepipe.pipeline.ingest import ingest
+from wrinklepipe.pipeline.ingest import ingest_all
 from wrinklepipe.pipeline.prepare import run_stages
 from wrinklepipe.pipeline.validation import validate_output
 
@@ -112,8 +112,10 @@ def convert(
             png_compression(opt.png_level),
         ):
             with console.status("reading inputs"):
-                asset, notes = ingest(manifest)
+                got = ingest_all(manifest)
+            asset, notes = got.asset, got.notes
             source = asset  # as read: what validation measures the shipped maps against
+            document = (got.document, got.target) if got.document is not None else None
             with console.status("choosing sizes, scale and formats by fidelity"):
                 asset, stage_rep = run_stages(
                     asset,
@@ -130,7 +132,7 @@ def convert(
             with console.status("encoding, packing, compressing"):
                 formats = {**manifest.formats, **stage_rep.formats}
                 files, n, choices = build_outputs(
-                    pkg, opt.glb, opt.compressed, asset.budget, formats
+                    pkg, opt.glb, opt.compressed, asset.budget, formats, document
                 )
             notes += n
             read = input_rows(manifest.root, manifest.input_files)

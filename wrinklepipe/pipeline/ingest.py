@@ -1,11 +1,19 @@
 """Ingest: a loaded manifest and the files it names -> a :class:`WrinkleAsset`.
 
 Maps come back as float32 unit normals (+Y), wrinkle states as the whole wrinkled face, masks as
-``[R, H, W]`` in [0, 1]; the mesh through :func:`wrinklepipe.io.mesh.load_mesh`.
+``[R, H, W]`` in [0, 1].
+
+The mesh: a glTF source is read as a whole document (:mod:`wrinklepipe.document`): the
+manifest's ``material`` (and ``meshes``) select the wrinkled primitives, which get their
+tangents and vertex IDs in the document, and the render mesh is those primitives only
+(:func:`wrinklepipe.document.render_mesh.wrinkled_mesh`); convert then writes the document back
+with the wrinkle data added. Without ``base`` the wrinkled material's own ``normalTexture`` is
+the base map. Other meshes (USD, OBJ) come through :func:`wrinklepipe.io.mesh.load_mesh`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -14,10 +22,23 @@ import numpy as np
 from wrinklepipe import masks as wm
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
+from wrinklepipe.document.images import texture_normals
+from wrinklepipe.document.model import Document, read_document
+from wrinklepipe.document.render_mesh import wrinkled_mesh
+from wrinklepipe.document.repair import repair
+from wrinklepipe.document.wrinkle_maps import WrinkleTarget
+from wrinklepipe.document.wrinkled import (
+    add_wrinkle_attributes,
+    material_normal_texture,
+    select_wrinkled,
+)
 from wrinklepipe.errors import input_error
+from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.io.images import read_image
 from wrinklepipe.io.mesh import load_mesh
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
+
+_GLTF = (".gltf", ".glb")
 
 
 def _read_normals(path: Path, convention: str) -> tuple[np.ndarray, list[str]]:
@@ -32,13 +53,17 @@ def _load_mesh(path: Path) -> Mesh:
     return load_mesh(path)
 
 
-def read_maps(manifest: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+def read_maps(
+    manifest: Any, base: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """The manifest's maps as read: base ``[H, W, 3]``, wrinkled-face states ``[K, H, W, 3]``
     (unit normals, +Y; wrinkle-only maps get the base added in PD space), masks ``[R, h, w]``,
-    and notes on what was read."""
+    and notes on what was read. ``base``: the base map when it does not come from the
+    manifest's ``base`` file (a glTF material's own normalTexture)."""
     notes: list[str] = []
-    base, n = _read_normals(manifest.base, manifest.convention)
-    notes += n
+    if base is None:
+        base, n = _read_normals(manifest.base, manifest.convention)
+        notes += n
     states = []
     for s in manifest.states:
         st, n = _read_normals(s.map, manifest.convention)
@@ -47,7 +72,8 @@ def read_maps(manifest: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[s
             raise input_error(
                 s.map,
                 f"size {st.shape[1]}x{st.shape[0]} differs from the base map "
-                f"{base.shape[1]}x{base.shape[0]}",
+                f"{base.shape[1]}x{base.shape[0]}"
+                + ("" if manifest.base is not None else " (the wrinkled material's normalTexture)"),
             )
         if not manifest.states_include_base:  # wrinkle-only normals: add the base in PD space
             st = model.pd_to_normal(model.normal_to_pd(base) + model.normal_to_pd(st))
@@ -67,15 +93,119 @@ def read_maps(manifest: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[s
     return base, np.stack(states), mask_arr, notes
 
 
-def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
-    """Read every file a manifest names into a :class:`WrinkleAsset` (float maps, +Y)."""
-    base, states, mask_arr, notes = read_maps(manifest)
-    mesh = _load_mesh(manifest.mesh) if manifest.mesh is not None else None
-    if mesh is None:
+@dataclass
+class Ingested:
+    """What ingest read: the asset, notes, and for a glTF source the document (wrinkle
+    attributes added to the wrinkled primitives) with where its wrinkle data goes."""
+
+    asset: WrinkleAsset
+    notes: list[str] = field(default_factory=list)
+    document: Document | None = None
+    target: WrinkleTarget | None = None
+
+
+@dataclass
+class SourceDocument:
+    """A glTF source read for conversion (see :func:`read_source_document`)."""
+
+    doc: Document
+    target: WrinkleTarget
+    mesh: Mesh
+    base: np.ndarray | None
+    notes: list[str]
+
+
+def read_source_document(manifest: Any) -> SourceDocument:
+    """The manifest's glTF mesh as a document: repaired, the wrinkled primitives selected (shared
+    materials cloned for a ``meshes`` restriction), tangents and vertex IDs added to them; the
+    render mesh of those primitives; the material's normalTexture as the base when the manifest
+    names none."""
+    doc = read_document(manifest.mesh)
+    notes = list(doc.notes) + repair(doc)
+    sel = select_wrinkled(doc, manifest.material, manifest.meshes, manifest.path, manifest.name)
+    notes += sel.notes
+    base = None
+    base_texture = None
+    if manifest.base is None:
+        info = material_normal_texture(doc, sel.materials, manifest.path)
+        base_texture = int(info["index"])
+        key = f"/materials/{sel.materials[0]}/normalTexture"
+        base, n = texture_normals(doc, base_texture, key)
+        notes += n
+    for part in add_wrinkle_attributes(doc, sel.refs):
+        where = f"{doc.mesh_name(part.ref.mesh)}/{part.ref.primitive}"
+        notes += [f"{where}: {n}" for n in part.notes]
+    mesh = wrinkled_mesh(doc, sel.refs)
+    listing = ", ".join(f"{p.name} ({p.count} vertices)" for p in mesh.parts)
+    mats = ", ".join(repr(doc.material_name(m)) for m in sel.materials)
+    notes.append(f"wrinkled material(s) {mats}: primitives {listing}")
+    target = WrinkleTarget(tuple(sel.materials), tuple(sel.refs), base_texture)
+    return SourceDocument(doc, target, mesh, base, notes)
+
+
+def check_masks_on_mesh(masks: np.ndarray, mesh: Mesh, manifest: Any) -> None:
+    """Every region's mask must touch the wrinkled primitives' UV layout (a texel of a UV
+    triangle, or the texel under a vertex); one message naming the regions that do not."""
+    if mesh.uvs is None or not len(masks):
+        return
+    r, h, w = masks.shape
+    size = max(h, w)
+    ids = rasterise_triangle_ids(mesh.uvs, mesh.indices, size)
+    rows = np.minimum((np.arange(h) + 0.5) / h * size, size - 1).astype(np.int64)
+    cols = np.minimum((np.arange(w) + 0.5) / w * size, size - 1).astype(np.int64)
+    covered = ids[rows][:, cols] >= 0
+    uv = np.asarray(mesh.uvs, np.float64)
+    ok = np.isfinite(uv).all(axis=1)
+    vy = np.clip(np.floor(uv[ok, 1] * h), 0, h - 1).astype(np.int64)
+    vx = np.clip(np.floor(uv[ok, 0] * w), 0, w - 1).astype(np.int64)
+    covered[vy, vx] = True
+    touched = (np.asarray(masks) > 0)[:, covered].any(axis=1)
+    missing = [reg.name for reg, t in zip(manifest.regions, touched) if not t]
+    if missing:
+        where = ", ".join(p.name for p in mesh.parts) or mesh.name
+        raise input_error(
+            manifest.path,
+            f"the mask(s) of region(s) {', '.join(map(repr, missing))} fall on no wrinkled "
+            f"primitive: they are zero over the UV layout of {where} (a mask painted for another "
+            "part, or the wrong material)",
+            "regions",
+        )
+
+
+def ingest_all(manifest: Any) -> Ingested:
+    """Read every file a manifest names (see the module doc)."""
+    if manifest.mesh is None:
         raise input_error(
             manifest.path, "the manifest names no mesh; glTF/USD output needs one", "mesh"
         )
-    asset = WrinkleAsset(
+    source = None
+    if manifest.mesh.suffix.lower() in _GLTF:
+        source = read_source_document(manifest)
+        mesh = source.mesh
+        base, states, mask_arr, notes = read_maps(manifest, source.base)
+        notes = source.notes + notes
+        check_masks_on_mesh(mask_arr, mesh, manifest)
+    else:
+        base, states, mask_arr, notes = read_maps(manifest)
+        mesh = _load_mesh(manifest.mesh)
+    asset = _asset(manifest, base, states, mask_arr, mesh)
+    if source is not None and source.target.base_texture is not None:
+        asset.provenance["base_source"] = "material"
+    if source is None:
+        return Ingested(asset, notes)
+    return Ingested(asset, notes, source.doc, source.target)
+
+
+def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
+    """Read every file a manifest names into a :class:`WrinkleAsset` (float maps, +Y)."""
+    got = ingest_all(manifest)
+    return got.asset, got.notes
+
+
+def _asset(
+    manifest: Any, base: np.ndarray, states: np.ndarray, mask_arr: np.ndarray, mesh: Mesh
+) -> WrinkleAsset:
+    return WrinkleAsset(
         name=manifest.name,
         base=base,
         states=states,
@@ -95,7 +225,6 @@ def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
             "auto_resolution": sorted(k for k, v in manifest.resolution.items() if v == "auto"),
         },
     )
-    return asset, notes
 
 
 def _mask_channel(region: Any) -> np.ndarray:

@@ -92,9 +92,15 @@ def run_stages(
     res = dict(asset.resolution)
     base = asset.base
     if "base" in res and res["base"] != base.shape[0]:
-        base = _resize_normals(base, int(res["base"]))
-        rep.notes.append(f"base resampled to {res['base']}")
-        asset = replace(asset, base=base)
+        if asset.provenance.get("base_source") == "material":
+            rep.notes.append(
+                f"resolution.base {res['base']} ignored: the base is the wrinkled material's own "
+                "normalTexture, which ships as it is"
+            )
+        else:
+            base = _resize_normals(base, int(res["base"]))
+            rep.notes.append(f"base resampled to {res['base']}")
+            asset = replace(asset, base=base)
     mesh = prepare_mesh(asset.mesh)
     asset = replace(asset, mesh=mesh)
     why_not = auto.can_search(asset)

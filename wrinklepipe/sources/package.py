@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.gltf_read import read_gltf
 from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.io.usd_read import read_usd
 
@@ -20,7 +20,7 @@ def read_package(path: str | Path) -> WrinklePackage:
         path = found[0]
     suffix = path.suffix.lower()
     if suffix in (".gltf", ".glb"):
-        return read_gltf(path)
+        return read_wrinkled(path)
     if suffix in (".usda", ".usdc", ".usd", ".usdz"):
         return read_usd(path)
     raise input_error(path, "expected a convert folder, .gltf/.glb or .usda/.usdc/.usdz")

@@ -27,8 +27,8 @@ import numpy as np
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.document.container import split_glb
+from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.errors import InputError, input_error
-from wrinklepipe.io.gltf_read import read_gltf
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import package_from_asset
 from wrinklepipe.io.usd_read import read_usd
@@ -145,7 +145,7 @@ def check_gltf_claims_wrinkles(path: Path, max_bytes: int = 512 * 1024 * 1024) -
 
 def _from_reader(p: Path, kind: str) -> ValidationInput:
     if kind == "gltf":
-        pkg = guard_reader(lambda: read_gltf(p), p, "the glTF")
+        pkg = guard_reader(lambda: read_wrinkled(p), p, "the glTF")
     else:
         pkg = guard_reader(lambda: read_usd(p), p, "the USD stage")
     folder = p.parent

@@ -1,0 +1,239 @@
+"""convert writes into the source document: RobotExpressive (14 meshes, 3 materials, 2 skins,
+14 animations, CC0) with a wrinkle setup on its head (``material = "Main"`` restricted to
+``meshes = ["Head"]``: Main is shared with the body, so it is cloned for the head).
+
+Checked by independent readers: pygltflib + struct (every source element present with equal
+data, only the additions differ), the Khronos validator (0 errors), glTF-Transform's inspect
+(same meshes, materials, animations plus the additions) and ``inspect --diff``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gltf_reference as ref
+import numpy as np
+import pytest
+from passthrough import EXTENSION, WRINKLE_ATTRIBUTES, compare
+from test_document_inspect import GLTF_TRANSFORM, gltf_transform_inspect
+from wrinkle_setups import write_setup
+
+from wrinklepipe.cli import main
+from wrinklepipe.io import khronos
+from wrinklepipe.io.confine import allowed_roots
+from wrinklepipe.pipeline.convert import ConvertOptions, convert
+from wrinklepipe.sources.validation import load_input
+
+ROBOT = (
+    Path(__file__).resolve().parents[2]
+    / "shared"
+    / "data"
+    / "gltf-samples"
+    / "RobotExpressive"
+    / "RobotExpressive.glb"
+)
+needs_robot = pytest.mark.skipif(not ROBOT.is_file(), reason="../shared/data is absent")
+HEAD_MAIN = (2, 1)  # meshes[2] "Head", primitive 1 (material Main): the wrinkled primitive
+BLENDSHAPES = """
+[[drivers]]
+kind = "blendshapes"
+rows = [["Angry", "brow_L", 0, 1, 1, 0], ["Angry", "brow_R", 0, 1, 1, 0],
+        ["Surprised", "mouth", 0, 1, 1, 0]]
+[drivers.keys]
+Angry = [[0, 0], [1, 1], [2, 0]]
+Surprised = [[0, 0], [2, 0], [3, 1]]
+"""
+
+
+@pytest.fixture(scope="session")
+def robot(tmp_path_factory):
+    """RobotExpressive converted once (.gltf + .glb; validation without the render pass)."""
+    if not ROBOT.is_file():
+        pytest.skip("../shared/data is absent")
+    root = tmp_path_factory.mktemp("robot")
+    manifest = write_setup(root / "src", ROBOT, "robot", "Main", ["Head"], drivers=BLENDSHAPES)
+    with allowed_roots([ROBOT.parent]):
+        res = convert(manifest, root / "out", ConvertOptions(glb=True, render=False))
+    assert res.exit_code == 0
+    return root / "out", res.report
+
+
+@needs_robot
+@pytest.mark.parametrize("name", ["robot.gltf", "robot.glb"])
+def test_robot_loses_nothing(robot, name):
+    out, _ = robot
+    added = compare(ROBOT, out / name)
+    # only the head's Main primitive gained attributes: tangents, vertex IDs and (RobotExpressive
+    # has no UVs) the front-projection TEXCOORD_0 the masks are laid out on
+    assert added.attributes == {HEAD_MAIN: WRINKLE_ATTRIBUTES | {"TEXCOORD_0"}}
+    assert added.clones == {3: 1}  # "Main (wrinkled)" appended, the body keeps "Main"
+    assert added.materials == [3]
+    assert (added.textures, added.images) == (4, 4)  # base, 2 states, 1 RGBA mask texture
+    assert added.animations == ["blendshapes"]
+    # the source's hands had skin weights summing to up to 1.755: renormalised (4 accessors)
+    assert len(added.repaired) == 4
+    g = ref.load(out / name)
+    assert g.meshes[2].primitives[1].material == 3
+    assert [p.material for p in g.meshes[1].primitives] == [0, 1]  # Torso keeps Grey, Main
+
+
+@needs_robot
+def test_robot_extension_and_animation_point_at_the_clone(robot):
+    out, _ = robot
+    doc = json.loads((out / "robot.gltf").read_text())
+    mat = doc["materials"][3]
+    ext = mat["extensions"][EXTENSION]
+    assert [r["name"] for r in ext["regions"]] == ["brow_L", "brow_R", "mouth"]
+    assert doc["textures"][mat["normalTexture"]["index"]]["name"] == "base_normal"
+    anim = doc["animations"][ext["weightCurves"][0]["animation"]]
+    pointers = [
+        c["target"]["extensions"]["KHR_animation_pointer"]["pointer"]
+        for c in anim["channels"]
+        if c["target"]["path"] == "pointer"
+    ]
+    assert pointers == [f"/materials/3/extensions/{EXTENSION}/weights"]
+    # the blendshapes driver's inputs play on the Head node (13), in its target order
+    morph = [c for c in anim["channels"] if c["target"]["path"] == "weights"]
+    assert [c["target"]["node"] for c in morph] == [13]
+    g = ref.load(out / "robot.gltf")
+    sampler = anim["samplers"][morph[0]["sampler"]]
+    t = ref.accessor(g, out / "robot.gltf", sampler["input"])[:, 0]
+    w = ref.accessor(g, out / "robot.gltf", sampler["output"]).reshape(len(t), 3)
+    angry = np.interp(t, [0, 1, 2, 3], [0, 1, 0, 0])  # keys of the manifest
+    np.testing.assert_allclose(w[:, 0], angry, atol=1e-6)
+    np.testing.assert_allclose(w[:, 2], 0, atol=0)  # Sad is not driven
+
+
+@needs_robot
+@pytest.mark.skipif(not khronos.available(), reason="Khronos validator not installed")
+@pytest.mark.parametrize("name", ["robot.gltf", "robot.glb"])
+def test_robot_output_passes_the_khronos_validator(robot, name):
+    out, _ = robot
+    report = khronos.validate_gltf(out / name)
+    assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:5]
+
+
+@needs_robot
+@pytest.mark.skipif(not GLTF_TRANSFORM.exists(), reason="npm @gltf-transform/cli absent")
+def test_robot_gltf_transform_sees_the_same_character_plus_the_additions(robot):
+    out, _ = robot
+    before = gltf_transform_inspect(ROBOT)
+    after = gltf_transform_inspect(out / "robot.glb")
+    assert [(r["name"], r["vertices"]) for r in after["MESHES"]] == [
+        (r["name"], r["vertices"]) for r in before["MESHES"]
+    ]
+    mats0 = [(r["name"], r["instances"]) for r in before["MATERIALS"]]
+    mats1 = [(r["name"], r["instances"]) for r in after["MATERIALS"]]
+    assert mats0 == [("Grey", "6"), ("Main", "12"), ("Black", "1")]
+    assert mats1 == [("Grey", "6"), ("Main", "11"), ("Black", "1"), ("Main (wrinkled)", "1")]
+    keys = ("name", "channels", "duration", "keyframes")
+    anims0 = [tuple(r[k] for k in keys) for r in before["ANIMATIONS"]]
+    anims1 = [tuple(r[k] for k in keys) for r in after["ANIMATIONS"]]
+    assert anims1[:14] == anims0 and len(anims1) == 15 and anims1[14][0] == "blendshapes"
+    assert "TEXTURES" not in before
+    assert sorted(r["name"] for r in after["TEXTURES"]) == [
+        "base_normal",
+        "mask_0",
+        "wrinkle_compress",
+        "wrinkle_stretch",
+    ]
+
+
+@needs_robot
+def test_robot_inspect_diff_lists_only_the_additions(robot, capsys):
+    out, _ = robot
+    assert main(["inspect", "--diff", str(ROBOT), str(out / "robot.glb")]) == 1
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines == [
+        "+ animations[14]: 'blendshapes'",
+        "~ extensionsUsed: [] -> ['KHR_animation_pointer', 'WRINKLEPIPE_wrinkle_maps']",
+        "~ materials[1].instances: 12 -> 11",
+        "+ materials[3]: 'Main (wrinkled)'",
+        "+ meshes[2].primitives[1].attributes.TANGENT: 'VEC4:f32'",
+        "+ meshes[2].primitives[1].attributes.TEXCOORD_0: 'VEC2:f32'",
+        "+ meshes[2].primitives[1].attributes._WRINKLE_VERTEX_ID: 'SCALAR:f32'",
+        "~ meshes[2].primitives[1].material: 'Main' -> 'Main (wrinkled)'",
+        "+ textures[0]: 'base_normal'",
+        "+ textures[1]: 'wrinkle_stretch'",
+        "+ textures[2]: 'wrinkle_compress'",
+        "+ textures[3]: 'mask_0'",
+    ]
+
+
+@needs_robot
+def test_robot_masks_touch_only_the_wrinkled_primitive_and_sides_hold(robot):
+    out, report = robot
+    # the validator works on the wrinkled primitive alone: Head/1's 876 vertices of 7214
+    inp = load_input(out)
+    mesh = inp.asset.mesh
+    assert mesh.vertex_count == 876 and [p.pointer for p in mesh.parts] == [
+        "/meshes/2/primitives/1"
+    ]
+    g = ref.load(ROBOT)
+    head = ref.accessor(g, ROBOT, g.meshes[2].primitives[1].attributes.POSITION)
+    assert mesh.vertex_count == len(head)
+    # no side-rule problem (the masks' weight falls on their side of the head), no error
+    assert report["validation"]["counts"]["error"] == 0
+    assert not [i for i in report["validation"]["issues"] if "side" in i["message"].lower()]
+
+
+def _convert_cli(tmp_path, manifest) -> tuple[int, Path]:
+    out = tmp_path / "out"
+    code = main(["convert", str(manifest), "-o", str(out), "--allow-root", str(ROBOT.parent)])
+    return code, out
+
+
+@needs_robot
+@pytest.mark.parametrize(
+    "material, meshes, message",
+    [
+        ("Skin", None, "no material 'Skin' in RobotExpressive.glb (materials: 'Grey' ("),
+        (None, None, "RobotExpressive.glb has 3 materials; name the wrinkled one(s)"),
+        ("Main", ["Hat"], "no mesh or node 'Hat' in RobotExpressive.glb has a primitive using"),
+    ],
+)
+def test_robot_bad_selection_one_message_exit_2_nothing_written(
+    tmp_path, capsys, material, meshes, message
+):
+    manifest = write_setup(tmp_path / "src", ROBOT, "robot", material, meshes)
+    code, out = _convert_cli(tmp_path, manifest)
+    err = capsys.readouterr().err
+    assert code == 2 and not out.exists()
+    assert message in " ".join(err.split())
+
+
+@needs_robot
+def test_robot_masks_on_no_wrinkled_primitive_are_refused(tmp_path, capsys):
+    # a mask painted outside the head's UV layout (the corner the front projection leaves empty)
+    regions = {
+        "brow_L": ((0.55, 0.05, 0.95, 0.45), "left"),
+        "ghost": ((0.0, 0.0, 0.05, 0.05), "center"),
+    }
+    manifest = write_setup(tmp_path / "src", ROBOT, "robot", "Main", ["Head"], regions=regions)
+    code, out = _convert_cli(tmp_path, manifest)
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 2 and not out.exists()
+    assert "region(s) 'ghost' fall on no wrinkled primitive" in err and "Head/1" in err
+
+
+@needs_robot
+def test_robot_unused_and_ambiguous_materials_are_refused(tmp_path, capsys):
+    # a copy of the robot with an unused material and two materials named alike
+    g = ref.load(ROBOT)
+    doc = json.loads(g.to_json())
+    doc["materials"].append({"name": "Unused"})
+    doc["materials"].append({"name": "Black"})
+    src = tmp_path / "src"
+    src.mkdir()
+    g2 = ref.load(ROBOT)
+    g2.materials = type(g2).from_dict(doc).materials
+    g2.save(str(src / "robot2.glb"))
+    for material, message in (
+        ("Unused", "material 'Unused' is used by no primitive of robot2.glb"),
+        ("Black", "material name 'Black' is ambiguous in robot2.glb: materials 2, 4 share it"),
+    ):
+        manifest = write_setup(src, src / "robot2.glb", "robot", material)
+        code, out = _convert_cli(tmp_path, manifest)
+        err = " ".join(capsys.readouterr().err.split())
+        assert code == 2 and not out.exists(), err
+        assert message in err

@@ -1,0 +1,95 @@
+"""Wrinkle setups for whole characters in tests: a base, two states and masks drawn analytically
+in a UV layout, and a manifest naming the wrinkled material (and meshes) of a source document."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from wrinklepipe.io.images import write_image
+
+#: Regions as UV boxes (u0, v0, u1, v1) with their side; glTF characters face +Z, so their
+#: left is +X, which a front projection (and a mirrored face layout) puts at u > 0.5.
+REGIONS = {
+    "brow_L": ((0.55, 0.05, 0.95, 0.45), "left"),
+    "brow_R": ((0.05, 0.05, 0.45, 0.45), "right"),
+    "mouth": ((0.2, 0.55, 0.8, 0.95), "center"),
+}
+
+
+def _ridges(size: int, freq: float, amp: float) -> np.ndarray:
+    """Unit normals of a height field ``amp sin(2 pi freq v)`` (ridges along u), encoded."""
+    v = (np.arange(size) + 0.5) / size
+    dh = amp * 2 * np.pi * freq * np.cos(2 * np.pi * freq * v)  # dh/dv per texel row
+    n = np.zeros((size, size, 3))
+    n[..., 1] = dh[:, None]
+    n[..., 2] = 1.0
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return 0.5 + 0.5 * n
+
+
+def write_setup(
+    folder: Path,
+    mesh: Path,
+    name: str,
+    material: str | list[str] | None = None,
+    meshes: list[str] | None = None,
+    base: bool = True,
+    size: int = 64,
+    mask_size: int = 16,
+    regions: dict | None = None,
+    drivers: str = "",
+) -> Path:
+    """Write maps, masks and ``manifest.toml`` into ``folder``; return the manifest path.
+
+    ``mesh`` may be absolute (the tests allow its folder with ``allowed_roots``)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    regions = REGIONS if regions is None else regions
+    flat = np.zeros((size, size, 3))
+    flat[..., :] = (0.5, 0.5, 1.0)
+    if base:
+        write_image(folder / "base.png", flat, 8)
+    write_image(folder / "stretch.png", _ridges(size, 4, 0.01), 8)
+    write_image(folder / "compress.png", _ridges(size, 8, 0.01), 8)
+    (folder / "masks").mkdir(exist_ok=True)
+    c = (np.arange(mask_size) + 0.5) / mask_size
+    for r, ((u0, v0, u1, v1), _) in regions.items():
+        m = (c[None, :] >= u0) & (c[None, :] <= u1) & (c[:, None] >= v0) & (c[:, None] <= v1)
+        write_image(folder / "masks" / f"{r}.png", m.astype(np.float64), 8)
+    lines = [
+        f'name = "{name}"',
+        f'mesh = "{mesh.as_posix()}"',
+        'convention = "opengl"',
+        "pd_scale = 1",
+    ]
+    if base:
+        lines.append('base = "base.png"')
+    if material is not None:
+        lines.append(f"material = {_toml(material)}")
+    if meshes is not None:
+        lines.append(f"meshes = {_toml(meshes)}")
+    lines += [
+        "",
+        "[[states]]",
+        'name = "stretch"',
+        'map = "stretch.png"',
+        "",
+        "[[states]]",
+        'name = "compress"',
+        'map = "compress.png"',
+    ]
+    for r, (_, side) in regions.items():
+        lines += ["", "[[regions]]", f'name = "{r}"', f'mask = "masks/{r}.png"', f'side = "{side}"']
+    names = list(regions)
+    lines += ["", "[expressions]"]
+    lines.append("raise = {" + ", ".join(f"{r} = 1.0" for r in names[:2]) + "}")
+    lines.append("smile = {" + f"{names[-1]} = 1.0" + "}")
+    (folder / "manifest.toml").write_text("\n".join(lines) + "\n" + drivers, encoding="utf-8")
+    return folder / "manifest.toml"
+
+
+def _toml(value: str | list[str]) -> str:
+    if isinstance(value, str):
+        return f'"{value}"'
+    return "[" + ", ".join(f'"{v}"' for v in value) + "]"

@@ -1,0 +1,122 @@
+"""Images of a source document that the pipeline must read (everything else passes through).
+
+Only a map the pipeline needs is decoded (the wrinkled material's own ``normalTexture`` when it
+is the base, the base texture of a converted output the validator reads); the document keeps
+every image's bytes as they are either way.
+
+- :func:`texture_source`: the image a texture shows: ``KHR_texture_basisu``'s source when present
+  (a KTX2 / Basis Universal image), else ``EXT_texture_webp``'s, else ``source``.
+- :func:`image_values`: image bytes -> float32 ``[H, W, C]`` in [0, 1] and the stored bits.
+  PNG / JPEG / WebP through OpenImageIO (:func:`wrinklepipe.io.images.read_image`); KTX2 (Basis
+  Universal ETC1S / UASTC) transcoded to RGBA8 by ``alktx2`` first.
+- :func:`texture_normals`: a texture as unit normals (+Y, what glTF's normalTexture holds).
+
+OpenImageIO reads files, so the bytes go through a private temporary folder that is removed
+afterwards (nothing is written beside the source). Problems name the glTF file and pointer.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.document.model import Document
+from wrinklepipe.document.write import mime_type
+from wrinklepipe.errors import InputError
+from wrinklepipe.io.images import read_image
+from wrinklepipe.normals.read import ReadOptions, read_normal_map
+
+BASISU = "KHR_texture_basisu"
+WEBP = "EXT_texture_webp"
+_SUFFIX = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp"}
+
+
+def texture_source(doc: Document, texture: int) -> int:
+    """The image index texture ``texture`` shows (basisu / webp extension source first)."""
+    texs = doc.array("textures")
+    key = f"/textures/{texture}"
+    if not isinstance(texture, int) or not 0 <= texture < len(texs):
+        raise doc.err(f"texture {texture!r} does not exist", "/textures")
+    t = texs[texture]
+    ext = t.get("extensions") or {}
+    for name in (BASISU, WEBP):
+        src = (ext.get(name) or {}).get("source")
+        if isinstance(src, int):
+            return src
+    src = t.get("source")
+    if not isinstance(src, int):
+        raise doc.err("texture has no source image", key)
+    return src
+
+
+def _ktx2_to_png(data: bytes, doc: Document, key: str) -> bytes:
+    # alktx2 (Basis Universal transcoder) is imported only when a KTX2 map must be read.
+    import alktx2
+
+    try:
+        png, _ = alktx2.decode_ktx2_to_bytes(data, format="png")
+    except Exception as exc:  # noqa: BLE001 - the binding raises plain RuntimeErrors
+        raise doc.err(f"KTX2 image does not decode (alktx2: {exc})", key) from None
+    return bytes(png)
+
+
+def _with_file(data: bytes, suffix: str, read: Any) -> Any:
+    with tempfile.TemporaryDirectory(prefix="wrinklepipe-image-") as folder:
+        path = Path(folder) / f"image{suffix}"
+        path.write_bytes(data)
+        return read(path)
+
+
+def _decodable(doc: Document, image: int) -> tuple[bytes, str]:
+    key = f"/images/{image}"
+    data = doc.image_bytes(image)
+    img = doc.array("images")[image]
+    mime = mime_type(data, str(img.get("uri", "")))
+    if mime == "image/ktx2":
+        return _ktx2_to_png(data, doc, key), ".png"
+    if mime not in _SUFFIX:
+        raise doc.err(f"image is {mime}; only PNG, JPEG, WebP and KTX2 maps are read", key)
+    return data, _SUFFIX[mime]
+
+
+def _renamed(exc: InputError, doc: Document, key: str) -> InputError:
+    text = "; ".join(p.message for p in exc.problems)
+    return doc.err(text, key)
+
+
+def image_values(doc: Document, image: int) -> tuple[np.ndarray, int]:
+    """Image ``image`` as float32 ``[H, W, C]`` in [0, 1] and its stored bits (8 or 16)."""
+    key = f"/images/{image}"
+    data, suffix = _decodable(doc, image)
+    try:
+        values, info = _with_file(data, suffix, read_image)
+    except InputError as exc:
+        raise _renamed(exc, doc, key) from None
+    return values, 16 if info.format == "uint16" else 8
+
+
+def image_pixels(doc: Document, image: int) -> np.ndarray:
+    """Image ``image`` as stored integers ``[H, W, C]`` (uint8, or uint16 for 16-bit PNGs)."""
+    values, bits = image_values(doc, image)
+    top = (1 << bits) - 1
+    dtype = np.uint16 if bits == 16 else np.uint8
+    return np.clip(np.rint(values.astype(np.float64) * top), 0, top).astype(dtype)
+
+
+def texture_normals(doc: Document, texture: int, key: str) -> tuple[np.ndarray, list[str]]:
+    """Texture ``texture`` as unit normals ``[H, W, 3]`` (+Y: glTF normal textures are OpenGL
+    tangent space by the spec) and notes on what was read."""
+    image = texture_source(doc, texture)
+    data, suffix = _decodable(doc, image)
+    options = ReadOptions(convention="opengl", detect=False)
+    try:
+        nm = _with_file(data, suffix, lambda p: read_normal_map(p, options))
+    except InputError as exc:
+        raise _renamed(exc, doc, key) from None
+    img = doc.array("images")[image]
+    label = img.get("name") or img.get("uri") or f"image {image}"
+    notes = [f"base normal map: {doc.path.name} {key} ({label}, {nm.source_format})"]
+    return np.asarray(nm.normals, np.float32), notes
