@@ -302,6 +302,7 @@ def _load_manifest(p: Path) -> ValidationInput:
     if asset.drivers:
         curves, _ = guard_reader(lambda: evaluate_drivers(asset, p.parent), p, "the drivers")
         inp.weight_curves = {str(c.name): np.asarray(c.values, np.float32) for c in curves}
+        inp.curves = list(curves)
     inp.pointers.update({k: str(p) for k in ("meta", "masks", "channels", "textures")})
     inp.pointers["expressions"] = f"{p} [expressions]"
     return inp

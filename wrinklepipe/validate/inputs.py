@@ -118,6 +118,9 @@ class ValidationInput:
     pointers: dict[str, str] = field(default_factory=dict)  # item -> "file#pointer"
     vertex_weights: dict[str, np.ndarray] = field(default_factory=dict)  # name -> [V] or [V, K]
     weight_curves: dict[str, np.ndarray] = field(default_factory=dict)  # name -> [T, R] weights
+    #: The curves with their times and morph weights (``WeightCurves``), when the input has
+    #: them: the render pass draws the frames where each region's weight peaks.
+    curves: list[Any] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
 
     def texture(self, name: str) -> Texture | None:

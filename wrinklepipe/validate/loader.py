@@ -118,6 +118,7 @@ def input_from_package(
         textures=textures,
         channel_table=table,
         weight_curves=curves,
+        curves=list(getattr(pkg, "curves", []) or []),
         has_source=False,
         path=path,
         kind=kind,

@@ -1,6 +1,13 @@
 """The render pass: draw the mesh with the GLSL wrinkle model, compare with the numpy model.
 
-For neutral and every expression the generated shaders (:mod:`wrinklepipe.shading`) render, in
+The poses are those the drivers produce (:func:`wrinklepipe.drivers.poses.driver_poses`):
+neutral, the expression table for ``expressions`` drivers (or none), and for other drivers'
+curves the frames where each region's weight peaks, named by time (``blendshapes@1.000s``).
+The mesh keeps its rest shape in every pose (every pixel compares the same surface point across
+poses and with the numpy reference; a curve frame's morph weights are listed in the info). The
+view is the front orthographic view fitted to the
+mesh, which for a whole document is its wrinkled primitives only (other parts are left out).
+For each pose the generated shaders (:mod:`wrinklepipe.shading`) render, in
 one draw, a shaded image, the tangent-space normal buffer (float32) and the UV buffer. The numpy
 reference (:func:`wrinklepipe.model.blend`) is evaluated at the rasterised UVs on the same
 shipped texels (bilinear, clamp to edge, no mipmaps, like the GPU), so the two must agree to
@@ -19,6 +26,7 @@ from scipy import ndimage
 
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh
+from wrinklepipe.drivers.poses import DriverPose, driver_poses
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.shading import glsl
 from wrinklepipe.shading.setup import MaskEntry, ShaderSetup
@@ -437,8 +445,23 @@ def can_render(ctx: Context) -> str:
     return ""
 
 
+def render_poses(inp: ValidationInput) -> list[DriverPose]:
+    """The poses the render pass draws (:func:`wrinklepipe.drivers.poses.driver_poses` on the
+    input's curves; curves known only by their values are keyed by frame index)."""
+    curves = list(inp.curves)
+    if not curves:
+        from wrinklepipe.io.package import WeightCurves
+
+        curves = [
+            WeightCurves(name, np.arange(len(v), dtype=np.float32), np.asarray(v, np.float32))
+            for name, v in sorted(inp.weight_curves.items())
+        ]
+    return driver_poses(inp.asset, curves)
+
+
 def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, Any]]:
-    """Render neutral and every expression; returns (issues, render info, images)."""
+    """Render the poses the drivers produce (:func:`render_poses`); returns (issues, render
+    info, images)."""
     inp, a, o = ctx.inp, ctx.asset, ctx.options
     where = inp.pointer("meta")
     reason = can_render(ctx)
@@ -453,11 +476,18 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
     images: dict[str, Any] = {}
     issues: list[Issue] = []
     info = dict(r.info)
+    poses = render_poses(inp)
+    by_name = {p.name: p for p in poses}
+    info["pose_sources"] = {
+        p.name: {"curve": p.curve, "time": p.time, "regions": list(p.regions), "morphs": p.morphs}
+        for p in poses
+        if p.curve is not None
+    }
     try:
         t0 = time.perf_counter()
         frames = {}
-        for expr in ctx.expressions():
-            frames[expr] = r.draw(ctx.weights(expr))
+        for pose in poses:
+            frames[pose.name] = r.draw(pose.weights)
         info["render_s"] = round(time.perf_counter() - t0, 4)
         plain = r.draw(None, plain=True)
     except Exception as exc:  # noqa: BLE001 - a driver failing mid-draw: report, do not crash
@@ -465,7 +495,7 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
     finally:
         r.release()
     t0 = time.perf_counter()
-    neutral = frames[None]
+    neutral = frames["neutral"]
     cov = neutral.covered
     if not cov.any():
         return _skip("the mesh covers no pixel of the render target", where)
@@ -477,9 +507,8 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
     missing = []
     n_gpu_neutral = neutral.normal[cov][:, :3]
     dilate = np.ones((5, 5), bool)
-    for expr, fr in frames.items():
-        label = expr or "neutral"
-        w = ctx.weights(expr)
+    for label, fr in frames.items():
+        w = by_name[label].weights
         ref = model.blend(samples.base, samples.states, samples.masks, w, a.encoding, a.policy)
         gpu = fr.normal[cov][:, :3]
         err = model.angular_error_deg(gpu, ref).astype(np.float32)
@@ -491,7 +520,7 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
         emap[cov] = err
         images[f"gpu_error/{label}"] = emap
         images[f"render/{label}"] = fr.color[..., :3]
-        if expr is not None:
+        if label != "neutral":
             change = model.angular_error_deg(gpu, n_gpu_neutral).astype(np.float32)
             changed = change > o.wrinkle_deg
             masks_expected = samples.src_masks if samples.src_masks is not None else samples.masks
