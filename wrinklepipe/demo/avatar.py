@@ -3,7 +3,7 @@
 Deterministic (no randomness, fixed float32 data), small, and built here rather than committed:
 :func:`avatar_glb_bytes` returns the GLB, :func:`write_avatar_source` writes it with a wrinkle
 setup for its head material, :func:`avatar_source_dir` caches that folder
-(``$WRINKLEPIPE_CACHE/avatar-vN``) and returns the manifest path.
+(``$WRINKLEPIPE_CACHE/avatar-vN-HASH``) and returns the manifest path.
 
 The character (glTF +Y up, facing +Z, metres):
 
@@ -26,6 +26,7 @@ a ``blendshapes`` driver reading ``browInnerUp`` and ``jawOpen``.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
 from typing import Any
@@ -514,8 +515,15 @@ def write_avatar_source(folder: str | Path) -> Path:
 
 
 def avatar_source_dir() -> Path:
-    """The avatar source folder, generated once into the cache; returns the manifest path."""
-    folder = cache_root() / f"avatar-v{AVATAR_VERSION}"
+    """The avatar source folder, generated into the cache; returns the manifest path.
+
+    The folder is named by a hash of its files (generating them takes a fraction of a second),
+    so a change in the fixture or its encoders never reuses stale bytes."""
+    files = avatar_source_files()
+    digest = hashlib.sha256()
+    for rel, data in sorted(files.items()):
+        digest.update(rel.encode("utf-8") + b"\0" + hashlib.sha256(data).digest())
+    folder = cache_root() / f"avatar-v{AVATAR_VERSION}-{digest.hexdigest()[:12]}"
     manifest = folder / "manifest.toml"
     if manifest.is_file():
         return manifest
@@ -523,6 +531,6 @@ def avatar_source_dir() -> Path:
     with output_lock(folder, wait=True):  # parallel workers: one writes, the others wait
         if not manifest.is_file():
             with staged_folder(folder, force=True) as tmp:
-                for rel, data in sorted(avatar_source_files().items()):
+                for rel, data in sorted(files.items()):
                     write_bytes(tmp / rel, data)
     return manifest

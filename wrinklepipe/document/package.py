@@ -18,6 +18,7 @@ from wrinklepipe.document.images import image_pixels
 from wrinklepipe.document.model import Document, read_document
 from wrinklepipe.document.render_mesh import wrinkled_mesh
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE, wrinkled_primitives
+from wrinklepipe.errors import input_error, plain_reason
 from wrinklepipe.io.gltf_read import GltfReadOptions, package_from_gltf
 from wrinklepipe.io.package import EXTENSION, WrinklePackage
 
@@ -46,7 +47,18 @@ def morph_columns(doc: Document, refs: list, names: tuple[str, ...]) -> dict[int
 
 
 def read_wrinkled(path: str | Path, options: GltfReadOptions | None = None) -> WrinklePackage:
-    """Load a .gltf/.glb whose material(s) carry the wrinkle extension as a package."""
+    """Load a .gltf/.glb whose material(s) carry the wrinkle extension as a package.
+
+    Raises :class:`~wrinklepipe.errors.InputError` naming the file (and JSON pointer) for
+    anything malformed."""
+    try:
+        return _read_wrinkled(path, options)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
+        # Safety net for structures the specific checks did not foresee: still one clear line.
+        raise input_error(path, f"malformed glTF: {plain_reason(exc)}") from None
+
+
+def _read_wrinkled(path: str | Path, options: GltfReadOptions | None) -> WrinklePackage:
     doc = read_document(path, options)
     materials = wrinkled_materials(doc)
     if not materials:
