@@ -27,6 +27,7 @@ from wrinklepipe.document.model import Document
 from wrinklepipe.document.write import mime_type
 from wrinklepipe.errors import InputError
 from wrinklepipe.io.images import read_image
+from wrinklepipe.io.package import png_pixels
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
 
 BASISU = "KHR_texture_basisu"
@@ -99,7 +100,12 @@ def image_values(doc: Document, image: int) -> tuple[np.ndarray, int]:
 
 
 def image_pixels(doc: Document, image: int) -> np.ndarray:
-    """Image ``image`` as stored integers ``[H, W, C]`` (uint8, or uint16 for 16-bit PNGs)."""
+    """Image ``image`` as stored integers ``[H, W, C]`` (uint8, or uint16 for 16-bit PNGs):
+    PNG (and KTX2, transcoded to PNG) through :func:`wrinklepipe.io.package.png_pixels`, the
+    texels exactly as stored; other formats through :func:`image_values`."""
+    data, suffix = _decodable(doc, image)
+    if suffix == ".png":
+        return png_pixels(data, f"{doc.file} /images/{image}")
     values, bits = image_values(doc, image)
     top = (1 << bits) - 1
     dtype = np.uint16 if bits == 16 else np.uint8
