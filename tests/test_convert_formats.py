@@ -11,10 +11,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.io.images import write_image
 from wrinklepipe.normals import dds
 
 
@@ -61,3 +63,42 @@ def test_forced_format_converts_and_validates_clean(source, tmp_path, fmt):
     v = report["validation"]
     assert v["status"] == "ran" and v["counts"].get("error", 0) == 0, v["issues"]
     assert code in (0, 1)  # warnings may remain (a budget over BC1's error is one)
+
+
+@pytest.fixture(scope="module")
+def steep_source(tmp_path_factory) -> Path:
+    """The safety engineer's steep-wrinkle demo (tests/test_safety_answers.py): wrinkle_stretch
+    tilted 60 degrees on 16 x 16 of the 32 x 32 map, so the PD scale goes above 1."""
+    src = write_demo_source(tmp_path_factory.mktemp("steep") / "demo", size=32)
+    n = np.zeros((32, 32, 3), np.float32)
+    n[..., 2] = 1.0
+    tilt = np.radians(60.0)
+    n[8:24, 8:24] = (np.sin(tilt), 0.0, np.cos(tilt))
+    write_image(src.parent / "wrinkle_stretch.png", n * 0.5 + 0.5, bits=16)
+    return src
+
+
+@pytest.mark.parametrize("fmt", ["auto", "bc7", "bc7xy"])
+def test_steep_wrinkles_with_compressed_copies_validate_clean(steep_source, tmp_path, fmt):
+    """The automatic choice (and BC7 either way) on the steep demo: the validator reads the
+    base copy in the layout the writer used. bc7xy keeps x, y only (the extension records
+    'rg'); the validator read it as x, y, z in R, G, B: z = -1 on every texel (WP-MAP-002),
+    ~180 degrees from the source (WP-TEX-005)."""
+    m = _with_formats(steep_source, fmt, "auto" if fmt == "auto" else fmt, tmp_path)
+    out = tmp_path / "out"
+    code = main(["convert", str(m), "-o", str(out), "--no-render"])
+    report = json.loads((out / "report.json").read_text())
+    base = report["compression"]["base"]
+    if fmt != "auto":
+        assert base["chosen"] == fmt
+    doc = json.loads((out / "demo_head.gltf").read_text())
+    ext = doc["materials"][0]["extensions"]["WRINKLEPIPE_wrinkle_maps"]
+    rec = {doc["textures"][c["texture"]["index"]]["name"]: c for c in ext["compressed"]}
+    want = {"bc5": "rg", "bc1": "rgb", "bc3nm": "ag", "bc7": "rgb", "bc7xy": "rg"}
+    assert rec["base_normal"]["layout"] == base["layout"] == want[base["chosen"]]
+    v = report["validation"]
+    assert v["status"] == "ran" and v["counts"].get("error", 0) == 0, v["issues"]
+    # what the validator measured on the copy is BC7's error, not 180 degrees
+    check = base["checks"][base["chosen"]]["base_normal"]["error"]
+    assert check["mean_deg"] < 1.0
+    assert code == 0

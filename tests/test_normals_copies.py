@@ -18,7 +18,7 @@ import texture2ddecoder as t2d
 from wrinklepipe import codec
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.io.package import PackOptions, package_from_asset
-from wrinklepipe.normals import copies, dds, ktx2
+from wrinklepipe.normals import compress, copies, dds, ktx2
 from wrinklepipe.normals.compress import angle_deg, angular_error_stats
 
 
@@ -140,3 +140,26 @@ def test_full_mip_chains_averaged_in_the_right_space(pkg, fmt):
             rgba = _t2d(c.format, c.levels[1], w // 2, h // 2)
             got = _as_normals(rgba, c.layout).astype(np.float32)
         assert angle_deg(got, want).mean() < 1.5, (c.texture, fmt)
+
+
+def test_auto_never_picks_a_state_format_that_clips(pkg):
+    """A BC1 endpoint is 5 bits: a PD plateau stored at 251 (|t| = 0.969, inside the range)
+    comes back at 255, the end of the range, which the validator counts as clipped (WP-MAP-004).
+    ``auto`` takes the next format then (BC5 keeps 251 exactly), under a budget BC1 meets."""
+    q = np.full((16, 16, 3), 128, np.uint8)
+    q[4:12, 2:14, 0] = 251
+    state = next(t for t in pkg.textures if t.role == "state")
+
+    class Pkg:
+        meta = {"encoding": "pd", "mapping": 2, "scale": 1.0}
+        textures = [type(state)(state.name, q, "state")]
+
+    budget = {"max_mean_deg": 30.0, "max_p99_deg": 60.0}
+    made, _, choices = copies.compressed_copies(Pkg(), budget, {"wrinkle": "auto"}, False)
+    tried = choices["wrinkle"]["checks"]
+    assert list(tried) == ["bc1", "bc5"] and choices["wrinkle"]["chosen"] == "bc5"
+    assert tried["bc1"][state.name]["verdict"] == "fail"
+    bc1 = _t2d("bc1", compress.encode_bc(compress.pack_rgba(q[..., :2], "bc1"), "bc1"), 16, 16)
+    assert int((bc1[..., 0] == 255).sum()) == 32  # texels at the end: why BC1 was refused
+    got = _t2d("bc5", made[0].levels[0], 16, 16)
+    assert np.array_equal(got[..., :2], q[..., :2])

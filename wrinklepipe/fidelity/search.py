@@ -48,6 +48,9 @@ class SearchOptions:
     formats: tuple[str, ...] = ship.BLOCK_FORMATS
     screen_texels: int = 60_000
     scale_factors: tuple[float, ...] = SCALE_FACTORS
+    #: The validator's WP-MAP-004 limit: a state format whose copy puts more of a map's texels
+    #: at the end of the range (than this fraction, and than the PNG) is not chosen.
+    max_clipped_fraction: float = 0.001
 
 
 @dataclass
@@ -371,8 +374,26 @@ def search(
 
         return make
 
+    def state_edges_ok(f: str) -> bool:
+        # the copy must not clip where the PNG does not (the validator's rule, WP-MAP-004)
+        limit = o.max_clipped_fraction * state_q.shape[1] * state_q.shape[2]
+        for q in state_q:
+            edges = ship.block_edge_texels(q, f)
+            if edges > max(limit, ship.edge_texels(q)):
+                at = f"{f}: {edges} texels at the end of the range"
+                tried.append(Tried("state format (clipping, WP-MAP-004)", at, 0.0, 0.0, False))
+                return False
+        return True
+
     state_fmt = _pick_format(
-        judge, fx.state_format, o.formats, cbudget, tried, "state format", state_format
+        judge,
+        fx.state_format,
+        o.formats,
+        cbudget,
+        tried,
+        "state format",
+        state_format,
+        keeps=state_edges_ok,
     )
     if state_fmt != "png":
         judge.set("states", state_format(state_fmt))
@@ -439,10 +460,11 @@ def _pick_format(
     step: str,
     candidate: Callable[[str], Candidate],
     alone: Callable[[Candidate], Any] | None = None,
+    keeps: Callable[[str], bool] | None = None,
 ) -> str:
     """The first format (smallest blocks first) whose screened candidate meets ``budget``
-    (and, with ``alone``, whose own error over the face does too); ``fixed`` is measured, not
-    chosen."""
+    (and, with ``alone``, whose own error over the face does too; with ``keeps``, for which it
+    holds); ``fixed`` is measured, not chosen."""
     chosen = fixed not in (None, "auto")
     for f in [fixed] if chosen else formats:
         if f == "png":
@@ -454,6 +476,8 @@ def _pick_format(
             ok = budget.ok(a)
             if not ok:
                 tried.append(Tried(step + " (base alone)", f, a.p99, a.mean, False))
+        if ok and not chosen and keeps is not None:
+            ok = keeps(f)
         if ok or chosen:
             return f
     return "png"

@@ -230,7 +230,7 @@ def _load_folder(p: Path, o: LoadOptions) -> ValidationInput:
     return inp
 
 
-def _copy_layout(record: dict | None, fmt: str, png_layout: str) -> str:
+def _copy_layout(record: dict | None, fmt: str, png_layout: str | None) -> str | None:
     """Where a compressed copy keeps x, y (and z): the layout the extension / USD records for
     it; without a record, the codec's convention for the container's format (BC5: rg; a BC3
     normal map is DXT5nm: ag; BC1 / BC7: the PNG's layout, z in B for a normal map)."""

@@ -50,7 +50,8 @@ class Texture:
     Stored values (after the unorm/BC decode, in [0, 1]) are: ``0.5 + 0.5 n`` for normal maps
     (base, ``full`` and ``composite`` states; two-channel formats rebuild z), ``0.5 + 0.5 d / s``
     for ``pd`` states (R = x, G = y), ``D`` for ``diff`` states and the mask value for masks.
-    ``layout`` says where x and y live in a normal map: ``"rg"`` (default) or ``"ag"`` (DXT5nm).
+    ``layout`` says where x, y (and z) live: ``"rgb"``, ``"rg"`` (z rebuilt), ``"ag"`` (DXT5nm)
+    or ``None`` (not recorded: ``rgb`` with three or more channels, else ``rg``).
     ``mapping`` is the value-mapping version of ``pd`` / ``diff`` values
     (:mod:`wrinklepipe.codec.mappings`; 1 for assets that do not record one).
     """
@@ -66,7 +67,7 @@ class Texture:
     pointer: str = ""
     state: str = ""  # state name when role == "state"
     convention: str = "opengl"  # declared green convention of a normal map
-    layout: str = "rg"
+    layout: str | None = None
     mapping: int = 1
 
     @property

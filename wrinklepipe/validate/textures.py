@@ -63,10 +63,13 @@ def decode_values(tex: Texture, apply_srgb: bool = False) -> np.ndarray:
 
 
 def xy_layout(tex: Texture) -> str:
-    """Where a normal map keeps x, y (and z): ``"rgb"``, ``"rg"`` (z rebuilt) or ``"ag"``."""
-    if tex.layout == "ag":
-        return "ag"
-    return "rgb" if tex.channels >= 3 and tex.layout != "rg2" else "rg"
+    """Where a normal map keeps x, y (and z): ``"rgb"``, ``"rg"`` (z rebuilt) or ``"ag"``.
+
+    A recorded layout is what the writer used (a two-channel BC7 copy is ``rg`` in a
+    four-channel texture); without one (``None``) it follows the channel count."""
+    if tex.layout in ("ag", "rg", "rg2"):  # rg2: an older name of rg
+        return "ag" if tex.layout == "ag" else "rg"
+    return "rgb" if tex.channels >= 3 else "rg"
 
 
 def _flip(x: np.ndarray, flip_y: bool) -> np.ndarray:
