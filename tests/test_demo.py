@@ -12,9 +12,9 @@ import pytest
 
 from wrinklepipe import model
 from wrinklepipe.cli import main
+from wrinklepipe.commands import demo as demo_command
 from wrinklepipe.demo.character import MORPH_NAMES, generate
 from wrinklepipe.demo.source import write_demo_source
-from wrinklepipe.pipeline import convert as convert_module
 from wrinklepipe.presets import jimenez
 
 
@@ -147,9 +147,9 @@ def test_demo_rerun_replaces_its_own_output_only(tmp_path, monkeypatch, capsys):
     """A rerun replaces the previous demo without --force; another non-empty folder is refused
     and left as it was. (About the folder, so validation is off here; the run above has it.)"""
     monkeypatch.setenv("WRINKLEPIPE_CACHE", str(tmp_path / "cache"))
-    real = convert_module.convert
+    real = demo_command.convert
     monkeypatch.setattr(
-        convert_module, "convert", lambda m, o, opt: real(m, o, replace(opt, validate=False))
+        demo_command, "convert", lambda m, o, opt: real(m, o, replace(opt, validate=False))
     )
     out = tmp_path / "demo-out"
     assert main(["demo", "-o", str(out), "--size", "64"]) == 0

@@ -172,11 +172,12 @@ def test_bones_from_gltf_animation_reach_the_reference_frame():
     from wrinklepipe.drivers import DriverContext, evaluate
     from wrinklepipe.io.mesh import load_mesh
     from wrinklepipe.io.mesh_gltf import gltf_animation_times
+    from wrinklepipe.io.rig import GltfRig
 
     keys = gltf_animation_times(_RIGGED)
     t_ref = float(keys[len(keys) // 2])
     mesh = load_mesh(_RIGGED)
-    ctx = DriverContext(("r",), ("bent",), mesh=mesh, root=_RIGGED.parent, fps=24)
+    ctx = DriverContext(("r",), ("bent",), mesh=mesh, root=_RIGGED.parent, fps=24, read_rig=GltfRig)
     spec = {
         "kind": "bones",
         "file": _RIGGED.name,

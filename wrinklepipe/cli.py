@@ -18,7 +18,11 @@ import sys
 import threading
 from collections.abc import Iterator, Sequence
 
+from rich.markup import escape
+
+import wrinklepipe.commands as pkg
 from wrinklepipe import __version__
+from wrinklepipe.console import err
 from wrinklepipe.errors import InputError
 from wrinklepipe.io.confine import allowed_roots
 
@@ -42,8 +46,6 @@ COMMAND_ORDER = (
 
 
 def _command_modules() -> list:
-    import wrinklepipe.commands as pkg
-
     mods = []
     for info in pkgutil.iter_modules(pkg.__path__):
         if info.name.startswith("_"):
@@ -117,9 +119,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     Every failure ends in one message per problem and exit code 2, never a traceback; an
     unexpected error is reported as an internal error (``WRINKLEPIPE_DEBUG=1`` re-raises it)."""
-    from rich.markup import escape
-
-    from wrinklepipe.console import err
 
     parser = build_parser()
     args = parser.parse_args(argv)

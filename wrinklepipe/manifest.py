@@ -18,7 +18,9 @@ from typing import Any
 import jsonschema
 
 from wrinklepipe.errors import InputError, ProblemList
+from wrinklepipe.errors import InputError as _IE
 from wrinklepipe.io.confine import confine
+from wrinklepipe.io.images import read_header
 from wrinklepipe.io.json_safe import loads_toml
 from wrinklepipe.model import POLICY_WEIGHT_RANGE
 from wrinklepipe.paths import SCHEMAS_DIR
@@ -431,9 +433,6 @@ def _rel(p: Path, root: Path) -> str:
 
 
 def _file_problems(m: Manifest, file: str, problems: ProblemList) -> None:
-    from wrinklepipe.errors import InputError as _IE
-    from wrinklepipe.io.images import read_header
-
     sizes: dict[tuple[int, int], str] = {}  # existence and confinement: _path_problems
     for i, r in enumerate(m.regions):
         key = f"regions[{i}].mask"

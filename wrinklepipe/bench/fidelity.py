@@ -9,16 +9,15 @@ for at most 2x the baseline.
 
 from __future__ import annotations
 
+from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
+from wrinklepipe.demo import demo_asset
+from wrinklepipe.fidelity import search as fs
 
 
 @benchmark("fidelity", "automatic choices by fidelity (size, scale, masks, formats), demo 2048^2")
 def bench_fidelity(quick: bool = False) -> BenchResult:
-    from wrinklepipe import fidelity as fd
-    from wrinklepipe.demo import demo_asset
-    from wrinklepipe.fidelity import search as fs
-
     size = 256 if quick else 2048
     a = demo_asset(size)
     poses = fd.expression_poses(a.region_names, a.region_state_matrix(), a.expressions)

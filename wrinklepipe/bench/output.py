@@ -14,21 +14,19 @@ import zlib
 from pathlib import Path
 
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
-from wrinklepipe.io.package import DEFAULT_PNG_LEVEL
+from wrinklepipe.demo.package import demo_package
+from wrinklepipe.io.gltf_read import read_gltf
+from wrinklepipe.io.gltf_write import glb_bytes, gltf_document, write_gltf
+from wrinklepipe.io.images import write_image
+from wrinklepipe.io.package import DEFAULT_PNG_LEVEL, png_bytes
+from wrinklepipe.io.usd_read import read_usd
+from wrinklepipe.io.usd_write import build_stage, write_usd
 
 ZLIB_STEP = f"zlib level {DEFAULT_PNG_LEVEL} of raw texels"
 
 
 @benchmark("output-write", "glTF/GLB/USD writers and readers on the demo (1024^2 maps)")
 def bench_output(quick: bool = False) -> BenchResult:
-    from wrinklepipe.demo.package import demo_package
-    from wrinklepipe.io.gltf_read import read_gltf
-    from wrinklepipe.io.gltf_write import glb_bytes, gltf_document, write_gltf
-    from wrinklepipe.io.images import write_image
-    from wrinklepipe.io.package import png_bytes
-    from wrinklepipe.io.usd_read import read_usd
-    from wrinklepipe.io.usd_write import build_stage, write_usd
-
     size = 256 if quick else 1024
     repeat = 3 if quick else 5
     pkg = demo_package(size)

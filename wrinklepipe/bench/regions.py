@@ -11,13 +11,14 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
+from wrinklepipe.drivers.blendshapes import Row, evaluate_rows
+from wrinklepipe.drivers.bones import pose_influence, vertex_influence
+from wrinklepipe.masks import pack, unpack
+from wrinklepipe.presets import arkit, metahuman
 
 
 @benchmark("masks-pack", "pack/unpack 37 MetaHuman masks (10 RGBA + array) at 1024^2")
 def bench_masks_pack(quick: bool = False) -> BenchResult:
-    from wrinklepipe.masks import pack, unpack
-    from wrinklepipe.presets import metahuman
-
     size = 64 if quick else 1024
     rng = np.random.default_rng(3)
     masks = rng.random((37, size, size), dtype=np.float32)
@@ -49,10 +50,6 @@ def bench_masks_pack(quick: bool = False) -> BenchResult:
 
 @benchmark("drivers", "blend-shape rows (ARKit 52 -> regions) and bones (20k vertices)")
 def bench_drivers(quick: bool = False) -> BenchResult:
-    from wrinklepipe.drivers.blendshapes import Row, evaluate_rows
-    from wrinklepipe.drivers.bones import pose_influence, vertex_influence
-    from wrinklepipe.presets import arkit
-
     rng = np.random.default_rng(5)
     frames = 100 if quick else 2000
     x = rng.random((frames, 52))

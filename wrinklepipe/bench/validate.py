@@ -23,6 +23,11 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark
+from wrinklepipe.sources.validation import load_input
+from wrinklepipe.validate import ValidateOptions, validate
+from wrinklepipe.validate import gl as glw
+from wrinklepipe.validate.context import expression_weights
+from wrinklepipe.validate.render import Renderer
 
 
 def _interleaved(fns: dict[str, Callable[[], Any]], repeat: int) -> dict[str, float]:
@@ -39,12 +44,6 @@ def _interleaved(fns: dict[str, Callable[[], Any]], repeat: int) -> dict[str, fl
 
 @benchmark("validate", "validate-asset on the demo (512^2, 7 poses); wrinkle vs plain shader")
 def bench_validate(quick: bool = False) -> BenchResult:
-    from wrinklepipe.sources.validation import load_input
-    from wrinklepipe.validate import ValidateOptions, validate
-    from wrinklepipe.validate import gl as glw
-    from wrinklepipe.validate.context import expression_weights
-    from wrinklepipe.validate.render import Renderer
-
     size = 128 if quick else 512
     spec = f"demo:pd@{size}+bc"
     opts = ValidateOptions(render_size=size)

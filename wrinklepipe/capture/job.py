@@ -23,6 +23,7 @@ from wrinklepipe.capture.orientation import OrientationOptions
 from wrinklepipe.capture.pipeline import CaptureOptions, CaptureResult, capture
 from wrinklepipe.capture.ratio import RatioOptions, luminance, srgb_to_linear
 from wrinklepipe.capture.report import build_report, picture_images, render_html
+from wrinklepipe.capture.synthetic import dome_height, make_scene, normal_of
 from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image, write_image
 from wrinklepipe.model import normalize
@@ -389,7 +390,6 @@ def example_session() -> CaptureOutput:
     """The synthetic session of :mod:`.synthetic` as files (photos, landmarks as JSON, CSV and
     UV JSON, ROI, the neutral's normal map, the true texture-space map); ``report["hint"]``
     is the command to run on it (``DIR`` standing for the folder)."""
-    from wrinklepipe.capture.synthetic import dome_height, make_scene, normal_of
 
     sc = make_scene()
     s = float(sc.neutral.shape[0])

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.atomic import write_bytes
+from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.capture.pipeline import CaptureResult
 from wrinklepipe.io.images import write_image
 
@@ -354,7 +354,6 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
 
 def write_report(folder: Path, report: dict[str, Any], pictures: dict[str, str]) -> None:
     """``report.json`` and ``report.html`` into ``folder`` (atomic, deterministic)."""
-    from wrinklepipe.atomic import dumps_json
 
     write_bytes(folder / "report.json", dumps_json(report).encode("utf-8"))
     write_bytes(folder / "report.html", render_html(report, pictures).encode("utf-8"))

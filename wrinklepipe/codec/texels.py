@@ -12,7 +12,7 @@ import numpy as np
 from wrinklepipe.codec import layouts as lay
 from wrinklepipe.codec.encodings import Encoding, encoding
 from wrinklepipe.codec.formats import StorageFormat, storage_format
-from wrinklepipe.codec.mappings import CURRENT_VERSION, texel_bits
+from wrinklepipe.codec.mappings import CURRENT_VERSION, quantization_bound, texel_bits
 
 _F = np.float32
 
@@ -104,6 +104,5 @@ def to_normal(enc: str | Encoding, x: np.ndarray, base: np.ndarray | None = None
 
 def error_bound_t(bits: int, version: int = CURRENT_VERSION) -> float:
     """Largest change of a signed value that storing at ``bits`` can cause (half a step)."""
-    from wrinklepipe.codec.mappings import quantization_bound
 
     return quantization_bound(bits, version)

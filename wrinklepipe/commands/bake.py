@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from wrinklepipe.console import emit_json, err
 from wrinklepipe.drivers import KINDS
+from wrinklepipe.pipeline.bake import BakeOptions, bake_manifest
 
 NAME = "bake"
 HELP = "evaluate a weight driver over time: weight curves (JSON, CSV) and pre-blended maps"
@@ -51,9 +53,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.console import emit_json, err
-    from wrinklepipe.drivers.bake import BakeOptions, bake_manifest
-
     opts = BakeOptions(
         driver=args.driver,
         maps=args.maps,

@@ -5,6 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from wrinklepipe.atomic import staged_folder
+from wrinklepipe.capture.job import CaptureInputs, CaptureJobOptions, example_session, run_capture
+from wrinklepipe.capture.orientation import METHODS
+from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.errors import input_error
+
 NAME = "capture"
 HELP = "capture a wrinkle normal map from a neutral and an expression photo (ratio image)"
 DESCRIPTION = """\
@@ -43,9 +49,6 @@ examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from wrinklepipe.capture.job import CaptureJobOptions
-    from wrinklepipe.capture.orientation import METHODS
-
     d = CaptureJobOptions()
     p.add_argument("neutral", nargs="?", metavar="NEUTRAL", help="neutral photo I")
     p.add_argument("expression", nargs="?", metavar="EXPRESSION", help="expression photo I'")
@@ -130,16 +133,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.atomic import staged_folder
-    from wrinklepipe.capture.job import (
-        CaptureInputs,
-        CaptureJobOptions,
-        example_session,
-        run_capture,
-    )
-    from wrinklepipe.console import emit_json, err, status
-    from wrinklepipe.errors import input_error
-
     if args.example:
         out = example_session()
         with staged_folder(args.example, force=args.force) as tmp:

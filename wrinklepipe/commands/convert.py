@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from wrinklepipe.console import emit_json, err
 from wrinklepipe.io.package import DEFAULT_PNG_LEVEL
+from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
 NAME = "convert"
 HELP = "convert a source manifest into glTF + USD + textures + weight curves + report"
@@ -65,9 +67,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.console import emit_json, err
-    from wrinklepipe.pipeline.convert import ConvertOptions, convert
-
     options = ConvertOptions(
         glb=args.glb,
         usd_format="usdc" if args.usdc else "usdz" if args.usdz else "usda",

@@ -6,6 +6,10 @@ import argparse
 import json
 from pathlib import Path
 
+from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.demo.source import demo_source_dir
+from wrinklepipe.pipeline.convert import ConvertOptions, convert
+
 NAME = "demo"
 HELP = "convert and validate the built-in demo character; print where the outputs are"
 DESCRIPTION = """\
@@ -51,10 +55,6 @@ def _previous_demo(folder: Path) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.console import emit_json, err, status
-    from wrinklepipe.demo.source import demo_source_dir
-    from wrinklepipe.pipeline.convert import ConvertOptions, convert
-
     out = Path(args.output)
     with status(f"generating the demo character ({args.size}²)"):
         manifest = demo_source_dir(args.size)

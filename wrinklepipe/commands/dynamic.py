@@ -7,7 +7,22 @@ from pathlib import Path
 
 import numpy as np
 
+from wrinklepipe.commands.vertex_ids import write_per_vertex
 from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.errors import input_error
+from wrinklepipe.geometry.dynamic import (
+    DynamicOptions,
+    DynamicWeights,
+    morph_pose,
+    sample_bilinear,
+    seam_jump,
+    skinned_pose,
+    texture_space_weights,
+)
+from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
+from wrinklepipe.io.mesh import SUFFIXES, LoadOptions, load_mesh, load_meshes, merge_meshes
+from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, gltf_morph_weights
+from wrinklepipe.io.mesh_usd import usd_blend_shape_weights, usd_joint_world_matrices
 
 NAME = "dynamic"
 HELP = "dynamic wrinkle weights from the mesh's own stretch (Oat): rest vs a deformed pose"
@@ -51,8 +66,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _parse_morphs(items: list[str]) -> dict[str, float]:
-    from wrinklepipe.errors import input_error
-
     out: dict[str, float] = {}
     for item in items:
         name, sep, val = item.rpartition("=")
@@ -69,9 +82,6 @@ def _parse_morphs(items: list[str]) -> dict[str, float]:
 def deformed_pose(args: argparse.Namespace, mesh: object, parts: list) -> np.ndarray:
     """The deformed positions chosen by --pose / --morph / --time (``parts``: the unmerged
     meshes of ``mesh``, in merge order; USD poses each prim)."""
-    from wrinklepipe.errors import input_error
-    from wrinklepipe.geometry.dynamic import morph_pose, skinned_pose
-    from wrinklepipe.io.mesh import SUFFIXES, LoadOptions, load_mesh
 
     if args.morph:
         return morph_pose(mesh, _parse_morphs(args.morph), source=str(args.mesh))
@@ -94,8 +104,6 @@ def deformed_pose(args: argparse.Namespace, mesh: object, parts: list) -> np.nda
     if kind == "usd":
         return np.concatenate([_usd_part_pose(args, part) for part in parts])
     if kind == "gltf":
-        from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, gltf_morph_weights
-
         p = mesh.positions.astype(np.float64)
         if mesh.morph_names:
             w = gltf_morph_weights(args.mesh, mesh, args.time)
@@ -115,9 +123,6 @@ def deformed_pose(args: argparse.Namespace, mesh: object, parts: list) -> np.nda
 
 
 def _usd_part_pose(args: argparse.Namespace, part: object) -> np.ndarray:
-    from wrinklepipe.geometry.dynamic import morph_pose, skinned_pose
-    from wrinklepipe.io.mesh_usd import usd_blend_shape_weights, usd_joint_world_matrices
-
     p = part.positions.astype(np.float64)
     if part.morph_names:
         w = usd_blend_shape_weights(args.mesh, part, args.time)
@@ -135,18 +140,6 @@ def _usd_part_pose(args: argparse.Namespace, part: object) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.commands.vertex_ids import write_per_vertex
-    from wrinklepipe.errors import input_error
-    from wrinklepipe.geometry.dynamic import (
-        DynamicOptions,
-        DynamicWeights,
-        sample_bilinear,
-        seam_jump,
-        texture_space_weights,
-    )
-    from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
-    from wrinklepipe.io.mesh import LoadOptions, load_meshes, merge_meshes
-
     with status(f"reading {args.mesh}"):
         parts = load_meshes(args.mesh, LoadOptions(generate_uvs=args.texture_space is not None))
     mesh = parts[0] if len(parts) == 1 else merge_meshes(parts)

@@ -6,6 +6,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from wrinklepipe.atomic import output_files, write_bytes, write_json
+from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.io.images import DEFAULT_MAX_PIXELS
+from wrinklepipe.normals.job import OUTPUT_FORMATS, EncodeOptions, encode_normals
+
 NAME = "encode-normals"
 HELP = "encode a normal map (pd/diff/full), resize, block-compress, and measure the error"
 DESCRIPTION = """\
@@ -59,9 +64,6 @@ def _size(text: str) -> int | str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from wrinklepipe.io.images import DEFAULT_MAX_PIXELS
-    from wrinklepipe.normals.job import OUTPUT_FORMATS
-
     p.add_argument("input", metavar="IN", help="normal map to encode")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
     p.add_argument("--encoding", choices=("pd", "diff", "full"), default="pd")
@@ -113,10 +115,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.atomic import output_files, write_bytes, write_json
-    from wrinklepipe.console import emit_json, err, status
-    from wrinklepipe.normals.job import EncodeOptions, encode_normals
-
     opts = EncodeOptions(
         encoding=args.encoding,
         scale=args.scale,

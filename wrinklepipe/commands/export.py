@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 
+from wrinklepipe.console import emit_json, err
+from wrinklepipe.export.job import export
+from wrinklepipe.export.presets import ENGINE_PRESETS
+
 NAME = "export"
 HELP = "export a converted asset for Unreal, Unity, Godot or Blender"
 DESCRIPTION = """\
@@ -31,8 +35,6 @@ examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from wrinklepipe.export.presets import ENGINE_PRESETS
-
     p.add_argument("source", metavar="SOURCE", help="convert output folder, .gltf/.glb or USD")
     p.add_argument("--engine", required=True, choices=sorted(ENGINE_PRESETS), help="target")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
@@ -41,9 +43,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.console import emit_json, err
-    from wrinklepipe.export.job import export
-
     files, notes = export(args.source, args.output, args.engine, force=args.force)
     if args.json:
         emit_json({"engine": args.engine, "files": sorted(files), "notes": notes})

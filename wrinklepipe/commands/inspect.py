@@ -8,6 +8,9 @@ from typing import Any
 from rich.table import Table
 
 from wrinklepipe.console import emit_json, out
+from wrinklepipe.document import read_document
+from wrinklepipe.document.inspect import diff, summary
+from wrinklepipe.errors import input_error
 
 NAME = "inspect"
 HELP = "list a glTF's scenes, meshes, materials, textures, skins, animations; or diff two"
@@ -108,10 +111,6 @@ def _summary(file: str, read: Any, summarize: Any) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.document import read_document
-    from wrinklepipe.document.inspect import diff, summary
-    from wrinklepipe.errors import input_error
-
     if args.diff and len(args.files) != 2:
         raise input_error("<arguments>", f"--diff needs two files, got {len(args.files)}")
     if not args.diff and len(args.files) != 1:

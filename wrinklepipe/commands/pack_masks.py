@@ -6,6 +6,7 @@ import argparse
 
 from wrinklepipe.atomic import staged_folder
 from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.errors import InputError
 from wrinklepipe.masks import (
     LAYOUTS,
     check_masks,
@@ -60,8 +61,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.errors import InputError
-
     names = [n.strip() for n in args.names.split(",")] if args.names else None
     if args.size is not None and args.size <= 0:
         raise InputError(f"--size must be positive, got {args.size}", "<arguments>")

@@ -4,8 +4,21 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import time
+from pathlib import Path
 
+from wrinklepipe.batch import AssetOptions, LocalEngine, run_plan
+from wrinklepipe.batch.folders import output_folders, plan_validation, single_result
+from wrinklepipe.batch.progress import BatchProgress
+from wrinklepipe.batch.publish import publish
+from wrinklepipe.batch.run import BatchRun
+from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.sources.validation import LoadOptions, load_input
+from wrinklepipe.validate import validate
+from wrinklepipe.validate.config import Config, load_config
+from wrinklepipe.validate.context import ValidateOptions
+from wrinklepipe.validate.report import print_summary, report_json, write_reports
 
 NAME = "validate-asset"
 HELP = "check a converted folder, glTF/GLB/USD or manifest: rules, GPU render pass, reports"
@@ -66,13 +79,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _run_folder(args: argparse.Namespace, folders: list) -> int:
     """validate-asset over a folder of outputs: one job per asset on the local engine."""
-    from pathlib import Path
-
-    from wrinklepipe.batch import AssetOptions, LocalEngine, run_plan
-    from wrinklepipe.batch.folders import plan_validation
-    from wrinklepipe.batch.progress import BatchProgress
-    from wrinklepipe.batch.publish import publish
-    from wrinklepipe.console import emit_json, err
 
     for flag, value in (("--html", args.html), ("--source", args.source)):
         if value:
@@ -102,17 +108,6 @@ def _run_folder(args: argparse.Namespace, folders: list) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    import time
-    from pathlib import Path
-
-    from wrinklepipe.batch.folders import output_folders
-    from wrinklepipe.console import emit_json, err, status
-    from wrinklepipe.sources.validation import LoadOptions, load_input
-    from wrinklepipe.validate import validate
-    from wrinklepipe.validate.config import Config, load_config
-    from wrinklepipe.validate.context import ValidateOptions
-    from wrinklepipe.validate.report import print_summary, report_json, write_reports
-
     if args.render_size is not None and not 16 <= args.render_size <= 4096:
         raise input_error("--render-size", f"{args.render_size} is not in 16..4096")
     if Path(args.path).is_dir() and (folders := output_folders(Path(args.path))):
@@ -154,12 +149,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _one_asset_reports(args: argparse.Namespace, report: object, seconds: float) -> None:
     """JUnit / SARIF for one validated asset (the same reports as over a folder)."""
-    from pathlib import Path
-
-    from wrinklepipe.batch.folders import single_result
-    from wrinklepipe.batch.publish import publish
-    from wrinklepipe.batch.run import BatchRun
-    from wrinklepipe.console import err
 
     issues = [i.to_json() for i in report.issues]
     name = str(report.input.get("name", ""))

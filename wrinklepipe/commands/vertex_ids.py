@@ -9,7 +9,11 @@ from typing import Any
 
 import numpy as np
 
+from wrinklepipe.atomic import dumps_json, write_output
 from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.errors import input_error
+from wrinklepipe.geometry.vertex_ids import VertexIdOptions, compute_vertex_ids
+from wrinklepipe.io.mesh import LoadOptions, load_mesh
 
 NAME = "vertex-ids"
 HELP = "spatial-hash vertex IDs: render vertices at the same position share an ID"
@@ -46,8 +50,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def write_per_vertex(path: Path, values: np.ndarray, meta: dict[str, Any], inputs: list) -> None:
     """Write a per-vertex array as .npy, .json or .txt/.csv atomically."""
-    from wrinklepipe.atomic import dumps_json, write_output
-    from wrinklepipe.errors import input_error
 
     suffix = path.suffix.lower()
     if suffix == ".npy":
@@ -68,10 +70,6 @@ def write_per_vertex(path: Path, values: np.ndarray, meta: dict[str, Any], input
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.errors import input_error
-    from wrinklepipe.geometry.vertex_ids import VertexIdOptions, compute_vertex_ids
-    from wrinklepipe.io.mesh import LoadOptions, load_mesh
-
     if args.tolerance is not None and not args.tolerance >= 0:
         raise input_error("<arguments>", f"--tolerance must be >= 0, got {args.tolerance}")
     if not args.relative >= 0:

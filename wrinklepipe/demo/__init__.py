@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.demo.character import DemoCharacter, generate
 
@@ -33,7 +35,6 @@ def demo_asset(
     ``states`` hold the wrinkled face (base + wrinkle height) at full activation, so every encoding
     can be derived from them; the paper's reduced sizes are in ``resolution``.
     """
-    import numpy as np
 
     c = generate(size, mesh_resolution=mesh_resolution)
 

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import DracoPy
+import meshoptimizer
 import numpy as np
 
 from wrinklepipe.document.accessors import WIDTH, component_dtype
@@ -31,7 +33,6 @@ class DecodeError(ValueError):
 
 def meshopt_view(ext: dict[str, Any], source: bytes) -> bytes:
     """The decoded bytes (``count * byteStride``) of one meshopt-compressed bufferView."""
-    import meshoptimizer  # deferred on purpose: only files that use meshopt need the module
 
     try:
         count, stride = int(ext["count"]), int(ext["byteStride"])
@@ -81,7 +82,6 @@ def draco_primitive(
 ) -> dict[int, np.ndarray]:
     """Decode a Draco primitive: ``{accessor index: values [count, components]}`` in each
     accessor's component type (its indices accessor and every attribute the extension names)."""
-    import DracoPy  # deferred on purpose: only Draco files need the module
 
     try:
         mesh = DracoPy.decode(data)

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.document.model import Document
+from wrinklepipe.document.write import mime_type
 
 _COMPONENT = {5120: "i8", 5121: "u8", 5122: "i16", 5123: "u16", 5125: "u32", 5126: "f32"}
 _MODES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP", 4: "TRIANGLES"}
@@ -47,8 +48,6 @@ def image_size(data: bytes) -> tuple[int, int] | None:
 
 
 def _format(data: bytes) -> str:
-    from wrinklepipe.document.write import mime_type
-
     return mime_type(data)
 
 

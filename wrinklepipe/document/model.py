@@ -23,9 +23,11 @@ tree is rewritten except what ingest had to decode:
 
 from __future__ import annotations
 
+import base64
 import copy
+import urllib.parse
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 import numpy as np
@@ -119,8 +121,6 @@ class Document:
         if "bufferView" in img:
             return self.view_bytes(img["bufferView"])[0]
         if isinstance(img.get("uri"), str) and img["uri"].startswith("data:"):
-            import base64
-
             return base64.b64decode(img["uri"].partition(",")[2])
         raise self.err("image has neither uri nor bufferView", f"/images/{i}")
 
@@ -394,8 +394,5 @@ def _drop_extensions(gltf: dict[str, Any], names: list[str]) -> None:
 
 
 def _clean_uri(uri: str) -> str:
-    import urllib.parse
-    from pathlib import PurePosixPath
-
     parts = PurePosixPath(urllib.parse.unquote(uri).replace("\\", "/")).parts
     return "/".join(p for p in parts if p not in ("", "."))

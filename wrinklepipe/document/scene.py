@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.document.model import Document, PrimitiveRef
-from wrinklepipe.io.mesh_gltf import world_matrices
+from wrinklepipe.io.mesh_gltf import _triangles, world_matrices
 
 
 def node_world_matrices(doc: Document) -> dict[int, np.ndarray]:
@@ -101,7 +101,6 @@ def _skinned(
 
 def primitive_triangles(doc: Document, ref: PrimitiveRef) -> np.ndarray:
     """``[T, 3]`` int64 vertex indices of a TRIANGLES primitive (strips and fans unrolled)."""
-    from wrinklepipe.io.mesh_gltf import _triangles
 
     prim = doc.primitive(ref)
     n = len(doc.accessor(prim["attributes"]["POSITION"]))

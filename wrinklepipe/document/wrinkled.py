@@ -26,6 +26,8 @@ from wrinklepipe.document.model import ARRAY_BUFFER, Document, PrimitiveRef
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles, rest_positions
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
+from wrinklepipe.geometry.tangents import mikktspace_tangents_report
+from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 
 VERTEX_ID_ATTRIBUTE = "_WRINKLE_VERTEX_ID"
 #: Largest integer a float32 holds exactly (vertex IDs are FLOAT accessors).
@@ -269,8 +271,6 @@ def front_projection_uvs(positions: np.ndarray) -> np.ndarray:
 def add_wrinkle_attributes(doc: Document, refs: list[PrimitiveRef]) -> list[WrinkledPart]:
     """Add TANGENT (where missing or invalid), TEXCOORD (where missing) and the shared
     ``_WRINKLE_VERTEX_ID`` to each wrinkled primitive (new accessors only)."""
-    from wrinklepipe.geometry.tangents import mikktspace_tangents_report
-    from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 
     worlds = node_world_matrices(doc)
     world = [rest_positions(doc, r, worlds=worlds) for r in refs]

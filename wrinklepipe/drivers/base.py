@@ -12,16 +12,30 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from wrinklepipe.asset import Mesh, WrinkleAsset
 from wrinklepipe.errors import InputError, Problem
 from wrinklepipe.model import POLICIES
+from wrinklepipe.presets import jimenez
 
 #: Default sampling rate when neither the call nor the driver spec gives one.
 DEFAULT_FPS = 30.0
+
+
+class Rig(Protocol):
+    """A skeleton with its animation, as the ``bones`` driver reads it (the pipeline gives one
+    through :attr:`DriverContext.read_rig`; :class:`wrinklepipe.io.rig.GltfRig` reads glTF)."""
+
+    joint_names: tuple[str, ...]
+    joints: np.ndarray | None
+    skin_weights: np.ndarray | None
+
+    def key_times(self) -> np.ndarray: ...
+
+    def joint_matrices(self, times: Sequence[float | None]) -> np.ndarray: ...
 
 
 @dataclass
@@ -31,6 +45,8 @@ class DriverContext:
     ``region_states`` ``[R, K]`` is 1 where region r drives state k (see
     :meth:`WrinkleAsset.region_state_matrix`). ``expressions`` is ``{expression: {region: w}}``.
     ``root`` resolves relative file names in a spec. ``source`` names the spec in messages.
+    ``read_rig`` opens a skinned file a ``bones`` spec names (the layer that builds the context
+    supplies it: drivers read no meshes themselves).
     """
 
     regions: tuple[str, ...]
@@ -42,6 +58,7 @@ class DriverContext:
     root: Path = Path(".")
     fps: float = DEFAULT_FPS
     source: str = "<driver>"
+    read_rig: Callable[[Path], Rig] | None = None
 
     def __post_init__(self) -> None:
         self.regions = tuple(str(r) for r in self.regions)
@@ -67,7 +84,11 @@ class DriverContext:
 
     @classmethod
     def from_asset(
-        cls, asset: WrinkleAsset, root: str | Path = ".", fps: float = DEFAULT_FPS
+        cls,
+        asset: WrinkleAsset,
+        root: str | Path = ".",
+        fps: float = DEFAULT_FPS,
+        read_rig: Callable[[Path], Rig] | None = None,
     ) -> DriverContext:
         return cls(
             regions=asset.region_names,
@@ -78,10 +99,16 @@ class DriverContext:
             mesh=asset.mesh,
             root=Path(root),
             fps=fps,
+            read_rig=read_rig,
         )
 
     @classmethod
-    def from_manifest(cls, manifest: Any, mesh: Mesh | None = None) -> DriverContext:
+    def from_manifest(
+        cls,
+        manifest: Any,
+        mesh: Mesh | None = None,
+        read_rig: Callable[[Path], Rig] | None = None,
+    ) -> DriverContext:
         """From a :class:`wrinklepipe.manifest.Manifest` (the mesh is loaded by the caller)."""
         states = tuple(s.name for s in manifest.states)
         rs = np.zeros((len(manifest.regions), len(states)), np.float32)
@@ -90,8 +117,6 @@ class DriverContext:
                 rs[i, k] = 1.0 if (not r.states or s in r.states) else 0.0
         expressions = manifest.expressions
         if isinstance(expressions, str):
-            from wrinklepipe.presets import jimenez
-
             expressions = jimenez.expression_table() if expressions == "jimenez" else {}
         return cls(
             regions=tuple(r.name for r in manifest.regions),
@@ -102,6 +127,7 @@ class DriverContext:
             mesh=mesh,
             root=manifest.root,
             source=str(manifest.path),
+            read_rig=read_rig,
         )
 
 

@@ -38,12 +38,14 @@ from wrinklepipe.drivers.base import (
     spec_problem,
 )
 from wrinklepipe.drivers.curves import (
+    curves_to_weights,
     keys_range,
     load_keys,
     read_gltf_morph_animation,
     sample_keys,
 )
 from wrinklepipe.errors import InputError, Problem
+from wrinklepipe.presets import arkit
 
 
 @dataclass(frozen=True)
@@ -132,8 +134,6 @@ def _rows(ctx: DriverContext, spec: Mapping[str, Any], notes: list[str]) -> list
     rows: list[Row] = []
     preset = spec.get("preset")
     if preset is not None:
-        from wrinklepipe.presets import arkit
-
         if preset not in arkit.PRESETS:
             raise spec_problem(
                 ctx, f"unknown preset {preset!r} ({', '.join(arkit.PRESETS)})", "preset"
@@ -173,8 +173,6 @@ def _outputs(ctx: DriverContext, rows: Sequence[Row]) -> list[str]:
 def blendshapes_driver(
     ctx: DriverContext, spec: Mapping[str, Any], times: np.ndarray | None
 ) -> DriverResult:
-    from wrinklepipe.drivers.curves import curves_to_weights
-
     notes: list[str] = []
     rows = _rows(ctx, spec, notes)
     outputs = _outputs(ctx, rows)
@@ -209,7 +207,6 @@ def blendshapes_driver(
         inputs = sample_keys(keys, universe, times, interp)
     if not mesh_names and spec.get("preset") is not None:
         # No mesh to say which shapes exist: the preset's own names are known (weight 0 if absent).
-        from wrinklepipe.presets import arkit
 
         extra = [n for n in arkit.NAMES if n not in universe]
         universe = (*universe, *extra)

@@ -105,16 +105,16 @@ def _xyz_table(
 def _gltf_bones_doc(
     ctx: DriverContext, spec: Mapping[str, Any], times: np.ndarray | None
 ) -> dict[str, Any]:
-    """The bones file's content (see the module doc) from a skinned glTF's first animation."""
-    from wrinklepipe.io.mesh import load_mesh
-    from wrinklepipe.io.mesh_gltf import gltf_animation_times, gltf_joint_world_matrices_at
-
+    """The bones file's content (see the module doc) from a skinned glTF's first animation
+    (opened by ``ctx.read_rig``)."""
     path = resolve(ctx, str(spec["file"]))
-    rig = load_mesh(path)
+    if ctx.read_rig is None:
+        raise spec_problem(ctx, f"{path.name}: no rig reader in this context", "file")
+    rig = ctx.read_rig(path)
     if not rig.joint_names:
         raise spec_problem(ctx, f"{path.name} has no skin (no joints)", "file")
     if times is None:
-        keys = gltf_animation_times(path)
+        keys = rig.key_times()
         n = max(int(round((keys[-1] - keys[0]) * ctx.fps)) + 1, 1)
         times = keys[0] + np.arange(n) / ctx.fps
     names = list(rig.joint_names)
@@ -128,7 +128,7 @@ def _gltf_bones_doc(
     ref_names = [str(k) for k in dict(spec.get("reference_times", {}))]
     ref_times = [float(t) for t in dict(spec.get("reference_times", {})).values()]
     # one read of the file: rest pose, reference frames, animation frames
-    m = gltf_joint_world_matrices_at(path, rig, [None, *ref_times, *map(float, times)])
+    m = rig.joint_matrices([None, *ref_times, *map(float, times)])
     if root is not None:
         m = np.linalg.inv(m[:, names.index(str(root))])[:, None] @ m
     sel = [names.index(j) for j in joints]

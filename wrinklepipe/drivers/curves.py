@@ -26,8 +26,10 @@ import csv
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
+from urllib.parse import unquote
 
 import numpy as np
+import pygltflib
 from scipy.interpolate import CubicSpline
 
 from wrinklepipe.drivers.base import (
@@ -136,7 +138,6 @@ def read_gltf_morph_animation(
     Returns ``(times [F], target names, weights [F, M])``; with ``times`` None the animation is
     sampled at ``fps`` over its own time range. LINEAR, STEP and CUBICSPLINE samplers.
     """
-    import pygltflib
 
     path = Path(path)
     try:
@@ -209,8 +210,6 @@ _TYPES = {
 
 
 def _buffer_bytes(g: Any, path: Path, i: int) -> bytes:
-    from urllib.parse import unquote
-
     uri = g.buffers[i].uri
     if uri is None:
         return g.binary_blob() or b""

@@ -27,6 +27,7 @@ from wrinklepipe.drivers.base import (
     resolve,
     spec_problem,
 )
+from wrinklepipe.drivers.curves import keys_range, load_keys, read_gltf_morph_animation, sample_keys
 
 
 def _geometry() -> Any:
@@ -39,13 +40,6 @@ def _geometry() -> Any:
 def _morph_frames(
     ctx: DriverContext, spec: Mapping[str, Any], times: np.ndarray | None
 ) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
-    from wrinklepipe.drivers.curves import (
-        keys_range,
-        load_keys,
-        read_gltf_morph_animation,
-        sample_keys,
-    )
-
     fps = float(spec.get("fps", ctx.fps))
     file = spec.get("file")
     if file is not None and Path(str(file)).suffix.lower() in (".gltf", ".glb"):

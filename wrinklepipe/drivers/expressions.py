@@ -31,13 +31,14 @@ from wrinklepipe.drivers.base import (
     spec_problem,
 )
 from wrinklepipe.drivers.curves import keys_range, load_keys, sample_keys
+from wrinklepipe.errors import InputError, Problem
+from wrinklepipe.presets import jimenez
 
 
 def expression_matrix(
     table: Mapping[str, Mapping[str, float]], regions: Sequence[str], where: str = "<expressions>"
 ) -> tuple[tuple[str, ...], np.ndarray]:
     """Table ``{expression: {region: w}}`` -> (expression names, ``[E, R]`` float32)."""
-    from wrinklepipe.errors import InputError, Problem
 
     names = tuple(table)
     mat = np.zeros((len(names), len(regions)), np.float32)
@@ -69,7 +70,6 @@ def _table(ctx: DriverContext, spec: Mapping[str, Any]) -> Mapping[str, Mapping[
         return ctx.expressions
     if preset != "jimenez":
         raise spec_problem(ctx, f"unknown expression preset {preset!r} (jimenez)", "preset")
-    from wrinklepipe.presets import jimenez
 
     return jimenez.expression_table()
 

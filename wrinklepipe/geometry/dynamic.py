@@ -26,9 +26,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.ndimage import gaussian_filter
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
+from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 
 NAME = "dynamic"
 
@@ -152,7 +155,6 @@ class DynamicWeights:
         ``[V]`` is the artist's rest-pose wrinkle weight (e.g. a vertex-colour channel mapped to
         [-1, 1]).
         """
-        from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 
         opts = options or DynamicOptions()
         if opts.weighting not in ("angle", "uniform"):
@@ -359,9 +361,6 @@ def texture_space_weights(
     not pull the weights towards 0. Row 0 is v = 0 (glTF UV convention). Sample it at vertex UVs
     with :func:`sample_bilinear`.
     """
-    from scipy.ndimage import gaussian_filter
-
-    from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 
     tid = rasterise_triangle_ids(uvs, indices, size)
     cov = tid >= 0

@@ -35,6 +35,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from wrinklepipe.errors import input_error
 
@@ -352,8 +355,6 @@ def compute_vertex_ids(
     cell = tol * float(factor)
     f, cand = _cluster(cols, lo, float((hi - lo).max()), cell, tol)
     if len(cand) > 1:
-        from scipy.spatial import cKDTree
-
         pts = p[cand].astype(np.float64)
         tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
         # Euclidean query (faster than p=inf), then keep the Chebyshev distance <= 2 tol.
@@ -371,8 +372,6 @@ def compute_vertex_ids(
 def _merge(f: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Union the nodes ``a[i]``-``b[i]`` (a node is the index of its first point); every point
     then points at the smallest node of its component."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
 
     involved, inv = np.unique(np.concatenate([a, b]), return_inverse=True)
     m = len(involved)

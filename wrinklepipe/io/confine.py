@@ -55,7 +55,7 @@ def confine(
 def confine_usd(path: str | Path) -> None:
     """Check every sublayer, reference and payload reachable from a USD file before the stage
     is opened: each must lie inside the root layer's folder or an allowed root."""
-    from pxr import Sdf, Tf
+    from pxr import Sdf, Tf  # deferred: usd-core, USD only
 
     root = Path(path).resolve()
     folder = root.parent

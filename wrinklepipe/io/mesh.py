@@ -18,9 +18,13 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import xatlas
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.mesh_gltf import GltfMeshOptions, read_gltf_meshes
+from wrinklepipe.io.mesh_obj import read_obj_meshes
+from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
 
 SUFFIXES = {
     ".gltf": "gltf",
@@ -57,18 +61,12 @@ def load_meshes(path: str | Path, options: LoadOptions | None = None) -> list[Me
     if not p.is_file():
         raise input_error(p, "file not found")
     if kind == "gltf":
-        from wrinklepipe.io.mesh_gltf import GltfMeshOptions, read_gltf_meshes
-
         meshes = read_gltf_meshes(p, GltfMeshOptions(bake_transforms=opts.bake_transforms))
     elif kind == "usd":
-        from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
-
         meshes = read_usd_meshes(
             p, UsdMeshOptions(bake_transforms=opts.bake_transforms, time=opts.usd_time)
         )
     else:
-        from wrinklepipe.io.mesh_obj import read_obj_meshes
-
         meshes = read_obj_meshes(p)
     if opts.generate_uvs:
         meshes = [ensure_uvs(m) if m.uvs is None else m for m in meshes]
@@ -183,7 +181,6 @@ def ensure_uvs(mesh: Mesh) -> Mesh:
     every per-vertex attribute follows). Noted in ``mesh.notes``."""
     if mesh.uvs is not None:
         return mesh
-    import xatlas
 
     vmap, idx, uvs = xatlas.parametrize(
         np.ascontiguousarray(mesh.positions, np.float32),

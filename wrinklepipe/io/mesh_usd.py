@@ -47,7 +47,7 @@ class UsdMeshOptions:
 
 
 def _open(path: Path) -> Any:
-    from pxr import Tf, Usd
+    from pxr import Tf, Usd  # deferred: usd-core, USD only
 
     confine_usd(path)  # sublayers, references, payloads: inside the asset's folder
     try:
@@ -61,7 +61,7 @@ def _open(path: Path) -> Any:
 
 def read_usd_meshes(path: str | Path, options: UsdMeshOptions | None = None) -> list[Mesh]:
     """One :class:`Mesh` per ``UsdGeom.Mesh`` prim with faces (named by prim path)."""
-    from pxr import Usd, UsdGeom
+    from pxr import Usd, UsdGeom  # deferred: usd-core, USD only
 
     opts = options or UsdMeshOptions()
     p = Path(path)
@@ -122,7 +122,7 @@ def _primvar_corners(
 
 
 def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh | None:
-    from pxr import UsdGeom, UsdSkel
+    from pxr import UsdGeom, UsdSkel  # deferred: usd-core, USD only
 
     file = str(path)
     ppath = str(prim.GetPath())
@@ -288,7 +288,7 @@ def _apply(mesh: Mesh, m: np.ndarray) -> None:
 def _blend_shapes(
     file: str, ppath: str, binding: Any, mesh: Mesh, vmap: np.ndarray, n_p: int
 ) -> None:
-    from pxr import UsdSkel
+    from pxr import UsdSkel  # deferred: usd-core, USD only
 
     names_attr = binding.GetBlendShapesAttr().Get()
     targets = binding.GetBlendShapeTargetsRel().GetTargets()
@@ -359,7 +359,7 @@ def _blend_shapes(
 
 
 def _skin(file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: Any) -> bool:
-    from pxr import Usd, UsdSkel
+    from pxr import Usd, UsdSkel  # deferred: usd-core, USD only
 
     root = UsdSkel.Root.Find(prim)
     if not root:
@@ -426,7 +426,7 @@ def _skin(file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: An
 def usd_joint_world_matrices(path: str | Path, mesh: Mesh, time: float | None = None) -> np.ndarray:
     """World matrices ``[J, 4, 4]`` (column vectors) of ``mesh``'s joints at ``time``, from the
     skeleton bound to the mesh prim ``mesh.name`` and its animation source."""
-    from pxr import Usd, UsdGeom, UsdSkel
+    from pxr import Usd, UsdGeom, UsdSkel  # deferred: usd-core, USD only
 
     p = Path(path)
     stage = _open(p)
@@ -455,7 +455,7 @@ def usd_joint_world_matrices(path: str | Path, mesh: Mesh, time: float | None = 
 
 def usd_blend_shape_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, float]:
     """The SkelAnimation blend-shape weights bound to ``mesh.name`` at ``time``."""
-    from pxr import Usd, UsdSkel
+    from pxr import Usd, UsdSkel  # deferred: usd-core, USD only
 
     p = Path(path)
     stage = _open(p)

@@ -13,7 +13,10 @@ validator works on). The per-texel encodings are those of :mod:`wrinklepipe.mode
 from __future__ import annotations
 
 import contextlib
+import os
+import re
 import struct
+import tempfile
 import zlib
 from collections.abc import Iterator
 from contextvars import ContextVar
@@ -21,10 +24,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import OpenImageIO as oiio
 
 from wrinklepipe import codec, model
+from wrinklepipe import masks as wm
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.errors import input_error
+from wrinklepipe.normals.resample import resize_normals
 
 EXTENSION = "WRINKLEPIPE_wrinkle_maps"
 CHANNELS = "rgba"
@@ -36,7 +42,6 @@ def safe_name(name: str, taken: set[str] | None = None) -> str:
     """A file stem made from ``name``: letters, digits, ``_ . -`` only, no leading dot, unique
     within ``taken`` (which it updates). Texture and curve files are named with it, so names
     from a manifest or a foreign glTF can never point outside the output folder."""
-    import re
 
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)).lstrip(".") or "unnamed"
     if taken is not None:
@@ -177,7 +182,6 @@ def resize_normals_pd(normals: np.ndarray, h: int, w: int) -> np.ndarray:
     """
     if normals.shape[0] == h and normals.shape[1] == w:
         return normals
-    from wrinklepipe.normals.resample import resize_normals
 
     return np.asarray(resize_normals(normals, (h, w), space="pd"), np.float32)
 
@@ -201,7 +205,6 @@ def pack_masks(
     :func:`wrinklepipe.masks.pack` does the packing (docs/regions.md); ``array`` layers become
     single-channel textures, the others RGBA textures.
     """
-    from wrinklepipe import masks as wm
 
     p = wm.pack(masks, names, layout=layout, sides=sides)
     tex = np.asarray(p.textures, np.float32)
@@ -212,7 +215,6 @@ def pack_masks(
 
 def unpack_masks(textures: list[np.ndarray], table: list[dict[str, Any]]) -> np.ndarray:
     """Channel table + textures (values01 ``[H, W, C]``) -> masks ``[R, H, W]`` in table order."""
-    from wrinklepipe import masks as wm
 
     if not table:
         return np.zeros((0, 1, 1), np.float32)
@@ -383,10 +385,6 @@ def png_bytes(pixels: np.ndarray, level: int | None = None) -> bytes:
 
 def png_pixels(data: bytes, file: str = "") -> np.ndarray:
     """Decode a PNG's pixels as stored (uint8/uint16 ``[H, W, C]``) via OpenImageIO."""
-    import os
-    import tempfile
-
-    import OpenImageIO as oiio
 
     fd, tmp = tempfile.mkstemp(suffix=".png")
     try:

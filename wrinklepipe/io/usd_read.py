@@ -38,7 +38,7 @@ class UsdReadOptions:
 
 
 def _asset_bytes(layer_path: Path, asset: Any, file: str, key: str, opt: UsdReadOptions) -> bytes:
-    from pxr import Ar
+    from pxr import Ar  # deferred: usd-core, USD only
 
     raw = asset.path if hasattr(asset, "path") else str(asset)
     if not raw:
@@ -111,7 +111,7 @@ def _stem(asset: Any) -> str:
 
 def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> WrinklePackage:
     """Load a wrinklepipe USD stage as a :class:`WrinklePackage`."""
-    from pxr import Tf, Usd, UsdGeom, UsdShade, UsdSkel
+    from pxr import Tf, Usd, UsdGeom, UsdShade, UsdSkel  # deferred: usd-core, USD only
 
     opt = options or UsdReadOptions()
     path = Path(path)

@@ -22,9 +22,12 @@ as time samples when there is a weight curve (time code = seconds x ``timeCodesP
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import os
+import struct
 import tempfile
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,6 +38,7 @@ from wrinklepipe import codec
 from wrinklepipe.asset import Mesh
 from wrinklepipe.atomic import check_not_input, write_bytes
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.gltf_write import skin_weights_normalized
 from wrinklepipe.io.package import MAX_FLOAT_ID, WrinklePackage, png_bytes, safe_name
 from wrinklepipe.paths import SCHEMAS_DIR
 
@@ -79,7 +83,7 @@ def register_schema() -> None:
     takes effect if it happens before that (this module registers on import; or set
     ``PXR_PLUGINPATH_NAME`` to ``schemas/usd``). Writing and reading never depend on it.
     """
-    from pxr import Plug
+    from pxr import Plug  # deferred: usd-core, USD only
 
     Plug.Registry().RegisterPlugins(str(USD_SCHEMA_DIR))
 
@@ -96,7 +100,7 @@ class UsdOptions:
 
 
 def _ident(name: str) -> str:
-    from pxr import Tf
+    from pxr import Tf  # deferred: usd-core, USD only
 
     return Tf.MakeValidIdentifier(name)
 
@@ -104,9 +108,7 @@ def _ident(name: str) -> str:
 def _skel(stage: Any, root_path: Any, mesh: Any, m: Mesh) -> None:
     """Skeleton + SkelAnimation + binding: the mesh's skin (joints at their bind pose, flat, as
     in the glTF) or one root joint, and one BlendShape per morph target."""
-    from pxr import Gf, Sdf, UsdSkel, Vt
-
-    from wrinklepipe.io.gltf_write import skin_weights_normalized
+    from pxr import Gf, Sdf, UsdSkel, Vt  # deferred: usd-core, USD only
 
     has_skin = m.joints is not None and m.skin_weights is not None and len(m.joint_names) > 0
     skel = UsdSkel.Skeleton.Define(stage, root_path.AppendChild("Skel"))
@@ -185,7 +187,7 @@ def _morph_curves(stage: Any, root_path: Any, prim: Any, pkg: WrinklePackage, fp
     """Morph-target weights of each curve: ``wrinkle:morphCurves:curve<i>`` time samples on the
     material (exact), and those of the first curve also as the SkelAnimation's
     ``blendShapeWeights`` time samples (what UsdSkel plays)."""
-    from pxr import Sdf, Usd, UsdSkel, Vt
+    from pxr import Sdf, Usd, UsdSkel, Vt  # deferred: usd-core, USD only
 
     for i, c in enumerate(pkg.curves):
         if c.morph_weights is None:
@@ -210,7 +212,7 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
 
     Keep the returned stage referenced while using its layers (they die with it).
     """
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt  # deferred: usd-core, USD only
 
     opt = options or UsdOptions()
     register_schema()
@@ -456,9 +458,6 @@ def usdz_bytes(entries: list[tuple[str, bytes]]) -> bytes:
     The first entry must be the root layer. Alignment uses a padding extra field (id 0x1986, as
     USD's own writer does); the date is 1980-01-01 so the bytes never depend on the clock.
     """
-    import io
-    import struct
-    import zipfile
 
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_STORED) as zf:

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wrinklepipe import codec
+from wrinklepipe.normals._chunks import map_rows
 
 _F = np.float32
 _EPS = np.float32(1e-12)
@@ -154,7 +155,6 @@ def encode_pd_u8(
     ``c`` and steps ``h`` (v2: 128, 127); this is what every 8-bit PD output (PNG, BCn) stores.
     Returns ``(q, scale, clipped_texels)``.
     """
-    from wrinklepipe.normals._chunks import map_rows
 
     n = np.asarray(normals, dtype=_F)
     if n.ndim != 3 or n.shape[-1] != 3:

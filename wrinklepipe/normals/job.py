@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import math
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,14 +16,14 @@ import numpy as np
 
 from wrinklepipe import codec
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.images import DEFAULT_MAX_PIXELS
+from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, write_image
 from wrinklepipe.model import normal_to_pd, normalize, pd_to_normal
 from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import dds as dds_mod
 from wrinklepipe.normals import encode as enc
 from wrinklepipe.normals import footprint as fp
 from wrinklepipe.normals import ktx2 as ktx2_mod
-from wrinklepipe.normals import mips, resample
+from wrinklepipe.normals import mips, resample, uastc
 from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
 
 _F = np.float32
@@ -246,8 +247,6 @@ def encode_normals(
     dec = cmp.decoder_for(o.encoding, params.get("scale", 1.0), params.get("gain", 1.0), b_n)
     blend = _blend_fn(o.encoding, params, b_n, truth)
     if fmt == "uastc":
-        from wrinklepipe.normals import uastc
-
         q = _components(o.encoding, x, "uastc", params)
         try:
             check, data = uastc.uastc_check(q, truth, dec, budget, mips=o.mips)
@@ -336,9 +335,6 @@ def _plain(
 ) -> tuple[bytes, cmp.ErrorStats]:
     """Bytes of a PNG/TIFF/EXR file of the map (RGB: pd keeps B = 0) and the error of its
     stored texels."""
-    import tempfile
-
-    from wrinklepipe.io.images import write_image
 
     f = codec.storage_format(fmt)
     texels, _ = codec.encode(encoding, x, f, param=_param(encoding, params), channels=3)

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 import OpenImageIO as oiio
 
-from wrinklepipe.model import normal_to_pd, normalize, pd_to_normal
+from wrinklepipe.model import blend, normal_to_pd, normalize, pd_to_normal
 from wrinklepipe.normals.compress import Budget, ErrorStats, angular_error_stats
 
 _F = np.float32
@@ -122,7 +122,6 @@ def reduction_error(
     ``filter`` and magnified back with a bilinear (triangle) filter; the worst texels over all
     weights are pooled into one :class:`ErrorStats`.
     """
-    from wrinklepipe.model import blend
 
     st = np.asarray(states_pd, dtype=_F)
     k, h, w = st.shape[:3]

@@ -22,7 +22,7 @@ from wrinklepipe.normals import compress as cmp
 def available() -> bool:
     """True when the ``alktx2`` Basis Universal binding imports."""
     try:
-        import alktx2  # noqa: F401
+        import alktx2  # noqa: F401  # deferred: optional, UASTC only
     except ImportError:
         return False
     return True
@@ -30,7 +30,7 @@ def available() -> bool:
 
 def _lib() -> Any:
     try:
-        import alktx2
+        import alktx2  # deferred: optional, UASTC only
     except ImportError:
         raise ValueError(
             "UASTC needs a Basis Universal encoder: pip install alktx2 (or wrinklepipe[uastc])"

@@ -16,6 +16,7 @@ from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.drivers.base import resolve
 from wrinklepipe.drivers.curves import load_keys, read_gltf_morph_animation, sample_keys
 from wrinklepipe.io.package import WeightCurves
+from wrinklepipe.io.rig import GltfRig
 
 
 def expression_cycle(asset: WrinkleAsset, seconds_per_expression: float = 1.0) -> WeightCurves:
@@ -87,7 +88,7 @@ def evaluate_drivers(asset: WrinkleAsset, root: Path) -> tuple[list[WeightCurves
         return [expression_cycle(asset)] if asset.expressions else [], [
             "no drivers: a curve visiting each expression of the table was written"
         ]
-    ctx = wd.DriverContext.from_asset(asset, root)
+    ctx = wd.DriverContext.from_asset(asset, root, read_rig=GltfRig)
     curves: list[WeightCurves] = []
     used: set[str] = set()
     for i, spec in enumerate(asset.drivers):

@@ -184,7 +184,7 @@ def _gltf_pointers(inp: ValidationInput, p: Path) -> None:
 def _usd_pointers(inp: ValidationInput, p: Path) -> None:
     """Point issues at prims: the material with WrinkleMapsAPI, its attributes, the mesh."""
     try:
-        from pxr import Usd, UsdGeom  # usd-core is heavy (~0.3 s): loaded for USD inputs only
+        from pxr import Usd, UsdGeom  # deferred: usd-core, USD only
 
         stage = Usd.Stage.Open(str(p))
         mat = mesh = None

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from wrinklepipe.atomic import write_output
+
 SEVERITIES = ("error", "warning", "info")
 
 
@@ -373,8 +375,6 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     text = issues_markdown()
     if args:
-        from wrinklepipe.atomic import write_output
-
         write_output(Path(args[0]), text.encode("utf-8"))
     else:
         sys.stdout.write(text)

@@ -9,6 +9,8 @@ import numpy as np
 
 from wrinklepipe import model
 from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.io.package import resize_normals_pd
+from wrinklepipe.masks import resample_masks
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.inputs import Texture, ValidationInput
 
@@ -61,7 +63,6 @@ def expression_weights(asset: WrinkleAsset, expr: str | None) -> np.ndarray:
 
 def resize_normals(normals: np.ndarray, h: int, w: int) -> np.ndarray:
     """Unit normals resampled in PD space as ``convert`` does."""
-    from wrinklepipe.io.package import resize_normals_pd
 
     n = np.asarray(normals, np.float32)
     if n.shape[:2] == (h, w):
@@ -71,7 +72,6 @@ def resize_normals(normals: np.ndarray, h: int, w: int) -> np.ndarray:
 
 def resize_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:
     """Masks ``[R, H, W]`` resampled as ``convert`` does (box down, bilinear up)."""
-    from wrinklepipe.masks import resample_masks
 
     return np.asarray(resample_masks(np.asarray(masks, np.float32), (h, w)), np.float32)
 

@@ -118,7 +118,7 @@ class RawGL:
 def create_context() -> object:
     """A headless moderngl context on EGL (GPU when present, Mesa llvmpipe otherwise)."""
     try:
-        import moderngl
+        import moderngl  # deferred: only where a GL context is made (GLUnavailable below)
 
         ctx = moderngl.create_context(standalone=True, backend="egl")
     except Exception as exc:  # noqa: BLE001 - any driver failure means "no GL here"

@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import moderngl
 import numpy as np
 from scipy import ndimage
 
@@ -28,6 +29,7 @@ from wrinklepipe import model
 from wrinklepipe.asset import Mesh
 from wrinklepipe.drivers.poses import DriverPose, driver_poses
 from wrinklepipe.geometry.normals import vertex_normals
+from wrinklepipe.geometry.tangents import mikktspace_tangents
 from wrinklepipe.shading import glsl
 from wrinklepipe.shading.setup import MaskEntry, ShaderSetup
 from wrinklepipe.validate import gl as glw
@@ -126,8 +128,6 @@ class Renderer:
 
     # ------------------------------------------------------------------ setup
     def _setup(self) -> None:
-        import moderngl
-
         ctx, inp = self.ctx, self.inp
         a = inp.asset
         self.gl = glw.RawGL.load()
@@ -151,8 +151,6 @@ class Renderer:
             normals = _vertex_normals(mesh)
         tangents = mesh.tangents
         if tangents is None or np.asarray(tangents).shape != (mesh.vertex_count, 4):
-            from wrinklepipe.geometry.tangents import mikktspace_tangents
-
             tangents = mikktspace_tangents(mesh.positions, normals, mesh.uvs, mesh.indices)
         verts = np.concatenate(
             [
@@ -247,7 +245,6 @@ class Renderer:
         image: elsewhere every activation is 0 and the model returns the base); ``False``
         draws every triangle with the wrinkle shader.
         """
-        import moderngl
 
         ctx = self.ctx
         self.fbo.use()

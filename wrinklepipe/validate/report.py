@@ -10,10 +10,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rich.markup import escape
+from rich.table import Table
 
 from wrinklepipe import __version__
 from wrinklepipe.atomic import dumps_json, output_files, staged_folder, write_bytes
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.package import png_bytes
 from wrinklepipe.validate.catalogue import RULES_BY_CODE
 from wrinklepipe.validate.run import Report
 
@@ -96,8 +99,6 @@ def normalized(doc: dict[str, Any]) -> dict[str, Any]:
 
 def print_summary(report: Report, console: Any, fail_on: str = "error", limit: int = 40) -> None:
     """A short summary: counts, the issues (first ``limit``), the render-pass agreement."""
-    from rich.markup import escape
-    from rich.table import Table
 
     style = {"error": "bold red", "warning": "yellow", "info": "cyan"}
     c = report.counts
@@ -160,8 +161,6 @@ def heat(values: np.ndarray, vmax: float) -> np.ndarray:
 
 
 def _png(img: np.ndarray) -> bytes:
-    from wrinklepipe.io.package import png_bytes
-
     arr = np.clip(np.rint(np.asarray(img, np.float64) * 255.0), 0, 255).astype(np.uint8)
     return png_bytes(arr)
 

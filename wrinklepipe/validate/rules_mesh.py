@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.asset import Mesh
+from wrinklepipe.geometry.tangents import mikktspace_tangents
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context
 from wrinklepipe.validate.rules_weights import group_spread, position_groups
@@ -13,7 +14,6 @@ from wrinklepipe.validate.rules_weights import group_spread, position_groups
 def reference_tangents(mesh: Mesh) -> tuple[np.ndarray, float, str]:
     """(tangents [V, 4], allowed angle in degrees, name): MikkTSpace from the geometry stage
     (it reproduces the Khronos sample's exported tangents to 0.03 degrees)."""
-    from wrinklepipe.geometry.tangents import mikktspace_tangents
 
     t = mikktspace_tangents(mesh.positions, mesh.normals, mesh.uvs, mesh.indices)
     return np.asarray(t, np.float64), 5.0, "MikkTSpace"

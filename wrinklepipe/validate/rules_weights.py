@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wrinklepipe.geometry.dynamic import DynamicWeights
 from wrinklepipe.model import POLICY_WEIGHT_RANGE
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context
@@ -37,7 +38,6 @@ def dynamic_weights(mesh: object, max_targets: int = 16) -> dict[str, np.ndarray
         or np.asarray(mesh.morph_deltas).shape[1:] != np.asarray(mesh.positions).shape
     ):
         return {}
-    from wrinklepipe.geometry.dynamic import DynamicWeights
 
     rest = np.asarray(mesh.positions, np.float64)
     op = DynamicWeights.build(rest, np.asarray(mesh.indices), np.asarray(mesh.vertex_ids))

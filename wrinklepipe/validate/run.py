@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from wrinklepipe.validate import (
+    render,
     rules_compression,
     rules_maps,
     rules_masks,
@@ -112,8 +113,6 @@ def validate(
     render_info: dict[str, Any] = {}
     images: dict[str, Any] = {}
     if opts.render:
-        from wrinklepipe.validate import render
-
         if progress:
             progress("render")
         t0 = time.perf_counter()

@@ -18,6 +18,7 @@ from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.normals import compress as nc
 from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.validate.inputs import ChannelEntry, Texture, ValidationInput
+from wrinklepipe.validate.textures import resize_bilinear
 
 #: Validator format name -> codec storage format of the texels (plain formats store RGBA8).
 _STORAGE = {"bc1": "bc1", "bc3": "bc3nm", "bc5": "bc5", "bc7": "bc7", "rgba8": "png8"}
@@ -101,8 +102,6 @@ def stored_state_quantities(asset: WrinkleAsset) -> np.ndarray:
     base = model.normalize(asset.base)
     states = model.normalize(asset.states)
     if base.shape[:2] != states.shape[1:3]:
-        from wrinklepipe.validate.textures import resize_bilinear
-
         base = model.normalize(resize_bilinear(base, *states.shape[1:3]))
     e = codec.encoding(asset.encoding)
     return np.stack([e.from_normals(s, base) for s in states])
