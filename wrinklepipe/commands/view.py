@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import webbrowser
+
+from wrinklepipe.console import err
+from wrinklepipe.errors import input_error
+from wrinklepipe.view.server import Site, ViewServer, find_asset, find_three
 
 NAME = "view"
 HELP = "preview a converted character in the browser (three.js, local, loopback only)"
@@ -28,10 +33,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.console import err
-    from wrinklepipe.errors import input_error
-    from wrinklepipe.view.server import Site, ViewServer, find_asset, find_three
-
     folder, gltf = find_asset(args.path)
     site = Site(folder, gltf, find_three(args.three))
     try:
@@ -42,8 +43,6 @@ def run(args: argparse.Namespace) -> int:
         ) from None
     err.print(f"[bold green]viewing[/] {gltf} at {server.url}  (Ctrl-C stops)")
     if args.open:
-        import webbrowser
-
         webbrowser.open(server.url)
     try:
         server.serve_forever()

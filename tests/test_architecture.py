@@ -1,0 +1,202 @@
+"""The package's shape: every module imports, every import goes down the layers of
+:mod:`wrinklepipe.layers` (module level and deferred alike), the module graph has no circle,
+imports sit at module level except named heavy optional dependencies, and
+docs/architecture.md shows the table as it is."""
+
+from __future__ import annotations
+
+import ast
+import functools
+import importlib
+import sys
+from pathlib import Path
+
+import pytest
+
+from wrinklepipe import layers
+from wrinklepipe.paths import ROOT
+
+PACKAGE = ROOT / "wrinklepipe"
+
+#: Third-party modules that may be imported inside a function (with a comment on the line
+#: saying why): heavy, and needed by few code paths.
+DEFERRED = {
+    "pxr": "usd-core: ~0.3 s and its plugin registry, for USD files only",
+    "trimesh": "~1.7 s to import, only the geometry benchmark's baseline uses it",
+    "alktx2": "optional (Basis Universal UASTC only), may be absent",
+    "moderngl": "imported where a GL context is made, inside the guard for 'no GL here'",
+}
+
+#: Imports that still run up the layers, each to be removed (the test fails when one is no
+#: longer there, so this list only shrinks).
+KNOWN_UPWARD: set[tuple[str, str]] = set()
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for p in sorted(PACKAGE.rglob("*.py")):
+        parts = list(p.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = p
+    return out
+
+
+MODULES = _modules()
+
+
+def _owner(name: str) -> str:
+    """The module a dotted name lives in (``wrinklepipe.io.package.png_bytes`` -> its module)."""
+    while name and name not in MODULES:
+        name = name.rpartition(".")[0]
+    return name
+
+
+@functools.cache
+def _imports(module: str) -> list[tuple[ast.stmt, list[str], bool]]:
+    """Every import statement of ``module``: (node, wrinklepipe modules named, at module level)."""
+    tree = ast.parse(MODULES[module].read_text(encoding="utf-8"))
+    top = {id(n) for n in tree.body}
+    out = []
+    for node in ast.walk(tree):
+        targets: list[str] = []
+        if isinstance(node, ast.Import):
+            targets = [_owner(a.name) for a in node.names if a.name.startswith("wrinklepipe")]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = (
+                    module if MODULES[module].name == "__init__.py" else module.rpartition(".")[0]
+                )
+                for _ in range(node.level - 1):
+                    base = base.rpartition(".")[0]
+                name = f"{base}.{node.module}" if node.module else base
+            else:
+                name = node.module or ""
+            if name.startswith("wrinklepipe"):
+                for a in node.names:
+                    full = f"{name}.{a.name}"
+                    targets.append(full if full in MODULES else _owner(name))
+        else:
+            continue
+        out.append((node, [t for t in targets if t and t != module], id(node) in top))
+    return out
+
+
+@functools.cache
+def _graph() -> dict[str, set[str]]:
+    return {m: {t for _, ts, _ in _imports(m) for t in ts} for m in MODULES}
+
+
+def test_every_module_imports():
+    for name in MODULES:
+        if name.endswith("__main__"):
+            continue
+        importlib.import_module(name)
+
+
+def test_every_module_has_a_layer():
+    missing = []
+    for name in MODULES:
+        try:
+            layers.layer_of(name)
+        except KeyError:
+            missing.append(name)
+    assert not missing, f"add these to wrinklepipe/layers.py: {missing}"
+
+
+def test_imports_go_down_the_layers():
+    upward = set()
+    for m, targets in _graph().items():
+        for t in targets:
+            if not layers.may_import(m, t):
+                upward.add((m, t))
+    new = sorted(upward - KNOWN_UPWARD)
+    assert not new, "imports running up the layers:\n" + "\n".join(
+        f"  {m} ({layers.layer_of(m).name}) -> {t} ({layers.layer_of(t).name})" for m, t in new
+    )
+    assert not (KNOWN_UPWARD - upward), f"fixed, remove from KNOWN_UPWARD: {KNOWN_UPWARD - upward}"
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    found: list[list[str]] = []
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10 * len(graph) + 100))
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                found.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_import_circle():
+    assert _cycles(_graph()) == []
+
+
+def test_the_circle_finder_finds_circles():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_layer_rules_by_hand():
+    assert layers.layer_of("wrinklepipe.pipeline.convert").name == "jobs"
+    assert layers.layer_of("wrinklepipe.pipeline.ingest").name == "pipeline"
+    assert layers.layer_of("wrinklepipe").name == "core"
+    assert layers.may_import("wrinklepipe.validate.ship", "wrinklepipe.pipeline.prepare")
+    assert not layers.may_import("wrinklepipe.pipeline.prepare", "wrinklepipe.validate.run")
+    with pytest.raises(KeyError):
+        layers.layer_of("wrinklepipe.newpackage.thing")
+
+
+def test_imports_are_at_module_level():
+    """Every import inside a function names a heavy optional dependency of :data:`DEFERRED`
+    and says why in a comment on its line; wrinklepipe's own modules are always imported at
+    module level."""
+    bad = []
+    for m, path in MODULES.items():
+        lines = path.read_text(encoding="utf-8").split("\n")
+        for node, _, top in _imports(m):
+            if top:
+                continue
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            root = (names[0] if names else (node.module or "")).split(".")[0]
+            if isinstance(node, ast.ImportFrom) and node.module == "__future__":
+                continue
+            said = "#" in "".join(lines[node.lineno - 1 : node.end_lineno])
+            if root not in DEFERRED or not said:
+                bad.append(
+                    f"{path.relative_to(ROOT)}:{node.lineno}: {lines[node.lineno - 1].strip()}"
+                )
+    assert not bad, "imports inside functions:\n" + "\n".join(bad)
+
+
+def test_architecture_page_shows_the_table():
+    page = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    start, end = "<!-- layers: start -->\n", "<!-- layers: end -->"
+    assert start in page and end in page
+    shown = page.split(start, 1)[1].split(end, 1)[0]
+    assert shown == layers.markdown_table(), "regenerate: python -m wrinklepipe.layers"

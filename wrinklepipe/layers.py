@@ -1,0 +1,152 @@
+"""The package's layers and which may import which: the one table the docs and the tests share.
+
+Each layer may import itself and the layers listed before it, never a later one; a module
+belongs to the layer of the longest prefix below that names it (``wrinklepipe.pipeline.convert``
+is a job, ``wrinklepipe.pipeline.ingest`` a pipeline stage). ``tests/test_architecture.py``
+parses every module's imports (module level and deferred alike) and checks them against this
+table, and that the module graph has no circle; ``docs/architecture.md`` shows the table,
+generated from it (``python -m wrinklepipe.layers``; a test keeps the page current).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Layer:
+    """One layer: a name, what lives there, and the module prefixes it holds."""
+
+    name: str
+    holds: str
+    prefixes: tuple[str, ...]
+
+
+LAYERS: tuple[Layer, ...] = (
+    Layer(
+        "core",
+        "the wrinkle model and codec (numpy only), plain data types, errors, staged writes, "
+        "terminal output, presets",
+        (
+            "wrinklepipe",
+            "wrinklepipe.paths",
+            "wrinklepipe.errors",
+            "wrinklepipe.asset",
+            "wrinklepipe.model",
+            "wrinklepipe.codec",
+            "wrinklepipe.presets",
+            "wrinklepipe.atomic",
+            "wrinklepipe.console",
+            "wrinklepipe.layers",
+        ),
+    ),
+    Layer(
+        "files",
+        "small file helpers the stages read with: pixels (OpenImageIO), guarded JSON, "
+        "confined paths",
+        ("wrinklepipe.io.images", "wrinklepipe.io.json_safe", "wrinklepipe.io.confine"),
+    ),
+    Layer(
+        "stages",
+        "array-in, array-out stages: geometry, normal maps, masks, weight drivers, shader "
+        "generation, fidelity, capture",
+        (
+            "wrinklepipe.geometry",
+            "wrinklepipe.normals",
+            "wrinklepipe.masks",
+            "wrinklepipe.drivers",
+            "wrinklepipe.shading",
+            "wrinklepipe.fidelity",
+            "wrinklepipe.capture",
+        ),
+    ),
+    Layer(
+        "io",
+        "readers and writers of whole formats: meshes, glTF and USD packages, the glTF "
+        "document, the source manifest",
+        ("wrinklepipe.io", "wrinklepipe.manifest", "wrinklepipe.document"),
+    ),
+    Layer(
+        "pipeline",
+        "convert's stages on an asset, what convert writes, engine export files, the demo",
+        (
+            "wrinklepipe.pipeline",
+            "wrinklepipe.outputs",
+            "wrinklepipe.export",
+            "wrinklepipe.demo",
+        ),
+    ),
+    Layer(
+        "validate",
+        "the validator: rules and the render pass over a validation input",
+        ("wrinklepipe.validate",),
+    ),
+    Layer(
+        "sources",
+        "a manifest, an output folder or a file -> pipeline or validation inputs",
+        ("wrinklepipe.sources",),
+    ),
+    Layer(
+        "jobs",
+        "whole runs that read, run stages, validate and write a folder; the viewer's server",
+        (
+            "wrinklepipe.pipeline.convert",
+            "wrinklepipe.pipeline.bake",
+            "wrinklepipe.pipeline.validation",
+            "wrinklepipe.export.job",
+            "wrinklepipe.batch",
+            "wrinklepipe.view",
+        ),
+    ),
+    Layer(
+        "cli",
+        "the command line (one thin module per command) and the benchmarks",
+        (
+            "wrinklepipe.cli",
+            "wrinklepipe.__main__",
+            "wrinklepipe.commands",
+            "wrinklepipe.bench",
+        ),
+    ),
+)
+
+
+def layer_of(module: str) -> Layer:
+    """The layer holding ``module`` (longest matching prefix). KeyError when none does."""
+    best: tuple[int, Layer] | None = None
+    for layer in LAYERS:
+        for p in layer.prefixes:
+            # the root package holds only itself: a new subpackage must be placed on purpose
+            if module == p or (p != "wrinklepipe" and module.startswith(p + ".")):
+                if best is None or len(p) > best[0]:
+                    best = (len(p), layer)
+    if best is None:
+        raise KeyError(module)
+    return best[1]
+
+
+def rank(module: str) -> int:
+    """Position of ``module``'s layer in :data:`LAYERS` (0 = core)."""
+    return LAYERS.index(layer_of(module))
+
+
+def may_import(importer: str, imported: str) -> bool:
+    """True when ``importer`` may import ``imported``: same layer or a layer below."""
+    return rank(imported) <= rank(importer)
+
+
+def markdown_table() -> str:
+    """The table of ``docs/architecture.md`` (between its ``layers`` markers)."""
+    rows = [
+        "| # | layer | holds | modules | may import |",
+        "|---|---|---|---|---|",
+    ]
+    for i, layer in enumerate(LAYERS):
+        mods = ", ".join(f"`{p.removeprefix('wrinklepipe.')}`" for p in layer.prefixes)
+        below = ", ".join(x.name for x in LAYERS[:i]) or "(nothing else)"
+        rows.append(f"| {i} | **{layer.name}** | {layer.holds} | {mods} | {below} |")
+    return "\n".join(rows) + "\n"
+
+
+if __name__ == "__main__":  # pragma: no cover - prints the docs table
+    print(markdown_table(), end="")
