@@ -24,6 +24,7 @@ from __future__ import annotations
 import multiprocessing
 import multiprocessing.connection
 import os
+import signal
 import time
 import uuid
 from collections import deque
@@ -172,8 +173,6 @@ def _exit_text(code: int | None) -> str:
     if code is None:
         return "no exit status"
     if code < 0:
-        import signal
-
         try:
             return f"killed by {signal.Signals(-code).name}"
         except ValueError:
@@ -217,7 +216,7 @@ class DaskEngine:
             )
 
     def run(self, jobs: Sequence[Job], on_stage: StageFn) -> Iterator[AssetResult]:
-        from distributed import as_completed
+        from distributed import as_completed  # deferred: Dask engine only (above)
 
         client = self._client()
         try:

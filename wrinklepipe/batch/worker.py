@@ -23,6 +23,9 @@ from wrinklepipe.batch.results import AssetResult, counts_of, status_for
 from wrinklepipe.console import stage_listener
 from wrinklepipe.errors import InputError
 from wrinklepipe.pipeline.convert import convert
+from wrinklepipe.sources.validation import LoadOptions, load_input
+from wrinklepipe.validate import ValidateOptions, validate
+from wrinklepipe.validate.config import Config, load_config
 
 
 def _ignore(_stage: str) -> None:
@@ -130,10 +133,6 @@ def _convert(job: Job, stages: _Stages) -> AssetResult:
 
 
 def _validate(job: Job, stages: _Stages) -> AssetResult:
-    from wrinklepipe.sources.validation import LoadOptions, load_input
-    from wrinklepipe.validate import ValidateOptions, validate
-    from wrinklepipe.validate.config import Config, load_config
-
     params: dict[str, Any] = dict(job.params)
     base = AssetResult(
         id=job.id,

@@ -6,6 +6,11 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from wrinklepipe.batch import Cache, DaskEngine, LocalEngine, parse_size, plan_batch, run_plan
+from wrinklepipe.batch.progress import BatchProgress
+from wrinklepipe.batch.publish import publish
+from wrinklepipe.console import emit_json, err
+from wrinklepipe.demo.source import cache_root
 from wrinklepipe.errors import input_error
 
 NAME = "batch"
@@ -134,12 +139,6 @@ def _cli_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wrinklepipe.batch import Cache, DaskEngine, LocalEngine, parse_size, plan_batch, run_plan
-    from wrinklepipe.batch.progress import BatchProgress
-    from wrinklepipe.batch.publish import publish
-    from wrinklepipe.console import emit_json, err
-    from wrinklepipe.demo.source import cache_root
-
     if args.jobs is not None and args.jobs < 1:
         raise input_error("--jobs", f"{args.jobs} is not a number of workers (1 or more)")
     if args.timeout is not None and args.scheduler:

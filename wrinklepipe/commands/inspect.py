@@ -10,7 +10,7 @@ from rich.table import Table
 from wrinklepipe.console import emit_json, out
 from wrinklepipe.document import read_document
 from wrinklepipe.document.inspect import diff, summary
-from wrinklepipe.errors import input_error
+from wrinklepipe.errors import input_error, plain_reason
 
 NAME = "inspect"
 HELP = "list a glTF's scenes, meshes, materials, textures, skins, animations; or diff two"
@@ -102,7 +102,6 @@ def print_summary(s: dict[str, Any]) -> None:
 def _summary(file: str, read: Any, summarize: Any) -> dict[str, Any]:
     """One file's summary; a structure the reader's checks did not foresee (an index into a
     missing array, a wrong type) is one message naming the file, not a traceback."""
-    from wrinklepipe.errors import input_error, plain_reason
 
     try:
         return summarize(read(file))
