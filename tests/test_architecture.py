@@ -34,8 +34,12 @@ KNOWN_UPWARD: set[tuple[str, str]] = set()
 
 
 def _modules() -> dict[str, Path]:
+    """Every module of the package (files under folders without ``__init__.py``, such as the
+    Blender script in ``data/``, are data, not modules)."""
     out = {}
     for p in sorted(PACKAGE.rglob("*.py")):
+        if any(not (d / "__init__.py").is_file() for d in p.parents if PACKAGE in [d, *d.parents]):
+            continue
         parts = list(p.relative_to(ROOT).with_suffix("").parts)
         if parts[-1] == "__init__":
             parts = parts[:-1]
