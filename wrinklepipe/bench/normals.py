@@ -27,6 +27,8 @@ from pathlib import Path
 import etcpak
 import ispc_texcomp
 import numpy as np
+import OpenImageIO as oiio
+import pygltflib
 import quicktex
 import quicktex.s3tc.bc1 as quicktex_bc1
 import quicktex.s3tc.bc3 as quicktex_bc3
@@ -35,8 +37,15 @@ import texture2ddecoder
 
 from wrinklepipe import codec
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark
+from wrinklepipe.demo import character
+from wrinklepipe.io.images import write_image
+from wrinklepipe.model import height_to_normal
 from wrinklepipe.normals import bc4
 from wrinklepipe.normals import compress as cmp
+from wrinklepipe.normals import encode as enc
+from wrinklepipe.normals._chunks import threads as _threads
+from wrinklepipe.normals.read import ReadOptions, read_normal_map
+from wrinklepipe.normals.resample import resize
 from wrinklepipe.paths import ROOT
 
 SIZE = 4096
@@ -57,10 +66,6 @@ def bench_map(size: int) -> np.ndarray:
     The demo's 512^2 wrinkle and pore heights magnified to ``size`` (so the slope statistics
     match a real wrinkle map: folds, pores, flat areas), plus fine seeded noise.
     """
-    from wrinklepipe.demo import character
-    from wrinklepipe.model import height_to_normal
-    from wrinklepipe.normals.resample import resize
-
     base = min(size, 512)
     d = character.generate(base)
     h = (d.base_height + d.wrinkle_heights[1]).astype(np.float32)
@@ -76,9 +81,6 @@ def _helmet_texels(tmp: Path) -> np.ndarray | None:
     glb = HELMET / "glTF-Binary" / "DamagedHelmet.glb"
     if not glb.exists():
         return None
-    import OpenImageIO as oiio
-    import pygltflib
-
     g = pygltflib.GLTF2().load(str(glb))
     mat = next(m for m in g.materials if m.normalTexture is not None)
     img = g.images[g.textures[mat.normalTexture.index].source]
@@ -249,12 +251,6 @@ def _format_quality(res: BenchResult, q: np.ndarray, ref: np.ndarray) -> None:
 
 @benchmark("normals", "BC5 vs exhaustive/etcpak/quicktex/ispc on 256^2 crops; 4096^2 fused path")
 def bench_normals(quick: bool) -> BenchResult:
-    from wrinklepipe.demo import character
-    from wrinklepipe.io.images import write_image
-    from wrinklepipe.normals import encode as enc
-    from wrinklepipe.normals._chunks import threads as _threads
-    from wrinklepipe.normals.read import ReadOptions, read_normal_map
-
     size = QUICK_SIZE if quick else SIZE
     crop = 64 if quick else 256
     repeat = 2 if quick else 3

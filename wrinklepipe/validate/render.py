@@ -30,6 +30,7 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.drivers.poses import DriverPose, driver_poses
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents
+from wrinklepipe.io.package import WeightCurves
 from wrinklepipe.shading import glsl
 from wrinklepipe.shading.setup import MaskEntry, ShaderSetup
 from wrinklepipe.validate import gl as glw
@@ -447,8 +448,6 @@ def render_poses(inp: ValidationInput) -> list[DriverPose]:
     input's curves; curves known only by their values are keyed by frame index)."""
     curves = list(inp.curves)
     if not curves:
-        from wrinklepipe.io.package import WeightCurves
-
         curves = [
             WeightCurves(name, np.arange(len(v), dtype=np.float32), np.asarray(v, np.float32))
             for name, v in sorted(inp.weight_curves.items())
