@@ -7,6 +7,7 @@ Khronos validator, glTF-Transform's inspect and ``inspect --diff``."""
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import shutil
@@ -16,6 +17,7 @@ import gltf_reference as ref
 import numpy as np
 import pytest
 from passthrough import EXTENSION, WRINKLE_ATTRIBUTES, compare
+from PIL import Image
 from test_document_inspect import GLTF_TRANSFORM, gltf_transform_inspect
 
 from wrinklepipe.cli import main
@@ -302,3 +304,57 @@ def test_blendshapes_driver_renders_its_wrinkled_poses_and_frames_the_face(conve
     # area over its bounding square is pi / 4, less the framing margin)
     assert rep.render["covered_pixels"] / rep.render["size"] ** 2 > 0.5
     assert rep.counts.get("error", 0) == 0
+
+
+@pytest.fixture(scope="module")
+def exported(converted, tmp_path_factory):
+    """The converted avatar exported for Godot (base kept in the glTF) and Unreal (base dropped:
+    it ships as a DirectX DDS of its own)."""
+    out, _ = converted
+    root = tmp_path_factory.mktemp("avatar-export")
+    for engine in ("godot", "unreal"):
+        assert main(["export", str(out), "--engine", engine, "-o", str(root / engine)]) == 0
+    return root
+
+
+def test_engine_export_is_the_whole_avatar_less_the_extension(source, exported):
+    src = source.parent / "avatar.glb"
+    gltf = exported / "godot" / "avatar.gltf"
+    added = compare(src, gltf, base_replaced=False)  # every source element, equal data
+    assert added.attributes == {(0, 0): WRINKLE_ATTRIBUTES}
+    assert added.materials == [] and (added.textures, added.images) == (0, 0)
+    assert added.animations == ["blendshapes"]  # the morph weights stay; the pointer went
+    doc = json.loads(gltf.read_text())
+    assert EXTENSION not in json.dumps(doc)
+    assert doc["extensionsUsed"] == (ref.load(src).extensionsUsed or [])  # no pointer left
+    assert [c["target"]["path"] for c in doc["animations"][1]["channels"]] == ["weights"]
+    setup = json.loads((exported / "godot" / "wrinkle_setup.json").read_text())
+    # Skin's normal map is embedded in the buffer: the shader's base is it, as a PNG beside
+    assert setup["base"]["file"] == "textures/base_normal.png"
+    g = ref.load(src)
+    skin_normal = ref.image_bytes(g, src, g.textures[g.materials[0].normalTexture.index].source)
+    with (
+        Image.open(io.BytesIO(skin_normal)) as a,
+        Image.open(exported / "godot" / setup["base"]["file"]) as b,
+    ):
+        np.testing.assert_array_equal(np.asarray(a.convert("RGB")), np.asarray(b.convert("RGB")))
+    # Unreal: the same character without Skin's normalTexture (its base is the DirectX DDS)
+    g0 = ref.load(src)
+    g1 = ref.load(exported / "unreal" / "avatar.gltf")
+    assert [m.name for m in g1.meshes] == [m.name for m in g0.meshes]
+    assert g1.materials[0].normalTexture is None and len(g1.images) == len(g0.images) - 1
+    for m0, m1 in zip(g0.materials[1:], g1.materials[1:]):
+        assert m1.name == m0.name and m1.doubleSided == m0.doubleSided
+        i0, i1 = m0.pbrMetallicRoughness.baseColorTexture, m1.pbrMetallicRoughness.baseColorTexture
+        b0 = ref.image_bytes(g0, src, g0.textures[i0.index].source)
+        assert (
+            ref.image_bytes(g1, exported / "unreal" / "avatar.gltf", g1.textures[i1.index].source)
+            == b0
+        )
+
+
+@pytest.mark.skipif(not khronos.available(), reason="Khronos validator not installed")
+@pytest.mark.parametrize("engine", ["godot", "unreal"])
+def test_engine_export_of_the_avatar_passes_the_khronos_validator(exported, engine):
+    report = khronos.validate_gltf(exported / engine / "avatar.gltf")
+    assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:5]

@@ -237,3 +237,21 @@ def test_robot_unused_and_ambiguous_materials_are_refused(tmp_path, capsys):
         err = " ".join(capsys.readouterr().err.split())
         assert code == 2 and not out.exists(), err
         assert message in err
+
+
+@needs_robot
+def test_robot_engine_export_keeps_every_part(robot, tmp_path):
+    out, _ = robot
+    assert main(["export", str(out), "--engine", "unreal", "-o", str(tmp_path / "ue")]) == 0
+    gltf = tmp_path / "ue" / "robot.gltf"
+    added = compare(ROBOT, gltf)  # every source element with equal data (pygltflib + struct)
+    assert added.attributes == {HEAD_MAIN: WRINKLE_ATTRIBUTES | {"TEXCOORD_0"}}
+    assert added.clones == {3: 1} and added.materials == []  # the clone, without the extension
+    assert (added.textures, added.images) == (0, 0)  # Unreal's base ships as a DirectX DDS
+    assert added.animations == ["blendshapes"]  # the Head's morph weights, no pointer channel
+    g = ref.load(gltf)
+    assert (len(g.meshes), len(g.materials), len(g.skins), len(g.animations)) == (14, 4, 2, 15)
+    assert not (g.extensionsUsed or []) and g.materials[3].normalTexture is None
+    if khronos.available():
+        report = khronos.validate_gltf(gltf)
+        assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:5]

@@ -324,7 +324,7 @@ def _decode_draco(doc: Document) -> set[int]:
         if decompress.DRACO not in decoded:
             decoded.append(decompress.DRACO)
     if draco_views:
-        remap = _drop_views(doc, draco_views)
+        remap = drop_views(doc, draco_views)
         new_views = {remap[v] for v in new_views}
     return new_views
 
@@ -355,7 +355,7 @@ def _true_bounds(doc: Document, views: set[int]) -> None:
         )
 
 
-def _drop_views(doc: Document, drop: set[int]) -> dict[int, int]:
+def drop_views(doc: Document, drop: set[int]) -> dict[int, int]:
     """Remove unused bufferViews and renumber the references (accessors, sparse, images);
     return the old -> new index map."""
     keep = [i for i in range(len(doc.views)) if i not in drop]
@@ -366,7 +366,8 @@ def _drop_views(doc: Document, drop: set[int]) -> dict[int, int]:
     def fix(obj: dict[str, Any]) -> None:
         if "bufferView" in obj:
             if obj["bufferView"] in drop:
-                raise doc.err("a Draco bitstream bufferView is also used by other data")
+                i = obj["bufferView"]
+                raise doc.err(f"bufferView {i} is removed but still used by other data")
             obj["bufferView"] = remap[obj["bufferView"]]
 
     for a in doc.array("accessors"):

@@ -67,10 +67,7 @@ def pack(
             length += pad
         v["buffer"] = 0
         v["byteLength"] = len(data)
-        if length:
-            v["byteOffset"] = length
-        else:
-            v.pop("byteOffset", None)
+        v["byteOffset"] = length  # always written, as the package writer does
         chunks.append(data)
         length += len(data)
     data = b"".join(chunks)

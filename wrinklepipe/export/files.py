@@ -18,6 +18,7 @@ import numpy as np
 
 from wrinklepipe import codec
 from wrinklepipe.atomic import dumps_json
+from wrinklepipe.document.model import Document
 from wrinklepipe.errors import input_error
 from wrinklepipe.export import readme
 from wrinklepipe.export.gltf import plain_gltf
@@ -51,6 +52,17 @@ class Export:
     notes: list[str] = field(default_factory=list)
     setup: dict[str, Any] = field(default_factory=dict)
     names: list[str] = field(default_factory=list)  # per region: parameter / curve name
+    #: the converted glTF as a document: the mesh file is then the whole character
+    document: Document | None = None
+    mesh_files: dict[str, bytes] = field(default_factory=dict)
+
+
+def _add_mesh(ex: Export, keep_normal: bool) -> str:
+    """The engine's glTF into ``ex.files`` (:func:`plain_gltf`); returns the base image's path."""
+    mesh, base_uri = plain_gltf(ex.pkg, keep_normal, ex.document)
+    ex.files.update(mesh)
+    ex.mesh_files = mesh
+    return base_uri
 
 
 def _names(regions: list[str], style: str) -> list[str]:
@@ -130,8 +142,7 @@ def _same_size(ex: Export, role: str, names: list[str]) -> None:
 def _unreal(ex: Export) -> None:
     pkg = ex.pkg
     meta = pkg.meta
-    mesh, _ = plain_gltf(pkg, keep_normal=False)
-    ex.files.update(mesh)
+    _add_mesh(ex, keep_normal=False)
     ex.notes.append("normal maps converted to DirectX (-Y): y negated in each map's value mapping")
     base = next(t for t in pkg.textures if t.role == "base_normal")
     res = block_dds(pkg, base, "bc5", BUDGET)
@@ -219,8 +230,7 @@ def _arrays(ex: Export) -> ShaderSetup:
     """Unity and Godot: the glTF with its base normal map, states and masks as array strips."""
     pkg = ex.pkg
     meta = pkg.meta
-    mesh, base_uri = plain_gltf(pkg, keep_normal=True)
-    ex.files.update(mesh)
+    base_uri = _add_mesh(ex, keep_normal=True)
     states = [s["texture"] for s in meta["states"]]
     masks = meta["masks"]["textures"]
     _same_size(ex, "state", states)
@@ -265,8 +275,7 @@ def _blender(ex: Export) -> None:
     pkg = ex.pkg
     meta = pkg.meta
     ex.names = ["wp_" + n for n in _names([r["name"] for r in meta["regions"]], "identifier")]
-    mesh, base_uri = plain_gltf(pkg, keep_normal=True)
-    ex.files.update(mesh)
+    base_uri = _add_mesh(ex, keep_normal=True)
     ex.setup["base"] = {"file": base_uri, "format": "png"}
     ex.setup["states"] = []
     for s in meta["states"]:
@@ -293,14 +302,17 @@ def _blender(ex: Export) -> None:
 _ENGINES = {"unreal": _unreal, "unity": _unity, "godot": _godot, "blender": _blender}
 
 
-def export_files(pkg: WrinklePackage, engine: str) -> tuple[dict[str, bytes], list[str]]:
-    """The files of an engine export as ``{relative path: bytes}`` and the notes."""
+def export_files(
+    pkg: WrinklePackage, engine: str, document: Document | None = None
+) -> tuple[dict[str, bytes], list[str]]:
+    """The files of an engine export as ``{relative path: bytes}`` and the notes. ``document``:
+    the converted glTF as a document (the mesh file is then the whole character)."""
     preset = ENGINE_PRESETS[engine]
     work = rgba_masks(pkg) if engine == "unreal" else pkg
     work = to_8bit_states(work) if engine in ("unity", "godot") else work
     if preset.convention == "directx":
         work = to_directx(work)
-    ex = Export(work, preset)
+    ex = Export(work, preset, document=document)
     if work is not pkg and engine == "unreal" and work.meta["masks"] != pkg.meta["masks"]:
         ex.notes.append("masks: the array layout repacked four to an RGBA texture (exact)")
     if engine in ("unity", "godot") and any(
@@ -308,6 +320,13 @@ def export_files(pkg: WrinklePackage, engine: str) -> tuple[dict[str, bytes], li
     ):
         ex.notes.append("states: 16-bit maps re-encoded at 8 bits (the engine imports PNG at 8)")
     _ENGINES[engine](ex)
+    for rel, data in ex.mesh_files.items():
+        if ex.files[rel] != data:
+            raise input_error(
+                pkg.name,
+                f"the character's file {rel!r} has the name of a file the {engine} export "
+                "writes; rename that image in the source",
+            )
     setup: ShaderSetup = ex.setup.pop("shader")
     shader = setup.to_json()
     shader["slotFlat"] = [s for slots in shader["slots"] for s in slots]

@@ -12,8 +12,12 @@ from __future__ import annotations
 from typing import Any
 
 from wrinklepipe.atomic import dumps_json
+from wrinklepipe.document.model import Document
+from wrinklepipe.document.package import wrinkled_materials
+from wrinklepipe.document.plain import normal_image, plain_document
+from wrinklepipe.document.write import document_files, mime_type
 from wrinklepipe.io.gltf_write import gltf_document
-from wrinklepipe.io.package import EXTENSION, WrinklePackage
+from wrinklepipe.io.package import EXTENSION, WrinklePackage, png_bytes
 
 POINTER = "KHR_animation_pointer"
 
@@ -76,9 +80,14 @@ def _keep_textures(
     return {u: b for u, b in images.items() if u in uris}
 
 
-def plain_gltf(pkg: WrinklePackage, keep_normal: bool = True) -> tuple[dict[str, bytes], str]:
+def plain_gltf(
+    pkg: WrinklePackage, keep_normal: bool = True, document: Document | None = None
+) -> tuple[dict[str, bytes], str]:
     """``{relative path: bytes}`` of ``NAME.gltf`` + ``NAME.bin`` (+ the base normal PNG when
-    ``keep_normal``) and the base image's path (empty without it)."""
+    ``keep_normal``) and the base image's path (empty without it). ``document``: the converted
+    glTF as a document (then the whole character, see the module doc)."""
+    if document is not None:
+        return _plain_document_files(pkg, document, keep_normal)
     doc, data, images = gltf_document(pkg)
     doc["buffers"][0]["uri"] = f"{pkg.name}.bin"
     for m in doc.get("materials", []):
@@ -94,3 +103,27 @@ def plain_gltf(pkg: WrinklePackage, keep_normal: bool = True) -> tuple[dict[str,
     files = {f"{pkg.name}.gltf": dumps_json(doc).encode("utf-8"), f"{pkg.name}.bin": data}
     files.update(images)
     return files, next(iter(images), "")
+
+
+def _plain_document_files(
+    pkg: WrinklePackage, document: Document, keep_normal: bool
+) -> tuple[dict[str, bytes], str]:
+    wrinkled = wrinkled_materials(document)
+    doc = plain_document(document, keep_normal)
+    files = document_files(doc, pkg.name, glb=False)
+    if not keep_normal:
+        return files, ""
+    image = normal_image(doc, wrinkled[0]) if wrinkled else None
+    if image is not None and image in doc.images:
+        uri = doc.images[image].uri
+        if mime_type(files[uri], uri) in ("image/png", "image/jpeg"):
+            return files, uri  # the material's own file, as the glTF references it
+    # embedded in the buffer, or a format an engine's texture importer does not read (KTX2,
+    # WebP): the package's base as a PNG beside the glTF
+    uri, k = "textures/base_normal.png", 1
+    while uri in files:
+        k += 1
+        uri = f"textures/base_normal_{k}.png"
+    base = next(t for t in pkg.textures if t.role == "base_normal")
+    files[uri] = png_bytes(base.pixels)
+    return files, uri

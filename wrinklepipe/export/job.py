@@ -5,10 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from wrinklepipe.atomic import staged_folder, write_bytes
+from wrinklepipe.document.model import read_document
 from wrinklepipe.errors import input_error
 from wrinklepipe.export.files import export_files
 from wrinklepipe.export.presets import ENGINE_PRESETS
-from wrinklepipe.sources.package import read_package
+from wrinklepipe.sources.package import read_package, written_file
 
 
 def export(
@@ -19,7 +20,10 @@ def export(
         raise input_error(engine, f"unknown engine; expected one of {', '.join(ENGINE_PRESETS)}")
     source = Path(source)
     pkg = read_package(source)
-    files, notes = export_files(pkg, engine)
+    written = written_file(source)
+    # a glTF output is exported whole (every part of a character converted in place)
+    document = read_document(written) if written.suffix.lower() in (".gltf", ".glb") else None
+    files, notes = export_files(pkg, engine, document)
     inputs = [source] if source.is_dir() else [source, source.parent]
     try:
         with staged_folder(output, force=force, inputs=inputs) as tmp:
