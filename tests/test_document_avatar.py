@@ -358,3 +358,72 @@ def test_engine_export_is_the_whole_avatar_less_the_extension(source, exported):
 def test_engine_export_of_the_avatar_passes_the_khronos_validator(exported, engine):
     report = khronos.validate_gltf(exported / engine / "avatar.gltf")
     assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:5]
+
+
+def _usd_errors(stage) -> list[str]:
+    from pxr import UsdValidation
+
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    return [
+        e.GetMessage()
+        for e in UsdValidation.ValidationContext(validators).Validate(stage)
+        if e.GetType() == UsdValidation.ValidationErrorType.Error
+    ]
+
+
+def test_usd_output_carries_the_whole_avatar(source, converted):
+    from pxr import Usd, UsdGeom, UsdShade, UsdSkel
+
+    out, report = converted
+    src = source.parent / "avatar.glb"
+    g = ref.load(src)
+    stage = Usd.Stage.Open(str(out / "avatar.usda"))
+    assert _usd_errors(stage) == []
+    meshes = {p.GetName(): p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)}
+    assert sorted(meshes) == sorted(m.name for m in g.meshes)  # Head = the wrinkle layer's
+    # every part: its points, triangles, UVs (v flipped), material (double-sided flag kept)
+    for m in g.meshes[1:]:
+        prim = meshes[m.name]
+        gm = UsdGeom.Mesh(prim)
+        p = m.primitives[0]
+        np.testing.assert_array_equal(
+            np.asarray(gm.GetPointsAttr().Get()), ref.accessor(g, src, p.attributes.POSITION)
+        )
+        idx = ref.accessor(g, src, p.indices).reshape(-1)
+        np.testing.assert_array_equal(np.asarray(gm.GetFaceVertexIndicesAttr().Get()), idx)
+        uv = ref.accessor(g, src, p.attributes.TEXCOORD_0)
+        st = np.asarray(UsdGeom.PrimvarsAPI(gm).GetPrimvar("st").Get())
+        np.testing.assert_allclose(st, np.stack([uv[:, 0], 1 - uv[:, 1]], -1), atol=1e-7)
+        mat = g.materials[p.material]
+        bound, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        assert bound.GetPrim().GetName() == mat.name
+        assert gm.GetDoubleSidedAttr().Get() == bool(mat.doubleSided)
+        # the base colour texture: the source image, byte for byte
+        tex = UsdShade.Shader(bound.GetPrim().GetChild("baseColorTexture"))
+        file = tex.GetInput("file").Get().path
+        image = g.textures[mat.pbrMetallicRoughness.baseColorTexture.index].source
+        assert (out / file).read_bytes() == ref.image_bytes(g, src, image)
+    # the skeleton: the 20 joints, their hierarchy, rest pose (node TRS) and bind pose (IBM)
+    skel = UsdSkel.Skeleton(next(p for p in stage.Traverse() if p.GetName() == "AvatarSkin"))
+    topo = UsdSkel.Topology(skel.GetJointsAttr().Get())
+    joints = list(g.skins[0].joints)
+    parents = {c: i for i, n in enumerate(g.nodes) for c in n.children or []}
+    assert [joints[k] if k >= 0 else None for k in topo.GetParentIndices()] == [
+        parents.get(j) if parents.get(j) in joints else None for j in joints
+    ]
+    rest = np.asarray(skel.GetRestTransformsAttr().Get()).transpose(0, 2, 1)
+    world_parents = {i: parents.get(i) for i in range(len(g.nodes))}
+    for k, j in enumerate(joints):
+        local = _world(g.nodes, j, {**world_parents, j: None})
+        want = local if parents.get(j) in joints else _world(g.nodes, j, world_parents)
+        np.testing.assert_allclose(rest[k], want, atol=1e-6)
+    ibm = ref.accessor(g, src, g.skins[0].inverseBindMatrices).reshape(-1, 4, 4)
+    bind = np.asarray(skel.GetBindTransformsAttr().Get())
+    np.testing.assert_allclose(bind, np.linalg.inv(ibm), atol=1e-5)  # both row-major here
+    # Teeth's morph target: its name and deltas
+    teeth = UsdSkel.BindingAPI(meshes["Teeth"])
+    assert list(teeth.GetBlendShapesAttr().Get()) == ["jawOpen"]
+    shape = UsdSkel.BlendShape(stage.GetPrimAtPath(teeth.GetBlendShapeTargetsRel().GetTargets()[0]))
+    delta = ref.accessor(g, src, g.meshes[2].primitives[0].targets[0]["POSITION"])
+    np.testing.assert_array_equal(np.asarray(shape.GetOffsetsAttr().Get()), delta)
+    assert any("animation(s) of the source are not carried" in n for n in report["notes"])

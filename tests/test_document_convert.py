@@ -255,3 +255,82 @@ def test_robot_engine_export_keeps_every_part(robot, tmp_path):
     if khronos.available():
         report = khronos.validate_gltf(gltf)
         assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:5]
+
+
+def _gltf_worlds(g) -> dict[int, np.ndarray]:
+    """Node world matrices from pygltflib's TRS / matrix (column vectors)."""
+    parents = {c: i for i, n in enumerate(g.nodes) for c in n.children or []}
+
+    def local(n) -> np.ndarray:
+        if n.matrix is not None:
+            return np.asarray(n.matrix, np.float64).reshape(4, 4).T
+        x, y, z, w = n.rotation or [0, 0, 0, 1]
+        r = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+            ]
+        )
+        m = np.eye(4)
+        m[:3, :3] = r * np.asarray(n.scale or [1, 1, 1])
+        m[:3, 3] = n.translation or [0, 0, 0]
+        return m
+
+    def world(i: int) -> np.ndarray:
+        return local(g.nodes[i]) if i not in parents else world(parents[i]) @ local(g.nodes[i])
+
+    return {i: world(i) for i in range(len(g.nodes))}
+
+
+@needs_robot
+def test_robot_usd_carries_every_part_at_its_place(robot):
+    from pxr import Usd, UsdGeom, UsdSkel, UsdValidation
+
+    out, _ = robot
+    g = ref.load(ROBOT)
+    stage = Usd.Stage.Open(str(out / "robot.usda"))
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    errors = [
+        e.GetMessage()
+        for e in UsdValidation.ValidationContext(validators).Validate(stage)
+        if e.GetType() == UsdValidation.ValidationErrorType.Error
+    ]
+    assert errors == []
+    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    instanced = sum(len(g.meshes[n.mesh].primitives) for n in g.nodes if n.mesh is not None)
+    assert len(meshes) == instanced  # every primitive: 18 below Scene + the wrinkle layer's
+    # rigid parts sit where the glTF puts them at rest: USD's composed transform of the points
+    # equals pygltflib's node world matrix applied to the accessor (struct) positions
+    worlds = _gltf_worlds(g)
+    cache = UsdGeom.XformCache()
+    checked = 0
+    for i, n in enumerate(g.nodes):
+        if n.mesh is None or n.skin is not None:
+            continue
+        for k, p in enumerate(g.meshes[n.mesh].primitives):
+            if (n.mesh, k) == HEAD_MAIN:
+                continue
+            name = g.meshes[n.mesh].name + (f"_{k}" if len(g.meshes[n.mesh].primitives) > 1 else "")
+            prim = next(
+                m
+                for m in meshes
+                if (m.GetDisplayName() or m.GetName()) == name
+                and (m.GetParent().GetDisplayName() or m.GetParent().GetName()) == n.name
+            )
+            m = np.asarray(cache.GetLocalToWorldTransform(prim)).T
+            pts = np.asarray(UsdGeom.Mesh(prim).GetPointsAttr().Get(), np.float64)
+            src = ref.accessor(g, ROBOT, p.attributes.POSITION).astype(np.float64)
+            want = src @ worlds[i][:3, :3].T + worlds[i][:3, 3]
+            np.testing.assert_allclose(pts @ m[:3, :3].T + m[:3, 3], want, atol=1e-4)
+            checked += 1
+    assert checked == 14  # the parts parented to bones; the hands are skinned
+    skels = [UsdSkel.Skeleton(p) for p in stage.Traverse() if p.IsA(UsdSkel.Skeleton)]
+    scene = [s for s in skels if "/Scene/" in str(s.GetPath())]
+    assert [len(s.GetJointsAttr().Get()) for s in scene] == [len(s.joints) for s in g.skins]
+    head = next(m for m in meshes if m.GetName() == "Head_0")
+    assert list(UsdSkel.BindingAPI(head).GetBlendShapesAttr().Get()) == [
+        "Angry",
+        "Surprised",
+        "Sad",
+    ]

@@ -413,15 +413,22 @@ def write_usd(
     path: str | Path,
     options: UsdOptions | None = None,
     write_textures: bool = True,
+    stage: Any = None,
+    extra: dict[str, bytes] | None = None,
 ) -> list[Path]:
-    """Write ``.usda`` / ``.usdc`` (+ the PNGs beside it), or a self-contained ``.usdz``."""
+    """Write ``.usda`` / ``.usdc`` (+ the PNGs beside it), or a self-contained ``.usdz``.
+
+    ``stage``: the package's stage (:func:`build_stage`) with additions (a glTF source's other
+    parts, :func:`wrinklepipe.document.usd_scene.add_scene`); ``extra``: files it references
+    ``{path relative to the layer: bytes}``, written beside the layer or packed into the usdz."""
     opt = options or UsdOptions()
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".usda", ".usdc", ".usd", ".usdz"):
         raise input_error(path, "USD output must end in .usda, .usdc, .usd or .usdz")
     check_not_input(path)
-    stage = build_stage(pkg, opt)
+    stage = build_stage(pkg, opt) if stage is None else stage
+    extra = extra or {}
     written: list[Path] = []
     if suffix == ".usda":
         text = stage.GetRootLayer().ExportToString()
@@ -432,8 +439,11 @@ def write_usd(
         tdir = path.parent / opt.texture_dir if opt.texture_dir else path.parent
         for t in pkg.textures:
             written.append(write_bytes(tdir / f"{t.name}.png", png_bytes(t.pixels)))
+    if suffix != ".usdz":
+        for rel, data in sorted(extra.items()):
+            written.append(write_bytes(path.parent / rel, data))
     if suffix == ".usdz":
-        written.append(_write_usdz(stage, pkg, path, opt))
+        written.append(_write_usdz(stage, pkg, path, opt, extra))
     return written
 
 
@@ -476,7 +486,9 @@ def usdz_bytes(entries: list[tuple[str, bytes]]) -> bytes:
     return buf.getvalue()
 
 
-def _write_usdz(stage: Any, pkg: WrinklePackage, path: Path, opt: UsdOptions) -> Path:
+def _write_usdz(
+    stage: Any, pkg: WrinklePackage, path: Path, opt: UsdOptions, extra: dict[str, bytes]
+) -> Path:
     """A usdz holding a usdc root layer and the PNGs it references."""
     with tempfile.TemporaryDirectory(prefix="wrinklepipe-usdz-") as work:
         layer_path = Path(work) / f"{path.stem}.usdc"
@@ -486,4 +498,5 @@ def _write_usdz(stage: Any, pkg: WrinklePackage, path: Path, opt: UsdOptions) ->
     for t in pkg.textures:
         rel = f"{opt.texture_dir}/{t.name}.png" if opt.texture_dir else f"{t.name}.png"
         entries.append((rel, png_bytes(t.pixels)))
+    entries += sorted(extra.items())
     return write_bytes(path, usdz_bytes(entries))

@@ -18,11 +18,12 @@ from typing import Any
 
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.document.model import Document
+from wrinklepipe.document.usd_scene import add_scene
 from wrinklepipe.document.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
 from wrinklepipe.document.write import document_files
 from wrinklepipe.io.gltf_write import glb_bytes, gltf_document
 from wrinklepipe.io.package import WrinklePackage, png_bytes
-from wrinklepipe.io.usd_write import write_usd
+from wrinklepipe.io.usd_write import build_stage, write_usd
 from wrinklepipe.normals.copies import files as copy_files
 from wrinklepipe.normals.copies import records as copy_records
 from wrinklepipe.outputs.compression import compressed_copies
@@ -93,14 +94,35 @@ def build_outputs(
 
 
 def write_folder(
-    folder: Path, files: dict[str, bytes], pkg: WrinklePackage, usd_format: str = "usda"
-) -> None:
+    folder: Path,
+    files: dict[str, bytes],
+    pkg: WrinklePackage,
+    usd_format: str = "usda",
+    source: tuple[Document, WrinkleTarget] | None = None,
+) -> list[str]:
     """Write ``files`` (sorted) under ``folder``, then ``NAME.usda`` and, when ``usd_format`` is
-    ``usdc`` or ``usdz``, that layer too (textures are the PNGs already in ``files``)."""
-    for rel, data in sorted(files.items()):
+    ``usdc`` or ``usdz``, that layer too (textures are the PNGs already in ``files``).
+    ``source``: a glTF source document, whose other parts the USD layers carry too
+    (:func:`wrinklepipe.document.usd_scene.add_scene`); returns notes on what USD cannot hold."""
+    stage = build_stage(pkg)
+    extra: dict[str, bytes] = {}
+    notes: list[str] = []
+    if source is not None:
+        skip = {(r.mesh, r.primitive) for r in source[1].refs}
+        extra, notes = add_scene(
+            stage, stage.GetDefaultPrim().GetPath(), source[0], skip, "textures"
+        )
+    for rel, data in sorted({**files, **extra}.items()):
         write_bytes(folder / rel, data)
     usd_names = [f"{pkg.name}.usda"] + (
         [f"{pkg.name}.{usd_format}"] if usd_format != "usda" else []
     )
     for u in usd_names:
-        write_usd(pkg, folder / u, write_textures=False)
+        write_usd(
+            pkg,
+            folder / u,
+            write_textures=False,
+            stage=stage,
+            extra=extra if u.endswith(".usdz") else None,
+        )
+    return notes

@@ -136,7 +136,7 @@ def convert(
                 )
             notes += n
             read = input_rows(manifest.root, manifest.input_files)
-            write_folder(tmp, files, pkg, opt.usd_format)
+            notes += write_folder(tmp, files, pkg, opt.usd_format, document)
             with console.status("validating"):
                 validation = (
                     validate_output(tmp, manifest.path, opt.render, html_page=True, source=source)
