@@ -46,7 +46,7 @@ class _Names:
         self.taken: dict[str, set[str]] = {}
 
     def __call__(self, parent: Any, name: str) -> str:
-        from pxr import Tf
+        from pxr import Tf  # deferred: usd-core, USD only
 
         base = Tf.MakeValidIdentifier(name or "unnamed")
         used = self.taken.setdefault(str(parent), set())
@@ -59,7 +59,7 @@ class _Names:
 
 
 def _gf(m: np.ndarray) -> Any:
-    from pxr import Gf
+    from pxr import Gf  # deferred: usd-core, USD only
 
     return Gf.Matrix4d(np.asarray(m, np.float64).T.tolist())  # Gf: row vectors
 
@@ -102,7 +102,7 @@ class _Scene:
         return self.images[src]
 
     def material(self, index: int | None) -> Any:
-        from pxr import Gf, Sdf, UsdGeom, UsdShade
+        from pxr import Gf, Sdf, UsdGeom, UsdShade  # deferred: usd-core, USD only
 
         if index is None:
             return None
@@ -218,7 +218,7 @@ class _Scene:
 
     # -- skins -------------------------------------------------------------------------------
     def skeleton(self, skin: int) -> Any:
-        from pxr import Sdf, UsdGeom, UsdSkel, Vt
+        from pxr import Sdf, UsdGeom, UsdSkel, Vt  # deferred: usd-core, USD only
 
         if skin in self.skeletons:
             return self.skeletons[skin]
@@ -270,7 +270,7 @@ class _Scene:
 
     # -- meshes ------------------------------------------------------------------------------
     def mesh(self, parent: Any, name: str, ref: PrimitiveRef, node: int) -> None:
-        from pxr import Gf, Sdf, UsdGeom, UsdShade, UsdSkel, Vt
+        from pxr import Gf, Sdf, UsdGeom, UsdShade, UsdSkel, Vt  # deferred: usd-core, USD only
 
         doc = self.doc
         prim = doc.primitive(ref)
@@ -366,7 +366,7 @@ class _Scene:
 
     # -- nodes -------------------------------------------------------------------------------
     def node(self, parent: Any, i: int, skip: set[tuple[int, int]], seen: set[int]) -> None:
-        from pxr import UsdGeom
+        from pxr import UsdGeom  # deferred: usd-core, USD only
 
         if i in seen or not 0 <= i < len(self.doc.array("nodes")):
             return
@@ -402,7 +402,7 @@ def add_scene(
     """Add ``doc``'s scene, less the primitives ``skip`` (``(mesh, primitive)``: the wrinkled
     ones, which the wrinkle layer holds), below ``root/Scene``; return the image files it
     references ``{relative path: bytes}`` and notes (see the module doc)."""
-    from pxr import UsdGeom, UsdSkel
+    from pxr import UsdGeom, UsdSkel  # deferred: usd-core, USD only
 
     scene_path = root.AppendChild("Scene")
     if stage.GetPrimAtPath(root).IsA(UsdSkel.Root):
