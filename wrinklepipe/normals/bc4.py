@@ -318,7 +318,12 @@ def _targets(values: np.ndarray) -> np.ndarray:
 def bc4_blocks(values: np.ndarray) -> np.ndarray:
     """BC4 blocks [N, 8] (row-major block order) of one channel ``values`` [H, W] (multiples
     of 4): uint8 texels, or float targets in texel units 0..255."""
-    x = _targets(values)
+    return _encode_blocks(_targets(values))
+
+
+def _encode_blocks(x: np.ndarray) -> np.ndarray:
+    """BC4 blocks [N, 8] of target blocks ``x`` [16, N]. Every step is block-local: a block
+    encodes the same whatever other blocks share the call."""
     n = x.shape[1]
     lo, hi = np.empty(n, _F), np.empty(n, _F)
     for s in range(0, n, BATCH):
@@ -332,14 +337,38 @@ def encode_bc4(values: np.ndarray) -> bytes:
     return bc4_blocks(values).tobytes()
 
 
+#: Maps of at most this many blocks have BC5's two channels encoded in one pass (the same
+#: blocks, the encoder being block-local): the endpoint windows cost a fixed ~30 ms of numpy
+#: calls per pass whatever the block count, which dominates small maps and mip levels.
+ONE_PASS_BLOCKS = 4096
+
+
 def encode_bc5(x: np.ndarray, y: np.ndarray) -> bytes:
     """BC5 data of two channels [H, W] (R = ``x``, G = ``y``; texels or float targets); the two
-    channels are encoded on two threads."""
-    if threads() > 1:
-        bx, by = pool().map(bc4_blocks, (x, y))
+    channels are encoded on two threads (small maps: both in one pass)."""
+    tx, ty = _targets(x), _targets(y)
+    n = tx.shape[1]
+    if threads() > 1 and n > ONE_PASS_BLOCKS:
+        bx, by = pool().map(_encode_blocks, (tx, ty))
     else:
-        bx, by = bc4_blocks(x), bc4_blocks(y)
+        both = _encode_blocks(np.concatenate([tx, ty], axis=1))
+        bx, by = both[:n], both[n:]
     return np.concatenate([bx, by], axis=1).tobytes()
+
+
+def encode_bc5_many(maps: list[tuple[np.ndarray, np.ndarray]]) -> list[bytes]:
+    """:func:`encode_bc5` of each ``(x, y)`` pair (e.g. the levels of a mip chain), every
+    block of every map in one pass: the same bytes as one call each, without the fixed cost
+    of a pass per map."""
+    planes = [_targets(c) for xy in maps for c in xy]
+    if not planes:
+        return []
+    ends = np.cumsum([p.shape[1] for p in planes])
+    blocks = np.split(_encode_blocks(np.concatenate(planes, axis=1)), ends[:-1])
+    return [
+        np.concatenate([blocks[2 * i], blocks[2 * i + 1]], axis=1).tobytes()
+        for i in range(len(maps))
+    ]
 
 
 def reference_bc4(values: np.ndarray, outside: int = 32) -> np.ndarray:
