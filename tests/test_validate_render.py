@@ -34,7 +34,7 @@ def need_gl():
 @pytest.mark.slow
 @pytest.mark.parametrize("encoding", ["pd", "diff", "full"])
 def test_gpu_matches_reference_from_compressed_textures(encoding):
-    inp = load_input(f"demo:{encoding}@512+bc")
+    inp = load_input(f"demo:{encoding}@256+bc")
     assert {t.fmt for t in inp.textures if t.role != "mask"} <= {"bc5", "bc7"}
     report = validate(inp, ValidateOptions(half_res_check=False))
     per_pose = report.metrics["gpu_vs_reference_deg"]
