@@ -67,11 +67,14 @@ def test_folder_contents(converted):
     report = json.loads((converted / "report.json").read_text())
     listed = {o["file"] for o in report["outputs"]}
     assert listed == files - {"report.json", "report.html"}
-    assert report["asset"]["sizes"]["mask_0"] == [16, 16, 4]  # the manifest's mask size
-    # "auto": the smallest power of two whose blended error meets the budget (or full size)
+    # "auto": the smallest power of two within the budget inside the active regions (the
+    # fidelity search's record says which it tried), or full size
     size = report["asset"]["sizes"]["wrinkle_stretch"][0]
     assert size in (16, 32, 64, 128, 256)
     assert report["asset"]["sizes"]["wrinkle_compress"][0] == size
+    fid = report["fidelity"]
+    assert fid["wrinkle"] == size and [fid["mask"]] * 2 == report["asset"]["sizes"]["mask_0"][:2]
+    assert fid["png"]["poses"] and all(p["p99_deg"] <= 2.0 for p in fid["png"]["poses"])
 
 
 def test_validation_ran_clean(converted):

@@ -41,7 +41,7 @@ def test_demo_manifest_loads(src):
     assert len(m.regions) == 8
     assert m.expressions["surprise"]["forehead_inner_l"] == 0.8
     assert m.mesh == (src / "head.glb").resolve()
-    assert m.resolution == {"base": 64, "wrinkle": "auto", "mask": 16}
+    assert m.resolution == {"base": 64, "wrinkle": "auto", "mask": "auto"}
 
 
 def _problems(path: Path) -> list[tuple[str, str, str]]:

@@ -333,7 +333,27 @@ def c_over_budget() -> ValidationInput:
 
 
 def c_wasted() -> ValidationInput:
-    return ship(replace(demo(), budget={"max_mean_deg": 2.0, "max_p99_deg": 8.0}))
+    from wrinklepipe import model
+    from wrinklepipe.normals.resample import resize
+
+    a = demo()
+    # wrinkles with nothing finer than half the map's size: the wrinkle-only slopes at SIZE / 2,
+    # magnified back, over the full base
+    d = model.normal_to_pd(a.states) - model.normal_to_pd(a.base)[None]
+    smooth = np.stack([resize(resize(x, SIZE // 2), SIZE, "triangle") for x in d])
+    states = model.pd_to_normal(model.normal_to_pd(a.base)[None] + smooth)
+    return ship(replace(a, states=states, budget={"max_mean_deg": 2.0, "max_p99_deg": 8.0}))
+
+
+def c_base_flipped_v() -> ValidationInput:
+    a = demo()
+    return ship(replace(a, base=np.ascontiguousarray(a.base[::-1])))  # states keep theirs
+
+
+def c_side_from_name() -> ValidationInput:
+    a = demo()
+    regions = tuple(replace(r, side="center") if r.name == "nose_l" else r for r in a.regions)
+    return ship(replace(a, regions=regions))
 
 
 def c_lr_swapped() -> ValidationInput:
@@ -391,37 +411,45 @@ CASES: list[Case] = [
     ),
     Case(
         "map_z_negative",
-        ["WP-MAP-002", "WP-TEX-005", "WP-TEX-007"],
+        ["WP-FID-003", "WP-MAP-002", "WP-TEX-005", "WP-TEX-007"],
         "a quarter of the base map has z < 0",
         c_z_negative,
     ),
     Case(
         "map_flipped_green",
-        ["WP-MAP-003", "WP-TEX-005", "WP-TEX-007"],
+        [
+            "WP-FID-001",
+            "WP-FID-002",
+            "WP-FID-003",
+            "WP-FID-004",
+            "WP-MAP-003",
+            "WP-TEX-005",
+            "WP-TEX-007",
+        ],
         "base map baked DirectX (green down), declared OpenGL",
         c_flipped_green,
     ),
     Case(
         "map_pd_clipped",
-        ["WP-MAP-004", "WP-TEX-005", "WP-TEX-007"],
+        ["WP-FID-001", "WP-FID-002", "WP-FID-004", "WP-MAP-004", "WP-TEX-005", "WP-TEX-007"],
         "pd maps encoded with scale 1/16: the slopes clip",
         c_pd_clipped,
     ),
     Case(
         "map_diff_bias",
-        ["WP-MAP-005", "WP-TEX-005", "WP-TEX-007"],
+        ["WP-FID-001", "WP-FID-002", "WP-FID-004", "WP-MAP-005", "WP-TEX-005", "WP-TEX-007"],
         "difference maps shifted by 12/255",
         c_diff_bias,
     ),
     Case(
         "map_diff_declared_pd",
-        ["WP-MAP-006", "WP-TEX-005", "WP-TEX-007"],
+        ["WP-FID-001", "WP-FID-002", "WP-FID-004", "WP-MAP-006", "WP-TEX-005", "WP-TEX-007"],
         "difference maps declared as pd",
         c_diff_declared_pd,
     ),
     Case(
         "mask_out_of_range",
-        ["WP-MASK-001", "WP-TEX-007"],
+        ["WP-FID-002", "WP-MASK-001", "WP-TEX-007"],
         "glabella mask painted up to 1.5 in the source (the shipped 8-bit channel clips)",
         c_mask_out_of_range,
     ),
@@ -434,7 +462,7 @@ CASES: list[Case] = [
     Case("mask_empty", ["WP-MASK-003", "WP-TEX-007"], "the chin mask is empty", c_mask_empty),
     Case(
         "mask_swapped_channels",
-        ["WP-MASK-004", "WP-TEX-007"],
+        ["WP-FID-001", "WP-FID-002", "WP-MASK-004", "WP-TEX-007"],
         "channels r (nose_l) and b (glabella) of mask_1 swapped",
         c_mask_swapped,
     ),
@@ -504,14 +532,22 @@ CASES: list[Case] = [
     ),
     Case(
         "tex_srgb_normal",
-        ["WP-RND-001", "WP-TEX-001", "WP-TEX-007"],
+        ["WP-FID-004", "WP-RND-001", "WP-TEX-001", "WP-TEX-007"],
         "base normal map tagged sRGB",
         c_srgb_normal,
     ),
     Case("tex_srgb_mask", ["WP-TEX-002", "WP-TEX-007"], "mask_0 tagged sRGB", c_srgb_mask),
     Case(
         "tex_bc_size",
-        ["WP-RND-004", "WP-TEX-003", "WP-TEX-005", "WP-TEX-007"],
+        [
+            "WP-FID-001",
+            "WP-FID-002",
+            "WP-FID-003",
+            "WP-RND-004",
+            "WP-TEX-003",
+            "WP-TEX-005",
+            "WP-TEX-007",
+        ],
         "BC5 base map declared 126 x 126",
         c_bc_size,
     ),
@@ -523,7 +559,7 @@ CASES: list[Case] = [
     ),
     Case(
         "tex_over_budget",
-        ["WP-TEX-005", "WP-TEX-007"],
+        ["WP-FID-001", "WP-FID-002", "WP-FID-003", "WP-FID-004", "WP-TEX-005", "WP-TEX-007"],
         "BC5/BC7 of the noisy demo base misses a 1 / 4 degree budget",
         c_over_budget,
     ),
@@ -534,6 +570,27 @@ CASES: list[Case] = [
         c_wasted,
     ),
     Case(
+        "map_base_flipped_v",
+        [
+            "WP-FID-001",
+            "WP-FID-002",
+            "WP-FID-004",
+            "WP-FID-006",
+            "WP-MAP-003",
+            "WP-MAP-004",
+            "WP-TEX-005",
+            "WP-TEX-007",
+        ],
+        "the base map flipped vertically relative to the wrinkle states",
+        c_base_flipped_v,
+    ),
+    Case(
+        "mask_side_from_name",
+        ["WP-MASK-006", "WP-TEX-007"],
+        "region nose_l declared center: its name says left",
+        c_side_from_name,
+    ),
+    Case(
         "mask_lr_swapped",
         ["WP-MASK-004", "WP-MASK-005", "WP-TEX-007"],
         "channels r (forehead_outer_l) and g (forehead_outer_r) of mask_0 swapped",
@@ -541,13 +598,21 @@ CASES: list[Case] = [
     ),
     Case(
         "render_leak",
-        ["WP-MASK-004", "WP-RND-002", "WP-TEX-005", "WP-TEX-007"],
+        [
+            "WP-FID-001",
+            "WP-FID-002",
+            "WP-FID-004",
+            "WP-MASK-004",
+            "WP-RND-002",
+            "WP-TEX-005",
+            "WP-TEX-007",
+        ],
         "the glabella channel is also painted over the chin",
         c_leak,
     ),
     Case(
         "render_no_wrinkle",
-        ["WP-RND-003", "WP-TEX-005", "WP-TEX-007"],
+        ["WP-FID-001", "WP-FID-002", "WP-FID-004", "WP-RND-003", "WP-TEX-005", "WP-TEX-007"],
         "wrinkle maps exported flat",
         c_no_wrinkle,
     ),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.io.package import DEFAULT_PNG_LEVEL
@@ -82,14 +83,84 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         emit_json(result.report)
     else:
-        rep = result.report
-        a = rep["asset"]
-        err.print(
-            f"[bold green]wrote[/] {result.output} ({len(rep['outputs']) + 2} files): "
-            f"{len(a['states'])} states, {len(a['regions'])} regions, encoding {a['encoding']} "
-            f"(scale {a['scale']}), {a['vertices']} vertices"
-        )
-        status = rep["validation"].get("status", "")
-        if status:
-            err.print(f"validation: {status}")
+        for line in summary_lines(result.report, result.exit_code, str(result.output)):
+            err.print(line, markup=False, highlight=False, soft_wrap=True)
     return result.exit_code
+
+
+def _fmt(f: str) -> str:
+    return "none (PNG only)" if f == "png" else f
+
+
+def fidelity_table(fid: dict[str, Any], which: str) -> list[str]:
+    """The per-pose fidelity table of report.json's ``fidelity`` record (worst first)."""
+    part = fid.get(which)
+    if not part:
+        return []
+    budget = fid.get("budget" if which == "png" else "compressed_budget", {})
+    limit = ", ".join(f"{k[4:-4]} {v:g}" for k, v in sorted(budget.items()))
+    rows = sorted(part["poses"], key=lambda p: -p["p99_deg"])
+    out = [f"fidelity ({which}, degrees inside each pose's active region; budget {limit}):"]
+    out.append(f"  {'pose':<16}{'mean':>7}{'p99':>7}{'max':>8}")
+    p99 = budget.get("max_p99_deg")
+    mean = budget.get("max_mean_deg")
+    for r in rows:
+        over = (p99 is not None and r["p99_deg"] > p99) or (
+            mean is not None and r["mean_deg"] > mean
+        )
+        out.append(
+            f"  {r['pose']:<16}{r['mean_deg']:7.2f}{r['p99_deg']:7.2f}{r['max_deg']:8.2f}"
+            + ("  over budget" if over else "")
+        )
+    b = part.get("base")
+    if b:
+        out.append(
+            f"  {'base (face)':<16}{b['mean_deg']:7.2f}{b['p99_deg']:7.2f}{b['max_deg']:8.2f}"
+        )
+    return out
+
+
+def summary_lines(rep: dict[str, Any], exit_code: int, where: str = "") -> list[str]:
+    """What convert tells the terminal: what it wrote, the choices and their fidelity, every
+    warning and validation error or warning, and why the exit code is 1."""
+    a = rep["asset"]
+    out = [
+        f"wrote {where + ' ' if where else ''}({len(rep['outputs']) + 2} files): "
+        f"{len(a['states'])} states, "
+        f"{len(a['regions'])} regions, encoding {a['encoding']} (scale {a['scale']}), "
+        f"{a['vertices']} vertices"
+    ]
+    fid = rep.get("fidelity")
+    if fid:
+        out.append(
+            f"chosen: states {fid['wrinkle']}^2, masks {fid['mask']}^2, pd_scale "
+            f"{fid['pd_scale']:g}; compressed copies: base "
+            f"{_fmt(fid['base_format'])}, states {_fmt(fid['state_format'])}"
+        )
+        out += fidelity_table(fid, "png") + fidelity_table(fid, "compressed")
+        out += [f"note: {n}" for n in fid.get("notes", [])]
+    clipped = rep.get("pd_scale", {}).get("clipped_texels") or {}
+    if any(clipped.values()):
+        out.append(
+            "clipped texels (stored at the end of the PD range): "
+            + ", ".join(f"{k} {v}" for k, v in sorted(clipped.items()))
+        )
+    out += [f"warning: {w}" for w in rep.get("warnings", [])]
+    v = rep.get("validation", {})
+    if v.get("status") != "ran":
+        out.append(f"validation: {v.get('reason', v.get('status', 'skipped'))}")
+        return out
+    issues = [i for i in v.get("issues", []) if i.get("severity") in ("error", "warning")]
+    for i in issues:
+        out.append(f"{i['severity']} {i['code']}: {i['message']}")
+    counts = v.get("counts", {})
+    out.append(
+        f"validation: {counts.get('error', 0)} error(s), {counts.get('warning', 0)} warning(s), "
+        f"{counts.get('info', 0)} info (report.json, validation.html)"
+    )
+    if exit_code == 1:
+        codes = sorted({i["code"] for i in issues if i["severity"] == "error"})
+        out.append(
+            f"exit 1: the output was written but validation found errors ({', '.join(codes)})"
+        )
+    return out

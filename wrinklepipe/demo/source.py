@@ -123,7 +123,7 @@ def manifest_text(c: DemoCharacter, size: int) -> str:
         "[resolution]",
         f"base = {size}",
         'wrinkle = "auto"  # the smallest size whose blended error meets the budget',
-        f"mask = {min(max(size // 16, 16), max(size // 4, 4))}",
+        'mask = "auto"  # the smallest mask size within the budget',
         "",
         "[budget]",
         "max_mean_deg = 0.5",

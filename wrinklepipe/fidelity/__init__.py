@@ -23,6 +23,7 @@ from wrinklepipe.fidelity.metric import (
     prepare,
     sample,
     sample_at,
+    sample_masks_at,
 )
 from wrinklepipe.fidelity.stats import Budget, Stats, weighted_quantile, weighted_stats
 
@@ -44,6 +45,7 @@ __all__ = [
     "prepare",
     "sample",
     "sample_at",
+    "sample_masks_at",
     "weighted_quantile",
     "weighted_stats",
 ]

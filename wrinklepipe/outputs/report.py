@@ -104,6 +104,7 @@ def convert_report(
     outputs: list[dict[str, Any]],
     validation: dict[str, Any],
     fidelity: dict[str, Any] | None = None,
+    warnings: list[str] | None = None,
 ) -> dict[str, Any]:
     """report.json: tool and version, what was read, the asset, what the stages did and chose,
     what was written (hashes) and what validation found."""
@@ -116,6 +117,7 @@ def convert_report(
         "asset": asset_summary(pkg),
         "pd_scale": pd_scale,
         "fidelity": fidelity,
+        "warnings": list(warnings or []),
         "decode_error": decode_error,
         "compression": compression,
         "notes": notes,

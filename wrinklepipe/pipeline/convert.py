@@ -153,6 +153,7 @@ def convert(
                     "clipped_texels": clipped_texels(pkg),
                 },
                 fidelity=stage_rep.fidelity,
+                warnings=list(asset.provenance.get("warnings", [])),
                 decode_error=decode_errors(asset, pkg),
                 compression=choices,
                 notes=notes,

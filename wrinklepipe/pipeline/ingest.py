@@ -41,10 +41,21 @@ from wrinklepipe.normals.read import ReadOptions, read_normal_map
 _GLTF = (".gltf", ".glb")
 
 
-def _read_normals(path: Path, convention: str) -> tuple[np.ndarray, list[str]]:
-    """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes (wrinklepipe.normals.read)."""
-    nm = read_normal_map(path, ReadOptions(convention=convention))
+def _read_normals(
+    path: Path, convention: str, stats: dict[str, Any] | None = None, role: str = ""
+) -> tuple[np.ndarray, list[str]]:
+    """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes (wrinklepipe.normals.read);
+    the reader's counts of problem texels go into ``stats[role]``."""
+    o = ReadOptions(convention=convention)
+    nm = read_normal_map(path, o)
     notes = [f"{path.name}: {nm.source_format}, convention {nm.convention}"]
+    notes += [f"{path.name}: {n}" for n in nm.notes if "convention" not in n]
+    if stats is not None:
+        stats[role] = {
+            "file": path.name,
+            "stats": nm.stats.to_json(),
+            "tolerance": o.unit_tolerance,
+        }
     return np.asarray(nm.normals, np.float32), notes
 
 
@@ -54,19 +65,20 @@ def _load_mesh(path: Path) -> Mesh:
 
 
 def read_maps(
-    manifest: Any, base: np.ndarray | None = None
+    manifest: Any, base: np.ndarray | None = None, stats: dict[str, Any] | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """The manifest's maps as read: base ``[H, W, 3]``, wrinkled-face states ``[K, H, W, 3]``
     (unit normals, +Y; wrinkle-only maps get the base added in PD space), masks ``[R, h, w]``,
     and notes on what was read. ``base``: the base map when it does not come from the
-    manifest's ``base`` file (a glTF material's own normalTexture)."""
+    manifest's ``base`` file (a glTF material's own normalTexture). ``stats``: the reader's
+    problem-texel counts per map file."""
     notes: list[str] = []
     if base is None:
-        base, n = _read_normals(manifest.base, manifest.convention)
+        base, n = _read_normals(manifest.base, manifest.convention, stats, "base")
         notes += n
     states = []
     for s in manifest.states:
-        st, n = _read_normals(s.map, manifest.convention)
+        st, n = _read_normals(s.map, manifest.convention, stats, f"state {s.name}")
         notes += n
         if st.shape != base.shape:
             raise input_error(
@@ -174,6 +186,7 @@ def check_masks_on_mesh(masks: np.ndarray, mesh: Mesh, manifest: Any) -> None:
 
 def ingest_all(manifest: Any) -> Ingested:
     """Read every file a manifest names (see the module doc)."""
+    stats: dict[str, Any] = {}
     if manifest.mesh is None:
         raise input_error(
             manifest.path, "the manifest names no mesh; glTF/USD output needs one", "mesh"
@@ -182,13 +195,22 @@ def ingest_all(manifest: Any) -> Ingested:
     if manifest.mesh.suffix.lower() in _GLTF:
         source = read_source_document(manifest)
         mesh = source.mesh
-        base, states, mask_arr, notes = read_maps(manifest, source.base)
+        base, states, mask_arr, notes = read_maps(manifest, source.base, stats)
         notes = source.notes + notes
         check_masks_on_mesh(mask_arr, mesh, manifest)
     else:
-        base, states, mask_arr, notes = read_maps(manifest)
+        base, states, mask_arr, notes = read_maps(manifest, None, stats)
         mesh = _load_mesh(manifest.mesh)
-    asset = _asset(manifest, base, states, mask_arr, mesh)
+    regions, warnings = _regions(manifest)
+    b = stats.get("base", {}).get("stats", {})
+    if b.get("non_unit") or b.get("z_negative"):
+        warnings.append(
+            f"{stats['base']['file']}: {b['non_unit']} of {b['texels']} texels not unit length, "
+            f"{b['z_negative']} with z < 0 (renormalised to be blended and stored)"
+        )
+    asset = _asset(manifest, base, states, mask_arr, mesh, regions)
+    asset.provenance["maps"] = stats
+    asset.provenance["warnings"] = warnings
     if source is not None and source.target.base_texture is not None:
         asset.provenance["base_source"] = "material"
     if source is None:
@@ -203,7 +225,12 @@ def ingest(manifest: Any) -> tuple[WrinkleAsset, list[str]]:
 
 
 def _asset(
-    manifest: Any, base: np.ndarray, states: np.ndarray, mask_arr: np.ndarray, mesh: Mesh
+    manifest: Any,
+    base: np.ndarray,
+    states: np.ndarray,
+    mask_arr: np.ndarray,
+    mesh: Mesh,
+    regions: tuple[Region, ...],
 ) -> WrinkleAsset:
     return WrinkleAsset(
         name=manifest.name,
@@ -211,7 +238,7 @@ def _asset(
         states=states,
         state_names=tuple(s.name for s in manifest.states),
         masks=mask_arr,
-        regions=tuple(Region(r.name, r.side, tuple(r.states)) for r in manifest.regions),
+        regions=regions,
         expressions={e: dict(row) for e, row in manifest.expressions.items()},
         encoding=manifest.encoding,
         policy=manifest.policy,
@@ -225,6 +252,25 @@ def _asset(
             "auto_resolution": sorted(k for k, v in manifest.resolution.items() if v == "auto"),
         },
     )
+
+
+def _regions(manifest: Any) -> tuple[tuple[Region, ...], list[str]]:
+    """The manifest's regions; a region without ``side`` whose name ends in _L / _R (or _left,
+    .r ...) takes the side of its name, with a warning that says so."""
+    raw = manifest.raw.get("regions", []) if isinstance(manifest.raw, dict) else []
+    out, warnings = [], []
+    for i, r in enumerate(manifest.regions):
+        side = r.side
+        given = i < len(raw) and isinstance(raw[i], dict) and "side" in raw[i]
+        named = wm.infer_side(r.name)
+        if not given and named != "center":
+            side = named
+            warnings.append(
+                f"regions[{i}] {r.name!r}: no side given; the name says {named}, so it is "
+                f'{named} (set side = "{named}" to say so, or "center")'
+            )
+        out.append(Region(r.name, side, tuple(r.states)))
+    return tuple(out), warnings
 
 
 def _mask_channel(region: Any) -> np.ndarray:

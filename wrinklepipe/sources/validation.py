@@ -29,6 +29,7 @@ from wrinklepipe.demo import demo_asset
 from wrinklepipe.document.container import split_glb
 from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.fidelity.ship import edge_texels
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import package_from_asset
 from wrinklepipe.io.usd_read import read_usd
@@ -251,6 +252,10 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
     out = []
     for t in inp.textures:
         dds = folder / f"{t.name}.dds"
+        if t.role == "state" and dds.exists() and inp.asset.encoding == "pd" and t.fmt == "rgb8":
+            # the clipped count is a property of the stored texels: count it on the lossless map
+            px = np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, -1)
+            inp.extra.setdefault("pd_edge_texels", {})[t.name] = edge_texels(px)
         if t.role in ("base", "state") and dds.exists():
             img = guard_reader(lambda dds=dds: read_dds(dds), dds, "the DDS file")
             fmt = str(img.format).lower()
@@ -330,7 +335,12 @@ def attach_source(inp: ValidationInput, src: WrinkleAsset, manifest: Path) -> Va
         )
     masks = np.stack([src.masks[names.index(r)] for r in a.region_names])
     inp.asset = replace(
-        a, base=src.base, states=src.states, masks=masks, budget=src.budget or a.budget
+        a,
+        base=src.base,
+        states=src.states,
+        masks=masks,
+        budget=src.budget or a.budget,
+        provenance={**a.provenance, "maps": src.provenance.get("maps", {})},
     )
     inp.has_source = True
     return inp

@@ -59,6 +59,7 @@ AREAS = {
     "MESH": "Mesh, tangents, vertex IDs, morph targets",
     "TEX": "Texture formats, compression and footprint",
     "RND": "Render pass (GPU vs numpy reference)",
+    "FID": "Fidelity: the shipped asset against the full-resolution source",
 }
 
 RULES: tuple[Rule, ...] = (
@@ -135,6 +136,15 @@ RULES: tuple[Rule, ...] = (
         "encoding explains it (e.g. a diff map declared as pd).",
         "Declare the encoding the map was written with, or re-encode it.",
     ),
+    Rule(
+        "WP-MAP-007",
+        "warning",
+        "Problem texels in a source map",
+        "Reading a source normal map found texels that are not unit length (by more than the "
+        "reader's tolerance) or point below the surface (z < 0); they were renormalised to be "
+        "blended and stored, so the shipped map differs from the file there.",
+        "Re-bake or renormalise the source map, or ask for the repair explicitly.",
+    ),
     # --- MASK
     Rule(
         "WP-MASK-001",
@@ -174,6 +184,14 @@ RULES: tuple[Rule, ...] = (
         "A region declared left (the character's left, +X) has most of its mask on the right, "
         "or the other way round.",
         "Mirror the mask, or fix the region's side.",
+    ),
+    Rule(
+        "WP-MASK-006",
+        "warning",
+        "Region side contradicts its name",
+        "A region whose name ends in _L / _R (or _left / _right) has another side, often center "
+        "because ``side`` was left out, so the side check (WP-MASK-005) does not look at it.",
+        "Set ``side`` to the side the name says (left is the character's left), or rename it.",
     ),
     # --- WGT
     Rule(
@@ -329,6 +347,61 @@ RULES: tuple[Rule, ...] = (
         "Render pass skipped",
         "The render pass could not run (no OpenGL 3.3 context, no mesh, or unsupported layout).",
         "Install Mesa's EGL (llvmpipe) or run on a machine with a GPU.",
+    ),
+    # --- FID
+    Rule(
+        "WP-FID-001",
+        "error",
+        "A pose is over the budget against the full-resolution source",
+        "For one pose (an expression at full amount), the blend of the shipped, decoded "
+        "textures differs from the blend of the source maps at full resolution by more than the "
+        "budget (activation-weighted mean / p99 / max degrees inside the pose's active region; "
+        "the compressed budget when base or states are block-compressed).",
+        "Ship the states or masks larger, raise the PD scale if it clips, or use a better "
+        "format; with every size on auto convert picks them.",
+    ),
+    Rule(
+        "WP-FID-002",
+        "warning",
+        "A region is over the budget against the full-resolution source",
+        "Inside one region (its mask, in the pose where it loses most) the shipped blend "
+        "differs from the source's by more than the budget, even when the pose as a whole "
+        "passes.",
+        "Look at the region's heat map: a small crease lost at the shipped size, a mask edge.",
+    ),
+    Rule(
+        "WP-FID-003",
+        "warning",
+        "The base is over the budget against the source base",
+        "The shipped base alone, over the face (the mesh's UV footprint), differs from the "
+        "source base by more than the budget.",
+        "Ship the base larger or in a better format.",
+    ),
+    Rule(
+        "WP-FID-004",
+        "error",
+        "The render is over the budget against the full-resolution source",
+        "On the pixels where a pose is active, the GPU render of the shipped bytes differs from "
+        "the numpy render of the full-resolution source (screen space) by more than the budget.",
+        "See WP-FID-001; the render shows the loss as a viewer sees it.",
+    ),
+    Rule(
+        "WP-FID-006",
+        "error",
+        "Base and states are not of one face (flipped or offset)",
+        "Where every mask is zero a wrinkle state should equal the base; here it differs on a "
+        "large part of the face, as when the base (or the states) is flipped or shifted "
+        "relative to the other.",
+        "Flip or realign the map the message names and convert again.",
+    ),
+    Rule(
+        "WP-FID-007",
+        "warning",
+        "States differ from the base where every mask is zero",
+        "Outside every mask a wrinkle state differs from the base on a large part of the face, "
+        "and no flip or offset of the base explains it: detail that no mask ever shows, or maps "
+        "of another face.",
+        "Check that base and states are of one bake; clear the states outside the wrinkle regions.",
     ),
 )
 

@@ -38,6 +38,7 @@ from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context
 from wrinklepipe.validate.inputs import Texture, ValidationInput
+from wrinklepipe.validate.rules_fidelity import render_fidelity
 
 
 def shader_setup(inp: ValidationInput) -> ShaderSetup:
@@ -552,6 +553,14 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
     ctx.metrics["gpu_vs_reference_deg"] = {
         k: v["gpu_vs_reference_deg"] for k, v in per_pose.items()
     }
+    # fidelity in screen space: the GPU render against the full-resolution source's
+    gpu = {e: fr.normal[cov][:, :3] for e, fr in frames.items() if e is not None}
+    f_issues, f_info = render_fidelity(ctx, uv, gpu, samples.masks)
+    issues += f_issues
+    for e, err in f_info.get("maps", {}).items():
+        emap = np.zeros(cov.shape, np.float32)
+        emap[cov] = err
+        images[f"fidelity_render/{e}"] = emap
     # mask overlay from the UV buffer: shipped masks coloured per region over the neutral render
     overlay = np.zeros(cov.shape + (3,), np.float32)
     rng = np.random.default_rng(7)
@@ -570,7 +579,7 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
         y1, x1 = min(int(cy) + half, cov.shape[0]), min(int(cx) + half, cov.shape[1])
         info["crop"] = [int(x0), int(y0), int(x1), int(y1)]
         for k in list(images):
-            if k.split("/")[0] in ("render", "gpu_error", "change"):
+            if k.split("/")[0] in ("render", "gpu_error", "change", "fidelity_render"):
                 images[k] = images[k][y0:y1, x0:x1]
     if gpu_bad:
         worst = max(gpu_bad, key=lambda x: x[1]["p99"])

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from wrinklepipe import fidelity as fd
 from wrinklepipe import model
+from wrinklepipe.validate import rules_fidelity
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context
@@ -109,18 +111,26 @@ def _half_resolution(ctx: Context, mean_b: float, p99_b: float) -> list[Issue]:
     h, w = ctx.shipped_states[0].shape[:2]
     if h < 8 or w < 8 or h % 2 or w % 2:
         return []
-    base, _, masks = ctx.shipped_on_grid
-    half = []
-    for s in ctx.shipped_states:
-        small = s.reshape(h // 2, 2, w // 2, 2, -1).mean(axis=(1, 3))
-        g = ctx.to_grid(small)
-        if a.encoding in ("full", "composite"):
-            g = model.normalize(g)
-        half.append(g)
-    errs = shipping_errors(ctx, (base, np.stack(half).astype(np.float32), masks))
-    if all(m <= mean_b and p <= p99_b for m, p, _, _ in errs.values()):
-        wasted = sum(len(t.data) for t in texs) * 3 // 4
+    halves = [s.reshape(h // 2, 2, w // 2, 2, -1).mean(axis=(1, 3)) for s in ctx.shipped_states]
+    ref = rules_fidelity.reference(ctx)
+    if ref is not None and ctx.shipped_base is not None and ctx.shipped_masks is not None:
+        # the one measure: the full-resolution source inside each pose's active region
+        fid = fd.measure(ref, ctx.shipped_base, np.stack(halves), ctx.shipped_masks, False)
+        budget, _ = rules_fidelity.budgets(ctx)
+        ok, worst = fid.meets(budget), fid.worst_p99()
+    else:
+        base, _, masks = ctx.shipped_on_grid
+        half = []
+        for small in halves:
+            g = ctx.to_grid(small)
+            if a.encoding in ("full", "composite"):
+                g = model.normalize(g)
+            half.append(g)
+        errs = shipping_errors(ctx, (base, np.stack(half).astype(np.float32), masks))
+        ok = all(m <= mean_b and p <= p99_b for m, p, _, _ in errs.values())
         worst = max(p for _, p, _, _ in errs.values())
+    if ok:
+        wasted = sum(len(t.data) for t in texs) * 3 // 4
         return [
             make_issue(
                 "WP-TEX-006",

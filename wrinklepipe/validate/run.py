@@ -10,6 +10,7 @@ from typing import Any
 from wrinklepipe.validate import (
     render,
     rules_compression,
+    rules_fidelity,
     rules_maps,
     rules_masks,
     rules_mesh,
@@ -27,8 +28,12 @@ CHECKS: tuple[tuple[str, Callable[[Context], list[Issue]]], ...] = (
     ("maps", rules_maps.check_maps),
     ("channel_table", rules_masks.check_channel_table),
     ("masks", rules_masks.check_masks),
+    ("sides", rules_fidelity.check_sides),
     ("weights", rules_weights.check_weights),
     ("mesh", rules_mesh.check_mesh),
+    ("source texels", rules_fidelity.check_source_texels),
+    ("alignment", rules_fidelity.check_alignment),
+    ("fidelity", rules_fidelity.check_fidelity),
     ("compression", rules_compression.check_compression),
     ("footprint", rules_compression.check_footprint),
 )
@@ -119,10 +124,13 @@ def validate(
         r_issues, render_info, images = render.render_pass(ctx)
         issues += r_issues
         ctx.timings["render"] = time.perf_counter() - t0
-    for key in ("shipping_error_maps",):
+    for key, prefix in (
+        ("shipping_error_maps", "shipping_error"),
+        ("fidelity_error_maps", "fidelity_error"),
+    ):
         if key in ctx.metrics:
             for e, m in ctx.metrics.pop(key).items():
-                images[f"shipping_error/{e}"] = m
+                images[f"{prefix}/{e}"] = m
     issues, dropped = cfg.apply(issues)
     issues.sort(key=lambda i: (_RANK[i.severity], i.code, i.pointer, i.message))
     return Report(

@@ -1,0 +1,435 @@
+"""Fidelity rules (WP-FID-*): the shipped asset against the full-resolution source.
+
+They run when the validator knows the source (``has_source``: a manifest, ``--source
+MANIFEST``, convert's own validation), with the one measure of :mod:`wrinklepipe.fidelity`:
+per pose (the expression table at full amount) the blend of the shipped, decoded textures
+against the blend of the source maps at full resolution, on the texels where the pose's
+activation is non-zero, weighted by it. Without a source only the self-consistency rules run.
+
+Also here, because a person would catch them at a glance: base and states misaligned (flipped
+or offset: the wrinkled-minus-base difference spread where every mask is zero, WP-FID-006),
+region sides that contradict the names (WP-MASK-006), and problem texels of the source base
+(WP-MAP-007).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe import fidelity as fd
+from wrinklepipe import model
+from wrinklepipe.masks import infer_side
+from wrinklepipe.normals.compress import angle_deg
+from wrinklepipe.validate import textures as tx
+from wrinklepipe.validate.catalogue import Issue, make_issue
+from wrinklepipe.validate.context import Context, encode_source_states, resize_normals
+
+#: A texel outside every mask "differs" when its state and base normals are this far apart.
+MISALIGNED_DEG = 1.0
+#: ... and the asset is misaligned when more than this fraction of the face outside the masks does.
+MISALIGNED_FRACTION = 0.10
+
+
+def _cache(ctx: Context) -> dict[str, Any]:
+    c = ctx.__dict__.setdefault("_fidelity", {})
+    return c
+
+
+def poses(ctx: Context) -> list[fd.Pose]:
+    """The poses fidelity is judged on: every expression at full amount."""
+    a = ctx.asset
+    return [fd.Pose(e, ctx.weights(e)) for e in sorted(a.expressions)]
+
+
+def budgets(ctx: Context) -> tuple[fd.Budget, str]:
+    """The budget that applies and which one: the compressed copies' when a base or state
+    texture is block-compressed (``compressed_max_*``, else the same), else the budget."""
+    b = ctx.asset.budget or {}
+    mean, p99 = ctx.options.default_budget
+    png = fd.Budget(
+        float(b.get("max_mean_deg", mean)), float(b.get("max_p99_deg", p99)), b.get("max_max_deg")
+    )
+    block = any(t.is_block for t in ctx.inp.textures if t.role in ("base", "state"))
+    if not block:
+        return png, "budget"
+    comp = fd.Budget.from_dict(b, "compressed_")
+    if comp.mean is None and comp.p99 is None and comp.max is None:
+        return png, "budget"
+    return comp, "compressed budget"
+
+
+# ------------------------------------------------------------------------------------------------
+# the measure on the shipped textures
+
+
+def _measurable(ctx: Context) -> bool:
+    a = ctx.asset
+    return bool(
+        ctx.inp.has_source
+        and a.encoding in model.ENCODINGS
+        and a.policy in model.POLICIES
+        and not (a.policy == "signed" and len(a.state_names) != 2)
+        and len(a.states)
+        and a.regions
+        and a.expressions
+    )
+
+
+def footprint(ctx: Context, shape: tuple[int, int]) -> np.ndarray | None:
+    """The mesh's UV footprint on a square grid (None without a mesh with UVs)."""
+    mesh = ctx.asset.mesh
+    if mesh is None or mesh.uvs is None or shape[0] != shape[1]:
+        return None
+    return fd.footprint(mesh.uvs, mesh.indices, shape)
+
+
+def reference(ctx: Context) -> fd.Reference | None:
+    """The full-resolution source prepared for the measure (cached on the context)."""
+    c = _cache(ctx)
+    if "reference" not in c:
+        c["reference"] = None
+        if _measurable(ctx):
+            a = ctx.asset
+            H, W = a.states.shape[1:3]
+            base = resize_normals(a.base, H, W)
+            states = encode_source_states(base, np.asarray(a.states, np.float32), a.encoding)
+            c["reference"] = fd.prepare(
+                base,
+                states,
+                a.masks,
+                poses(ctx),
+                a.region_names,
+                a.encoding,
+                a.policy,
+                footprint(ctx, (H, W)),
+            )
+    return c["reference"]
+
+
+def shipped_fidelity(ctx: Context) -> fd.Fidelity | None:
+    """The shipped textures' fidelity (per pose and region, the base over the face, error maps
+    on the source grid), or None when it cannot be measured."""
+    c = _cache(ctx)
+    if "fidelity" not in c:
+        c["fidelity"] = None
+        ref = reference(ctx)
+        base, states, masks = ctx.shipped_base, ctx.shipped_states, ctx.shipped_masks
+        if ref is not None and base is not None and states is not None and masks is not None:
+            c["fidelity"] = fd.measure(ref, base, np.stack(states), masks, error_maps=True)
+    return c["fidelity"]
+
+
+def check_fidelity(ctx: Context) -> list[Issue]:
+    fid = shipped_fidelity(ctx)
+    if fid is None:
+        return []
+    budget, which = budgets(ctx)
+    where = ctx.inp.pointer("textures")
+    ctx.metrics["fidelity"] = {**fid.to_json(), "budget": _budget_json(budget), "applies": which}
+    ctx.metrics["fidelity_error_maps"] = fid.errors
+    out: list[Issue] = []
+    for p in sorted(fid.over(budget), key=lambda p: -p.overall.p99):
+        o = p.overall
+        region = max(p.regions.items(), key=lambda kv: kv[1].p99, default=None)
+        worst = f"; worst region {region[0]}: p99 {region[1].p99:.2f}" if region else ""
+        out.append(
+            make_issue(
+                "WP-FID-001",
+                f"pose {p.pose!r}: p99 {o.p99:.2f}, mean {o.mean:.2f}, max {o.max:.2f} degrees "
+                f"from the full-resolution source inside its active region ({o.texels} texels), "
+                f"over the {which} ({budget.describe()}){worst}",
+                where,
+                pose=p.pose,
+                p99_deg=round(o.p99, 4),
+                mean_deg=round(o.mean, 4),
+            )
+        )
+    regions: dict[str, tuple[str, fd.Stats]] = {}
+    for p in fid.poses:
+        for r, st in p.regions.items():
+            if r not in regions or st.p99 > regions[r][1].p99:
+                regions[r] = (p.pose, st)
+    for r, (pose, st) in sorted(regions.items()):
+        if not budget.ok(st):
+            out.append(
+                make_issue(
+                    "WP-FID-002",
+                    f"region {r!r}: p99 {st.p99:.2f}, mean {st.mean:.2f} degrees from the "
+                    f"full-resolution source in pose {pose!r} ({st.texels} texels), over the "
+                    f"{which} ({budget.describe()})",
+                    ctx.inp.pointer("masks"),
+                    region=r,
+                    pose=pose,
+                    p99_deg=round(st.p99, 4),
+                )
+            )
+    b = fid.base
+    if b is not None and not budget.ok(b):
+        out.append(
+            make_issue(
+                "WP-FID-003",
+                f"the shipped base differs from the source base over the face by p99 "
+                f"{b.p99:.2f}, mean {b.mean:.2f} degrees ({b.texels} texels), over the {which} "
+                f"({budget.describe()})",
+                ctx.base_tex.where if ctx.base_tex is not None else where,
+                p99_deg=round(b.p99, 4),
+            )
+        )
+    return out
+
+
+def _budget_json(b: fd.Budget) -> dict[str, float]:
+    return {
+        k: v
+        for k, v in (("max_mean_deg", b.mean), ("max_p99_deg", b.p99), ("max_max_deg", b.max))
+        if v is not None
+    }
+
+
+# ------------------------------------------------------------------------------------------------
+# base and states aligned (WP-FID-006)
+
+
+def _outside(masks: np.ndarray, shape: tuple[int, int], fp: np.ndarray | None) -> np.ndarray:
+    """Texels of the ``shape`` grid where every mask is zero (inside the footprint)."""
+    H, W = shape
+    m = np.asarray(masks, np.float32)
+    if m.shape[1:] != (H, W):
+        m = fd.sample_masks_at(m, (H, W), np.arange(H * W)).reshape(-1, H, W)
+    out = ~(m > 0).any(axis=0)
+    return out & fp if fp is not None else out
+
+
+def _spread(base: np.ndarray, states: np.ndarray, outside: np.ndarray) -> float:
+    """Fraction of ``outside`` texels where some state differs from the base."""
+    if not outside.any():
+        return 0.0
+    b = base[outside]
+    far = np.zeros(b.shape[0], bool)
+    for s in states:
+        far |= angle_deg(s[outside], b) > MISALIGNED_DEG
+    return float(far.mean())
+
+
+def estimate_shift(a: np.ndarray, b: np.ndarray) -> tuple[int, int, float]:
+    """Integer ``(dy, dx)`` that best aligns ``b`` onto ``a`` ([H, W], by phase correlation)
+    and the peak's share of the correlation energy (near 1: a clear shift)."""
+    fa = np.fft.rfft2(a - a.mean())
+    fb = np.fft.rfft2(b - b.mean())
+    cross = fa * np.conj(fb)
+    cross /= np.maximum(np.abs(cross), 1e-12)
+    corr = np.fft.irfft2(cross, s=a.shape)
+    i = int(np.argmax(corr))
+    dy, dx = divmod(i, a.shape[1])
+    dy = dy - a.shape[0] if dy > a.shape[0] // 2 else dy
+    dx = dx - a.shape[1] if dx > a.shape[1] // 2 else dx
+    return int(dy), int(dx), float(corr.max())
+
+
+def check_alignment(ctx: Context) -> list[Issue]:
+    """The wrinkled-minus-base difference where every mask is zero: near 0 when base and states
+    are of one face; spread over the face when one is flipped or offset."""
+    a = ctx.asset
+    if ctx.inp.has_source and len(a.states) and a.encoding in model.ENCODINGS:
+        H, W = a.states.shape[1:3]
+        base = resize_normals(a.base, H, W)
+        states = np.asarray(a.states, np.float32)
+        masks = a.masks
+        what = "source"
+    else:
+        sts = ctx.shipped_states
+        if sts is None or ctx.shipped_base is None or a.encoding not in model.ENCODINGS:
+            return []
+        H, W = sts[0].shape[:2]
+        flat = np.arange(H * W)
+        base = model.normalize(fd.sample_at(ctx.shipped_base, (H, W), flat)).reshape(H, W, 3)
+        one = np.ones((1, H, W), np.float32)
+        states = np.stack([model.combine(base, s[None], one, a.encoding) for s in sts])
+        masks = ctx.shipped_masks if ctx.shipped_masks is not None else a.masks
+        what = "shipped"
+    if masks is None or not len(masks):
+        return []
+    fp = footprint(ctx, (H, W))
+    outside = _outside(masks, (H, W), fp)
+    spread = _spread(base, states, outside)
+    ctx.metrics["base_state_spread"] = round(spread, 5)
+    if spread <= MISALIGNED_FRACTION:
+        return []
+    hint = _misalignment(base, states, outside, spread)
+    if hint:
+        return [
+            make_issue(
+                "WP-FID-006",
+                f"the {what} states differ from the base by more than {MISALIGNED_DEG:g} degree "
+                f"on {100 * spread:.1f}% of the face where every mask is zero (a wrinkle map of "
+                f"the same face differs only under its masks); {hint}",
+                ctx.inp.pointer("textures"),
+                spread=round(spread, 4),
+            )
+        ]
+    return [
+        make_issue(
+            "WP-FID-007",
+            f"the {what} states differ from the base by more than {MISALIGNED_DEG:g} degree on "
+            f"{100 * spread:.1f}% of the face where every mask is zero: detail no mask ever shows "
+            "(or maps of another face); no flip or offset explains it",
+            ctx.inp.pointer("textures"),
+            spread=round(spread, 4),
+        )
+    ]
+
+
+def _misalignment(base: np.ndarray, states: np.ndarray, outside: np.ndarray, spread: float) -> str:
+    """What explains a spread difference: a flip of the base (the spread at least halves with
+    it) or an integer offset (phase correlation), else ''."""
+    tries = {
+        "the base flipped vertically (V)": base[::-1],
+        "the base flipped horizontally (U)": base[:, ::-1],
+    }
+    fits = {k: _spread(b, states, outside) for k, b in tries.items()}
+    best = min(fits, key=lambda k: fits[k])
+    if fits[best] < 0.5 * spread:
+        return f"with {best} it would be {100 * fits[best]:.1f}%: one of them is flipped"
+    p = model.normal_to_pd
+    dy, dx, peak = estimate_shift(p(base)[..., 0], p(states[0])[..., 0])
+    if (dy, dx) != (0, 0) and peak > 0.05:
+        shifted = np.roll(base, (-dy, -dx), axis=(0, 1))
+        moved = _spread(shifted, states, outside)
+        if moved < 0.5 * spread:
+            return (
+                f"the base is offset by ({dx}, {dy}) texels (x right, y down) from the states "
+                f"(moved back, {100 * moved:.1f}%): an offset"
+            )
+    return ""
+
+
+# ------------------------------------------------------------------------------------------------
+# sides from names (WP-MASK-006) and the source base's texels (WP-MAP-007)
+
+
+def check_sides(ctx: Context) -> list[Issue]:
+    out = []
+    for r in ctx.asset.regions:
+        named = infer_side(r.name)
+        if named != "center" and r.side != named:
+            out.append(
+                make_issue(
+                    "WP-MASK-006",
+                    f"region {r.name!r}: its name says the character's {named} but its side is "
+                    f"{r.side}"
+                    + (
+                        ": the side check (WP-MASK-005) does not look at it"
+                        if r.side == "center"
+                        else ""
+                    ),
+                    ctx.inp.pointer("meta"),
+                    region=r.name,
+                    named=named,
+                    side=r.side,
+                )
+            )
+    return out
+
+
+def check_source_texels(ctx: Context) -> list[Issue]:
+    """Problem texels counted when the source maps were read (ingest records them)."""
+    maps = ctx.asset.provenance.get("maps", {}) if ctx.inp.has_source else {}
+    out = []
+    for role, entry in sorted(maps.items()):
+        st = entry.get("stats", {})
+        bad = int(st.get("non_unit", 0)), int(st.get("z_negative", 0))
+        if not any(bad):
+            continue
+        total = max(int(st.get("texels", 0)), 1)
+        out.append(
+            make_issue(
+                "WP-MAP-007",
+                f"source {role} {entry.get('file', '')}: {bad[0]} of {total} texels "
+                f"({100 * bad[0] / total:.1f}%) are not unit length (by more than "
+                f"{entry.get('tolerance', 0.01):g}), {bad[1]} point below the surface (z < 0)"
+                + (
+                    "; repaired as asked"
+                    if st.get("repaired")
+                    else "; renormalised to be blended and stored (set repair to change them)"
+                ),
+                entry.get("file", ctx.inp.pointer("meta")),
+                non_unit=bad[0],
+                z_negative=bad[1],
+            )
+        )
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# the render pass against the full-resolution source, in screen space (WP-FID-004)
+
+
+def render_fidelity(
+    ctx: Context, uv: np.ndarray, gpu: dict[str, np.ndarray], shipped_masks: np.ndarray
+) -> tuple[list[Issue], dict[str, Any]]:
+    """Each pose's GPU normal buffer (``gpu[pose]`` ``[N, 3]`` at the covered pixels' ``uv``)
+    against the numpy blend of the full-resolution source sampled at the same UVs, on the pixels
+    where the pose is active (source or shipped masks), weighted by the activation.
+
+    Returns the issues and ``{pose: Stats}`` (screen-space error per pixel under ``"maps"``)."""
+    a = ctx.asset
+    if not _measurable(ctx) or not gpu:
+        return [], {}
+    H, W = a.states.shape[1:3]
+    base_src = model.normalize(tx.bilinear(resize_normals(a.base, H, W), uv))
+    enc = encode_source_states(
+        resize_normals(a.base, H, W), np.asarray(a.states, np.float32), a.encoding
+    )
+    states_src = np.stack([tx.bilinear(s, uv) for s in enc])
+    if a.encoding in ("full", "composite"):
+        states_src = model.normalize(states_src)
+    masks_src = tx.bilinear(np.moveaxis(np.asarray(a.masks, np.float32), 0, -1), uv).T
+    texture_budget, which = budgets(ctx)
+    o = ctx.options
+    # the GPU's own filtering error (WP-RND-001 bounds it) is allowed on top of the budget
+    budget = fd.Budget(
+        None if texture_budget.mean is None else texture_budget.mean + o.gpu_max_mean_deg,
+        None if texture_budget.p99 is None else texture_budget.p99 + o.gpu_max_p99_deg,
+        texture_budget.max,
+    )
+    stats: dict[str, fd.Stats] = {}
+    errs: dict[str, np.ndarray] = {}
+    for p in poses(ctx):
+        if p.name not in gpu:
+            continue
+        act_src = model.activations(masks_src, p.weights, a.policy)
+        act_ship = model.activations(shipped_masks, p.weights, a.policy)
+        w = np.maximum(np.abs(act_src).sum(axis=0), np.abs(act_ship).sum(axis=0))
+        src = model.combine(base_src, states_src, act_src, a.encoding)
+        err = angle_deg(gpu[p.name], src)
+        if not (w > 0).any():
+            continue  # the pose's active region is not in view
+        errs[p.name] = np.where(w > 0, err, 0.0).astype(np.float32)
+        stats[p.name] = fd.weighted_stats(err, w)
+    ctx.metrics["fidelity_render_deg"] = {
+        k: {
+            "mean": round(s.mean, 4),
+            "p99": round(s.p99, 4),
+            "max": round(s.max, 4),
+            "pixels": s.texels,
+        }
+        for k, s in stats.items()
+    }
+    over = [(k, s) for k, s in stats.items() if s.texels and not budget.ok(s)]
+    issues = []
+    if over:
+        k, s = max(over, key=lambda kv: kv[1].p99)
+        issues.append(
+            make_issue(
+                "WP-FID-004",
+                f"{len(over)} of {len(stats)} poses: the render of the shipped asset differs "
+                f"from the numpy render of the full-resolution source over the {which} plus the "
+                f"GPU's tolerance ({budget.describe()}) on the active pixels; worst {k}: p99 "
+                f"{s.p99:.2f}, mean "
+                f"{s.mean:.2f} degrees ({s.texels} pixels)",
+                ctx.inp.pointer("meta"),
+            )
+        )
+    return issues, {"stats": stats, "maps": errs}
