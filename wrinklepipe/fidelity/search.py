@@ -290,8 +290,24 @@ def search(
         top = max(
             float(np.abs(fm.sample_at(x, ref.shape, u)).max(initial=0.0)) for x in levels[size]
         )
+        # the validator's clipping rule (WP-MAP-004) counts every texel of the map, active or
+        # not: a scale that clips more than it allows is never chosen, and the candidates
+        # include the smallest scale that keeps every texel of the map inside the range
+        limit = o.max_clipped_fraction * size * size
+
+        def clips(s: float) -> bool:
+            return max(clipped_texels(levels[size], s), default=0) > limit
+
+        safe = scale_candidates(
+            max(float(np.abs(x).max(initial=0.0)) for x in levels[size]), (1.0,)
+        )[0]
+        while clips(safe):
+            safe += 1.0 / 64.0
         best: tuple[tuple[float, float], float] | None = None
-        for s in scale_candidates(top, o.scale_factors):
+        for s in sorted({*scale_candidates(top, o.scale_factors), safe}, reverse=True):
+            if s < safe and clips(s):
+                tried.append(Tried(f"{label} (clips, WP-MAP-004)", s, 0.0, 0.0, False))
+                continue
             f = judge.run(False, states(size, s))
             tried.append(Tried(label, s, *f.score(), f.meets(budget), judge.screens))
             if best is None or f.score() < best[0]:
