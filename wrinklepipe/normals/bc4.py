@@ -94,14 +94,24 @@ class _Scorer:
         return j
 
 
+def _positions(u: np.ndarray, r: np.ndarray, n: int) -> list[np.ndarray]:
+    """Palette positions j (0..n) that can hold the entry ``floor(j r / n)`` nearest to ``u``:
+    j0 = floor(n u / r) and the next two (the usual answer), then ``up`` (the first j whose
+    entry exceeds u: ``ceil((floor(u) + 1) n / r)``) and ``up - 1`` (the largest entry at or
+    below u). The last two alone are exact; they matter when r is small, where truncation
+    puts several positions on one value (r = 1: j = 0..n-1 all give 0)."""
+    rr = np.maximum(r, _F(1))
+    j0 = np.clip(np.floor(u * (_F(n) / rr)), _F(0), _F(n))
+    up = np.clip(np.ceil((np.floor(u) + _F(1)) * _F(n) / rr), _F(0), _F(n))
+    near = [np.minimum(j0 + _F(dj), _F(n)) for dj in (0, 1, 2)]
+    return near + [np.maximum(up - _F(1), _F(0)), up]
+
+
 def _exact8(x: np.ndarray, lo: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Exact squared error and nearest palette position j (0 = lo .. 7 = hi), 8-value mode."""
     u = x - lo
-    j0 = np.floor(u * (_F(7) / np.maximum(r, _F(1))))
-    np.clip(j0, _F(0), _F(7), out=j0)
     best = bj = None
-    for dj in (0, 1, 2):  # the truncated palette's nearest entry is j0, j0 + 1 or j0 + 2
-        j = np.minimum(j0 + _F(dj), _F(7))
+    for j in _positions(u, r, 7):
         e = u - np.floor(j * r / _F(7))
         e *= e
         if best is None:
@@ -116,11 +126,8 @@ def _exact8(x: np.ndarray, lo: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, n
 def _exact6(x: np.ndarray, lo: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Exact squared error and BC4 code of 6-value palettes (lo, 4 interpolants, hi, 0, 255)."""
     u = x - lo
-    j0 = np.floor(u * (_F(5) / np.maximum(r, _F(1))))
-    np.clip(j0, _F(0), _F(5), out=j0)
     best = bc = None
-    for dj in (0, 1, 2):
-        j = np.minimum(j0 + _F(dj), _F(5))
+    for j in _positions(u, r, 5):
         e = u - np.floor(j * r / _F(5))
         e *= e
         code = np.where(j == 0, _F(0), np.where(j == 5, _F(1), j + _F(1)))
@@ -193,11 +200,8 @@ def _exact8_tail(
 ) -> np.ndarray:
     """Squared error plus ``lam`` times each texel's excess over ``tau`` (a tail penalty)."""
     u = x - lo
-    j0 = np.floor(u * (_F(7) / np.maximum(r, _F(1))))
-    np.clip(j0, _F(0), _F(7), out=j0)
     best = None
-    for dj in (0, 1, 2):
-        j = np.minimum(j0 + _F(dj), _F(7))
+    for j in _positions(u, r, 7):
         e = u - np.floor(j * r / _F(7))
         e *= e
         best = e if best is None else np.minimum(best, e)
