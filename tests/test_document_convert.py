@@ -9,6 +9,7 @@ data, only the additions differ), the Khronos validator (0 errors), glTF-Transfo
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 
 import gltf_reference as ref
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 from passthrough import EXTENSION, WRINKLE_ATTRIBUTES, compare
 from test_document_inspect import GLTF_TRANSFORM, gltf_transform_inspect
+from test_document_read import GLTFPACK
 from wrinkle_setups import write_setup
 
 from wrinklepipe.cli import main
@@ -333,4 +335,41 @@ def test_robot_usd_carries_every_part_at_its_place(robot):
         "Angry",
         "Surprised",
         "Sad",
+    ]
+
+
+@needs_robot
+@pytest.mark.skipif(not GLTFPACK.exists(), reason="npm gltfpack absent")
+def test_gltfpack_compressed_robot_converts_whole(tmp_path, capsys):
+    """RobotExpressive through the real encoder (meshopt + quantization) converts, its face
+    plate ("Black") wrinkled: decoded, written uncompressed (the report says so), the
+    quantized accessors kept, every part there; inspect --diff lists only the additions."""
+    packed = tmp_path / "src" / "packed.glb"
+    packed.parent.mkdir()
+    cmd = [str(GLTFPACK), "-i", str(ROBOT), "-o", str(packed), "-kn", "-km", "-cc", "-ke"]
+    subprocess.run(cmd, check=True, capture_output=True, timeout=120)
+    manifest = write_setup(tmp_path / "src", packed, "robot", "Black", drivers=BLENDSHAPES)
+    res = convert(manifest, tmp_path / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0 and res.report["validation"]["counts"]["error"] == 0
+    assert "EXT_meshopt_compression: decoded; written uncompressed" in res.report["notes"]
+    out = tmp_path / "out" / "robot.gltf"
+    g = ref.load(out)
+    assert g.extensionsRequired == ["KHR_mesh_quantization"]  # quantized accessors kept
+    assert (len(g.meshes), len(g.skins), len(g.animations)) == (14, 2, 15)
+    if khronos.available():
+        report = khronos.validate_gltf(out)
+        assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:5]
+    assert main(["inspect", "--diff", str(packed), str(out), "--json"]) == 1
+    lines = json.loads(capsys.readouterr().out)["differences"]
+    changed = [ln for ln in lines if not ln.startswith("+ textures[")]
+    assert [ln for ln in changed if "WRINKLEPIPE_wrinkle_maps." not in ln] == [
+        "+ animations[14]: 'blendshapes'",
+        "~ decoded: ['EXT_meshopt_compression'] -> []",
+        "~ extensionsUsed: ['KHR_mesh_quantization'] -> ['KHR_animation_pointer', "
+        "'KHR_mesh_quantization', 'WRINKLEPIPE_wrinkle_maps']",
+        "~ materials[2].extensions: [] -> ['WRINKLEPIPE_wrinkle_maps']",
+        "+ materials[2].textures.normalTexture: 0",
+        "+ meshes[2].primitives[2].attributes.TANGENT: 'VEC4:f32'",
+        "+ meshes[2].primitives[2].attributes.TEXCOORD_0: 'VEC2:f32'",
+        "+ meshes[2].primitives[2].attributes._WRINKLE_VERTEX_ID: 'SCALAR:f32'",
     ]
