@@ -18,6 +18,7 @@ import numpy as np
 
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.capture import landmarks as L
+from wrinklepipe.capture import mesh_view as MV
 from wrinklepipe.capture.evaluate import errors as truth_errors
 from wrinklepipe.capture.orientation import OrientationOptions
 from wrinklepipe.capture.pipeline import CaptureOptions, CaptureResult, capture
@@ -26,7 +27,9 @@ from wrinklepipe.capture.report import build_report, picture_images, render_html
 from wrinklepipe.capture.synthetic import dome_height, make_scene, normal_of
 from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image, write_image
+from wrinklepipe.io.mesh import LoadOptions, load_mesh
 from wrinklepipe.model import normalize
+from wrinklepipe.validate.gl import GLUnavailable
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,7 @@ class CaptureInputs:
     size: str | None = None
     roi: str | None = None
     neutral_normals: str | None = None
+    neutral_mesh: str | None = None
     truth: str | None = None
 
     def given(self) -> dict[str, str]:
@@ -73,6 +77,7 @@ class CaptureInputs:
             "photo_landmarks",
             "roi",
             "neutral_normals",
+            "neutral_mesh",
             "truth",
         )
         return {n: str(getattr(self, n)) for n in names if getattr(self, n)}
@@ -161,6 +166,14 @@ def read_neutral_normals(path: str, shape: tuple[int, int], roi: np.ndarray | No
         raise input_error(path, "neutral normal map has non-finite values")
     if info.format not in ("half", "float", "double"):
         v = 2.0 * v - 1.0
+    return _facing(path, v, shape, roi, "expected +Z towards the camera")
+
+
+def _facing(
+    path: str, v: np.ndarray, shape: tuple[int, int], roi: np.ndarray | None, hint: str
+) -> np.ndarray:
+    """Unit normals where every ROI pixel faces the camera (else one message naming the
+    first pixel that does not); +Z outside the ROI."""
     length = np.linalg.norm(v, axis=-1)
     inside = np.ones(shape, bool) if roi is None else np.asarray(roi) > 0.5
     bad = inside & ((length < 0.5) | (v[..., 2] <= 0.0))
@@ -169,9 +182,73 @@ def read_neutral_normals(path: str, shape: tuple[int, int], roi: np.ndarray | No
         raise input_error(
             path,
             f"{int(bad.sum())} pixel(s) of the ROI are not normals facing the camera (first at "
-            f"x={c}, y={r}: {np.round(v[r, c], 3).tolist()}); expected +Z towards the camera",
+            f"x={c}, y={r}: {np.round(v[r, c], 3).tolist()}); {hint}",
         )
     return np.where(inside[..., None], normalize(v), np.array([0.0, 0.0, 1.0], np.float32))
+
+
+#: A camera fit worse than this (RMS pixels) means the landmarks do not match the mesh.
+MAX_CAMERA_RESIDUAL_PX = 3.0
+
+
+def neutral_normals_from_mesh(
+    path: str,
+    uv: np.ndarray,
+    photo: np.ndarray,
+    names: list[str] | None,
+    shape: tuple[int, int],
+    roi: np.ndarray | None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """The neutral's normals in the photo's view, rendered from the mesh at ``path`` with the
+    camera that the landmark pairs define (``uv`` on the mesh's layout, ``photo`` pixels); and
+    what the fit found (for the report). See :mod:`.mesh_view`."""
+    mesh = load_mesh(path, LoadOptions(generate_uvs=False))
+    if mesh.uvs is None:
+        raise input_error(path, "mesh has no texture coordinates; the landmarks are UVs on it")
+    world, found = MV.points_at_uv(mesh, uv)
+    if not found.all():
+        off = [names[i] if names else str(i) for i in np.flatnonzero(~found)[:5]]
+        raise input_error(
+            path,
+            f"{int((~found).sum())} texture landmark(s) fall outside the mesh's UV layout "
+            f"(first: {', '.join(off)}); the texture landmarks must lie on this mesh",
+        )
+    cam = MV.fit_camera(world, photo)
+    if cam.residual_px > MAX_CAMERA_RESIDUAL_PX:
+        raise input_error(
+            path,
+            f"no camera projects the mesh's landmark points onto the photo's (RMS error "
+            f"{cam.residual_px:.2f} px, worst {cam.max_residual_px:.2f} px > "
+            f"{MAX_CAMERA_RESIDUAL_PX} px): is this the character's neutral mesh, and do the "
+            "texture landmarks pair with the photo landmarks?",
+        )
+    try:
+        n0, covered = MV.render_normals(mesh, cam, shape)
+    except GLUnavailable as exc:
+        raise input_error(
+            path, f"{exc}; render the neutral's normal pass elsewhere and give --neutral-normals"
+        ) from None
+    inside = np.ones(shape, bool) if roi is None else np.asarray(roi) > 0.5
+    if not covered[inside].all():
+        share = float(covered[inside].mean())
+        raise input_error(
+            path,
+            f"seen from the landmarks' camera the mesh covers {100 * share:.1f} % of the ROI; "
+            "the ROI must lie on the mesh",
+        )
+    n0 = _facing(path, n0, shape, roi, "the mesh turns away from the landmarks' camera there")
+    info = {
+        "file": str(path),
+        "vertices": mesh.vertex_count,
+        "triangles": mesh.triangle_count,
+        "camera": "scaled orthographic",
+        "view_from_mesh_z_deg": round(cam.view_deg, 4),
+        "scale_px_per_unit": round(cam.scale, 6),
+        "landmark_residual_rms_px": round(cam.residual_px, 4),
+        "landmark_residual_max_px": round(cam.max_residual_px, 4),
+        "roi_min_nz": round(float(n0[..., 2][inside].min()), 4),
+    }
+    return n0, info
 
 
 def _nz_map(o: CaptureJobOptions, shape: tuple[int, int]) -> np.ndarray | float:
@@ -219,10 +296,24 @@ def check_options(inputs: CaptureInputs, o: CaptureJobOptions) -> None:
             raise input_error("<arguments>", f"{flag} must be a finite number >= 0, got {val}")
     if not 0 < o.nz <= 1:
         raise input_error("<arguments>", f"--nz must lie in (0, 1], got {o.nz}")
-    if inputs.neutral_normals and (o.nz != 1.0 or o.nz_regions):
+    if inputs.neutral_normals and inputs.neutral_mesh:
+        raise input_error(
+            "<arguments>", "give the neutral's shape once: --neutral-normals or --neutral-mesh"
+        )
+    for flag, given in (
+        ("--neutral-normals", inputs.neutral_normals),
+        ("--neutral-mesh", inputs.neutral_mesh),
+    ):
+        if given and (o.nz != 1.0 or o.nz_regions):
+            raise input_error(
+                "<arguments>",
+                f"{flag} gives the neutral's shape per pixel; drop --nz / --nz-region",
+            )
+    if inputs.neutral_mesh and not inputs.texture_landmarks:
         raise input_error(
             "<arguments>",
-            "--neutral-normals gives the neutral's shape per pixel; drop --nz / --nz-region",
+            "--neutral-mesh needs --texture-landmarks (the UVs that put the landmarks on the "
+            "mesh and define the camera)",
         )
 
 
@@ -294,6 +385,12 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
     n0 = (
         read_neutral_normals(inputs.neutral_normals, shape, roi) if inputs.neutral_normals else None
     )
+    mesh_info = None
+    if inputs.neutral_mesh:
+        uv = pt / np.array([tw, th], np.float64)
+        n0, mesh_info = neutral_normals_from_mesh(
+            inputs.neutral_mesh, uv, pp, lm_t_names, shape, roi
+        )
     truth = None
     if inputs.truth:
         t, tinfo = read_image(inputs.truth)
@@ -336,11 +433,16 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
         "furrow_sigma": o.furrow_sigma,
         "nz": o.nz,
         "nz_regions": list(o.nz_regions),
-        "neutral_shape": "normal map" if n0 is not None else "N_z constant/regions",
+        "neutral_shape": (
+            "mesh" if mesh_info else "normal map" if n0 is not None else "N_z constant/regions"
+        ),
         "colorspace": o.colorspace,
         "scale": o.scale,
     }
     report = build_report(res, inputs.given(), opts, outputs, te)
+    if mesh_info is not None:
+        report["neutral_shape"] = "mesh"
+        report["neutral_mesh"] = mesh_info
     for key, names in (("expression_to_neutral", lm_n.names), ("photo_to_texture", lm_t_names)):
         worst = report["warps"][key]["leave_one_out_worst_index"]
         if names is not None and worst is not None:

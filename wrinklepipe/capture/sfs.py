@@ -30,7 +30,7 @@ is reported: a residual near the noise means the height explains the photos.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pyamg
@@ -115,6 +115,8 @@ class _Grid:
     dx: sparse.csr_matrix  # central d/dcol at the unknown pixels, [U, U] (0 outside)
     dy: sparse.csr_matrix  # central d/drow
     reg: sparse.csr_matrix  # forward differences (both axes, stacked), [E, U]
+    #: the integration system's preconditioner, set up once per grid (it depends on the grid only)
+    cache: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 def _grid(mask: np.ndarray) -> _Grid:
@@ -207,6 +209,8 @@ def _solve(
         scale = float(jtj.diagonal().mean()) or 1.0
         a = (jtj + sparse.identity(jtj.shape[0]) * (mu * scale)).tocsr()
         b = -(jac.T @ (weight * f) + lam * (reg_t_reg @ c))
+        # a fresh preconditioner per step: reusing the first step's was measured 2x slower
+        # (more CG iterations than the set-up it saves)
         step, _ = spla.cg(a, b, rtol=o.cg_tol, maxiter=o.cg_maxiter, M=_multigrid(a))
 
         trial = c + step
@@ -341,9 +345,12 @@ def _fuse(
 
 def _integrate(grid: _Grid, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
     """Least-squares height with central-difference slopes ``q`` and ``c = 0`` outside."""
-    a = (grid.dx.T @ grid.dx + grid.dy.T @ grid.dy + 1e-3 * (grid.reg.T @ grid.reg)).tocsr()
+    if "integrate" not in grid.cache:
+        a = (grid.dx.T @ grid.dx + grid.dy.T @ grid.dy + 1e-3 * (grid.reg.T @ grid.reg)).tocsr()
+        grid.cache["integrate"] = (a, _multigrid(a))
+    a, precond = grid.cache["integrate"]
     b = grid.dx.T @ qx + grid.dy.T @ qy
-    x, _ = spla.cg(a, b, rtol=1e-6, maxiter=300, M=_multigrid(a))
+    x, _ = spla.cg(a, b, rtol=1e-6, maxiter=300, M=precond)
     return x
 
 

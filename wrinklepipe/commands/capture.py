@@ -23,9 +23,12 @@ into the character's texture space through the texture landmarks.
 
 The neutral's shape: --neutral-normals is the neutral face's normal map seen from the photo's
 camera (camera frame: +X right, +Y up, +Z towards the camera; 0.5 + 0.5 n, or raw n in EXR),
-the same size as the neutral photo. With it, ratios above 1 (skin turned towards the flash) are
-used, the wrinkle is measured relative to the neutral surface, and ridges are told from valleys.
-Without it the neutral faces the camera (--nz, --nz-region give constants).
+the same size as the neutral photo; or --neutral-mesh, the character's neutral mesh (glTF, USD
+or OBJ with the UVs the texture landmarks are given in): the landmarks define a scaled
+orthographic camera and the mesh's normals are rendered from it. With either, ratios above 1
+(skin turned towards the flash) are used, the wrinkle is measured relative to the neutral
+surface, and ridges are told from valleys where the neutral turns from the camera. Without them
+the neutral faces the camera (--nz, --nz-region give constants).
 
 orientation (which way each wrinkle normal leans; the ratio only gives how much):
   auto        sfs with --neutral-normals on a neutral turned from the camera (N_z < 0.97
@@ -72,6 +75,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--neutral-normals",
         metavar="MAP",
         help="the neutral face's normals seen from the photo's camera (the neutral's shape)",
+    )
+    p.add_argument(
+        "--neutral-mesh",
+        metavar="MESH",
+        help="the character's neutral mesh (glTF/USD/OBJ with UVs): its normals are rendered "
+        "from the camera the texture landmarks define (instead of --neutral-normals)",
     )
     p.add_argument(
         "--nz",
@@ -151,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
         size=args.size,
         roi=args.roi,
         neutral_normals=args.neutral_normals,
+        neutral_mesh=args.neutral_mesh,
         truth=args.truth,
     )
     options = CaptureJobOptions(
