@@ -14,6 +14,7 @@ from wrinklepipe.capture import mesh_view as MV
 from wrinklepipe.capture.sessions import SessionOptions, make_session, neutral_mesh
 from wrinklepipe.cli import main
 from wrinklepipe.io.images import write_image
+from wrinklepipe.validate.gl import create_context
 
 
 def test_points_at_uv_by_hand():
@@ -65,7 +66,11 @@ def test_rendered_normals_match_the_analytic_neutral(curved):
     cam = MV.fit_camera(world, s.lm_neutral)
     # the mesh was turned 20 degrees about Y: the camera found from the landmarks says so
     assert cam.view_deg == pytest.approx(20.0, abs=0.01) and cam.residual_px < 0.01
-    n, covered = MV.render_normals(mesh, cam, s.neutral.shape)
+    ctx = create_context()
+    try:
+        n, covered = MV.render_normals(mesh, cam, s.neutral.shape, ctx)
+    finally:
+        ctx.release()
     roi = s.roi > 0.5
     assert covered[roi].all()
     err = np.degrees(np.arccos(np.clip(np.sum(n * s.neutral_normals, axis=-1), -1, 1)))[roi]

@@ -94,6 +94,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.pipeline.bake",
             "wrinklepipe.pipeline.validation",
             "wrinklepipe.export.job",
+            "wrinklepipe.capture.job",
             "wrinklepipe.batch",
             "wrinklepipe.view",
         ),

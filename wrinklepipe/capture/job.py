@@ -29,7 +29,7 @@ from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image, write_image
 from wrinklepipe.io.mesh import LoadOptions, load_mesh
 from wrinklepipe.model import normalize
-from wrinklepipe.validate.gl import GLUnavailable
+from wrinklepipe.validate.gl import GLUnavailable, create_context
 
 
 @dataclass(frozen=True)
@@ -223,11 +223,15 @@ def neutral_normals_from_mesh(
             "texture landmarks pair with the photo landmarks?",
         )
     try:
-        n0, covered = MV.render_normals(mesh, cam, shape)
+        ctx = create_context()
     except GLUnavailable as exc:
         raise input_error(
             path, f"{exc}; render the neutral's normal pass elsewhere and give --neutral-normals"
         ) from None
+    try:
+        n0, covered = MV.render_normals(mesh, cam, shape, ctx)
+    finally:
+        ctx.release()
     inside = np.ones(shape, bool) if roi is None else np.asarray(roi) > 0.5
     if not covered[inside].all():
         share = float(covered[inside].mean())

@@ -22,13 +22,13 @@ the rows), +Z towards the camera; photo pixel ``(col, row)`` has its centre at `
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from wrinklepipe.asset import Mesh
-from wrinklepipe.validate.gl import create_context  # moderngl is imported only when called
 
 
 @dataclass(frozen=True)
@@ -196,19 +196,22 @@ void main() { color = vec4(normalize(v_n), 1.0); }
 
 
 def render_normals(
-    mesh: Mesh, camera: OrthoCamera, shape: tuple[int, int]
+    mesh: Mesh, camera: OrthoCamera, shape: tuple[int, int], ctx: Any
 ) -> tuple[np.ndarray, np.ndarray]:
     """The mesh's camera-frame normals seen through ``camera`` at every photo pixel
     (``[H, W, 3]``, float32; nearest surface wins) and the pixels the mesh covers (``[H, W]``
-    bool). Rendered with OpenGL (moderngl on EGL), 32-bit float target."""
+    bool). Rendered with OpenGL into a 32-bit float target; ``ctx`` is a moderngl context
+    (``wrinklepipe.validate.gl.create_context()``), which this releases nothing of but what it
+    made."""
     h, w = shape
     pos = np.asarray(mesh.positions, np.float32)
     nrm = vertex_normals(mesh).astype(np.float32)
     zc = pos.astype(np.float64) @ camera.rotation[2]
     pad = 1e-3 * max(float(zc.max() - zc.min()), 1e-6)
-    ctx = create_context()
+    made = []
     try:
         prog = ctx.program(vertex_shader=_VERT, fragment_shader=_FRAG)
+        made.append(prog)
         prog["rot"].write(camera.rotation.T.astype(np.float32).tobytes())  # column-major
         prog["map"].value = (camera.scale, float(camera.offset[0]), float(camera.offset[1]), 0.0)
         prog["size"].value = (float(w), float(h))
@@ -219,13 +222,15 @@ def render_normals(
         tex = ctx.texture((w, h), 4, dtype="f4")
         dep = ctx.depth_renderbuffer((w, h))
         fbo = ctx.framebuffer([tex], dep)
+        made += [vbo, ibo, vao, tex, dep, fbo]
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable(ctx.DEPTH_TEST)
         vao.render()
         img = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
     finally:
-        ctx.release()
+        for obj in reversed(made):
+            obj.release()
     img = img[::-1]  # GL rows run bottom-up
     covered = img[..., 3] > 0.5
     n = np.where(covered[..., None], img[..., :3], np.array([0.0, 0.0, 1.0], np.float32))
