@@ -8,10 +8,16 @@ decoder); its exported Custom-node HLSL, compiled by glslang and rendered on the
 (BC5 level 0 uploaded as is), equals the numpy model with y negated. Unity's exported file
 renders the exported strips equal to numpy. Blender's script runs under ``blender -b`` when
 Debian's blender is installed.
+
+Whole characters (the generated multi-mesh avatar, RobotExpressive from ../shared/data) export
+whole: every mesh, material, texture, skin and animation of the converted document is in each
+engine's glTF (pygltflib + struct, :func:`passthrough.compare`), the plain parts unchanged, only
+the wrinkle additions gone; the wrinkled material renders equal to numpy from the exported files.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import shutil
@@ -19,19 +25,25 @@ import subprocess
 from dataclasses import replace
 from pathlib import Path
 
+import gltf_reference as ref
 import numpy as np
 import pytest
 import shader_harness as h
 import texture2ddecoder
+from passthrough import EXTENSION, compare
+from wrinkle_setups import write_setup
 
 from wrinklepipe import codec, model
-from wrinklepipe.demo import demo_asset
+from wrinklepipe.demo import avatar, demo_asset
 from wrinklepipe.errors import InputError
 from wrinklepipe.export.job import export
+from wrinklepipe.io import khronos
+from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.package import PackOptions, package_from_asset, png_pixels
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.paths import ROOT
+from wrinklepipe.pipeline.convert import ConvertOptions, convert
 from wrinklepipe.pipeline.drivers import expression_cycle
 from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.shading import hlsl
@@ -40,12 +52,33 @@ from wrinklepipe.validate.inputs import ChannelEntry, Texture
 from wrinklepipe.validate.render import shader_setup
 
 ENGINES = ["unreal", "unity", "godot", "blender"]
-VALIDATOR = ROOT / "tools" / "node" / "node_modules" / ".bin" / "gltf-validator"
+DATA = ROOT.parent / "shared" / "data"
+ROBOT = DATA / "gltf-samples" / "RobotExpressive" / "RobotExpressive.glb"
+ROBOT_DRIVERS = """
+[[drivers]]
+kind = "blendshapes"
+rows = [["Angry", "brow_L", 0, 1, 1, 0], ["Angry", "brow_R", 0, 1, 1, 0],
+        ["Surprised", "mouth", 0, 1, 1, 0]]
+[drivers.keys]
+Angry = [[0, 0], [1, 1], [2, 0]]
+Surprised = [[0, 0], [2, 0], [3, 1]]
+"""
 
 
-def _source(tmp: Path, encoding: str = "pd", layout: str = "rgba", base=None) -> Path:
-    a = demo_asset(128, encoding=encoding)
+def _source(
+    tmp: Path,
+    encoding: str = "pd",
+    layout: str = "rgba",
+    base=None,
+    size: int = 128,
+    overlap: bool = False,
+) -> Path:
+    a = demo_asset(size, encoding=encoding)
     a = replace(a, mesh=prepare_mesh(a.mesh))
+    if overlap:  # two regions overlap: every policy gives another result
+        masks = a.masks.copy()
+        masks[2] = np.maximum(masks[2], masks[6])
+        a = replace(a, masks=masks)
     if base is not None:  # the same wrinkles over another base
         relief = model.normal_to_pd(a.states) - model.normal_to_pd(a.base)[None]
         states = model.pd_to_normal(model.normal_to_pd(base)[None] + relief)
@@ -74,10 +107,64 @@ def exports(tmp_path_factory):
     return src, out
 
 
+def _export_all(src: Path, tmp: Path) -> dict[str, tuple[Path, dict[str, bytes], list[str]]]:
+    out = {}
+    for e in ENGINES:
+        files, notes = export(src, tmp / e, e)
+        out[e] = (tmp / e, files, notes)
+    return out
+
+
+@pytest.fixture(scope="module")
+def avatar_exports(tmp_path_factory):
+    """The generated multi-mesh avatar converted (its Skin material wrinkled) and exported."""
+    tmp = tmp_path_factory.mktemp("avatar_export")
+    manifest = avatar.avatar_source_dir()
+    res = convert(manifest, tmp / "src", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    return tmp / "src", _export_all(tmp / "src", tmp), manifest.parent / "avatar.glb"
+
+
+@pytest.fixture(scope="module")
+def robot_exports(tmp_path_factory):
+    """RobotExpressive (CC0, 14 meshes, 2 skins, 14 animations) converted with the manifest's
+    ``material = "Main"`` on ``meshes = ["Head"]`` (cloned as 'Main (wrinkled)'), exported."""
+    if not ROBOT.is_file():
+        pytest.skip("../shared/data is absent")
+    tmp = tmp_path_factory.mktemp("robot_export")
+    manifest = write_setup(tmp / "in", ROBOT, "robot", "Main", ["Head"], drivers=ROBOT_DRIVERS)
+    with allowed_roots([ROBOT.parent]):
+        res = convert(manifest, tmp / "src", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    return tmp / "src", _export_all(tmp / "src", tmp), ROBOT
+
+
+@pytest.fixture(params=["demo", "avatar"])
+def rendered_exports(request, exports, avatar_exports):
+    return (exports if request.param == "demo" else avatar_exports)[:2]
+
+
+#: Each file parsed once per module (pygltflib takes ~1 s on RobotExpressive; read only).
+_gltf = functools.lru_cache(maxsize=None)(ref.load)
+_input = functools.lru_cache(maxsize=None)(load_input)
+
+
+def _validates(path: Path) -> None:
+    if khronos.available():
+        report = khronos.validate_gltf(path)
+        assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:5]
+
+
 @pytest.mark.parametrize("engine", ENGINES)
 def test_export_is_complete_flat_and_true(exports, engine):
     src, out = exports
     folder, files, notes = out[engine]
+    _complete_flat_and_true(src, folder, files, notes, engine)
+    doc = json.loads(files["demo.gltf"])
+    assert len(doc.get("images", [])) == (0 if engine == "unreal" else 1)
+
+
+def _complete_flat_and_true(src, folder, files, notes, engine) -> None:
     # flat: the folder itself plus textures/ and curves/ only
     assert {p.split("/")[0] for p in files if "/" in p} <= {"textures", "curves"}
     assert all(p.count("/") <= 1 for p in files)
@@ -104,19 +191,14 @@ def test_export_is_complete_flat_and_true(exports, engine):
     # curves named the engine's way, values those of the glTF
     curve = json.loads(files[next(c for c in setup["curves"] if c.endswith(".json"))])
     assert curve["regions"] == [r["parameter"] for r in setup["regions"]]
-    src_pkg_curve = load_input(src).weight_curves
+    src_pkg_curve = _input(src).weight_curves
     first = next(iter(src_pkg_curve.values()))
     np.testing.assert_allclose(np.reshape(curve["values"], first.shape), first, atol=1e-6)
     # the mesh: a glTF without the wrinkle extension, valid for the Khronos validator
     doc = json.loads(files[setup["mesh"]])
     assert "WRINKLEPIPE_wrinkle_maps" not in json.dumps(doc)
-    assert len(doc.get("images", [])) == (0 if engine == "unreal" else 1)
-    if VALIDATOR.exists():
-        r = subprocess.run(
-            [str(VALIDATOR), str(folder / setup["mesh"]), "-o"], capture_output=True, text=True
-        )
-        report = json.loads(r.stdout)
-        assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:5]
+    assert "KHR_animation_pointer" not in json.dumps(doc)
+    _validates(folder / setup["mesh"])
 
 
 def test_export_is_byte_identical_on_a_rerun(exports, tmp_path):
@@ -174,18 +256,24 @@ def _exported_texture(name, role, path, data, state="", mapping=1):
     )
 
 
+def _expressions(inp) -> list[str]:
+    """Up to three of the asset's expressions (the demo's table, the avatar's two)."""
+    return list(inp.asset.expressions)[:3]
+
+
 @pytest.mark.gpu
-def test_unreal_export_renders_the_model(exports):
+def test_unreal_export_renders_the_model(rendered_exports):
     """The exported WP_Wrinkle.hlsl on the exported BC5 texels (glslang -> spirv-cross ->
-    moderngl) equals numpy on the same texels (decoded by texture2ddecoder), y negated."""
+    moderngl) equals numpy on the same texels (decoded by texture2ddecoder), y negated: for the
+    demo and for the avatar's wrinkled material."""
     if h.missing_tools():
         pytest.skip(f"{h.missing_tools()} not installed")
     import test_engine_shaders as ts
 
-    src, out = exports
+    src, out = rendered_exports
     folder, files, _ = out["unreal"]
     setup_doc = json.loads(files["wrinkle_setup.json"])
-    ref_in = load_input(src)
+    ref_in = _input(src)
     mapping = setup_doc["mapping"]
     base = setup_doc["base"]["file"]
     textures = [_exported_texture("base", "base", base, files[base])]
@@ -212,44 +300,46 @@ def test_unreal_export_renders_the_model(exports):
     except Exception as exc:  # noqa: BLE001
         pytest.skip(f"no OpenGL: {exc}")
     try:
-        images = ts._render_unreal(gpu, inp, setup, ["anger", "surprise", "joy"])
+        images = ts._render_unreal(gpu, inp, setup, [None, *_expressions(inp)])
         s = h.samples(inp, gpu.uvs())
+        flip = np.array([1.0, -1.0, 1.0], np.float32)
         for expr, img in images.items():
-            ref = h.blend(inp, s, expr) * np.array([1.0, -1.0, 1.0], np.float32)
-            st = h.compare(img, ref)
+            st = h.compare(img, h.blend(inp, s, expr) * flip)
             assert st["mean"] <= 0.5 and st["p99"] <= 2.0, (expr, st)
+        moved = max(h.compare(img, h.blend(inp, s, None) * flip)["p99"] for img in images.values())
+        assert moved > 2.0  # the expressions really wrinkle
     finally:
         gpu.release()
 
 
 @pytest.mark.gpu
 @pytest.mark.parametrize("engine", ["unity", "godot"])
-def test_unity_and_godot_exports_render_the_model(exports, engine):
+def test_unity_and_godot_exports_render_the_model(rendered_exports, engine):
     """The exported shader file on the exported strips (sliced back into array layers) and the
     glTF's base map (read as x, y with z rebuilt, as these engines import normal maps) equals
-    numpy on the same texels."""
+    numpy on the same texels: for the demo and for the avatar's wrinkled material."""
     if h.missing_tools():
         pytest.skip(f"{h.missing_tools()} not installed")
     import test_engine_shaders as ts
 
-    src, out = exports
+    src, out = rendered_exports
     folder, files, _ = out[engine]
     doc = json.loads(files["wrinkle_setup.json"])
-    ref_in = load_input(src)
-    base = png_pixels(files[doc["base"]["file"]])
-    textures = [Texture("base", "base", "rgb8", 128, 128, base.tobytes(), layout="rg2")]
+    ref_in = _input(src)
+
+    def texture(name, role, px, **kw):
+        fmt = {3: "rgb8", 4: "rgba8"}[px.shape[-1]]
+        return Texture(name, role, fmt, px.shape[1], px.shape[0], px.tobytes(), **kw)
+
+    textures = [texture("base", "base", png_pixels(files[doc["base"]["file"]]), layout="rg2")]
     states = png_pixels(files[doc["statesArray"]["file"]])
     n_states = doc["statesArray"]["layers"]
     for k, layer in enumerate(np.split(states, n_states, axis=0)):
         name = doc["states"][k]["name"]
-        textures.append(
-            Texture(
-                name, "state", "rgb8", 128, 128, layer.tobytes(), state=name, mapping=doc["mapping"]
-            )
-        )
+        textures.append(texture(name, "state", layer, state=name, mapping=doc["mapping"]))
     masks = png_pixels(files[doc["masks"]["file"]])
     for i, layer in enumerate(np.split(masks, doc["masks"]["layers"], axis=0)):
-        textures.append(Texture(f"mask_{i}", "mask", "rgba8", 128, 128, layer.tobytes()))
+        textures.append(texture(f"mask_{i}", "mask", layer))
     inp = replace(ref_in, textures=textures, has_source=False)
     setup = shader_setup(inp)
     assert setup.base_layout == "rg" and doc["shader"]["slots"] == setup.slots()
@@ -275,7 +365,8 @@ def test_unity_and_godot_exports_render_the_model(exports, engine):
         prog = gpu.program(glsl)
         samplers = {n: (t, i > 0) for i, (n, t) in enumerate(zip(names, samplers_arrays))}
         s = h.samples(inp, gpu.uvs())
-        for expr in ("anger", "surprise", "joy"):
+        moved = 0.0
+        for expr in [None, *_expressions(inp)]:
             wv = setup.weight_vectors(h.region_weights(inp, expr))
             used = setup.used_vectors()
             if engine == "unity":
@@ -288,6 +379,8 @@ def test_unity_and_godot_exports_render_the_model(exports, engine):
                 )
             st = h.compare(img, h.blend(inp, s, expr))
             assert st["mean"] <= 0.5 and st["p99"] <= 2.0, (engine, expr, st)
+            moved = max(moved, h.compare(img, h.blend(inp, s, None))["p99"])
+        assert moved > 2.0  # the expressions really wrinkle
     finally:
         gpu.release()
 
@@ -369,9 +462,6 @@ def test_blender_script_builds_the_node_group(exports, tmp_path):
     assert (tmp_path / "face.blend").exists()
 
 
-DATA = ROOT.parent / "shared" / "data"
-
-
 @pytest.mark.shared
 def test_a_real_skinned_character_exports_for_every_engine(tmp_path):
     """CesiumMan (../shared/data, a skinned Khronos sample) with the fidelity fixture's
@@ -392,13 +482,7 @@ def test_a_real_skinned_character_exports_for_every_engine(tmp_path):
         doc = json.loads(files[setup["mesh"]])
         assert doc.get("skins"), engine  # the skeleton survives
         assert len(setup["regions"]) == 8 and setup["shader"]["slots"]
-        if VALIDATOR.exists():
-            r = subprocess.run(
-                [str(VALIDATOR), str(tmp_path / engine / setup["mesh"]), "-o"],
-                capture_output=True,
-                text=True,
-            )
-            assert json.loads(r.stdout)["issues"]["numErrors"] == 0, engine
+        _validates(tmp_path / engine / setup["mesh"])
         if engine == "blender" and shutil.which("blender"):
             r = subprocess.run(
                 [
@@ -417,3 +501,156 @@ def test_a_real_skinned_character_exports_for_every_engine(tmp_path):
             assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
             line = next(x for x in r.stdout.splitlines() if x.startswith('{"wrinklepipe"'))
             assert json.loads(line)["drivers"] == 8
+
+
+def _materials_resolved(path: Path) -> list[dict]:
+    """Each material with every texture reference replaced by the SHA-256 of its image's bytes
+    (pygltflib reads the file): materials compared whatever the texture numbering."""
+    g = _gltf(path)
+    j = json.loads(g.to_json())
+
+    def resolve(o):
+        if isinstance(o, list):
+            return [resolve(v) for v in o]
+        if not isinstance(o, dict):
+            return o
+        out = {}
+        for k, v in o.items():
+            if k.lower().endswith("texture") and isinstance(v, dict) and "index" in v:
+                img = ref.image_bytes(g, path, j["textures"][v["index"]]["source"])
+                v = {**v, "index": hashlib.sha256(img).hexdigest()}
+            out[k] = resolve(v)
+        return out
+
+    return [resolve(m) for m in j.get("materials", [])]
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("character", ["avatar", "robot"])
+def test_a_whole_character_exports_whole(request, character, engine):
+    """Every part of the converted character is in the engine's glTF (pygltflib + struct: the
+    converted document's meshes, nodes, skins, accessors, animations equal), the plain parts'
+    materials with their textures byte for byte, the wrinkled one without the extension (and,
+    for Unreal, without its base map: that ships as DDS); the folder is complete, flat and
+    true; 0 Khronos errors."""
+    src, out, source = request.getfixturevalue(f"{character}_exports")
+    folder, files, notes = out[engine]
+    _complete_flat_and_true(src, folder, files, notes, engine)
+    setup = json.loads(files["wrinkle_setup.json"])
+    wrinkled_name = {"avatar": "Skin", "robot": "Main (wrinkled)"}[character]
+    assert setup["materials"] == [wrinkled_name]
+    converted = next(src.glob("*.gltf"))
+    mesh = folder / setup["mesh"]
+    g0, g1 = _gltf(converted), _gltf(mesh)
+    j0, j1 = json.loads(g0.to_json()), json.loads(g1.to_json())
+    for key in ("scene", "scenes", "nodes", "skins", "meshes"):
+        assert j1.get(key) == j0.get(key), key
+    for i in range(len(g0.accessors)):  # every accessor's values, by an independent reader
+        np.testing.assert_array_equal(ref.accessor(g0, converted, i), ref.accessor(g1, mesh, i))
+    # animations: the converted ones minus the weight channels (KHR_animation_pointer)
+    names0 = [a["name"] for a in j0["animations"]]
+    assert [a["name"] for a in j1["animations"]] == names0
+    for a0, a1 in zip(j0["animations"], j1["animations"], strict=True):
+        kept = [c for c in a0["channels"] if c["target"]["path"] != "pointer"]
+        assert [c["target"] for c in a1["channels"]] == [c["target"] for c in kept]
+    # materials: the plain parts' as converted (textures byte for byte), the wrinkled one bare
+    m0, m1 = _materials_resolved(converted), _materials_resolved(mesh)
+    assert [m["name"] for m in m1] == [m["name"] for m in m0]
+    for a, b in zip(m0, m1, strict=True):
+        if EXTENSION not in (a.get("extensions") or {}):
+            assert b == a, a["name"]
+            continue
+        a = {**a, "extensions": {k: v for k, v in a["extensions"].items() if k != EXTENSION}}
+        a = {k: v for k, v in a.items() if v != {}}
+        if engine == "unreal":
+            a.pop("normalTexture")
+        assert b == a
+    # no wrinkle texture in the glTF: its images are the plain parts' (+ the base off Unreal)
+    n_plain = {"avatar": 4, "robot": 0}[character]
+    assert len(j1.get("images", [])) == n_plain + (engine != "unreal")
+    if character == "avatar" and engine != "unreal":  # the converted document, as converted
+        added = compare(source, mesh, base_replaced=False)
+        assert added.materials == [] and added.animations == ["blendshapes"]
+    if engine == "blender" and character == "robot" and shutil.which("blender"):
+        r = subprocess.run(  # (the avatar's run adds nothing the robot's does not check)
+            ["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python"]
+            + [str(folder / "build_wrinkles.py")],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+        line = next(x for x in r.stdout.splitlines() if x.startswith('{"wrinklepipe"'))
+        summary = json.loads(line)
+        assert summary["material"] == wrinkled_name and summary["drivers"] == 3
+
+
+BLENDER_SIZE = 96  # rendered pixels on the 64^2 demo: samples between texels
+BLENDER_CASES = [  # every encoding, every policy (overlapping masks: the policies differ)
+    ("pd", "clamp01"),
+    ("diff", "signed"),
+    ("full", "additive"),
+    ("composite", "renormalize"),
+    ("pd", "lerp"),
+]
+
+
+@pytest.mark.skipif(
+    shutil.which("blender") is None,
+    reason="Debian's blender is not installed (WRINKLEPIPE_BLENDER=1 ci/bootstrap.sh installs it)",
+)
+def test_blender_node_group_renders_the_model(tmp_path):
+    """The exported build_wrinkles.py's node group, rendered by Cycles in ``blender -b``
+    (tests/blender_render.py: emission on a UV-aligned plane, one centred sample per pixel,
+    float EXR read by OpenImageIO) equals numpy on the exported texels, for every encoding and
+    policy; strong weights move the normal."""
+    import OpenImageIO as oiio
+
+    setups, inputs = [], []
+    for encoding, policy in BLENDER_CASES:
+        src = _source(tmp_path / f"{encoding}_{policy}", encoding, size=64, overlap=True)
+        gltf = src / "demo.gltf"
+        doc = json.loads(gltf.read_text())
+        doc["materials"][0]["extensions"][EXTENSION]["policy"] = policy
+        gltf.write_text(json.dumps(doc))
+        folder = tmp_path / f"blender_{encoding}_{policy}"
+        export(src, folder, "blender")
+        setups.append(str(folder / "wrinkle_setup.json"))
+        inputs.append(load_input(src))
+    n = len(inputs[0].asset.regions)
+    rng = np.random.default_rng(16)
+    weights = []
+    for _, policy in BLENDER_CASES:
+        lo = model.POLICY_WEIGHT_RANGE[policy].low
+        sets = [np.zeros(n), np.full(n, 0.9), rng.uniform(lo, 1.0, n), np.full(n, max(lo, -0.6))]
+        weights.append([w.astype(np.float32) for w in sets])
+    (tmp_path / "weights.json").write_text(
+        json.dumps([[w.tolist() for w in sets] for sets in weights])
+    )
+    r = subprocess.run(
+        ["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python"]
+        + [str(Path(__file__).parent / "blender_render.py"), "--", str(tmp_path)]
+        + [str(BLENDER_SIZE), str(tmp_path / "weights.json"), *setups],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    c = (np.arange(BLENDER_SIZE) + 0.5) / BLENDER_SIZE
+    u, v = np.meshgrid(c, c)  # EXR row i = glTF v (Blender's v is 1 - glTF's)
+    uv = np.stack([u, v], -1).reshape(-1, 2).astype(np.float32)
+    for e, ((encoding, policy), inp) in enumerate(zip(BLENDER_CASES, inputs, strict=True)):
+        a = inp.asset
+        assert (a.encoding, a.policy) == (encoding, policy)
+        s = h.samples(inp, uv)
+        d = a.region_state_matrix()
+        for k, w in enumerate(weights[e]):
+            ww = w if policy == "signed" else w[:, None] * d
+            img = oiio.ImageBuf(str(tmp_path / f"{e}_{k}.exr")).get_pixels(oiio.FLOAT)
+            normal = img * 2.0 - 1.0  # (the harness's compare reads x, y, z of RGBA)
+            ref = model.blend(s.base, s.states, s.masks, ww, encoding, policy)
+            st = h.compare(normal[None], ref)
+            assert st["mean"] <= 0.5 and st["p99"] <= 2.0, (encoding, policy, k, st)
+            if k == 1:
+                neutral = model.blend(s.base, s.states, s.masks, ww * 0, encoding, policy)
+                assert h.compare(normal[None], neutral)["p99"] > 2.0, (encoding, policy)

@@ -7,6 +7,11 @@ several weight sets into float32 targets; Python compares each covered pixel wit
 ``wrinklepipe.model.blend`` on the shipped texels at the pixel's UV (0.5 degrees mean / 2 degrees
 p99). The animation check reads the region weights the AnimationMixer gives at times t and
 compares them with the curves the glTF stores, interpolated independently (numpy).
+
+Whole characters on the same page: the generated multi-mesh avatar and RobotExpressive
+(../shared/data, ``material = "Main"`` on its head), each converted into its source document:
+the wrinkled material's debug normal equals numpy, and the lit frame at strong weights equals the
+plain GLTFLoader's (no plugin) at every pixel the wrinkled material does not cover.
 """
 
 from __future__ import annotations
@@ -20,12 +25,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import shader_harness as h
+from wrinkle_setups import write_setup
 
 from wrinklepipe import model
-from wrinklepipe.demo import demo_asset
+from wrinklepipe.demo import avatar, demo_asset
+from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.paths import ROOT
+from wrinklepipe.pipeline.convert import ConvertOptions, convert
 from wrinklepipe.pipeline.drivers import expression_cycle
 from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.sources.validation import load_input
@@ -36,6 +44,17 @@ POLICIES = ["clamp01", "signed", "additive", "renormalize", "lerp"]
 CHROMIUM = Path("/usr/bin/chromium")
 NODE_MODULES = ROOT / "tools" / "node" / "node_modules"
 SIZE = 160
+CHAR_SIZE = 128  # the whole characters' renders
+EXTENSION = "WRINKLEPIPE_wrinkle_maps"
+ROBOT_DRIVERS = """
+[[drivers]]
+kind = "blendshapes"
+rows = [["Angry", "brow_L", 0, 1, 1, 0], ["Angry", "brow_R", 0, 1, 1, 0],
+        ["Surprised", "mouth", 0, 1, 1, 0]]
+[drivers.keys]
+Angry = [[0, 0], [1, 1], [2, 0]]
+Surprised = [[0, 0], [2, 0], [3, 1]]
+"""
 
 
 def _missing() -> str:
@@ -82,6 +101,49 @@ def _real_character(root: Path) -> Path | None:
     a = replace(a, mesh=prepare_mesh(a.mesh))
     write_gltf(package_from_asset(a, PackOptions(), [expression_cycle(a)]), root / "real", "cesium")
     return root / "real" / "cesium.gltf"
+
+
+def _characters(root: Path) -> dict[str, Path]:
+    """The multi-mesh avatar and (with ../shared/data) RobotExpressive, converted into their
+    source documents (wrinkled: the avatar's Skin, the robot's Main on its Head)."""
+    out = {}
+    res = convert(avatar.avatar_source_dir(), root / "avatar", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    out["avatar"] = root / "avatar" / "avatar.gltf"
+    robot = DATA / "gltf-samples" / "RobotExpressive" / "RobotExpressive.glb"
+    if robot.is_file():
+        manifest = write_setup(
+            root / "robot_in", robot, "robot", "Main", ["Head"], drivers=ROBOT_DRIVERS
+        )
+        with allowed_roots([robot.parent]):
+            res = convert(manifest, root / "robot", ConvertOptions(render=False))
+        assert res.exit_code == 0
+        out["robot"] = root / "robot" / "robot.gltf"
+    return out
+
+
+CHAR_TIMES = [0.0, 0.5, 1.25, 2.0, 2.6, 2.95]  # within both clips (the mixer loops)
+
+
+def _character_calls(name: str, url: str, clip: int, plan: list) -> list[dict]:
+    """Focused on the wrinkles: the UV / coverage render, the lit frame at strong weights, the
+    debug normal at each weight set, the weights the clip ``clip`` plays at CHAR_TIMES; then the
+    same lit frame (same camera) without the plugin."""
+    s = CHAR_SIZE
+    strong = [0.9] * 3
+    calls = [
+        {"fn": "load", "args": [url]},
+        {"fn": "focusWrinkles", "args": []},
+        {"fn": "renderDebug", "args": [2, None, s], "file": f"{name}_uv.f32"},
+        {"fn": "renderColor", "args": [strong, s], "file": f"{name}_lit_strong.u8"},
+    ]
+    for wname, w in _weight_sets(3, "clamp01").items():
+        calls.append({"fn": "renderDebug", "args": [1, w, s], "file": f"{name}_{wname}.f32"})
+        plan.append((name, wname, w, f"{name}_{wname}.f32"))
+    calls.append({"fn": "sampleWeights", "args": [clip, CHAR_TIMES], "character": name})
+    calls.append({"fn": "load", "args": [url, {"plugin": False, "keepCamera": True}]})
+    calls.append({"fn": "renderColor", "args": [None, s], "file": f"{name}_lit_plain.u8"})
+    return calls
 
 
 def _with_occluder(gltf: Path) -> Path:
@@ -164,6 +226,15 @@ def browser(tmp_path_factory):
         for name, w in _weight_sets(8, "clamp01").items():
             calls.append({"fn": "renderDebug", "args": [1, w, SIZE], "file": f"real_{name}.f32"})
             plan.append(("real", name, w, f"real_{name}.f32"))
+    characters = _characters(root)
+    for name, path in characters.items():
+        doc = json.loads(path.read_text())
+        ext = next(
+            m for m in doc["materials"] if "extensions" in m and EXTENSION in m["extensions"]
+        )
+        clip = ext["extensions"][EXTENSION]["weightCurves"][0]["animation"]
+        url = "/asset/" + path.relative_to(root).as_posix()
+        calls += _character_calls(name, url, clip, plan)
     times = [0.0, 0.25, 0.5, 1.0, 1.6, 2.75, 3.3, 5.9]
     first = "/asset/" + assets["pd-clamp01"].relative_to(root).as_posix()
     calls += [{"fn": "load", "args": [first]}, {"fn": "sampleWeights", "args": [0, times]}]
@@ -191,6 +262,8 @@ def browser(tmp_path_factory):
         "assets": assets,
         "multi": multi,
         "real": real,
+        "characters": characters,
+        "calls": calls,
         "out": out,
         "plan": plan,
         "results": res["results"],
@@ -198,8 +271,10 @@ def browser(tmp_path_factory):
     }
 
 
-def _image(b, file: str) -> np.ndarray:
-    return np.fromfile(b["out"] / file, np.float32).reshape(SIZE, SIZE, 4)
+def _image(b, file: str, size: int = SIZE) -> np.ndarray:
+    if file.endswith(".u8"):
+        return np.fromfile(b["out"] / file, np.uint8).reshape(size, size, 4)
+    return np.fromfile(b["out"] / file, np.float32).reshape(size, size, 4)
 
 
 @pytest.mark.parametrize("policy", POLICIES)
@@ -282,7 +357,8 @@ def test_weights_animation_plays_the_curves(browser):
     loads = [r for r in browser["results"] if r["fn"] == "load"]
     anim = loads[-1]["value"]["animations"]
     assert anim[0]["tracks"] == 8 and anim[0]["duration"] > 0
-    got = np.asarray(next(r for r in browser["results"] if r["fn"] == "sampleWeights")["value"])
+    samples = [r for r in browser["results"] if r["fn"] == "sampleWeights"]
+    got = np.asarray(samples[-1]["value"])  # the demo's (the last load)
     curve = read_gltf(browser["assets"]["pd-clamp01"]).curves[0]
     times = np.asarray(browser["times"])
     expect = np.stack(
@@ -290,4 +366,69 @@ def test_weights_animation_plays_the_curves(browser):
         axis=1,
     )
     assert np.abs(expect).max() > 0.5  # the cycle reaches full expressions
+    np.testing.assert_allclose(got, expect, atol=1e-5)
+
+
+@pytest.mark.parametrize("name", ["avatar", "robot"])
+def test_threejs_renders_a_whole_character(browser, name):
+    """The avatar (Head/Eyes/Teeth/Body, 4 materials, 20-joint skin) and RobotExpressive (14
+    meshes, 2 skins) converted into their documents: the wrinkled material's debug normal at
+    every pixel it covers equals numpy; the lit frame at strong weights equals the plain
+    GLTFLoader's (same camera, no plugin) wherever the wrinkled material is not (plain parts
+    unaffected, byte for byte) and differs where its masks are (the wrinkles are in the artist's
+    lit view)."""
+    if name not in browser["characters"]:
+        pytest.skip("../shared/data is absent")
+    size = CHAR_SIZE
+    uvimg = _image(browser, f"{name}_uv.f32", size)
+    cov = uvimg[..., 3] > 0.5
+    assert cov.sum() > 0.05 * size * size
+    inp = load_input(browser["characters"][name])
+    s = h.samples(inp, uvimg[cov][:, :2].astype(np.float32))
+    d = inp.asset.region_state_matrix()
+    moved = 0.0
+    for k, wname, w, file in browser["plan"]:
+        if k != name:
+            continue
+        ww = np.asarray(w, np.float32)[:, None] * d
+        ref = model.blend(s.base, s.states, s.masks, ww, inp.asset.encoding, inp.asset.policy)
+        img = _image(browser, file, size)[cov][None]
+        st = h.compare(img, ref)
+        assert st["mean"] <= 0.5 and st["p99"] <= 2.0, (name, wname, st)
+        if wname == "strong":
+            base = model.blend(s.base, s.states, s.masks, ww * 0, inp.asset.encoding, "clamp01")
+            moved = h.compare(img, base)["p99"]
+    assert moved > 2.0
+    # plain parts unaffected: the same camera with and without the plugin
+    face = cov
+    lit = _image(browser, f"{name}_lit_strong.u8", size).astype(np.int16)
+    plain = _image(browser, f"{name}_lit_plain.u8", size).astype(np.int16)
+    assert 0 < face.sum() and (~face).sum() > 0
+    background = (plain == plain[0, 0]).all(-1)
+    assert (~face & ~background).sum() > 0.01 * size * size  # plain parts are in the frame
+    np.testing.assert_array_equal(lit[~face], plain[~face])
+    # the wrinkles show in the lit frame, where the masks are (numpy's, at the pixels' UVs)
+    diff = np.abs(lit - plain)[..., :3].max(-1)[face]
+    masked = s.masks.max(0) > 0.25
+    assert diff[masked].mean() > 1.0 and diff[masked].mean() > 5 * diff[~masked].mean()
+
+
+@pytest.mark.parametrize("name", ["avatar", "robot"])
+def test_a_whole_characters_weights_play_with_its_morphs(browser, name):
+    """The converted document's weight animation (its blendshapes driver's curves, in the clip
+    that also plays the morph weights): the mixer's weights at t equal the stored curve."""
+    from wrinklepipe.sources.package import read_package
+
+    if name not in browser["characters"]:
+        pytest.skip("../shared/data is absent")
+    calls = [c for c in browser["calls"] if c["fn"] == "sampleWeights"]
+    k = next(i for i, c in enumerate(calls) if c.get("character") == name)
+    got = np.asarray([r for r in browser["results"] if r["fn"] == "sampleWeights"][k]["value"])
+    curve = read_package(browser["characters"][name]).curves[0]
+    times = np.asarray(CHAR_TIMES)
+    expect = np.stack(
+        [np.interp(times, curve.times, curve.values[:, r]) for r in range(curve.values.shape[1])],
+        axis=1,
+    )
+    assert np.abs(expect).max() > 0.5
     np.testing.assert_allclose(got, expect, atol=1e-5)

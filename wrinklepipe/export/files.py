@@ -10,6 +10,7 @@ import steps. A combination an engine cannot express is refused with one message
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,6 +20,7 @@ import numpy as np
 from wrinklepipe import codec
 from wrinklepipe.atomic import dumps_json
 from wrinklepipe.document.model import Document
+from wrinklepipe.document.package import wrinkled_materials
 from wrinklepipe.errors import input_error
 from wrinklepipe.export import readme
 from wrinklepipe.export.gltf import plain_gltf
@@ -58,10 +60,20 @@ class Export:
 
 
 def _add_mesh(ex: Export, keep_normal: bool) -> str:
-    """The engine's glTF into ``ex.files`` (:func:`plain_gltf`); returns the base image's path."""
+    """The engine's glTF into ``ex.files`` (:func:`plain_gltf`); records the wrinkled
+    material's name(s) (``materials``: where the engine applies the wrinkle shader); returns the
+    base image's path."""
     mesh, base_uri = plain_gltf(ex.pkg, keep_normal, ex.document)
     ex.files.update(mesh)
     ex.mesh_files = mesh
+    if ex.document is not None:
+        materials = ex.document.array("materials")
+        ex.setup["materials"] = [
+            materials[i].get("name", "") for i in wrinkled_materials(ex.document)
+        ]
+    else:
+        gltf = json.loads(mesh[f"{ex.pkg.name}.gltf"])
+        ex.setup["materials"] = [gltf["materials"][0].get("name", "")]
     return base_uri
 
 

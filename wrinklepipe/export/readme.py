@@ -12,7 +12,10 @@ def _files(files: list[str]) -> str:
 def _common(doc: dict[str, Any]) -> str:
     notes = "\n".join(f"- {n}" for n in doc["notes"]) or "- none"
     states = ", ".join(s["name"] for s in doc["states"])
+    materials = " / ".join(f"`{m}`" for m in doc.get("materials", [])) or "the face's"
     return (
+        f"The wrinkled material: {materials} in `{doc['mesh']}` (apply the wrinkle shader to the "
+        "surfaces using it; every other part and material is as in the source).\n\n"
         f"Encoding `{doc['encoding']}` (scale {doc['scale']}, value mapping v{doc['mapping']}), "
         f"policy `{doc['policy']}`, {len(doc['states'])} states ({states}), "
         f"{len(doc['regions'])} regions, normal maps in the {doc['convention']} convention "
@@ -33,7 +36,8 @@ def _unreal(doc: dict[str, Any]) -> str:
 ## Import into Unreal Engine 5
 
 1. Import `{doc["mesh"]}` (Interchange glTF importer: skeletal mesh with its morph targets and
-   animations; its material has no textures, the wrinkle material replaces it).
+   animations; the wrinkled material comes without its base normal map, which is in
+   `textures/`, and the wrinkle material below replaces it; other materials keep their textures).
 2. Import the textures in `textures/`. For `base_normal` and the `wrinkle_*` maps set
    Compression Settings **Normalmap (BC5)** for `.dds` files (they are BC5 with full mip chains;
    set Mip Gen Settings **LeaveExistingMips**), sRGB **off**, and do **not** flip the green

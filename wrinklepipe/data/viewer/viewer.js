@@ -2,7 +2,8 @@
 // Expression sliders set the region weights (sum of expression x its table row), the timeline
 // plays the glTF animations (morph targets and wrinkle weights in one AnimationMixer), the
 // overlay colours each region's mask. `window.wrinklepipe` is the page's scripting interface
-// (the tests use it): load(url), setWeights(w), renderDebug(mode, w), sampleWeights(clip, t).
+// (the tests use it): load(url, { plugin }), setWeights(w), renderDebug(mode, w), renderColor(w),
+// focusWrinkles(), sampleWeights(clip, t).
 
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
@@ -42,6 +43,7 @@ function frame( object ) {
 	const box = new THREE.Box3().setFromObject( object );
 	const size = box.getSize( new THREE.Vector3() ), centre = box.getCenter( new THREE.Vector3() );
 	const r = Math.max( size.x, size.y ) * 0.5 / Math.tan( THREE.MathUtils.degToRad( camera.fov * 0.5 ) );
+	camera.up.set( 0, 1, 0 );
 	camera.position.set( centre.x, centre.y, box.max.z + r * 1.1 );
 	camera.near = r / 100;
 	camera.far = r * 10 + size.z * 2;
@@ -51,7 +53,9 @@ function frame( object ) {
 
 }
 
-async function load( url ) {
+// Load a glTF into the scene (replacing the last one); `plugin: false` loads it with the plain
+// GLTFLoader (no wrinkles), to compare against; `keepCamera: true` keeps the camera as it is.
+async function load( url, { plugin = true, keepCamera = false } = {} ) {
 
 	if ( state.gltf ) {
 
@@ -61,13 +65,13 @@ async function load( url ) {
 	}
 
 	const loader = new GLTFLoader();
-	loader.register( ( parser ) => new WrinkleMapsPlugin( parser, { renderer } ) );
+	if ( plugin ) loader.register( ( parser ) => new WrinkleMapsPlugin( parser, { renderer } ) );
 	const gltf = await loader.loadAsync( url );
 	state.gltf = gltf;
 	state.wrinkles = gltf.userData.wrinkles || [];
 	scene.add( gltf.scene );
 	resize();
-	frame( gltf.scene );
+	if ( ! keepCamera ) frame( gltf.scene );
 	state.mixer = new THREE.AnimationMixer( gltf.scene );
 	state.action = null;
 	buildPanel( gltf );
@@ -304,6 +308,31 @@ function renderDebug( mode, weights, size = 256 ) {
 
 }
 
+// Render one frame as the artist sees it (lit, materials as loaded, mip-mapped) at region
+// weights `weights` into an 8-bit RGBA target of `size` x `size` (square, as renderDebug).
+function renderColor( weights, size = 256 ) {
+
+	if ( ! still ) renderer.setAnimationLoop( null );
+	const target = new THREE.WebGLRenderTarget( size, size, { depthBuffer: true } );
+	for ( const w of state.wrinkles ) w.setDebug( 0, false );
+	if ( weights ) setWeights( weights );
+	const aspect = camera.aspect;
+	camera.aspect = 1;
+	camera.updateProjectionMatrix();
+	renderer.setRenderTarget( target );
+	renderer.clear();
+	renderer.render( scene, camera );
+	const out = new Uint8Array( size * size * 4 );
+	renderer.readRenderTargetPixels( target, 0, 0, size, size, out );
+	renderer.setRenderTarget( null );
+	camera.aspect = aspect;
+	camera.updateProjectionMatrix();
+	target.dispose();
+	if ( ! still ) renderer.setAnimationLoop( animate );
+	return { size, data: toBase64( out ) };
+
+}
+
 // Point the camera at where the wrinkles are: render the activation (debug mode 3: view-space
 // position and sum |a_k|) from 14 directions at low resolution with every region weight 1
 // (or `weights`), keep the direction that sees the most active pixels, and frame their
@@ -408,7 +437,7 @@ async function start() {
 
 }
 
-window.wrinklepipe = { ready: start(), load, setWeights, renderDebug, focusWrinkles, sampleWeights, state, renderer, THREE };
+window.wrinklepipe = { ready: start(), load, setWeights, renderDebug, renderColor, focusWrinkles, sampleWeights, state, renderer, THREE };
 window.wrinklepipe.ready.catch( ( e ) => {
 
 	$( 'status' ).textContent = String( e );

@@ -5,10 +5,11 @@
 or run it from Blender's text editor (it reads the wrinkle_setup.json next to it). It imports the
 export's glTF when the scene has no mesh, builds the node group ``WrinklePipe`` (the wrinkle
 model of wrinklepipe.model in shader nodes: masks through the channel table, region weights,
-the asset's policy and encoding), inserts it into the material that uses the base normal map
-(UV Map -> WrinklePipe -> Normal Map -> the BSDF's Normal), gives the mesh object one custom
-property per region (``wp_<region>``) with a driver into the material, and keys those
-properties from the export's weight curves. Prints a JSON summary on its last line.
+the asset's policy and encoding), inserts it into the wrinkled material (the glTF material named
+in the setup's ``materials``, else the one sampling the base normal map: UV Map -> WrinklePipe
+-> Normal Map -> the BSDF's Normal), gives the mesh object one custom property per region
+(``wp_<region>``) with a driver into the material, and keys those properties from the export's
+weight curves. Prints a JSON summary on its last line.
 """
 
 from __future__ import annotations
@@ -270,15 +271,23 @@ def _uses_image(mat: Any, base_name: str) -> bool:
     )
 
 
-def find_face(base_path: str) -> tuple[Any, Any] | None:
-    """(object, material) of the mesh whose material samples the base normal map, or None."""
-    base_name = os.path.basename(base_path)
-    for obj in bpy.context.scene.objects:
-        if obj.type != "MESH":
-            continue
-        for slot in obj.material_slots:
-            if _uses_image(slot.material, base_name):
-                return obj, slot.material
+def _named(mat: Any, names: list[str]) -> bool:
+    """``mat`` is one of the glTF materials ``names`` (Blender suffixes clashes: ``.001``)."""
+    return mat is not None and any(mat.name == n or mat.name.startswith(n + ".") for n in names)
+
+
+def find_face(setup: dict[str, Any]) -> tuple[Any, Any] | None:
+    """(object, material) of the mesh with the wrinkled material (by the glTF material's name
+    in ``setup["materials"]``, else the material that samples the base normal map), or None."""
+    names = setup.get("materials") or []
+    base_name = os.path.basename(setup["base"]["file"])
+    for test in (lambda m: _named(m, names), lambda m: _uses_image(m, base_name)):
+        for obj in bpy.context.scene.objects:
+            if obj.type != "MESH":
+                continue
+            for slot in obj.material_slots:
+                if test(slot.material):
+                    return obj, slot.material
     return None
 
 
@@ -358,14 +367,15 @@ def main() -> None:
         setup = json.load(f)
     setup["shader"].setdefault("baseLayout", "rgb")
     setup["shader"].setdefault("stateLayout", "rgb")
-    found = find_face(setup["base"]["file"])
+    found = find_face(setup)
     if found is None:  # not in the scene yet: import the export's glTF
         _numpy_bool_shim()
         bpy.ops.import_scene.gltf(filepath=os.path.join(folder, setup["mesh"]))
-        found = find_face(setup["base"]["file"])
+        found = find_face(setup)
     if found is None:
         raise RuntimeError(
-            f"no mesh whose material uses {setup['base']['file']} (import {setup['mesh']} first)"
+            f"no mesh with the material {setup.get('materials')} or one that uses "
+            f"{setup['base']['file']} (import {setup['mesh']} first)"
         )
     obj, mat = found
     group = build_group(setup, folder)
