@@ -83,3 +83,41 @@ def test_png_level_changes_bytes_not_pixels_and_reruns_are_identical(manifest, t
             png_pixels((a / rel).read_bytes()), png_pixels((c / rel).read_bytes())
         )
     assert any((a / r).read_bytes() != (c / r).read_bytes() for r in tex)
+
+
+def test_reuse_changes_no_byte_of_the_folder(manifest, tmp_path, monkeypatch):
+    """convert computes a resample, a PNG or a block encoding asked twice once (wrinklepipe.reuse);
+    the folder is byte for byte the one every stage computing everything itself writes."""
+    import contextlib
+
+    from wrinklepipe import reuse
+    from wrinklepipe.pipeline import convert as pc
+
+    monkeypatch.setattr(reuse, "MIN_INPUT_BYTES", 0)  # the 32^2 demo's maps are small
+    memos = []
+    real = pc.reuse
+
+    @contextlib.contextmanager
+    def spy():
+        with real() as memo:
+            memos.append(memo)
+            yield memo
+
+    monkeypatch.setattr(pc, "reuse", spy)
+    convert(manifest, tmp_path / "reused")
+    monkeypatch.setattr(pc, "reuse", contextlib.nullcontext)
+    convert(manifest, tmp_path / "plain")
+    (memo,) = memos
+    # the glTF document and the textures folder hold the same PNGs; the search's block
+    # roundtrip of the chosen format is the copy's encoding
+    assert memo.hits["wrinklepipe.io.package._png"] >= 4
+    assert memo.hits["wrinklepipe.normals.compress.encode_bc"] >= 1
+    files = sorted(p.relative_to(tmp_path / "plain") for p in (tmp_path / "plain").rglob("*"))
+    assert files == sorted(
+        p.relative_to(tmp_path / "reused") for p in (tmp_path / "reused").rglob("*")
+    )
+    for rel in files:
+        if (tmp_path / "plain" / rel).is_file():
+            assert (tmp_path / "plain" / rel).read_bytes() == (
+                tmp_path / "reused" / rel
+            ).read_bytes(), rel

@@ -31,6 +31,7 @@ from wrinklepipe import masks as wm
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.errors import input_error
 from wrinklepipe.normals.resample import resize_normals
+from wrinklepipe.reuse import reused
 
 EXTENSION = "WRINKLEPIPE_wrinkle_maps"
 CHANNELS = "rgba"
@@ -362,7 +363,11 @@ def png_bytes(pixels: np.ndarray, level: int | None = None) -> bytes:
     :func:`png_compression`, else :data:`DEFAULT_PNG_LEVEL`). Same pixels and level -> same bytes.
     """
     level = _PNG_LEVEL.get() if level is None else int(level)
-    px = np.asarray(pixels)
+    return _png(np.asarray(pixels), level)
+
+
+@reused  # a texture the glTF document and the folder (or the GLB) both hold is encoded once
+def _png(px: np.ndarray, level: int) -> bytes:
     if px.ndim == 2:
         px = px[..., None]
     h, w, c = px.shape

@@ -44,6 +44,7 @@ from wrinklepipe import codec
 from wrinklepipe.normals import _chunks, bc4
 from wrinklepipe.normals import encode as enc
 from wrinklepipe.normals._chunks import map_rows, pool, threads
+from wrinklepipe.reuse import reused
 
 _F = np.float32
 
@@ -114,6 +115,7 @@ QUICKTEX_LEVEL = 5
 ISPC_BC7_PROFILE = "basic"
 
 
+@reused  # the search's roundtrip and the copy encode the same texels once per conversion
 def encode_bc(rgba: np.ndarray, fmt: str, targets: np.ndarray | None = None) -> bytes:
     """Compress RGBA8 [H, W, 4] (H, W multiples of 4) in the layout of ``fmt``; returns the
     block data (row-major blocks).
@@ -165,6 +167,7 @@ _DECODERS = {
 }
 
 
+@reused
 def decode_bc_bgra(data: bytes, width: int, height: int, fmt: str) -> np.ndarray:
     """texture2ddecoder's output as is: [H, W, 4] uint8 in B, G, R, A order."""
     check_format(fmt)

@@ -1,5 +1,12 @@
-"""Resample wrinkle maps and masks with a proper filter (OpenImageIO's resize), mip chains, and
+"""Resample wrinkle maps and masks with a proper filter (OpenImageIO's filters), mip chains, and
 what a reduction costs in degrees.
+
+- :func:`resize` is OpenImageIO's ``ImageBufAlgo.resize`` computed separably: its filters are
+  separable and it normalises the weights per axis, so the image is filtered along the rows,
+  then the columns, with OpenImageIO's own per-axis weights (read once per size pair and filter
+  from its resize of unit impulses, edge clamping included). Equal to OpenImageIO's result to
+  float rounding (its 2-D loop sums 13 x 13 taps per texel for lanczos3 at half size; this
+  sums 13 + 13), about ten times faster at 2048^2.
 
 - PD slopes are linear in the height field, so they are filtered as they are (``space="pd"``);
   unit normals are filtered then renormalised (``space="normal"``).
@@ -12,13 +19,16 @@ what a reduction costs in degrees.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
 import OpenImageIO as oiio
+from scipy import sparse
 
 from wrinklepipe.model import blend, normal_to_pd, normalize, pd_to_normal
 from wrinklepipe.normals.compress import Budget, ErrorStats, angular_error_stats
+from wrinklepipe.reuse import reused
 
 _F = np.float32
 
@@ -26,6 +36,7 @@ _F = np.float32
 DEFAULT_FILTER = "lanczos3"
 
 
+@reused  # the same resample asked again in one conversion is computed once
 def resize(
     values: np.ndarray, size: tuple[int, int] | int, filter: str = DEFAULT_FILTER
 ) -> np.ndarray:
@@ -44,13 +55,46 @@ def resize(
     if (h, w) == a.shape[:2]:
         out = a.copy()
     else:
-        src = oiio.ImageBuf(np.ascontiguousarray(a))
-        roi = oiio.ROI(0, w, 0, h, 0, 1, 0, a.shape[2])
-        dst = oiio.ImageBufAlgo.resize(src, filtername=filter, roi=roi)
-        if dst.has_error:
-            raise ValueError(f"resize failed: {dst.geterror()}")
-        out = np.asarray(dst.get_pixels(oiio.FLOAT), dtype=_F).reshape(h, w, a.shape[2])
+        rows, cols = axis_weights(a.shape[0], h, filter), axis_weights(a.shape[1], w, filter)
+        H, W, C = a.shape
+        t = (rows @ a.reshape(H, W * C)).reshape(h, W, C)  # along the columns (y) ...
+        t = cols @ np.ascontiguousarray(t.transpose(1, 0, 2)).reshape(W, h * C)  # ... then x
+        out = np.ascontiguousarray(t.reshape(w, h, C).transpose(1, 0, 2), dtype=_F)
     return out[..., 0] if squeeze else out
+
+
+def oiio_resize(a: np.ndarray, h: int, w: int, filter: str = DEFAULT_FILTER) -> np.ndarray:
+    """OpenImageIO's ``ImageBufAlgo.resize`` of float ``[H, W, C]`` to ``h`` x ``w`` as it is
+    (the reference :func:`resize` equals; it reads its weights from it)."""
+    src = oiio.ImageBuf(np.ascontiguousarray(a, dtype=_F))
+    roi = oiio.ROI(0, w, 0, h, 0, 1, 0, a.shape[2])
+    dst = oiio.ImageBufAlgo.resize(src, filtername=filter, roi=roi)
+    if dst.has_error:
+        raise ValueError(f"resize failed: {dst.geterror()}")
+    return np.asarray(dst.get_pixels(oiio.FLOAT), dtype=_F).reshape(h, w, a.shape[2])
+
+
+#: Impulses per OpenImageIO call when reading the weights (channels of a one-row image).
+_IMPULSES = 512
+
+
+@functools.lru_cache(maxsize=64)
+def axis_weights(n_in: int, n_out: int, filter: str = DEFAULT_FILTER) -> sparse.csr_matrix:
+    """OpenImageIO's resize weights along one axis, ``[n_out, n_in]`` (sparse): row ``o`` holds
+    what each source sample contributes to output sample ``o`` (normalised, samples past the
+    edge clamped onto it). Read from OpenImageIO itself: a one-row image whose channel ``k`` is
+    a unit impulse at sample ``k`` resized along that row (the other axis keeps its size, where
+    OpenImageIO's weights are exactly 1 on the sample itself), so channel ``k`` comes out as
+    column ``k`` of the matrix."""
+    if n_in <= 0 or n_out <= 0:
+        raise ValueError(f"invalid resize {n_in} -> {n_out}")
+    blocks = []
+    for k0 in range(0, n_in, _IMPULSES):
+        k = min(_IMPULSES, n_in - k0)
+        impulses = np.zeros((1, n_in, k), _F)
+        impulses[0, k0 + np.arange(k), np.arange(k)] = 1.0
+        blocks.append(sparse.csr_matrix(oiio_resize(impulses, 1, n_out, filter)[0]))
+    return sparse.hstack(blocks, format="csr")
 
 
 def resize_normals(

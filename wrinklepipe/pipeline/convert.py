@@ -46,6 +46,7 @@ from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
 from wrinklepipe.pipeline.prepare import run_stages
 from wrinklepipe.pipeline.validation import validate_output
+from wrinklepipe.reuse import reuse
 
 
 @dataclass(frozen=True)
@@ -110,6 +111,7 @@ def convert(
         with (
             staged_folder(output, force=opt.force, inputs=inputs) as tmp,
             png_compression(opt.png_level),
+            reuse(),  # a resample, PNG or block encoding asked twice is computed once
         ):
             with console.status("reading inputs"):
                 got = ingest_all(manifest)

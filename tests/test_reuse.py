@@ -1,0 +1,131 @@
+"""Work done once per conversion: the run-scoped memo (wrinklepipe.reuse) and the separable
+resize (OpenImageIO's weights, rows then columns) against OpenImageIO's own resize."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wrinklepipe import reuse
+from wrinklepipe.io.package import png_bytes
+from wrinklepipe.normals.resample import axis_weights, oiio_resize, resize
+
+# ------------------------------------------------------------------------------------------------
+# separable resize
+
+
+def _lanczos3(x: np.ndarray) -> np.ndarray:
+    x = np.abs(x)
+    return np.where(x < 3.0, np.sinc(x) * np.sinc(x / 3.0), 0.0)
+
+
+def test_axis_weights_are_the_published_filters():
+    # box at half size: each output texel is the mean of its two source texels
+    box = axis_weights(8, 4, "box").toarray()
+    assert np.array_equal(box, np.kron(np.eye(4), [[0.5, 0.5]]))
+    # triangle at twice the size is bilinear: 3/4 of the nearer texel, 1/4 of the other,
+    # the edge texels clamped
+    tri = axis_weights(4, 8, "triangle").toarray()
+    assert np.allclose(tri[1], [0.75, 0.25, 0, 0]) and np.allclose(tri[4], [0, 0.25, 0.75, 0])
+    assert np.allclose(tri[0], [1, 0, 0, 0]) and np.allclose(tri[7], [0, 0, 0, 1])
+    # lanczos3 at half size: L(d) = sinc(d) sinc(d/3) at the distance d (in output texels) from
+    # the output centre to each source centre, normalised; output 5 of 32 -> 16 sits at 11.0
+    lz = axis_weights(32, 16, "lanczos3").toarray()[5]
+    d = (np.arange(32) + 0.5 - 11.0) / 2.0
+    want = _lanczos3(d)
+    assert np.allclose(lz, want / want.sum(), atol=2e-6)
+    # every row of every filter is normalised
+    for f in ("lanczos3", "triangle", "box", "blackman-harris"):
+        for n_in, n_out in ((16, 5), (5, 16), (7, 7), (1, 3)):
+            assert np.allclose(axis_weights(n_in, n_out, f).sum(axis=1), 1.0, atol=1e-6)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    h=st.integers(1, 24),
+    w=st.integers(1, 24),
+    th=st.integers(1, 40),
+    tw=st.integers(1, 40),
+    c=st.integers(1, 3),
+    f=st.sampled_from(["lanczos3", "triangle", "box", "blackman-harris"]),
+    seed=st.integers(0, 2**16),
+)
+def test_resize_equals_openimageio(h, w, th, tw, c, f, seed):
+    a = np.random.default_rng(seed).standard_normal((h, w, c)).astype(np.float32)
+    got = resize(a, (th, tw), f)
+    ref = oiio_resize(a, th, tw, f)
+    assert got.shape == ref.shape == (th, tw, c) and got.dtype == np.float32
+    assert np.abs(got - ref).max() <= 4e-6 * max(1.0, float(np.abs(a).max()))
+
+
+def test_resize_2048_to_1024_equals_openimageio():
+    a = np.random.default_rng(3).uniform(-1, 1, (512, 512, 2)).astype(np.float32)
+    for size in (256, (512, 200), 1024):
+        got = resize(a, size)
+        h, w = (size, size) if isinstance(size, int) else size
+        assert np.abs(got - oiio_resize(a, h, w)).max() < 2e-6
+
+
+# ------------------------------------------------------------------------------------------------
+# the memo
+
+
+@reuse.reused
+def _double(a: np.ndarray, k: int | dict = 2) -> np.ndarray:
+    _double.calls += 1  # type: ignore[attr-defined]
+    return a * (k if isinstance(k, int) else k["a"])
+
+
+_double.calls = 0  # type: ignore[attr-defined]
+
+
+@pytest.fixture
+def counted():
+    _double.calls = 0  # type: ignore[attr-defined]
+    return _double
+
+
+def test_reuse_computes_each_content_once_and_hands_out_private_copies(counted):
+    a = np.arange(1 << 15, dtype=np.float32)  # 128 KB, over MIN_INPUT_BYTES
+    with reuse.reuse() as memo:
+        first = counted(a)
+        again = counted(a.copy())  # another object, the same bytes
+        assert counted.calls == 1 and np.array_equal(first, again)
+        again[:] = -1  # the caller's own copy
+        assert np.array_equal(counted(a), a * 2) and counted.calls == 1
+        counted(a, k=3)  # other arguments, another result
+        counted(a.astype(np.float64))  # same values, another dtype
+        counted(a.reshape(2, -1))  # same bytes, another shape
+        assert counted.calls == 4
+        assert memo.hits[f"{__name__}._double"] == 2
+    counted(a)
+    assert counted.calls == 5  # outside reuse(): it just runs
+    assert reuse.active() is None
+
+
+def test_reuse_skips_small_unkeyable_and_bounds_its_memory(counted):
+    with reuse.reuse():
+        small = np.ones(8, np.float32)
+        counted(small), counted(small)
+        assert counted.calls == 2  # below MIN_INPUT_BYTES: not worth a key
+        big = np.ones(1 << 15, np.float32)
+        counted(big, k={"a": 2})  # a dict: not keyed by content, it just runs
+        counted(big, k={"a": 2})
+        assert counted.calls == 4
+    a, b = np.zeros(1 << 15, np.float32), np.ones(1 << 15, np.float32)
+    with reuse.reuse(max_bytes=(1 << 17) + 10) as memo:  # room for one result
+        counted(a), counted(b), counted(a)
+        assert counted.calls == 7  # a was dropped for b and memo.stored_bytes <= memo.max_bytes
+        with reuse.reuse() as inner:  # nested: the same memo
+            assert inner is memo
+
+
+def test_png_bytes_are_the_same_from_the_memo():
+    px = (np.arange(256 * 256 * 3) % 253).astype(np.uint8).reshape(256, 256, 3)
+    plain = png_bytes(px)
+    with reuse.reuse() as memo:
+        assert png_bytes(px) == plain and png_bytes(px.copy()) == plain
+        assert png_bytes(px, level=1) != plain  # the level is part of the key
+    assert memo.hits["wrinklepipe.io.package._png"] == 1

@@ -1,0 +1,170 @@
+"""Work done once per run: a content-addressed memo for pure, costly array functions.
+
+A conversion computes some things more than once on the very same data: the base resampled to
+the states' size (the search, the package, the decoded package for the report, the validator's
+source at the shipped size), a PNG the glTF document and the texture folder both hold, a block
+encoding the search made and the copy makes again. Inside ``with reuse():`` (``convert`` opens
+one per conversion) a function decorated with :func:`reused` computes each distinct input once:
+the key is the function, the SHA-256 of every array / bytes argument (with its dtype and shape)
+and the ``repr`` of the other arguments, so a hit is the result of exactly those bytes, whoever
+asks (a validator reading back a written file gets the result of the bytes in that file).
+
+Only pure, deterministic functions may be decorated. Results are kept as private copies: an
+array returned is the caller's own (mutating it never changes what a later call gets). Outside
+``reuse()``, or in a thread that did not enter it (context variables do not follow work into a
+thread pool), a decorated function simply runs. The memo is bounded (least recently used entries
+are dropped past ``max_bytes``) and ends with the block.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import hashlib
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Iterator
+from contextvars import ContextVar
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+import numpy as np
+
+#: Default bound of one run's memo (bytes of stored results).
+DEFAULT_MAX_BYTES = 1 << 30
+#: Calls whose array / bytes arguments total less than this are not worth a key: they just run.
+MIN_INPUT_BYTES = 1 << 16
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+@dataclass
+class Memo:
+    """One run's stored results and what they saved (``hits`` / ``misses`` per function)."""
+
+    max_bytes: int = DEFAULT_MAX_BYTES
+    entries: OrderedDict[tuple, Any] = field(default_factory=OrderedDict)
+    stored_bytes: int = 0
+    hits: dict[str, int] = field(default_factory=dict)
+    misses: dict[str, int] = field(default_factory=dict)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def get(self, key: tuple) -> tuple[bool, Any]:
+        with self.lock:
+            if key not in self.entries:
+                return False, None
+            self.entries.move_to_end(key)
+            return True, self.entries[key]
+
+    def put(self, key: tuple, value: Any) -> None:
+        size = _result_bytes(value)
+        with self.lock:
+            if key in self.entries or size > self.max_bytes:
+                return
+            self.entries[key] = value
+            self.stored_bytes += size
+            while self.stored_bytes > self.max_bytes:
+                _, old = self.entries.popitem(last=False)
+                self.stored_bytes -= _result_bytes(old)
+
+    def count(self, table: dict[str, int], name: str) -> None:
+        with self.lock:
+            table[name] = table.get(name, 0) + 1
+
+
+_MEMO: ContextVar[Memo | None] = ContextVar("wrinklepipe_reuse", default=None)
+
+
+@contextlib.contextmanager
+def reuse(max_bytes: int = DEFAULT_MAX_BYTES) -> Iterator[Memo]:
+    """Within the block, :func:`reused` functions compute each distinct input once. Nested
+    blocks share the outer memo."""
+    outer = _MEMO.get()
+    if outer is not None:
+        yield outer
+        return
+    memo = Memo(max_bytes=max_bytes)
+    token = _MEMO.set(memo)
+    try:
+        yield memo
+    finally:
+        _MEMO.reset(token)
+
+
+def active() -> Memo | None:
+    """The memo of the enclosing :func:`reuse` block (None outside one)."""
+    return _MEMO.get()
+
+
+class _Unkeyable(Exception):
+    """An argument the memo cannot key by content: the call just runs."""
+
+
+def _digest(value: Any, sizes: list[int]) -> Any:
+    if isinstance(value, np.ndarray):
+        a = np.ascontiguousarray(value)
+        sizes.append(a.nbytes)
+        h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
+        h.update(memoryview(a).cast("B") if a.size else b"")
+        return ("array", h.digest())
+    if isinstance(value, bytes | bytearray | memoryview):
+        sizes.append(len(value))
+        return ("bytes", hashlib.sha256(value).digest())
+    if value is None or isinstance(value, bool | int | float | str):
+        return (type(value).__name__, repr(value))
+    if isinstance(value, tuple | list):
+        return (type(value).__name__, tuple(_digest(v, sizes) for v in value))
+    raise _Unkeyable
+
+
+def _result_bytes(value: Any) -> int:
+    if isinstance(value, np.ndarray):
+        return int(value.nbytes)
+    if isinstance(value, bytes):
+        return len(value)
+    if isinstance(value, tuple | list):
+        return sum(_result_bytes(v) for v in value)
+    return 64
+
+
+def _private(value: Any) -> Any:
+    """A copy no caller holds (arrays copied; bytes and scalars are immutable)."""
+    if isinstance(value, np.ndarray):
+        return value.copy()
+    if isinstance(value, tuple):
+        return tuple(_private(v) for v in value)
+    if isinstance(value, list):
+        return [_private(v) for v in value]
+    return value
+
+
+def reused(fn: F) -> F:
+    """Decorate a pure function of arrays / bytes / plain values (see the module doc)."""
+    name = f"{fn.__module__}.{fn.__qualname__}"
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        memo = _MEMO.get()
+        if memo is None:
+            return fn(*args, **kwargs)
+        sizes: list[int] = []
+        try:
+            key = (
+                name,
+                tuple(_digest(a, sizes) for a in args),
+                tuple(sorted((k, _digest(v, sizes)) for k, v in kwargs.items())),
+            )
+        except _Unkeyable:
+            return fn(*args, **kwargs)
+        if sum(sizes) < MIN_INPUT_BYTES:
+            return fn(*args, **kwargs)
+        found, value = memo.get(key)
+        if found:
+            memo.count(memo.hits, name)
+            return _private(value)
+        memo.count(memo.misses, name)
+        out = fn(*args, **kwargs)
+        memo.put(key, _private(out))
+        return out
+
+    return wrapper  # type: ignore[return-value]
