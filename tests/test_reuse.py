@@ -60,12 +60,19 @@ def test_resize_equals_openimageio(h, w, th, tw, c, f, seed):
     assert np.abs(got - ref).max() <= 4e-6 * max(1.0, float(np.abs(a).max()))
 
 
-def test_resize_2048_to_1024_equals_openimageio():
+def test_resize_equals_openimageio_at_the_sizes_convert_uses():
     a = np.random.default_rng(3).uniform(-1, 1, (512, 512, 2)).astype(np.float32)
-    for size in (256, (512, 200), 1024):
+    for size in (256, (512, 200), 1024, (300, 1024)):
         got = resize(a, size)
         h, w = (size, size) if isinstance(size, int) else size
         assert np.abs(got - oiio_resize(a, h, w)).max() < 2e-6
+    # OpenImageIO sizes its y taps from the x filter: rows magnified 2 -> 3 with x kept weigh
+    # the middle row 0.487 / 0.513, with x magnified too 0.5 / 0.5; both as OpenImageIO does
+    b = np.array([[[1.0]], [[0.0]]], np.float32)
+    for w in (1, 2, 3):
+        ref = oiio_resize(np.repeat(b, w, axis=1), 3, max(w, 1) * (2 if w > 1 else 1))
+        got = resize(np.repeat(b, w, axis=1), ref.shape[:2])
+        assert np.abs(got - ref).max() < 1e-6
 
 
 # ------------------------------------------------------------------------------------------------

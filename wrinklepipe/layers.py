@@ -38,6 +38,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.atomic",
             "wrinklepipe.console",
             "wrinklepipe.layers",
+            "wrinklepipe.reuse",
         ),
     ),
     Layer(
