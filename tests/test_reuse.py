@@ -137,3 +137,27 @@ def test_png_bytes_are_the_same_from_the_memo():
         assert png_bytes(px) == plain and png_bytes(px.copy()) == plain
         assert png_bytes(px, level=1) != plain  # the level is part of the key
     assert memo.hits["wrinklepipe.io.package._png"] == 1
+
+
+def test_map_threads_keeps_order_and_the_callers_png_level():
+    from wrinklepipe.io.package import png_compression
+
+    imgs = [
+        (np.arange(128 * 128 * 3) % (7 + k)).astype(np.uint8).reshape(128, 128, 3) for k in range(5)
+    ]
+    with png_compression(1):
+        got = reuse.map_threads(png_bytes, imgs, workers=2)
+    assert got == [png_bytes(i, level=1) for i in imgs]  # in order, at the caller's level
+    with pytest.raises(ZeroDivisionError):
+        reuse.map_threads(lambda x: 1 // x, [1, 0, 2], workers=2)
+
+
+def test_warm_fills_the_memo_for_the_later_calls(counted):
+    a = np.arange(1 << 15, dtype=np.float32)
+    assert reuse.warm([lambda: counted(a)])() is None and counted.calls == 0  # no memo: no-op
+    with reuse.reuse() as memo:
+        wait = reuse.warm([lambda: counted(a), lambda: counted(a, k=3)])
+        wait()
+        assert counted.calls == 2
+        assert np.array_equal(counted(a), a * 2) and np.array_equal(counted(a, k=3), a * 3)
+        assert counted.calls == 2 and memo.hits[f"{__name__}._double"] == 2

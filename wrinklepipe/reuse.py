@@ -19,11 +19,14 @@ are dropped past ``max_bytes``) and ends with the block.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import functools
 import hashlib
+import os
 import threading
 from collections import OrderedDict
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -36,6 +39,8 @@ DEFAULT_MAX_BYTES = 1 << 30
 MIN_INPUT_BYTES = 1 << 16
 
 F = TypeVar("F", bound=Callable[..., Any])
+T = TypeVar("T")
+R = TypeVar("R")
 
 
 @dataclass
@@ -168,3 +173,40 @@ def reused(fn: F) -> F:
         return out
 
     return wrapper  # type: ignore[return-value]
+
+
+def _workers(workers: int | None) -> int:
+    return max(1, workers if workers is not None else min(2, os.cpu_count() or 1))
+
+
+def map_threads(fn: Callable[[T], R], items: Iterable[T], workers: int | None = None) -> list[R]:
+    """``[fn(x) for x in items]`` on ``workers`` threads (default: 2, or 1 on one core), each
+    call in a copy of the caller's context, so the PNG level (:func:`png_compression`) and this
+    run's memo apply as they do in the caller. For work that releases the GIL (zlib, the block
+    encoders); results in order; the first exception is raised."""
+    todo = list(items)
+    n = _workers(workers)
+    if n == 1 or len(todo) < 2:
+        return [fn(x) for x in todo]
+    with ThreadPoolExecutor(max_workers=n, thread_name_prefix="wp-reuse") as ex:
+        futures = [ex.submit(contextvars.copy_context().run, fn, x) for x in todo]
+        return [f.result() for f in futures]
+
+
+def warm(calls: Sequence[Callable[[], object]], workers: int = 1) -> Callable[[], None]:
+    """Start ``calls`` (calls of :func:`reused` functions) on background threads in this run's
+    memo, so that the same calls made later are hits while the caller does other work; returns
+    ``wait()``, to call before those later calls. Without an active memo nothing starts (the
+    results would have nowhere to go). A call that fails here is simply not stored: the later
+    call computes it again and raises where it is made."""
+    if _MEMO.get() is None or not calls:
+        return lambda: None
+    ex = ThreadPoolExecutor(max_workers=_workers(workers), thread_name_prefix="wp-warm")
+    futures = [ex.submit(contextvars.copy_context().run, c) for c in calls]
+    ex.shutdown(wait=False)
+
+    def wait() -> None:
+        for f in futures:
+            f.exception()  # waits; an error is raised again by the real call
+
+    return wait

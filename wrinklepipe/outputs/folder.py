@@ -13,9 +13,11 @@ byte for byte); for other sources (OBJ, USD) a new document of the package
 from __future__ import annotations
 
 import copy
+import functools
 from pathlib import Path
 from typing import Any
 
+from wrinklepipe import reuse
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.document.model import Document
 from wrinklepipe.document.usd_scene import add_scene
@@ -66,11 +68,15 @@ def build_outputs(
     files: dict[str, bytes] = {}
     notes: list[str] = []
     choices: dict[str, Any] = {}
+    # the PNGs (zlib, off the GIL) encode on another core while the block copies are made;
+    # the document and the textures folder below then take them from the run's memo
+    pngs_ready = reuse.warm([functools.partial(png_bytes, t.pixels) for t in pkg.textures])
     if compressed:  # first: the glTF extension and the USD schema record the copies
         made, n, choices = compressed_copies(pkg, budget, formats)
         files.update(copy_files(made))
         notes += n
         pkg.meta["compressed"] = copy_records(made)  # the USD layers written next read it too
+    pngs_ready()
     if source is not None:
         got, n = document_outputs(source[0], source[1], pkg, glb)
         files.update(got)
