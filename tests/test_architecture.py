@@ -206,3 +206,16 @@ def test_architecture_page_shows_the_table():
     assert start in page and end in page
     shown = page.split(start, 1)[1].split(end, 1)[0]
     assert shown == layers.markdown_table(), "regenerate: python -m wrinklepipe.layers"
+
+
+def test_commands_import_no_other_command():
+    """A command is a thin layer over a job or a stage: what two commands share lives below
+    them (e.g. ``outputs.per_vertex`` for vertex-ids and dynamic), never in one of them."""
+    shared = sorted(
+        (m, t)
+        for m, ts in _graph().items()
+        if m.startswith("wrinklepipe.commands.")
+        for t in ts
+        if t.startswith("wrinklepipe.commands.") and t != m
+    )
+    assert not shared, f"commands importing commands: {shared}"

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from wrinklepipe.commands.vertex_ids import write_per_vertex
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.dynamic import (
@@ -23,6 +22,7 @@ from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.io.mesh import SUFFIXES, LoadOptions, load_mesh, load_meshes, merge_meshes
 from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, gltf_morph_weights
 from wrinklepipe.io.mesh_usd import usd_blend_shape_weights, usd_joint_world_matrices
+from wrinklepipe.outputs.per_vertex import write_per_vertex
 
 NAME = "dynamic"
 HELP = "dynamic wrinkle weights from the mesh's own stretch (Oat): rest vs a deformed pose"

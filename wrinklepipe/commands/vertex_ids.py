@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import io
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from wrinklepipe.atomic import dumps_json, write_output
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.vertex_ids import VertexIdOptions, compute_vertex_ids
 from wrinklepipe.io.mesh import LoadOptions, load_mesh
+from wrinklepipe.outputs.per_vertex import write_per_vertex
 
 NAME = "vertex-ids"
 HELP = "spatial-hash vertex IDs: render vertices at the same position share an ID"
@@ -46,27 +44,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="tolerance relative to the bounding-box diagonal (default 1e-6)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
-
-
-def write_per_vertex(path: Path, values: np.ndarray, meta: dict[str, Any], inputs: list) -> None:
-    """Write a per-vertex array as .npy, .json or .txt/.csv atomically."""
-
-    suffix = path.suffix.lower()
-    if suffix == ".npy":
-        buf = io.BytesIO()
-        np.save(buf, values, allow_pickle=False)
-        data = buf.getvalue()
-    elif suffix == ".json":
-        data = dumps_json({**meta, "values": values.tolist()}).encode()
-    elif suffix in (".txt", ".csv"):
-        if values.dtype.kind == "f":
-            lines = np.char.mod("%.9g", values.astype(np.float64))
-        else:
-            lines = values.astype(str)
-        data = ("\n".join(lines.tolist()) + "\n").encode()
-    else:
-        raise input_error(path, "output must end in .npy, .json, .txt or .csv")
-    write_output(path, data, inputs=inputs)
 
 
 def run(args: argparse.Namespace) -> int:
