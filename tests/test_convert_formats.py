@@ -13,11 +13,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import texture2ddecoder as t2d
 
+from wrinklepipe import codec
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.io.images import write_image
 from wrinklepipe.normals import dds
+from wrinklepipe.sources.validation import load_input
+from wrinklepipe.validate.context import Context
 
 
 @pytest.fixture(scope="module")
@@ -63,6 +67,34 @@ def test_forced_format_converts_and_validates_clean(source, tmp_path, fmt):
     v = report["validation"]
     assert v["status"] == "ran" and v["counts"].get("error", 0) == 0, v["issues"]
     assert code in (0, 1)  # warnings may remain (a budget over BC1's error is one)
+    # the validator's decode of the written copies equals the codec's decode of the texels
+    # texture2ddecoder reads from the files, texel for texel; and a hand reading of them
+    ctx = Context(load_input(out))
+    rgba = {n: _t2d(out / "compressed" / f"{n}.dds") for n in ("base_normal", "wrinkle_stretch")}
+    base = codec.decode("full", rgba["base_normal"], want)
+    assert np.array_equal(ctx.shipped_base, base)
+    v = rgba["base_normal"].astype(np.float64) / 255 * 2 - 1
+    hand = {"rgb": v[..., :3], "rg": v[..., :2], "ag": v[..., [3, 1]]}[want]
+    if hand.shape[-1] == 2:
+        hand = np.dstack([hand, np.sqrt(np.maximum(0, 1 - (hand**2).sum(-1)))])
+    hand /= np.linalg.norm(hand, axis=-1, keepdims=True)
+    assert np.max(np.abs(ctx.shipped_base - hand)) < 2e-6
+    k = [t.name for t in ctx.inp.state_textures()].index("wrinkle_stretch")
+    scale = ctx.asset.pd_scale
+    xy = rgba["wrinkle_stretch"][..., [3, 1] if fmt == "bc3nm" else [0, 1]]
+    hand_pd = (np.maximum(xy.astype(np.float64), 1) - 128) / 127 * scale  # mapping v2
+    assert np.max(np.abs(ctx.shipped_states[k] - hand_pd)) < 1e-6
+    lay = "ag" if fmt == "bc3nm" else "rg"
+    pd = codec.decode("pd", rgba["wrinkle_stretch"], lay, param=scale)
+    assert np.array_equal(ctx.shipped_states[k], pd)
+
+
+def _t2d(path: Path) -> np.ndarray:
+    """Level 0 of a DDS as RGBA8, decoded by texture2ddecoder (BGRA order)."""
+    img = dds.read_dds(path)
+    fn = getattr(t2d, f"decode_{img.format}")
+    px = np.frombuffer(fn(bytes(img.levels[0]), img.width, img.height), np.uint8)
+    return px.reshape(img.height, img.width, 4)[..., [2, 1, 0, 3]]
 
 
 @pytest.fixture(scope="module")
