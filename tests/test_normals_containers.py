@@ -268,6 +268,21 @@ def test_bench_normals_quick_smoke():
     assert demo["ours"]["mean_deg"] <= 1.03 * demo["exhaustive"]["mean_deg"]
     assert demo["ours"]["mean_deg"] < demo["etcpak"]["mean_deg"]
     assert set(r.extra["formats"]) == {"bc1", "bc3", "bc7"}
+    # the coarse-to-fine hard-block search against the encoder before it, in the same run
+    assert "ours (before: whole hard window)" in demo and r.extra["bc5_before_over_now"] > 0
+
+
+def test_bench_record_keeps_the_benchmarks_it_did_not_run(tmp_path):
+    from wrinklepipe.commands.bench import _merged
+
+    f = tmp_path / "results.json"
+    f.write_text(json.dumps({"quick": False, "results": [{"name": "a"}, {"name": "normals"}]}))
+    run = {"quick": False, "results": [{"name": "normals", "new": 1}]}
+    assert _merged(str(f), run)["results"] == [{"name": "a"}, {"name": "normals", "new": 1}]
+    assert _merged(str(f), {"quick": True, "results": []}) == {"quick": True, "results": []}
+    f.write_text("{not json")
+    assert _merged(str(f), run) == run
+    assert _merged(str(tmp_path / "absent.json"), run) == run
 
 
 def test_uastc_ktx2_when_basis_universal_is_installed(tmp_path, demo_files):

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
+from pathlib import Path
 
 from rich.table import Table
 
@@ -31,7 +33,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--list", action="store_true", help="list the benchmarks and exit")
     p.add_argument("--quick", action="store_true", help="small sizes (a smoke run)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
-    p.add_argument("--record", metavar="FILE", help="also write the results as JSON to FILE")
+    p.add_argument(
+        "--record",
+        metavar="FILE",
+        help="also write the results as JSON to FILE (benchmarks not run are kept from it)",
+    )
+
+
+def _merged(path: str, payload: dict) -> dict:
+    """The recorded file with this run's benchmarks replaced (the others kept, by name), when
+    it holds a run of the same kind (``quick`` or not); else this run alone."""
+    try:
+        old = json.loads(Path(path).read_text(encoding="utf-8"))
+        kept = [r for r in old["results"] if isinstance(r, dict) and "name" in r]
+        same = old.get("quick") == payload["quick"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return payload
+    if not same:
+        return payload
+    ran = {r["name"] for r in payload["results"]}
+    results = [r for r in kept if r["name"] not in ran] + payload["results"]
+    return {"quick": payload["quick"], "results": sorted(results, key=lambda r: r["name"])}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         results.append(registry[name][1](args.quick))
     payload = {"quick": bool(args.quick), "results": [r.to_json() for r in results]}
     if args.record:
-        write_output(args.record, dumps_json(payload).encode("utf-8"))
+        write_output(args.record, dumps_json(_merged(args.record, payload)).encode("utf-8"))
     failures = [f for r in results for f in r.failures()]
     if args.json:
         emit_json(payload)
