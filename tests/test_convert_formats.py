@@ -9,9 +9,12 @@ here (BC7 written with B = 0, read with z from B).
 from __future__ import annotations
 
 import json
+import struct
 from pathlib import Path
 
+import alktx2
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 import texture2ddecoder as t2d
 
@@ -134,3 +137,65 @@ def test_steep_wrinkles_with_compressed_copies_validate_clean(steep_source, tmp_
     check = base["checks"][base["chosen"]]["base_normal"]["error"]
     assert check["mean_deg"] < 1.0
     assert code == 0
+
+
+def test_uastc_copies_when_asked(source, tmp_path):
+    """formats = uastc: a Basis Universal KTX2 per map (basisu's UASTC LDR 4x4, the mip chain
+    made here), no DDS; the validator reads it transcoded, with 0 errors."""
+    m = _with_formats(source, "uastc", "uastc", tmp_path)
+    out = tmp_path / "out"
+    code = main(["convert", str(m), "-o", str(out), "--no-render"])
+    report = json.loads((out / "report.json").read_text())
+    v = report["validation"]
+    assert v["status"] == "ran" and v["counts"].get("error", 0) == 0, v["issues"]
+    assert code in (0, 1)
+    comp = report["compression"]
+    assert comp["base"]["chosen"] == comp["wrinkle"]["chosen"] == "uastc"
+    doc = json.loads((out / "demo_head.gltf").read_text())
+    ext = doc["materials"][0]["extensions"]["WRINKLEPIPE_wrinkle_maps"]
+    rec = {doc["textures"][c["texture"]["index"]]["name"]: c for c in ext["compressed"]}
+    assert rec["base_normal"]["layout"] == "rgb" and rec["wrinkle_stretch"]["layout"] == "rg"
+    assert rec["base_normal"]["uris"] == ["compressed/base_normal.ktx2"]
+    assert not any((out / "compressed").glob("*.dds"))
+    for name in ("base_normal", "wrinkle_stretch"):
+        ktx = (out / "compressed" / f"{name}.ktx2").read_bytes()
+        info = alktx2.inspect_ktx2(ktx)
+        png = _oiio_png(out / "textures" / f"{name}.png")
+        h, w = png.shape[:2]
+        assert ktx[:12] == b"\xabKTX 20\xbb\r\n\x1a\n"
+        assert rec[name]["levels"] == max(w, h).bit_length() == struct.unpack("<I", ktx[40:44])[0]
+        assert info, info
+        # transcoded by alktx2 (independent of the writer's check) = the PNG within UASTC's error
+        got, _ = alktx2.decode_ktx2_to_bytes(ktx, format="png")
+        p = tmp_path / f"{name}.png"
+        p.write_bytes(got)
+        dec = _oiio_png(p)
+        c = [0, 1, 2] if name == "base_normal" else [0, 1]
+        diff = np.abs(dec[..., c].astype(int) - png[..., c].astype(int))
+        assert diff.mean() < 2.0 and diff.max() <= 40, (name, diff.mean(), diff.max())
+        # the error the convert check reported is the one this reading measures (written out:
+        # glTF 2 v / 255 - 1 normalised; pd v2 (v - 128) / 127 s, n = normalize(-d, 1))
+        group = "base" if name == "base_normal" else "wrinkle"
+        reported = comp[group]["checks"]["uastc"][name]["compression_error"]["mean_deg"]
+        assert _mean_angle(dec, png, name, report["pd_scale"]["value"]) == pytest.approx(
+            reported, abs=2e-3
+        )
+
+
+def _mean_angle(a: np.ndarray, b: np.ndarray, name: str, scale: float) -> float:
+    def normals(v: np.ndarray) -> np.ndarray:
+        v = v.astype(np.float64)
+        if name == "base_normal":
+            n = v[..., :3] / 255 * 2 - 1
+        else:
+            d = (np.maximum(v[..., :2], 1) - 128) / 127 * scale
+            n = np.dstack([-d, np.ones(d.shape[:2])])
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    cos = np.clip((normals(a) * normals(b)).sum(-1), -1, 1)
+    return float(np.degrees(np.arccos(cos)).mean())
+
+
+def _oiio_png(path: Path) -> np.ndarray:
+    buf = oiio.ImageBuf(str(path))
+    return np.asarray(buf.get_pixels(oiio.UINT8))

@@ -230,7 +230,7 @@ def _compressed_block(meta: dict[str, Any], tex_index: dict[str, int]) -> dict[s
                 "layout": c["layout"],
                 "mapping": int(c["mapping"]),
                 "levels": int(c["levels"]),
-                "uris": [c["ktx2"], c["dds"]],
+                "uris": [u for u in (c["ktx2"], c["dds"]) if u],  # uastc: a KTX2 only
             }
             for c in meta["compressed"]
         ]

@@ -83,7 +83,7 @@ def _compressed(prim: Any, mapping: int) -> list[dict[str, Any]]:
             "mapping": 1 if n == "base_normal" else mapping,
             "levels": int(lv),
             "ktx2": f"compressed/{n}.ktx2",
-            "dds": f"compressed/{n}.dds",
+            "dds": "" if str(f) == "uastc" else f"compressed/{n}.dds",  # UASTC: KTX2 only
         }
         for n, f, lay, lv in zip(names, fmts, lays, levels)
     ]

@@ -26,14 +26,15 @@ import numpy as np
 
 from wrinklepipe import codec
 from wrinklepipe.normals import compress as cmp
-from wrinklepipe.normals import mips
+from wrinklepipe.normals import mips, uastc
 from wrinklepipe.normals.dds import dds_bytes
 from wrinklepipe.normals.ktx2 import ktx2_bytes
 
 #: Formats ``auto`` tries, smallest blocks first (BC1: 8 bytes; then BC5, BC3nm, BC7: 16).
 AUTO_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")
-#: What a manifest's ``formats.base`` / ``formats.wrinkle`` may name.
-REQUESTABLE: tuple[str, ...] = ("auto", *cmp.FORMATS)
+#: What a manifest's ``formats.base`` / ``formats.wrinkle`` may name (``uastc``: a Basis
+#: Universal KTX2 only, never chosen by ``auto``).
+REQUESTABLE: tuple[str, ...] = ("auto", *cmp.FORMATS, "uastc")
 
 
 @dataclass
@@ -47,11 +48,14 @@ class Copy:
     mapping: int
     width: int
     height: int
-    levels: list[bytes]
+    levels: list[bytes]  # block data per level; uastc: the whole KTX2 file
     check: cmp.FormatCheck
+    level_count: int = 0
 
     def files(self) -> dict[str, bytes]:
         w, h = self.width, self.height
+        if self.format == "uastc":  # basisu writes the KTX2 (its DFD); no DDS holds UASTC
+            return {f"compressed/{self.texture}.ktx2": self.levels[0]}
         return {
             f"compressed/{self.texture}.dds": dds_bytes(self.format, w, h, self.levels),
             f"compressed/{self.texture}.ktx2": ktx2_bytes(
@@ -66,8 +70,8 @@ class Copy:
             "format": self.format,
             "layout": self.layout,
             "mapping": self.mapping,
-            "levels": len(self.levels),
-            "dds": f"compressed/{self.texture}.dds",
+            "levels": self.level_count or len(self.levels),
+            "dds": "" if self.format == "uastc" else f"compressed/{self.texture}.dds",
             "ktx2": f"compressed/{self.texture}.ktx2",
         }
 
@@ -94,10 +98,17 @@ def _decoder(m: _Map, base: np.ndarray | None):  # noqa: ANN202 - compress.decod
     return cmp.decoder_for(enc, scale, gain, base, m.version)
 
 
-def _check(m: _Map, fmt: str, budget: cmp.Budget, base: np.ndarray | None) -> cmp.FormatCheck:
+def _check(
+    m: _Map, fmt: str, budget: cmp.Budget, base: np.ndarray | None, with_mips: bool = True
+) -> cmp.FormatCheck:
     q = _components(m, fmt)
     decode = _decoder(m, base)
     reference = decode(q, slice(0, q.shape[0]))  # what the uncompressed map decodes to
+    if fmt == "uastc":  # one KTX2 with the whole chain, level 0 measured from it
+        ktx = _uastc_file(m, with_mips)
+        check = uastc.uastc_check(q, reference, decode, budget, ktx2=ktx)[0]
+        check.data = ktx
+        return check
     return cmp.compress_and_check(q, reference, fmt, decode, budget, keep_decoded=False)
 
 
@@ -131,7 +142,31 @@ def _quantity(m: _Map) -> np.ndarray:
     return codec.decode(e, m.texels[..., : e.components], where, param=m.param, version=m.version)
 
 
+def _uastc_levels(m: _Map, with_mips: bool) -> int:
+    h, w = m.texels.shape[:2]
+    return mips.level_count(w, h) if with_mips else 1
+
+
+def _uastc_file(m: _Map, with_mips: bool) -> bytes:
+    """The UASTC KTX2 of a map: level 0 and (``with_mips``) the chain made here (PD averaged
+    in slope space, normals renormalised), encoded by basisu in one file."""
+    lay = codec.storage_format("uastc").layout_for(m.encoding)
+    texels = [_components(m, "uastc")]
+    if _uastc_levels(m, with_mips) > 1:
+        texels += mips.texel_levels(m.encoding, _quantity(m), "uastc", m.param, m.version)
+    return uastc.encode_uastc_levels([codec.layouts.pack(t, lay, 4) for t in texels])
+
+
+def _uastc_copy(m: _Map, check: cmp.FormatCheck, with_mips: bool) -> Copy:
+    h, w = m.texels.shape[:2]
+    lay = codec.storage_format("uastc").layout_for(m.encoding).name
+    n = _uastc_levels(m, with_mips)
+    return Copy(m.name, m.encoding, "uastc", lay, m.version, w, h, [check.data], check, n)
+
+
 def _copy(m: _Map, fmt: str, check: cmp.FormatCheck, with_mips: bool) -> Copy:
+    if fmt == "uastc":
+        return _uastc_copy(m, check, with_mips)
     h, w = m.texels.shape[:2]
     levels = [check.data]
     if with_mips and max(h, w) > 1:
@@ -198,14 +233,14 @@ def compressed_copies(
             if base is not None and base.shape[:2] != maps[0].texels.shape[:2]:
                 notes.append(f"{group}: diff states at another size than the base; PNG only")
                 continue
-        holds = [f for f in cmp.FORMATS if codec.storage_format(f).holds(maps[0].encoding)]
+        holds = [f for f in REQUESTABLE[1:] if codec.storage_format(f).holds(maps[0].encoding)]
         if want != "auto" and want not in holds:
             notes.append(f"{group}: {want} cannot hold {maps[0].encoding} maps; PNG only")
             continue
         candidates = [f for f in AUTO_FORMATS if f in holds] if want == "auto" else [want]
         checks: dict[str, list[cmp.FormatCheck]] = {}
         for f in candidates:
-            checks[f] = [_check(m, f, limits, base) for m in maps]
+            checks[f] = [_check(m, f, limits, base, with_mips) for m in maps]
             if want == "auto":
                 for m, c in zip(maps, checks[f]):
                     if c.verdict == "pass" and _clips(m, c):
@@ -238,7 +273,7 @@ def compressed_copies(
             "requested": want,
             "chosen": pick or "png",
             "layout": made[0].layout if made else None,
-            "levels": len(made[0].levels) if made else 0,
+            "levels": made[0].record()["levels"] if made else 0,
             "checks": {
                 f: {m.name: c.to_json() for m, c in zip(maps, cs)} for f, cs in checks.items()
             },

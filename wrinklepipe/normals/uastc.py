@@ -60,6 +60,25 @@ def encode_uastc(rgba: np.ndarray, mips: bool = True, quality: int = 100, effort
     )
 
 
+def encode_uastc_levels(levels: list[np.ndarray], quality: int = 100, effort: int = 4) -> bytes:
+    """A mip chain made here (RGBA8 ``[h, w, 4]`` per level, level 0 first: PD averaged in
+    slope space, normals renormalised) -> KTX2 bytes holding UASTC LDR 4x4 (linear)."""
+    raw = [(np.ascontiguousarray(v, np.uint8).tobytes(), v.shape[1], v.shape[0]) for v in levels]
+    return bytes(
+        _lib().encode_raw_mips_to_ktx2(
+            raw,
+            False,
+            codec="uastc",
+            quality=quality,
+            effort=effort,
+            srgb=False,
+            linear=True,
+            threads=1,
+            check_for_alpha=False,
+        )
+    )
+
+
 def decode_uastc(ktx2: bytes) -> np.ndarray:
     """Level 0 of a UASTC KTX2 -> RGBA8 [H, W, 4] (transcoded by basisu)."""
     png, _ = _lib().decode_ktx2_to_bytes(ktx2, format="png")
@@ -79,15 +98,18 @@ def uastc_check(
     decode: Any,
     budget: cmp.Budget | None = None,
     mips: bool = True,
+    ktx2: bytes | None = None,
 ) -> tuple[cmp.FormatCheck, bytes]:
-    """Encode 8-bit texels [H, W, 2 or 3] as UASTC KTX2, decode, measure. Returns the check
-    (format "uastc", bytes = file size) and the KTX2 file bytes."""
+    """Encode 8-bit texels [H, W, 2 or 3] as UASTC KTX2 (or take ``ktx2``, made of them), decode
+    level 0, measure. Returns the check (format "uastc", bytes = file size) and the file."""
     q = np.asarray(stored_u8)
     h, w, c = q.shape
-    rgba = np.zeros((h, w, 4), np.uint8)
-    rgba[..., :c] = q
-    rgba[..., 3] = 255
-    ktx = encode_uastc(rgba, mips=mips)
+    if ktx2 is None:
+        rgba = np.zeros((h, w, 4), np.uint8)
+        rgba[..., :c] = q
+        rgba[..., 3] = 255
+        ktx2 = encode_uastc(rgba, mips=mips)
+    ktx = ktx2
     dec = decode_uastc(ktx)[..., :c]
     n_dec = decode(np.ascontiguousarray(dec), slice(0, h))
     n_raw = decode(q, slice(0, h))

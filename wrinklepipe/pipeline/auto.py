@@ -60,10 +60,22 @@ def budgets(budget: dict[str, float]) -> tuple[fd.Budget, fd.Budget]:
     return png, comp
 
 
+#: Formats the searches do not encode: the copy's own check measures them (UASTC: basisu).
+_NOT_SEARCHED = ("uastc",)
+
+
 def _fixed_format(want: str | None) -> str | None:
     if want in (None, "auto"):
         return None
-    return "png" if want in _NOT_BLOCK else want
+    return "png" if want in _NOT_BLOCK or want in _NOT_SEARCHED else want
+
+
+def _for_copies(want: str | None, chosen: str) -> str:
+    """The format the compressed copies are made in: a format the searches do not encode as
+    asked, else what they chose (``png``: no copy)."""
+    if want in _NOT_SEARCHED:
+        return str(want)
+    return chosen if chosen != "png" else "png8"
 
 
 def auto_choices(
@@ -126,8 +138,8 @@ def auto_choices(
         asset=out,
         choice=choice,
         formats={
-            "base": choice.base_format if choice.base_format != "png" else "png8",
-            "wrinkle": choice.state_format if choice.state_format != "png" else "png8",
+            "base": _for_copies(formats.get("base"), choice.base_format),
+            "wrinkle": _for_copies(formats.get("wrinkle"), choice.state_format),
         },
         notes=notes,
     )

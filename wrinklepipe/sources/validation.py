@@ -35,11 +35,12 @@ from wrinklepipe.io.package import package_from_asset
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.model import ENCODINGS
+from wrinklepipe.normals import uastc
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
-from wrinklepipe.validate.inputs import FORMATS, ValidationInput
+from wrinklepipe.validate.inputs import FORMATS, Texture, ValidationInput
 from wrinklepipe.validate.loader import (
     BUNDLE_SUFFIX,
     EXTENSION,
@@ -242,6 +243,23 @@ def _copy_layout(record: dict | None, fmt: str, png_layout: str | None) -> str |
     return "rg" if FORMATS[fmt][0] == 2 else png_layout
 
 
+def _uastc_texture(t: Texture, path: Path, layout: str | None) -> Texture:
+    """A texture replaced by its UASTC KTX2 copy, level 0 transcoded by basisu (alktx2) to
+    RGBA8: what an engine that transcodes it samples."""
+    px = guard_reader(lambda: uastc.decode_uastc(path.read_bytes()), path, "the KTX2 file")
+    h, w = px.shape[:2]
+    return replace(
+        t,
+        fmt="rgba8",
+        width=w,
+        height=h,
+        data=px.tobytes(),
+        file=str(path),
+        pointer="",
+        layout=layout,
+    )
+
+
 def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> ValidationInput:
     """Replace base/state textures by the BC copies that ship beside them (DDS)."""
     if not folder.is_dir():
@@ -252,10 +270,22 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
     out = []
     for t in inp.textures:
         dds = folder / f"{t.name}.dds"
-        if t.role == "state" and dds.exists() and inp.asset.encoding == "pd" and t.fmt == "rgb8":
+        rec = recorded.get(t.name)
+        ktx2 = folder / f"{t.name}.ktx2"
+        uastc_copy = (
+            t.role in ("base", "state")
+            and rec is not None
+            and rec.get("format") == "uastc"
+            and ktx2.exists()
+        )
+        copied = dds.exists() or uastc_copy
+        if t.role == "state" and copied and inp.asset.encoding == "pd" and t.fmt == "rgb8":
             # the clipped count is a property of the stored texels: count it on the lossless map
             px = np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, -1)
             inp.extra.setdefault("pd_edge_texels", {})[t.name] = edge_texels(px)
+        if uastc_copy:
+            out.append(_uastc_texture(t, ktx2, _copy_layout(rec, "rgba8", t.layout)))
+            continue
         if t.role in ("base", "state") and dds.exists():
             img = guard_reader(lambda dds=dds: read_dds(dds), dds, "the DDS file")
             fmt = str(img.format).lower()
