@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_document_convert import ROBOT, needs_robot, robot  # noqa: F401 (the fixture)
 
 from wrinklepipe import codec
 from wrinklepipe import fidelity as fd
@@ -164,3 +165,25 @@ def test_an_offset_base_is_reported_with_its_shift(tmp_path, capsys):
     line = next(x for x in err.splitlines() if "WP-FID-006" in x)
     # rolled by +5 rows (y) and -3 columns (x); moved back, the states fit it again
     assert "offset by (-3, 5) texels" in line and "an offset" in line, line
+
+
+@needs_robot
+def test_the_choices_and_the_rules_judge_the_poses_the_drivers_produce(request, tmp_path):
+    """RobotExpressive with a blendshapes driver and no expressions driver: the searches and the
+    validator judge the driver's frames, not the expression table."""
+    out, report = request.getfixturevalue("robot")  # converted once for the document tests
+    poses = {p["pose"]: p for p in report["fidelity"]["png"]["poses"]}
+    # the manifest's keys: Angry peaks at t = 1 s (brow_L, brow_R), Surprised at 3 s (mouth)
+    assert set(poses) == {"blendshapes@1.000s", "blendshapes@3.000s"}
+    # active texels on the 64^2 grid: a mask box of n 16^2 texels, magnified 4x bilinearly, is
+    # non-zero on (n + 1) * 4 texels a side (brows 6 x 6 each, mouth 10 x 6)
+    assert poses["blendshapes@1.000s"]["texels"] == 2 * 28 * 28
+    assert poses["blendshapes@3.000s"]["texels"] == 44 * 28
+    v = tmp_path / "v.json"
+    args = ["validate-asset", str(out), "--source", str(out.parent / "src" / "manifest.toml")]
+    args += ["--no-render", "--report", str(v), "--allow-root", str(ROBOT.parent)]
+    assert main(args) == 0
+    measured = json.loads(v.read_text())["metrics"]["fidelity"]["poses"]
+    assert {p["pose"]: p["texels"] for p in measured} == {k: p["texels"] for k, p in poses.items()}
+    by_pose = {p["pose"]: set(p["regions"]) for p in measured}
+    assert by_pose == {"blendshapes@1.000s": {"brow_L", "brow_R"}, "blendshapes@3.000s": {"mouth"}}

@@ -100,8 +100,9 @@ def fidelity_table(fid: dict[str, Any], which: str) -> list[str]:
     budget = fid.get("budget" if which == "png" else "compressed_budget", {})
     limit = ", ".join(f"{k[4:-4]} {v:g}" for k, v in sorted(budget.items()))
     rows = sorted(part["poses"], key=lambda p: -p["p99_deg"])
+    width = max([16, *(len(r["pose"]) + 2 for r in rows)])
     out = [f"fidelity ({which}, degrees inside each pose's active region; budget {limit}):"]
-    out.append(f"  {'pose':<16}{'mean':>7}{'p99':>7}{'max':>8}")
+    out.append(f"  {'pose':<{width}}{'mean':>7}{'p99':>7}{'max':>8}")
     p99 = budget.get("max_p99_deg")
     mean = budget.get("max_mean_deg")
     for r in rows:
@@ -109,13 +110,13 @@ def fidelity_table(fid: dict[str, Any], which: str) -> list[str]:
             mean is not None and r["mean_deg"] > mean
         )
         out.append(
-            f"  {r['pose']:<16}{r['mean_deg']:7.2f}{r['p99_deg']:7.2f}{r['max_deg']:8.2f}"
+            f"  {r['pose']:<{width}}{r['mean_deg']:7.2f}{r['p99_deg']:7.2f}{r['max_deg']:8.2f}"
             + ("  over budget" if over else "")
         )
     b = part.get("base")
     if b:
         out.append(
-            f"  {'base (face)':<16}{b['mean_deg']:7.2f}{b['p99_deg']:7.2f}{b['max_deg']:8.2f}"
+            f"  {'base (face)':<{width}}{b['mean_deg']:7.2f}{b['p99_deg']:7.2f}{b['max_deg']:8.2f}"
         )
     return out
 

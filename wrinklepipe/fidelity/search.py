@@ -294,17 +294,22 @@ def search(
         # not: a scale that clips more than it allows is never chosen, and the candidates
         # include the smallest scale that keeps every texel of the map inside the range
         limit = o.max_clipped_fraction * size * size
+        level = levels[size]
+        safe = scale_candidates(float(np.abs(level).max(initial=0.0)), (1.0,))[0]
+        candidates = sorted({*scale_candidates(top, o.scale_factors), safe}, reverse=True)
+        # only texels with a component above 0.99 of the smallest scale can reach the end of
+        # the range (|t| >= 1 - 0.5/127): count clipping on that tail alone, as edge_texels does
+        amax = np.abs(level).max(axis=-1)
+        tails = [x[a >= 0.99 * candidates[-1]][:, None, :] for x, a in zip(level, amax)]
 
         def clips(s: float) -> bool:
-            return max(clipped_texels(levels[size], s), default=0) > limit
+            return max(clipped_texels(tails, s), default=0) > limit
 
-        safe = scale_candidates(
-            max(float(np.abs(x).max(initial=0.0)) for x in levels[size]), (1.0,)
-        )[0]
         while clips(safe):
             safe += 1.0 / 64.0
+            candidates = sorted({*candidates, safe}, reverse=True)
         best: tuple[tuple[float, float], float] | None = None
-        for s in sorted({*scale_candidates(top, o.scale_factors), safe}, reverse=True):
+        for s in candidates:
             if s < safe and clips(s):
                 tried.append(Tried(f"{label} (clips, WP-MAP-004)", s, 0.0, 0.0, False))
                 continue

@@ -11,6 +11,7 @@ budget when absent).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -35,12 +36,13 @@ class Applied:
     notes: list[str]
 
 
-def can_search(asset: WrinkleAsset) -> str:
-    """Empty when the searches can run on this asset, else why not."""
+def can_search(asset: WrinkleAsset, poses: Sequence[fd.Pose] | None = None) -> str:
+    """Empty when the searches can run on this asset (judged on ``poses``, by default its
+    expression table), else why not."""
     if asset.encoding != "pd":
         return f"encoding {asset.encoding!r} (the searches are for pd)"
-    if not asset.expressions:
-        return "no expressions to judge poses by"
+    if not (asset.expressions if poses is None else poses):
+        return "no poses to judge by (no expressions, no driver curve)"
     k, h, w = asset.states.shape[:3]
     if h != w or asset.masks.shape[1] != asset.masks.shape[2]:
         return "maps that are not square"
@@ -83,9 +85,12 @@ def auto_choices(
     formats: dict[str, str] | None = None,
     auto_scale: bool = True,
     compressed: bool = True,
+    poses: Sequence[fd.Pose] | None = None,
 ) -> Applied:
     """Search, then apply: states at the chosen size (from the search's pyramid), masks at the
-    chosen size, the chosen PD scale; the formats to pass to the compressed copies."""
+    chosen size, the chosen PD scale; the formats to pass to the compressed copies. ``poses``:
+    what the searches judge (the poses the drivers produce, as validation measures them);
+    by default every expression of the table at full amount."""
     formats = formats or {}
     auto = set(asset.provenance.get("auto_resolution", ()))
     res = asset.resolution
@@ -94,15 +99,16 @@ def auto_choices(
         - model.normal_to_pd(resize_normals_pd(asset.base, *asset.states.shape[1:3]))[None]
     )
     H = asset.states.shape[1]
-    poses = fd.expression_poses(
-        asset.region_names, asset.region_state_matrix(), asset.expressions, asset.policy
-    )
+    if poses is None:
+        poses = fd.expression_poses(
+            asset.region_names, asset.region_state_matrix(), asset.expressions, asset.policy
+        )
     mesh = asset.mesh
     src = fs.Source(
         base=asset.base,
         slopes=slopes,
         masks=asset.masks,
-        poses=poses,
+        poses=list(poses),
         region_names=asset.region_names,
         policy=asset.policy,
         footprint=fd.footprint(mesh.uvs, mesh.indices, (H, H)),

@@ -17,19 +17,23 @@ byte-identical.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from wrinklepipe import console  # console.status is looked up per call (tests hook it)
+from wrinklepipe import fidelity as fd
+from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.atomic import staged_folder
+from wrinklepipe.drivers.poses import driver_poses
 from wrinklepipe.errors import input_error
 from wrinklepipe.fidelity.ship import edge_texels
 from wrinklepipe.io.package import (
     DEFAULT_PNG_LEVEL,
     PackOptions,
+    WeightCurves,
     package_from_asset,
     png_compression,
 )
@@ -44,7 +48,7 @@ from wrinklepipe.outputs.report import (
 )
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
-from wrinklepipe.pipeline.prepare import run_stages
+from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.pipeline.validation import validate_output
 from wrinklepipe.reuse import reuse
 
@@ -96,6 +100,12 @@ def clipped_texels(pkg: Any) -> dict[str, int]:
     }
 
 
+def judged_poses(asset: WrinkleAsset, curves: list[WeightCurves]) -> list[fd.Pose]:
+    """The poses the automatic choices judge: those the drivers produce (neutral aside), as
+    the validator's fidelity rules and render pass take them."""
+    return [fd.Pose(p.name, p.weights) for p in driver_poses(asset, curves) if p.name != "neutral"]
+
+
 def convert(
     manifest_path: str | Path, output: str | Path, options: ConvertOptions | None = None
 ) -> ConvertResult:
@@ -118,17 +128,21 @@ def convert(
             asset, notes = got.asset, got.notes
             source = asset  # as read: what validation measures the shipped maps against
             document = (got.document, got.target) if got.document is not None else None
+            with console.status("evaluating drivers"):
+                # before the choices: they are judged on the poses the drivers produce (the
+                # curves depend on the regions and the mesh, not on the sizes chosen)
+                if asset.mesh is not None and asset.mesh.uvs is not None:
+                    asset = replace(asset, mesh=prepare_mesh(asset.mesh))
+                curves, drivers_notes = evaluate_drivers(asset, manifest.root)
             with console.status("choosing sizes, scale and formats by fidelity"):
                 asset, stage_rep = run_stages(
                     asset,
                     auto_scale=manifest.pd_scale == "auto",
                     formats=manifest.formats,
                     compressed=opt.compressed,
+                    poses=judged_poses(asset, curves),
                 )
-            notes += stage_rep.notes
-            with console.status("evaluating drivers"):
-                curves, n = evaluate_drivers(asset, manifest.root)
-            notes += n
+            notes += stage_rep.notes + drivers_notes
             layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
             pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
             with console.status("encoding, packing, compressing"):

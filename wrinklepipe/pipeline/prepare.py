@@ -8,11 +8,13 @@ scale and block formats) by fidelity against the full-resolution source
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from wrinklepipe import fidelity as fd
 from wrinklepipe import masks as wm
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh, WrinkleAsset
@@ -81,12 +83,14 @@ def run_stages(
     auto_scale: bool,
     formats: dict[str, str] | None = None,
     compressed: bool = True,
+    poses: Sequence[fd.Pose] | None = None,
 ) -> tuple[WrinkleAsset, StageReport]:
     """Resample to the target resolutions, prepare the mesh, choose the PD scale.
 
     For ``pd`` assets the automatic choices (sizes, scale, block formats) are made by fidelity
     against the full-resolution source (:mod:`wrinklepipe.pipeline.auto`); other encodings keep
-    the manifest's sizes and the percentile scale.
+    the manifest's sizes and the percentile scale. ``poses``: what the searches judge (convert
+    passes the poses its drivers produce; default: the expression table).
     """
     rep = StageReport()
     res = dict(asset.resolution)
@@ -103,9 +107,9 @@ def run_stages(
             asset = replace(asset, base=base)
     mesh = prepare_mesh(asset.mesh)
     asset = replace(asset, mesh=mesh)
-    why_not = auto.can_search(asset)
+    why_not = auto.can_search(asset, poses)
     if not why_not:
-        applied = auto.auto_choices(asset, formats, auto_scale, compressed)
+        applied = auto.auto_choices(asset, formats, auto_scale, compressed, poses)
         asset = applied.asset
         rep.notes += applied.notes
         rep.fidelity = auto.choice_report(applied.choice)

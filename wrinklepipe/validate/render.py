@@ -27,10 +27,8 @@ from scipy import ndimage
 
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh
-from wrinklepipe.drivers.poses import DriverPose, driver_poses
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents
-from wrinklepipe.io.package import WeightCurves
 from wrinklepipe.shading import glsl
 from wrinklepipe.shading.setup import MaskEntry, ShaderSetup
 from wrinklepipe.validate import gl as glw
@@ -38,6 +36,7 @@ from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context
 from wrinklepipe.validate.inputs import Texture, ValidationInput
+from wrinklepipe.validate.poses import render_poses
 from wrinklepipe.validate.rules_fidelity import render_fidelity
 
 
@@ -442,18 +441,6 @@ def can_render(ctx: Context) -> str:
         if t.is_block and (t.width % 4 or t.height % 4):
             return f"{t.name!r} is block-compressed with a size that is not a multiple of 4"
     return ""
-
-
-def render_poses(inp: ValidationInput) -> list[DriverPose]:
-    """The poses the render pass draws (:func:`wrinklepipe.drivers.poses.driver_poses` on the
-    input's curves; curves known only by their values are keyed by frame index)."""
-    curves = list(inp.curves)
-    if not curves:
-        curves = [
-            WeightCurves(name, np.arange(len(v), dtype=np.float32), np.asarray(v, np.float32))
-            for name, v in sorted(inp.weight_curves.items())
-        ]
-    return driver_poses(inp.asset, curves)
 
 
 def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, Any]]:

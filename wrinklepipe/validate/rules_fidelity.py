@@ -2,8 +2,9 @@
 
 They run when the validator knows the source (``has_source``: a manifest, ``--source
 MANIFEST``, convert's own validation), with the one measure of :mod:`wrinklepipe.fidelity`:
-per pose (the expression table at full amount) the blend of the shipped, decoded textures
-against the blend of the source maps at full resolution, on the texels where the pose's
+per pose (those the drivers produce, as the render pass draws them: the expression table, each
+curve's per-region peak frames) the blend of the shipped, decoded textures against the blend
+of the source maps at full resolution, on the texels where the pose's
 activation is non-zero, weighted by it. Without a source only the self-consistency rules run.
 
 Also here, because a person would catch them at a glance: base and states misaligned (flipped
@@ -25,6 +26,7 @@ from wrinklepipe.normals.compress import angle_deg
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context, encode_source_states, resize_normals
+from wrinklepipe.validate.poses import fidelity_poses
 
 #: A texel outside every mask "differs" when its state and base normals are this far apart.
 MISALIGNED_DEG = 1.0
@@ -38,9 +40,12 @@ def _cache(ctx: Context) -> dict[str, Any]:
 
 
 def poses(ctx: Context) -> list[fd.Pose]:
-    """The poses fidelity is judged on: every expression at full amount."""
-    a = ctx.asset
-    return [fd.Pose(e, ctx.weights(e)) for e in sorted(a.expressions)]
+    """The poses fidelity is judged on: those the drivers produce, as the render pass draws
+    them (:func:`wrinklepipe.validate.poses.fidelity_poses`; cached on the context)."""
+    c = _cache(ctx)
+    if "poses" not in c:
+        c["poses"] = fidelity_poses(ctx.inp)
+    return c["poses"]
 
 
 def budgets(ctx: Context) -> tuple[fd.Budget, str]:
@@ -73,7 +78,7 @@ def _measurable(ctx: Context) -> bool:
         and not (a.policy == "signed" and len(a.state_names) != 2)
         and len(a.states)
         and a.regions
-        and a.expressions
+        and poses(ctx)
     )
 
 
