@@ -20,6 +20,14 @@ def session(tmp_path_factory) -> Path:
     return folder
 
 
+@pytest.fixture(scope="module")
+def base(session, tmp_path_factory) -> Path:
+    """One default run on the example session, shared by the tests that read its outputs."""
+    out = tmp_path_factory.mktemp("cap_base") / "a"
+    assert main(_args(session, out)) == 0
+    return out
+
+
 def _args(s: Path, out: Path) -> list[str]:
     return [
         "capture",
@@ -42,10 +50,9 @@ def _args(s: Path, out: Path) -> list[str]:
     ]
 
 
-def test_end_to_end_outputs_report_and_determinism(session, tmp_path, capsys):
-    out = tmp_path / "a"
-    assert main(_args(session, out) + ["--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
+def test_end_to_end_outputs_report_and_determinism(session, base, tmp_path, capsys):
+    out = base
+    report = json.loads((out / "report.json").read_text())
     info = read_header(out / "capture.png")
     assert (info.width, info.height, info.channels, info.format) == (128, 128, 3, "uint16")
     # The written map, decoded, is far closer to the truth than a flat map.
@@ -91,9 +98,11 @@ def test_end_to_end_outputs_report_and_determinism(session, tmp_path, capsys):
     assert m.regions[0].states == ("capture",)
     (out / "manifest.toml").unlink()
     (out / "base.png").unlink()
-    # Byte-identical on rerun.
+    # Byte-identical on rerun; --json prints the same report.
     out2 = tmp_path / "b"
-    assert main(_args(session, out2)) == 0
+    capsys.readouterr()
+    assert main(_args(session, out2) + ["--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == report
     for f in sorted(p for p in out.rglob("*") if p.is_file()):
         assert f.read_bytes() == (out2 / f.relative_to(out)).read_bytes(), f.name
 
@@ -233,9 +242,7 @@ def test_eight_bit_srgb_photos(session, tmp_path):
     assert report["ratio"]["exposure_factor"] == pytest.approx(0.93 / 0.9, abs=3e-3)
 
 
-def test_photo_landmarks_and_nz_regions(session, tmp_path, capsys):
-    base = tmp_path / "base"
-    assert main(_args(session, base)) == 0
+def test_photo_landmarks_and_nz_regions(session, base, tmp_path, capsys):
     # An explicit photo-side set equal to the neutral landmarks changes nothing.
     same = tmp_path / "same"
     assert main(_args(session, same) + ["--photo-landmarks", str(session / "neutral.json")]) == 0

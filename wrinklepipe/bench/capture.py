@@ -25,7 +25,7 @@ from wrinklepipe.capture.synthetic import SceneOptions, make_scene
 
 @benchmark("capture", "ratio-image capture: warps, ratio, orientation methods, whole stage")
 def bench_capture(quick: bool) -> BenchResult:
-    size, tex = (192, 128) if quick else (1024, 512)
+    size, tex = (96, 64) if quick else (1024, 512)
     sc = make_scene(SceneOptions(size=size, texture_size=tex))
     # quick mode is a smoke run (the test suite's): each step once, no warm-up
     repeat, warmup = (1, 0) if quick else (3, 1)
@@ -87,7 +87,7 @@ def bench_capture(quick: bool) -> BenchResult:
     out = last[0]  # the stage is deterministic: the last timed run's result is the result
     table = {m: errors(n, sc.truth_texture, sc.roi_texture) for m, n in out.normal_texture.items()}
     fs = make_session(
-        SessionOptions(size=size // 2 if quick else 512, texture_size=tex // 2, folds=FOREHEAD)
+        SessionOptions(size=64 if quick else 512, texture_size=tex // 2, folds=FOREHEAD)
     )
     cur = capture(
         fs.neutral,
