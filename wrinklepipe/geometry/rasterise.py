@@ -10,10 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from wrinklepipe.reuse import reused
+
 #: Candidate texels processed per chunk (bounds memory on large triangles).
 CHUNK_TEXELS = 4_000_000
 
 
+@reused  # the search's UV footprint and the validator's (fidelity rules) are the same
 def rasterise_triangle_ids(uvs: np.ndarray, indices: np.ndarray, size: int) -> np.ndarray:
     """Triangle index per texel ``[size, size]`` int64, -1 where no triangle covers it.
 
