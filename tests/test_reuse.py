@@ -161,3 +161,29 @@ def test_warm_fills_the_memo_for_the_later_calls(counted):
         assert counted.calls == 2
         assert np.array_equal(counted(a), a * 2) and np.array_equal(counted(a, k=3), a * 3)
         assert counted.calls == 2 and memo.hits[f"{__name__}._double"] == 2
+
+
+def test_dataclass_arguments_are_keyed_by_content_and_results_deep_copied():
+    from dataclasses import dataclass
+
+    @dataclass
+    class Box:
+        name: str
+        values: np.ndarray
+
+    calls = []
+
+    @reuse.reused
+    def wrap(b: Box) -> Box:
+        calls.append(1)
+        return Box(b.name + "!", b.values + 1)
+
+    v = np.zeros(1 << 15, np.float32)
+    with reuse.reuse():
+        first = wrap(Box("a", v))
+        again = wrap(Box("a", v.copy()))  # equal content: a hit
+        assert len(calls) == 1 and again.name == "a!" and np.array_equal(again.values, v + 1)
+        again.values[:] = 7  # a deep copy: the next caller's result is untouched
+        assert np.array_equal(wrap(Box("a", v)).values, v + 1) and first.values[0] == 1
+        wrap(Box("b", v))
+        assert len(calls) == 2

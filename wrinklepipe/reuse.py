@@ -9,6 +9,7 @@ the key is the function, the SHA-256 of every array / bytes argument (with its d
 and the ``repr`` of the other arguments, so a hit is the result of exactly those bytes, whoever
 asks (a validator reading back a written file gets the result of the bytes in that file).
 
+Arguments may be arrays, bytes, plain values, tuples / lists of them and dataclasses of them.
 Only pure, deterministic functions may be decorated. Results are kept as private copies: an
 array returned is the caller's own (mutating it never changes what a later call gets). Outside
 ``reuse()``, or in a thread that did not enter it (context variables do not follow work into a
@@ -20,6 +21,8 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import copy
+import dataclasses
 import functools
 import hashlib
 import os
@@ -119,6 +122,11 @@ def _digest(value: Any, sizes: list[int]) -> Any:
         return (type(value).__name__, repr(value))
     if isinstance(value, tuple | list):
         return (type(value).__name__, tuple(_digest(v, sizes) for v in value))
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        fields = tuple(
+            (f.name, _digest(getattr(value, f.name), sizes)) for f in dataclasses.fields(value)
+        )
+        return (f"{type(value).__module__}.{type(value).__qualname__}", fields)
     raise _Unkeyable
 
 
@@ -129,6 +137,8 @@ def _result_bytes(value: Any) -> int:
         return len(value)
     if isinstance(value, tuple | list):
         return sum(_result_bytes(v) for v in value)
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return sum(_result_bytes(getattr(value, f.name)) for f in dataclasses.fields(value))
     return 64
 
 
@@ -140,7 +150,9 @@ def _private(value: Any) -> Any:
         return tuple(_private(v) for v in value)
     if isinstance(value, list):
         return [_private(v) for v in value]
-    return value
+    if value is None or isinstance(value, bytes | str | int | float | bool):
+        return value
+    return copy.deepcopy(value)  # any other result (a dataclass of arrays): a deep copy
 
 
 def reused(fn: F) -> F:

@@ -31,6 +31,7 @@ from wrinklepipe import model
 from wrinklepipe.fidelity.stats import Budget, Stats, weighted_stats, weighted_stats_many
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.normals.compress import angle_deg
+from wrinklepipe.reuse import reused
 
 _F = np.float32
 
@@ -267,6 +268,7 @@ def _region_share(masks_at: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return masks_at * per_region[:, None]
 
 
+@reused  # the search's full-resolution reference is the validator's (fidelity rules)
 def prepare(
     base: np.ndarray,
     states: np.ndarray,
