@@ -31,14 +31,14 @@ def test_directx_negates_y_in_each_maps_value_mapping(pkg):
     from wrinklepipe import codec
 
     flipped = to_directx(pkg)
-    version = int(pkg.meta.get("mapping", 1))
+    version = pkg.meta.mapping
     for t, f in zip(pkg.textures, flipped.textures, strict=True):
         if t.role == "mask":
             assert np.array_equal(t.pixels, f.pixels)
             continue
         assert np.array_equal(f.pixels[..., [0, 2]], t.pixels[..., [0, 2]])
         q = t.pixels[..., 1].astype(np.int64)
-        if t.role == "state" and pkg.meta["encoding"] in ("pd", "diff") and version == 2:
+        if t.role == "state" and pkg.meta.encoding in ("pd", "diff") and version == 2:
             expect = np.clip(256 - q, 0, 255)  # v2: 128 + 127 t, so -t is 256 - q
         else:
             expect = 255 - q  # normal maps: 2 v - 1

@@ -99,11 +99,11 @@ def test_masks_survive_packing_exactly(n_regions, layout, seed):
         assert np.array_equal(png_pixels(png_bytes(t.pixels)), t.pixels)
     back = asset_from_package(pkg)
     assert np.array_equal(np.rint(back.masks * 255), np.rint(masks * 255))
-    table = pkg.meta["masks"]["table"]
-    assert [e["region"] for e in table] == [f"r{i}" for i in range(n_regions)]
+    table = pkg.meta.masks.table
+    assert [e.region for e in table] == [f"r{i}" for i in range(n_regions)]
     if layout == "rgba":
-        assert len(pkg.meta["masks"]["textures"]) == (n_regions + 3) // 4
-        assert table[min(5, n_regions - 1)]["channel"] == "rgba"[min(5, n_regions - 1) % 4]
+        assert len(pkg.meta.masks.textures) == (n_regions + 3) // 4
+        assert table[min(5, n_regions - 1)].channel == "rgba"[min(5, n_regions - 1) % 4]
 
 
 def _asset(masks: np.ndarray) -> WrinkleAsset:

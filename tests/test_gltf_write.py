@@ -281,7 +281,7 @@ def test_names_from_inputs_never_leave_the_folder(tmp_path):
     files = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*") if p.is_file())
     assert all(f.startswith("out/") for f in files), files
     assert "out/textures/wrinkle_.._.._evil.png" in files
-    assert pkg.meta["states"][0]["name"] == "../../evil"  # the name itself is kept
+    assert pkg.meta.states[0].name == "../../evil"  # the name itself is kept
     c = WeightCurves("../up/../x", np.zeros(1, np.float32), np.zeros((1, 1), np.float32))
     assert sorted(curve_files(c, ["r"])) == ["curves/_up_.._x.csv", "curves/_up_.._x.json"]
     assert safe_name("a/b", {"a_b"}) == "a_b_2"

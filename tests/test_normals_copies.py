@@ -8,6 +8,7 @@ RGB = xyz (no z rebuild), BC5 as x, y with z rebuilt, BC3nm as x = A, y = G.
 from __future__ import annotations
 
 import struct
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -128,11 +129,11 @@ def test_full_mip_chains_averaged_in_the_right_space(pkg, fmt):
         # renormalised mean normal), within the format's error
         stored = pkg.texture(c.texture).pixels
         if c.encoding == "pd":
-            q0 = codec.decode("pd", stored[..., :2], "rg", param=pkg.meta["scale"])
+            q0 = codec.decode("pd", stored[..., :2], "rg", param=pkg.meta.scale)
             want = codec.pd_to_normal(q0.reshape(h // 2, 2, w // 2, 2, 2).mean(axis=(1, 3)))
             rgba = _t2d(c.format, c.levels[1], w // 2, h // 2)
             got = codec.to_normal(
-                "pd", codec.decode("pd", rgba[..., :2], "rg", param=pkg.meta["scale"])
+                "pd", codec.decode("pd", rgba[..., :2], "rg", param=pkg.meta.scale)
             )
         else:
             n0 = codec.decode("full", stored[..., :3], "rgb")
@@ -151,7 +152,7 @@ def test_auto_never_picks_a_state_format_that_clips(pkg):
     state = next(t for t in pkg.textures if t.role == "state")
 
     class Pkg:
-        meta = {"encoding": "pd", "mapping": 2, "scale": 1.0}
+        meta = replace(pkg.meta, encoding="pd", mapping=2, scale=1.0)
         textures = [type(state)(state.name, q, "state")]
 
     budget = {"max_mean_deg": 30.0, "max_p99_deg": 60.0}

@@ -19,6 +19,7 @@ from wrinklepipe import model
 from wrinklepipe.asset import Region
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.errors import InputError
+from wrinklepipe.metadata import WrinkleMeta
 from wrinklepipe.shading import template as tpl
 from wrinklepipe.shading.setup import MAX_WEIGHT_VECTORS, from_meta
 
@@ -82,9 +83,13 @@ def test_slot_table_puts_each_weight_where_the_core_reads_it(
         "scale": 1.0,
         "states": [{"name": s} for s in states],
         "regions": regions,
-        "masks": {"textures": [f"m{i}" for i in range(len(tex))], "table": packed.table},
+        "masks": {
+            "layout": layout,
+            "textures": [f"m{i}" for i in range(len(tex))],
+            "table": packed.table,
+        },
     }
-    setup = from_meta(meta, [t.shape[-1] for t in tex])
+    setup = from_meta(WrinkleMeta.from_json(meta), [t.shape[-1] for t in tex])
     w = rng.uniform(-1, 1, n_regions).astype(np.float32)
     wv = setup.weight_vectors(w)
     # one weight per region spread over its states == the general [R, K] form
@@ -113,11 +118,12 @@ def test_every_core_define_is_set_and_spelled_per_language():
         "states": [{"name": s} for s in a.state_names],
         "regions": [{"name": r.name, "states": list(r.states)} for r in a.regions],
         "masks": {
+            "layout": "rgba",
             "textures": ["m0", "m1"],
             "table": wm.pack(a.masks, list(a.region_names)).table,
         },
     }
-    setup = from_meta(meta, [4, 4])
+    setup = from_meta(WrinkleMeta.from_json(meta), [4, 4])
     d = tpl.defines(setup)
     used = set(
         w
@@ -202,9 +208,9 @@ def test_a_larger_asset_is_refused_with_one_clear_message():
         "policy": "clamp01",
         "states": [{"name": s} for s in states],
         "regions": regions,
-        "masks": {"textures": [f"m{i}" for i in range(64)], "table": table},
+        "masks": {"layout": "rgba", "textures": [f"m{i}" for i in range(64)], "table": table},
     }
-    setup = from_meta(meta, [4] * 64)
+    setup = from_meta(WrinkleMeta.from_json(meta), [4] * 64)
     assert setup.n_weight_vectors + setup.n_groups == 64 * 4 * 4 + 64 > MAX_WEIGHT_VECTORS
     with pytest.raises(InputError) as exc:
         setup.check("big.gltf")
@@ -228,6 +234,6 @@ def _small_setup(n_regions: int, n_states: int):
         "policy": "clamp01",
         "states": [{"name": s} for s in states],
         "regions": regions,
-        "masks": {"textures": [f"m{i}" for i in range(n_tex)], "table": table},
+        "masks": {"layout": "rgba", "textures": [f"m{i}" for i in range(n_tex)], "table": table},
     }
-    return from_meta(meta, [4] * n_tex)
+    return from_meta(WrinkleMeta.from_json(meta), [4] * n_tex)

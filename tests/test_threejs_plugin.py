@@ -63,7 +63,7 @@ def test_javascript_setup_equals_python_setup():
     for layout, policy, pkg in _packages():
         doc, _, _ = gltf_document(pkg)
         exts.append(doc["materials"][0]["extensions"]["WRINKLEPIPE_wrinkle_maps"])
-        chans = [pkg.texture(n).pixels.shape[-1] for n in pkg.meta["masks"]["textures"]]
+        chans = [pkg.texture(n).pixels.shape[-1] for n in pkg.meta.masks.textures]
         cases.append((layout, policy, from_meta(pkg.meta, chans)))
     url = json.dumps((PLUGIN_DIR / "wrinkle_setup.js").as_uri())
     r = subprocess.run(

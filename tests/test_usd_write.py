@@ -255,8 +255,8 @@ def test_bias_and_metadata_round_trip(pkg, tmp_path):
 
     rng = np.random.default_rng(3)
     colors = rng.random((pkg.mesh.vertex_count, 4)).astype(np.float32)
-    meta = dict(
-        pkg.meta, drivers=[{"kind": "curves", "keys": {"glabella": [[0.0, 0.0], [1.0, 0.5]]}}]
+    meta = replace(
+        pkg.meta, drivers=({"kind": "curves", "keys": {"glabella": [[0.0, 0.0], [1.0, 0.5]]}},)
     )
     p2 = replace(pkg, mesh=replace(pkg.mesh, colors=colors), meta=meta)
     write_gltf(p2, tmp_path / "g", "x")
@@ -264,7 +264,7 @@ def test_bias_and_metadata_round_trip(pkg, tmp_path):
     write_usd(g, tmp_path / "u.usda")
     u = read_usd(tmp_path / "u.usda")
     assert np.array_equal(g.mesh.colors, colors) and np.array_equal(u.mesh.colors, colors)
-    assert u.meta["drivers"] == g.meta["drivers"] == meta["drivers"]
+    assert u.meta.drivers == g.meta.drivers == meta.drivers
 
 
 def test_several_weight_curves_keep_names_and_order(pkg, tmp_path):

@@ -32,6 +32,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.paths",
             "wrinklepipe.errors",
             "wrinklepipe.asset",
+            "wrinklepipe.metadata",
             "wrinklepipe.model",
             "wrinklepipe.codec",
             "wrinklepipe.presets",

@@ -82,7 +82,7 @@ def add_wrinkle_maps(doc: Document, target: WrinkleTarget, pkg: WrinklePackage) 
 
     animations = curve_animations(
         pkg.curves,
-        len(pkg.meta["regions"]),
+        len(pkg.meta.regions),
         accessor,
         [weights_pointer(m) for m in target.materials],
         morphs,

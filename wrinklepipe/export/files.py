@@ -88,7 +88,7 @@ def _names(regions: list[str], style: str) -> list[str]:
 
 def _mapping_affine(pkg: WrinklePackage, bits: int) -> dict[str, float]:
     """``t = v * mul + add`` for a sampled state texel (Blender's nodes use it)."""
-    m = codec.mapping(mapping_version(pkg) if pkg.meta["encoding"] in ("pd", "diff") else 1)
+    m = codec.mapping(mapping_version(pkg) if pkg.meta.versioned else 1)
     mul, add = m.affine(bits)
     return {"mul": float(mul), "add": float(add), "clampMin": -1.0 if m.version >= 2 else None}
 
@@ -98,7 +98,7 @@ def _curves(ex: Export) -> list[str]:
     (first row the key times, then one row per curve, named like the material parameters)."""
     paths = []
     taken: set[str] = set()
-    regions = [r["name"] for r in ex.pkg.meta["regions"]]
+    regions = ex.pkg.meta.region_names
     for c in ex.pkg.curves:
         stem = safe_name(c.name, taken)
         values = np.asarray(c.values, np.float32)
@@ -128,7 +128,7 @@ def _layout(channels: int) -> str:
 
 def _shader_setup(ex: Export, base_layout: str, state_layout: str, bits: int) -> ShaderSetup:
     pkg = ex.pkg
-    chans = [pkg.texture(n).pixels.shape[-1] for n in pkg.meta["masks"]["textures"]]
+    chans = [pkg.texture(n).pixels.shape[-1] for n in pkg.meta.masks.textures]
     conv = ex.preset.convention
     setup = from_meta(pkg.meta, chans, base_layout, state_layout, bits, conv, conv)
     problems = setup.problems()
@@ -175,17 +175,17 @@ def _unreal(ex: Export) -> None:
             f"{res.p99_deg:.2f} deg against the stored map; budget {BUDGET.max_mean_deg} / "
             f"{BUDGET.max_p99_deg}): shipped as PNG"
         )
-    states = [pkg.texture(s["texture"]) for s in meta["states"]]
+    states = [pkg.texture(n) for n in meta.state_textures]
     results = []
-    if meta["encoding"] != "diff":
+    if meta.encoding != "diff":
         results = [block_dds(pkg, t, "bc5", BUDGET) for t in states]
     if results and all(r.data is not None for r in results):
         ex.setup["states"] = []
-        for s, t, r in zip(meta["states"], states, results, strict=True):
+        for s, t, r in zip(meta.states, states, results, strict=True):
             ex.files[f"textures/{t.name}.dds"] = r.data
             ex.setup["states"].append(
                 {
-                    "name": s["name"],
+                    "name": s.name,
                     "file": f"textures/{t.name}.dds",
                     "format": "bc5",
                     "levels": r.levels,
@@ -194,13 +194,13 @@ def _unreal(ex: Export) -> None:
         state_layout, bits = "rg", 8
     else:
         ex.setup["states"] = []
-        for s, t in zip(meta["states"], states, strict=True):
+        for s, t in zip(meta.states, states, strict=True):
             ex.files[f"textures/{t.name}.png"] = png_bytes(t.pixels)
             ex.setup["states"].append(
-                {"name": s["name"], "file": f"textures/{t.name}.png", "format": "png"}
+                {"name": s.name, "file": f"textures/{t.name}.png", "format": "png"}
             )
         state_layout, bits = _layout(states[0].pixels.shape[-1]), states[0].bits
-        if meta["encoding"] == "diff":
+        if meta.encoding == "diff":
             ex.notes.append("states: diff maps hold three deltas (BC5 holds two): shipped as PNG")
         else:
             worst = max(results, key=lambda r: r.p99_deg)
@@ -208,13 +208,13 @@ def _unreal(ex: Export) -> None:
                 f"states: BC5 is over the error budget (worst p99 {worst.p99_deg:.2f} deg): "
                 "shipped as PNG"
             )
-    masks = meta["masks"]["textures"]
+    masks = meta.masks.textures
     for n in masks:
         ex.files[f"textures/{n}.png"] = png_bytes(pkg.texture(n).pixels)
     ex.setup["masks"] = {
-        "layout": meta["masks"]["layout"],
+        "layout": meta.masks.layout,
         "files": [f"textures/{n}.png" for n in masks],
-        "table": meta["masks"]["table"],
+        "table": meta.masks.table_json(),
     }
     setup = _shader_setup(ex, base_layout, state_layout, bits)
     try:
@@ -243,23 +243,23 @@ def _arrays(ex: Export) -> ShaderSetup:
     pkg = ex.pkg
     meta = pkg.meta
     base_uri = _add_mesh(ex, keep_normal=True)
-    states = [s["texture"] for s in meta["states"]]
-    masks = meta["masks"]["textures"]
+    states = meta.state_textures
+    masks = list(meta.masks.textures)
     _same_size(ex, "state", states)
     _same_size(ex, "mask", masks)
     ex.files["textures/wrinkle_states.png"] = strip_png([pkg.texture(n).pixels for n in states])
     ex.files["textures/wrinkle_masks.png"] = strip_png([pkg.texture(n).pixels for n in masks])
     ex.setup["base"] = {"file": base_uri, "format": "png"}
     ex.setup["states"] = [
-        {"name": s["name"], "file": "textures/wrinkle_states.png", "layer": k}
-        for k, s in enumerate(meta["states"])
+        {"name": s.name, "file": "textures/wrinkle_states.png", "layer": k}
+        for k, s in enumerate(meta.states)
     ]
     ex.setup["statesArray"] = {"file": "textures/wrinkle_states.png", "layers": len(states)}
     ex.setup["masks"] = {
-        "layout": meta["masks"]["layout"],
+        "layout": meta.masks.layout,
         "file": "textures/wrinkle_masks.png",
         "layers": len(masks),
-        "table": meta["masks"]["table"],
+        "table": meta.masks.table_json(),
     }
     st = pkg.texture(states[0])
     # the engines compress imported normal maps to two channels: read x, y and rebuild z
@@ -269,7 +269,7 @@ def _arrays(ex: Export) -> ShaderSetup:
 
 
 def _unity(ex: Export) -> None:
-    ex.names = _names([r["name"] for r in ex.pkg.meta["regions"]], "region")
+    ex.names = _names(ex.pkg.meta.region_names, "region")
     _arrays(ex)
     setup = ex.setup["shader"]
     ex.files["WrinkleMaps.hlsl"] = hlsl.unity_file(setup, f"WRINKLEPIPE_{ex.pkg.name}").encode()
@@ -277,7 +277,7 @@ def _unity(ex: Export) -> None:
 
 
 def _godot(ex: Export) -> None:
-    ex.names = _names([r["name"] for r in ex.pkg.meta["regions"]], "snake")
+    ex.names = _names(ex.pkg.meta.region_names, "snake")
     _arrays(ex)
     ex.files["wrinkle.gdshader"] = godot.godot_shader(ex.setup["shader"]).encode("utf-8")
     ex.files["wrinkle_weights.gd"] = (RUNTIME_DIR / "godot" / "wrinkle_weights.gd").read_bytes()
@@ -286,23 +286,23 @@ def _godot(ex: Export) -> None:
 def _blender(ex: Export) -> None:
     pkg = ex.pkg
     meta = pkg.meta
-    ex.names = ["wp_" + n for n in _names([r["name"] for r in meta["regions"]], "identifier")]
+    ex.names = ["wp_" + n for n in _names(meta.region_names, "identifier")]
     base_uri = _add_mesh(ex, keep_normal=True)
     ex.setup["base"] = {"file": base_uri, "format": "png"}
     ex.setup["states"] = []
-    for s in meta["states"]:
-        t = pkg.texture(s["texture"])
+    for s in meta.states:
+        t = pkg.texture(s.texture)
         ex.files[f"textures/{t.name}.png"] = png_bytes(t.pixels)
-        ex.setup["states"].append({"name": s["name"], "file": f"textures/{t.name}.png"})
-    masks = meta["masks"]["textures"]
+        ex.setup["states"].append({"name": s.name, "file": f"textures/{t.name}.png"})
+    masks = meta.masks.textures
     for n in masks:
         ex.files[f"textures/{n}.png"] = png_bytes(pkg.texture(n).pixels)
     ex.setup["masks"] = {
-        "layout": meta["masks"]["layout"],
+        "layout": meta.masks.layout,
         "files": [f"textures/{n}.png" for n in masks],
-        "table": meta["masks"]["table"],
+        "table": meta.masks.table_json(),
     }
-    st = pkg.texture(meta["states"][0]["texture"])
+    st = pkg.texture(meta.states[0].texture)
     base = next(t for t in pkg.textures if t.role == "base_normal")
     ex.setup["shader"] = _shader_setup(
         ex, _layout(base.pixels.shape[-1]), _layout(st.pixels.shape[-1]), st.bits
@@ -325,7 +325,7 @@ def export_files(
     if preset.convention == "directx":
         work = to_directx(work)
     ex = Export(work, preset, document=document)
-    if work is not pkg and engine == "unreal" and work.meta["masks"] != pkg.meta["masks"]:
+    if work is not pkg and engine == "unreal" and work.meta.masks != pkg.meta.masks:
         ex.notes.append("masks: the array layout repacked four to an RGBA texture (exact)")
     if engine in ("unity", "godot") and any(
         t.bits == 16 for t in pkg.textures if t.role == "state"
@@ -344,20 +344,22 @@ def export_files(
     shader["slotFlat"] = [s for slots in shader["slots"] for s in slots]
     shader["slotOffsets"] = list(np.cumsum([0] + [len(s) for s in shader["slots"]]).tolist())
     meta = work.meta
-    regions = [r["name"] for r in meta["regions"]]
+    regions = meta.region_names
     doc = {
         "engine": engine,
         "title": preset.title,
         "convention": preset.convention,
-        "encoding": meta["encoding"],
-        "scale": meta["scale"],
-        "mapping": int(meta.get("mapping", 1)),
-        "policy": meta["policy"],
+        "encoding": meta.encoding,
+        "scale": meta.scale,
+        "mapping": int(meta.mapping),
+        "policy": meta.policy,
         "mesh": f"{pkg.name}.gltf",
         **ex.setup,
-        "regions": [{**r, "parameter": n} for r, n in zip(meta["regions"], ex.names, strict=True)],
+        "regions": [
+            {**r.to_json(), "parameter": n} for r, n in zip(meta.regions, ex.names, strict=True)
+        ],
         "regionNames": regions,
-        "expressions": meta["expressions"],
+        "expressions": meta.expressions,
         "shader": shader,
         "curves": _curves(ex),
         "notes": ex.notes,

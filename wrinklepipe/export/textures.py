@@ -20,17 +20,18 @@ import numpy as np
 
 from wrinklepipe import codec
 from wrinklepipe.io.package import PackedTexture, WrinklePackage, png_bytes
+from wrinklepipe.metadata import MaskChannel, MaskMeta
 from wrinklepipe.normals import compress as nc
 from wrinklepipe.normals import mips
 from wrinklepipe.normals.dds import dds_bytes
 
 
 def mapping_version(pkg: WrinklePackage) -> int:
-    return int(pkg.meta.get("mapping", codec.LEGACY_VERSION))
+    return int(pkg.meta.mapping)
 
 
 def _versioned(pkg: WrinklePackage, t: PackedTexture) -> bool:
-    return t.role == "state" and pkg.meta["encoding"] in ("pd", "diff")
+    return t.role == "state" and pkg.meta.versioned
 
 
 def to_directx(pkg: WrinklePackage) -> WrinklePackage:
@@ -61,12 +62,12 @@ class BlockResult:
 def _quantity(pkg: WrinklePackage, t: PackedTexture) -> tuple[str, np.ndarray, float]:
     """(encoding, stored quantity, parameter) of a base or state map, decoded exactly."""
     meta = pkg.meta
-    enc = "full" if t.role == "base_normal" else meta["encoding"]
+    enc = "full" if t.role == "base_normal" else meta.encoding
     if enc == "composite":
         enc = "full"  # a composite state is a unit normal map, checked as one
     px = t.pixels
     where = "rgb" if px.shape[-1] >= 3 else "rg"
-    param = float(meta["scale"]) if enc in ("pd", "diff") else 1.0
+    param = float(meta.scale) if enc in ("pd", "diff") else 1.0
     version = mapping_version(pkg) if _versioned(pkg, t) else 1
     x = codec.decode(enc, px, where, param=param, version=version)
     return enc, x, param
@@ -100,10 +101,10 @@ def rgba_masks(pkg: WrinklePackage) -> WrinklePackage:
     """An ``array`` table's single-channel masks repacked four to an RGBA texture (exact: texels
     only move); other layouts are returned unchanged."""
     meta = pkg.meta
-    table = meta["masks"]["table"]
-    if not table or not all("layer" in e for e in table):
+    table = meta.masks.table
+    if not table or not all(e.layer is not None for e in table):
         return pkg
-    layers = [pkg.texture(n).pixels[..., 0] for n in meta["masks"]["textures"]]
+    layers = [pkg.texture(n).pixels[..., 0] for n in meta.masks.textures]
     n_tex = (len(layers) + 3) // 4
     h, w = layers[0].shape
     new_tex, names = [], []
@@ -114,17 +115,12 @@ def rgba_masks(pkg: WrinklePackage) -> WrinklePackage:
                 px[..., c] = layers[4 * i + c]
         names.append(f"mask_rgba_{i}")
         new_tex.append(PackedTexture(names[-1], px, "mask"))
-    new_table = [
-        {
-            "region": e["region"],
-            "texture": int(e["layer"]) // 4,
-            "channel": "rgba"[int(e["layer"]) % 4],
-        }
-        for e in table
-    ]
+    new_table = tuple(
+        MaskChannel(e.region, texture=e.index // 4, channel="rgba"[e.index % 4]) for e in table
+    )
     textures = [t for t in pkg.textures if t.role != "mask"] + new_tex
-    masks = {"layout": "rgba", "textures": names, "table": new_table}
-    return replace(pkg, textures=textures, meta={**meta, "masks": masks})
+    masks = MaskMeta("rgba", tuple(names), new_table)
+    return replace(pkg, textures=textures, meta=replace(meta, masks=masks))
 
 
 def to_8bit_states(pkg: WrinklePackage) -> WrinklePackage:

@@ -32,6 +32,7 @@ from wrinklepipe.io.package import (
     png_pixels,
     safe_name,
 )
+from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE, WrinkleMeta
 
 _COMPONENTS = {
     5120: np.int8,
@@ -279,7 +280,7 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
         "NORMAL",
         "TANGENT",
         "TEXCOORD_0",
-        ext.get("vertexIdAttribute", "_WRINKLE_VERTEX_ID"),
+        ext.get("vertexIdAttribute", VERTEX_ID_ATTRIBUTE),
     ):
         if need not in attrs:
             raise r.err(f"primitive has no {need} attribute", "/meshes/0/primitives/0/attributes")
@@ -291,7 +292,7 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
             f"/accessors/{attrs['POSITION']}",
         )
     nv = positions.shape[0]
-    ids_f = r.accessor(attrs[ext.get("vertexIdAttribute", "_WRINKLE_VERTEX_ID")]).astype(np.float64)
+    ids_f = r.accessor(attrs[ext.get("vertexIdAttribute", VERTEX_ID_ATTRIBUTE)]).astype(np.float64)
     if np.any(ids_f != np.rint(ids_f)) or np.any(ids_f < 0):
         raise r.err("vertex IDs must be non-negative integers", "/meshes/0/primitives/0/attributes")
     if "indices" in prim:
@@ -412,82 +413,24 @@ def package_from_gltf(
         textures[-1].name = "base_normal"
         taken.add("base_normal")
         by_image = {k: ("base_normal" if v == base_name else v) for k, v in by_image.items()}
+
+    def named(info: Any, key: str, role: str) -> str:
+        if role != "copy":
+            return tex(info, key, role)
+        src = _texture_image(doc, err, info["index"], key)
+        if src not in by_image:
+            raise err("a compressed copy of a texture the extension does not use", key)
+        return by_image[src]
+
     try:
-        states = [
-            {"name": s["name"], "texture": tex(s["texture"], f"{pkey}/states/{i}", "state")}
-            for i, s in enumerate(ext["states"])
-        ]
-        masks = ext["masks"]
-        mask_names = [
-            tex(t, f"{pkey}/masks/textures/{i}", "mask") for i, t in enumerate(masks["textures"])
-        ]
-        regions = [
-            {
-                "name": g["name"],
-                "side": g.get("side", "center"),
-                "states": list(g.get("states", [])),
-            }
-            for g in ext["regions"]
-        ]
-        region_names = [g["name"] for g in regions]
-        expressions = {}
-        for e in ext.get("expressions", []):
-            if len(e["weights"]) != len(region_names):
-                raise err(
-                    f"expression {e['name']!r} has {len(e['weights'])} weights for "
-                    f"{len(region_names)} regions",
-                    f"{pkey}/expressions",
-                )
-            expressions[e["name"]] = {rn: float(w) for rn, w in zip(region_names, e["weights"])}
-        meta: dict[str, Any] = {
-            "encoding": ext["encoding"],
-            "scale": float(ext.get("scale", 1.0)),
-            "mapping": int(ext.get("mapping", 1)),  # assets written before v2 record none
-            "policy": ext["policy"],
-            "states": states,
-            "masks": {
-                "layout": masks["layout"],
-                "textures": mask_names,
-                "table": [dict(e) for e in masks["table"]],
-            },
-            "regions": regions,
-            "expressions": {k: dict(sorted(v.items())) for k, v in sorted(expressions.items())},
-            "drivers": [dict(d) for d in ext.get("drivers", [])],
-            "weights": [float(w) for w in ext.get("weights", [0.0] * len(regions))],
-        }
-        compressed = []
-        for i, c in enumerate(ext.get("compressed", [])):
-            key = f"{pkey}/compressed/{i}"
-            src = _texture_image(doc, err, c["texture"]["index"], key)
-            if src not in by_image:
-                raise err("a compressed copy of a texture the extension does not use", key)
-            ktx2, dds = (list(c.get("uris", [])) + ["", ""])[:2]
-            compressed.append(
-                {
-                    "texture": by_image[src],
-                    "format": str(c["format"]),
-                    "layout": str(c["layout"]),
-                    "mapping": int(c.get("mapping", 1)),
-                    "levels": int(c.get("levels", 1)),
-                    "ktx2": str(ktx2),
-                    "dds": str(dds),
-                }
-            )
-        if compressed:
-            meta["compressed"] = compressed
+        meta = WrinkleMeta.from_extension(ext, named, err, pkey)
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
         raise err(f"malformed extension block: {plain_reason(exc)}", pkey) from None
     try:
-        json.dumps(meta, allow_nan=False)
+        json.dumps(meta.to_json(), allow_nan=False)
     except ValueError:
         raise err("the extension block holds a NaN or infinite number", pkey) from None
-    for i, e in enumerate(meta["masks"]["table"]):
-        t = e.get("layer", e.get("texture"))
-        if not isinstance(t, int) or not 0 <= t < len(mask_names):
-            raise err(
-                f"channel table entry {i} points at mask texture {t!r}, which does not exist",
-                f"{pkey}/masks/table/{i}",
-            )
+    regions = meta.regions
 
     # -- weight curves ----------------------------------------------------------------------
     curves = []

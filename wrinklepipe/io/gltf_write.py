@@ -37,10 +37,10 @@ from wrinklepipe.io.package import (
     png_bytes,
     safe_name,
 )
+from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE, WrinkleMeta
 
 POINTER_EXTENSION = "KHR_animation_pointer"
 WEIGHTS_POINTER = f"/materials/0/extensions/{EXTENSION}/weights"
-VERTEX_ID_ATTRIBUTE = "_WRINKLE_VERTEX_ID"
 BIAS_ATTRIBUTE = "_WRINKLE_BIAS"
 
 _FLOAT = 5126
@@ -178,63 +178,11 @@ def weights_pointer(material: int) -> str:
 
 
 def extension_block(
-    meta: dict[str, Any], tex_index: dict[str, int], vertex_id_attribute: str = VERTEX_ID_ATTRIBUTE
+    meta: WrinkleMeta, tex_index: dict[str, int], vertex_id_attribute: str = VERTEX_ID_ATTRIBUTE
 ) -> dict[str, Any]:
-    """The ``WRINKLEPIPE_wrinkle_maps`` JSON of a package's ``meta`` (textures by glTF index)."""
-    region_names = [r["name"] for r in meta["regions"]]
-    return {
-        "encoding": meta["encoding"],
-        "scale": float(meta["scale"]),
-        "mapping": int(meta.get("mapping", 1)),
-        "policy": meta["policy"],
-        "states": [
-            {"name": s["name"], "texture": {"index": tex_index[s["texture"]]}}
-            for s in meta["states"]
-        ],
-        "masks": {
-            "layout": meta["masks"]["layout"],
-            "textures": [{"index": tex_index[n]} for n in meta["masks"]["textures"]],
-            "table": [dict(e) for e in meta["masks"]["table"]],
-        },
-        "regions": [
-            {
-                "name": r["name"],
-                "side": r.get("side", "center"),
-                "states": list(r.get("states", [])),
-            }
-            for r in meta["regions"]
-        ],
-        "expressions": [
-            {
-                "name": e,
-                "weights": [float(row.get(rn, 0.0)) for rn in region_names],
-            }
-            for e, row in meta.get("expressions", {}).items()
-        ],
-        "drivers": list(meta.get("drivers", [])),
-        "weights": [float(w) for w in meta["weights"]],
-        "vertexIdAttribute": vertex_id_attribute,
-        **_compressed_block(meta, tex_index),
-    }
-
-
-def _compressed_block(meta: dict[str, Any], tex_index: dict[str, int]) -> dict[str, Any]:
-    """``compressed``: the block-compressed copies shipped beside the PNGs (none: no key)."""
-    if not meta.get("compressed"):
-        return {}
-    return {
-        "compressed": [
-            {
-                "texture": {"index": tex_index[c["texture"]]},
-                "format": c["format"],
-                "layout": c["layout"],
-                "mapping": int(c["mapping"]),
-                "levels": int(c["levels"]),
-                "uris": [u for u in (c["ktx2"], c["dds"]) if u],  # uastc: a KTX2 only
-            }
-            for c in meta["compressed"]
-        ]
-    }
+    """The ``WRINKLEPIPE_wrinkle_maps`` JSON of a package's ``meta`` (textures by glTF index):
+    :meth:`~wrinklepipe.metadata.WrinkleMeta.to_extension`."""
+    return meta.to_extension(tex_index, vertex_id_attribute)
 
 
 @dataclass(frozen=True)
@@ -366,7 +314,7 @@ def gltf_document(
     ext = extension_block(pkg.meta, tex_index)
     animations = curve_animations(
         pkg.curves,
-        len(pkg.meta["regions"]),
+        len(pkg.meta.regions),
         lambda a, minmax: buf.accessor(a, minmax=minmax),
         [WEIGHTS_POINTER],
         [MorphChannel(0, np.arange(len(m.morph_names)))] if len(m.morph_names) else [],

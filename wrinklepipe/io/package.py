@@ -2,7 +2,8 @@
 
 A :class:`WrinklePackage` holds the mesh, the textures *as stored* (integer pixels, row 0 at the
 top of the image, i.e. glTF's v = 0) and a format-neutral description of the wrinkle setup
-(``meta``) in which textures are named, not indexed. Both writers serialise the same package, so a
+(``meta``, a :class:`~wrinklepipe.metadata.WrinkleMeta`) in which textures are named, not
+indexed. Both writers serialise the same package, so a
 glTF -> USD -> glTF round trip compares packages field by field and pixel by pixel.
 
 :func:`package_from_asset` encodes an in-memory :class:`~wrinklepipe.asset.WrinkleAsset` (float
@@ -30,10 +31,17 @@ from wrinklepipe import codec, model
 from wrinklepipe import masks as wm
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.errors import input_error
+from wrinklepipe.metadata import EXTENSION as EXTENSION  # re-exported for the readers/writers
+from wrinklepipe.metadata import (
+    MaskMeta,
+    RegionMeta,
+    StateMeta,
+    WrinkleMeta,
+    table_from_json,
+)
 from wrinklepipe.normals.resample import resize_normals
 from wrinklepipe.reuse import reused
 
-EXTENSION = "WRINKLEPIPE_wrinkle_maps"
 CHANNELS = "rgba"
 #: Largest integer a float32 holds exactly: vertex IDs are stored as FLOAT accessors.
 MAX_FLOAT_ID = 1 << 24
@@ -86,7 +94,7 @@ class WrinklePackage:
     name: str
     mesh: Mesh
     textures: list[PackedTexture]
-    meta: dict[str, Any]
+    meta: WrinkleMeta
     curves: list[WeightCurves] = field(default_factory=list)
 
     def texture(self, name: str) -> PackedTexture:
@@ -260,7 +268,7 @@ def package_from_asset(
             "state",
         )
         textures.append(tex)
-        states_meta.append({"name": name, "texture": tex.name})
+        states_meta.append(StateMeta(name, tex.name))
     masks = np.clip(np.asarray(asset.masks, np.float32), 0.0, 1.0)
     names = [r.name for r in asset.regions]
     mask_tex, table = pack_masks(masks, names, opt.mask_layout, [r.side for r in asset.regions])
@@ -268,63 +276,57 @@ def package_from_asset(
     for i, t in enumerate(mask_tex):
         mask_names.append(safe_name(f"mask_{i}", taken))
         textures.append(PackedTexture(mask_names[-1], _q(t, 8), "mask"))
-    meta: dict[str, Any] = {
-        "encoding": asset.encoding,
-        "scale": scale,
-        "mapping": codec.CURRENT_VERSION,
-        "policy": asset.policy,
-        "states": states_meta,
-        "masks": {"layout": opt.mask_layout, "textures": mask_names, "table": table},
-        "regions": [
-            {"name": r.name, "side": r.side, "states": list(r.states)} for r in asset.regions
-        ],
-        "expressions": {
+    meta = WrinkleMeta(
+        encoding=asset.encoding,
+        policy=asset.policy,
+        states=tuple(states_meta),
+        masks=MaskMeta(opt.mask_layout, tuple(mask_names), table_from_json(table)),
+        regions=tuple(RegionMeta(r.name, r.side, tuple(r.states)) for r in asset.regions),
+        scale=scale,
+        mapping=codec.CURRENT_VERSION,
+        expressions={
             e: {r: float(w) for r, w in sorted(row.items())}
             for e, row in sorted(asset.expressions.items())
         },
-        "drivers": [dict(d) for d in asset.drivers],
-        "weights": [0.0] * len(names),  # float32 values (they are animated as FLOAT)
-    }
+        drivers=tuple(dict(d) for d in asset.drivers),
+        weights=(0.0,) * len(names),  # float32 values (they are animated as FLOAT)
+    )
     return WrinklePackage(asset.name, asset.mesh, textures, meta, list(curves or []))
 
 
-def mapping_version(meta: dict[str, Any]) -> int:
+def mapping_version(meta: WrinkleMeta) -> int:
     """The value-mapping version an asset's metadata records (absent: the legacy v1);
     ValueError for a version this wrinklepipe cannot read."""
-    return codec.mapping(int(meta.get("mapping", codec.LEGACY_VERSION))).version
+    return codec.mapping(int(meta.mapping)).version
 
 
 def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
     """Decode a package into float maps and masks (what validation and rendering work on)."""
     meta = pkg.meta
-    enc, scale = str(meta["encoding"]), float(meta["scale"])
+    enc, scale = meta.encoding, float(meta.scale)
     version = mapping_version(meta)
     base = decode_base(pkg.texture("base_normal").pixels)
     states = []
     cache: dict[tuple[int, ...], np.ndarray] = {}
-    for s in meta["states"]:
-        stored = pkg.texture(s["texture"]).pixels
+    for s in meta.states:
+        stored = pkg.texture(s.texture).pixels
         b = _base_at(base, stored.shape[:2], cache)
         states.append(decode_state(b, stored, enc, scale, version))
-    mask_tex = [_dq(pkg.texture(n).pixels) for n in meta["masks"]["textures"]]
-    masks = unpack_masks(mask_tex, meta["masks"]["table"])
-    regions = tuple(
-        Region(r["name"], r.get("side", "center"), tuple(r.get("states", ())))
-        for r in meta["regions"]
-    )
+    mask_tex = [_dq(pkg.texture(n).pixels) for n in meta.masks.textures]
+    masks = unpack_masks(mask_tex, meta.masks.table_json())
     return WrinkleAsset(
         name=pkg.name,
         base=base,
         states=np.stack(states) if states else np.zeros((0,) + base.shape, np.float32),
-        state_names=tuple(s["name"] for s in meta["states"]),
+        state_names=tuple(meta.state_names),
         masks=masks,
-        regions=regions,
-        expressions={e: dict(row) for e, row in meta.get("expressions", {}).items()},
+        regions=tuple(Region(r.name, r.side, r.states) for r in meta.regions),
+        expressions={e: dict(row) for e, row in meta.expressions.items()},
         encoding=enc,
-        policy=str(meta["policy"]),
+        policy=meta.policy,
         pd_scale=scale,
         mesh=pkg.mesh,
-        drivers=[dict(d) for d in meta.get("drivers", [])],
+        drivers=[dict(d) for d in meta.drivers],
     )
 
 

@@ -27,6 +27,16 @@ from wrinklepipe.io.package import (
     safe_name,
 )
 from wrinklepipe.io.usd_write import API_NAME, register_schema
+from wrinklepipe.metadata import (
+    CompressedCopy,
+    MaskChannel,
+    MaskMeta,
+    RegionMeta,
+    SplitRef,
+    StateMeta,
+    WrinkleMeta,
+    sorted_expressions,
+)
 
 
 @dataclass(frozen=True)
@@ -66,7 +76,7 @@ def _asset_bytes(layer_path: Path, asset: Any, file: str, key: str, opt: UsdRead
     return data
 
 
-def _compressed(prim: Any, mapping: int) -> list[dict[str, Any]]:
+def _compressed(prim: Any, mapping: int) -> tuple[CompressedCopy, ...]:
     """The records of the block-compressed copies (``wrinkle:compressed*``), if authored."""
 
     def get(name: str) -> list[Any]:
@@ -75,18 +85,18 @@ def _compressed(prim: Any, mapping: int) -> list[dict[str, Any]]:
 
     names = [str(n) for n in get("compressedTextures")]
     fmts, lays, levels = get("compressedFormats"), get("compressedLayouts"), get("compressedLevels")
-    return [
-        {
-            "texture": n,
-            "format": str(f),
-            "layout": str(lay),
-            "mapping": 1 if n == "base_normal" else mapping,
-            "levels": int(lv),
-            "ktx2": f"compressed/{n}.ktx2",
-            "dds": "" if str(f) == "uastc" else f"compressed/{n}.dds",  # UASTC: KTX2 only
-        }
+    return tuple(
+        CompressedCopy(
+            texture=n,
+            format=str(f),
+            layout=str(lay),
+            mapping=1 if n == "base_normal" else mapping,
+            levels=int(lv),
+            ktx2=f"compressed/{n}.ktx2",
+            dds="" if str(f) == "uastc" else f"compressed/{n}.dds",  # UASTC: KTX2 only
+        )
         for n, f, lay, lv in zip(names, fmts, lays, levels)
-    ]
+    )
 
 
 def _mapping(prim: Any) -> int:
@@ -254,10 +264,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         if not inp:
             raise input_error(file, f"inputs:wrinkle:state:{s} missing", str(mat_prim.GetPath()))
         states.append(
-            {
-                "name": s,
-                "texture": add_texture(inp.Get(), inp.GetAttr().GetPath().pathString, "state"),
-            }
+            StateMeta(s, add_texture(inp.Get(), inp.GetAttr().GetPath().pathString, "state"))
         )
     mask_names = []
     for n in api("maskNames"):
@@ -279,48 +286,49 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         raise input_error(
             file, "per-region arrays of WrinkleMapsAPI differ in length", str(mat_prim.GetPath())
         )
-    table: list[dict[str, Any]] = []
-    for i, name in enumerate(region_names):
-        if layout == "array":
-            e: dict[str, Any] = {"region": name, "layer": int(mtex[i])}
-        else:
-            e = {"region": name, "texture": int(mtex[i]), "channel": mch[i]}
-            if layout == "lr-split":
-                e["side"] = sides[i]
-            if int(stex[i]) >= 0:
-                e["split"] = {"texture": int(stex[i]), "channel": sch[i]}
-        table.append(e)
+    table = tuple(
+        MaskChannel(name, layer=int(mtex[i]))
+        if layout == "array"
+        else MaskChannel(
+            name,
+            texture=int(mtex[i]),
+            channel=mch[i],
+            side=sides[i] if layout == "lr-split" else None,
+            split=SplitRef(int(stex[i]), sch[i]) if int(stex[i]) >= 0 else None,
+        )
+        for i, name in enumerate(region_names)
+    )
     expr_names = [str(n) for n in api("expressionNames")]
     ew = (
         np.asarray(api("expressionWeights"), np.float64).reshape(len(expr_names), r)
         if expr_names
         else np.zeros((0, r), np.float64)
     )
-    expressions = {
-        e: {rn: float(w) for rn, w in sorted(zip(region_names, row))}
-        for e, row in sorted(zip(expr_names, ew))
-    }
     drivers = loads_json(str(api("drivers")), file, "wrinkle:drivers JSON", str(mat_prim.GetPath()))
     weights_attr = mat_prim.GetAttribute("wrinkle:weights")
     default = weights_attr.Get(Usd.TimeCode.Default())
-    meta: dict[str, Any] = {
-        "encoding": str(api("encoding")),
-        "scale": float(api("scale")),
-        "mapping": _mapping(mat_prim),
-        "policy": str(api("policy")),
-        "states": states,
-        "masks": {"layout": layout, "textures": mask_names, "table": table},
-        "regions": [
-            {"name": n, "side": sides[i], "states": [x for x in rstates[i].split(",") if x]}
+    where = str(mat_prim.GetPath())
+    if not isinstance(drivers, list) or not all(isinstance(d, dict) for d in drivers):
+        raise input_error(file, "wrinkle:drivers must be a JSON array of objects", where)
+    mapping = _mapping(mat_prim)
+    meta = WrinkleMeta(
+        encoding=str(api("encoding")),
+        policy=str(api("policy")),
+        states=tuple(states),
+        masks=MaskMeta(layout, tuple(mask_names), table),
+        regions=tuple(
+            RegionMeta(n, sides[i], tuple(x for x in rstates[i].split(",") if x))
             for i, n in enumerate(region_names)
-        ],
-        "expressions": expressions,
-        "drivers": drivers,
-        "weights": [float(w) for w in (default if default is not None else [0.0] * r)],
-    }
-    comp = _compressed(mat_prim, meta["mapping"])
-    if comp:
-        meta["compressed"] = comp
+        ),
+        scale=float(api("scale")),
+        mapping=mapping,
+        expressions=sorted_expressions(
+            {e: dict(zip(region_names, row.tolist())) for e, row in zip(expr_names, ew)}
+        ),
+        drivers=tuple(drivers),
+        weights=tuple(float(w) for w in (default if default is not None else [0.0] * r)),
+        compressed=_compressed(mat_prim, mapping),
+    ).check(lambda message, key: input_error(file, message, key), where)
     fps = stage.GetTimeCodesPerSecond()
 
     def curve(attr: Any, name: str) -> WeightCurves | None:

@@ -310,8 +310,8 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
         base.ConnectableAPI(), "rgb"
     )
     meta = pkg.meta
-    enc, scale = str(meta["encoding"]), float(meta["scale"])
-    version = int(meta.get("mapping", 1))
+    enc, scale = meta.encoding, float(meta.scale)
+    version = int(meta.mapping)
 
     def state_scale_bias(name: str) -> tuple[tuple, tuple]:
         """UsdUVTexture scale and bias that turn the stored values into the quantity: pd slopes
@@ -330,9 +330,9 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
         tex = texture(name, sc, bi)
         tex.CreateInput("file", Sdf.ValueTypeNames.Asset).ConnectToSource(inp)
 
-    for s in meta["states"]:
-        interface_texture("state", _ident(s["name"]), s["texture"], *state_scale_bias(s["texture"]))
-    for name in meta["masks"]["textures"]:
+    for s in meta.states:
+        interface_texture("state", _ident(s.name), s.texture, *state_scale_bias(s.texture))
+    for name in meta.masks.textures:
         interface_texture("mask", _ident(name), name, (1, 1, 1, 1), (0, 0, 0, 0))
 
     prim = mat.GetPrim()
@@ -341,50 +341,46 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
         name: prim.CreateAttribute(name, Sdf.ValueTypeNames.Find(t), custom=False)
         for name, t in API_ATTRIBUTES.items()
     }
-    table = meta["masks"]["table"]
-    regions = meta["regions"]
-    names = [r["name"] for r in regions]
-    expr_names = list(meta.get("expressions", {}))
+    table = meta.masks.table
+    regions = meta.regions
+    names = meta.region_names
+    expr_names = list(meta.expressions)
     expr = np.array(
-        [[meta["expressions"][e].get(n, 0.0) for n in names] for e in expr_names], np.float64
+        [[meta.expressions[e].get(n, 0.0) for n in names] for e in expr_names], np.float64
     ).reshape(-1)
     values = {
         "wrinkle:encoding": enc,
         "wrinkle:scale": scale,
         "wrinkle:mapping": version,
-        "wrinkle:policy": str(meta["policy"]),
-        "wrinkle:stateNames": Vt.TokenArray([s["name"] for s in meta["states"]]),
-        "wrinkle:maskLayout": str(meta["masks"]["layout"]),
-        "wrinkle:maskNames": Vt.TokenArray([_ident(n) for n in meta["masks"]["textures"]]),
+        "wrinkle:policy": meta.policy,
+        "wrinkle:stateNames": Vt.TokenArray(meta.state_names),
+        "wrinkle:maskLayout": meta.masks.layout,
+        "wrinkle:maskNames": Vt.TokenArray([_ident(n) for n in meta.masks.textures]),
         "wrinkle:regionNames": Vt.TokenArray(names),
-        "wrinkle:regionSides": Vt.TokenArray([r.get("side", "center") for r in regions]),
-        "wrinkle:regionStates": Vt.StringArray([",".join(r.get("states", [])) for r in regions]),
+        "wrinkle:regionSides": Vt.TokenArray([r.side for r in regions]),
+        "wrinkle:regionStates": Vt.StringArray([",".join(r.states) for r in regions]),
         "wrinkle:maskTexture": Vt.IntArray(
-            [int(e.get("layer", e.get("texture", -1))) for e in table]
+            [-1 if e.layer is None and e.texture is None else e.index for e in table]
         ),
-        "wrinkle:maskChannel": Vt.TokenArray([str(e.get("channel", "")) for e in table]),
-        "wrinkle:splitTexture": Vt.IntArray(
-            [int(e["split"]["texture"]) if e.get("split") else -1 for e in table]
-        ),
-        "wrinkle:splitChannel": Vt.TokenArray(
-            [str(e["split"]["channel"]) if e.get("split") else "" for e in table]
-        ),
+        "wrinkle:maskChannel": Vt.TokenArray([e.channel or "" for e in table]),
+        "wrinkle:splitTexture": Vt.IntArray([e.split.texture if e.split else -1 for e in table]),
+        "wrinkle:splitChannel": Vt.TokenArray([e.split.channel if e.split else "" for e in table]),
         "wrinkle:expressionNames": Vt.TokenArray(expr_names),
         "wrinkle:expressionWeights": Vt.DoubleArray.FromNumpy(expr),
-        "wrinkle:drivers": json.dumps(meta.get("drivers", []), sort_keys=True),
+        "wrinkle:drivers": json.dumps(list(meta.drivers), sort_keys=True),
     }
-    comp = meta.get("compressed") or []
+    comp = meta.compressed
     if comp:  # the block-compressed copies beside the PNGs (compressed/NAME.ktx2 and .dds)
-        values["wrinkle:compressedTextures"] = Vt.TokenArray([c["texture"] for c in comp])
-        values["wrinkle:compressedFormats"] = Vt.TokenArray([c["format"] for c in comp])
-        values["wrinkle:compressedLayouts"] = Vt.TokenArray([c["layout"] for c in comp])
-        values["wrinkle:compressedLevels"] = Vt.IntArray([int(c["levels"]) for c in comp])
+        values["wrinkle:compressedTextures"] = Vt.TokenArray([c.texture for c in comp])
+        values["wrinkle:compressedFormats"] = Vt.TokenArray([c.format for c in comp])
+        values["wrinkle:compressedLayouts"] = Vt.TokenArray([c.layout for c in comp])
+        values["wrinkle:compressedLevels"] = Vt.IntArray([c.levels for c in comp])
     for attr_name, value in values.items():
         attrs[attr_name].Set(value)
-    if [str(e.get("region")) for e in table] != names:
+    if [e.region for e in table] != names:
         raise input_error(pkg.name, "channel table must list the regions in region order")
     weights = attrs["wrinkle:weights"]
-    weights.Set(Vt.FloatArray([float(w) for w in meta["weights"]]))
+    weights.Set(Vt.FloatArray([float(w) for w in meta.weights]))
     if pkg.curves:
         c = pkg.curves[0]
         attrs["wrinkle:weightCurve"].Set(c.name)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe import codec
+from wrinklepipe.metadata import CompressedCopy
 from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import mips, uastc
 from wrinklepipe.normals.dds import dds_bytes
@@ -63,17 +64,17 @@ class Copy:
             ),
         }
 
-    def record(self) -> dict[str, Any]:
+    def record(self) -> CompressedCopy:
         """The extension / USD record of this copy."""
-        return {
-            "texture": self.texture,
-            "format": self.format,
-            "layout": self.layout,
-            "mapping": self.mapping,
-            "levels": self.level_count or len(self.levels),
-            "dds": "" if self.format == "uastc" else f"compressed/{self.texture}.dds",
-            "ktx2": f"compressed/{self.texture}.ktx2",
-        }
+        return CompressedCopy(
+            texture=self.texture,
+            format=self.format,
+            layout=self.layout,
+            mapping=self.mapping,
+            levels=self.level_count or len(self.levels),
+            ktx2=f"compressed/{self.texture}.ktx2",
+            dds="" if self.format == "uastc" else f"compressed/{self.texture}.dds",
+        )
 
 
 @dataclass(frozen=True)
@@ -192,9 +193,9 @@ def compressed_copies(
     limits = cmp.Budget(budget.get("max_mean_deg"), budget.get("max_p99_deg", 2.0))
     formats = formats or {}
     meta = pkg.meta
-    enc = str(meta["encoding"])
-    version = int(meta.get("mapping", codec.LEGACY_VERSION))
-    param = float(meta.get("scale", 1.0))
+    enc = meta.encoding
+    version = int(meta.mapping)
+    param = float(meta.scale)
     base_tex = next((t for t in pkg.textures if t.role == "base_normal"), None)
     groups: list[tuple[str, str, list[_Map]]] = []
     if base_tex is not None:
@@ -273,7 +274,7 @@ def compressed_copies(
             "requested": want,
             "chosen": pick or "png",
             "layout": made[0].layout if made else None,
-            "levels": made[0].record()["levels"] if made else 0,
+            "levels": made[0].record().levels if made else 0,
             "checks": {
                 f: {m.name: c.to_json() for m, c in zip(maps, cs)} for f, cs in checks.items()
             },
@@ -289,6 +290,6 @@ def files(copies: list[Copy]) -> dict[str, bytes]:
     return out
 
 
-def records(copies: list[Copy]) -> list[dict[str, Any]]:
+def records(copies: list[Copy]) -> tuple[CompressedCopy, ...]:
     """What the glTF extension / USD schema record of the copies (sorted by texture)."""
-    return [c.record() for c in sorted(copies, key=lambda c: c.texture)]
+    return tuple(c.record() for c in sorted(copies, key=lambda c: c.texture))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import functools
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -62,8 +63,8 @@ def build_outputs(
     """Every output file as ``{relative path: bytes}`` (except USD, written by usd-core), notes,
     and the block-format choices. ``glb``: also a self-contained ``NAME.glb``; ``compressed``:
     DDS + KTX2 copies (:func:`wrinklepipe.outputs.compression.compressed_copies`), recorded in
-    the package's ``meta["compressed"]`` (in place) before the glTF is written; ``source``: the
-    glTF source document and where its wrinkle data goes (see the module doc)."""
+    ``pkg.meta.compressed`` (``pkg.meta`` is replaced) before the glTF is written; ``source``:
+    the glTF source document and where its wrinkle data goes (see the module doc)."""
     name = pkg.name
     files: dict[str, bytes] = {}
     notes: list[str] = []
@@ -75,7 +76,8 @@ def build_outputs(
         made, n, choices = compressed_copies(pkg, budget, formats)
         files.update(copy_files(made))
         notes += n
-        pkg.meta["compressed"] = copy_records(made)  # the USD layers written next read it too
+        # the USD layers written next read the records from the same package
+        pkg.meta = replace(pkg.meta, compressed=copy_records(made))
     pngs_ready()
     if source is not None:
         got, n = document_outputs(source[0], source[1], pkg, glb)
@@ -92,7 +94,7 @@ def build_outputs(
             files[f"{name}.glb"] = glb_bytes(gdoc, gdata)
     for t in pkg.textures:  # the same PNGs serve glTF and USD
         files.setdefault(f"textures/{t.name}.png", png_bytes(t.pixels))
-    regions = [r["name"] for r in pkg.meta["regions"]]
+    regions = pkg.meta.region_names
     taken: set[str] = set()
     for c in pkg.curves:
         files.update(curve_files(c, regions, taken))

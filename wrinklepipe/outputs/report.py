@@ -63,14 +63,15 @@ def asset_summary(pkg: WrinklePackage) -> dict[str, Any]:
     """The report's ``asset`` section: the wrinkle setup, texture sizes, mesh and curves."""
     m = pkg.mesh
     return {
-        "encoding": pkg.meta["encoding"],
-        "scale": pkg.meta["scale"],
-        "policy": pkg.meta["policy"],
-        "states": [s["name"] for s in pkg.meta["states"]],
+        "encoding": pkg.meta.encoding,
+        "scale": pkg.meta.scale,
+        "policy": pkg.meta.policy,
+        "states": pkg.meta.state_names,
         "regions": [
-            {**r, "mask": e} for r, e in zip(pkg.meta["regions"], pkg.meta["masks"]["table"])
+            {**r.to_json(), "mask": e.to_json()}
+            for r, e in zip(pkg.meta.regions, pkg.meta.masks.table)
         ],
-        "mask_layout": pkg.meta["masks"]["layout"],
+        "mask_layout": pkg.meta.masks.layout,
         "sizes": {t.name: list(t.pixels.shape) for t in pkg.textures},
         "vertices": m.vertex_count,
         "triangles": m.triangle_count,

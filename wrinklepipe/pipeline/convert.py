@@ -90,13 +90,13 @@ class ConvertResult:
 def clipped_texels(pkg: Any) -> dict[str, int]:
     """Per PD state: texels stored at the end of the range (:func:`edge_texels`), counted on the
     shipped 8-bit texels, as the validator counts them (WP-MAP-004)."""
-    if pkg.meta["encoding"] != "pd":
+    if pkg.meta.encoding != "pd":
         return {}
     tex = {t.name: t for t in pkg.textures}
     return {
-        s["name"]: edge_texels(tex[s["texture"]].pixels)
-        for s in pkg.meta["states"]
-        if tex[s["texture"]].pixels.dtype == np.uint8
+        s.name: edge_texels(tex[s.texture].pixels)
+        for s in pkg.meta.states
+        if tex[s.texture].pixels.dtype == np.uint8
     }
 
 

@@ -17,12 +17,14 @@ slots; the core never sees them.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from wrinklepipe.errors import input_error
+from wrinklepipe.metadata import MaskChannel, RegionMeta, WrinkleMeta
 from wrinklepipe.model import ENCODINGS, POLICIES
 
 CHANNELS = "rgba"
@@ -260,46 +262,41 @@ class ShaderSetup:
 
 
 def region_state_matrix(
-    regions: list[dict[str, Any]], states: list[str]
+    regions: Sequence[RegionMeta], states: list[str]
 ) -> tuple[tuple[int, ...], ...]:
     """``[R][K]``: 1 where region r drives state k (a region listing no states drives all)."""
-    rows = []
-    for r in regions:
-        drives = list(r.get("states") or [])
-        rows.append(tuple(int(not drives or s in drives) for s in states))
-    return tuple(rows)
+    return tuple(tuple(int(not r.states or s in r.states) for s in states) for r in regions)
 
 
 def entries_from_table(
-    table: list[dict[str, Any]], n_layers: int
+    table: Sequence[MaskChannel], n_layers: int
 ) -> tuple[tuple[MaskEntry, ...], tuple[int, int] | None]:
     """The extension's channel table (texture/layer indices, channel letters) -> entries and the
     lr-split channel. Raises ``ValueError`` on an entry that points nowhere."""
     entries = []
     split: tuple[int, int] | None = None
     for i, e in enumerate(table):
-        if "layer" in e:
-            layer, ch, part = int(e["layer"]), 0, 0
+        if e.layer is not None:
+            layer, ch, part = e.layer, 0, 0
         else:
-            layer, ch = int(e["texture"]), CHANNELS.index(str(e["channel"]))
+            layer, ch = e.index, CHANNELS.index(str(e.channel))
             part = 0
-            if e.get("split"):
-                sp = (int(e["split"]["texture"]), CHANNELS.index(str(e["split"]["channel"])))
+            if e.split is not None:
+                sp = (e.split.texture, CHANNELS.index(e.split.channel))
                 if split is not None and sp != split:
                     raise ValueError("more than one lr-split channel")
                 split = sp
-                side = e.get("side", "center")
-                part = 1 if side == "left" else 2 if side == "right" else 0
+                part = 1 if e.side == "left" else 2 if e.side == "right" else 0
         if not 0 <= layer < n_layers:
             raise ValueError(
-                f"channel table entry {i} ({e.get('region')}) names mask {layer} of {n_layers}"
+                f"channel table entry {i} ({e.region}) names mask {layer} of {n_layers}"
             )
         entries.append(MaskEntry(layer, ch, part))
     return tuple(entries), split
 
 
 def from_meta(
-    meta: dict[str, Any],
+    meta: WrinkleMeta,
     layer_channels: list[int],
     base_layout: str = "rgb",
     state_layout: str = "rgb",
@@ -309,19 +306,18 @@ def from_meta(
 ) -> ShaderSetup:
     """A setup from the extension's description (a package's ``meta``: names, not indices, for
     textures; the channel table as in ``schemas/WRINKLEPIPE_wrinkle_maps``)."""
-    states = [str(s["name"]) for s in meta["states"]]
-    regions = list(meta["regions"])
-    masks = meta["masks"]
-    layer_names = [str(n) for n in masks["textures"]]
-    entries, split = entries_from_table(list(masks["table"]), len(layer_names))
-    by_name = {str(e["region"]): n for n, e in enumerate(masks["table"])}
-    order = [by_name[str(r["name"])] for r in regions]
+    states = meta.state_names
+    regions = meta.regions
+    layer_names = list(meta.masks.textures)
+    entries, split = entries_from_table(meta.masks.table, len(layer_names))
+    by_name = {e.region: n for n, e in enumerate(meta.masks.table)}
+    order = [by_name[r.name] for r in regions]
     return ShaderSetup(
-        encoding=str(meta["encoding"]),
-        policy=str(meta["policy"]),
-        scale=float(meta.get("scale", 1.0)),
+        encoding=meta.encoding,
+        policy=meta.policy,
+        scale=float(meta.scale),
         state_names=tuple(states),
-        region_names=tuple(str(r["name"]) for r in regions),
+        region_names=tuple(meta.region_names),
         region_states=region_state_matrix(regions, states),
         entries=tuple(entries[i] for i in order),
         layer_names=tuple(layer_names),
@@ -330,7 +326,7 @@ def from_meta(
         base_layout=base_layout,
         state_layout=state_layout,
         state_bits=int(state_bits),
-        mapping=int(meta.get("mapping", 1)),
+        mapping=int(meta.mapping),
         base_convention=convention,
         state_convention=convention,
         output=output or convention,

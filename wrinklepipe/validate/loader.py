@@ -70,8 +70,8 @@ def input_from_package(
     asset = guard_reader(lambda: asset_from_package(pkg), Path(path), "the wrinkle data")
     meta = pkg.meta
     version = guard_reader(lambda: mapping_version(meta), Path(path), "the mapping version")
-    state_of = {s["texture"]: s["name"] for s in meta.get("states", [])}
-    mask_names = list(meta.get("masks", {}).get("textures", []))
+    state_of = {s.texture: s.name for s in meta.states}
+    mask_names = list(meta.masks.textures)
     textures = []
     file_of = file_of or {}
     for t in pkg.textures:
@@ -98,17 +98,16 @@ def input_from_package(
             )
         )
     table = []
-    for e in meta.get("masks", {}).get("table", []):
-        if "layer" in e:
-            tex, ch = mask_names[int(e["layer"])], 0
+    for e in meta.masks.table:
+        if e.layer is not None:
+            tex, ch = mask_names[e.layer], 0
         else:
-            tex = mask_names[int(e["texture"])] if int(e["texture"]) < len(mask_names) else "?"
-            ch = CHANNELS.index(e["channel"]) if e.get("channel") in CHANNELS else 99
-        entry = ChannelEntry(str(e["region"]), tex, ch)
-        if "split" in e:
-            sp = e["split"]
-            entry.split = (mask_names[int(sp["texture"])], CHANNELS.index(sp["channel"]))
-            entry.side = str(e.get("side", "center"))
+            tex = mask_names[e.index] if e.index < len(mask_names) else "?"
+            ch = CHANNELS.index(e.channel) if e.channel in CHANNELS else 99
+        entry = ChannelEntry(e.region, tex, ch)
+        if e.split is not None:
+            entry.split = (mask_names[e.split.texture], CHANNELS.index(e.split.channel))
+            entry.side = e.side or "center"
         table.append(entry)
     curves = {
         str(c.name): np.asarray(c.values, np.float32) for c in getattr(pkg, "curves", []) or []
@@ -122,7 +121,7 @@ def input_from_package(
         has_source=False,
         path=path,
         kind=kind,
-        extra={"compressed": [dict(c) for c in meta.get("compressed", [])]},
+        extra={"compressed": [c.to_json() for c in meta.compressed]},
         pointers={
             "meta": f"{path}#/extensions/{EXTENSION}" if kind == "gltf" else path,
             "mesh": f"{path}#/meshes/0" if kind == "gltf" else path,
