@@ -4,7 +4,7 @@ glTF-Transform's shape (a Document in, transforms, a Document out), kept as simp
 faithful: the document *is* the source JSON tree (every scene, node, mesh, material, texture,
 sampler, image, skin, animation, camera, extra and unknown extension, as written) plus the bytes
 of every bufferView and of every external image. Accessors are decoded on demand
-(:mod:`wrinklepipe.document.accessors`). Additions (bufferViews, accessors, images, textures,
+(:mod:`wrinklepipe.io.accessors`). Additions (bufferViews, accessors, images, textures,
 samplers, animations, attributes, extensions) go through the methods below; nothing in the source
 tree is rewritten except what ingest had to decode:
 
@@ -32,10 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document import accessors as acc
 from wrinklepipe.document import decompress
 from wrinklepipe.document.container import Container, open_container
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.io import accessors as acc
 from wrinklepipe.io.gltf_read import GltfReadOptions
 
 ARRAY_BUFFER = 34962

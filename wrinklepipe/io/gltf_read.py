@@ -22,6 +22,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error, plain_reason
+from wrinklepipe.io.accessors import read_accessor
 from wrinklepipe.io.confine import confine
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import (
@@ -33,16 +34,6 @@ from wrinklepipe.io.package import (
     safe_name,
 )
 from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE, WrinkleMeta
-
-_COMPONENTS = {
-    5120: np.int8,
-    5121: np.uint8,
-    5122: np.int16,
-    5123: np.uint16,
-    5125: np.uint32,
-    5126: np.float32,
-}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 
 
 @dataclass(frozen=True)
@@ -162,8 +153,8 @@ class _Reader:
 
     def view(self, i: int) -> tuple[bytes, int]:
         views = self.doc.get("bufferViews", [])
-        if not 0 <= i < len(views):
-            raise self.err(f"bufferView {i} does not exist", "/bufferViews")
+        if not isinstance(i, int) or isinstance(i, bool) or not 0 <= i < len(views):
+            raise self.err(f"bufferView {i!r} does not exist", "/bufferViews")
         v = views[i]
         data = self.buffer(int(v.get("buffer", 0)))
         off, n = int(v.get("byteOffset", 0)), int(v["byteLength"])
@@ -172,41 +163,10 @@ class _Reader:
         return data[off : off + n], int(v.get("byteStride", 0))
 
     def accessor(self, i: int) -> np.ndarray:
-        accs = self.doc.get("accessors", [])
-        key = f"/accessors/{i}"
-        if not isinstance(i, int) or not 0 <= i < len(accs):
-            raise self.err(f"accessor {i} does not exist", "/accessors")
-        a = accs[i]
-        if not isinstance(a, dict):
-            raise self.err("accessor must be an object", key)
-        if "sparse" in a:
-            raise self.err("sparse accessors are not supported", key)
-        try:
-            dtype = np.dtype(_COMPONENTS[a["componentType"]]).newbyteorder("<")
-            width, count = _WIDTH[a["type"]], int(a["count"])
-        except (KeyError, TypeError, ValueError):
-            raise self.err("accessor has a bad componentType, type or count", key) from None
-        if count < 0:
-            raise self.err(f"accessor count {count} is negative", key)
-        if "bufferView" not in a:
-            return np.zeros((count, width), dtype).squeeze(-1 if width == 1 else ())
-        data, stride = self.view(int(a["bufferView"]))
-        off = int(a.get("byteOffset", 0))
-        elem = dtype.itemsize * width
-        stride = stride or elem
-        if stride < elem or stride % dtype.itemsize:
-            raise self.err(f"byteStride {stride} does not fit {elem}-byte elements", key)
-        need = off + (count - 1) * stride + elem if count else 0
-        if need > len(data):
-            raise self.err(f"accessor needs {need} bytes, its bufferView has {len(data)}", key)
-        raw = np.frombuffer(data, np.uint8, count=need - off, offset=off) if count else None
-        if raw is None:
-            return np.zeros((0, width), dtype)
-        rows = np.lib.stride_tricks.as_strided(raw, (count, elem), (stride, 1))
-        arr = np.ascontiguousarray(rows).view(dtype).reshape(count, width)
-        if a.get("normalized") and dtype.kind in "iu":
-            arr = arr.astype(np.float32) / np.float32(np.iinfo(dtype).max)
-        return arr[:, 0] if width == 1 else arr
+        """Accessor ``i`` through :func:`wrinklepipe.io.accessors.read_accessor` (the one
+        accessor reader); a SCALAR accessor as ``[count]``."""
+        arr = read_accessor(self.doc, i, self.view, self.err)
+        return arr[:, 0] if arr.shape[1] == 1 else arr
 
     def image(self, i: int) -> tuple[str, np.ndarray]:
         imgs = self.doc.get("images", [])

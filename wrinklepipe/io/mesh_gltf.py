@@ -5,8 +5,9 @@ What is read: POSITION, NORMAL, TANGENT, TEXCOORD_0, COLOR_0, JOINTS_0/WEIGHTS_0
 ``mesh.extras.targetNames``), the skin of the node that instances the mesh (joint names,
 inverse bind matrices) and that node's world transform.
 
-- Accessors: any component type, ``normalized`` integers decoded per the spec (signed:
-  ``max(c / MAX, -1)``), sparse accessors, byte strides. This makes ``KHR_mesh_quantization``
+- Accessors (:mod:`wrinklepipe.io.accessors`, the one accessor reader): any component type,
+  ``normalized`` integers decoded per the spec (signed: ``max(c / MAX, -1)``), sparse
+  accessors, byte strides. This makes ``KHR_mesh_quantization``
   work (quantised attributes are plain accessors; the dequantising node transform is applied).
 - ``EXT_meshopt_compression``: the compressed views are not decoded (no well-kept PyPI decoder);
   when the extension is *required* the file is refused with a message naming it, otherwise the
@@ -33,7 +34,8 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.gltf_read import _COMPONENTS, _WIDTH, GltfReadOptions, _Reader
+from wrinklepipe.io.accessors import read_accessor
+from wrinklepipe.io.gltf_read import GltfReadOptions, _Reader
 
 #: Required extensions that do not change geometry (textures/materials/lights): ignored.
 _HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_")
@@ -59,82 +61,21 @@ class GltfMeshOptions:
 
 
 class _MeshReader(_Reader):
-    """The safe container reader plus full accessor decoding (sparse, normalized, strides)."""
+    """The safe container reader; accessors through :func:`wrinklepipe.io.accessors.
+    read_accessor` (sparse, normalized, strides), refusing required meshopt views."""
 
     def typed(self, i: Any, key: str) -> np.ndarray:
         """Accessor ``i`` as a 2-D array ``[count, width]`` (normalized ints -> float32)."""
-        accs = self.doc.get("accessors", [])
-        if not isinstance(i, int) or not 0 <= i < len(accs):
-            raise self.err(f"accessor {i!r} does not exist", key)
-        a = accs[i]
-        akey = f"/accessors/{i}"
-        try:
-            dtype = np.dtype(_COMPONENTS[a["componentType"]]).newbyteorder("<")
-            width = _WIDTH[a["type"]]
-            count = int(a["count"])
-        except (KeyError, TypeError, ValueError):
-            raise self.err("accessor has a bad componentType, type or count", akey) from None
-        if count < 0:
-            raise self.err("accessor count is negative", akey)
-        if "bufferView" in a:
-            arr = self._strided(
-                int(a["bufferView"]), int(a.get("byteOffset", 0)), dtype, width, count, akey
-            )
-        else:
-            arr = np.zeros((count, width), dtype)
-        if "sparse" in a:
-            arr = arr.copy()
-            sp = a["sparse"]
-            n = int(sp.get("count", 0))
-            si, sv = sp.get("indices", {}), sp.get("values", {})
-            try:
-                idt = np.dtype(_COMPONENTS[si["componentType"]]).newbyteorder("<")
-            except (KeyError, TypeError):
-                raise self.err(
-                    "sparse indices have a bad componentType", akey + "/sparse"
-                ) from None
-            idx = self._strided(
-                int(si["bufferView"]), int(si.get("byteOffset", 0)), idt, 1, n, akey + "/sparse"
-            )[:, 0].astype(np.int64)
-            vals = self._strided(
-                int(sv["bufferView"]),
-                int(sv.get("byteOffset", 0)),
-                dtype,
-                width,
-                n,
-                akey + "/sparse",
-            )
-            if n and (idx.min() < 0 or idx.max() >= count):
-                raise self.err("sparse indices out of range", akey + "/sparse/indices")
-            arr[idx] = vals
-        if a.get("normalized") and dtype.kind in "iu":
-            info = np.iinfo(dtype)
-            out = arr.astype(np.float32) / np.float32(info.max)
-            if dtype.kind == "i":
-                np.maximum(out, -1.0, out=out)
-            return out
-        return arr
+        return read_accessor(self.doc, i, self._view_bytes, self.err)
 
-    def _strided(
-        self, view_i: int, off: int, dtype: np.dtype, width: int, count: int, key: str
-    ) -> np.ndarray:
+    def _view_bytes(self, view_i: Any) -> tuple[bytes, int]:
         views = self.doc.get("bufferViews", [])
-        if 0 <= view_i < len(views):
+        if isinstance(view_i, int) and 0 <= view_i < len(views):
             ext = views[view_i].get("extensions", {})
             for name in ("EXT_meshopt_compression", "KHR_meshopt_compression"):
                 if name in ext and name in self.doc.get("extensionsRequired", []):
                     raise self.err(_REFUSED[name], f"/bufferViews/{view_i}")
-        data, stride = self.view(view_i)
-        elem = dtype.itemsize * width
-        stride = stride or elem
-        if count == 0:
-            return np.zeros((0, width), dtype)
-        need = off + (count - 1) * stride + elem
-        if off < 0 or need > len(data):
-            raise self.err(f"accessor needs {need} bytes, its bufferView has {len(data)}", key)
-        raw = np.frombuffer(data, np.uint8, count=need - off, offset=off)
-        rows = np.lib.stride_tricks.as_strided(raw, (count, elem), (stride, 1))
-        return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+        return self.view(view_i)
 
 
 def _vec(node: dict[str, Any], key: str, default: list[float], n: int) -> np.ndarray:

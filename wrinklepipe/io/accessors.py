@@ -1,6 +1,8 @@
 """glTF accessors -> numpy arrays, per the glTF 2.0 spec (section 3.6).
 
-One reader for every accessor the project decodes: any component type (little-endian), every
+THE accessor reader: the glTF document model (:mod:`wrinklepipe.document`), the package reader
+(:mod:`wrinklepipe.io.gltf_read`) and the glTF animations the drivers are given all decode
+accessors here, so every one of them reads any component type (little-endian), every
 element type (``MAT2``/``MAT3`` with byte-aligned columns as the spec requires for 1- and 2-byte
 components), byte strides, sparse substitution, accessors without a bufferView (zeros),
 ``normalized`` integers (unsigned ``c / MAX``, signed ``max(c / MAX, -1)``). The bytes of each
