@@ -8,6 +8,7 @@ import pytest
 
 from wrinklepipe import drivers as wd
 from wrinklepipe.drivers.blendshapes import Row, evaluate_rows
+from wrinklepipe.io.animation import read_morph_tracks
 from wrinklepipe.presets import arkit, jimenez
 
 
@@ -157,7 +158,9 @@ def test_arkit_preset_on_a_gltf_drives_only_the_mapped_regions(tmp_path):
     glb = make_morph_gltf(tmp_path / "arkit.glb", arkit.NAMES, [0.0, 1.0], np.stack([k0, k1]))
     _assert_valid_gltf(glb)
     regions = (*jimenez.REGION_NAMES, *EXTRA)
-    ctx = wd.DriverContext(regions, ("stretch", "compress"), root=tmp_path)
+    ctx = wd.DriverContext(
+        regions, ("stretch", "compress"), root=tmp_path, read_morph_tracks=read_morph_tracks
+    )
     res = wd.evaluate(
         "blendshapes", ctx, {"preset": "arkit52", "file": "arkit.glb"}, times=[0.0, 0.5, 1.0]
     )

@@ -11,6 +11,7 @@ from test_drivers_blendshapes import make_morph_gltf
 from wrinklepipe import drivers as wd
 from wrinklepipe.drivers.curves import sample
 from wrinklepipe.errors import InputError
+from wrinklepipe.io.animation import read_morph_tracks
 
 REGIONS = ("brow", "chin")
 STATES = ("stretch", "compress")
@@ -55,7 +56,7 @@ def test_csv_and_json_files(tmp_path):
 
 def test_gltf_animation_linear_and_cubicspline(tmp_path):
     glb = make_morph_gltf(tmp_path / "a.glb", ["brow", "other"], [0, 1], [[0, 0], [1, 1]])
-    ctx = wd.DriverContext(REGIONS, STATES, root=tmp_path)
+    ctx = wd.DriverContext(REGIONS, STATES, root=tmp_path, read_morph_tracks=read_morph_tracks)
     res = wd.evaluate("curves", ctx, {"file": glb.name}, times=[0.25])
     assert res.weights[0, 0, 0] == pytest.approx(0.25)
     assert "other" in res.notes[0]
@@ -125,7 +126,7 @@ def test_gltf_with_external_buffer_and_broken_files(tmp_path):
     g.convert_buffers(pygltflib.BufferFormat.BINFILE)
     g.save(str(tmp_path / "ext.gltf"))
     assert any(p.suffix == ".bin" for p in tmp_path.iterdir())
-    ctx = wd.DriverContext(REGIONS, STATES, root=tmp_path)
+    ctx = wd.DriverContext(REGIONS, STATES, root=tmp_path, read_morph_tracks=read_morph_tracks)
     res = wd.evaluate("curves", ctx, {"file": "ext.gltf"}, times=[0.5])
     assert res.weights[0, 0, 0] == pytest.approx(0.5)
     # a truncated GLB and a buffer URI escaping the folder: clear messages, no traceback
@@ -134,5 +135,5 @@ def test_gltf_with_external_buffer_and_broken_files(tmp_path):
         wd.evaluate("curves", ctx, {"file": "cut.glb"})
     g.buffers[0].uri = "../../etc/passwd"
     g.save(str(tmp_path / "evil.gltf"))
-    with pytest.raises(InputError, match="outside the file's folder"):
+    with pytest.raises(InputError, match="leaves the asset folder"):
         wd.evaluate("curves", ctx, {"file": "evil.gltf"})

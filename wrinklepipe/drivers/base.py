@@ -38,6 +38,20 @@ class Rig(Protocol):
     def joint_matrices(self, times: Sequence[float | None]) -> np.ndarray: ...
 
 
+@dataclass(frozen=True)
+class MorphTrack:
+    """One animation channel of morph-target weights, as read from a glTF (the pipeline gives
+    a reader through :attr:`DriverContext.read_morph_tracks`; :func:`wrinklepipe.io.animation.
+    read_morph_tracks` reads glTF): the target ``names``, key ``times`` [N] (strictly
+    increasing) and ``values`` [N, M] (CUBICSPLINE: [N, 3, M], in-tangent, value,
+    out-tangent), ``interpolation`` LINEAR | STEP | CUBICSPLINE."""
+
+    names: tuple[str, ...]
+    times: np.ndarray
+    values: np.ndarray
+    interpolation: str = "LINEAR"
+
+
 @dataclass
 class DriverContext:
     """Everything a driver may read besides its own spec.
@@ -45,8 +59,9 @@ class DriverContext:
     ``region_states`` ``[R, K]`` is 1 where region r drives state k (see
     :meth:`WrinkleAsset.region_state_matrix`). ``expressions`` is ``{expression: {region: w}}``.
     ``root`` resolves relative file names in a spec. ``source`` names the spec in messages.
-    ``read_rig`` opens a skinned file a ``bones`` spec names (the layer that builds the context
-    supplies it: drivers read no meshes themselves).
+    ``read_rig`` opens a skinned file a ``bones`` spec names and ``read_morph_tracks`` reads
+    the morph-weight animation of a glTF a ``curves``, ``blendshapes`` or ``dynamic`` spec
+    names (the layer that builds the context supplies both: drivers read no glTF themselves).
     """
 
     regions: tuple[str, ...]
@@ -59,6 +74,7 @@ class DriverContext:
     fps: float = DEFAULT_FPS
     source: str = "<driver>"
     read_rig: Callable[[Path], Rig] | None = None
+    read_morph_tracks: Callable[[Path], list[MorphTrack]] | None = None
 
     def __post_init__(self) -> None:
         self.regions = tuple(str(r) for r in self.regions)
@@ -89,6 +105,7 @@ class DriverContext:
         root: str | Path = ".",
         fps: float = DEFAULT_FPS,
         read_rig: Callable[[Path], Rig] | None = None,
+        read_morph_tracks: Callable[[Path], list[MorphTrack]] | None = None,
     ) -> DriverContext:
         return cls(
             regions=asset.region_names,
@@ -100,6 +117,7 @@ class DriverContext:
             root=Path(root),
             fps=fps,
             read_rig=read_rig,
+            read_morph_tracks=read_morph_tracks,
         )
 
     @classmethod
@@ -108,6 +126,7 @@ class DriverContext:
         manifest: Any,
         mesh: Mesh | None = None,
         read_rig: Callable[[Path], Rig] | None = None,
+        read_morph_tracks: Callable[[Path], list[MorphTrack]] | None = None,
     ) -> DriverContext:
         """From a :class:`wrinklepipe.manifest.Manifest` (the mesh is loaded by the caller)."""
         states = tuple(s.name for s in manifest.states)
@@ -128,6 +147,7 @@ class DriverContext:
             root=manifest.root,
             source=str(manifest.path),
             read_rig=read_rig,
+            read_morph_tracks=read_morph_tracks,
         )
 
 

@@ -41,7 +41,7 @@ from wrinklepipe.drivers.curves import (
     curves_to_weights,
     keys_range,
     load_keys,
-    read_gltf_morph_animation,
+    morph_animation,
     sample_keys,
 )
 from wrinklepipe.errors import InputError, Problem
@@ -180,7 +180,7 @@ def blendshapes_driver(
     mesh_names = tuple(ctx.mesh.morph_names) if ctx.mesh is not None else ()
     file = spec.get("file")
     if file is not None and Path(str(file)).suffix.lower() in (".gltf", ".glb"):
-        times, names, x = read_gltf_morph_animation(resolve(ctx, str(file)), times, fps)
+        times, names, x = morph_animation(ctx, resolve(ctx, str(file)), times, fps)
         universe = mesh_names or names
         inputs = np.zeros((len(times), len(universe)))
         for j, n in enumerate(names):

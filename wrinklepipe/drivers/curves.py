@@ -26,15 +26,14 @@ import csv
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
-from urllib.parse import unquote
 
 import numpy as np
-import pygltflib
 from scipy.interpolate import CubicSpline
 
 from wrinklepipe.drivers.base import (
     DriverContext,
     DriverResult,
+    MorphTrack,
     frame_times,
     register,
     resolve,
@@ -130,127 +129,44 @@ def read_curves_json(path: str | Path) -> tuple[Keys, str | None]:
     return check_keys(keys, str(path)), interp
 
 
-def read_gltf_morph_animation(
-    path: str | Path, times: np.ndarray | None = None, fps: float = 30.0, animation: int = 0
+def morph_animation(
+    ctx: DriverContext, path: str | Path, times: np.ndarray | None = None, fps: float = 30.0
 ) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
-    """Sample the morph-target weights a glTF animation drives.
+    """The morph-target weights a glTF's animation drives, read through
+    ``ctx.read_morph_tracks`` and sampled by :func:`sample_morph_tracks`."""
+    if ctx.read_morph_tracks is None:
+        raise spec_problem(
+            ctx, "no glTF animation reader was given (DriverContext.read_morph_tracks)", "file"
+        )
+    return sample_morph_tracks(ctx.read_morph_tracks(Path(path)), times, fps)
 
-    Returns ``(times [F], target names, weights [F, M])``; with ``times`` None the animation is
-    sampled at ``fps`` over its own time range. LINEAR, STEP and CUBICSPLINE samplers.
-    """
 
-    path = Path(path)
-    try:
-        g = pygltflib.GLTF2().load(str(path))
-    except Exception as exc:  # pygltflib raises many kinds
-        raise input_error(path, f"cannot read glTF: {exc}") from None
-    if not g.animations or animation >= len(g.animations):
-        raise input_error(path, "no animation in this file", "animations")
-    anim = g.animations[animation]
-    tracks = []
-    for ci, ch in enumerate(anim.channels):
-        if ch.target.path != "weights" or ch.target.node is None:
-            continue
-        key = f"animations[{animation}].channels[{ci}]"
-        if not 0 <= ch.target.node < len(g.nodes) or not 0 <= ch.sampler < len(anim.samplers):
-            raise input_error(path, "channel names a missing node or sampler", key)
-        node = g.nodes[ch.target.node]
-        if node.mesh is None or not 0 <= node.mesh < len(g.meshes):
-            raise input_error(path, "weights channel targets a node without a mesh", key)
-        mesh = g.meshes[node.mesh]
-        names = tuple((mesh.extras or {}).get("targetNames", ()))
-        n_targets = len(mesh.primitives[0].targets or [])
-        if len(names) != n_targets:
-            names = tuple(f"target{i}" for i in range(n_targets))
-        s = anim.samplers[ch.sampler]
-        kt = _accessor(g, s.input, path).reshape(-1)
-        kv = _accessor(g, s.output, path).reshape(-1)
-        interp = s.interpolation or "LINEAR"
-        per_key = len(names) * (3 if interp == "CUBICSPLINE" else 1)
-        if kt.size == 0 or kv.size != kt.size * per_key:
-            raise input_error(
-                path, f"{kv.size} weight values for {kt.size} keys x {per_key} per key", key
-            )
-        if np.any(np.diff(kt) <= 0):
-            raise input_error(path, "key times must increase strictly", key)
-        tracks.append((names, kt, kv, interp))
-    if not tracks:
-        raise input_error(path, "the animation drives no morph-target weights", "animations")
+def sample_morph_tracks(
+    tracks: Sequence[MorphTrack], times: np.ndarray | None = None, fps: float = 30.0
+) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
+    """Sample morph-weight tracks: ``(times [F], target names, weights [F, M])``; with
+    ``times`` None at ``fps`` over the tracks' own time range. LINEAR, STEP and CUBICSPLINE
+    (glTF's Hermite); a name two tracks share takes the first track's curve."""
     if times is None:
-        t0 = min(float(k[1][0]) for k in tracks)
-        t1 = max(float(k[1][-1]) for k in tracks)
+        t0 = min(float(k.times[0]) for k in tracks)
+        t1 = max(float(k.times[-1]) for k in tracks)
         times = frame_times(t0, t1, fps)
     all_names: list[str] = []
     cols: list[np.ndarray] = []
-    for names, kt, kv, interp in tracks:
-        m = len(names)
-        if interp == "CUBICSPLINE":
-            v = kv.reshape(kt.size, 3, m)
+    for k in tracks:
+        kt = np.asarray(k.times, np.float64)
+        if k.interpolation == "CUBICSPLINE":
+            v = np.asarray(k.values, np.float64)
             w = _hermite(kt, v[:, 1], v[:, 0], v[:, 2], times)
         else:
-            v = kv.reshape(kt.size, m)
-            mode = "step" if interp == "STEP" else "linear"
-            w = np.stack([sample(kt, v[:, j], times, mode) for j in range(m)], axis=1)
-        for j, n in enumerate(names):
+            v = np.asarray(k.values, np.float64)
+            mode = "step" if k.interpolation == "STEP" else "linear"
+            w = np.stack([sample(kt, v[:, j], times, mode) for j in range(len(k.names))], axis=1)
+        for j, n in enumerate(k.names):
             if n not in all_names:
                 all_names.append(n)
                 cols.append(w[:, j])
     return np.asarray(times, np.float64), tuple(all_names), np.stack(cols, axis=1)
-
-
-_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
-# componentType -> (numpy dtype, divisor for normalized integers: glTF animation outputs)
-_TYPES = {
-    5126: ("<f4", None),
-    5120: ("<i1", 127.0),
-    5121: ("<u1", 255.0),
-    5122: ("<i2", 32767.0),
-    5123: ("<u2", 65535.0),
-}
-
-
-def _buffer_bytes(g: Any, path: Path, i: int) -> bytes:
-    uri = g.buffers[i].uri
-    if uri is None:
-        return g.binary_blob() or b""
-    if uri.startswith("data:"):
-        return g.get_data_from_buffer_uri(uri)
-    folder = path.parent.resolve()
-    target = (folder / unquote(uri)).resolve()
-    if folder not in target.parents:
-        raise input_error(
-            path, f"buffer URI {uri!r} points outside the file's folder", f"buffers[{i}]"
-        )
-    if not target.is_file():
-        raise input_error(path, f"buffer file not found: {uri}", f"buffers[{i}]")
-    return target.read_bytes()
-
-
-def _accessor(g: Any, index: int, path: Path = Path("<gltf>")) -> np.ndarray:
-    """An accessor as float64 ``[count, components]`` (normalized integers scaled to [-1, 1])."""
-    try:
-        acc = g.accessors[index]
-        view = g.bufferViews[acc.bufferView]
-        data = _buffer_bytes(g, path, view.buffer)
-        ncomp = _COMPONENTS[acc.type]
-        dtype, div = _TYPES[acc.componentType]
-        size = np.dtype(dtype).itemsize * ncomp
-        start = (view.byteOffset or 0) + (acc.byteOffset or 0)
-        stride = view.byteStride or size
-        if acc.count <= 0 or start + stride * (acc.count - 1) + size > len(data):
-            raise ValueError("accessor runs past the end of its buffer")
-        raw = np.frombuffer(data, np.uint8, count=stride * (acc.count - 1) + size, offset=start)
-        idx = np.arange(acc.count)[:, None] * stride + np.arange(size)[None]
-        out = raw[idx].copy().view(dtype).reshape(acc.count, ncomp).astype(np.float64)
-    except InputError:
-        raise
-    except (IndexError, KeyError, TypeError, ValueError) as exc:
-        raise input_error(path, f"bad accessor: {exc}", f"accessors[{index}]") from None
-    if div is not None:
-        out = np.maximum(out / div, -1.0)
-    if not np.isfinite(out).all():
-        raise input_error(path, "accessor holds non-finite values", f"accessors[{index}]")
-    return out
 
 
 def _hermite(
@@ -354,7 +270,7 @@ def curves_driver(
     cols: list[np.ndarray] = []
     gltf = None
     if "file" in spec and Path(str(spec["file"])).suffix.lower() in (".gltf", ".glb"):
-        gltf = read_gltf_morph_animation(resolve(ctx, str(spec["file"])), times, fps)
+        gltf = morph_animation(ctx, resolve(ctx, str(spec["file"])), times, fps)
         times = gltf[0]
     if not keys and gltf is None:
         raise spec_problem(ctx, "curves driver needs 'keys' or a 'file'", "keys")

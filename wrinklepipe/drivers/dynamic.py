@@ -27,7 +27,7 @@ from wrinklepipe.drivers.base import (
     resolve,
     spec_problem,
 )
-from wrinklepipe.drivers.curves import keys_range, load_keys, read_gltf_morph_animation, sample_keys
+from wrinklepipe.drivers.curves import keys_range, load_keys, morph_animation, sample_keys
 
 
 def _geometry() -> Any:
@@ -43,7 +43,7 @@ def _morph_frames(
     fps = float(spec.get("fps", ctx.fps))
     file = spec.get("file")
     if file is not None and Path(str(file)).suffix.lower() in (".gltf", ".glb"):
-        return read_gltf_morph_animation(resolve(ctx, str(file)), times, fps)
+        return morph_animation(ctx, resolve(ctx, str(file)), times, fps)
     if "morphs" in spec and "keys" not in spec:
         names = tuple(str(k) for k in spec["morphs"])
         t = np.zeros(1) if times is None else times

@@ -19,6 +19,7 @@ from wrinklepipe.console import track
 from wrinklepipe.drivers.bake import blend_frames, changed_frames, encode_states, weights_csv
 from wrinklepipe.drivers.base import DriverContext, evaluate, frame_times
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.io.animation import read_morph_tracks
 from wrinklepipe.io.images import write_image
 from wrinklepipe.io.mesh import load_mesh
 from wrinklepipe.io.package import resize_normals_pd
@@ -84,7 +85,9 @@ def bake_manifest(
     kind = str(spec["kind"])
     needs_mesh = kind in ("blendshapes", "bones", "dynamic")
     mesh = load_mesh_for_drivers(manifest.mesh) if needs_mesh else None
-    ctx = DriverContext.from_manifest(manifest, mesh, read_rig=GltfRig)
+    ctx = DriverContext.from_manifest(
+        manifest, mesh, read_rig=GltfRig, read_morph_tracks=read_morph_tracks
+    )
     ctx.source = f"{manifest.path} [drivers[{index}]]"
     if opt.fps is not None:
         if opt.fps <= 0:

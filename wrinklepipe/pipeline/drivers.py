@@ -14,7 +14,8 @@ import numpy as np
 from wrinklepipe import drivers as wd
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.drivers.base import resolve
-from wrinklepipe.drivers.curves import load_keys, read_gltf_morph_animation, sample_keys
+from wrinklepipe.drivers.curves import load_keys, morph_animation, sample_keys
+from wrinklepipe.io.animation import read_morph_tracks
 from wrinklepipe.io.package import WeightCurves
 from wrinklepipe.io.rig import GltfRig
 
@@ -66,7 +67,7 @@ def morph_inputs(
     t = np.asarray(times, np.float64)
     file = spec.get("file")
     if file is not None and Path(str(file)).suffix.lower() in (".gltf", ".glb"):
-        _, got, x = read_gltf_morph_animation(resolve(ctx, str(file)), t)
+        _, got, x = morph_animation(ctx, resolve(ctx, str(file)), t)
         out = np.zeros((t.size, len(names)), np.float32)
         for j, n in enumerate(got):
             if n in names:
@@ -88,7 +89,9 @@ def evaluate_drivers(asset: WrinkleAsset, root: Path) -> tuple[list[WeightCurves
         return [expression_cycle(asset)] if asset.expressions else [], [
             "no drivers: a curve visiting each expression of the table was written"
         ]
-    ctx = wd.DriverContext.from_asset(asset, root, read_rig=GltfRig)
+    ctx = wd.DriverContext.from_asset(
+        asset, root, read_rig=GltfRig, read_morph_tracks=read_morph_tracks
+    )
     curves: list[WeightCurves] = []
     used: set[str] = set()
     for i, spec in enumerate(asset.drivers):
