@@ -11,8 +11,7 @@ from typing import Any
 from wrinklepipe.batch.options import AssetOptions
 from wrinklepipe.batch.plan import BatchPlan, Job
 from wrinklepipe.batch.results import AssetResult, counts_of, status_for
-
-_ASSET_SUFFIXES = (".gltf", ".glb", ".usda", ".usdc", ".usdz", ".usd")
+from wrinklepipe.io.readers import PACKAGE_SUFFIXES
 
 
 def is_asset_folder(folder: Path) -> bool:
@@ -21,7 +20,7 @@ def is_asset_folder(folder: Path) -> bool:
         names = os.listdir(folder)
     except OSError:
         return False
-    return any(n.lower().endswith(_ASSET_SUFFIXES) for n in names) or "manifest.toml" in names
+    return any(n.lower().endswith(PACKAGE_SUFFIXES) for n in names) or "manifest.toml" in names
 
 
 def output_folders(folder: Path) -> list[Path]:

@@ -19,9 +19,10 @@ from wrinklepipe.geometry.dynamic import (
     texture_space_weights,
 )
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
-from wrinklepipe.io.mesh import SUFFIXES, LoadOptions, load_mesh, load_meshes, merge_meshes
+from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes, merge_meshes
 from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, gltf_morph_weights
 from wrinklepipe.io.mesh_usd import usd_blend_shape_weights, usd_joint_world_matrices
+from wrinklepipe.io.readers import format_of
 from wrinklepipe.outputs.per_vertex import write_per_vertex
 
 NAME = "dynamic"
@@ -100,7 +101,8 @@ def deformed_pose(args: argparse.Namespace, mesh: object, parts: list) -> np.nda
                 pose, f"pose has shape {list(arr.shape)}, the mesh {list(mesh.positions.shape)}"
             )
         return arr
-    kind = SUFFIXES.get(Path(args.mesh).suffix.lower())
+    fmt = format_of(args.mesh)
+    kind = fmt.name if fmt is not None else None
     if kind == "usd":
         return np.concatenate([_usd_part_pose(args, part) for part in parts])
     if kind == "gltf":

@@ -5,7 +5,7 @@
 non-skinned primitives are baked into world space by the first node that instances them;
 skinned ones stay in their bind space (the node transform of a skinned mesh is ignored by the
 spec; the skin's joints, weights and inverse bind matrices come along). Several primitives are
-merged by :func:`wrinklepipe.io.mesh.merge_meshes` (morph targets unioned by name, skins by
+merged by :func:`wrinklepipe.io.mesh_merge.merge_meshes` (morph targets unioned by name, skins by
 joint name); ``Mesh.parts`` maps every vertex run back to its primitive, vertex order kept.
 Degenerate triangles are left out of the render mesh (counted); the document is not touched.
 """
@@ -18,8 +18,8 @@ from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.document.model import Document, PrimitiveRef
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
-from wrinklepipe.io.mesh import merge_meshes
 from wrinklepipe.io.mesh_gltf import drop_degenerate
+from wrinklepipe.io.mesh_merge import merge_meshes
 
 BIAS_ATTRIBUTE = "_WRINKLE_BIAS"
 

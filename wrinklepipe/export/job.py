@@ -9,6 +9,7 @@ from wrinklepipe.document.model import read_document
 from wrinklepipe.errors import input_error
 from wrinklepipe.export.files import export_files
 from wrinklepipe.export.presets import ENGINE_PRESETS
+from wrinklepipe.io.readers import format_of
 from wrinklepipe.sources.package import read_package, written_file
 
 
@@ -22,7 +23,8 @@ def export(
     pkg = read_package(source)
     written = written_file(source)
     # a glTF output is exported whole (every part of a character converted in place)
-    document = read_document(written) if written.suffix.lower() in (".gltf", ".glb") else None
+    fmt = format_of(written)
+    document = read_document(written) if fmt is not None and fmt.name == "gltf" else None
     files, notes = export_files(pkg, engine, document)
     inputs = [source] if source.is_dir() else [source, source.parent]
     try:

@@ -36,9 +36,8 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.io.images import read_image
 from wrinklepipe.io.mesh import load_mesh
+from wrinklepipe.io.readers import format_of
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
-
-_GLTF = (".gltf", ".glb")
 
 
 def _read_normals(
@@ -192,7 +191,8 @@ def ingest_all(manifest: Any) -> Ingested:
             manifest.path, "the manifest names no mesh; glTF/USD output needs one", "mesh"
         )
     source = None
-    if manifest.mesh.suffix.lower() in _GLTF:
+    fmt = format_of(manifest.mesh)
+    if fmt is not None and fmt.name == "gltf":
         source = read_source_document(manifest)
         mesh = source.mesh
         base, states, mask_arr, notes = read_maps(manifest, source.base, stats)

@@ -27,12 +27,11 @@ import numpy as np
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.document.container import split_glb
-from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.fidelity.ship import edge_texels
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import package_from_asset
-from wrinklepipe.io.usd_read import read_usd
+from wrinklepipe.io.readers import Format, format_of, read_package_file
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.model import ENCODINGS
 from wrinklepipe.normals import uastc
@@ -40,6 +39,7 @@ from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
+from wrinklepipe.sources.package import asset_file
 from wrinklepipe.validate.inputs import FORMATS, Texture, ValidationInput
 from wrinklepipe.validate.loader import (
     BUNDLE_SUFFIX,
@@ -49,9 +49,6 @@ from wrinklepipe.validate.loader import (
     read_bundle,
 )
 from wrinklepipe.validate.ship import ShipOptions, ship_asset
-
-_GLTF = (".gltf", ".glb")
-_USD = (".usd", ".usda", ".usdc", ".usdz")
 
 
 @dataclass(frozen=True)
@@ -80,13 +77,11 @@ def load_input(path: str | Path, options: LoadOptions | None = None) -> Validati
         if not p.exists():
             raise input_error(p, "not found")
         suffix = p.suffix.lower()
+        fmt = format_of(p)
         if p.is_dir():
             inp = _load_folder(p, o)
-        elif suffix in _GLTF:
-            check_gltf_claims_wrinkles(p, o.max_gltf_bytes)
-            inp = _from_reader(p, "gltf")
-        elif suffix in _USD:
-            inp = _from_reader(p, "usd")
+        elif fmt is not None and fmt.package is not None:
+            inp = _from_written(p, fmt, o)
         elif suffix == ".toml":
             inp = _load_manifest(p)
         elif suffix == BUNDLE_SUFFIX:
@@ -145,11 +140,13 @@ def check_gltf_claims_wrinkles(path: Path, max_bytes: int = 512 * 1024 * 1024) -
         )
 
 
-def _from_reader(p: Path, kind: str) -> ValidationInput:
+def _from_written(p: Path, fmt: Format, o: LoadOptions) -> ValidationInput:
+    """A written .gltf/.glb or USD file through the package reader of its format."""
+    kind = fmt.name
     if kind == "gltf":
-        pkg = guard_reader(lambda: read_wrinkled(p), p, "the glTF")
-    else:
-        pkg = guard_reader(lambda: read_usd(p), p, "the USD stage")
+        check_gltf_claims_wrinkles(p, o.max_gltf_bytes)
+    what = "the glTF" if kind == "gltf" else "the USD stage"
+    pkg = guard_reader(lambda: read_package_file(p), p, what)
     folder = p.parent
     files = {t.name: str(folder / "textures" / f"{t.name}.png") for t in pkg.textures}
     files = {k: v for k, v in files.items() if Path(v).exists()}
@@ -212,20 +209,15 @@ def _usd_pointers(inp: ValidationInput, p: Path) -> None:
 
 
 def _load_folder(p: Path, o: LoadOptions) -> ValidationInput:
-    found = (
-        sorted(p.glob("*.gltf"))
-        or sorted(p.glob("*.glb"))
-        or sorted(q for q in p.iterdir() if q.suffix.lower() in _USD)
-    )
-    if not found:
+    f = asset_file(p)
+    if f is None:
         manifests = sorted(p.glob("manifest.toml"))
         if manifests:
             return _load_manifest(manifests[0])
         raise input_error(p, "no .gltf/.glb/.usd or manifest.toml in this folder")
-    f = found[0]
-    if f.suffix.lower() in _GLTF:
-        check_gltf_claims_wrinkles(f, o.max_gltf_bytes)
-    inp = _from_reader(f, "gltf" if f.suffix.lower() in _GLTF else "usd")
+    fmt = format_of(f)
+    assert fmt is not None  # asset_file finds only suffixes the readers know
+    inp = _from_written(f, fmt, o)
     inp.kind = "folder"
     if o.textures != "png":
         inp = _use_compressed(inp, p / "compressed", required=o.textures == "compressed")
