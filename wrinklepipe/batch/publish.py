@@ -1,5 +1,6 @@
-"""Write a finished run's reports (JSON summary, JUnit, SARIF) and print its tally: shared by
-``wrinklepipe batch`` and ``wrinklepipe validate-asset`` over a folder of outputs."""
+"""Run a plan with progress, write its reports (JSON summary, JUnit, SARIF) and print its
+tally: shared by ``wrinklepipe batch`` and ``wrinklepipe validate-asset`` over a folder of
+outputs (:func:`run_and_publish`; :func:`publish` for a run already made)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,40 @@ from rich.console import Console
 
 from wrinklepipe.atomic import dumps_json, write_output
 from wrinklepipe.batch import reports
+from wrinklepipe.batch.cache import Cache
+from wrinklepipe.batch.engines import DaskEngine, LocalEngine
 from wrinklepipe.batch.plan import BatchPlan
-from wrinklepipe.batch.run import BatchRun
+from wrinklepipe.batch.progress import BatchProgress
+from wrinklepipe.batch.run import BatchRun, run_plan
+
+
+def run_and_publish(
+    plan: BatchPlan,
+    engine: LocalEngine | DaskEngine,
+    cache: Cache | None,
+    *,
+    command: str,
+    console: Console,
+    summary_path: str | None = None,
+    junit_path: str | None = None,
+    sarif_path: str | None = None,
+) -> tuple[BatchRun, dict[str, Any]]:
+    """Run ``plan`` on ``engine`` (through ``cache``) with a progress display titled by
+    ``command``, then :func:`publish` it; returns the run and the JSON summary."""
+    title = f"wrinklepipe {command}: {len(plan.jobs)} assets"
+    with BatchProgress(console, len(plan.jobs), title) as progress:
+        run = run_plan(plan, engine, cache, progress.stage, progress.done)
+    doc = publish(
+        run,
+        plan,
+        command=command,
+        engine=engine.description,
+        console=console,
+        summary_path=summary_path,
+        junit_path=junit_path,
+        sarif_path=sarif_path,
+    )
+    return run, doc
 
 
 def publish(

@@ -14,7 +14,7 @@ import traceback
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import OpenImageIO
 
@@ -26,6 +26,8 @@ from wrinklepipe.pipeline.convert import convert
 from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import ValidateOptions, validate
 from wrinklepipe.validate.config import Config, load_config
+
+T = TypeVar("T")
 
 
 def _ignore(_stage: str) -> None:
@@ -100,8 +102,9 @@ def _crash(exc: BaseException, job: Job, what: str) -> list[dict[str, str]]:
     ]
 
 
-def _convert(job: Job, stages: _Stages) -> AssetResult:
-    base = AssetResult(
+def _error_result(job: Job, problems: list[dict[str, str]]) -> AssetResult:
+    """The result of a job that could not run: ``status="error"`` with its problems."""
+    return AssetResult(
         id=job.id,
         manifest=job.manifest_rel,
         output=job.id,
@@ -109,41 +112,55 @@ def _convert(job: Job, stages: _Stages) -> AssetResult:
         source="none",
         fail_on=job.options.fail_on,
         worker=socket.gethostname(),
+        problems=problems,
     )
+
+
+def _guarded(job: Job, what: str, work: Callable[[], T]) -> T | AssetResult:
+    """``work()``, or the error result of the job when it raises: an InputError's problems,
+    any other exception as a crash of ``what`` (one asset never takes the others down)."""
     try:
-        with stage_listener(stages):
-            res = convert(job.manifest, job.output, job.options.convert_options(job.force))
+        return work()
     except InputError as exc:
-        base.problems = _problems(exc, job)
-        return base
+        return _error_result(job, _problems(exc, job))
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - one asset's crash must not stop the others
-        base.problems = _crash(exc, job, "conversion")
-        return base
+        return _error_result(job, _crash(exc, job, what))
+
+
+def _judged(
+    job: Job, name: str, source: str, validation: str, issues: list[dict[str, Any]]
+) -> AssetResult:
+    """The result of a job that ran: its issues, their counts and the status they give."""
+    result = _error_result(job, [])
+    result.name = name
+    result.source = source
+    result.validation = validation
+    result.issues = issues
+    result.counts = counts_of(issues)
+    result.status = status_for(issues, job.options.fail_on)
+    return result
+
+
+def _convert(job: Job, stages: _Stages) -> AssetResult:
+    def work() -> Any:
+        with stage_listener(stages):
+            return convert(job.manifest, job.output, job.options.convert_options(job.force))
+
+    res = _guarded(job, "conversion", work)
+    if isinstance(res, AssetResult):
+        return res
     validation = res.report.get("validation", {})
     issues = list(validation.get("issues", []))
-    base.name = str(res.report.get("name", ""))
-    base.source = "converted"
-    base.validation = str(validation.get("status", ""))
-    base.issues = issues
-    base.counts = counts_of(issues)
-    base.status = status_for(issues, job.options.fail_on)
-    return base
+    name = str(res.report.get("name", ""))
+    return _judged(job, name, "converted", str(validation.get("status", "")), issues)
 
 
 def _validate(job: Job, stages: _Stages) -> AssetResult:
     params: dict[str, Any] = dict(job.params)
-    base = AssetResult(
-        id=job.id,
-        manifest=job.manifest_rel,
-        output=job.id,
-        status="error",
-        source="none",
-        fail_on=job.options.fail_on,
-        worker=socket.gethostname(),
-    )
-    try:
+
+    def work() -> Any:
         config = load_config(params["config"]) if params.get("config") else Config()
         options = config.validate_options(ValidateOptions())  # as validate-asset does
         if not job.options.render:
@@ -154,23 +171,13 @@ def _validate(job: Job, stages: _Stages) -> AssetResult:
         stages("loading")
         inp = load_input(job.output, LoadOptions(textures=params.get("textures", "auto")))
         stages("validating")
-        report = validate(inp, options, config)
-    except InputError as exc:
-        base.problems = _problems(exc, job)
-        return base
-    except (KeyboardInterrupt, SystemExit):
-        raise
-    except Exception as exc:  # noqa: BLE001 - one asset's crash must not stop the others
-        base.problems = _crash(exc, job, "validation")
-        return base
+        return validate(inp, options, config)
+
+    report = _guarded(job, "validation", work)
+    if isinstance(report, AssetResult):
+        return report
     issues = _replace_prefix([i.to_json() for i in report.issues], str(job.output), ".")
-    base.name = str(report.input.get("name", ""))
-    base.source = "validated"
-    base.validation = "ran"
-    base.issues = issues
-    base.counts = counts_of(issues)
-    base.status = status_for(issues, job.options.fail_on)
-    return base
+    return _judged(job, str(report.input.get("name", "")), "validated", "ran", issues)
 
 
 def run_job(job: Job, emit: Callable[[str], None] = _ignore) -> AssetResult:

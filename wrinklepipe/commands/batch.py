@@ -6,9 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from wrinklepipe.batch import Cache, DaskEngine, LocalEngine, parse_size, plan_batch, run_plan
-from wrinklepipe.batch.progress import BatchProgress
-from wrinklepipe.batch.publish import publish
+from wrinklepipe.batch import Cache, DaskEngine, LocalEngine, parse_size, plan_batch
+from wrinklepipe.batch.publish import run_and_publish
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.demo.source import cache_root
 from wrinklepipe.errors import input_error
@@ -151,15 +150,11 @@ def run(args: argparse.Namespace) -> int:
         folder = Path(args.cache) if args.cache else cache_root() / "batch"
         cache = Cache(folder, parse_size(args.cache_size))
     engine = DaskEngine(args.scheduler) if args.scheduler else LocalEngine(args.jobs, args.timeout)
-    with BatchProgress(
-        err, len(plan.jobs), f"wrinklepipe batch: {len(plan.jobs)} assets"
-    ) as progress:
-        result = run_plan(plan, engine, cache, progress.stage, progress.done)
-    doc = publish(
-        result,
+    result, doc = run_and_publish(
         plan,
+        engine,
+        cache,
         command="batch",
-        engine=engine.description,
         console=err,
         summary_path=args.summary,
         junit_path=args.junit,

@@ -7,10 +7,9 @@ import dataclasses
 import time
 from pathlib import Path
 
-from wrinklepipe.batch import AssetOptions, LocalEngine, run_plan
+from wrinklepipe.batch import AssetOptions, LocalEngine
 from wrinklepipe.batch.folders import output_folders, plan_validation, single_result
-from wrinklepipe.batch.progress import BatchProgress
-from wrinklepipe.batch.publish import publish
+from wrinklepipe.batch.publish import publish, run_and_publish
 from wrinklepipe.batch.run import BatchRun
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import InputError, input_error
@@ -88,15 +87,11 @@ def _run_folder(args: argparse.Namespace, folders: list) -> int:
     options = AssetOptions(render=not args.no_render, fail_on=args.fail_on)
     params = {"config": args.config, "textures": args.textures, "render_size": args.render_size}
     plan = plan_validation(Path(args.path), folders, options, params)
-    engine = LocalEngine(args.jobs)
-    title = f"wrinklepipe validate-asset: {len(plan.jobs)} assets"
-    with BatchProgress(err, len(plan.jobs), title) as progress:
-        result = run_plan(plan, engine, None, progress.stage, progress.done)
-    doc = publish(
-        result,
+    result, doc = run_and_publish(
         plan,
+        LocalEngine(args.jobs),
+        None,
         command="validate-asset",
-        engine=engine.description,
         console=err,
         summary_path=args.report,
         junit_path=args.junit,
