@@ -35,7 +35,7 @@ import socket
 import sys
 import tempfile
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -630,3 +630,28 @@ def staged_folder(
     finally:
         if not published:
             _remove_created(created)
+
+
+def write_files(
+    target: str | Path,
+    files: Mapping[str, bytes],
+    *,
+    force: bool = False,
+    inputs: Iterable[str | Path] = (),
+    what: str = "the output",
+) -> Path:
+    """Write ``files`` (``{relative path: bytes}``, in sorted order) as the folder ``target``
+    through :func:`staged_folder`: all of them or none, never over an input, ``force`` as
+    there. An ``OSError`` while writing (disk full, permissions) becomes one
+    :class:`~wrinklepipe.errors.InputError` naming ``target``: "could not write ``what``
+    (reason); nothing was changed". The one helper for a job that has its files as bytes."""
+    try:
+        with staged_folder(target, force=force, inputs=inputs) as tmp:
+            for rel, data in sorted(files.items()):
+                write_bytes(tmp / rel, data)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise input_error(
+            target, f"could not write {what} ({reason}); nothing was changed"
+        ) from None
+    return Path(target)

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.atomic import output_lock, staged_folder, write_bytes
+from wrinklepipe.atomic import output_lock, write_files
 from wrinklepipe.demo.source import cache_root
 from wrinklepipe.io.gltf_write import glb_bytes
 from wrinklepipe.io.package import png_bytes
@@ -508,9 +508,7 @@ def avatar_source_files() -> dict[str, bytes]:
 def write_avatar_source(folder: str | Path) -> Path:
     """Write the avatar's source folder (see the module doc); return the manifest path."""
     folder = Path(folder)
-    with staged_folder(folder) as tmp:
-        for rel, data in sorted(avatar_source_files().items()):
-            write_bytes(tmp / rel, data)
+    write_files(folder, avatar_source_files(), what="the avatar source")
     return folder / "manifest.toml"
 
 
@@ -530,7 +528,5 @@ def avatar_source_dir() -> Path:
     folder.parent.mkdir(parents=True, exist_ok=True)
     with output_lock(folder, wait=True):  # parallel workers: one writes, the others wait
         if not manifest.is_file():
-            with staged_folder(folder, force=True) as tmp:
-                for rel, data in sorted(files.items()):
-                    write_bytes(tmp / rel, data)
+            write_files(folder, files, force=True, what="the avatar source")
     return manifest

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from wrinklepipe.atomic import staged_folder, write_bytes
+from wrinklepipe.atomic import write_files
 from wrinklepipe.document.model import read_document
 from wrinklepipe.errors import input_error
 from wrinklepipe.export.files import export_files
@@ -27,13 +27,5 @@ def export(
     document = read_document(written) if fmt is not None and fmt.name == "gltf" else None
     files, notes = export_files(pkg, engine, document)
     inputs = [source] if source.is_dir() else [source, source.parent]
-    try:
-        with staged_folder(output, force=force, inputs=inputs) as tmp:
-            for rel, data in sorted(files.items()):
-                write_bytes(tmp / rel, data)
-    except OSError as exc:
-        reason = exc.strerror or str(exc)
-        raise input_error(
-            output, f"could not write the export ({reason}); nothing was changed"
-        ) from None
+    write_files(output, files, force=force, inputs=inputs, what="the export")
     return files, notes
