@@ -32,21 +32,25 @@ examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    d = BakeOptions()  # the defaults: one place
     p.add_argument("manifest", metavar="MANIFEST", help="source manifest (TOML)")
-    p.add_argument("--driver", choices=KINDS, default=None, help="which driver (default: first)")
+    p.add_argument(
+        "--driver", choices=KINDS, default=d.driver, help="which driver (default: first)"
+    )
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
     p.add_argument("--maps", action="store_true", help="also write a blended normal map per frame")
-    p.add_argument("--fps", type=float, default=None, help="sampling rate (default: the driver's)")
-    p.add_argument("--start", type=float, default=None, help="first time in seconds")
-    p.add_argument("--end", type=float, default=None, help="last time in seconds")
+    p.add_argument("--fps", type=float, default=d.fps, help="sampling rate (default: the driver's)")
+    p.add_argument("--start", type=float, default=d.start, help="first time in seconds")
+    p.add_argument("--end", type=float, default=d.end, help="last time in seconds")
     p.add_argument(
         "--tolerance",
         type=float,
-        default=0.0,
-        help="weights within this of the last rendered frame count as unchanged (default 0)",
+        default=d.tolerance,
+        help="weights within this of the last rendered frame count as unchanged "
+        f"(default {d.tolerance:g})",
     )
     p.add_argument(
-        "--size", type=int, default=None, help="size of the blended maps (default: base)"
+        "--size", type=int, default=d.size, help="size of the blended maps (default: base)"
     )
     p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
     p.add_argument("--json", action="store_true", help="print a summary as JSON")

@@ -6,7 +6,6 @@ import argparse
 from typing import Any
 
 from wrinklepipe.console import emit_json, err
-from wrinklepipe.io.package import DEFAULT_PNG_LEVEL
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
 NAME = "convert"
@@ -37,6 +36,7 @@ examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    d = ConvertOptions()  # the defaults: one place
     p.add_argument("manifest", metavar="MANIFEST", help="source manifest (manifest.toml)")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
     p.add_argument("--glb", action="store_true", help="also write a self-contained NAME.glb")
@@ -45,7 +45,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     usd.add_argument("--usdz", action="store_true", help="also write a packaged NAME.usdz")
     p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
     p.add_argument(
-        "--bits", type=int, choices=(8, 16), default=8, help="PNG bits of normal maps (8)"
+        "--bits",
+        type=int,
+        choices=(8, 16),
+        default=d.bits,
+        help=f"PNG bits of normal maps ({d.bits})",
     )
     p.add_argument(
         "--mask-layout",
@@ -60,9 +64,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--png-level",
         type=int,
         choices=range(10),
-        default=DEFAULT_PNG_LEVEL,
+        default=d.png_level,
         metavar="0-9",
-        help=f"zlib level of the PNGs (default {DEFAULT_PNG_LEVEL}; 9: a few %% smaller, slower)",
+        help=f"zlib level of the PNGs (default {d.png_level}; 9: a few %% smaller, slower)",
     )
     p.add_argument("--json", action="store_true", help="print report.json on stdout")
 

@@ -51,6 +51,7 @@ examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    d = DynamicOptions()  # the defaults: one place
     p.add_argument("mesh", metavar="MESH", help="rest mesh file")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--pose", metavar="POSE", help="deformed mesh file or .npy positions")
@@ -58,7 +59,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--time", type=float, metavar="T", help="time of the file's animation")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help=".npy, .json, .txt, .csv")
     p.add_argument(
-        "--weighting", choices=("angle", "uniform"), default="angle", help="vertex smoothing"
+        "--weighting", choices=("angle", "uniform"), default=d.weighting, help="vertex smoothing"
     )
     p.add_argument("--bias-channel", type=int, choices=(0, 1, 2, 3), default=None)
     p.add_argument("--texture-space", type=int, default=None, metavar="N", help="also N x N")

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from wrinklepipe.atomic import output_files, write_bytes, write_json
 from wrinklepipe.console import emit_json, err, status
-from wrinklepipe.io.images import DEFAULT_MAX_PIXELS
 from wrinklepipe.normals.job import OUTPUT_FORMATS, EncodeOptions, encode_normals
 
 NAME = "encode-normals"
@@ -64,12 +63,15 @@ def _size(text: str) -> int | str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    d = EncodeOptions()  # the defaults: one place
     p.add_argument("input", metavar="IN", help="normal map to encode")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
-    p.add_argument("--encoding", choices=("pd", "diff", "full"), default="pd")
+    p.add_argument("--encoding", choices=("pd", "diff", "full"), default=d.encoding)
     p.add_argument("--base", metavar="BASE", help="neutral-face normal map (diff; pd wrinkle-only)")
-    p.add_argument("--scale", type=_scale, default="auto", help="PD slope scale s or auto")
-    p.add_argument("--gain", type=_scale, default=1.0, help="diff gain or auto (default 1)")
+    p.add_argument("--scale", type=_scale, default=d.scale, help="PD slope scale s or auto")
+    p.add_argument(
+        "--gain", type=_scale, default=d.gain, help=f"diff gain or auto (default {d.gain:g})"
+    )
     p.add_argument(
         "--format",
         dest="fmt",
@@ -77,7 +79,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="output format (default from OUT's suffix: .dds/.ktx2 -> bc5)",
     )
-    p.add_argument("--convention", choices=("auto", "opengl", "directx"), default="auto")
+    p.add_argument("--convention", choices=("auto", "opengl", "directx"), default=d.convention)
     p.add_argument("--size", type=_size, default=None, help="target side in texels, or auto")
     p.add_argument("--no-mips", dest="mips", action="store_false", help="level 0 only")
     p.add_argument(
@@ -101,14 +103,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         const=True,
         help="DX10 header for every format (also BC1/BC3)",
     )
-    p.add_argument("--max-p99", type=float, default=2.0, help="budget: p99 error in degrees")
-    p.add_argument("--max-mean", type=float, default=None, help="budget: mean error in degrees")
+    p.add_argument(
+        "--max-p99", type=float, default=d.max_p99_deg, help="budget: p99 error in degrees"
+    )
+    p.add_argument(
+        "--max-mean", type=float, default=d.max_mean_deg, help="budget: mean error in degrees"
+    )
     p.add_argument("--repair", action="store_true", help="repair NaN / zero / z<0 texels")
     p.add_argument(
         "--max-pixels",
         type=int,
-        default=DEFAULT_MAX_PIXELS,
-        help=f"refuse images larger than this (default {DEFAULT_MAX_PIXELS})",
+        default=d.max_pixels,
+        help=f"refuse images larger than this (default {d.max_pixels})",
     )
     p.add_argument("--report", metavar="R.json", help="write the report as JSON")
     p.add_argument("--json", action="store_true", help="print the report as JSON")

@@ -33,15 +33,16 @@ examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    d = VertexIdOptions()  # the defaults: one place
     p.add_argument("mesh", metavar="MESH", help="mesh file")
     p.add_argument("-o", "--output", metavar="OUT", default=None, help=".npy, .json or .txt")
     p.add_argument("--tolerance", type=float, default=None, metavar="T", help="absolute tolerance")
     p.add_argument(
         "--relative",
         type=float,
-        default=1e-6,
+        default=d.relative_tolerance,
         metavar="R",
-        help="tolerance relative to the bounding-box diagonal (default 1e-6)",
+        help=f"tolerance relative to the bounding-box diagonal (default {d.relative_tolerance:g})",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
