@@ -9,21 +9,9 @@ import numpy as np
 
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
-from wrinklepipe.geometry.dynamic import (
-    DynamicOptions,
-    DynamicWeights,
-    morph_pose,
-    sample_bilinear,
-    seam_jump,
-    skinned_pose,
-    texture_space_weights,
-)
-from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
-from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes, merge_meshes
-from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, gltf_morph_weights
-from wrinklepipe.io.mesh_usd import usd_blend_shape_weights, usd_joint_world_matrices
-from wrinklepipe.io.readers import format_of
+from wrinklepipe.geometry.dynamic import DynamicOptions
 from wrinklepipe.outputs.per_vertex import write_per_vertex
+from wrinklepipe.pipeline.dynamic import DynamicJobOptions, dynamic_weights
 
 NAME = "dynamic"
 HELP = "dynamic wrinkle weights from the mesh's own stretch (Oat): rest vs a deformed pose"
@@ -63,7 +51,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--bias-channel", type=int, choices=(0, 1, 2, 3), default=None)
     p.add_argument("--texture-space", type=int, default=None, metavar="N", help="also N x N")
-    p.add_argument("--blur", type=float, default=4.0, metavar="PX", help="texture-space blur")
+    p.add_argument(
+        "--blur",
+        type=float,
+        default=DynamicJobOptions().blur,
+        metavar="PX",
+        help="texture-space blur",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
@@ -81,115 +75,20 @@ def _parse_morphs(items: list[str]) -> dict[str, float]:
     return out
 
 
-def deformed_pose(args: argparse.Namespace, mesh: object, parts: list) -> np.ndarray:
-    """The deformed positions chosen by --pose / --morph / --time (``parts``: the unmerged
-    meshes of ``mesh``, in merge order; USD poses each prim)."""
-
-    if args.morph:
-        return morph_pose(mesh, _parse_morphs(args.morph), source=str(args.mesh))
-    if args.pose:
-        pose = Path(args.pose)
-        if pose.suffix.lower() == ".npy":
-            try:
-                arr = np.load(pose, allow_pickle=False)
-            except (OSError, ValueError) as exc:
-                raise input_error(pose, f"cannot read positions: {exc}") from None
-        else:
-            arr = load_mesh(pose, LoadOptions(generate_uvs=False)).positions
-        arr = np.asarray(arr, dtype=np.float64)
-        if arr.shape != mesh.positions.shape:
-            raise input_error(
-                pose, f"pose has shape {list(arr.shape)}, the mesh {list(mesh.positions.shape)}"
-            )
-        return arr
-    fmt = format_of(args.mesh)
-    kind = fmt.name if fmt is not None else None
-    if kind == "usd":
-        return np.concatenate([_usd_part_pose(args, part) for part in parts])
-    if kind == "gltf":
-        p = mesh.positions.astype(np.float64)
-        if mesh.morph_names:
-            w = gltf_morph_weights(args.mesh, mesh, args.time)
-            p = morph_pose(mesh, w, source=str(args.mesh))
-        if mesh.joints is not None:
-            rest = mesh.positions
-            mesh.positions = p.astype(np.float32)
-            try:
-                jm = gltf_joint_world_matrices(args.mesh, mesh, args.time)
-                p = skinned_pose(mesh, jm, source=str(args.mesh))
-            finally:
-                mesh.positions = rest
-        elif not mesh.morph_names:
-            raise input_error(args.mesh, "--time needs a skinned or morph-animated glTF mesh")
-        return p
-    raise input_error(args.mesh, "--time needs a glTF or USD file with an animation")
-
-
-def _usd_part_pose(args: argparse.Namespace, part: object) -> np.ndarray:
-    p = part.positions.astype(np.float64)
-    if part.morph_names:
-        w = usd_blend_shape_weights(args.mesh, part, args.time)
-        w = {k: v for k, v in w.items() if k in part.morph_names}
-        p = morph_pose(part, w, source=str(args.mesh))
-    if part.joints is not None:
-        jm = usd_joint_world_matrices(args.mesh, part, args.time)
-        rest = part.positions
-        part.positions = p.astype(np.float32)
-        try:
-            p = skinned_pose(part, jm, source=str(args.mesh))
-        finally:
-            part.positions = rest
-    return p
-
-
 def run(args: argparse.Namespace) -> int:
-    with status(f"reading {args.mesh}"):
-        parts = load_meshes(args.mesh, LoadOptions(generate_uvs=args.texture_space is not None))
-    mesh = parts[0] if len(parts) == 1 else merge_meshes(parts)
-    deformed = deformed_pose(args, mesh, parts)
-    bias = None
-    if args.bias_channel is not None:
-        if mesh.colors is None:
-            raise input_error(args.mesh, "--bias-channel: the mesh has no vertex colours")
-        bias = 2.0 * mesh.colors[:, args.bias_channel] - 1.0
-    ids = compute_vertex_ids(mesh.positions, source=str(args.mesh))
-    op = DynamicWeights.build(
-        mesh.positions,
-        mesh.indices,
-        vertex_ids=ids,
-        bias=bias,
-        options=DynamicOptions(weighting=args.weighting),
-        source=str(args.mesh),
+    options = DynamicJobOptions(
+        pose=args.pose,
+        morphs=_parse_morphs(args.morph) if args.morph else {},
+        time=args.time,
+        weighting=args.weighting,
+        bias_channel=args.bias_channel,
+        texture_space=args.texture_space,
+        blur=args.blur,
     )
-    w = op.frame(deformed)
-    summary: dict = {
-        "mesh": str(args.mesh),
-        "vertices": int(len(w)),
-        "triangles": int(mesh.triangle_count),
-        "skipped_triangles": op.skipped_triangles,
-        "min": float(w.min()),
-        "max": float(w.max()),
-        "mean": float(w.mean()),
-        "compressed_vertices": int((w > 1e-6).sum()),
-        "stretched_vertices": int((w < -1e-6).sum()),
-        "seam_jump_max": float(seam_jump(w, ids).max(initial=0.0)),
-        "notes": [*mesh.notes, *op.notes],
-    }
-    if args.texture_space is not None:
-        if args.texture_space < 8 or args.texture_space > 8192:
-            raise input_error("<arguments>", "--texture-space must be in 8..8192")
-        img, _ = texture_space_weights(
-            mesh.uvs, mesh.indices, op.triangle_frame(deformed), args.texture_space, args.blur
-        )
-        jump = seam_jump(sample_bilinear(img, mesh.uvs), ids)
-        summary["texture_space"] = {
-            "size": args.texture_space,
-            "blur_px": args.blur,
-            "seam_jump_max": float(jump.max(initial=0.0)),
-            "seam_jump_mean": float(jump.mean()) if len(jump) else 0.0,
-        }
+    with status(f"reading {args.mesh}"):
+        w, summary = dynamic_weights(args.mesh, options)
     inputs = [args.mesh] + ([args.pose] if args.pose else [])
-    write_per_vertex(Path(args.output), w.astype(np.float32), summary, inputs)
+    write_per_vertex(Path(args.output), w, summary, inputs)
     summary["output"] = str(args.output)
     if args.json:
         emit_json(summary)
