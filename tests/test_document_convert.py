@@ -18,46 +18,22 @@ import pytest
 from passthrough import EXTENSION, WRINKLE_ATTRIBUTES, compare
 from test_document_inspect import GLTF_TRANSFORM, gltf_transform_inspect
 from test_document_read import GLTFPACK
-from wrinkle_setups import write_setup
+from wrinkle_setups import ROBOT, ROBOT_DRIVERS, write_setup
 
 from wrinklepipe.cli import main
 from wrinklepipe.io import khronos
-from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
 from wrinklepipe.sources.validation import load_input
 
-ROBOT = (
-    Path(__file__).resolve().parents[2]
-    / "shared"
-    / "data"
-    / "gltf-samples"
-    / "RobotExpressive"
-    / "RobotExpressive.glb"
-)
 needs_robot = pytest.mark.skipif(not ROBOT.is_file(), reason="../shared/data is absent")
 HEAD_MAIN = (2, 1)  # meshes[2] "Head", primitive 1 (material Main): the wrinkled primitive
-BLENDSHAPES = """
-[[drivers]]
-kind = "blendshapes"
-rows = [["Angry", "brow_L", 0, 1, 1, 0], ["Angry", "brow_R", 0, 1, 1, 0],
-        ["Surprised", "mouth", 0, 1, 1, 0]]
-[drivers.keys]
-Angry = [[0, 0], [1, 1], [2, 0]]
-Surprised = [[0, 0], [2, 0], [3, 1]]
-"""
 
 
 @pytest.fixture(scope="session")
-def robot(tmp_path_factory):
-    """RobotExpressive converted once (.gltf + .glb; validation without the render pass)."""
-    if not ROBOT.is_file():
-        pytest.skip("../shared/data is absent")
-    root = tmp_path_factory.mktemp("robot")
-    manifest = write_setup(root / "src", ROBOT, "robot", "Main", ["Head"], drivers=BLENDSHAPES)
-    with allowed_roots([ROBOT.parent]):
-        res = convert(manifest, root / "out", ConvertOptions(glb=True, render=False))
-    assert res.exit_code == 0
-    return root / "out", res.report
+def robot(robot_converted):
+    """RobotExpressive converted once (.gltf + .glb; validation without the render pass): the
+    shared conftest fixture."""
+    return robot_converted
 
 
 @needs_robot
@@ -348,7 +324,7 @@ def test_gltfpack_compressed_robot_converts_whole(tmp_path, capsys):
     packed.parent.mkdir()
     cmd = [str(GLTFPACK), "-i", str(ROBOT), "-o", str(packed), "-kn", "-km", "-cc", "-ke"]
     subprocess.run(cmd, check=True, capture_output=True, timeout=120)
-    manifest = write_setup(tmp_path / "src", packed, "robot", "Black", drivers=BLENDSHAPES)
+    manifest = write_setup(tmp_path / "src", packed, "robot", "Black", drivers=ROBOT_DRIVERS)
     res = convert(manifest, tmp_path / "out", ConvertOptions(render=False))
     assert res.exit_code == 0 and res.report["validation"]["counts"]["error"] == 0
     assert "EXT_meshopt_compression: decoded; written uncompressed" in res.report["notes"]

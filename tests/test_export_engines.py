@@ -31,14 +31,13 @@ import pytest
 import shader_harness as h
 import texture2ddecoder
 from passthrough import EXTENSION, compare
-from wrinkle_setups import write_setup
+from wrinkle_setups import ROBOT
 
 from wrinklepipe import codec, model
 from wrinklepipe.demo import avatar, demo_asset
 from wrinklepipe.errors import InputError
 from wrinklepipe.export.job import export
 from wrinklepipe.io import khronos
-from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.package import PackOptions, package_from_asset, png_pixels
 from wrinklepipe.normals.dds import read_dds
@@ -53,16 +52,6 @@ from wrinklepipe.validate.render import shader_setup
 
 ENGINES = ["unreal", "unity", "godot", "blender"]
 DATA = ROOT.parent / "shared" / "data"
-ROBOT = DATA / "gltf-samples" / "RobotExpressive" / "RobotExpressive.glb"
-ROBOT_DRIVERS = """
-[[drivers]]
-kind = "blendshapes"
-rows = [["Angry", "brow_L", 0, 1, 1, 0], ["Angry", "brow_R", 0, 1, 1, 0],
-        ["Surprised", "mouth", 0, 1, 1, 0]]
-[drivers.keys]
-Angry = [[0, 0], [1, 1], [2, 0]]
-Surprised = [[0, 0], [2, 0], [3, 1]]
-"""
 
 
 def _source(
@@ -126,17 +115,12 @@ def avatar_exports(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def robot_exports(tmp_path_factory):
+def robot_exports(robot_converted, tmp_path_factory):
     """RobotExpressive (CC0, 14 meshes, 2 skins, 14 animations) converted with the manifest's
-    ``material = "Main"`` on ``meshes = ["Head"]`` (cloned as 'Main (wrinkled)'), exported."""
-    if not ROBOT.is_file():
-        pytest.skip("../shared/data is absent")
-    tmp = tmp_path_factory.mktemp("robot_export")
-    manifest = write_setup(tmp / "in", ROBOT, "robot", "Main", ["Head"], drivers=ROBOT_DRIVERS)
-    with allowed_roots([ROBOT.parent]):
-        res = convert(manifest, tmp / "src", ConvertOptions(render=False))
-    assert res.exit_code == 0
-    return tmp / "src", _export_all(tmp / "src", tmp), ROBOT
+    ``material = "Main"`` on ``meshes = ["Head"]`` (cloned as 'Main (wrinkled)'; the shared
+    conftest fixture), exported."""
+    src = robot_converted[0]
+    return src, _export_all(src, tmp_path_factory.mktemp("robot_export")), ROBOT
 
 
 @pytest.fixture(params=["demo", "avatar"])

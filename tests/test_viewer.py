@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import shader_harness as h
-from wrinkle_setups import write_setup
+from wrinkle_setups import ROBOT, write_robot_setup
 
 from wrinklepipe import model
 from wrinklepipe.demo import avatar, demo_asset
@@ -46,15 +46,6 @@ NODE_MODULES = ROOT / "tools" / "node" / "node_modules"
 SIZE = 160
 CHAR_SIZE = 128  # the whole characters' renders
 EXTENSION = "WRINKLEPIPE_wrinkle_maps"
-ROBOT_DRIVERS = """
-[[drivers]]
-kind = "blendshapes"
-rows = [["Angry", "brow_L", 0, 1, 1, 0], ["Angry", "brow_R", 0, 1, 1, 0],
-        ["Surprised", "mouth", 0, 1, 1, 0]]
-[drivers.keys]
-Angry = [[0, 0], [1, 1], [2, 0]]
-Surprised = [[0, 0], [2, 0], [3, 1]]
-"""
 
 
 def _missing() -> str:
@@ -110,12 +101,9 @@ def _characters(root: Path) -> dict[str, Path]:
     res = convert(avatar.avatar_source_dir(), root / "avatar", ConvertOptions(render=False))
     assert res.exit_code == 0
     out["avatar"] = root / "avatar" / "avatar.gltf"
-    robot = DATA / "gltf-samples" / "RobotExpressive" / "RobotExpressive.glb"
-    if robot.is_file():
-        manifest = write_setup(
-            root / "robot_in", robot, "robot", "Main", ["Head"], drivers=ROBOT_DRIVERS
-        )
-        with allowed_roots([robot.parent]):
+    if ROBOT.is_file():
+        manifest = write_robot_setup(root / "robot_in")
+        with allowed_roots([ROBOT.parent]):
             res = convert(manifest, root / "robot", ConvertOptions(render=False))
         assert res.exit_code == 0
         out["robot"] = root / "robot" / "robot.gltf"

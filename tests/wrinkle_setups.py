@@ -93,3 +93,31 @@ def _toml(value: str | list[str]) -> str:
     if isinstance(value, str):
         return f'"{value}"'
     return "[" + ", ".join(f'"{v}"' for v in value) + "]"
+
+
+#: RobotExpressive (CC0, 14 meshes, 3 materials, 2 skins, 14 animations) from ../shared/data.
+ROBOT = (
+    Path(__file__).resolve().parents[2]
+    / "shared"
+    / "data"
+    / "gltf-samples"
+    / "RobotExpressive"
+    / "RobotExpressive.glb"
+)
+#: The blendshapes driver the RobotExpressive setups use: its Angry / Surprised morphs drive
+#: the brows and the mouth.
+ROBOT_DRIVERS = """
+[[drivers]]
+kind = "blendshapes"
+rows = [["Angry", "brow_L", 0, 1, 1, 0], ["Angry", "brow_R", 0, 1, 1, 0],
+        ["Surprised", "mouth", 0, 1, 1, 0]]
+[drivers.keys]
+Angry = [[0, 0], [1, 1], [2, 0]]
+Surprised = [[0, 0], [2, 0], [3, 1]]
+"""
+
+
+def write_robot_setup(folder: Path) -> Path:
+    """RobotExpressive's wrinkle setup: ``material = "Main"`` on ``meshes = ["Head"]`` (Main
+    is shared with the body, so it is cloned for the head), driven by :data:`ROBOT_DRIVERS`."""
+    return write_setup(folder, ROBOT, "robot", "Main", ["Head"], drivers=ROBOT_DRIVERS)
