@@ -4,11 +4,10 @@ checked by an independent reader (pygltflib) and the Khronos validator."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import gltf_reference as ref
 import numpy as np
 import pytest
+from wrinkle_setups import ROBOT
 
 from wrinklepipe.document import read_document, write_document
 from wrinklepipe.document.repair import repair
@@ -21,14 +20,6 @@ from wrinklepipe.document.wrinkled import (
 from wrinklepipe.errors import InputError
 from wrinklepipe.io import khronos
 
-ROBOT = (
-    Path(__file__).resolve().parents[2]
-    / "shared"
-    / "data"
-    / "gltf-samples"
-    / "RobotExpressive"
-    / "RobotExpressive.glb"
-)
 needs_robot = pytest.mark.skipif(not ROBOT.is_file(), reason="../shared/data is absent")
 
 

@@ -17,9 +17,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import shader_harness as h
+from wrinkle_setups import overlapping_demo
 
-from wrinklepipe import codec, model
-from wrinklepipe.demo import demo_asset
+from wrinklepipe import codec
 from wrinklepipe.shading import godot, hlsl
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate.render import shader_setup
@@ -44,24 +44,11 @@ def gpu():
     r.release()
 
 
-def _asset(encoding: str, policy: str):
-    """The demo with overlapping masks and strong / negative expressions (every policy's edge)."""
-    a = demo_asset(128, encoding=encoding, policy=policy)
-    masks = a.masks.copy()
-    masks[2] = np.maximum(masks[2], masks[6])  # overlap: sums reach 2 over the glabella
-    ex = dict(a.expressions)
-    ex["all_strong"] = {r: 0.9 for r in a.region_names}
-    ex["negative"] = {r: -0.7 for r in a.region_names}
-    lo = model.POLICY_WEIGHT_RANGE[policy].low
-    ex = {e: {r: max(w, lo) for r, w in row.items()} for e, row in ex.items()}
-    return replace(a, masks=masks, expressions=ex)
-
-
 @functools.cache
 def _shipped_encoding(encoding: str):
     """The shipped textures of one encoding (they do not depend on the policy) and the texels
     sampled at the harness's UVs."""
-    inp = ship_asset(_asset(encoding, "clamp01"), ShipOptions(compress=False))
+    inp = ship_asset(overlapping_demo(encoding, "clamp01"), ShipOptions(compress=False))
     uv = h.uv_grid(96)
     return inp, h.samples(inp, uv)
 
@@ -69,7 +56,7 @@ def _shipped_encoding(encoding: str):
 def _shipped(encoding: str, policy: str):
     """(input, numpy reference per expression) for one encoding x policy."""
     inp, samples = _shipped_encoding(encoding)
-    a = _asset(encoding, policy)
+    a = overlapping_demo(encoding, policy)
     inp = replace(inp, asset=replace(inp.asset, policy=policy, expressions=a.expressions))
     refs = {e: h.blend(inp, samples, e) for e in [None, *sorted(a.expressions)]}
     return inp, refs
@@ -308,7 +295,9 @@ def test_at_texel_centres_the_engines_equal_numpy_to_float_precision():
             inp = replace(
                 inp,
                 asset=replace(
-                    inp.asset, expressions=_asset(encoding, "lerp").expressions, policy="lerp"
+                    inp.asset,
+                    expressions=overlapping_demo(encoding, "lerp").expressions,
+                    policy="lerp",
                 ),
             )
             s = h.samples(inp, h.uv_grid(128))

@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from wrinkle_setups import overlapping_demo
 
 from wrinklepipe import model
 from wrinklepipe.demo import demo_asset
@@ -49,22 +50,10 @@ def test_gpu_matches_reference_from_compressed_textures(encoding):
     assert all(poses[p]["leak_pixels"] == 0 for p in poses if p != "neutral")
 
 
-def _overlapping_asset(encoding: str, policy: str):
-    a = demo_asset(128, encoding=encoding, policy=policy)
-    masks = a.masks.copy()
-    masks[2] = np.maximum(masks[2], masks[6])  # overlap: sums reach 2 over the glabella
-    ex = dict(a.expressions)
-    ex["all_strong"] = {r: 0.9 for r in a.region_names}
-    ex["negative"] = {r: -0.7 for r in a.region_names}
-    lo = model.POLICY_WEIGHT_RANGE[policy].low
-    ex = {e: {r: max(w, lo) for r, w in row.items()} for e, row in ex.items()}
-    return replace(a, masks=masks, expressions=ex)
-
-
 @pytest.mark.parametrize("policy", ["clamp01", "signed", "additive", "renormalize", "lerp"])
 @pytest.mark.parametrize("encoding", ["pd", "diff", "full", "composite"])
 def test_every_encoding_and_policy(encoding, policy):
-    inp = ship_asset(_overlapping_asset(encoding, policy), ShipOptions(compress=False))
+    inp = ship_asset(overlapping_demo(encoding, policy), ShipOptions(compress=False))
     ctx = Context(inp, ValidateOptions(render_size=128))
     issues, info, _ = render_pass(ctx)
     assert "skipped" not in info

@@ -3,10 +3,14 @@ in a UV layout, and a manifest naming the wrinkled material (and meshes) of a so
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from wrinklepipe import model
+from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.demo import demo_asset
 from wrinklepipe.io.images import write_image
 
 #: Regions as UV boxes (u0, v0, u1, v1) with their side; glTF characters face +Z, so their
@@ -121,3 +125,17 @@ def write_robot_setup(folder: Path) -> Path:
     """RobotExpressive's wrinkle setup: ``material = "Main"`` on ``meshes = ["Head"]`` (Main
     is shared with the body, so it is cloned for the head), driven by :data:`ROBOT_DRIVERS`."""
     return write_setup(folder, ROBOT, "robot", "Main", ["Head"], drivers=ROBOT_DRIVERS)
+
+
+def overlapping_demo(encoding: str, policy: str) -> WrinkleAsset:
+    """The 128 demo with overlapping masks (glabella over forehead_inner: sums reach 2) and
+    strong / negative expressions clipped to the policy's weight range: every policy's edge."""
+    a = demo_asset(128, encoding=encoding, policy=policy)
+    masks = a.masks.copy()
+    masks[2] = np.maximum(masks[2], masks[6])  # overlap: sums reach 2 over the glabella
+    ex = dict(a.expressions)
+    ex["all_strong"] = {r: 0.9 for r in a.region_names}
+    ex["negative"] = {r: -0.7 for r in a.region_names}
+    lo = model.POLICY_WEIGHT_RANGE[policy].low
+    ex = {e: {r: max(w, lo) for r, w in row.items()} for e, row in ex.items()}
+    return replace(a, masks=masks, expressions=ex)
