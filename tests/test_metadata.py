@@ -20,11 +20,16 @@ from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.masks.layouts import LAYOUTS
 from wrinklepipe.metadata import (
     EXTENSION,
+    CompressedCopy,
     MaskChannel,
+    MaskMeta,
+    RegionMeta,
     SplitRef,
+    StateMeta,
     WrinkleMeta,
     extension_schema,
     schema_problems,
+    sorted_expressions,
 )
 
 MASK_LAYOUTS = ("rgba", "array", "lr-split", "jimenez8")
@@ -138,3 +143,75 @@ def test_check_refuses_a_description_off_the_schema(metas):
     meta = replace(metas["rgba"], policy="max")
     with pytest.raises(InputError, match="does not match the schema: 'max' is not one of"):
         meta.check(_err, "/Mat")
+
+
+_NAME = st.text("abcdefghijklmnopqrstuvwxyz_0123456789", min_size=1, max_size=8)
+_WEIGHT = st.floats(-1, 1, allow_nan=False, width=32)
+
+
+@st.composite
+def _metas(draw) -> WrinkleMeta:
+    """Any description the schema admits: rgba or array tables, lr-split sides, expressions,
+    drivers, weights and compressed copies."""
+    states = draw(st.lists(_NAME, min_size=1, max_size=4, unique=True))
+    regions = draw(st.lists(_NAME, min_size=1, max_size=9, unique=True))
+    layout = draw(st.sampled_from(["rgba", "array", "lr-split"]))
+    if layout == "array":
+        masks = tuple(f"mask_{i}" for i in range(len(regions)))
+        table = tuple(MaskChannel(r, layer=i) for i, r in enumerate(regions))
+    else:
+        masks = tuple(f"mask_{i}" for i in range((len(regions) + 4) // 4))
+        sides = draw(st.lists(st.sampled_from(["left", "right", "center"]), min_size=len(regions),
+                              max_size=len(regions)))  # fmt: skip
+        split = SplitRef(len(masks) - 1, "a")
+        table = tuple(
+            MaskChannel(
+                r,
+                texture=i // 4,
+                channel="rgba"[i % 4],
+                side=s if layout == "lr-split" else None,
+                split=split if layout == "lr-split" and s != "center" else None,
+            )
+            for i, (r, s) in enumerate(zip(regions, sides))
+        )
+    region_meta = tuple(
+        RegionMeta(r, draw(st.sampled_from(["left", "right", "center"])),
+                   tuple(draw(st.lists(st.sampled_from(states), unique=True, max_size=2))))
+        for r in regions
+    )  # fmt: skip
+    expressions = sorted_expressions(
+        {e: {r: draw(_WEIGHT) for r in regions} for e in draw(st.lists(_NAME, max_size=3))}
+    )
+    kinds = st.sampled_from(["curves", "expressions", "blendshapes", "bones", "dynamic"])
+    drivers = tuple({"kind": k} for k in draw(st.lists(kinds, max_size=2)))
+    state_meta = tuple(StateMeta(s, f"wrinkle_{s}") for s in states)
+    copies = tuple(
+        CompressedCopy(t, "bc5", "rg", 2, 3, f"compressed/{t}.ktx2", f"compressed/{t}.dds")
+        for t in draw(st.lists(st.sampled_from([s.texture for s in state_meta]), unique=True))
+    )
+    return WrinkleMeta(
+        encoding=draw(st.sampled_from(list(model.ENCODINGS))),
+        policy=draw(st.sampled_from(list(model.POLICIES))),
+        states=state_meta,
+        masks=MaskMeta(layout, masks, table),
+        regions=region_meta,
+        scale=draw(st.floats(0.125, 8, width=32)),
+        mapping=draw(st.sampled_from([1, 2])),
+        expressions=expressions,
+        drivers=drivers,
+        weights=tuple(draw(_WEIGHT) for _ in regions),
+        compressed=copies,
+    )
+
+
+@settings(max_examples=60, deadline=None)
+@given(meta=_metas())
+def test_every_description_round_trips_through_both_json_forms(meta):
+    """Law: from_json . to_json and from_extension . to_extension are the identity, and the
+    extension form of a description the schema admits has no schema problem."""
+    assert WrinkleMeta.from_json(json.loads(json.dumps(meta.to_json()))) == meta
+    ext, name_of = _ext_with_index(meta)
+    assert schema_problems(ext) == []
+    ext = json.loads(json.dumps(ext))
+    back = WrinkleMeta.from_extension(ext, lambda info, key, role: name_of[info["index"]], _err)
+    assert back == meta
