@@ -205,6 +205,15 @@ def test_config_accepts_both_key_styles_and_rejects_unknown_codes():
         parse_config({"options": {"speed": 3}})
 
 
+def test_run_options_lay_the_command_line_over_the_config():
+    c = parse_config({"ignore": ["WP-TEX-007"], "options": {"render_size": 96, "grid": 32}})
+    options, rest = c.run_options()
+    assert (options.render, options.render_size, options.grid) == (True, 96, 32)
+    assert rest.ignore == {"WP-TEX-007"} and rest.options == {}  # applied: not applied twice
+    options, _ = c.run_options(render=False, render_size=200)
+    assert (options.render, options.render_size, options.grid) == (False, 200, 32)
+
+
 def _glb(doc: dict) -> bytes:
     js = json.dumps(doc).encode()
     js += b" " * (-len(js) % 4)

@@ -12,7 +12,6 @@ import socket
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -24,7 +23,7 @@ from wrinklepipe.console import stage_listener
 from wrinklepipe.errors import InputError
 from wrinklepipe.pipeline.convert import convert
 from wrinklepipe.sources.validation import LoadOptions, load_input
-from wrinklepipe.validate import ValidateOptions, validate
+from wrinklepipe.validate import validate
 from wrinklepipe.validate.config import Config, load_config
 
 T = TypeVar("T")
@@ -162,12 +161,7 @@ def _validate(job: Job, stages: _Stages) -> AssetResult:
 
     def work() -> Any:
         config = load_config(params["config"]) if params.get("config") else Config()
-        options = config.validate_options(ValidateOptions())  # as validate-asset does
-        if not job.options.render:
-            options = replace(options, render=False)
-        if params.get("render_size"):
-            options = replace(options, render_size=int(params["render_size"]))
-        config = Config(config.ignore, config.severity, {})
+        options, config = config.run_options(job.options.render, params.get("render_size"))
         stages("loading")
         inp = load_input(job.output, LoadOptions(textures=params.get("textures", "auto")))
         stages("validating")

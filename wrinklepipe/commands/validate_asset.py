@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
 from pathlib import Path
 
@@ -16,7 +15,6 @@ from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import validate
 from wrinklepipe.validate.config import Config, load_config
-from wrinklepipe.validate.context import ValidateOptions
 from wrinklepipe.validate.report import print_summary, report_json, write_reports
 
 NAME = "validate-asset"
@@ -109,12 +107,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_folder(args, folders)
     t0 = time.perf_counter()
     config = load_config(args.config) if args.config else Config()
-    options = config.validate_options(ValidateOptions())
-    if args.no_render:
-        options = dataclasses.replace(options, render=False)
-    if args.render_size is not None:
-        options = dataclasses.replace(options, render_size=args.render_size)
-    config = Config(config.ignore, config.severity, {})  # options are applied above
+    options, config = config.run_options(not args.no_render, args.render_size)
     with status(f"loading {args.path}"):
         inp = load_input(args.path, LoadOptions(textures=args.textures, source=args.source))
     with status("validating"):

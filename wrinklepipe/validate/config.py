@@ -49,6 +49,20 @@ class Config:
     def validate_options(self, base: ValidateOptions | None = None) -> ValidateOptions:
         return dataclasses.replace(base or ValidateOptions(), **self.options)
 
+    def run_options(
+        self, render: bool = True, render_size: int | None = None
+    ) -> tuple[ValidateOptions, Config]:
+        """What one validation runs with: the options this config sets, the command line's
+        ``render`` (False turns the render pass off) and ``render_size`` (when given) over
+        them; and the config that is left to apply to the issues (ignores and severities:
+        its options are in the first). ``validate-asset`` and a batch worker both use it."""
+        options = self.validate_options(ValidateOptions())
+        if not render:
+            options = dataclasses.replace(options, render=False)
+        if render_size:
+            options = dataclasses.replace(options, render_size=int(render_size))
+        return options, Config(self.ignore, self.severity, {})
+
 
 def parse_config(data: dict[str, Any], file: str = "<config>") -> Config:
     """A :class:`Config` from parsed TOML/JSON; every problem reported at once."""
