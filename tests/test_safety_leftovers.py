@@ -140,3 +140,58 @@ def test_mount_point_output_is_refused_before_any_work(source, tmp_path, monkeyp
     assert _convert(source, out) == 2
     assert "mount point" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mnt"]
+
+
+_KILLED_WHILE_STAGING = """
+import os, signal, sys
+from pathlib import Path
+from wrinklepipe import atomic
+
+target, step = Path(sys.argv[1]), sys.argv[2]
+real_open, real_rename = os.open, os.rename
+
+def die():
+    os.kill(os.getpid(), signal.SIGKILL)
+
+def open_(path, *a, **k):
+    if step == "mkdir" and str(path).endswith(atomic.STAGING_MARKER):
+        die()  # the -new folder exists, its marker not yet
+    return real_open(path, *a, **k)
+
+def rename(src, dst, *a, **k):
+    if step == "rename" and str(src).endswith(atomic.STAGING_NEW_SUFFIX):
+        die()  # the marker is complete, the folder not yet renamed
+    return real_rename(src, dst, *a, **k)
+
+os.open, os.rename = open_, rename
+with atomic.output_lock(target):
+    atomic._Staging(target.parent, target.name)
+    if step == "renamed":
+        die()
+"""
+
+
+@pytest.mark.parametrize("step", ["mkdir", "rename", "renamed"])
+def test_a_kill_while_the_staging_folder_is_made(tmp_path, step):
+    """The staging folder appears by a rename with its complete marker inside (never without
+    it); a kill at any step of making it leaves only what the next run on that output removes."""
+    target = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _KILLED_WHILE_STAGING, str(target), step], env=env
+    )
+    assert proc.wait() == -signal.SIGKILL
+    left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".out."))
+    want = atomic.STAGING_SUFFIX if step == "renamed" else atomic.STAGING_NEW_SUFFIX
+    assert len(left) == 2 and left[0].endswith(want) and left[1] == ".out.wrinklepipe-lock"
+    marker = tmp_path / left[0] / atomic.STAGING_MARKER
+    if step == "mkdir":
+        assert not marker.exists()
+    else:  # the marker names the killed run
+        owner = json.loads(marker.read_text())
+        assert owner["tool"] == "wrinklepipe" and owner["pid"] == proc.pid
+        assert owner["host"] == socket.gethostname()
+    assert _staging(tmp_path) == ([tmp_path / left[0]] if step == "renamed" else [])
+    with atomic.output_lock(target):
+        assert sorted(p.name for p in tmp_path.iterdir()) == [".out.wrinklepipe-lock"]
+    assert list(tmp_path.iterdir()) == []

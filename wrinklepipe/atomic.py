@@ -12,7 +12,10 @@ The rules every writing command follows (the README's "Safety" section says the 
 * **Built aside, published by one rename.** Everything is written into a staging folder beside
   the output, ``.NAME.<random>.wrinklepipe-partial/``, which carries a marker file
   (``.wrinklepipe-staging``: pid, host, process start, flock held while the run lives). The
-  result is renamed into place only when complete. ``rename(2)`` of a folder onto a non-empty
+  staging folder itself appears by a rename: it is made as ``...wrinklepipe-partial-new/``, its
+  marker written inside, then renamed, so a staging folder never exists without its complete
+  marker (a kill in between leaves a ``-new`` folder the run's lock lists). The result is
+  renamed into place only when complete. ``rename(2)`` of a folder onto a non-empty
   folder fails (``ENOTEMPTY``), so files added to the output meanwhile are never replaced.
 * **Remove only what this run created**, or what a dead run of this tool provably left: a staging
   folder is removed by a later run only when its marker names a process on this host that is
@@ -44,6 +47,8 @@ from wrinklepipe.errors import input_error
 
 #: Suffix of a staging folder beside an output; marker file inside it; suffix of a lock file.
 STAGING_SUFFIX = ".wrinklepipe-partial"
+#: Suffix of a staging folder while its marker is being written (renamed to STAGING_SUFFIX).
+STAGING_NEW_SUFFIX = STAGING_SUFFIX + "-new"
 STAGING_MARKER = ".wrinklepipe-staging"
 LOCK_SUFFIX = ".wrinklepipe-lock"
 _TOOL = "wrinklepipe"
@@ -171,8 +176,8 @@ class _Held:
     depth: int
     record: dict[str, Any]
 
-    def register(self, staging_name: str) -> None:
-        self.record.setdefault("staging", []).append(staging_name)
+    def register(self, *staging_names: str) -> None:
+        self.record.setdefault("staging", []).extend(staging_names)
         _write_owner(self.fd, self.record)
 
 
@@ -258,30 +263,43 @@ def output_lock(target: str | Path, wait: bool = False) -> Iterator[Path]:
 
 
 class _Staging:
-    """``.NAME.<random>.wrinklepipe-partial/`` with our marker (flock held while we live)."""
+    """``.NAME.<random>.wrinklepipe-partial/`` with our marker (flock held while we live).
+
+    Made under the name ``...-partial-new``, the marker created, locked and written inside, then
+    renamed: the staging folder appears with its complete marker at once. Both names are in the
+    output lock's record before anything exists, so the next holder of the lock removes what a
+    run killed at any moment left (a ``-new`` folder that is empty or holds only our marker)."""
 
     def __init__(self, parent: Path, name: str) -> None:
         held = _HELD.get(parent / f".{name}{LOCK_SUFFIX}")
         for _ in range(100):
-            folder = parent / f".{name}.{secrets.token_hex(6)}{STAGING_SUFFIX}"
+            stem = f".{name}.{secrets.token_hex(6)}"
+            new, folder = parent / f"{stem}{STAGING_NEW_SUFFIX}", parent / f"{stem}{STAGING_SUFFIX}"
+            if folder.exists() or folder.is_symlink():
+                continue
             if held is not None:
-                held.register(folder.name)  # before it exists: no moment unaccounted for
+                held.register(new.name, folder.name)  # before they exist: no moment unaccounted
             try:
-                folder.mkdir(mode=0o700)
+                new.mkdir(mode=0o700)
                 break
             except FileExistsError:
                 continue
         else:
             raise FileExistsError(errno.EEXIST, "no free staging folder name", str(parent))
-        self.dir = folder
         try:
-            marker = self.dir / STAGING_MARKER
+            marker = new / STAGING_MARKER
             self.fd = os.open(marker, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
         except BaseException:
-            os.rmdir(self.dir)
+            os.rmdir(new)
             raise
-        fcntl.flock(self.fd, fcntl.LOCK_EX)
-        _write_owner(self.fd, held.record if held is not None else None)
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX)
+            _write_owner(self.fd, held.record if held is not None else None)
+            os.rename(new, folder)  # `folder` was checked free (and its name is random)
+        except BaseException:
+            _remove_staging(new, self.fd)
+            raise
+        self.dir = folder
 
     def remove(self) -> None:
         _remove_staging(self.dir, self.fd)
@@ -308,7 +326,8 @@ def _remove_staging(folder: Path, fd: int) -> None:
 
 
 def _staging_name(name: str) -> bool:
-    return name.startswith(".") and name.endswith(STAGING_SUFFIX) and "/" not in name
+    ends = name.endswith(STAGING_SUFFIX) or name.endswith(STAGING_NEW_SUFFIX)
+    return name.startswith(".") and ends and "/" not in name
 
 
 def _remove_recorded(parent: Path, name: str, holder: dict[str, Any]) -> None:
