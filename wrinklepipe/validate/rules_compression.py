@@ -112,10 +112,11 @@ def _half_resolution(ctx: Context, mean_b: float, p99_b: float) -> list[Issue]:
     if h < 8 or w < 8 or h % 2 or w % 2:
         return []
     halves = [s.reshape(h // 2, 2, w // 2, 2, -1).mean(axis=(1, 3)) for s in ctx.shipped_states]
-    ref = rules_fidelity.reference(ctx)
-    if ref is not None and ctx.shipped_base is not None and ctx.shipped_masks is not None:
-        # the one measure: the full-resolution source inside each pose's active region
-        fid = fd.measure(ref, ctx.shipped_base, np.stack(halves), ctx.shipped_masks, False)
+    samples = rules_fidelity.shipped_samples(ctx, np.stack(halves))
+    if samples is not None:
+        # the one measure (fd.measure: the full-resolution source inside each pose's active
+        # region) of the halved states with the shipped base and masks; only the poses decide
+        fid = fd.evaluate(rules_fidelity.reference(ctx), samples, regions=False)
         budget, _ = rules_fidelity.budgets(ctx)
         ok, worst = fid.meets(budget), fid.worst_p99()
     else:

@@ -113,16 +113,31 @@ def reference(ctx: Context) -> fd.Reference | None:
     return c["reference"]
 
 
+def shipped_samples(ctx: Context, states: np.ndarray) -> fd.Samples | None:
+    """The shipped base and masks with ``states`` (the shipped ones, or others measured
+    against them) gathered at the reference's texels, as :func:`fd.measure` gathers them; the
+    base and masks are gathered once per validation (cached on the context). None when
+    fidelity cannot be measured."""
+    ref = reference(ctx)
+    base, masks = ctx.shipped_base, ctx.shipped_masks
+    if ref is None or base is None or masks is None:
+        return None
+    c = _cache(ctx)
+    if "base_masks" not in c:
+        c["base_masks"] = fd.sample(ref, base, None, masks)
+    return fd.merge(c["base_masks"], fd.sample(ref, states=np.asarray(states)))
+
+
 def shipped_fidelity(ctx: Context) -> fd.Fidelity | None:
     """The shipped textures' fidelity (per pose and region, the base over the face, error maps
     on the source grid), or None when it cannot be measured."""
     c = _cache(ctx)
     if "fidelity" not in c:
         c["fidelity"] = None
-        ref = reference(ctx)
-        base, states, masks = ctx.shipped_base, ctx.shipped_states, ctx.shipped_masks
-        if ref is not None and base is not None and states is not None and masks is not None:
-            c["fidelity"] = fd.measure(ref, base, np.stack(states), masks, error_maps=True)
+        states = ctx.shipped_states
+        s = shipped_samples(ctx, np.stack(states)) if states is not None else None
+        if s is not None:  # fd.measure of the shipped maps
+            c["fidelity"] = fd.evaluate(reference(ctx), s, base_over_face=True, error_maps=True)
     return c["fidelity"]
 
 
@@ -201,9 +216,18 @@ def _outside(masks: np.ndarray, shape: tuple[int, int], fp: np.ndarray | None) -
     """Texels of the ``shape`` grid where every mask is zero (inside the footprint)."""
     H, W = shape
     m = np.asarray(masks, np.float32)
-    if m.shape[1:] != (H, W):
-        m = fd.sample_masks_at(m, (H, W), np.arange(H * W)).reshape(-1, H, W)
-    out = ~(m > 0).any(axis=0)
+    if m.shape[1:] == (H, W):
+        inside = (m > 0).any(axis=0)
+    elif m.size and m.min() >= 0:
+        # Bilinear weights are >= 0: a sampled mask is > 0 exactly where one of its taps with
+        # a weight > 0 is, so sampling "some mask > 0" once gives what sampling every mask
+        # does (one channel instead of R)
+        some = (m > 0).any(axis=0).astype(np.float32)
+        inside = fd.sample_masks_at(some[None], (H, W), np.arange(H * W)).reshape(H, W) > 0
+    else:
+        inside = (fd.sample_masks_at(m, (H, W), np.arange(H * W)) > 0).any(axis=0)
+        inside = inside.reshape(H, W)
+    out = ~inside
     return out & fp if fp is not None else out
 
 
