@@ -213,3 +213,41 @@ def test_every_block_is_encoded_on_its_own(demo_base):
     whole = bc4.bc4_blocks(v).reshape(16, 16, 8)
     part = bc4.bc4_blocks(v[16:32, 8:40]).reshape(4, 8, 8)
     assert np.array_equal(part, whole[4:8, 2:10])
+
+
+def _window_one_pair_at_a_time(x, lo, hi, outside, inside, score, step):
+    """The window's definition: every pair in order, kept when strictly better."""
+    best = score(x, lo, hi - lo)
+    xmin, xmax = x.min(axis=0), x.max(axis=0)
+    top = int(np.ceil(float(inside.max())))
+    top, out = -(-top // step) * step, -(-outside // step) * step
+    for dl in range(-out, top + 1, step):
+        for dh in range(-top, outside + 1, step):
+            l2 = np.clip(np.floor(xmin) + np.float32(dl), 0, 255)
+            h2 = np.clip(np.ceil(xmax) + np.float32(dh), 0, 255)
+            ok = (l2 <= xmin + inside) & (h2 >= l2) & (h2 >= xmax - inside)
+            e = score(x, l2, h2 - l2)
+            m = ok & (e < best)
+            best, lo, hi = np.where(m, e, best), np.where(m, l2, lo), np.where(m, h2, hi)
+    return best, lo, hi
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.sampled_from([1, 5, 40, 700]), st.sampled_from([1, 4]), st.integers(0, 2**32 - 1))
+def test_the_window_keeps_what_one_pair_at_a_time_keeps(n, step, seed):
+    """Many pairs per numpy pass (few blocks) or one (many): the pair kept is the first best
+    in the window's order, as scoring the pairs one by one keeps it."""
+    rng = np.random.default_rng(seed)
+    x = np.clip(rng.normal(128, 60, (16, n)), 0, 255).astype(np.float32)
+    x[:, ::3] = np.rint(x[:, ::3])  # integer texels too (ties between pairs)
+    lo, hi = bc4._search(x)
+    inside = np.minimum(rng.random(n).astype(np.float32) * 9, np.float32(8))
+
+    def score(xb, lb, rb):
+        return bc4._Scorer(xb).tail8(lb, rb, 4.0, 1.0)
+
+    want = _window_one_pair_at_a_time(x, lo.copy(), hi.copy(), 16, inside, score, step)
+    got_lo, got_hi = lo.copy(), hi.copy()
+    got = bc4._window(x, got_lo, got_hi, 16, inside, score, step)
+    for a, b in zip((got, got_lo, got_hi), want):
+        assert np.array_equal(a, b)

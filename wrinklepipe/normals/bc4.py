@@ -217,6 +217,54 @@ def _exact8_tail(
     return best.sum(axis=0) + _F(lam) * np.maximum(best - _F(tau), _F(0)).sum(axis=0)
 
 
+#: Candidate pairs times blocks scored per vectorised pass of a window (the scorer's
+#: ``[16, pairs, blocks]`` temporaries stay at 256 KB, in the cache): the ~600 pairs of a
+#: small map's window take a few passes instead of one each (a fixed ~30 ms per encode before,
+#: whatever the block count); with more than WINDOW_PASS / 8 blocks, one pair per pass.
+WINDOW_PASS = 1 << 12
+
+
+def _keep_best(
+    x: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    best: np.ndarray,
+    pairs: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]],
+    count: int,
+    score: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+) -> None:
+    """Score ``count`` candidate pairs per block (``pairs(k)`` -> ``lo``, ``hi``, ``ok``
+    ``[len(k), N]`` for pair numbers ``k``) and keep, in place, each block's first best pair
+    that beats ``best``: what trying them one at a time in order with a strict ``<`` keeps.
+    Every block is scored on its own (block-local); several pairs share one numpy pass."""
+    n = x.shape[1]
+    if n == 0 or count == 0:
+        return
+    per = WINDOW_PASS // n
+    if per < 8:  # enough blocks that one pair per pass costs no more than its numpy work
+        for k in range(count):
+            l2, h2, ok = (a[0] for a in pairs(np.array([k])))
+            e = score(x, l2, h2 - l2)
+            m = ok & (e < best)
+            np.copyto(best, e, where=m)
+            np.copyto(lo, l2, where=m)
+            np.copyto(hi, h2, where=m)
+        return
+    cols = np.arange(n)
+    for s in range(0, count, per):
+        k = np.arange(s, min(s + per, count))
+        l2, h2, ok = pairs(k)
+        xb = np.broadcast_to(x[:, None, :], (x.shape[0], k.size, n))
+        e = score(xb, l2, h2 - l2)
+        np.copyto(e, _F(np.inf), where=~ok)
+        first = np.argmin(e, axis=0)  # the first minimum, as a strict < in order keeps
+        e_min = e[first, cols]
+        m = e_min < best
+        np.copyto(best, e_min, where=m)
+        np.copyto(lo, l2[first, cols], where=m)
+        np.copyto(hi, h2[first, cols], where=m)
+
+
 def _window(
     x: np.ndarray,
     lo: np.ndarray,
@@ -228,14 +276,16 @@ def _window(
 ) -> np.ndarray:
     """Every pair with ``lo`` in ``[min - outside, min + inside]`` and ``hi`` in
     ``[max - inside, max + outside]`` (every ``step``-th level of each), scored by
-    ``score(x, lo, r)``; keeps the best (in place) and returns its score. Each ``lo`` offset
-    works on the blocks it is valid for only."""
+    ``score(x, lo, r)``; keeps the best (in place; ties: the lowest ``lo`` offset, then the
+    lowest ``hi`` offset) and returns its score. Each ``lo`` offset works on the blocks it is
+    valid for only, with all its ``hi`` offsets in one pass."""
     best = score(x, lo, hi - lo)
     xmin, xmax = x.min(axis=0), x.max(axis=0)
     fmn, cmx = np.floor(xmin), np.ceil(xmax)
     top = int(np.ceil(float(inside.max()))) if inside.size else 0
     # offsets on a grid anchored at 0, so that a block's pairs do not depend on its batch
     top, out = -(-top // step) * step, -(-outside // step) * step
+    dhs = np.arange(-top, outside + 1, step).astype(_F)
     for dl in range(-out, top + 1, step):
         l_all = np.clip(fmn + _F(dl), 0, 255)
         sel = np.flatnonzero(l_all <= xmin + inside)
@@ -243,19 +293,24 @@ def _window(
             continue
         xs = np.ascontiguousarray(x[:, sel])
         l2, b2, lo2, hi2 = l_all[sel], best[sel], lo[sel], hi[sel]
-        lim = xmax[sel] - inside[sel]
-        for dh in range(-top, outside + 1, step):
-            h2 = np.clip(cmx[sel] + _F(dh), 0, 255)
-            ok = (h2 >= l2) & (h2 >= lim)
-            if not ok.any():
-                continue
-            e = score(xs, l2, h2 - l2)
-            m = ok & (e < b2)
-            np.copyto(b2, e, where=m)
-            np.copyto(lo2, l2, where=m)
-            np.copyto(hi2, h2, where=m)
+        pairs = _hi_offsets(l2, cmx[sel], xmax[sel] - inside[sel], dhs)
+        _keep_best(xs, lo2, hi2, b2, pairs, dhs.size, score)
         best[sel], lo[sel], hi[sel] = b2, lo2, hi2
     return best
+
+
+def _hi_offsets(
+    lo: np.ndarray, cmx: np.ndarray, lim: np.ndarray, dhs: np.ndarray
+) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The pairs of one ``lo`` per block with ``hi = ceil(max) + dhs[k]`` (valid when
+    ``hi >= lo`` and ``hi >= lim``), for :func:`_keep_best`."""
+
+    def pairs(k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        h2 = np.clip(cmx + dhs[k, None], 0, 255)
+        ls = np.broadcast_to(lo, h2.shape)
+        return ls, h2, (h2 >= ls) & (h2 >= lim)
+
+    return pairs
 
 
 def _polish(
@@ -268,19 +323,18 @@ def _polish(
 ) -> None:
     """Every pair within ``radius`` levels of each block's (lo, hi), scored; keeps the best
     (in place): the levels a coarse window stepped over."""
+    d = np.arange(-radius, radius + 1).astype(_F)
+    dl, dh = np.repeat(d, d.size), np.tile(d, d.size)
+    moved = (dl != 0) | (dh != 0)
+    dl, dh = dl[moved], dh[moved]
     lo0, hi0 = lo.copy(), hi.copy()
-    for dl in range(-radius, radius + 1):
-        l2 = np.clip(lo0 + _F(dl), 0, 255)
-        for dh in range(-radius, radius + 1):
-            if not (dl or dh):
-                continue
-            h2 = np.clip(hi0 + _F(dh), 0, 255)
-            ok = h2 >= l2
-            e = score(x, l2, h2 - l2)
-            m = ok & (e < best)
-            np.copyto(best, e, where=m)
-            np.copyto(lo, l2, where=m)
-            np.copyto(hi, h2, where=m)
+
+    def pairs(k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        l2 = np.clip(lo0 + dl[k, None], 0, 255)
+        h2 = np.clip(hi0 + dh[k, None], 0, 255)
+        return l2, h2, h2 >= l2
+
+    _keep_best(x, lo, hi, best, pairs, dl.size, score)
 
 
 def _refine_hard(x: np.ndarray, lo: np.ndarray, hi: np.ndarray, step: int = HARD_STEP) -> None:
@@ -400,8 +454,8 @@ def encode_bc4(values: np.ndarray) -> bytes:
 
 
 #: Maps of at most this many blocks have BC5's two channels encoded in one pass (the same
-#: blocks, the encoder being block-local): the endpoint windows cost a fixed ~30 ms of numpy
-#: calls per pass whatever the block count, which dominates small maps and mip levels.
+#: blocks, the encoder being block-local): each pass has a fixed cost of numpy calls (~7 ms)
+#: whatever the block count, which dominates small maps and mip levels.
 ONE_PASS_BLOCKS = 4096
 
 
