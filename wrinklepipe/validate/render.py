@@ -97,11 +97,12 @@ def ortho_front(positions: np.ndarray, aspect: float = 1.0, margin: float = 1.05
 
 @dataclass
 class Frame:
-    """One pose as rendered: images are ``[H, W, C]`` float32, row 0 at the top."""
+    """One pose as rendered: images are ``[H, W, C]`` float32, row 0 at the top (None: not
+    read back, see :meth:`Renderer.draw`)."""
 
-    color: np.ndarray
+    color: np.ndarray | None
     normal: np.ndarray
-    uv: np.ndarray
+    uv: np.ndarray | None
 
     @property
     def covered(self) -> np.ndarray:
@@ -238,13 +239,17 @@ class Renderer:
         plain: bool = False,
         read: bool = True,
         split: bool = True,
+        color: bool = True,
+        uv: bool = True,
     ) -> Frame | None:
         """Render one pose (``weights`` ``[R, K]``, or ``[R]`` under ``signed``).
 
         ``plain``: the plain normal-map shader everywhere (the benchmark's baseline).
         ``split``: the wrinkle shader only on triangles a weighted mask touches (the same
         image: elsewhere every activation is 0 and the model returns the base); ``False``
-        draws every triangle with the wrinkle shader.
+        draws every triangle with the wrinkle shader. ``color`` / ``uv``: read those images
+        back (each read of a float target costs as much as a draw on llvmpipe; the UVs are the
+        same in every pose, the geometry does not move).
         """
 
         ctx = self.ctx
@@ -274,8 +279,11 @@ class Renderer:
             ctx.finish()
             return None
         s = self.size
-        imgs = []
-        for i in range(3):
+        imgs: list[np.ndarray | None] = []
+        for i, wanted in enumerate((color, True, uv)):
+            if not wanted:
+                imgs.append(None)
+                continue
             raw = self.fbo.read(components=4, attachment=i, dtype="f4")
             imgs.append(np.frombuffer(raw, np.float32).reshape(s, s, 4)[::-1].copy())
         return Frame(*imgs)
@@ -470,10 +478,10 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
     try:
         t0 = time.perf_counter()
         frames = {}
-        for pose in poses:
-            frames[pose.name] = r.draw(pose.weights)
+        for pose in poses:  # the UVs are read once (the neutral pose's)
+            frames[pose.name] = r.draw(pose.weights, uv=pose.name == "neutral")
         info["render_s"] = round(time.perf_counter() - t0, 4)
-        plain = r.draw(None, plain=True)
+        plain = r.draw(None, plain=True, color=False, uv=False)
     except Exception as exc:  # noqa: BLE001 - a driver failing mid-draw: report, do not crash
         return _skip(f"{type(exc).__name__}: {str(exc).strip()[:300]}", where)
     finally:

@@ -90,6 +90,19 @@ def footprint(ctx: Context, shape: tuple[int, int]) -> np.ndarray | None:
     return fd.footprint(mesh.uvs, mesh.indices, shape)
 
 
+def source_encoded(ctx: Context) -> tuple[np.ndarray, np.ndarray]:
+    """The source base at the source states' size and the source states in combine's
+    representation (cached on the context: the measure and the render pass both use them)."""
+    c = _cache(ctx)
+    if "source_encoded" not in c:
+        a = ctx.asset
+        H, W = a.states.shape[1:3]
+        base = resize_normals(a.base, H, W)
+        states = encode_source_states(base, np.asarray(a.states, np.float32), a.encoding)
+        c["source_encoded"] = (base, states)
+    return c["source_encoded"]
+
+
 def reference(ctx: Context) -> fd.Reference | None:
     """The full-resolution source prepared for the measure (cached on the context)."""
     c = _cache(ctx)
@@ -98,8 +111,7 @@ def reference(ctx: Context) -> fd.Reference | None:
         if _measurable(ctx):
             a = ctx.asset
             H, W = a.states.shape[1:3]
-            base = resize_normals(a.base, H, W)
-            states = encode_source_states(base, np.asarray(a.states, np.float32), a.encoding)
+            base, states = source_encoded(ctx)
             c["reference"] = fd.prepare(
                 base,
                 states,
@@ -406,11 +418,8 @@ def render_fidelity(
     a = ctx.asset
     if not _measurable(ctx) or not gpu:
         return [], {}
-    H, W = a.states.shape[1:3]
-    base_src = model.normalize(tx.bilinear(resize_normals(a.base, H, W), uv))
-    enc = encode_source_states(
-        resize_normals(a.base, H, W), np.asarray(a.states, np.float32), a.encoding
-    )
+    base_hw, enc = source_encoded(ctx)
+    base_src = model.normalize(tx.bilinear(base_hw, uv))
     states_src = np.stack([tx.bilinear(s, uv) for s in enc])
     if a.encoding in ("full", "composite"):
         states_src = model.normalize(states_src)

@@ -249,12 +249,14 @@ def _encoding_match(ctx: Context) -> list[Issue]:
         relief = model.angular_error_deg(src, src_base) > 2.0
         if relief.sum() < 16:
             continue
+        # decoding is per texel: decode the wrinkled texels only, as a [1, n] image
+        v_r, base_r, src_r = v[relief][None], base[relief][None], src[relief]
         errs = {}
         for enc in model.ENCODINGS:
             if enc == "diff" and v.shape[-1] < 3:
                 continue
-            full = _as_full(enc, base, v, t, a.pd_scale)
-            errs[enc] = float(np.mean(model.angular_error_deg(full, src)[relief]))
+            full = _as_full(enc, base_r, v_r, t, a.pd_scale)[0]
+            errs[enc] = float(np.mean(model.angular_error_deg(full, src_r)))
         ctx.metrics.setdefault("encoding_fit_mean_deg", {})[t.name] = {
             e: round(x, 3) for e, x in errs.items()
         }
