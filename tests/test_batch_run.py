@@ -76,7 +76,7 @@ schema = "wrinklepipe/batch@1"
 output = "../out"
 
 [defaults]
-render = false          # the validator's rules run; its GPU pass runs for two assets below
+render = false          # the validator's rules run; its GPU pass runs for one asset below
 png_level = 6
 
 [[assets]]
@@ -85,7 +85,6 @@ render = true
 
 [[assets]]
 manifest = "chars/cy/manifest.toml"
-render = true
 glb = true
 
 [[assets]]

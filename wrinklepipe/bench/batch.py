@@ -12,7 +12,8 @@ policies, a second manifest name), each with an empty cache of its own:
 The outputs of the two cold runs are compared byte for byte (``extra.identical``). The fork
 server is started before the clock runs (it is paid once per batch, not per asset). Each timed
 step runs once: a cold batch is minutes of work, and a repeat would no longer be cold.
-``--quick``: the variants at 32^2, validated without the render pass (a smoke run, no limits).
+``--quick``: three of the variants (two PD policies, a diff map) at 32^2, validated without the
+render pass (a smoke run of the benchmark, no limits).
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ def bench_batch(quick: bool = False) -> BenchResult:
     with tempfile.TemporaryDirectory() as work:
         w = Path(work)
         repo = w / "repo"
-        write_studio(repo, size)
+        write_studio(repo, size, count=3 if quick else None)
         LocalEngine.warm()
 
         def timed(out: str, jobs: int, cache: str, force: bool = False) -> tuple[float, object]:

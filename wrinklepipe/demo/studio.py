@@ -65,12 +65,15 @@ def variant_text(text: str, name: str, encoding: str, policy: str, layout: str |
     return text
 
 
-def write_studio(folder: str | Path, sizes: Sequence[int] | int = 64) -> list[Path]:
-    """Write the :data:`VARIANTS` under ``folder``; return their manifest paths."""
+def write_studio(
+    folder: str | Path, sizes: Sequence[int] | int = 64, count: int | None = None
+) -> list[Path]:
+    """Write the :data:`VARIANTS` (the first ``count`` of them) under ``folder``; return their
+    manifest paths."""
     folder = Path(folder)
     sizes = [sizes] if isinstance(sizes, int) else list(sizes)
     out = []
-    for i, (rel, encoding, policy, layout) in enumerate(VARIANTS):
+    for i, (rel, encoding, policy, layout) in enumerate(VARIANTS[:count]):
         target = folder / rel
         written = write_demo_source(target.parent, sizes[i % len(sizes)])
         name = target.parent.name + ("_" + target.stem if target.stem != "manifest" else "")
