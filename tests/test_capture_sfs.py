@@ -81,3 +81,50 @@ def test_auto_picks_what_was_measured_best():
     assert resolve_method("gradient", np.full(10, 0.8)) == "gradient"
     with pytest.raises(ValueError, match="unknown orientation"):
         resolve_method("shading", None)
+
+
+def test_eikonal_height_is_the_distance_cone():
+    # |grad u| = 1 on a disc with u = 0 on its border: the largest solution is the distance to
+    # the border (a cone, maximum at the centre), the smallest its negative.
+    n = 61
+    idx = np.arange(n) - 30.0
+    yy, xx = np.meshgrid(idx, idx, indexing="ij")
+    r = np.hypot(xx, yy)
+    mask = r <= 25.0
+    ring = mask & ~(np.hypot(xx, yy) <= 24.0)
+    up = S.eikonal_height(np.ones((n, n)), mask, np.zeros((n, n)), upward=True)
+    down = S.eikonal_height(np.ones((n, n)), mask, np.zeros((n, n)), upward=False)
+    dist = 25.0 - r  # analytic, from the disc's edge; the ring pixels are the border
+    inner = mask & ~ring
+    assert np.abs(up - dist)[inner].mean() < 1.0  # upwind first order: within a pixel
+    assert up[30, 30] == pytest.approx(25.0, abs=1.5)
+    assert np.allclose(down, -up)
+    # a slope twice as steep: twice as high
+    up2 = S.eikonal_height(np.full((n, n), 2.0), mask, np.zeros((n, n)))
+    assert np.allclose(up2[inner], 2.0 * up[inner], rtol=1e-6)
+
+
+def test_neutral_height_from_slopes():
+    # a tilted paraboloid's analytic slopes, given only inside an irregular mask
+    n = 48
+    idx = np.arange(n) + 0.5
+    yy, xx = np.meshgrid(idx, idx, indexing="ij")
+    h = 0.01 * (xx - 20) ** 2 - 0.004 * (yy - 30) ** 2 + 0.3 * xx
+    # central slopes of the pixel grid: the midpoint rule on a quadratic is exact
+    g = np.stack([0.02 * (xx - 20) + 0.3, -0.008 * (yy - 30)], -1)
+    mask = ((xx - 24) ** 2 + (yy - 24) ** 2 < 400) & ~((xx > 30) & (yy < 20))
+    g = np.where(mask[..., None], g, 99.0)  # outside the mask: ignored
+    est = S.neutral_height(mask, g)
+    ref = h - h[mask].mean()
+    assert np.abs(est - ref)[mask].max() < 5e-3  # of a 15 px range (a tiny shrink term)
+
+
+def test_ratio_residual_on_a_downsampled_grid():
+    # Photos wider than max_side are judged on a coarser grid: slopes are the same there (a
+    # height in coarse pixels over a coarse pixel), so the true map still explains R.
+    ratio, n0, n1, roi = _scene(1.0, tilt=0.25, n=96)
+    truth = S.relative_to(n1, n0)
+    full = S.ratio_residual(truth, n0, ratio, roi)
+    half = S.ratio_residual(truth, n0, ratio, roi, max_side=48)
+    assert full < 2e-3 and half < 4e-3
+    assert S.ratio_residual(truth * [-1.0, -1.0, 1.0], n0, ratio, roi, max_side=48) > 5 * half
