@@ -123,20 +123,15 @@ class CaptureResult:
 AUTO_SFS_BELOW_NZ = 0.97
 
 
-#: ``auto`` on a nearly flat neutral (normals given) still takes ``sfs`` when the solve explains
-#: R better than the integrable prior it starts from by this fraction (its residual against
-#: the prior start's, both refined). Measured: 45-48 % lower on nearly flat foreheads with ridges
-#: and furrows, where the solve orients 71-73 % right against the prior's 53 %; 7 % lower on the
-#: example session (all dents), where the prior is right and the solve is not.
-AUTO_SFS_RESIDUAL_GAIN = 0.25
-
-
 def solve_explains_better(result: S.SfsResult) -> bool:
-    """Whether the solve ends ``AUTO_SFS_RESIDUAL_GAIN`` below its first (prior) start."""
+    """Whether the solve's winning start is not its first (the integrable prior): another start
+    ended with a residual lower by more than ``SfsOptions.tie``, so the photos, not the prior,
+    decided the sign. ``auto`` takes ``sfs`` then even on a nearly flat neutral. Measured:
+    nearly flat foreheads with ridges and furrows (the prior's mirror or the eikonal start wins;
+    the solve orients 90 % right against the prior's 8-53 %); the example session (all dents:
+    the prior's start is kept, and the prior is better than its refinement)."""
     first = next(iter(result.starts), None)
-    if first is None or result.start == first:
-        return False
-    return result.residual <= (1.0 - AUTO_SFS_RESIDUAL_GAIN) * result.starts[first]
+    return first is not None and result.start != first
 
 
 def resolve_method(method: str, neutral_nz: np.ndarray | None) -> str:
@@ -192,7 +187,9 @@ def capture(
     i1 = np.asarray(expression, np.float32)
     h, w = i0.shape
     k = sigma_scale(w, o)
-    ratio_opts = dataclasses.replace(o.ratio, blur_sigma=o.ratio.blur_sigma * k)
+    ratio_opts = dataclasses.replace(
+        o.ratio, blur_sigma=o.ratio.blur_sigma * k, exposure_ring=o.ratio.exposure_ring * k
+    )
     orient_opts = dataclasses.replace(
         o.orientation,
         structure_sigma=o.orientation.structure_sigma * k,

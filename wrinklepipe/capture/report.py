@@ -90,6 +90,7 @@ def build_report(
         },
         "ratio": {
             "exposure_factor": rr.exposure,
+            "exposure_reference": rr.exposure_reference,
             "noise_sigma": rr.noise,
             "deadband": rr.deadband,
             "fraction_dark": rr.frac_dark,
@@ -262,6 +263,7 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
             ["quantity", "value"],
             [
                 ["exposure factor (R divided by)", _f(rt["exposure_factor"], 4)],
+                ["exposure measured on", rt["exposure_reference"]],
                 ["noise sigma of blurred R", _f(rt["noise_sigma"], 5)],
                 ["deadband", _f(rt["deadband"], 5)],
                 ["dark pixels (ROI share)", _f(rt["fraction_dark"], 4)],
