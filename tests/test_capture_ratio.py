@@ -107,3 +107,30 @@ def test_ratio_law_cancels_albedo_and_exposure(exposure, shade, seed):
     )
     assert r.exposure == pytest.approx(exposure, rel=2e-3)
     assert np.allclose(r.nz[:8], shade, atol=3e-3) and np.allclose(r.nz[8:], 1.0, atol=3e-3)
+
+
+def test_exposure_is_measured_on_the_skin_around_the_roi():
+    # A ROI lined all over (cosine creases on a tilted neutral: R swings above and below 1 and
+    # its histogram peaks at the swings' extremes, not at 1) inside unwrinkled skin: the flash
+    # ratio 1.035 is read from the ring of skin around the ROI.
+    n = 96
+    idx = np.arange(n) + 0.5
+    yy, xx = np.meshgrid(idx, idx, indexing="ij")
+    roi = ((xx - 48) ** 2 + (yy - 48) ** 2 <= 30**2).astype(float)
+    g0 = 0.15  # the neutral's slope along the rows
+    q = 0.36 * np.sin(2 * np.pi * yy / 9.0) * roi  # the creases' slope
+    nz0 = 1 / np.sqrt(1 + g0**2)
+    nz1 = 1 / np.sqrt(1 + (g0 + q) ** 2)
+    i0 = np.full((n, n), 0.4)
+    i1 = 0.4 * 1.035 * nz1 / nz0
+    opts = RatioOptions(blur_sigma=0.0, deadband=0.0)
+    r = ratio_image(i0, i1, roi=roi, options=opts)
+    assert r.exposure == pytest.approx(1.035, abs=2e-4)
+    assert r.exposure_reference == "skin around the ROI"
+    inside = ratio_image(i0, i1, roi=roi, options=RatioOptions(blur_sigma=0.0, exposure_ring=0))
+    assert inside.exposure_reference == "ROI"
+    assert abs(inside.exposure - 1.035) > 1e-3  # its mode sits on a crease extreme (-0.18 %)
+    # a ROI covering the photo leaves no ring: its own level, said so
+    whole = ratio_image(i0, i1, options=opts)
+    assert whole.exposure_reference == "ROI"
+    assert ratio_image(i0, i1, roi=roi, options=PLAIN).exposure_reference == "none"
