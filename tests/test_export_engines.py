@@ -148,14 +148,21 @@ def test_export_is_complete_flat_and_true(exports, engine):
     assert len(doc.get("images", [])) == (0 if engine == "unreal" else 1)
 
 
+#: Import-settings sidecars beside a texture: Unity ``.meta``, Godot ``.import``.
+_SIDECARS = (".meta", ".import")
+
+
 def _complete_flat_and_true(src, folder, files, notes, engine) -> None:
     # flat: the folder itself plus textures/ and curves/ only
     assert {p.split("/")[0] for p in files if "/" in p} <= {"textures", "curves"}
     assert all(p.count("/") <= 1 for p in files)
     on_disk = sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
     assert on_disk == sorted(files)
-    # no texture twice
-    digests = [hashlib.sha256(b).hexdigest() for p, b in files.items() if p.startswith("textures/")]
+    # no texture twice (import-settings sidecars aside: two arrays of as many layers share one)
+    images = [
+        b for p, b in files.items() if p.startswith("textures/") and not p.endswith(_SIDECARS)
+    ]
+    digests = [hashlib.sha256(b).hexdigest() for b in images]
     assert len(digests) == len(set(digests))
     setup = json.loads(files["wrinkle_setup.json"])
     # every file the setup names exists

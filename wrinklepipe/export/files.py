@@ -22,7 +22,7 @@ from wrinklepipe.atomic import dumps_json
 from wrinklepipe.document.model import Document
 from wrinklepipe.document.package import wrinkled_materials
 from wrinklepipe.errors import input_error
-from wrinklepipe.export import readme
+from wrinklepipe.export import importers, readme
 from wrinklepipe.export.gltf import plain_gltf
 from wrinklepipe.export.presets import ENGINE_PRESETS, EnginePreset
 from wrinklepipe.export.textures import (
@@ -233,7 +233,7 @@ def _unreal(ex: Export) -> None:
                 "inputs": [{"name": a, "connect": b} for a, b in n.inputs],
             }
             for n in (nodes.decode, nodes.wrinkle)
-        ]
+        ],
     }
     ex.setup["shader"] = setup
 
@@ -268,9 +268,36 @@ def _arrays(ex: Export) -> ShaderSetup:
     return setup
 
 
+def _sidecars(ex: Export) -> list[tuple[str, int, int, int | None]]:
+    """(file, width, height, array layers or None for the base normal map) of the textures the
+    wrinkle shader samples in a Unity or Godot export."""
+    pkg = ex.pkg
+    base = next(t for t in pkg.textures if t.role == "base_normal").pixels
+    out: list[tuple[str, int, int, int | None]] = []
+    if ex.setup["base"]["file"] in ex.files:
+        out.append((ex.setup["base"]["file"], base.shape[1], base.shape[0], None))
+    for name, arr in (("states", ex.setup["statesArray"]), ("masks", ex.setup["masks"])):
+        first = pkg.texture(
+            pkg.meta["states"][0]["texture"]
+            if name == "states"
+            else pkg.meta["masks"]["textures"][0]
+        ).pixels
+        out.append((arr["file"], first.shape[1], first.shape[0] * arr["layers"], arr["layers"]))
+    return out
+
+
 def _unity(ex: Export) -> None:
     ex.names = _names(ex.pkg.meta.region_names, "region")
     _arrays(ex)
+    for rel, w, h, layers in _sidecars(ex):
+        if max(w, h) > importers.UNITY_MAX_TEXTURE_SIZE:
+            ex.notes.append(
+                f"{rel}: {w} x {h} px is over Unity's import limit of "
+                f"{importers.UNITY_MAX_TEXTURE_SIZE} px per side; Unity scales it down on import"
+            )
+        guid = importers.unity_guid(ex.pkg.name, rel, ex.files[rel])
+        meta = importers.unity_texture_meta(guid, importers.unity_max_size(w, h), layers)
+        ex.files[rel + ".meta"] = meta.encode("utf-8")
     setup = ex.setup["shader"]
     ex.files["WrinkleMaps.hlsl"] = hlsl.unity_file(setup, f"WRINKLEPIPE_{ex.pkg.name}").encode()
     ex.files["WrinkleWeights.cs"] = (RUNTIME_DIR / "unity" / "WrinkleWeights.cs").read_bytes()
@@ -279,6 +306,13 @@ def _unity(ex: Export) -> None:
 def _godot(ex: Export) -> None:
     ex.names = _names(ex.pkg.meta.region_names, "snake")
     _arrays(ex)
+    for rel, _, _, layers in _sidecars(ex):
+        text = (
+            importers.godot_normal_map_import()
+            if layers is None
+            else importers.godot_array_import(layers)
+        )
+        ex.files[rel + ".import"] = text.encode("utf-8")
     ex.files["wrinkle.gdshader"] = godot.godot_shader(ex.setup["shader"]).encode("utf-8")
     ex.files["wrinkle_weights.gd"] = (RUNTIME_DIR / "godot" / "wrinkle_weights.gd").read_bytes()
 

@@ -59,14 +59,22 @@ def _unreal(doc: dict[str, Any]) -> str:
 
 
 def _unity(doc: dict[str, Any]) -> str:
+    base = doc["base"]["file"]
+    n_states, n_masks = doc["statesArray"]["layers"], doc["masks"]["layers"]
     return f"""\
 ## Import into Unity (URP/HDRP Shader Graph)
 
-1. Import `{doc["mesh"]}` with glTFast or UnityGLTF (mesh, blend shapes, animation clip).
-2. Textures: `{doc["base"]["file"]}` (the base normal map) and `textures/wrinkle_states.png` /
-   `textures/wrinkle_masks.png` (texture arrays: Texture Shape **2D Array**, Columns 1, Rows
-   {doc["statesArray"]["layers"]} / {doc["masks"]["layers"]}). All three: Texture Type Default, sRGB
-   **off**, Generate Mip Maps on, Compression None or High Quality, Wrap Mode Clamp.
+1. Copy the whole folder into `Assets/` (with the `.meta` files: they hold the texture import
+   settings, so the textures import right without a click):
+   - `{base}`: Texture Type **Normal map** (Unity stores it in its own normal-map encoding; the
+     wrinkle shader reads it as `UnpackNormal` does), Generate Mip Maps on.
+   - `textures/wrinkle_states.png` / `textures/wrinkle_masks.png`: Texture Shape **2D Array**,
+     Columns 1, Rows {n_states} / {n_masks}; Texture Type Default, sRGB **off**, Alpha Source From
+     Input (mask data, not transparency).
+   - All three: mip maps with the Box filter, Filter Mode Trilinear, Wrap Mode Clamp, Compression
+     **None** (the texels wrinklepipe's tests render). To save memory choose Normal or High
+     Quality compression instead; the error is then that of Unity's encoder (not measured here).
+2. Import `{doc["mesh"]}` with glTFast or UnityGLTF (mesh, blend shapes, animation clip).
 3. In the face's Shader Graph add a **Custom Function** node: Type File, Source
    `WrinkleMaps.hlsl`, Name `WrinkleNormal`, Precision Float; inputs UV (Vector 2), BaseMap
    (Texture 2D), States (Texture 2D Array), Masks (Texture 2D Array), Sampler (Sampler State);
@@ -79,14 +87,20 @@ def _unity(doc: dict[str, Any]) -> str:
 
 
 def _godot(doc: dict[str, Any]) -> str:
+    base = doc["base"]["file"]
+    n_states, n_masks = doc["statesArray"]["layers"], doc["masks"]["layers"]
     return f"""\
 ## Import into Godot 4
 
-1. Put the folder in the project and let Godot import `{doc["mesh"]}` (mesh, blend shapes and
-   animations in an AnimationPlayer).
-2. Re-import `textures/wrinkle_states.png` and `textures/wrinkle_masks.png` as **Texture2DArray**
-   (Import As, Slices Vertical {doc["statesArray"]["layers"]} / {doc["masks"]["layers"]}), Compress
-   Mode Lossless, Mipmaps on. The base normal map `{doc["base"]["file"]}` may stay a normal map.
+1. Copy the folder into the project with the `.import` files (they hold the import settings:
+   Godot imports the textures with them, no re-import by hand):
+   - `{base}`: Texture2D, Normal Map **Enable**, Lossless, mipmaps generated, no Y flip (the
+     map is already +Y), 3D detection off (it stays lossless).
+   - `textures/wrinkle_states.png` / `textures/wrinkle_masks.png`: **Texture2DArray**, Slices
+     Horizontal 1 / Vertical {n_states} / {n_masks}, Lossless, mipmaps generated.
+   Godot adds its `uid` and paths to the `.import` files on the first import. VRAM Compressed
+   saves memory at the cost of Godot's encoder's error (not measured here).
+2. Let Godot import `{doc["mesh"]}` (mesh, blend shapes and animations in an AnimationPlayer).
 3. Give the face surface a **ShaderMaterial** with `wrinkle.gdshader`; set `wp_base` to the base
    normal map, `wp_states` / `wp_masks` to the two arrays and `wp_albedo` to the colour map.
 4. Add a Node with `wrinkle_weights.gd`: mesh = the face, setup_path = `wrinkle_setup.json`,

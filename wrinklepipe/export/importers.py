@@ -1,0 +1,205 @@
+"""Import-settings sidecars an engine reads beside a texture.
+
+Text only (no I/O): :mod:`wrinklepipe.export.files` puts them in the export.
+
+- **Unity** ``.meta`` (:func:`unity_texture_meta`): the TextureImporter block Unity writes itself
+  (``fileFormatVersion: 2``, ``serializedVersion: 13`` as Unity 2022.3 / 6 write it; an older
+  editor upgrades it on import). The base normal map is ``textureType: 1`` (NormalMap: Unity
+  stores it in its own normal-map encoding, which the wrinkle shader reads like Unity's
+  ``UnpackNormal``); the state and mask strips are ``textureType: 0`` (Default) with sRGB off,
+  ``textureShape: 4`` (Texture2DArray) and ``flipbookRows`` = layers, one column (Unity cuts
+  cells left to right, top to bottom: layer 0 is the top of the strip). All: mip maps on with
+  the box filter (``mipMapMode: 0``), trilinear filtering, clamped wrap, uncompressed
+  (``textureCompression: 0``: the texels the wrinkle tests render), ``maxTextureSize`` no smaller
+  than the image. The GUID is derived from the asset name, the file's path and its bytes
+  (:func:`unity_guid`), so a rerun writes the same bytes.
+- **Godot 4** ``.import`` (:func:`godot_normal_map_import`, :func:`godot_array_import`): the
+  ``[remap]`` importer and type and the ``[params]`` Godot's importers read; Godot adds its
+  ``uid``, ``path`` and ``[deps]`` on the first import. Lossless (``compress/mode=0``), mip
+  maps generated, ``detect_3d/compress_to=0`` (use in 3D does not switch the texture to VRAM
+  compression); the base is ``compress/normal_map=1`` (a normal map: mip maps renormalised,
+  x and y read, z rebuilt), ``roughness/mode=1`` (no roughness processing), OpenGL green
+  (``process/normal_map_invert_y=false``); the strips are ``2d_array_texture`` with
+  ``slices/vertical`` = layers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+#: Unity's largest texture import size (TextureImporter.maxTextureSize).
+UNITY_MAX_TEXTURE_SIZE = 16384
+
+
+def unity_guid(asset: str, rel: str, data: bytes) -> str:
+    """A Unity asset GUID (32 hex digits) for the file ``rel`` of ``asset`` holding ``data``."""
+    digest = hashlib.sha256(data).hexdigest()
+    return hashlib.md5(f"wrinklepipe:{asset}:{rel}:{digest}".encode()).hexdigest()
+
+
+def unity_max_size(width: int, height: int) -> int:
+    """The smallest of Unity's import sizes (powers of two 32..16384) holding the image."""
+    side = max(width, height, 32)
+    return min(1 << (side - 1).bit_length(), UNITY_MAX_TEXTURE_SIZE)
+
+
+def unity_texture_meta(guid: str, max_size: int, layers: int | None = None) -> str:
+    """A texture's ``.meta``: the base normal map (``layers`` None: a 2D NormalMap) or a data
+    strip imported as a 2D array of ``layers`` cells stacked vertically (Default, sRGB off)."""
+    texture_type, shape, rows = (1, 1, 1) if layers is None else (0, 4, int(layers))
+    return f"""\
+fileFormatVersion: 2
+guid: {guid}
+TextureImporter:
+  internalIDToNameTable: []
+  externalObjects: {{}}
+  serializedVersion: 13
+  mipmaps:
+    mipMapMode: 0
+    enableMipMap: 1
+    sRGBTexture: 0
+    linearTexture: 0
+    fadeOut: 0
+    borderMipMap: 0
+    mipMapsPreserveCoverage: 0
+    alphaTestReferenceValue: 0.5
+    mipMapFadeDistanceStart: 1
+    mipMapFadeDistanceEnd: 3
+  bumpmap:
+    convertToNormalMap: 0
+    externalNormalMap: 0
+    heightScale: 0.25
+    normalMapFilter: 0
+    flipGreenChannel: 0
+  isReadable: 0
+  streamingMipmaps: 0
+  streamingMipmapsPriority: 0
+  vTOnly: 0
+  ignoreMipmapLimit: 0
+  grayScaleToAlpha: 0
+  generateCubemap: 6
+  cubemapConvolution: 0
+  seamlessCubemap: 0
+  textureFormat: 1
+  maxTextureSize: {max_size}
+  textureSettings:
+    serializedVersion: 2
+    filterMode: 2
+    aniso: 1
+    mipBias: 0
+    wrapU: 1
+    wrapV: 1
+    wrapW: 1
+  nPOTScale: 0
+  lightmap: 0
+  compressionQuality: 100
+  spriteMode: 0
+  spriteExtrude: 1
+  spriteMeshType: 1
+  alignment: 0
+  spritePivot: {{x: 0.5, y: 0.5}}
+  spritePixelsToUnits: 100
+  spriteBorder: {{x: 0, y: 0, z: 0, w: 0}}
+  spriteGenerateFallbackPhysicsShape: 1
+  alphaUsage: 1
+  alphaIsTransparency: 0
+  spriteTessellationDetail: -1
+  textureType: {texture_type}
+  textureShape: {shape}
+  singleChannelComponent: 0
+  flipbookRows: {rows}
+  flipbookColumns: 1
+  maxTextureSizeSet: 0
+  compressionQualitySet: 0
+  textureFormatSet: 0
+  ignorePngGamma: 1
+  applyGammaDecoding: 0
+  swizzle: 50462976
+  cookieLightType: 0
+  platformSettings:
+  - serializedVersion: 4
+    buildTarget: DefaultTexturePlatform
+    maxTextureSize: {max_size}
+    resizeAlgorithm: 0
+    textureFormat: -1
+    textureCompression: 0
+    compressionQuality: 100
+    crunchedCompression: 0
+    allowsAlphaSplitting: 0
+    overridden: 0
+    ignorePlatformSupport: 0
+    androidETC2FallbackOverride: 0
+    forceMaximumCompressionQuality_BC6H_BC7: 0
+  spriteSheet:
+    serializedVersion: 2
+    sprites: []
+    outline: []
+    physicsShape: []
+    bones: []
+    spriteID:
+    internalID: 0
+    vertices: []
+    indices:
+    edges: []
+    weights: []
+    secondaryTextures: []
+    nameFileIdTable: {{}}
+  mipmapLimitGroupName:
+  pSDRemoveMatte: 0
+  userData: wrinklepipe
+  assetBundleName:
+  assetBundleVariant:
+"""
+
+
+def godot_normal_map_import() -> str:
+    """The base normal map's ``.import`` (Lossless, a normal map, mip maps)."""
+    return """\
+[remap]
+
+importer="texture"
+type="CompressedTexture2D"
+
+[params]
+
+compress/mode=0
+compress/high_quality=false
+compress/lossy_quality=0.7
+compress/hdr_compression=1
+compress/normal_map=1
+compress/channel_pack=0
+mipmaps/generate=true
+mipmaps/limit=-1
+roughness/mode=1
+roughness/src_normal=""
+process/fix_alpha_border=false
+process/premult_alpha=false
+process/normal_map_invert_y=false
+process/hdr_as_srgb=false
+process/hdr_clamp_exposure=false
+process/size_limit=0
+detect_3d/compress_to=0
+"""
+
+
+def godot_array_import(layers: int) -> str:
+    """A vertical strip's ``.import`` as a Texture2DArray of ``layers`` slices (Lossless, mip
+    maps)."""
+    return f"""\
+[remap]
+
+importer="2d_array_texture"
+type="CompressedTexture2DArray"
+
+[params]
+
+compress/mode=0
+compress/high_quality=false
+compress/lossy_quality=0.7
+compress/hdr_compression=1
+compress/channel_pack=0
+mipmaps/generate=true
+mipmaps/limit=-1
+slices/horizontal=1
+slices/vertical={layers}
+"""
