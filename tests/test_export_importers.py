@@ -7,6 +7,10 @@ a stable GUID and a max size no smaller than the image (read by OpenImageIO). Th
 reads Unity's NormalMap encodings (x in alpha for DXT5nm-style): rendered from a base stored
 that way it equals numpy. Godot 4: each has an ``.import`` (parsed by configparser) naming the
 importer and type, with only the keys Godot's class reference documents for that importer.
+Unreal: ``WP_CustomNodes.t3d`` holds the two Custom nodes as material-editor clipboard text; read
+back by a parser written here (Begin/End blocks, Unreal's string escapes), each node's Code is
+byte for byte the exported ``.hlsl``, its inputs those of ``wrinkle_setup.json``, and the code
+taken from the text compiles (glslang -> spirv-cross) and renders equal to numpy.
 The demo at 64^2, one export per engine per module.
 """
 
@@ -22,11 +26,12 @@ import OpenImageIO as oiio
 import pytest
 import shader_harness as h
 import yaml
-from test_export_engines import _expressions, _input, _source
+from test_export_engines import _exported_texture, _expressions, _input, _source
 
 from wrinklepipe.export.job import export
 from wrinklepipe.io.package import png_pixels
-from wrinklepipe.validate.inputs import Texture
+from wrinklepipe.shading import hlsl
+from wrinklepipe.validate.inputs import ChannelEntry, Texture
 from wrinklepipe.validate.render import shader_setup
 
 #: ResourceImporterTexture / ResourceImporterLayeredTexture properties (Godot 4 class reference,
@@ -76,7 +81,7 @@ GODOT_LAYERED_KEYS = {
 def exported(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("importers")
     src = _source(tmp, size=64)
-    return src, {e: (tmp / e, *export(src, tmp / e, e)) for e in ("unity", "godot")}
+    return src, {e: (tmp / e, *export(src, tmp / e, e)) for e in ("unity", "godot", "unreal")}
 
 
 def _sampled(files: dict[str, bytes]) -> list[tuple[str, int | None]]:
@@ -211,6 +216,147 @@ def test_unity_reads_its_dxt5nm_normal_map_encoding(exported):
             data = np.concatenate([wv.ravel(), setup.used_vectors().ravel()]).astype(np.float32)
             img = gpu.draw(prog, samplers, blocks={block: data.tobytes()})
             st = h.compare(img, h.blend(inp, s, expr))
+            assert st["mean"] <= 0.5 and st["p99"] <= 2.0, (expr, st)
+    finally:
+        gpu.release()
+
+
+# ------------------------------------------------------------------------------------------------
+# Unreal clipboard text
+
+_UNESCAPE = {"n": "\n", "r": "\r", "t": "\t"}
+
+
+def _unquote(value: str) -> str:
+    """An Unreal exported string (``"..."`` with backslash escapes) -> its text. The string ends
+    at the first quote not escaped (as Unreal's reader ends it): it must be the last character."""
+    quoted = re.fullmatch(r'"((?:[^"\\\n]|\\.)*)"', value)
+    assert quoted, value[:60]
+    return re.sub(r"\\(.)", lambda m: _UNESCAPE.get(m.group(1), m.group(1)), quoted[1])
+
+
+def _t3d_objects(text: str) -> list[dict]:
+    """Top-level ``Begin Object`` blocks: their class, name and the properties of the inner
+    object (``key=value`` lines; ``Inputs(i)`` collected in order), nesting checked."""
+    objects, depth, current = [], 0, None
+    for line in text.splitlines():
+        stripped = line.strip()
+        if stripped.startswith("Begin Object"):
+            head = dict(re.findall(r'(\w+)=("[^"]*"|\S+)', stripped))
+            if depth == 0:
+                current = {"class": head["Class"], "name": head["Name"].strip('"'), "props": {}}
+                current["inputs"] = []
+            depth += 1
+        elif stripped == "End Object":
+            depth -= 1
+            assert depth >= 0
+            if depth == 0:
+                objects.append(current)
+        elif depth == 2 and "=" in stripped:
+            key, value = stripped.split("=", 1)
+            if key.startswith("Inputs("):
+                assert key == f"Inputs({len(current['inputs'])})"
+                current["inputs"].append(_unquote(re.fullmatch(r"\(InputName=(.*)\)", value)[1]))
+            else:
+                current["props"][key] = value
+        elif depth == 1 and "=" in stripped:
+            key, value = stripped.split("=", 1)
+            current[key] = value
+    assert depth == 0
+    return objects
+
+
+def _t3d_nodes(files: dict[str, bytes]) -> list[dict]:
+    doc = json.loads(files["wrinkle_setup.json"])
+    return _t3d_objects(files[doc["unreal"]["clipboard"]].decode())
+
+
+def test_unreal_clipboard_text_holds_the_two_custom_nodes(exported):
+    _, out = exported
+    _, files, _ = out["unreal"]
+    doc = json.loads(files["wrinkle_setup.json"])
+    assert doc["unreal"]["clipboard"] in files and f"`{doc['unreal']['clipboard']}`" in (
+        files["README.md"].decode()
+    )
+    objects = _t3d_nodes(files)
+    assert len(objects) == len(doc["unreal"]["nodes"]) == 2
+    for obj, node in zip(objects, doc["unreal"]["nodes"], strict=True):
+        assert obj["class"] == "/Script/UnrealEd.MaterialGraphNode"
+        props = obj["props"]
+        assert _unquote(props["Code"]) == files[node["code"]].decode()  # byte for byte
+        assert _unquote(props["Description"]) == node["description"]
+        assert props["OutputType"] == node["output"].replace(" ", "_")
+        assert props["OutputType"] in ("CMOT_Float1", "CMOT_Float3")
+        assert obj["inputs"] == [i["name"] for i in node["inputs"]]
+        inner = re.fullmatch(
+            r"\"/Script/Engine.MaterialExpressionCustom'(\w+)'\"", obj["MaterialExpression"]
+        )
+        assert inner, obj["MaterialExpression"]
+    assert len({o["name"] for o in objects}) == 2
+    assert _unquote(objects[0]["props"]["Description"]) == "WP_Decode"
+    assert objects[1]["inputs"][-1] == "Decode"
+
+
+@pytest.mark.gpu
+def test_unreal_clipboard_code_renders_the_model(exported):
+    """The Code taken out of the clipboard text, wrapped as Unreal wraps Custom nodes, through
+    glslang -> spirv-cross -> moderngl on the exported texels equals numpy with y negated."""
+    if h.missing_tools():
+        pytest.skip(f"{h.missing_tools()} not installed")
+    import test_engine_shaders as ts
+
+    src, out = exported
+    _, files, _ = out["unreal"]
+    doc = json.loads(files["wrinkle_setup.json"])
+    ref_in = _input(src)
+    base = doc["base"]["file"]
+    textures = [_exported_texture("base", "base", base, files[base])]
+    for st in doc["states"]:
+        textures.append(
+            _exported_texture(
+                st["name"], "state", st["file"], files[st["file"]], st["name"], doc["mapping"]
+            )
+        )
+    for i, f in enumerate(doc["masks"]["files"]):
+        px = png_pixels(files[f])
+        textures.append(
+            Texture(f"mask{i}", "mask", "rgba8", px.shape[1], px.shape[0], px.tobytes())
+        )
+    table = [
+        ChannelEntry(e["region"], f"mask{e['texture']}", "rgba".index(e["channel"]))
+        for e in doc["masks"]["table"]
+    ]
+    inp = replace(ref_in, textures=textures, channel_table=table, has_source=False)
+    setup = replace(shader_setup(inp), output="directx")
+    decode, wrinkle = (_unquote(o["props"]["Code"]) for o in _t3d_nodes(files))
+    made = hlsl.unreal_nodes(setup)
+    nodes = replace(
+        made, decode=replace(made.decode, code=decode), wrinkle=replace(made.wrinkle, code=wrinkle)
+    )
+    try:
+        gpu = h.UVRenderer(64)
+    except Exception as exc:  # noqa: BLE001
+        pytest.skip(f"no OpenGL: {exc}")
+    try:
+        prog = gpu.program(
+            h.hlsl_to_glsl(ts.unreal_material(nodes, setup.n_states, setup.n_layers))
+        )
+        names = ["Base", *(f"State{k}" for k in range(setup.n_states))]
+        names += [f"Mask{k}" for k in range(setup.n_layers)]
+        samplers = {
+            f"SPIRV_Cross_Combined{n}{n}Sampler": (gpu.upload([t], array=False), False)
+            for n, t in zip(
+                names, [textures[0], *inp.state_textures(), *h.mask_layers(inp)], strict=True
+            )
+        }
+        s = h.samples(inp, gpu.uvs())
+        flip = np.array([1.0, -1.0, 1.0], np.float32)
+        for expr in [None, *_expressions(inp)]:
+            w = h.region_weights(inp, expr)
+            pad = np.zeros(((len(w) + 3) // 4) * 4, np.float32)
+            pad[: len(w)] = w
+            img = gpu.draw(prog, samplers, blocks={"WPHarness": pad.tobytes()})
+            st = h.compare(img, h.blend(inp, s, expr) * flip)
             assert st["mean"] <= 0.5 and st["p99"] <= 2.0, (expr, st)
     finally:
         gpu.release()

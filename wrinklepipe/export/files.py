@@ -40,6 +40,8 @@ from wrinklepipe.shading import godot, hlsl
 from wrinklepipe.shading.setup import ShaderSetup, from_meta
 
 RUNTIME_DIR = Path(__file__).resolve().parent.parent / "data" / "engines"
+#: Unreal material-editor clipboard text of the two Custom nodes.
+UNREAL_CLIPBOARD = "WP_CustomNodes.t3d"
 #: Error budget for block-compressed copies (the manifest's default budget).
 BUDGET = Budget(max_mean_deg=0.5, max_p99_deg=2.0)
 
@@ -224,7 +226,9 @@ def _unreal(ex: Export) -> None:
     ex.names = [n for n, _ in nodes.region_inputs]
     ex.files["WP_Decode.hlsl"] = nodes.decode.code.encode("utf-8")
     ex.files["WP_Wrinkle.hlsl"] = nodes.wrinkle.code.encode("utf-8")
+    ex.files[UNREAL_CLIPBOARD] = importers.unreal_t3d([nodes.decode, nodes.wrinkle]).encode()
     ex.setup["unreal"] = {
+        "clipboard": UNREAL_CLIPBOARD,
         "nodes": [
             {
                 "description": n.description,

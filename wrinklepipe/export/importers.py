@@ -1,4 +1,4 @@
-"""Import-settings sidecars an engine reads beside a texture.
+"""Import-settings sidecars an engine reads beside a texture, and Unreal's clipboard text.
 
 Text only (no I/O): :mod:`wrinklepipe.export.files` puts them in the export.
 
@@ -21,11 +21,18 @@ Text only (no I/O): :mod:`wrinklepipe.export.files` puts them in the export.
   x and y read, z rebuilt), ``roughness/mode=1`` (no roughness processing), OpenGL green
   (``process/normal_map_invert_y=false``); the strips are ``2d_array_texture`` with
   ``slices/vertical`` = layers.
+- **Unreal** clipboard text (:func:`unreal_t3d`): the two Custom nodes as the material editor
+  copies them (``Begin Object Class=/Script/UnrealEd.MaterialGraphNode`` holding a
+  ``/Script/Engine.MaterialExpressionCustom`` with ``Code``, ``OutputType``, ``Description`` and
+  ``Inputs``); strings escaped as Unreal's ``FString::ReplaceCharWithEscapedChar`` does
+  (``\\\\ \\n \\r \\t \\' \\"``). Pasting creates the nodes unconnected.
 """
 
 from __future__ import annotations
 
 import hashlib
+
+from wrinklepipe.shading.hlsl import CustomNode
 
 #: Unity's largest texture import size (TextureImporter.maxTextureSize).
 UNITY_MAX_TEXTURE_SIZE = 16384
@@ -203,3 +210,44 @@ mipmaps/limit=-1
 slices/horizontal=1
 slices/vertical={layers}
 """
+
+
+_ESCAPES = {"\\": "\\\\", "\n": "\\n", "\r": "\\r", "\t": "\\t", "'": "\\'", '"': '\\"'}
+
+
+def unreal_string(text: str) -> str:
+    """``text`` as an Unreal exported string property value (quoted, escaped)."""
+    return '"' + "".join(_ESCAPES.get(c, c) for c in text) + '"'
+
+
+def _node_t3d(node: CustomNode, index: int, x: int) -> str:
+    graph = f"MaterialGraphNode_{index}"
+    expr = f"MaterialExpressionCustom_{index}"
+    lines = [
+        f'Begin Object Class=/Script/UnrealEd.MaterialGraphNode Name="{graph}"',
+        f'   Begin Object Class=/Script/Engine.MaterialExpressionCustom Name="{expr}"',
+        "   End Object",
+        f'   Begin Object Name="{expr}"',
+        f"      Code={unreal_string(node.code)}",
+        f"      OutputType={node.output.replace(' ', '_')}",
+        f"      Description={unreal_string(node.description)}",
+    ]
+    lines += [
+        f"      Inputs({i})=(InputName={unreal_string(name)})"
+        for i, (name, _) in enumerate(node.inputs)
+    ]
+    lines += [
+        f"      MaterialExpressionEditorX={x}",
+        "      MaterialExpressionEditorY=0",
+        "   End Object",
+        f"   MaterialExpression=\"/Script/Engine.MaterialExpressionCustom'{expr}'\"",
+        f"   NodePosX={x}",
+        "   NodePosY=0",
+        "End Object",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def unreal_t3d(nodes: list[CustomNode]) -> str:
+    """The Custom ``nodes`` as material-editor clipboard text, left to right."""
+    return "".join(_node_t3d(n, i, -800 + 400 * i) for i, n in enumerate(nodes))

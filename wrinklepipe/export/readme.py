@@ -43,15 +43,20 @@ def _unreal(doc: dict[str, Any]) -> str:
    set Mip Gen Settings **LeaveExistingMips**), sRGB **off**, and do **not** flip the green
    channel: they are already DirectX (-Y). `.png` maps: sRGB off, Compression **Masks (no sRGB)**
    or VectorDisplacementmap. The {n_masks} mask textures: sRGB off, Compression **Masks**.
-3. Make a Material Function (or edit the face material) with two **Custom** nodes:
+3. Make a Material Function (or edit the face material) with the two **Custom** nodes: open
+   `{doc["unreal"]["clipboard"]}` in a text editor, copy all of it and paste it into the
+   material graph (Ctrl+V). That makes both nodes with their code, output type and named input
+   pins, unconnected. (The text follows the format of Unreal 5's material-editor copies; it was
+   not pasted into Unreal where wrinklepipe is tested. If your editor refuses it, make the
+   nodes by hand as below.)
    - `WP_Decode`: Output Type Float 1, no inputs, Code = the contents of `WP_Decode.hlsl`.
    - `WP_Wrinkle`: Output Type Float 3, Code = the contents of `WP_Wrinkle.hlsl`, inputs in
      this order (names exactly as listed in `wrinkle_setup.json` `unreal.nodes[1].inputs`):
      `UV` (TexCoord 0), `Base`, `State0`..., `Mask0`... (Texture Object nodes holding the
      textures of `wrinkle_setup.json` in order), one scalar per region (a Scalar Parameter named
      like the input), and `Decode` (the WP_Decode node's output).
-   Connect `WP_Wrinkle` to the material's **Normal** (tangent space). With many textures set
-   the Texture Objects' Sampler Source to Shared: Wrap.
+   Connect the inputs as listed and `WP_Wrinkle` to the material's **Normal** (tangent space).
+   With many textures set the Texture Objects' Sampler Source to Shared: Wrap.
 4. Drive the region scalar parameters: import `curves/NAME.csv` as a **CurveTable** (one row per
    region, named like the parameters) and set the parameters from it in the Animation Blueprint
    or a Sequencer track, or add Material curves of the same names to the morph animation.
@@ -66,8 +71,9 @@ def _unity(doc: dict[str, Any]) -> str:
 
 1. Copy the whole folder into `Assets/` (with the `.meta` files: they hold the texture import
    settings, so the textures import right without a click):
-   - `{base}`: Texture Type **Normal map** (Unity stores it in its own normal-map encoding; the
-     wrinkle shader reads it as `UnpackNormal` does), Generate Mip Maps on.
+   - the base normal map `{base}`:
+     Texture Type **Normal map** (Unity stores it in its own normal-map encoding; the wrinkle
+     shader reads it as `UnpackNormal` does), Generate Mip Maps on.
    - `textures/wrinkle_states.png` / `textures/wrinkle_masks.png`: Texture Shape **2D Array**,
      Columns 1, Rows {n_states} / {n_masks}; Texture Type Default, sRGB **off**, Alpha Source From
      Input (mask data, not transparency).
@@ -94,8 +100,9 @@ def _godot(doc: dict[str, Any]) -> str:
 
 1. Copy the folder into the project with the `.import` files (they hold the import settings:
    Godot imports the textures with them, no re-import by hand):
-   - `{base}`: Texture2D, Normal Map **Enable**, Lossless, mipmaps generated, no Y flip (the
-     map is already +Y), 3D detection off (it stays lossless).
+   - the base normal map `{base}`:
+     Texture2D, Normal Map **Enable**, Lossless, mipmaps generated, no Y flip (the map is
+     already +Y), 3D detection off (it stays lossless).
    - `textures/wrinkle_states.png` / `textures/wrinkle_masks.png`: **Texture2DArray**, Slices
      Horizontal 1 / Vertical {n_states} / {n_masks}, Lossless, mipmaps generated.
    Godot adds its `uid` and paths to the `.import` files on the first import. VRAM Compressed
