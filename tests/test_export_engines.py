@@ -30,6 +30,7 @@ import numpy as np
 import pytest
 import shader_harness as h
 import texture2ddecoder
+from engine_imports import check_godot_sidecars, check_unity_sidecars, check_unreal_clipboard
 from passthrough import EXTENSION, compare
 from wrinkle_setups import ROBOT
 
@@ -527,6 +528,12 @@ def test_a_whole_character_exports_whole(request, character, engine):
     src, out, source = request.getfixturevalue(f"{character}_exports")
     folder, files, notes = out[engine]
     _complete_flat_and_true(src, folder, files, notes, engine)
+    if engine == "unity":  # the import settings beside the textures, on the real character too
+        check_unity_sidecars(folder, files, _input(src))
+    elif engine == "godot":
+        check_godot_sidecars(files)
+    elif engine == "unreal":
+        check_unreal_clipboard(files)
     setup = json.loads(files["wrinkle_setup.json"])
     wrinkled_name = {"avatar": "Skin", "robot": "Main (wrinkled)"}[character]
     assert setup["materials"] == [wrinkled_name]
