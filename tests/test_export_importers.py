@@ -22,6 +22,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import shader_harness as h
+import yaml
 from engine_imports import (
     check_godot_sidecars,
     check_unity_sidecars,
@@ -52,6 +53,14 @@ def test_unity_textures_carry_their_import_settings(exported, tmp_path):
     check_unity_sidecars(folder, files, _input(src))
     again, _ = export(src, tmp_path / "again", "unity")
     assert all(again[rel + ".meta"] == files[rel + ".meta"] for rel, _ in sampled(files))
+    # the same asset re-exported with other texels (diff encoding): the same GUIDs, so the
+    # project's material references survive the update
+    other, _ = export(_source(tmp_path, encoding="diff", size=64), tmp_path / "diff", "unity")
+    states = sampled(files)[1][0]
+    assert other[states] != files[states]
+    for rel, _ in sampled(files):
+        guid = yaml.safe_load(files[rel + ".meta"])["guid"]
+        assert yaml.safe_load(other[rel + ".meta"])["guid"] == guid
 
 
 def test_godot_textures_carry_their_import_settings(exported):

@@ -299,7 +299,7 @@ def _unity(ex: Export) -> None:
                 f"{rel}: {w} x {h} px is over Unity's import limit of "
                 f"{importers.UNITY_MAX_TEXTURE_SIZE} px per side; Unity scales it down on import"
             )
-        guid = importers.unity_guid(ex.pkg.name, rel, ex.files[rel])
+        guid = importers.unity_guid(ex.pkg.name, rel)
         meta = importers.unity_texture_meta(guid, importers.unity_max_size(w, h), layers)
         ex.files[rel + ".meta"] = meta.encode("utf-8")
     setup = ex.setup["shader"]

@@ -11,8 +11,9 @@ Text only (no I/O): :mod:`wrinklepipe.export.files` puts them in the export.
   cells left to right, top to bottom: layer 0 is the top of the strip). All: mip maps on with
   the box filter (``mipMapMode: 0``), trilinear filtering, clamped wrap, uncompressed
   (``textureCompression: 0``: the texels the wrinkle tests render), ``maxTextureSize`` no smaller
-  than the image. The GUID is derived from the asset name, the file's path and its bytes
-  (:func:`unity_guid`), so a rerun writes the same bytes.
+  than the image. The GUID is derived from the asset name and the file's path
+  (:func:`unity_guid`): a rerun writes the same bytes, and a re-export of the asset with new
+  texels keeps the GUIDs the project's materials reference.
 - **Godot 4** ``.import`` (:func:`godot_normal_map_import`, :func:`godot_array_import`): the
   ``[remap]`` importer and type and the ``[params]`` Godot's importers read; Godot adds its
   ``uid``, ``path`` and ``[deps]`` on the first import. Lossless (``compress/mode=0``), mip
@@ -38,10 +39,11 @@ from wrinklepipe.shading.hlsl import CustomNode
 UNITY_MAX_TEXTURE_SIZE = 16384
 
 
-def unity_guid(asset: str, rel: str, data: bytes) -> str:
-    """A Unity asset GUID (32 hex digits) for the file ``rel`` of ``asset`` holding ``data``."""
-    digest = hashlib.sha256(data).hexdigest()
-    return hashlib.md5(f"wrinklepipe:{asset}:{rel}:{digest}".encode()).hexdigest()
+def unity_guid(asset: str, rel: str) -> str:
+    """A Unity asset GUID (32 hex digits) for the file ``rel`` of ``asset``'s export: the same on
+    every export of that asset, so materials that reference the textures survive a re-export
+    with new texels."""
+    return hashlib.md5(f"wrinklepipe:unity:{asset}:{rel}".encode()).hexdigest()
 
 
 def unity_max_size(width: int, height: int) -> int:

@@ -80,6 +80,8 @@ def _unity(doc: dict[str, Any]) -> str:
    - All three: mip maps with the Box filter, Filter Mode Trilinear, Wrap Mode Clamp, Compression
      **None** (the texels wrinklepipe's tests render). To save memory choose Normal or High
      Quality compression instead; the error is then that of Unity's encoder (not measured here).
+   The GUIDs in the `.meta` files come from the asset's name and the file's path: exporting the
+   asset again and copying the folder over keeps every material's texture references.
 2. Import `{doc["mesh"]}` with glTFast or UnityGLTF (mesh, blend shapes, animation clip).
 3. In the face's Shader Graph add a **Custom Function** node: Type File, Source
    `WrinkleMaps.hlsl`, Name `WrinkleNormal`, Precision Float; inputs UV (Vector 2), BaseMap
