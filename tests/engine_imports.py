@@ -115,13 +115,34 @@ def check_unity_sidecars(folder: Path, files: dict[str, bytes], source: Validati
     assert len(guids) == 3
 
 
-def check_godot_sidecars(files: dict[str, bytes]) -> None:
-    """Every texture the wrinkle shader samples has an ``.import`` with the settings it needs."""
+def godot_uid_id(text: str) -> int:
+    """A Godot ``uid://`` text -> its id, as ``ResourceUID::text_to_id`` reads it: base 34,
+    'a'..'z' -> 0.., '0'..'9' -> 25.. (Godot's alphabet stops at 'y' and '8')."""
+    assert text.startswith("uid://") and len(text) > 6, text
+    n = 0
+    for ch in text[6:]:
+        if "a" <= ch <= "z":
+            digit = ord(ch) - ord("a")
+        else:
+            assert "0" <= ch <= "9", text
+            digit = ord(ch) - ord("0") + 25
+        assert digit < 34, text  # 'z' and '9' are not digits of Godot's UIDs
+        n = n * 34 + digit
+    return n
+
+
+def check_godot_sidecars(files: dict[str, bytes]) -> list[str]:
+    """Every texture the wrinkle shader samples has an ``.import`` with the settings it needs;
+    returns their UIDs."""
+    uids = []
     for rel, layers in sampled(files):
         cfg = configparser.ConfigParser(interpolation=None)
         cfg.optionxform = str  # Godot's keys are case-sensitive
         cfg.read_string(files[rel + ".import"].decode())
         params = dict(cfg["params"])
+        uid = cfg["remap"]["uid"].strip('"')
+        assert 0 <= godot_uid_id(uid) < 2**63  # a valid ResourceUID id
+        uids.append(uid)
         assert params["compress/mode"] == "0"  # Lossless: the texels as exported
         assert params["mipmaps/generate"] == "true" and params["mipmaps/limit"] == "-1"
         if layers is None:
@@ -137,6 +158,8 @@ def check_godot_sidecars(files: dict[str, bytes]) -> None:
             assert cfg["remap"]["type"] == '"CompressedTexture2DArray"'
             assert set(params) <= GODOT_LAYERED_KEYS, set(params) - GODOT_LAYERED_KEYS
             assert (params["slices/horizontal"], params["slices/vertical"]) == ("1", str(layers))
+    assert len(set(uids)) == len(uids)
+    return uids
 
 
 # ------------------------------------------------------------------------------------------------

@@ -27,12 +27,14 @@ from engine_imports import (
     check_godot_sidecars,
     check_unity_sidecars,
     check_unreal_clipboard,
+    godot_uid_id,
     sampled,
     t3d_nodes,
     unquote,
 )
 from test_export_engines import _exported_texture, _expressions, _input, _source
 
+from wrinklepipe.export import importers
 from wrinklepipe.export.job import export
 from wrinklepipe.io.package import png_pixels
 from wrinklepipe.shading import hlsl
@@ -63,8 +65,22 @@ def test_unity_textures_carry_their_import_settings(exported, tmp_path):
         assert yaml.safe_load(other[rel + ".meta"])["guid"] == guid
 
 
-def test_godot_textures_carry_their_import_settings(exported):
-    check_godot_sidecars(exported[1]["godot"][1])
+def test_godot_textures_carry_their_import_settings(exported, tmp_path):
+    src, out = exported
+    uids = check_godot_sidecars(out["godot"][1])
+    # the same asset re-exported with other texels keeps its UIDs
+    other, _ = export(_source(tmp_path, encoding="diff", size=64), tmp_path / "diff", "godot")
+    assert check_godot_sidecars(other) == uids
+
+
+def test_godot_uid_text_is_godots():
+    """Godot's own example (core/io/resource_uid.cpp): the largest id 0x7FFFFFFFFFFFFFFF is
+    written uid://d4n4ub6itg400; the writer writes it so and the reader here reads it back."""
+    assert importers.godot_uid_text(0x7FFFFFFFFFFFFFFF) == "uid://d4n4ub6itg400"
+    assert godot_uid_id("uid://d4n4ub6itg400") == 0x7FFFFFFFFFFFFFFF
+    assert importers.godot_uid_text(0) == "uid://a"
+    for n in (1, 33, 34, 12345678901234567, 2**62 + 7):
+        assert godot_uid_id(importers.godot_uid_text(n)) == n
 
 
 @pytest.mark.gpu

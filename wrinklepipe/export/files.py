@@ -311,10 +311,11 @@ def _godot(ex: Export) -> None:
     ex.names = _names(ex.pkg.meta.region_names, "snake")
     _arrays(ex)
     for rel, _, _, layers in _sidecars(ex):
+        uid = importers.godot_uid(ex.pkg.name, rel)
         text = (
-            importers.godot_normal_map_import()
+            importers.godot_normal_map_import(uid)
             if layers is None
-            else importers.godot_array_import(layers)
+            else importers.godot_array_import(layers, uid)
         )
         ex.files[rel + ".import"] = text.encode("utf-8")
     ex.files["wrinkle.gdshader"] = godot.godot_shader(ex.setup["shader"]).encode("utf-8")

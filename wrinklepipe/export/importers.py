@@ -15,8 +15,10 @@ Text only (no I/O): :mod:`wrinklepipe.export.files` puts them in the export.
   (:func:`unity_guid`): a rerun writes the same bytes, and a re-export of the asset with new
   texels keeps the GUIDs the project's materials reference.
 - **Godot 4** ``.import`` (:func:`godot_normal_map_import`, :func:`godot_array_import`): the
-  ``[remap]`` importer and type and the ``[params]`` Godot's importers read; Godot adds its
-  ``uid``, ``path`` and ``[deps]`` on the first import. Lossless (``compress/mode=0``), mip
+  ``[remap]`` importer, type and a ``uid`` derived from the asset name and the path
+  (:func:`godot_uid`; Godot's import keeps the uid it finds there, so a re-export keeps the
+  references), and the ``[params]`` Godot's importers read; Godot adds ``path`` and ``[deps]``
+  on the first import. Lossless (``compress/mode=0``), mip
   maps generated, ``detect_3d/compress_to=0`` (use in 3D does not switch the texture to VRAM
   compression); the base is ``compress/normal_map=1`` (a normal map: mip maps renormalised,
   x and y read, z rebuilt), ``roughness/mode=1`` (no roughness processing), OpenGL green
@@ -161,13 +163,37 @@ TextureImporter:
 """
 
 
-def godot_normal_map_import() -> str:
+#: The digits of Godot's resource UID text (``ResourceUID::id_to_text``: 'a'..'y', '0'..'8',
+#: base 34, the most significant digit first; Godot keeps this alphabet for compatibility).
+_GODOT_UID_DIGITS = "abcdefghijklmnopqrstuvwxy012345678"
+
+
+def godot_uid(asset: str, rel: str) -> str:
+    """A Godot resource UID (``uid://...``, a 63-bit id as ``ResourceUID::id_to_text`` writes it)
+    for the file ``rel`` of ``asset``'s export: the same on every export, so scenes and
+    materials that reference the texture keep their UID on a re-export."""
+    digest = hashlib.md5(f"wrinklepipe:godot:{asset}:{rel}".encode()).digest()
+    return godot_uid_text(int.from_bytes(digest[:8], "little") & 0x7FFFFFFFFFFFFFFF)
+
+
+def godot_uid_text(n: int) -> str:
+    """A non-negative 63-bit id as Godot writes it (``uid://`` + base-34 digits)."""
+    text = ""
+    while True:
+        n, c = divmod(n, len(_GODOT_UID_DIGITS))
+        text = _GODOT_UID_DIGITS[c] + text
+        if n == 0:
+            return "uid://" + text
+
+
+def godot_normal_map_import(uid: str) -> str:
     """The base normal map's ``.import`` (Lossless, a normal map, mip maps)."""
-    return """\
+    return f"""\
 [remap]
 
 importer="texture"
 type="CompressedTexture2D"
+uid="{uid}"
 
 [params]
 
@@ -191,7 +217,7 @@ detect_3d/compress_to=0
 """
 
 
-def godot_array_import(layers: int) -> str:
+def godot_array_import(layers: int, uid: str) -> str:
     """A vertical strip's ``.import`` as a Texture2DArray of ``layers`` slices (Lossless, mip
     maps)."""
     return f"""\
@@ -199,6 +225,7 @@ def godot_array_import(layers: int) -> str:
 
 importer="2d_array_texture"
 type="CompressedTexture2DArray"
+uid="{uid}"
 
 [params]
 

@@ -107,8 +107,10 @@ def _godot(doc: dict[str, Any]) -> str:
      already +Y), 3D detection off (it stays lossless).
    - `textures/wrinkle_states.png` / `textures/wrinkle_masks.png`: **Texture2DArray**, Slices
      Horizontal 1 / Vertical {n_states} / {n_masks}, Lossless, mipmaps generated.
-   Godot adds its `uid` and paths to the `.import` files on the first import. VRAM Compressed
-   saves memory at the cost of Godot's encoder's error (not measured here).
+   Each `.import` has a fixed `uid` (from the asset's name and the file's path): exporting the
+   asset again and copying the folder over keeps every reference to the textures. Godot adds
+   the imported paths on the first import. VRAM Compressed saves memory at the cost of Godot's
+   encoder's error (not measured here).
 2. Let Godot import `{doc["mesh"]}` (mesh, blend shapes and animations in an AnimationPlayer).
 3. Give the face surface a **ShaderMaterial** with `wrinkle.gdshader`; set `wp_base` to the base
    normal map, `wp_states` / `wp_masks` to the two arrays and `wp_albedo` to the colour map.
