@@ -282,9 +282,7 @@ def _sidecars(ex: Export) -> list[tuple[str, int, int, int | None]]:
         out.append((ex.setup["base"]["file"], base.shape[1], base.shape[0], None))
     for name, arr in (("states", ex.setup["statesArray"]), ("masks", ex.setup["masks"])):
         first = pkg.texture(
-            pkg.meta["states"][0]["texture"]
-            if name == "states"
-            else pkg.meta["masks"]["textures"][0]
+            pkg.meta.states[0].texture if name == "states" else pkg.meta.masks.textures[0]
         ).pixels
         out.append((arr["file"], first.shape[1], first.shape[0] * arr["layers"], arr["layers"]))
     return out
