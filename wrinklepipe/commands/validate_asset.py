@@ -15,6 +15,7 @@ from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import validate
 from wrinklepipe.validate.config import Config, load_config
+from wrinklepipe.validate.context import ValidateOptions
 from wrinklepipe.validate.report import print_summary, report_json, write_reports
 
 NAME = "validate-asset"
@@ -52,8 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--fail-on",
         choices=("error", "warning", "info"),
-        default="error",
-        help="lowest severity that makes the exit code 1 (default: error)",
+        default=AssetOptions().fail_on,
+        help=f"lowest severity that makes the exit code 1 (default: {AssetOptions().fail_on})",
     )
     p.add_argument("--config", metavar="FILE", help="TOML/JSON: ignore codes, change severities")
     p.add_argument(
@@ -62,14 +63,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="leave timings out of the JSON report (byte-identical reruns)",
     )
     p.add_argument("--no-render", action="store_true", help="skip the GPU render pass")
-    p.add_argument("--render-size", type=int, default=None, help="render target size (default 512)")
+    p.add_argument(
+        "--render-size",
+        type=int,
+        default=None,
+        help=f"render target size (default {ValidateOptions().render_size})",
+    )
     p.add_argument(
         "--source", metavar="MANIFEST", help="source manifest to measure the shipping error against"
     )
     p.add_argument(
         "--textures",
         choices=("auto", "png", "compressed"),
-        default="auto",
+        default=LoadOptions().textures,
         help="folders: validate the BC copies in compressed/ (auto: when present) or the PNGs",
     )
 
