@@ -21,6 +21,7 @@ from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.readers import FORMATS
 from wrinklepipe.paths import ROOT
 
 DATA = Path(__file__).resolve().parent.parent / "data"
@@ -67,12 +68,13 @@ def find_asset(path: str | Path) -> tuple[Path, Path]:
     p = Path(path)
     if not p.exists():
         raise input_error(p, "not found")
+    gltf = next(f for f in FORMATS if f.name == "gltf")
     if p.is_file():
-        if p.suffix.lower() not in (".gltf", ".glb"):
+        if p.suffix.lower() not in gltf.suffixes:
             raise input_error(p, "expected a .gltf or .glb (or a convert output folder)")
         return p.parent.resolve(), p.resolve()
-    found = sorted(p.glob("*.gltf")) + sorted(p.glob("*.glb"))
-    found = found or sorted(p.rglob("*.gltf")) + sorted(p.rglob("*.glb"))
+    found = [q for s in gltf.suffixes for q in sorted(p.glob("*" + s))]
+    found = found or [q for s in gltf.suffixes for q in sorted(p.rglob("*" + s))]
     if not found:
         raise input_error(p, "no .gltf or .glb in this folder (is it a convert output?)")
     return p.resolve(), found[0].resolve()
