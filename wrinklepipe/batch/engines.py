@@ -62,14 +62,8 @@ def cpu_count() -> int:
 
 
 def _lost(job: Job, message: str) -> AssetResult:
-    return AssetResult(
-        id=job.id,
-        manifest=job.manifest_rel,
-        output=job.id,
-        status="error",
-        source="none",
-        fail_on=job.options.fail_on,
-        problems=[{"file": job.manifest_rel, "key": "", "message": message}],
+    return AssetResult.could_not_run(
+        job, [{"file": job.manifest_rel, "key": "", "message": message}]
     )
 
 

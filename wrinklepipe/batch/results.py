@@ -46,6 +46,23 @@ class AssetResult:
         limit = SEVERITIES.index(self.fail_on)
         return [i for i in self.issues if SEVERITIES.index(i.get("severity", "info")) <= limit]
 
+    @classmethod
+    def could_not_run(
+        cls, job: Any, problems: list[dict[str, str]], worker: str = ""
+    ) -> AssetResult:
+        """The result of a :class:`~wrinklepipe.batch.plan.Job` that could not run:
+        ``status="error"``, nothing written, with its ``problems`` (file, key, message)."""
+        return cls(
+            id=job.id,
+            manifest=job.manifest_rel,
+            output=job.id,
+            status="error",
+            source="none",
+            fail_on=job.options.fail_on,
+            problems=problems,
+            worker=worker,
+        )
+
     def to_json(self) -> dict[str, Any]:
         out = asdict(self)
         out["exit_code"] = self.exit_code

@@ -63,15 +63,7 @@ def _error(job: Job, exc: BaseException) -> AssetResult:
                 "message": f"could not hash the inputs ({type(exc).__name__}: {exc})",
             }
         ]
-    return AssetResult(
-        id=job.id,
-        manifest=job.manifest_rel,
-        output=job.id,
-        status="error",
-        source="none",
-        fail_on=job.options.fail_on,
-        problems=problems,
-    )
+    return AssetResult.could_not_run(job, problems)
 
 
 def _from_entry(job: Job, entry: Entry, seconds: float) -> AssetResult:

@@ -102,17 +102,8 @@ def _crash(exc: BaseException, job: Job, what: str) -> list[dict[str, str]]:
 
 
 def _error_result(job: Job, problems: list[dict[str, str]]) -> AssetResult:
-    """The result of a job that could not run: ``status="error"`` with its problems."""
-    return AssetResult(
-        id=job.id,
-        manifest=job.manifest_rel,
-        output=job.id,
-        status="error",
-        source="none",
-        fail_on=job.options.fail_on,
-        worker=socket.gethostname(),
-        problems=problems,
-    )
+    """The result of a job that could not run here: ``status="error"`` with its problems."""
+    return AssetResult.could_not_run(job, problems, worker=socket.gethostname())
 
 
 def _guarded(job: Job, what: str, work: Callable[[], T]) -> T | AssetResult:
