@@ -1,8 +1,8 @@
 """The glTF container: a .glb or .gltf file -> its JSON tree and the bytes it names.
 
 Safety as in :mod:`wrinklepipe.io.gltf_read`: every URI is relative and stays inside the asset's
-folder (:func:`~wrinklepipe.io.gltf_read.safe_uri_path`), data URIs and external files are capped
-(:class:`~wrinklepipe.io.gltf_read.GltfReadOptions`), GLB chunk lengths are checked. Every problem
+folder (:func:`~wrinklepipe.io.gltf_limits.safe_uri_path`), data URIs and external files are capped
+(:class:`~wrinklepipe.io.gltf_limits.GltfReadOptions`), GLB chunk lengths are checked. Every problem
 is an :class:`~wrinklepipe.errors.InputError` naming the file and the JSON pointer.
 """
 
@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from wrinklepipe.errors import InputError, input_error
-from wrinklepipe.io.gltf_read import GltfReadOptions, safe_uri_path
+from wrinklepipe.io.gltf_limits import GltfReadOptions, safe_uri_path
 from wrinklepipe.io.json_safe import loads_json
 
 GLB_MAGIC = 0x46546C67

@@ -36,7 +36,7 @@ from wrinklepipe.document import decompress
 from wrinklepipe.document.container import Container, open_container
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.io import accessors as acc
-from wrinklepipe.io.gltf_read import GltfReadOptions
+from wrinklepipe.io.gltf_limits import GltfReadOptions
 
 ARRAY_BUFFER = 34962
 ELEMENT_ARRAY_BUFFER = 34963

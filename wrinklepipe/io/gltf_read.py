@@ -9,22 +9,19 @@ from the PNG header and capped before any pixel is decoded. Every problem is an
 
 from __future__ import annotations
 
-import base64
 import json
 import struct
-import urllib.parse
 from collections.abc import Callable
-from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from wrinklepipe.asset import Mesh
+from wrinklepipe.document.container import open_container
 from wrinklepipe.errors import input_error, plain_reason
 from wrinklepipe.io.accessors import read_accessor
-from wrinklepipe.io.confine import confine
-from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.io.gltf_limits import GltfReadOptions as GltfReadOptions  # re-exported
 from wrinklepipe.io.package import (
     EXTENSION,
     PackedTexture,
@@ -36,120 +33,24 @@ from wrinklepipe.io.package import (
 from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE, WrinkleMeta
 
 
-@dataclass(frozen=True)
-class GltfReadOptions:
-    """Reader limits: ``max_data_uri_bytes`` (decoded size of one data URI), ``max_pixels`` per
-    image, ``max_file_bytes`` for any external file."""
-
-    max_data_uri_bytes: int = 16 * 1024 * 1024
-    max_pixels: int = 8192 * 8192
-    max_file_bytes: int = 2 * 1024**3
-
-
-def safe_uri_path(folder: Path, uri: str, file: str, key: str) -> Path:
-    """Resolve a relative glTF URI inside ``folder``; refuse absolute paths, ``..`` and schemes."""
-    raw = urllib.parse.unquote(uri)
-    if raw.startswith(("/", "\\")) or (len(raw) > 1 and raw[1] == ":"):
-        raise input_error(
-            file, f"URI {uri!r} is an absolute path; only relative URIs are read", key
-        )
-    parsed = urllib.parse.urlparse(uri)
-    if parsed.scheme or parsed.netloc:
-        raise input_error(file, f"URI {uri!r} is not a relative path (scheme not allowed)", key)
-    parts = PurePosixPath(raw.replace("\\", "/")).parts
-    if ".." in parts:
-        raise input_error(file, f"URI {uri!r} leaves the asset folder ('..' not allowed)", key)
-    if not parts:
-        raise input_error(file, f"URI {uri!r} names no file", key)
-    return confine(folder, Path(*parts), file, key, "URI")  # the one confinement check
-
-
 class _Reader:
+    """A glTF file opened by the one container reader (:func:`wrinklepipe.document.container.
+    open_container`: GLB chunks, confined URIs, capped data URIs and files, buffers), with
+    bufferViews, accessors and PNG images on top."""
+
     def __init__(self, path: Path, options: GltfReadOptions) -> None:
         self.path = path
         self.file = str(path)
         self.opt = options
         self.folder = path.parent
-        self.glb_bin: bytes | None = None
-        self.doc = self._load()
-        self._buffers: dict[int, bytes] = {}
+        self.container = open_container(path, options)
+        self.doc = self.container.gltf
 
     def err(self, message: str, key: str = "") -> Exception:
         return input_error(self.file, message, key)
 
-    # -- container -------------------------------------------------------------------------
-    def _load(self) -> dict[str, Any]:
-        if not self.path.is_file():
-            raise self.err("file not found")
-        data = self.path.read_bytes()
-        if data[:4] == b"glTF":
-            if len(data) < 20:
-                raise self.err("GLB header truncated")
-            _, version, total = struct.unpack_from("<III", data, 0)
-            if version != 2:
-                raise self.err(f"GLB version {version}, expected 2")
-            if total != len(data):
-                raise self.err(f"GLB length field {total} != file size {len(data)}")
-            off, chunks = 12, []
-            while off + 8 <= len(data):
-                n, kind = struct.unpack_from("<II", data, off)
-                if off + 8 + n > len(data):
-                    raise self.err(f"GLB chunk at byte {off} runs past the end of the file")
-                chunks.append((kind, data[off + 8 : off + 8 + n]))
-                off += 8 + n
-            if not chunks or chunks[0][0] != 0x4E4F534A:
-                raise self.err("GLB has no JSON chunk first")
-            text = chunks[0][1]
-            bins = [c for k, c in chunks[1:] if k == 0x004E4942]
-            self.glb_bin = bins[0] if bins else None
-        else:
-            text = data
-        doc = loads_json(text, self.file, "glTF JSON")
-        if not isinstance(doc, dict) or str(doc.get("asset", {}).get("version")) != "2.0":
-            raise self.err("not a glTF 2.0 document (asset.version must be '2.0')", "/asset")
-        return doc
-
-    def _uri_bytes(self, uri: str, key: str) -> bytes:
-        if uri.startswith("data:"):
-            head, _, payload = uri.partition(",")
-            est = len(payload) * 3 // 4
-            if est > self.opt.max_data_uri_bytes:
-                raise self.err(
-                    f"data URI of ~{est} bytes is over the cap of {self.opt.max_data_uri_bytes}",
-                    key,
-                )
-            if not head.endswith(";base64"):
-                raise self.err("data URI is not base64", key)
-            try:
-                return base64.b64decode(payload, validate=True)
-            except ValueError:
-                raise self.err("data URI is not valid base64", key) from None
-        p = safe_uri_path(self.folder, uri, self.file, key)
-        if not p.is_file():
-            raise self.err(f"referenced file {uri!r} not found", key)
-        if p.stat().st_size > self.opt.max_file_bytes:
-            raise self.err(f"referenced file {uri!r} is over {self.opt.max_file_bytes} bytes", key)
-        return p.read_bytes()
-
     def buffer(self, i: int) -> bytes:
-        if i not in self._buffers:
-            bufs = self.doc.get("buffers", [])
-            if not 0 <= i < len(bufs):
-                raise self.err(f"buffer {i} does not exist", "/buffers")
-            b = bufs[i]
-            key = f"/buffers/{i}"
-            if "uri" in b:
-                data = self._uri_bytes(b["uri"], key + "/uri")
-            elif i == 0 and self.glb_bin is not None:
-                data = self.glb_bin
-            else:
-                raise self.err("buffer has no uri and there is no GLB binary chunk", key)
-            if len(data) < int(b.get("byteLength", 0)):
-                raise self.err(
-                    f"buffer holds {len(data)} bytes, byteLength says {b['byteLength']}", key
-                )
-            self._buffers[i] = data
-        return self._buffers[i]
+        return self.container.buffer(i)
 
     def view(self, i: int) -> tuple[bytes, int]:
         views = self.doc.get("bufferViews", [])
@@ -175,7 +76,7 @@ class _Reader:
             raise self.err(f"image {i} does not exist", "/images")
         img = imgs[i]
         if "uri" in img:
-            data = self._uri_bytes(img["uri"], key + "/uri")
+            data = self.container.uri_bytes(img["uri"], key + "/uri")
         elif "bufferView" in img:
             data, _ = self.view(int(img["bufferView"]))
         else:
