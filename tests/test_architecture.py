@@ -219,3 +219,44 @@ def test_commands_import_no_other_command():
         if t.startswith("wrinklepipe.commands.") and t != m
     )
     assert not shared, f"commands importing commands: {shared}"
+
+
+#: Objects whose ``.meta`` is some other dict (a batch cache entry's record), not a package's.
+_OTHER_META = {"self", "entry"}
+
+
+def _string_keyed_meta(tree: ast.AST) -> list[int]:
+    """Lines reading a package's metadata by string key: ``X.meta["k"]`` or ``X.meta.get()``."""
+
+    def is_meta(node: ast.AST) -> bool:
+        return (
+            isinstance(node, ast.Attribute)
+            and node.attr == "meta"
+            and not (isinstance(node.value, ast.Name) and node.value.id in _OTHER_META)
+        )
+
+    lines = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Subscript) and is_meta(node.value):
+            lines.append(node.lineno)
+        elif (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "get"
+            and is_meta(node.func.value)
+        ):
+            lines.append(node.lineno)
+    return lines
+
+
+def test_package_metadata_is_read_by_field():
+    """``WrinklePackage.meta`` is a typed :class:`wrinklepipe.metadata.WrinkleMeta`: the package
+    reads its fields (``pkg.meta.states[0].texture``), never string keys (the transitional
+    ``__getitem__`` is for code in flight only)."""
+    found = [
+        f"{name}:{line}"
+        for name, path in _modules().items()
+        for line in _string_keyed_meta(ast.parse(path.read_text(encoding="utf-8")))
+    ]
+    assert not found, found
+    assert _string_keyed_meta(ast.parse('pkg.meta["states"]\nex.pkg.meta.get("x")')) == [1, 2]
