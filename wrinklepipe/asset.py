@@ -17,13 +17,20 @@ import numpy as np
 class MeshPart:
     """Where a run of a merged mesh's vertices comes from: vertices ``start .. start + count``
     are, in order, the vertices of the source primitive at ``pointer`` (a glTF JSON pointer
-    such as ``/meshes/2/primitives/0``) instanced by node ``node``."""
+    such as ``/meshes/2/primitives/0``, or a USD ``Mesh`` prim path) instanced by node ``node``.
+
+    A USD part also says how its render vertices map back onto the prim's topology:
+    ``corners[c]`` is the render vertex (``0 .. count``) of ``faceVertexIndices[c]``, and
+    ``transform`` the 4x4 (column vectors) the reader applied to the prim's points (its
+    local-to-world, or the skin's ``geomBindTransform``)."""
 
     name: str
     pointer: str
     start: int
     count: int
     node: int | None = None
+    corners: np.ndarray | None = None  # [C] int64, USD: faceVertexIndices corner -> vertex
+    transform: np.ndarray | None = None  # [4, 4] float64, USD: prim space -> these vertices
 
 
 @dataclass

@@ -388,9 +388,10 @@ def _document_problems(m: Manifest, file: str, problems: ProblemList) -> None:
             f"mesh, whose wrinkled material's normalTexture is then the base; here: {what})",
             "base",
         )
+    usd = m.mesh is not None and m.mesh.suffix.lower() in (".usd", ".usda", ".usdc", ".usdz")
     for key, value in (("material", m.material), ("meshes", m.meshes)):
-        if value and not gltf:
-            problems.add(file, f"selects parts of a .gltf/.glb mesh; here: {what}", key)
+        if value and not (gltf or usd):
+            problems.add(file, f"selects parts of a .gltf/.glb or USD mesh; here: {what}", key)
 
 
 def _driver_problems(m: Manifest, file: str, problems: ProblemList) -> None:

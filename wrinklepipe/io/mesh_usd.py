@@ -16,6 +16,12 @@
   matrices from ``bindTransforms``; ``geomBindTransform`` is applied to the points. Matrices are
   converted from USD's row-vector convention to column vectors.
 - Non-skinned meshes are baked to world space when ``bake_transforms``.
+- Wrinkle data a wrinklepipe layer adds (``primvars:wrinkle:vertexId``, ``wrinkle:tangent``,
+  ``wrinkle:bias``; vertex or faceVarying) is read per render vertex, tangents transformed
+  with the points.
+- ``Mesh.parts`` holds one :class:`~wrinklepipe.asset.MeshPart` per mesh: the prim path, the
+  render vertex of every ``faceVertexIndices`` corner and the transform applied (what a layer
+  over the source needs to write per-vertex data back in the prim's own topology and space).
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.asset import Mesh
+from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.confine import confine_usd
 from wrinklepipe.io.mesh_gltf import drop_degenerate
@@ -46,7 +52,8 @@ class UsdMeshOptions:
     prim: str | None = None
 
 
-def _open(path: Path) -> Any:
+def open_stage(path: Path) -> Any:
+    """``Usd.Stage.Open`` after :func:`~wrinklepipe.io.confine.confine_usd`; one clear error."""
     from pxr import Tf, Usd  # deferred: usd-core, USD only
 
     confine_usd(path)  # sublayers, references, payloads: inside the asset's folder
@@ -65,7 +72,7 @@ def read_usd_meshes(path: str | Path, options: UsdMeshOptions | None = None) -> 
 
     opts = options or UsdMeshOptions()
     p = Path(path)
-    stage = _open(p)
+    stage = open_stage(p)
     time = Usd.TimeCode.Default() if opts.time is None else Usd.TimeCode(opts.time)
     out: list[Mesh] = []
     skipped: list[str] = []
@@ -242,26 +249,41 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
             vertex_ids = vid_c[src, 0].astype(np.int64)
         else:
             notes.append("ignored primvars:wrinkle:vertexId" + (f" ({why})" if why else ""))
+    wrinkle4: dict[str, np.ndarray | None] = {}
+    for name in ("tangent", "bias"):
+        got = None
+        p4 = api.GetPrimvar(f"wrinkle:{name}")
+        if p4 and p4.HasValue():
+            got, why = _primvar_corners(p4, time, counts, fvi, n_p, 4)
+            if got is None or not np.isfinite(got).all():
+                notes.append(f"ignored primvars:wrinkle:{name}" + (f" ({why})" if why else ""))
+                got = None
+        wrinkle4[name] = None if got is None else got[src].astype(np.float32)
     mesh = Mesh(
         vertex_ids=vertex_ids,
         positions=positions.astype(np.float32),
         indices=tris.astype(np.uint32),
         uvs=None if uvs is None else uvs.astype(np.float32),
         normals=None if normals is None else normals.astype(np.float32),
+        tangents=wrinkle4["tangent"],
+        colors=wrinkle4["bias"],
         name=ppath,
         notes=notes,
     )
+    applied = np.eye(4)
 
     skinned = False
     if prim.HasAPI(UsdSkel.BindingAPI):
         binding = UsdSkel.BindingAPI(prim)
         _blend_shapes(file, ppath, binding, mesh, vmap, n_p)
-        skinned = _skin(file, prim, mesh, vmap, n_p, time)
+        skinned, applied = _skin(file, prim, mesh, vmap, n_p, time)
     if not skinned and opts.bake_transforms:
         m = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time)).T
         if not np.allclose(m, np.eye(4)):
             _apply(mesh, m)
+            applied = m
             mesh.notes.append("baked the local-to-world transform")
+    mesh.parts = (MeshPart(ppath, ppath, 0, len(vmap), corners=corner_v, transform=applied),)
 
     tris2, n_degen = drop_degenerate(mesh.positions, mesh.indices.astype(np.int64))
     if n_degen:
@@ -281,6 +303,11 @@ def _apply(mesh: Mesh, m: np.ndarray) -> None:
         n = mesh.normals.astype(np.float64) @ np.linalg.inv(lin)
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
         mesh.normals = n.astype(np.float32)
+    if mesh.tangents is not None:  # tangent vectors move with the points; handedness with det
+        t = mesh.tangents[:, :3].astype(np.float64) @ lin.T
+        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-30)
+        w = mesh.tangents[:, 3:] * np.sign(np.linalg.det(lin))
+        mesh.tangents = np.concatenate([t, w], axis=1).astype(np.float32)
     if np.linalg.det(lin) < 0:
         mesh.indices = mesh.indices[:, [0, 2, 1]].copy()
 
@@ -358,20 +385,23 @@ def _blend_shapes(
         )
 
 
-def _skin(file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: Any) -> bool:
+def _skin(
+    file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: Any
+) -> tuple[bool, np.ndarray]:
+    """Read the UsdSkel skin onto ``mesh``: (skinned, the geomBindTransform applied)."""
     from pxr import Usd, UsdSkel  # deferred: usd-core, USD only
 
     root = UsdSkel.Root.Find(prim)
     if not root:
-        return False
+        return False, np.eye(4)
     cache = UsdSkel.Cache()
     cache.Populate(root, Usd.TraverseInstanceProxies())
     sq = cache.GetSkinningQuery(prim)
     if not sq or not sq.HasJointInfluences():
-        return False
+        return False, np.eye(4)
     skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
     if not skel:
-        return False
+        return False, np.eye(4)
     skel_q = cache.GetSkelQuery(skel)
     skel_joints = [str(j) for j in skel_q.GetJointOrder()]
     order = sq.GetJointOrder()
@@ -379,10 +409,10 @@ def _skin(file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: An
     missing = [j for j in joint_names if j not in skel_joints]
     if missing:
         mesh.notes.append(f"skin ignored: joints {missing[:3]} are not in the skeleton")
-        return False
+        return False, np.eye(4)
     inf = sq.ComputeJointInfluences(time)
     if not inf:
-        return False
+        return False, np.eye(4)
     ji, jw = inf
     k = sq.GetNumInfluencesPerComponent()
     ji = np.asarray(ji, dtype=np.int64).reshape(-1, k)
@@ -392,7 +422,7 @@ def _skin(file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: An
         jw = np.repeat(jw[:1], n_p, axis=0)
     if len(ji) != n_p:
         mesh.notes.append(f"skin ignored: {len(ji)} influences for {n_p} points")
-        return False
+        return False, np.eye(4)
     if k > 4:
         top = np.argsort(-jw, axis=1, kind="stable")[:, :4]
         ji = np.take_along_axis(ji, top, 1)
@@ -408,7 +438,7 @@ def _skin(file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: An
     bind = skel.GetBindTransformsAttr().Get()
     if bind is None or len(bind) != len(skel_joints):
         mesh.notes.append("skin ignored: Skeleton bindTransforms missing or wrong length")
-        return False
+        return False, np.eye(4)
     bind_col = np.asarray(bind, dtype=np.float64).transpose(0, 2, 1)  # row- to column-vector
     ibm = np.linalg.inv(bind_col)[[skel_joints.index(j) for j in joint_names]]
     geom = np.asarray(sq.GetGeomBindTransform(time), dtype=np.float64).T
@@ -420,7 +450,7 @@ def _skin(file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: An
     mesh.joint_names = tuple(joint_names)
     mesh.inverse_bind = ibm.astype(np.float32)
     mesh.notes.append(f"UsdSkel skin: {len(joint_names)} joints, {k} influence(s) per point")
-    return True
+    return True, geom
 
 
 def usd_joint_world_matrices(path: str | Path, mesh: Mesh, time: float | None = None) -> np.ndarray:
@@ -429,7 +459,7 @@ def usd_joint_world_matrices(path: str | Path, mesh: Mesh, time: float | None = 
     from pxr import Usd, UsdGeom, UsdSkel  # deferred: usd-core, USD only
 
     p = Path(path)
-    stage = _open(p)
+    stage = open_stage(p)
     prim = stage.GetPrimAtPath(mesh.name)
     if not prim:
         raise input_error(p, f"no prim {mesh.name}")
@@ -458,7 +488,7 @@ def usd_blend_shape_weights(path: str | Path, mesh: Mesh, time: float) -> dict[s
     from pxr import Usd, UsdSkel  # deferred: usd-core, USD only
 
     p = Path(path)
-    stage = _open(p)
+    stage = open_stage(p)
     prim = stage.GetPrimAtPath(mesh.name)
     skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton() if prim else None
     if not skel:

@@ -16,9 +16,11 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.asset import Mesh
+from wrinklepipe.document.usd_source import merge_parts
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.confine import confine_usd
 from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.io.mesh_usd import read_usd_meshes
 from wrinklepipe.io.package import (
     PackedTexture,
     WeightCurves,
@@ -26,7 +28,7 @@ from wrinklepipe.io.package import (
     png_pixels,
     safe_name,
 )
-from wrinklepipe.io.usd_write import API_NAME, register_schema
+from wrinklepipe.io.usd_write import API_NAME, LAYERED_OVER, register_schema
 from wrinklepipe.metadata import (
     CompressedCopy,
     MaskChannel,
@@ -119,40 +121,47 @@ def _stem(asset: Any) -> str:
     return PurePosixPath(asset.path.replace("\\", "/")).stem
 
 
-def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> WrinklePackage:
-    """Load a wrinklepipe USD stage as a :class:`WrinklePackage`."""
-    from pxr import Tf, Usd, UsdGeom, UsdShade, UsdSkel  # deferred: usd-core, USD only
+def _own_layout(prim: Any) -> bool:
+    """The layout :func:`~wrinklepipe.io.usd_write.build_stage` writes: triangles, one point per
+    render vertex (``primvars:st`` and ``wrinkle:tangent`` per vertex)."""
+    from pxr import UsdGeom  # deferred: usd-core, USD only
 
-    opt = options or UsdReadOptions()
-    path = Path(path)
-    file = str(path)
-    if not path.is_file():
-        raise input_error(file, "file not found")
-    register_schema()
-    confine_usd(path)  # sublayers, references, payloads: inside the asset's folder
-    try:
-        stage = Usd.Stage.Open(str(path))
-    except Tf.ErrorException as exc:
-        raise input_error(file, f"cannot open USD: {str(exc).strip()}") from None
-    if stage is None:
-        raise input_error(file, "cannot open USD stage")
-    mat_prim = None
-    for prim in stage.Traverse():
-        if prim.IsA(UsdShade.Material) and _has_api(prim):
-            mat_prim = prim
-            break
-    if mat_prim is None:
-        raise input_error(file, f"no Material with {API_NAME}: not a wrinklepipe asset")
-    mat = UsdShade.Material(mat_prim)
-    mesh_prim = None
-    for prim in stage.Traverse():
-        if prim.IsA(UsdGeom.Mesh):
-            bound, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
-            if bound and bound.GetPath() == mat_prim.GetPath():
-                mesh_prim = prim
-                break
-    if mesh_prim is None:
-        raise input_error(file, f"no Mesh bound to {mat_prim.GetPath()}")
+    gm = UsdGeom.Mesh(prim)
+    counts = gm.GetFaceVertexCountsAttr().Get()
+    pv = UsdGeom.PrimvarsAPI(prim)
+    return (
+        counts is not None
+        and len(counts) > 0
+        and bool(np.all(np.asarray(counts) == 3))
+        and all(
+            pv.GetPrimvar(n) and pv.GetPrimvar(n).GetInterpolation() == UsdGeom.Tokens.vertex
+            for n in ("st", "wrinkle:tangent")
+        )
+    )
+
+
+def _layered_mesh(path: Path, file: str, prims: list[str]) -> Mesh:
+    """The wrinkled meshes of a layer over a source, as the mesh reader reads them (render
+    vertices through the corner map; wrinkle primvars vertex or faceVarying), merged."""
+    parts = {m.name: m for m in read_usd_meshes(path)}
+    got = []
+    for p in prims:
+        m = parts.get(p)
+        if m is None:
+            raise input_error(file, "the wrinkled mesh has no faces", p)
+        for what, value in (("wrinkle:tangent", m.tangents), ("wrinkle:vertexId", m.vertex_ids)):
+            if value is None:
+                raise input_error(file, f"primvars:{what} missing or unreadable", p)
+        if m.uvs is None or m.normals is None:
+            raise input_error(file, "texture coordinates (primvars:st) or normals missing", p)
+        got.append(m)
+    return merge_parts(got, keep_ids=True)
+
+
+def _own_mesh(stage: Any, mesh_prim: Any, file: str) -> Mesh:
+    """The mesh of a stage :func:`~wrinklepipe.io.usd_write.build_stage` wrote."""
+    from pxr import UsdGeom, UsdSkel  # deferred: usd-core, USD only
+
     mkey = str(mesh_prim.GetPath())
     gm = UsdGeom.Mesh(mesh_prim)
     counts = np.asarray(gm.GetFaceVertexCountsAttr().Get() or [], np.int64)
@@ -232,6 +241,47 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         name=mesh_prim.GetName(),
         **skin,
     )
+    return mesh
+
+
+def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> WrinklePackage:
+    """Load a wrinklepipe USD stage as a :class:`WrinklePackage`."""
+    from pxr import Tf, Usd, UsdGeom, UsdShade  # deferred: usd-core, USD only
+
+    opt = options or UsdReadOptions()
+    path = Path(path)
+    file = str(path)
+    if not path.is_file():
+        raise input_error(file, "file not found")
+    register_schema()
+    confine_usd(path)  # sublayers, references, payloads: inside the asset's folder
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Tf.ErrorException as exc:
+        raise input_error(file, f"cannot open USD: {str(exc).strip()}") from None
+    if stage is None:
+        raise input_error(file, "cannot open USD stage")
+    mat_prim = None
+    for prim in stage.Traverse():
+        if prim.IsA(UsdShade.Material) and _has_api(prim):
+            mat_prim = prim
+            break
+    if mat_prim is None:
+        raise input_error(file, f"no Material with {API_NAME}: not a wrinklepipe asset")
+    mat = UsdShade.Material(mat_prim)
+    meshes = [
+        prim
+        for prim in stage.Traverse()
+        if prim.IsA(UsdGeom.Mesh)
+        and (bound := UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0])
+        and bound.GetPath() == mat_prim.GetPath()
+    ]
+    if not meshes:
+        raise input_error(file, f"no Mesh bound to {mat_prim.GetPath()}")
+    if not mat_prim.HasAttribute(LAYERED_OVER) and len(meshes) == 1 and _own_layout(meshes[0]):
+        mesh = _own_mesh(stage, meshes[0], file)
+    else:  # a layer over a source (wrinklepipe.document.usd_layer): the source's topology
+        mesh = _layered_mesh(path, file, [str(m.GetPath()) for m in meshes])
 
     # -- textures ----------------------------------------------------------------------------
     textures: list[PackedTexture] = []

@@ -76,6 +76,11 @@ API_ATTRIBUTES: dict[str, str] = {
 }
 
 
+#: Custom attribute on the wrinkled material of a layer over a USD source (the source's file
+#: name; :mod:`wrinklepipe.document.usd_layer`): its meshes keep the source's topology.
+LAYERED_OVER = "wrinkle:layeredOver"
+
+
 def register_schema() -> None:
     """Register the codeless ``WrinkleMapsAPI`` (``schemas/usd/plugInfo.json``); idempotent.
 

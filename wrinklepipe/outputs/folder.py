@@ -21,7 +21,14 @@ from typing import Any
 from wrinklepipe import reuse
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.document.model import Document
+from wrinklepipe.document.usd_layer import (
+    flattened_usdz,
+    layer_bytes,
+    layer_stage,
+    source_reference,
+)
 from wrinklepipe.document.usd_scene import add_scene
+from wrinklepipe.document.usd_source import UsdSource
 from wrinklepipe.document.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
 from wrinklepipe.document.write import document_files
 from wrinklepipe.io.gltf_write import glb_bytes, gltf_document
@@ -107,11 +114,18 @@ def write_folder(
     pkg: WrinklePackage,
     usd_format: str = "usda",
     source: tuple[Document, WrinkleTarget] | None = None,
+    usd_source: UsdSource | None = None,
+    final: Path | None = None,
 ) -> list[str]:
     """Write ``files`` (sorted) under ``folder``, then ``NAME.usda`` and, when ``usd_format`` is
     ``usdc`` or ``usdz``, that layer too (textures are the PNGs already in ``files``).
     ``source``: a glTF source document, whose other parts the USD layers carry too
-    (:func:`wrinklepipe.document.usd_scene.add_scene`); returns notes on what USD cannot hold."""
+    (:func:`wrinklepipe.document.usd_scene.add_scene`); returns notes on what USD cannot hold.
+    ``usd_source``: a USD source: ``NAME.usda`` (+ ``.usdc``) is a layer over it naming it
+    relative to ``final`` (the folder ``folder`` becomes), and ``NAME.usdz`` that layer
+    flattened (:mod:`wrinklepipe.document.usd_layer`)."""
+    if usd_source is not None:
+        return _write_layered(folder, files, pkg, usd_format, usd_source, final or folder)
     stage = build_stage(pkg)
     extra: dict[str, bytes] = {}
     notes: list[str] = []
@@ -134,3 +148,19 @@ def write_folder(
             extra=extra if u.endswith(".usdz") else None,
         )
     return notes
+
+
+def _write_layered(
+    folder: Path, files: dict[str, bytes], pkg: WrinklePackage, usd_format: str,
+    usd_source: UsdSource, final: Path,
+) -> list[str]:  # fmt: skip
+    stage, notes = layer_stage(usd_source, pkg)
+    ref = source_reference(usd_source.path, final)
+    out = dict(files)
+    out[f"{pkg.name}.usda"] = layer_bytes(stage, ref, ".usda")
+    if usd_format == "usdc":
+        out[f"{pkg.name}.usdc"] = layer_bytes(stage, ref, ".usdc")
+    out[f"{pkg.name}.usdz"], n = flattened_usdz(stage, pkg, pkg.name)
+    for rel, data in sorted(out.items()):
+        write_bytes(folder / rel, data)
+    return notes + n

@@ -152,7 +152,7 @@ def convert(
                 )
             notes += n
             read = input_rows(manifest.root, manifest.input_files)
-            notes += write_folder(tmp, files, pkg, opt.usd_format, document)
+            notes += write_folder(tmp, files, pkg, opt.usd_format, document, got.usd, output)
             with console.status("validating"):
                 validation = (
                     validate_output(tmp, manifest.path, opt.render, html_page=True, source=source)

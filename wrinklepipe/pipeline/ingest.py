@@ -8,7 +8,10 @@ manifest's ``material`` (and ``meshes``) select the wrinkled primitives, which g
 tangents and vertex IDs in the document, and the render mesh is those primitives only
 (:func:`wrinklepipe.document.render_mesh.wrinkled_mesh`); convert then writes the document back
 with the wrinkle data added. Without ``base`` the wrinkled material's own ``normalTexture`` is
-the base map. Other meshes (USD, OBJ) come through :func:`wrinklepipe.io.mesh.load_mesh`.
+the base map. A USD source likewise: the manifest's ``material``/``meshes`` select the wrinkled
+Mesh prims (:func:`wrinklepipe.document.usd_source.read_usd_source`), the render mesh is those
+meshes, and convert writes a layer over the source. OBJ comes through
+:func:`wrinklepipe.io.mesh.load_mesh`.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from wrinklepipe.document.images import texture_normals
 from wrinklepipe.document.model import Document, read_document
 from wrinklepipe.document.render_mesh import wrinkled_mesh
 from wrinklepipe.document.repair import repair
+from wrinklepipe.document.usd_source import UsdSource, read_usd_source
 from wrinklepipe.document.wrinkle_maps import WrinkleTarget
 from wrinklepipe.document.wrinkled import (
     add_wrinkle_attributes,
@@ -107,12 +111,14 @@ def read_maps(
 @dataclass
 class Ingested:
     """What ingest read: the asset, notes, and for a glTF source the document (wrinkle
-    attributes added to the wrinkled primitives) with where its wrinkle data goes."""
+    attributes added to the wrinkled primitives) with where its wrinkle data goes; for a USD
+    source its wrinkled meshes (``usd``)."""
 
     asset: WrinkleAsset
     notes: list[str] = field(default_factory=list)
     document: Document | None = None
     target: WrinkleTarget | None = None
+    usd: UsdSource | None = None
 
 
 @dataclass
@@ -191,12 +197,19 @@ def ingest_all(manifest: Any) -> Ingested:
             manifest.path, "the manifest names no mesh; glTF/USD output needs one", "mesh"
         )
     source = None
+    usd = None
     fmt = format_of(manifest.mesh)
     if fmt is not None and fmt.name == "gltf":
         source = read_source_document(manifest)
         mesh = source.mesh
         base, states, mask_arr, notes = read_maps(manifest, source.base, stats)
         notes = source.notes + notes
+        check_masks_on_mesh(mask_arr, mesh, manifest)
+    elif fmt is not None and fmt.name == "usd":
+        usd = read_usd_source(manifest)
+        mesh = usd.mesh
+        base, states, mask_arr, notes = read_maps(manifest, None, stats)
+        notes = usd.notes + notes
         check_masks_on_mesh(mask_arr, mesh, manifest)
     else:
         base, states, mask_arr, notes = read_maps(manifest, None, stats)
@@ -214,7 +227,7 @@ def ingest_all(manifest: Any) -> Ingested:
     if source is not None and source.target.base_texture is not None:
         asset.provenance["base_source"] = "material"
     if source is None:
-        return Ingested(asset, notes)
+        return Ingested(asset, notes, usd=usd)
     return Ingested(asset, notes, source.doc, source.target)
 
 

@@ -1,0 +1,470 @@
+"""convert over a USD source writes a layer over it: the source file is untouched (hash), the
+composed stage has every source prim with equal values (read independently through pxr) plus
+the wrinkle data, UsdValidation finds no error the source does not have, and the flattened usdz
+holds it all.
+
+Sources: a generated avatar (a skinned quad-grid head whose UV layout has a mirrored island, so
+its tangents differ per corner on the seam; a skinned body sharing the head's material; a rigid
+eye under a rotated Xform; a textured material; a 3-joint skeleton with an animation), and from
+``../shared/data`` Khronos' RiggedFigure (UsdSkel, 19 joints, no UVs) and CesiumMan (UsdSkel,
+textured) as Apple's Reality Converter wrote them."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from wrinkle_setups import write_setup
+
+from wrinklepipe.cli import main
+from wrinklepipe.io.confine import allowed_roots
+from wrinklepipe.io.images import write_image
+from wrinklepipe.io.usd_read import read_usd
+from wrinklepipe.pipeline.convert import ConvertOptions, convert
+
+pxr = pytest.importorskip("pxr")
+from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdSkel, UsdValidation  # noqa: E402
+
+USDZ = Path(__file__).resolve().parents[2] / "shared" / "data" / "usd" / "usd-wg" / "test_assets"
+RIGGED = USDZ / "USDZ" / "RiggedFigure" / "RiggedFigure.usdz"
+CESIUM = USDZ / "USDZ" / "CesiumMan" / "CesiumMan.usdz"
+IDENTITY = "( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) )"
+TILT = "(0.9238795, 0.3826834, 0, 0)"  # 45 degrees about X
+CENTRE = {  # real characters: regions in the middle of their layout (sides are not judged)
+    "brow": ((0.2, 0.2, 0.8, 0.5), "center"),
+    "mouth": ((0.2, 0.5, 0.8, 0.8), "center"),
+}
+
+
+def _grid() -> tuple[str, np.ndarray]:
+    """A 3 x 3 quad head in the XY plane facing +Z; columns 0-1 map u = 0.6 x, column 2 is a
+    mirrored island u = 1 - 0.6 (x - 2/3) (x, y in [0, 1]): the corners on x = 2/3 have two UVs
+    and, since u runs the other way there, the opposite tangent."""
+    xs = np.linspace(0, 1, 4)
+    pts = np.array([(x, 1.3 + 0.6 * y, 0.1) for y in xs for x in xs])
+    faces, st = [], []
+    for r in range(3):
+        for c in range(3):
+            quad = [r * 4 + c, r * 4 + c + 1, (r + 1) * 4 + c + 1, (r + 1) * 4 + c]
+            faces += quad
+            for q in quad:
+                x, y = xs[q % 4], xs[q // 4]
+                st.append((0.6 * x if c < 2 else 1 - 0.6 * (x - 2 / 3), y))
+    fmt = ", ".join
+    text = (
+        f"point3f[] points = [{fmt(f'({a:g}, {b:g}, {z:g})' for a, b, z in pts)}]\n"
+        f"int[] faceVertexCounts = [{fmt(['4'] * 9)}]\n"
+        f"int[] faceVertexIndices = [{fmt(map(str, faces))}]\n"
+        f"texCoord2f[] primvars:st = [{fmt(f'({u:g}, {v:g})' for u, v in st)}] "
+        '(interpolation = "faceVarying")\n'
+        f'normal3f[] normals = [{fmt(["(0, 0, 1)"] * 16)}] (interpolation = "vertex")\n'
+    )
+    return text, np.array(st)
+
+
+def _quad(z: float, y0: float) -> str:
+    return (
+        f"point3f[] points = [(0, {y0}, {z}), (1, {y0}, {z}), (1, {y0 + 1}, {z}), "
+        f"(0, {y0 + 1}, {z})]\n"
+        "int[] faceVertexCounts = [4]\nint[] faceVertexIndices = [0, 1, 2, 3]\n"
+        "texCoord2f[] primvars:st = [(0, 0), (1, 0), (1, 1), (0, 1)] "
+        '(interpolation = "vertex")\n'
+        f"normal3f[] normals = [{', '.join(['(0, 0, 1)'] * 4)}] "
+        '(interpolation = "vertex")\n'
+    )
+
+
+def _material(name: str, texture: bool) -> str:
+    p = f"/Avatar/Looks/{name}"
+    tex = (
+        f"""
+            color3f inputs:diffuseColor.connect = <{p}/Albedo.outputs:rgb>"""
+        if texture
+        else ""
+    )
+    shaders = (
+        f"""
+        def Shader "Albedo" {{
+            uniform token info:id = "UsdUVTexture"
+            asset inputs:file = @textures/skin.png@
+            float2 inputs:st.connect = <{p}/St.outputs:result>
+            float3 outputs:rgb
+        }}
+        def Shader "St" {{
+            uniform token info:id = "UsdPrimvarReader_float2"
+            string inputs:varname = "st"
+            float2 outputs:result
+        }}"""
+        if texture
+        else ""
+    )
+    return f"""
+    def Material "{name}" {{
+        token outputs:surface.connect = <{p}/Surface.outputs:surface>
+        def Shader "Surface" {{
+            uniform token info:id = "UsdPreviewSurface"{tex}
+            float inputs:roughness = 0.6
+            token outputs:surface
+        }}{shaders}
+    }}"""
+
+
+def _skinned(name: str, geometry: str, joint: int, n: int, material: str) -> str:
+    return f"""
+    def Mesh "{name}" (prepend apiSchemas = ["SkelBindingAPI", "MaterialBindingAPI"]) {{
+        {geometry}
+        uniform token subdivisionScheme = "none"
+        int[] primvars:skel:jointIndices = [{", ".join([str(joint)] * n)}] (
+            interpolation = "vertex"
+            elementSize = 1
+        )
+        float[] primvars:skel:jointWeights = [{", ".join(["1"] * n)}] (
+            interpolation = "vertex"
+            elementSize = 1
+        )
+        matrix4d primvars:skel:geomBindTransform = {IDENTITY}
+        rel skel:skeleton = </Avatar/Skel>
+        rel material:binding = </Avatar/Looks/{material}>
+    }}"""
+
+
+def write_avatar(folder: Path) -> Path:
+    """The generated avatar (see the module doc) as ``avatar.usda`` + ``textures/skin.png``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "textures").mkdir(exist_ok=True)
+    albedo = np.zeros((4, 4, 3))
+    albedo[..., 0] = np.linspace(0, 1, 4)
+    write_image(folder / "textures" / "skin.png", albedo, 8)
+    head, _ = _grid()
+    ident = IDENTITY
+
+    def up(y: float) -> str:
+        return f"( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, {y}, 0, 1) )"
+
+    text = f"""#usda 1.0
+(
+    defaultPrim = "Avatar"
+    metersPerUnit = 1
+    upAxis = "Y"
+    startTimeCode = 0
+    endTimeCode = 48
+    timeCodesPerSecond = 24
+)
+
+def SkelRoot "Avatar" (kind = "component") {{
+    def Skeleton "Skel" (prepend apiSchemas = ["SkelBindingAPI"]) {{
+        uniform token[] joints = ["root", "root/neck", "root/neck/head"]
+        uniform matrix4d[] bindTransforms = [{ident}, {up(1)}, {up(1.5)}]
+        uniform matrix4d[] restTransforms = [{ident}, {up(1)}, {up(0.4)}]
+        rel skel:animationSource = </Avatar/Skel/Anim>
+        def SkelAnimation "Anim" {{
+            uniform token[] joints = ["root/neck/head"]
+            quatf[] rotations.timeSamples = {{0: [(1, 0, 0, 0)], 48: [{TILT}]}}
+            half3[] scales = [(1, 1, 1)]
+            float3[] translations = [(0, 0.5, 0)]
+        }}
+    }}{_skinned("Head", head, 2, 16, "Skin")}{_skinned("Body", _quad(0, -0.5), 0, 4, "Skin")}
+    def Xform "EyeRig" {{
+        double3 xformOp:translate = (0, 1.6, 0.2)
+        float xformOp:rotateY = 90
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateY"]
+        def Mesh "Eye" (prepend apiSchemas = ["MaterialBindingAPI"]) {{
+            {_quad(0, 0)}
+            uniform token subdivisionScheme = "none"
+            rel material:binding = </Avatar/Looks/Eye>
+        }}
+    }}
+    def Scope "Looks" {{{_material("Skin", True)}{_material("Eye", False)}
+    }}
+}}
+"""
+    path = folder / "avatar.usda"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _convert(root: Path, source: Path, name: str, **setup) -> tuple[Path, dict, str]:
+    digest = _sha(source)
+    manifest = write_setup(root / "src", source, name, **setup)
+    with allowed_roots([source.parent]):
+        res = convert(manifest, root / "out", ConvertOptions(render=False))
+    assert _sha(source) == digest  # the source's bytes are untouched
+    return root / "out", res.report, digest
+
+
+@pytest.fixture(scope="module")
+def avatar(tmp_path_factory):
+    """The avatar's head wrinkled (material Skin, restricted to Head: Skin is cloned)."""
+    root = tmp_path_factory.mktemp("usd_avatar")
+    source = write_avatar(root / "assets")
+    out, report, _ = _convert(root, source, "hero", material="Skin", meshes=["Head"])
+    return source, out, report
+
+
+def _errors(stage) -> list[str]:
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    return sorted(
+        e.GetMessage()
+        for e in UsdValidation.ValidationContext(validators).Validate(stage)
+        if e.GetType() == UsdValidation.ValidationErrorType.Error
+    )
+
+
+def _resolved(asset) -> str:
+    """An asset path's resolved file, symbolic links followed (a package member kept)."""
+    r = asset.resolvedPath
+    inner = r[r.index("[") :] if r.endswith("]") else ""
+    return os.path.realpath(r[: len(r) - len(inner)]) + inner
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, Sdf.AssetPath):
+        return a.path == b.path and _resolved(a) == _resolved(b)
+    try:
+        return bool(np.array_equal(np.asarray(a), np.asarray(b)))
+    except (TypeError, ValueError):
+        return a == b
+
+
+def assert_composes_to_source(source: Path, layer: Path, changed_rels: set[str] = frozenset()):
+    """Every prim of the source (an independent pxr read of the source file alone) is in the
+    composed layer with its type and every attribute's value and time samples equal;
+    relationships equal except ``changed_rels`` (``PATH.NAME``)."""
+    src = Usd.Stage.Open(str(source))
+    out = Usd.Stage.Open(str(layer))
+    n = 0
+    for p in src.Traverse():
+        q = out.GetPrimAtPath(p.GetPath())
+        assert q and q.GetTypeName() == p.GetTypeName(), p.GetPath()
+        for a in p.GetAttributes():
+            b = q.GetAttribute(a.GetName())
+            assert b.GetTypeName() == a.GetTypeName(), a.GetPath()
+            assert b.GetTimeSamples() == a.GetTimeSamples(), a.GetPath()
+            for t in [Usd.TimeCode.Default(), *map(Usd.TimeCode, a.GetTimeSamples())]:
+                assert _same(b.Get(t), a.Get(t)), (a.GetPath(), t)
+            n += 1
+        for r in p.GetRelationships():
+            if str(r.GetPath()) not in changed_rels:
+                assert q.GetRelationship(r.GetName()).GetTargets() == r.GetTargets(), r.GetPath()
+    assert n > 0
+    return src, out
+
+
+def test_avatar_layer_sublayers_the_source_by_a_relative_path(avatar):
+    source, out, _ = avatar
+    layer = Sdf.Layer.FindOrOpen(str(out / "hero.usda"))
+    assert list(layer.subLayerPaths) == [Path(os.path.relpath(source, out)).as_posix()]
+    assert layer.defaultPrim == "Avatar" and layer.pseudoRoot.GetInfo("upAxis") == "Y"
+    assert Path(layer.ComputeAbsolutePath(layer.subLayerPaths[0])) == source.resolve()
+
+
+def test_avatar_composes_to_the_source_plus_the_wrinkle_data(avatar):
+    source, out, _ = avatar
+    src, stage = assert_composes_to_source(
+        source, out / "hero.usda", {"/Avatar/Head.material:binding"}
+    )
+    # the additions: over the source's prims only wrinkle data; new prims only the clone's
+    layer = stage.GetRootLayer()
+    for spec_path in [
+        p for p in _spec_paths(layer) if src.GetPrimAtPath(p) and layer.GetPrimAtPath(p)
+    ]:
+        spec = layer.GetPrimAtPath(spec_path)
+        assert spec.specifier == Sdf.SpecifierOver, spec_path
+    head = stage.GetPrimAtPath("/Avatar/Head")
+    added = {p.name for p in layer.GetPrimAtPath("/Avatar/Head").properties}
+    assert {"primvars:wrinkle:vertexId", "primvars:wrinkle:tangent", "material:binding"} <= added
+    assert added <= {
+        "primvars:wrinkle:vertexId",
+        "primvars:wrinkle:tangent",
+        "primvars:wrinkle:bias",
+        "material:binding",
+    }
+    assert not layer.GetPrimAtPath("/Avatar/Body")  # not wrinkled: no opinion at all
+    # the head is bound to the clone; the body keeps the source material, without wrinkles
+    mat, _ = UsdShade.MaterialBindingAPI(head).ComputeBoundMaterial()
+    assert str(mat.GetPath()) == "/Avatar/Looks/Skin_wrinkled"
+    assert "WrinkleMapsAPI" in mat.GetPrim().GetMetadata("apiSchemas").ApplyOperations([])
+    body, _ = UsdShade.MaterialBindingAPI(
+        stage.GetPrimAtPath("/Avatar/Body")
+    ).ComputeBoundMaterial()
+    assert str(body.GetPath()) == "/Avatar/Looks/Skin"
+    assert not body.GetPrim().HasAttribute("wrinkle:encoding")
+    # the clone keeps the source look (its albedo texture) and reads the base normal map
+    surface = stage.GetPrimAtPath("/Avatar/Looks/Skin_wrinkled/Surface")
+    albedo = UsdShade.Shader(surface).GetInput("diffuseColor").GetConnectedSources()[0][0]
+    assert albedo.source.GetPath() == Sdf.Path("/Avatar/Looks/Skin_wrinkled/Albedo")
+    normal = UsdShade.Shader(surface).GetInput("normal").GetConnectedSources()[0][0]
+    assert normal.source.GetPath() == Sdf.Path("/Avatar/Looks/Skin_wrinkled/base_normal")
+    assert mat.GetPrim().GetAttribute("wrinkle:weights").GetTimeSamples()
+
+
+def _spec_paths(layer) -> list[Sdf.Path]:
+    paths: list[Sdf.Path] = []
+    layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: paths.append(p) if p.IsPrimPath() else None)
+    return paths
+
+
+def test_avatar_tangents_line_up_with_the_source_topology(avatar):
+    """The head's tangents are +X on the plain island and -X on the mirrored one (u runs along
+    -x there), with opposite handedness: per corner (faceVarying), since the seam's points
+    have both; vertex IDs agree per point (vertex)."""
+    source, out, _ = avatar
+    stage = Usd.Stage.Open(str(out / "hero.usda"))
+    pv = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/Avatar/Head"))
+    tangent = pv.GetPrimvar("wrinkle:tangent")
+    assert tangent.GetInterpolation() == "faceVarying"
+    t = np.asarray(tangent.Get(), np.float64)
+    _, st = _grid()
+    mirrored = np.repeat(np.arange(9) % 3 == 2, 4)  # the corners of column-2 faces
+    assert t.shape == (36, 4) and len(st) == 36
+    np.testing.assert_allclose(t[~mirrored, :3], [[1, 0, 0]] * 24, atol=1e-5)
+    np.testing.assert_allclose(t[mirrored, :3], [[-1, 0, 0]] * 12, atol=1e-5)
+    w = t[:, 3]
+    assert set(np.abs(w)) == {1.0} and len(set(w[~mirrored])) == 1
+    assert set(w[mirrored]) == {-w[0]}
+    ids = pv.GetPrimvar("wrinkle:vertexId")
+    assert ids.GetInterpolation() == "vertex" and len(ids.Get()) == 16
+    assert len(set(ids.Get())) == 16  # 16 distinct positions
+
+
+def test_avatar_skin_binding_is_the_source_skeleton(avatar):
+    source, out, _ = avatar
+    stage = Usd.Stage.Open(str(out / "hero.usda"))
+    src = Usd.Stage.Open(str(source))
+    for path in ("/Avatar/Head", "/Avatar/Body"):
+        b, a = (
+            UsdSkel.BindingAPI(stage.GetPrimAtPath(path)),
+            UsdSkel.BindingAPI(src.GetPrimAtPath(path)),
+        )
+        assert b.GetSkeletonRel().GetTargets() == [Sdf.Path("/Avatar/Skel")]
+        assert list(b.GetJointIndicesPrimvar().Get()) == list(a.GetJointIndicesPrimvar().Get())
+        assert list(b.GetJointWeightsPrimvar().Get()) == list(a.GetJointWeightsPrimvar().Get())
+    skel = UsdSkel.Skeleton(stage.GetPrimAtPath("/Avatar/Skel"))
+    assert list(skel.GetJointsAttr().Get()) == ["root", "root/neck", "root/neck/head"]
+    # UsdSkel poses the composed head with the source's animation: at frame 48 the head
+    # joint's world transform is the source's (computed on the source alone)
+    cache_a, cache_b = UsdSkel.Cache(), UsdSkel.Cache()
+    qa = cache_a.GetSkelQuery(UsdSkel.Skeleton(src.GetPrimAtPath("/Avatar/Skel")))
+    qb = cache_b.GetSkelQuery(skel)
+    for t in (0, 24, 48):
+        np.testing.assert_allclose(
+            np.asarray(qb.ComputeJointSkelTransforms(Usd.TimeCode(t))),
+            np.asarray(qa.ComputeJointSkelTransforms(Usd.TimeCode(t))),
+        )
+
+
+def test_avatar_read_back_and_validated(avatar):
+    source, out, _ = avatar
+    with allowed_roots([source.parent]):
+        pkg = read_usd(out / "hero.usda")
+    assert pkg.mesh.vertex_count == 20  # 16 points, the 4 seam points split
+    assert pkg.mesh.joint_names == ("root", "root/neck", "root/neck/head")
+    np.testing.assert_allclose(np.abs(pkg.mesh.tangents[:, 0]), 1, atol=1e-5)
+    assert [t.name for t in pkg.textures][:1] == ["base_normal"]
+    assert pkg.curves and pkg.meta.regions[0].name == "brow_L"
+    with pytest.raises(Exception, match="outside"):  # without --allow-root: confined
+        read_usd(out / "hero.usda")
+    assert _errors(Usd.Stage.Open(str(out / "hero.usda"))) == []
+    usdz = Usd.Stage.Open(str(out / "hero.usdz"))
+    assert _errors(usdz) == []
+    # the usdz: self-contained, every source prim, the source texture byte for byte
+    src = Usd.Stage.Open(str(source))
+    assert {p.GetPath() for p in src.Traverse()} <= {p.GetPath() for p in usdz.Traverse()}
+    import zipfile
+
+    z = zipfile.ZipFile(out / "hero.usdz")
+    assert z.read("textures/source/skin.png") == (source.parent / "textures/skin.png").read_bytes()
+    assert read_usd(out / "hero.usdz").mesh.vertex_count == 20
+
+
+def test_rigid_mesh_tangents_are_written_in_the_prim_space(tmp_path):
+    """The eye sits under translate + rotateY(90): the pipeline works in world space (its
+    tangent -Z), the layer writes the prim's own +X back; reading the layer bakes it again."""
+    source = write_avatar(tmp_path / "assets")
+    out, report, _ = _convert(tmp_path, source, "eye", material="Eye")
+    stage = Usd.Stage.Open(str(out / "eye.usda"))
+    pv = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/Avatar/EyeRig/Eye"))
+    t = np.asarray(pv.GetPrimvar("wrinkle:tangent").Get(), np.float64)
+    assert pv.GetPrimvar("wrinkle:tangent").GetInterpolation() == "vertex"
+    np.testing.assert_allclose(t[:, :3], [[1, 0, 0]] * 4, atol=1e-6)
+    eye = stage.GetPrimAtPath("/Avatar/EyeRig/Eye")
+    mat, _ = UsdShade.MaterialBindingAPI(eye).ComputeBoundMaterial()
+    assert str(mat.GetPath()) == "/Avatar/Looks/Eye"  # not shared: the wrinkle data over it
+    with allowed_roots([source.parent]):
+        pkg = read_usd(out / "eye.usda")
+    np.testing.assert_allclose(pkg.mesh.tangents[:, :3], [[0, 0, -1]] * 4, atol=1e-6)
+    assert _errors(stage) == []
+    # a rerun writes the same bytes
+    again = tmp_path / "again"
+    with allowed_roots([source.parent]):
+        convert(tmp_path / "src" / "manifest.toml", again, ConvertOptions(render=False))
+    for name in ("eye.usda", "eye.usdz", "eye.gltf"):
+        assert (again / name).read_bytes() == (out / name).read_bytes(), name
+
+
+@pytest.mark.parametrize(
+    ("material", "meshes", "said"),
+    [
+        ("Cloth", None, "no material 'Cloth' in avatar.usda; its materials: 'Eye' (/Avatar/Looks"),
+        (None, None, "avatar.usda has 2 materials bound to meshes: name the wrinkled one"),
+        ("Skin", ["Eye"], "no Mesh prim 'Eye' bound to /Avatar/Looks/Skin (meshes bound to"),
+    ],
+)
+def test_bad_usd_selection_one_message_exit_2_nothing_written(
+    tmp_path, capsys, material, meshes, said
+):
+    source = write_avatar(tmp_path / "assets")
+    manifest = write_setup(tmp_path / "src", source, "hero", material, meshes)
+    out = tmp_path / "out"
+    code = main(["convert", str(manifest), "-o", str(out), "--allow-root", str(source.parent)])
+    err = capsys.readouterr().err
+    assert code == 2 and said in err, err
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["assets", "src"]
+
+
+needs_rigged = pytest.mark.skipif(not RIGGED.is_file(), reason="../shared/data is absent")
+
+
+@needs_rigged
+def test_rigged_figure_layer_keeps_the_figure_and_adds_uvs(tmp_path):
+    """RiggedFigure (UsdSkel: 19 joints, an animation, no UVs): the layer adds front-projected
+    st (vertex: no vertex split) and the wrinkle primvars over the skinned mesh; the figure,
+    its skeleton and its animation compose exactly as the source file alone reads."""
+    out, report, _ = _convert(tmp_path, RIGGED, "figure", regions=CENTRE)
+    src, stage = assert_composes_to_source(RIGGED, out / "figure.usda")
+    mesh = "/RiggedFigure/Geom/Z_UP/Armature/torso_joint_1_2/Proxy_1"
+    pv = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(mesh))
+    st = pv.GetPrimvar("st")
+    assert st.GetInterpolation() == "vertex" and len(st.Get()) == 370
+    assert not UsdGeom.PrimvarsAPI(src.GetPrimAtPath(mesh)).GetPrimvar("st")
+    assert len(pv.GetPrimvar("wrinkle:tangent").Get()) == 370
+    skel = UsdSkel.BindingAPI(stage.GetPrimAtPath(mesh)).GetInheritedSkeleton()
+    assert len(skel.GetJointsAttr().Get()) == 19
+    assert any("front-projected UVs" in n for n in report["notes"])
+    assert _errors(stage) == []
+    assert _errors(Usd.Stage.Open(str(out / "figure.usdz"))) == []
+
+
+@pytest.mark.skipif(not CESIUM.is_file(), reason="../shared/data is absent")
+def test_cesium_man_layer_over_a_usdz_source(tmp_path):
+    """CesiumMan.usdz (UsdSkel, a JPEG albedo inside the package): the layer sublayers the usdz;
+    UsdValidation finds only the source's own error (usdzconvert wrote its primvar reader's
+    varname as a token), none added; the flattened usdz carries the JPEG byte for byte."""
+    out, _, _ = _convert(tmp_path, CESIUM, "cesium", regions=CENTRE)
+    assert_composes_to_source(CESIUM, out / "cesium.usda")
+    source_errors = _errors(Usd.Stage.Open(str(CESIUM)))
+    assert len(source_errors) == 1 and "varname" in source_errors[0]
+    assert _errors(Usd.Stage.Open(str(out / "cesium.usda"))) == source_errors
+    assert _errors(Usd.Stage.Open(str(out / "cesium.usdz"))) == source_errors
+    import zipfile
+
+    inner = zipfile.ZipFile(CESIUM).read("0/CesiumMan_img0.jpg")
+    assert zipfile.ZipFile(out / "cesium.usdz").read("textures/source/CesiumMan_img0.jpg") == inner
