@@ -178,6 +178,12 @@ def SkelRoot "Avatar" (kind = "component") {{
         }}
     }}
     def Scope "Looks" {{{_material("Skin", True)}{_material("Eye", False)}
+        def Material "Spare" {{
+        }}
+    }}
+    def Scope "Props" {{
+        def Material "Eye" {{
+        }}
     }}
 }}
 """
@@ -388,7 +394,7 @@ def test_rigid_mesh_tangents_are_written_in_the_prim_space(tmp_path):
     """The eye sits under translate + rotateY(90): the pipeline works in world space (its
     tangent -Z), the layer writes the prim's own +X back; reading the layer bakes it again."""
     source = write_avatar(tmp_path / "assets")
-    out, report, _ = _convert(tmp_path, source, "eye", material="Eye")
+    out, report, _ = _convert(tmp_path, source, "eye", material="/Avatar/Looks/Eye")
     stage = Usd.Stage.Open(str(out / "eye.usda"))
     pv = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/Avatar/EyeRig/Eye"))
     t = np.asarray(pv.GetPrimvar("wrinkle:tangent").Get(), np.float64)
@@ -409,23 +415,33 @@ def test_rigid_mesh_tangents_are_written_in_the_prim_space(tmp_path):
         assert (again / name).read_bytes() == (out / name).read_bytes(), name
 
 
+GAP = {"gap": ((0.45, 0.1, 0.75, 0.9), "center")}  # between the head's two UV islands
+
+
 @pytest.mark.parametrize(
-    ("material", "meshes", "said"),
+    ("setup", "said"),
     [
-        ("Cloth", None, "no material 'Cloth' in avatar.usda; its materials: 'Eye' (/Avatar/Looks"),
-        (None, None, "avatar.usda has 2 materials bound to meshes: name the wrinkled one"),
-        ("Skin", ["Eye"], "no Mesh prim 'Eye' bound to /Avatar/Looks/Skin (meshes bound to"),
+        ({"material": "Cloth"}, "no material 'Cloth' in avatar.usda; its materials: 'Eye' ("),
+        ({"material": "Eye"}, "material name 'Eye' is ambiguous in avatar.usda (name it by path)"),
+        ({}, "avatar.usda has 2 materials bound to meshes: name the wrinkled one"),
+        ({"material": "Spare"}, "material /Avatar/Looks/Spare is bound to no mesh in avatar.usda"),
+        ({"material": "Skin", "meshes": ["Eye"]}, "no Mesh prim 'Eye' bound to /Avatar/Looks/Skin"),
+        (
+            {"material": "Skin", "meshes": ["Head"], "regions": GAP},
+            "region(s) 'gap' fall on no wrinkled primitive",
+        ),
     ],
 )
-def test_bad_usd_selection_one_message_exit_2_nothing_written(
-    tmp_path, capsys, material, meshes, said
-):
+def test_bad_usd_selection_one_message_exit_2_nothing_written(tmp_path, capsys, setup, said):
     source = write_avatar(tmp_path / "assets")
-    manifest = write_setup(tmp_path / "src", source, "hero", material, meshes)
+    manifest = write_setup(tmp_path / "src", source, "hero", **setup)
     out = tmp_path / "out"
     code = main(["convert", str(manifest), "-o", str(out), "--allow-root", str(source.parent)])
     err = capsys.readouterr().err
     assert code == 2 and said in err, err
+    if "materials:" in said:  # the message lists every material and the meshes bound to it
+        assert "'Skin' (/Avatar/Looks/Skin: /Avatar/Head, /Avatar/Body)" in err
+        assert "'Spare' (/Avatar/Looks/Spare: no mesh)" in err
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["assets", "src"]
 
