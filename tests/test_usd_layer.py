@@ -65,12 +65,12 @@ def _grid() -> tuple[str, np.ndarray]:
     return text, np.array(st)
 
 
-def _quad(z: float, y0: float) -> str:
+def _quad(z: float, y0: float, uv: str = "st") -> str:
     return (
         f"point3f[] points = [(0, {y0}, {z}), (1, {y0}, {z}), (1, {y0 + 1}, {z}), "
         f"(0, {y0 + 1}, {z})]\n"
         "int[] faceVertexCounts = [4]\nint[] faceVertexIndices = [0, 1, 2, 3]\n"
-        "texCoord2f[] primvars:st = [(0, 0), (1, 0), (1, 1), (0, 1)] "
+        f"texCoord2f[] primvars:{uv} = [(0, 0), (1, 0), (1, 1), (0, 1)] "
         '(interpolation = "vertex")\n'
         f"normal3f[] normals = [{', '.join(['(0, 0, 1)'] * 4)}] "
         '(interpolation = "vertex")\n'
@@ -172,7 +172,7 @@ def SkelRoot "Avatar" (kind = "component") {{
         float xformOp:rotateY = 90
         uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateY"]
         def Mesh "Eye" (prepend apiSchemas = ["MaterialBindingAPI"]) {{
-            {_quad(0, 0)}
+            {_quad(0, 0, "UVMap")}
             uniform token subdivisionScheme = "none"
             rel material:binding = </Avatar/Looks/Eye>
         }}
@@ -392,7 +392,8 @@ def test_avatar_read_back_and_validated(avatar):
 
 def test_rigid_mesh_tangents_are_written_in_the_prim_space(tmp_path):
     """The eye sits under translate + rotateY(90): the pipeline works in world space (its
-    tangent -Z), the layer writes the prim's own +X back; reading the layer bakes it again."""
+    tangent -Z), the layer writes the prim's own +X back; reading the layer bakes it again.
+    Its UVs are ``primvars:UVMap``."""
     source = write_avatar(tmp_path / "assets")
     out, report, _ = _convert(tmp_path, source, "eye", material="/Avatar/Looks/Eye")
     stage = Usd.Stage.Open(str(out / "eye.usda"))
@@ -403,6 +404,10 @@ def test_rigid_mesh_tangents_are_written_in_the_prim_space(tmp_path):
     eye = stage.GetPrimAtPath("/Avatar/EyeRig/Eye")
     mat, _ = UsdShade.MaterialBindingAPI(eye).ComputeBoundMaterial()
     assert str(mat.GetPath()) == "/Avatar/Looks/Eye"  # not shared: the wrinkle data over it
+    # the eye's UVs are primvars:UVMap (as Blender names them): the wrinkle textures read it
+    reader = stage.GetPrimAtPath("/Avatar/Looks/Eye/StReader")
+    assert reader.GetAttribute("inputs:varname").Get() == "UVMap"
+    assert not UsdGeom.PrimvarsAPI(eye).GetPrimvar("st")
     with allowed_roots([source.parent]):
         pkg = read_usd(out / "eye.usda")
     np.testing.assert_allclose(pkg.mesh.tangents[:, :3], [[0, 0, -1]] * 4, atol=1e-6)

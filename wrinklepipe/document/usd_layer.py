@@ -98,12 +98,15 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
     fps = stage.GetTimeCodesPerSecond()
     notes: list[str] = []
     mat_path = _material(stage, src, pkg, fps, notes)
+    if src.uv_name != "st":  # the wrinkle textures read the meshes' own UV primvar
+        reader = stage.GetPrimAtPath(mat_path.AppendChild("StReader"))
+        reader.GetAttribute("inputs:varname").Set(src.uv_name)
     marker = stage.GetPrimAtPath(mat_path).CreateAttribute(
         LAYERED_OVER, Sdf.ValueTypeNames.String, custom=True
     )
     marker.Set(src.path.name)  # read_usd reads the meshes in the source's topology
     for part in pkg.mesh.parts:
-        _mesh_overs(stage, part, pkg, src.added_uvs)
+        _mesh_overs(stage, part, pkg, src.added_uvs, src.uv_name)
     if pkg.curves:  # the source's playback range stays; a source without one gets the curves'
         times = np.concatenate([np.asarray(c.times, np.float64) for c in pkg.curves]) * fps
         start, end = float(times.min()), float(times.max())
@@ -246,7 +249,9 @@ def topology_values(
     return "faceVarying", per_corner
 
 
-def _mesh_overs(stage: Any, part: Any, pkg: WrinklePackage, added_uvs: tuple[str, ...]) -> None:
+def _mesh_overs(
+    stage: Any, part: Any, pkg: WrinklePackage, added_uvs: tuple[str, ...], uv_name: str
+) -> None:
     from pxr import Sdf, UsdGeom, Vt  # deferred: usd-core, USD only
 
     prim = stage.GetPrimAtPath(part.pointer)
@@ -286,7 +291,7 @@ def _mesh_overs(stage: Any, part: Any, pkg: WrinklePackage, added_uvs: tuple[str
     if part.pointer in added_uvs:
         uv = np.asarray(m.uvs[rows], np.float32)
         st = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1).astype(np.float32)
-        put("st", Sdf.ValueTypeNames.TexCoord2fArray, st, Vt.Vec2fArray)
+        put(uv_name, Sdf.ValueTypeNames.TexCoord2fArray, st, Vt.Vec2fArray)
 
 
 def layer_bytes(stage: Any, reference: str, suffix: str = ".usda") -> bytes:

@@ -30,7 +30,7 @@ from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.document.wrinkled import front_projection_uvs
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.mesh_merge import merge_meshes
-from wrinklepipe.io.mesh_usd import open_stage, read_usd_meshes
+from wrinklepipe.io.mesh_usd import open_stage, read_usd_meshes, uv_primvar
 
 
 @dataclass
@@ -40,7 +40,8 @@ class UsdSource:
     ``material``: the source Material prim the wrinkle data goes on (None: the layer defines
     one and binds the meshes to it); ``clone``: that material is also bound to meshes that are
     not wrinkled, so the layer wrinkles a copy of it; ``added_uvs``: prims given front-projected
-    UVs."""
+    UVs; ``uv_name``: the primvar the meshes' UVs are read from (the wrinkle textures' reader
+    reads it; added UVs get that name)."""
 
     path: Path
     mesh: Mesh
@@ -49,6 +50,7 @@ class UsdSource:
     clone: bool = False
     added_uvs: tuple[str, ...] = ()
     notes: list[str] = field(default_factory=list)
+    uv_name: str = "st"
 
 
 def _bindings(stage: Any, prims: list[str]) -> tuple[dict[str, str | None], dict[str, list[str]]]:
@@ -174,6 +176,15 @@ def read_usd_source(manifest: Any) -> UsdSource:
     by_name = {m.name: m for m in parts}
     chosen = [by_name[p] for p in prims]
     notes: list[str] = []
+    names = sorted(
+        {str(pv.GetPrimvarName()) for p in prims if (pv := uv_primvar(stage.GetPrimAtPath(p)))}
+    )
+    uv_name = names[0] if names else "st"
+    if len(names) > 1:
+        notes.append(
+            f"the wrinkled meshes read their UVs from different primvars ({', '.join(names)}): "
+            f"the wrinkle textures read {uv_name!r}"
+        )
     added: list[str] = []
     if any(m.uvs is None for m in chosen):
         uv = np.split(
@@ -186,7 +197,8 @@ def read_usd_source(manifest: Any) -> UsdSource:
                 added.append(m.name)
         notes.append(
             f"no texture coordinates on {', '.join(added)}: front-projected UVs (u along +X, v "
-            "down -Y over the wrinkled meshes' bounds), added to the output layer as primvars:st"
+            f"down -Y over the wrinkled meshes' bounds), added to the output layer as "
+            f"primvars:{uv_name}"
         )
     mesh = merge_parts(chosen)
     what = f"material {mat}" + (" (cloned: also bound to meshes not wrinkled)" if clone else "")
@@ -194,7 +206,7 @@ def read_usd_source(manifest: Any) -> UsdSource:
         f"wrinkled {what if mat else 'meshes (no material bound)'}: "
         + ", ".join(f"{p.name} ({p.count} vertices)" for p in mesh.parts)
     )
-    return UsdSource(path, mesh, tuple(prims), mat, clone, tuple(added), notes)
+    return UsdSource(path, mesh, tuple(prims), mat, clone, tuple(added), notes, uv_name)
 
 
 def merge_parts(meshes: list[Mesh], keep_ids: bool = False) -> Mesh:

@@ -128,6 +128,27 @@ def _primvar_corners(
     return None, f"{pv.GetName()}: unknown interpolation {interp}"
 
 
+def uv_primvar(prim: Any) -> Any:
+    """The primvar a mesh's texture coordinates are read from: ``st``, else the first
+    texCoord2f primvar (or float2 one named ``uv*``/``st*``); None when it has none."""
+    from pxr import UsdGeom  # deferred: usd-core, USD only
+
+    api = UsdGeom.PrimvarsAPI(prim)
+    st = api.GetPrimvar("st")
+    if st and st.HasValue():
+        return st
+    return next(
+        (
+            pv
+            for pv in api.GetPrimvarsWithValues()
+            if str(pv.GetTypeName().role) == "TextureCoordinate"
+            or pv.GetTypeName().cppTypeName.endswith("Vec2f>")
+            and pv.GetName().lower().startswith(("primvars:uv", "primvars:st"))
+        ),
+        None,
+    )
+
+
 def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh | None:
     from pxr import UsdGeom, UsdSkel  # deferred: usd-core, USD only
 
@@ -160,18 +181,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
         notes.append("holeIndices ignored (holes are not cut)")
 
     api = UsdGeom.PrimvarsAPI(prim)
-    st = api.GetPrimvar("st")
-    if not st or not st.HasValue():
-        st = next(
-            (
-                pv
-                for pv in api.GetPrimvarsWithValues()
-                if str(pv.GetTypeName().role) == "TextureCoordinate"
-                or pv.GetTypeName().cppTypeName.endswith("Vec2f>")
-                and pv.GetName().lower().startswith(("primvars:uv", "primvars:st"))
-            ),
-            None,
-        )
+    st = uv_primvar(prim)
     uv_c, why = _primvar_corners(st, time, counts, fvi, n_p, 2)
     if why:
         notes.append(f"ignored UVs ({why})")
