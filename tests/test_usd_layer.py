@@ -489,3 +489,27 @@ def test_cesium_man_layer_over_a_usdz_source(tmp_path):
 
     inner = zipfile.ZipFile(CESIUM).read("0/CesiumMan_img0.jpg")
     assert zipfile.ZipFile(out / "cesium.usdz").read("textures/source/CesiumMan_img0.jpg") == inner
+
+
+def test_a_list_of_materials_wrinkles_each(tmp_path):
+    """``material = ["Skin", "/Avatar/Looks/Eye"]`` with ``meshes = ["Head", "Eye"]``: Skin is
+    cloned (the body keeps it), the eye's material gets the data itself; read back, the head and
+    the eye are one wrinkled mesh whose vertex IDs are shared (computed over both)."""
+    source = write_avatar(tmp_path / "assets")
+    out, report, _ = _convert(
+        tmp_path, source, "pair", material=["Skin", "/Avatar/Looks/Eye"], meshes=["Head", "Eye"]
+    )
+    stage = Usd.Stage.Open(str(out / "pair.usda"))
+    for mesh, mat in (("/Avatar/Head", "Skin_wrinkled"), ("/Avatar/EyeRig/Eye", "Eye")):
+        bound, _ = UsdShade.MaterialBindingAPI(stage.GetPrimAtPath(mesh)).ComputeBoundMaterial()
+        assert str(bound.GetPath()) == f"/Avatar/Looks/{mat}"
+        assert bound.GetPrim().HasAttribute("wrinkle:encoding")
+    assert not stage.GetPrimAtPath("/Avatar/Looks/Skin").HasAttribute("wrinkle:encoding")
+    with allowed_roots([source.parent]):
+        pkg = read_usd(out / "pair.usda")
+    assert pkg.mesh.vertex_count == 24 and [p.name for p in pkg.mesh.parts] == [
+        "/Avatar/Head",
+        "/Avatar/EyeRig/Eye",
+    ]
+    assert len(set(pkg.mesh.vertex_ids.tolist())) == 20  # 16 head + 4 eye positions
+    assert _errors(stage) == []

@@ -97,14 +97,15 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
             root.pseudoRoot.SetInfo(key, source_layer.pseudoRoot.GetInfo(key))
     fps = stage.GetTimeCodesPerSecond()
     notes: list[str] = []
-    mat_path = _material(stage, src, pkg, fps, notes)
-    if src.uv_name != "st":  # the wrinkle textures read the meshes' own UV primvar
-        reader = stage.GetPrimAtPath(mat_path.AppendChild("StReader"))
-        reader.GetAttribute("inputs:varname").Set(src.uv_name)
-    marker = stage.GetPrimAtPath(mat_path).CreateAttribute(
-        LAYERED_OVER, Sdf.ValueTypeNames.String, custom=True
-    )
-    marker.Set(src.path.name)  # read_usd reads the meshes in the source's topology
+    mat_paths = _materials(stage, src, pkg, fps, notes)
+    for mat_path in mat_paths:
+        if src.uv_name != "st":  # the wrinkle textures read the meshes' own UV primvar
+            reader = stage.GetPrimAtPath(mat_path.AppendChild("StReader"))
+            reader.GetAttribute("inputs:varname").Set(src.uv_name)
+        marker = stage.GetPrimAtPath(mat_path).CreateAttribute(
+            LAYERED_OVER, Sdf.ValueTypeNames.String, custom=True
+        )
+        marker.Set(src.path.name)  # read_usd reads the meshes in the source's topology
     for part in pkg.mesh.parts:
         _mesh_overs(stage, part, pkg, src.added_uvs, src.uv_name)
     if pkg.curves:  # the source's playback range stays; a source without one gets the curves'
@@ -123,20 +124,25 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
     notes.append(
         f"USD: {pkg.name}.usda sublayers the source {src.path.name} unchanged and adds the wrinkle "
         "data "
-        f"over {len(pkg.mesh.parts)} mesh(es) and the material {mat_path}; {pkg.name}.usdz is it "
+        f"over {len(pkg.mesh.parts)} mesh(es) and the material(s) "
+        f"{', '.join(map(str, mat_paths))}; {pkg.name}.usdz is it "
         "flattened"
     )
     return stage, notes
 
 
-def _material(stage: Any, src: UsdSource, pkg: WrinklePackage, fps: float, notes: list[str]) -> Any:
-    """Put the package's wrinkle material on the source material (or a clone, or a new one)."""
+def _materials(
+    stage: Any, src: UsdSource, pkg: WrinklePackage, fps: float, notes: list[str]
+) -> list[Any]:
+    """Put the package's wrinkle material on each wrinkled source material (or its clone), or
+    on a new one bound to the meshes when none is bound; returns where it went."""
     from pxr import Sdf, Tf  # deferred: usd-core, USD only
 
     root = stage.GetRootLayer()
     built = build_stage(pkg, UsdOptions(fps=fps))  # the wrinkle material, as a new asset has it
     built_path = built.GetDefaultPrim().GetPath().AppendPath("Looks/skin")
-    if src.material is None:
+    wrinkled = {part.pointer for part in pkg.mesh.parts}
+    if not src.materials:
         top = stage.GetDefaultPrim() or next(iter(stage.GetPseudoRoot().GetChildren()), None)
         if top is None:
             raise input_error(src.path, "the USD source has no root prim")
@@ -146,27 +152,39 @@ def _material(stage: Any, src: UsdSource, pkg: WrinklePackage, fps: float, notes
         scope.typeName = "Scope"
         dest = scope_path.AppendChild(Tf.MakeValidIdentifier(pkg.name))
         Sdf.CopySpec(built.GetRootLayer(), built_path, root, dest)
-        _bind(stage, dest, pkg)
+        _bind(stage, dest, sorted(wrinkled))
         notes.append(f"no material is bound to the wrinkled meshes: defined {dest} and bound it")
-        return dest
-    source_mat = Sdf.Path(src.material)
-    if src.clone:
-        dest = _unique_child(stage, source_mat.GetParentPath(), f"{source_mat.name}_wrinkled")
-        spec = Sdf.CreatePrimInLayer(root, dest)
-        spec.specifier = Sdf.SpecifierDef
-        spec.typeName = "Material"
-        spec.referenceList.Prepend(Sdf.Reference(primPath=source_mat))
-        _bind(stage, dest, pkg)
-        notes.append(
-            f"material {source_mat} is also bound to meshes that are not wrinkled: the wrinkled "
-            f"meshes are bound to {dest} (an internal reference to it) with the wrinkle data"
-        )
-    else:
-        dest = source_mat
-        Sdf.CreatePrimInLayer(root, dest)  # an over
-    _wrinkle_inputs(stage, built.GetRootLayer(), built_path, dest)
-    _connect_base(stage, dest, notes)
-    return dest
+        return [dest]
+    out = []
+    for material in src.materials:
+        source_mat = Sdf.Path(material)
+        if material in src.cloned:
+            dest = _unique_child(stage, source_mat.GetParentPath(), f"{source_mat.name}_wrinkled")
+            spec = Sdf.CreatePrimInLayer(root, dest)
+            spec.specifier = Sdf.SpecifierDef
+            spec.typeName = "Material"
+            spec.referenceList.Prepend(Sdf.Reference(primPath=source_mat))
+            meshes = [p for p in sorted(wrinkled) if _bound(stage, p) == material]
+            _bind(stage, dest, meshes)
+            notes.append(
+                f"material {source_mat} is also bound to meshes that are not wrinkled: "
+                f"{', '.join(meshes)} are bound to {dest} (an internal reference to it) with the "
+                "wrinkle data"
+            )
+        else:
+            dest = source_mat
+            Sdf.CreatePrimInLayer(root, dest)  # an over
+        _wrinkle_inputs(stage, built.GetRootLayer(), built_path, dest)
+        _connect_base(stage, dest, notes)
+        out.append(dest)
+    return out
+
+
+def _bound(stage: Any, mesh: str) -> str:
+    from pxr import UsdShade  # deferred: usd-core, USD only
+
+    mat, _ = UsdShade.MaterialBindingAPI(stage.GetPrimAtPath(mesh)).ComputeBoundMaterial()
+    return str(mat.GetPath()) if mat else ""
 
 
 def _wrinkle_inputs(stage: Any, built: Any, built_path: Any, dest: Any) -> None:
@@ -228,12 +246,12 @@ def _connect_base(stage: Any, dest: Any, notes: list[str]) -> None:
     normal.GetAttr().SetConnections([dest.AppendChild("base_normal").AppendProperty("outputs:rgb")])
 
 
-def _bind(stage: Any, material: Any, pkg: WrinklePackage) -> None:
+def _bind(stage: Any, material: Any, meshes: list[str]) -> None:
     from pxr import UsdShade  # deferred: usd-core, USD only
 
     mat = UsdShade.Material(stage.GetPrimAtPath(material))
-    for part in pkg.mesh.parts:
-        UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(part.pointer)).Bind(mat)
+    for mesh in meshes:
+        UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(mesh)).Bind(mat)
 
 
 def topology_values(

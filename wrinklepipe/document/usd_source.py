@@ -1,13 +1,13 @@
 """A USD source read for conversion: which meshes get wrinkled, and their render mesh.
 
 The manifest's ``material`` (a Material prim's name or path, or a list) selects the wrinkled
-meshes: those bound to it (``material:binding``, as :func:`UsdShade.MaterialBindingAPI.
-ComputeBoundMaterial` resolves it). Without ``material``: the stage's only bound material, or,
-when no mesh has one, every mesh (convert then adds a material). ``meshes`` restricts the
-selection to Mesh prims named by name or path; a material also bound to meshes outside the
-restriction is then cloned in the output layer (an internal reference), as the glTF path clones
-a shared material. Bad selections are one :class:`~wrinklepipe.errors.InputError` each, listing
-what the stage has.
+meshes: those bound to it, or to one of them (``material:binding`` as
+``UsdShade.MaterialBindingAPI.ComputeBoundMaterial`` resolves it). Without ``material``: the
+stage's only bound material, or, when no mesh has one, every mesh (convert then adds a
+material). ``meshes`` restricts the selection to Mesh prims named by name or path; a material
+also bound to meshes outside the selection is then cloned in the output layer (an internal
+reference), as the glTF path clones a shared material. Bad selections are one
+:class:`~wrinklepipe.errors.InputError` each, listing what the stage has.
 
 The render mesh is the wrinkled meshes as :func:`wrinklepipe.io.mesh_usd.read_usd_meshes`
 reads them (world space, skins at their bind pose), merged in prim order; each
@@ -37,17 +37,17 @@ from wrinklepipe.io.mesh_usd import open_stage, read_usd_meshes, uv_primvar
 class UsdSource:
     """The wrinkled part of a USD source.
 
-    ``material``: the source Material prim the wrinkle data goes on (None: the layer defines
-    one and binds the meshes to it); ``clone``: that material is also bound to meshes that are
-    not wrinkled, so the layer wrinkles a copy of it; ``added_uvs``: prims given front-projected
+    ``materials``: the source Material prims the wrinkle data goes on (none: the layer defines
+    one and binds the meshes to it); ``cloned``: those also bound to meshes that are not
+    wrinkled, so the layer wrinkles a copy of each; ``added_uvs``: prims given front-projected
     UVs; ``uv_name``: the primvar the meshes' UVs are read from (the wrinkle textures' reader
     reads it; added UVs get that name)."""
 
     path: Path
     mesh: Mesh
     prims: tuple[str, ...]
-    material: str | None
-    clone: bool = False
+    materials: tuple[str, ...]
+    cloned: tuple[str, ...] = ()
     added_uvs: tuple[str, ...] = ()
     notes: list[str] = field(default_factory=list)
     uv_name: str = "st"
@@ -105,9 +105,10 @@ def select_meshes(
     meshes: tuple[str, ...] | list[str],
     file: str,
     stage_name: str,
-) -> tuple[list[str], str | None, bool]:
-    """The wrinkled Mesh prims (in ``prims`` order), the material they are bound to (None:
-    none) and whether it must be cloned (see the module doc)."""
+) -> tuple[list[str], list[str], list[str]]:
+    """The wrinkled Mesh prims (in ``prims`` order), the materials they are bound to (none: no
+    material bound) and those of them also bound to meshes not wrinkled, which the layer
+    clones (see the module doc)."""
     bound, materials = _bindings(stage, prims)
     used = {m: ms for m, ms in materials.items() if ms}
     if material is None:
@@ -138,21 +139,13 @@ def select_meshes(
                     key,
                 )
             chosen.append(m)
-    if len(chosen) > 1:
-        raise input_error(
-            file,
-            f"{len(chosen)} materials named: a USD source is wrinkled through one material "
-            f"(bind the wrinkled meshes to one; named: {', '.join(chosen)})",
-            "material",
-        )
-    mat = chosen[0] if chosen else None
-    picked = [p for p in prims if bound[p] == mat] if mat else list(prims)
+    picked = [p for p in prims if bound[p] in chosen] if chosen else list(prims)
     if meshes:
         keep: set[str] = set()
+        where = f"bound to {', '.join(chosen)}" if chosen else "in the stage"
         for k, name in enumerate(meshes):
             hits = {p for p in picked if p == name or p.rsplit("/", 1)[-1] == name}
             if not hits:
-                where = f"bound to {mat}" if mat else "in the stage"
                 raise input_error(
                     file,
                     f"no Mesh prim {name!r} {where} (meshes {where}: {', '.join(picked)})",
@@ -160,8 +153,8 @@ def select_meshes(
                 )
             keep |= hits
         picked = [p for p in picked if p in keep]
-    clone = mat is not None and len(picked) < len(used[mat])
-    return picked, mat, clone
+    cloned = [m for m in chosen if any(p not in picked for p in used[m])]
+    return picked, chosen, cloned
 
 
 def read_usd_source(manifest: Any) -> UsdSource:
@@ -170,7 +163,7 @@ def read_usd_source(manifest: Any) -> UsdSource:
     file = str(manifest.path)
     parts = read_usd_meshes(path)
     stage = open_stage(path)
-    prims, mat, clone = select_meshes(
+    prims, mats, cloned = select_meshes(
         stage, [m.name for m in parts], manifest.material, manifest.meshes, file, path.name
     )
     by_name = {m.name: m for m in parts}
@@ -201,12 +194,16 @@ def read_usd_source(manifest: Any) -> UsdSource:
             f"primvars:{uv_name}"
         )
     mesh = merge_parts(chosen)
-    what = f"material {mat}" + (" (cloned: also bound to meshes not wrinkled)" if clone else "")
+    what = ", ".join(
+        f"{m} (cloned: also bound to meshes not wrinkled)" if m in cloned else m for m in mats
+    )
     notes.append(
-        f"wrinkled {what if mat else 'meshes (no material bound)'}: "
+        f"wrinkled {'material(s) ' + what if mats else 'meshes (no material bound)'}: "
         + ", ".join(f"{p.name} ({p.count} vertices)" for p in mesh.parts)
     )
-    return UsdSource(path, mesh, tuple(prims), mat, clone, tuple(added), notes, uv_name)
+    return UsdSource(
+        path, mesh, tuple(prims), tuple(mats), tuple(cloned), tuple(added), notes, uv_name
+    )
 
 
 def merge_parts(meshes: list[Mesh], keep_ids: bool = False) -> Mesh:

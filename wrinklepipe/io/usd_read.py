@@ -269,16 +269,22 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     if mat_prim is None:
         raise input_error(file, f"no Material with {API_NAME}: not a wrinklepipe asset")
     mat = UsdShade.Material(mat_prim)
+    layered = mat_prim.HasAttribute(LAYERED_OVER)
+    wrinkled = {  # a layer over a source may wrinkle several of its materials alike
+        p.GetPath()
+        for p in stage.Traverse()
+        if p.IsA(UsdShade.Material) and _has_api(p) and (layered or p == mat_prim)
+    }
     meshes = [
         prim
         for prim in stage.Traverse()
         if prim.IsA(UsdGeom.Mesh)
         and (bound := UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0])
-        and bound.GetPath() == mat_prim.GetPath()
+        and bound.GetPath() in wrinkled
     ]
     if not meshes:
         raise input_error(file, f"no Mesh bound to {mat_prim.GetPath()}")
-    if not mat_prim.HasAttribute(LAYERED_OVER) and len(meshes) == 1 and _own_layout(meshes[0]):
+    if not layered and len(meshes) == 1 and _own_layout(meshes[0]):
         mesh = _own_mesh(stage, meshes[0], file)
     else:  # a layer over a source (wrinklepipe.document.usd_layer): the source's topology
         mesh = _layered_mesh(path, file, [str(m.GetPath()) for m in meshes])
