@@ -13,15 +13,20 @@ from __future__ import annotations
 
 import hashlib
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hs
 from wrinkle_setups import write_setup
 
 from wrinklepipe.cli import main
+from wrinklepipe.document.usd_layer import topology_values
 from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.io.images import write_image
+from wrinklepipe.io.mesh_usd import read_usd_meshes
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
@@ -513,3 +518,64 @@ def test_a_list_of_materials_wrinkles_each(tmp_path):
     ]
     assert len(set(pkg.mesh.vertex_ids.tolist())) == 20  # 16 head + 4 eye positions
     assert _errors(stage) == []
+
+
+@hs.composite
+def polygon_meshes(draw):
+    """Random polygons (3-5 distinct corners) over up to 8 points, faceVarying st drawn from a
+    few values (so corners of a point sometimes agree, sometimes split), per-point normals."""
+    n = draw(hs.integers(4, 8))
+    faces = draw(
+        hs.lists(
+            hs.lists(hs.integers(0, n - 1), min_size=3, max_size=5, unique=True),
+            min_size=1,
+            max_size=6,
+        )
+    )
+    fvi = [i for f in faces for i in f]
+    st = draw(
+        hs.lists(
+            hs.sampled_from([(0, 0), (0.25, 1), (1, 0.5)]), min_size=len(fvi), max_size=len(fvi)
+        )
+    )
+    seed = draw(hs.integers(0, 2**16))
+    return n, faces, fvi, st, seed
+
+
+@settings(max_examples=25, deadline=None)
+@given(polygon_meshes())
+def test_corner_map_law(mesh):
+    """For any polygon mesh with faceVarying UVs: the reader's render vertex of each corner
+    carries that corner's point and UV (v flipped), and per-vertex values written back through
+    :func:`topology_values` (vertex where the points agree, else faceVarying) read per corner
+    exactly as the render vertices hold them."""
+    n, faces, fvi, st, seed = mesh
+    rng = np.random.default_rng(seed)
+    pts = rng.normal(size=(n, 3))
+    fmt = ", ".join
+    points = fmt("({!r}, {!r}, {!r})".format(*map(float, q)) for q in pts.astype(np.float32))
+    text = f"""#usda 1.0
+def Mesh "m" {{
+    point3f[] points = [{points}]
+    int[] faceVertexCounts = [{fmt(str(len(f)) for f in faces)}]
+    int[] faceVertexIndices = [{fmt(map(str, fvi))}]
+    texCoord2f[] primvars:st = [{fmt(f"({u}, {v})" for u, v in st)}] (interpolation = "faceVarying")
+}}
+"""
+    with tempfile.TemporaryDirectory() as work:
+        path = Path(work) / "m.usda"
+        path.write_text(text, encoding="utf-8")
+        (m,) = read_usd_meshes(path)
+    corners = m.parts[0].corners
+    fvi_a = np.asarray(fvi)
+    np.testing.assert_array_equal(m.positions[corners], pts.astype(np.float32)[fvi_a])
+    st_a = np.asarray(st, np.float32)
+    np.testing.assert_array_equal(m.uvs[corners], np.stack([st_a[:, 0], 1 - st_a[:, 1]], 1))
+    values = rng.integers(0, 3, size=(m.vertex_count, 2)).astype(np.float32)
+    interp, data = topology_values(values, corners, fvi_a, n)
+    per_corner = data[fvi_a] if interp == "vertex" else data
+    np.testing.assert_array_equal(per_corner, values[corners])
+    same_per_point = all(
+        len({tuple(values[corners[c]]) for c in np.flatnonzero(fvi_a == q)}) <= 1 for q in range(n)
+    )
+    assert (interp == "vertex") == same_per_point
