@@ -579,3 +579,34 @@ def Mesh "m" {{
         len({tuple(values[corners[c]]) for c in np.flatnonzero(fvi_a == q)}) <= 1 for q in range(n)
     )
     assert (interp == "vertex") == same_per_point
+
+
+ARM = USDZ.parents[1] / "openusd" / "usd" / "usdSkel" / "doxygen" / "skinnedArm.usda"
+
+
+@pytest.mark.skipif(not ARM.is_file(), reason="../shared/data is absent")
+def test_skinned_arm_quads_without_uvs_or_normals(tmp_path):
+    """OpenUSD's skinned arm (quads, 3 joints, an animation, no UVs, no normals, no material):
+    the layer adds st, the wrinkle primvars and a material bound to the arm; it composes to the
+    source; read back, the tangents are the pipeline's (the glTF output's) to float rounding."""
+    import gltf_reference as ref
+
+    out, report, _ = _convert(tmp_path, ARM, "arm", regions=CENTRE)
+    _, stage = assert_composes_to_source(ARM, out / "arm.usda")
+    arm = stage.GetPrimAtPath("/Model/Arm")
+    mat, _ = UsdShade.MaterialBindingAPI(arm).ComputeBoundMaterial()
+    assert str(mat.GetPath()) == "/Model/WrinkleLooks/arm"
+    assert UsdGeom.PrimvarsAPI(arm).GetPrimvar("st").GetInterpolation() == "vertex"
+    assert any("no normals on /Model/Arm" in n for n in report["notes"])
+    assert _errors(stage) == [] and _errors(Usd.Stage.Open(str(out / "arm.usdz"))) == []
+    with allowed_roots([ARM.parent]):
+        pkg = read_usd(out / "arm.usda")
+    g = ref.load(out / "arm.gltf")
+    prim = g.meshes[0].primitives[0]
+    tangents = ref.accessor(g, out / "arm.gltf", prim.attributes.TANGENT)
+    positions = ref.accessor(g, out / "arm.gltf", prim.attributes.POSITION)
+    assert len(positions) == pkg.mesh.vertex_count == 12
+    order = [
+        int(np.flatnonzero((np.abs(positions - p) < 1e-6).all(1))[0]) for p in pkg.mesh.positions
+    ]
+    np.testing.assert_allclose(pkg.mesh.tangents, tangents[order], atol=1e-5)

@@ -178,6 +178,13 @@ def read_usd_source(manifest: Any) -> UsdSource:
             f"the wrinkled meshes read their UVs from different primvars ({', '.join(names)}): "
             f"the wrinkle textures read {uv_name!r}"
         )
+    bare = [m.name for m in chosen if m.normals is None]
+    if bare:
+        notes.append(
+            f"no normals on {', '.join(bare)}: the tangents are made against area-weighted "
+            "vertex normals (the layer adds no normals; a renderer's own smooth normals agree "
+            "up to the weighting)"
+        )
     added: list[str] = []
     if any(m.uvs is None for m in chosen):
         uv = np.split(

@@ -18,6 +18,7 @@ import numpy as np
 from wrinklepipe.asset import Mesh
 from wrinklepipe.document.usd_source import merge_parts
 from wrinklepipe.errors import input_error
+from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.io.confine import confine_usd
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.mesh_usd import read_usd_meshes
@@ -152,10 +153,13 @@ def _layered_mesh(path: Path, file: str, prims: list[str]) -> Mesh:
         for what, value in (("wrinkle:tangent", m.tangents), ("wrinkle:vertexId", m.vertex_ids)):
             if value is None:
                 raise input_error(file, f"primvars:{what} missing or unreadable", p)
-        if m.uvs is None or m.normals is None:
-            raise input_error(file, "texture coordinates (primvars:st) or normals missing", p)
+        if m.uvs is None:
+            raise input_error(file, "texture coordinates (primvars:st) missing", p)
         got.append(m)
-    return merge_parts(got, keep_ids=True)
+    mesh = merge_parts(got, keep_ids=True)
+    if mesh.normals is None:  # as convert made them: area-weighted, over the merged meshes
+        mesh.normals = vertex_normals(mesh.positions, mesh.indices).astype(np.float32)
+    return mesh
 
 
 def _own_mesh(stage: Any, mesh_prim: Any, file: str) -> Mesh:
