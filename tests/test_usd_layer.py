@@ -610,3 +610,40 @@ def test_skinned_arm_quads_without_uvs_or_normals(tmp_path):
         int(np.flatnonzero((np.abs(positions - p) < 1e-6).all(1))[0]) for p in pkg.mesh.positions
     ]
     np.testing.assert_allclose(pkg.mesh.tangents, tangents[order], atol=1e-5)
+
+
+def test_material_bound_only_to_faces_is_refused(tmp_path, capsys):
+    """A material bound through a GeomSubset (some faces of a mesh) cannot be wrinkled alone."""
+    (tmp_path / "assets").mkdir()
+    source = tmp_path / "assets" / "faces.usda"
+    source.write_text(
+        f"""#usda 1.0
+(
+    defaultPrim = "Root"
+    upAxis = "Y"
+)
+def Xform "Root" {{
+    def Mesh "Face" (prepend apiSchemas = ["MaterialBindingAPI"]) {{
+        {_quad(0, 0)}
+        rel material:binding = </Root/Skin>
+        def GeomSubset "lips" (prepend apiSchemas = ["MaterialBindingAPI"]) {{
+            uniform token elementType = "face"
+            uniform token familyName = "materialBind"
+            int[] indices = [0]
+            rel material:binding = </Root/Lips>
+        }}
+    }}
+    def Material "Skin" {{
+    }}
+    def Material "Lips" {{
+    }}
+}}
+""",
+        encoding="utf-8",
+    )
+    manifest = write_setup(tmp_path / "src", source, "face", "Lips")
+    out = tmp_path / "out"
+    code = main(["convert", str(manifest), "-o", str(out), "--allow-root", str(source.parent)])
+    err = capsys.readouterr().err
+    assert code == 2 and "material /Root/Lips is bound only to GeomSubset faces" in err, err
+    assert not (tmp_path / "out").exists()
