@@ -371,8 +371,12 @@ def test_avatar_skin_binding_is_the_source_skeleton(avatar):
         )
 
 
-def test_avatar_read_back_and_validated(avatar):
+def test_avatar_read_back_and_validated(avatar, capsys):
     source, out, _ = avatar
+    layer = str(out / "hero.usda")
+    code = main(["validate-asset", layer, "--no-render", "--allow-root", str(source.parent)])
+    said = "".join(capsys.readouterr())
+    assert code == 0 and "(usd: " in said and "0 error(s)" in said, said
     with allowed_roots([source.parent]):
         pkg = read_usd(out / "hero.usda")
     assert pkg.mesh.vertex_count == 20  # 16 points, the 4 seam points split
