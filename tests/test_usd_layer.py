@@ -651,3 +651,33 @@ def Xform "Root" {{
     err = capsys.readouterr().err
     assert code == 2 and "material /Root/Lips is bound only to GeomSubset faces" in err, err
     assert not (tmp_path / "out").exists()
+
+
+TEAPOT = USDZ.parents[0] / "full_assets" / "Teapot" / "Teapot.usd"
+
+
+@pytest.mark.skipif(not TEAPOT.is_file(), reason="../shared/data is absent")
+def test_teapot_payload_and_variants_compose_through_the_layer(tmp_path):
+    """usd-wg's Teapot (a payload, a model variant set, references, textured materials): the
+    layer over it composes to the source (the selected variant, the payload's prims, every
+    value); UsdValidation 0 errors on the layer and the usdz, which packs the selected
+    variant's textures byte for byte and names its own layer, not the source's, as the
+    asset's identifier."""
+    import zipfile
+
+    out, report, _ = _convert(tmp_path, TEAPOT, "teapot", regions=CENTRE)
+    _, stage = assert_composes_to_source(TEAPOT, out / "teapot.usda")
+    mat, _ = UsdShade.MaterialBindingAPI(
+        stage.GetPrimAtPath("/Teapot/Geometry")
+    ).ComputeBoundMaterial()
+    assert str(mat.GetPath()) == "/Teapot/Materials/Ceramic"
+    assert _errors(stage) == []
+    assert _errors(Usd.Stage.Open(str(out / "teapot.usdz"))) == []
+    names = zipfile.ZipFile(out / "teapot.usdz").namelist()
+    assert names[0] == "teapot.usdc" and not any(n.endswith(".usd") for n in names)
+    cards = TEAPOT.parent / "cards" / "Utah"
+    z = zipfile.ZipFile(out / "teapot.usdz")
+    assert z.read("textures/source/XNeg.png") == (cards / "XNeg.png").read_bytes()
+    flat = Usd.Stage.Open(str(out / "teapot.usdz"))
+    info = flat.GetPrimAtPath("/Teapot").GetAssetInfo()
+    assert info["identifier"].path == "teapot.usdc"

@@ -333,10 +333,14 @@ def layer_bytes(stage: Any, reference: str, suffix: str = ".usda") -> bytes:
 def flattened_usdz(stage: Any, pkg: WrinklePackage, name: str) -> tuple[bytes, list[str]]:
     """The composed stage flattened into one usdc, packed with every texture it uses: the
     package's under ``textures/``, the source's (found through USD's resolver, inside usdz
-    packages too) byte for byte under ``textures/source/``."""
+    packages too) byte for byte under ``textures/source/``. An asset path naming one of the
+    stage's own layers (``assetInfo`` identifiers) names the flattened layer instead."""
     from pxr import Ar, UsdUtils  # deferred: usd-core, USD only
 
     flat = stage.Flatten()
+    layers = {
+        os.path.realpath(x.realPath) for x in stage.GetUsedLayers() if x.realPath
+    }  # the layers the flattened one replaces
     ours = {f"./textures/{t.name}.png": f"textures/{t.name}.png" for t in pkg.textures}
     files: dict[str, bytes] = {ours[k]: png_bytes(t.pixels) for k, t in zip(ours, pkg.textures)}
     by_source: dict[str, str] = {}
@@ -347,6 +351,8 @@ def flattened_usdz(stage: Any, pkg: WrinklePackage, name: str) -> tuple[bytes, l
             return ours.get(asset, asset)
         if asset in by_source:
             return by_source[asset]
+        if os.path.realpath(asset) in layers:
+            return f"{name}.usdc"
         handle = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(asset))
         if handle is None:
             notes.append(f"usdz: {asset} not found: left as it is")
