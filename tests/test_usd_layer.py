@@ -681,3 +681,64 @@ def test_teapot_payload_and_variants_compose_through_the_layer(tmp_path):
     flat = Usd.Stage.Open(str(out / "teapot.usdz"))
     info = flat.GetPrimAtPath("/Teapot").GetAssetInfo()
     assert info["identifier"].path == "teapot.usdc"
+
+
+def test_instanced_head_is_made_overridable(tmp_path):
+    """A head referenced twice as an instanceable asset: its meshes and material are instance
+    proxies, which no layer can override. The layer turns the wrinkled instance into ordinary
+    prims (instanceable = false, noted), the other instance stays instanced, and the stage
+    composes to the source's values."""
+    assets = tmp_path / "assets"
+    assets.mkdir()
+    (assets / "head.usda").write_text(
+        f"""#usda 1.0
+(
+    defaultPrim = "Head"
+)
+def Xform "Head" {{
+    def Mesh "Face" (prepend apiSchemas = ["MaterialBindingAPI"]) {{
+        {_quad(0, 0)}
+        rel material:binding = </Head/Skin>
+    }}{_material("Skin", False).replace("/Avatar/Looks/Skin", "/Head/Skin")}
+}}
+""",
+        encoding="utf-8",
+    )
+    source = assets / "crowd.usda"
+    source.write_text(
+        """#usda 1.0
+(
+    defaultPrim = "Crowd"
+    metersPerUnit = 1
+    upAxis = "Y"
+)
+def Xform "Crowd" {
+    def "Ada" (instanceable = true
+        prepend references = @./head.usda@) {
+    }
+    def "Bo" (instanceable = true
+        prepend references = @./head.usda@) {
+        double3 xformOp:translate = (3, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+}
+""",
+        encoding="utf-8",
+    )
+    out, report, _ = _convert(
+        tmp_path, source, "ada", material="/Crowd/Ada/Skin", meshes=["/Crowd/Ada/Face"]
+    )
+    stage = Usd.Stage.Open(str(out / "ada.usda"))
+    assert not stage.GetPrimAtPath("/Crowd/Ada").IsInstance()
+    assert stage.GetPrimAtPath("/Crowd/Bo").IsInstance()
+    face = stage.GetPrimAtPath("/Crowd/Ada/Face")
+    assert UsdGeom.PrimvarsAPI(face).GetPrimvar("wrinkle:tangent").Get() is not None
+    mat, _ = UsdShade.MaterialBindingAPI(face).ComputeBoundMaterial()
+    assert mat.GetPrim().HasAttribute("wrinkle:encoding")
+    assert any("made not instanceable" in n for n in report["notes"])
+    src = Usd.Stage.Open(str(source))
+    for path in ("/Crowd/Ada/Face", "/Crowd/Bo/Face"):
+        a = UsdGeom.Mesh(src.GetPrimAtPath(path))
+        b = UsdGeom.Mesh(stage.GetPrimAtPath(path))
+        assert list(b.GetPointsAttr().Get()) == list(a.GetPointsAttr().Get())
+    assert _errors(stage) == []

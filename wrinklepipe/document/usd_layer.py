@@ -97,6 +97,7 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
             root.pseudoRoot.SetInfo(key, source_layer.pseudoRoot.GetInfo(key))
     fps = stage.GetTimeCodesPerSecond()
     notes: list[str] = []
+    _deinstance(stage, [part.pointer for part in pkg.mesh.parts] + list(src.materials), notes)
     mat_paths = _materials(stage, src, pkg, fps, notes)
     for mat_path in mat_paths:
         if src.uv_name != "st":  # the wrinkle textures read the meshes' own UV primvar
@@ -129,6 +130,33 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
         "flattened"
     )
     return stage, notes
+
+
+def _deinstance(stage: Any, paths: list[str], notes: list[str]) -> None:
+    """Instance proxies cannot be overridden: the instances holding a wrinkled mesh or
+    material become ordinary prims (``instanceable = false`` over the instance root; nested
+    instances likewise), which composes to the same prims and values."""
+    from pxr import Sdf  # deferred: usd-core, USD only
+
+    done: list[str] = []
+    while True:
+        roots = set()
+        for p in paths:
+            prim = stage.GetPrimAtPath(p)
+            if prim and prim.IsInstanceProxy():
+                while prim.IsInstanceProxy():
+                    prim = prim.GetParent()
+                roots.add(prim.GetPath())
+        if not roots:
+            break
+        for r in sorted(roots):
+            Sdf.CreatePrimInLayer(stage.GetRootLayer(), r).SetInfo("instanceable", False)
+            done.append(str(r))
+    if done:
+        notes.append(
+            f"USD: {', '.join(done)} made not instanceable in the layer (instance proxies "
+            "cannot hold the wrinkle overrides; the composed prims are the same)"
+        )
 
 
 def _materials(
