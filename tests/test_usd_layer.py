@@ -742,3 +742,17 @@ def Xform "Crowd" {
         b = UsdGeom.Mesh(stage.GetPrimAtPath(path))
         assert list(b.GetPointsAttr().Get()) == list(a.GetPointsAttr().Get())
     assert _errors(stage) == []
+
+
+def test_wrinkling_a_wrinkled_material_again_is_refused(avatar, tmp_path, capsys):
+    """The avatar's layer as a source, its wrinkled clone named again: one message (the
+    material already holds the wrinkle shaders), exit 2, nothing written."""
+    source, out, _ = avatar
+    manifest = write_setup(tmp_path / "src", out / "hero.usda", "again", "Skin_wrinkled")
+    code = main(
+        ["convert", str(manifest), "-o", str(tmp_path / "out2")]
+        + ["--allow-root", str(out), "--allow-root", str(source.parent)]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and "already has" in err and "is it already wrinkled?" in err, err
+    assert not (tmp_path / "out2").exists()

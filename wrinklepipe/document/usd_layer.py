@@ -123,11 +123,9 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
                 f"source plays {stage.GetStartTimeCode():g}..{stage.GetEndTimeCode():g} (kept)"
             )
     notes.append(
-        f"USD: {pkg.name}.usda sublayers the source {src.path.name} unchanged and adds the wrinkle "
-        "data "
-        f"over {len(pkg.mesh.parts)} mesh(es) and the material(s) "
-        f"{', '.join(map(str, mat_paths))}; {pkg.name}.usdz is it "
-        "flattened"
+        f"USD: {pkg.name}.usda sublayers the source {src.path.name} unchanged and adds the "
+        f"wrinkle data over {len(pkg.mesh.parts)} mesh(es) and the material(s) "
+        f"{', '.join(map(str, mat_paths))}; {pkg.name}.usdz is it flattened"
     )
     return stage, notes
 
@@ -202,7 +200,7 @@ def _materials(
         else:
             dest = source_mat
             Sdf.CreatePrimInLayer(root, dest)  # an over
-        _wrinkle_inputs(stage, built.GetRootLayer(), built_path, dest)
+        _wrinkle_inputs(stage, built.GetRootLayer(), built_path, dest, src.path)
         _connect_base(stage, dest, notes)
         out.append(dest)
     return out
@@ -215,7 +213,7 @@ def _bound(stage: Any, mesh: str) -> str:
     return str(mat.GetPath()) if mat else ""
 
 
-def _wrinkle_inputs(stage: Any, built: Any, built_path: Any, dest: Any) -> None:
+def _wrinkle_inputs(stage: Any, built: Any, built_path: Any, dest: Any, source: Path) -> None:
     """Everything of the built wrinkle material but its Surface shader and surface output onto
     ``dest`` (over a source material): apiSchemas, wrinkle:* attributes, interface inputs, the
     texture shaders (their connections re-pointed to ``dest``)."""
@@ -233,7 +231,7 @@ def _wrinkle_inputs(stage: Any, built: Any, built_path: Any, dest: Any) -> None:
     clash = [n for n in clash if n != "outputs:surface"]
     if clash:
         raise input_error(
-            str(composed.GetStage().GetRootLayer().subLayerPaths[0]),
+            source,
             f"material {dest} already has {', '.join(clash)}: the wrinkle material's shaders and "
             "inputs would replace them (is it already wrinkled?)",
         )
