@@ -756,3 +756,24 @@ def test_wrinkling_a_wrinkled_material_again_is_refused(avatar, tmp_path, capsys
     err = capsys.readouterr().err
     assert code == 2 and "already has" in err and "is it already wrinkled?" in err, err
     assert not (tmp_path / "out2").exists()
+
+
+def test_batch_cache_key_holds_the_layer_path_of_a_usd_source(tmp_path):
+    """The layer names its source relative to the output folder, so a cached convert folder
+    restored elsewhere would point nowhere: for a USD source the batch cache key holds that
+    path (same key where it is the same, another where it differs); for a glTF source the
+    output place is not part of the key."""
+    from wrinklepipe.batch.fingerprint import asset_key
+    from wrinklepipe.batch.options import AssetOptions
+
+    source = write_avatar(tmp_path / "assets")
+    manifest = write_setup(tmp_path / "src", source, "hero", material="Skin")
+    opt = AssetOptions()
+    with allowed_roots([source.parent]):
+        a = asset_key(manifest, opt, tmp_path / "build" / "hero")[0]
+        b = asset_key(manifest, opt, tmp_path / "build" / "hero2")[0]  # ../../assets as well
+        c = asset_key(manifest, opt, tmp_path / "deep" / "build" / "hero")[0]
+    assert a == b != c
+    gltf = write_setup(tmp_path / "g", tmp_path / "g" / "head.glb", "hero")
+    (tmp_path / "g" / "head.glb").write_bytes(b"glTF")
+    assert asset_key(gltf, opt, tmp_path / "x")[0] == asset_key(gltf, opt, tmp_path / "y" / "z")[0]

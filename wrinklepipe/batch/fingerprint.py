@@ -9,7 +9,9 @@
 * the **options** that change the output (:meth:`AssetOptions.output_fields`);
 * every **input**: the manifest and each file it reads (meshes with the buffers and images a
   ``.gltf`` names and the layers and assets a USD file pulls in, maps, masks, driver files),
-  as (path relative to the manifest's folder, SHA-256 of the bytes).
+  as (path relative to the manifest's folder, SHA-256 of the bytes);
+* for a USD source, the path the output layer names it by (relative to the output folder:
+  :func:`wrinklepipe.document.usd_layer.source_reference`).
 
 Paths are relative, so a character checked out elsewhere (another CI runner, another farm node)
 hits the same entry. Reading the inputs to hash them is the only work a cached asset costs.
@@ -30,6 +32,8 @@ from urllib.parse import unquote
 
 from wrinklepipe import __version__
 from wrinklepipe.batch.options import AssetOptions
+from wrinklepipe.document.usd_layer import source_reference
+from wrinklepipe.document.usd_source import USD_SUFFIXES
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.paths import ROOT
 
@@ -132,8 +136,12 @@ def input_files(manifest_path: Path) -> list[Path]:
     return sorted(Path(os.path.abspath(p)) for p in files)
 
 
-def asset_key(manifest_path: Path, options: AssetOptions) -> tuple[str, list[dict[str, Any]]]:
-    """The cache key of one asset and the input rows it was made from."""
+def asset_key(
+    manifest_path: Path, options: AssetOptions, output: Path | None = None
+) -> tuple[str, list[dict[str, Any]]]:
+    """The cache key of one asset and the input rows it was made from. ``output``: where it is
+    written; for a USD source the layer names the source relative to it, so that path is part
+    of the key (an entry is never restored where its sublayer path would not resolve)."""
     manifest_path = Path(os.path.abspath(manifest_path))
     root = manifest_path.parent
     rows = []
@@ -145,5 +153,8 @@ def asset_key(manifest_path: Path, options: AssetOptions) -> tuple[str, list[dic
         "options": options.output_fields(),
         "inputs": rows,
     }
+    m = load_manifest(manifest_path)
+    if output is not None and m.mesh is not None and m.mesh.suffix.lower() in USD_SUFFIXES:
+        doc["usd_source_reference"] = source_reference(m.mesh, Path(output))
     text = json.dumps(doc, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode("utf-8")).hexdigest(), rows

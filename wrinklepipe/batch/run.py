@@ -107,7 +107,7 @@ def run_plan(
         t1 = time.perf_counter()
         stage(job.id, "hashing inputs")
         try:
-            key, _ = asset_key(job.manifest, job.options)
+            key, _ = asset_key(job.manifest, job.options, job.output)
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001 - a manifest that cannot be read fails alone
@@ -141,7 +141,7 @@ def run_plan(
         if cache is not None and key and result.status != "error":
             result.key = key
             try:
-                same = asset_key(job.manifest, job.options)[0] == key
+                same = asset_key(job.manifest, job.options, job.output)[0] == key
             except Exception:  # noqa: BLE001 - inputs vanished meanwhile: do not store
                 same = False
             if same:
