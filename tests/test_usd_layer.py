@@ -777,3 +777,18 @@ def test_batch_cache_key_holds_the_layer_path_of_a_usd_source(tmp_path):
     gltf = write_setup(tmp_path / "g", tmp_path / "g" / "head.glb", "hero")
     (tmp_path / "g" / "head.glb").write_bytes(b"glTF")
     assert asset_key(gltf, opt, tmp_path / "x")[0] == asset_key(gltf, opt, tmp_path / "y" / "z")[0]
+
+
+def test_meshes_without_material_take_their_own_materials(tmp_path):
+    """``meshes = ["Head", "Eye"]`` and no ``material``: the named meshes with the materials
+    they are bound to (Skin, cloned since the body keeps it; Eye)."""
+    source = write_avatar(tmp_path / "assets")
+    out, report, _ = _convert(tmp_path, source, "named", meshes=["Head", "Eye"])
+    stage = Usd.Stage.Open(str(out / "named.usda"))
+    for mesh, mat in (("/Avatar/Head", "Skin_wrinkled"), ("/Avatar/EyeRig/Eye", "Eye")):
+        bound, _ = UsdShade.MaterialBindingAPI(stage.GetPrimAtPath(mesh)).ComputeBoundMaterial()
+        assert str(bound.GetPath()) == f"/Avatar/Looks/{mat}"
+    body, _ = UsdShade.MaterialBindingAPI(
+        stage.GetPrimAtPath("/Avatar/Body")
+    ).ComputeBoundMaterial()
+    assert str(body.GetPath()) == "/Avatar/Looks/Skin"

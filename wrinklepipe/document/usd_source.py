@@ -4,9 +4,10 @@ The manifest's ``material`` (a Material prim's name or path, or a list) selects 
 meshes: those bound to it, or to one of them (``material:binding`` as
 ``UsdShade.MaterialBindingAPI.ComputeBoundMaterial`` resolves it). Without ``material``: the
 stage's only bound material, or, when no mesh has one, every mesh (convert then adds a
-material). ``meshes`` restricts the selection to Mesh prims named by name or path; a material
-also bound to meshes outside the selection is then cloned in the output layer (an internal
-reference), as the glTF path clones a shared material. Bad selections are one
+material). ``meshes`` restricts the selection to Mesh prims named by name or path (without
+``material``: those meshes, with the materials they are bound to); a material also bound to
+meshes outside the selection is then cloned in the output layer (an internal reference), as
+the glTF path clones a shared material. Bad selections are one
 :class:`~wrinklepipe.errors.InputError` each, listing what the stage has.
 
 The render mesh is the wrinkled meshes as :func:`wrinklepipe.io.mesh_usd.read_usd_meshes`
@@ -101,6 +102,23 @@ def _find_material(
     raise input_error(file, f"{what}; its materials: {_listing(materials) or 'none'}", key)
 
 
+def _named(
+    prims: list[str], names: tuple[str, ...] | list[str], among: list[str], where: str, file: str
+) -> list[str]:
+    """The prims of ``among`` (in ``prims`` order) named by ``names`` (prim name or path)."""
+    keep: set[str] = set()
+    for k, name in enumerate(names):
+        hits = {p for p in among if p == name or p.rsplit("/", 1)[-1] == name}
+        if not hits:
+            raise input_error(
+                file,
+                f"no Mesh prim {name!r} {where} (meshes {where}: {', '.join(among) or 'none'})",
+                f"meshes[{k}]",
+            )
+        keep |= hits
+    return [p for p in prims if p in keep]
+
+
 def select_meshes(
     stage: Any,
     prims: list[str],
@@ -114,6 +132,19 @@ def select_meshes(
     clones (see the module doc)."""
     bound, materials = _bindings(stage, prims)
     used = {m: ms for m, ms in materials.items() if ms}
+    if material is None and meshes:  # the named meshes, bound to whatever they are bound to
+        picked = _named(prims, meshes, prims, "in the stage", file)
+        mats = {bound[p] for p in picked}
+        if None in mats and len(mats) > 1:
+            listing = ", ".join(f"{p}: {bound[p] or 'none'}" for p in picked)
+            raise input_error(
+                file,
+                "some of the named meshes are bound to a material and some to none "
+                f"({listing}): bind them, or wrinkle them separately",
+                "meshes",
+            )
+        chosen = sorted(m for m in mats if m is not None)
+        return picked, chosen, [m for m in chosen if any(p not in picked for p in used[m])]
     if material is None:
         if not used:
             chosen: list[str] = []
@@ -144,18 +175,7 @@ def select_meshes(
             chosen.append(m)
     picked = [p for p in prims if bound[p] in chosen] if chosen else list(prims)
     if meshes:
-        keep: set[str] = set()
-        where = f"bound to {', '.join(chosen)}" if chosen else "in the stage"
-        for k, name in enumerate(meshes):
-            hits = {p for p in picked if p == name or p.rsplit("/", 1)[-1] == name}
-            if not hits:
-                raise input_error(
-                    file,
-                    f"no Mesh prim {name!r} {where} (meshes {where}: {', '.join(picked)})",
-                    f"meshes[{k}]",
-                )
-            keep |= hits
-        picked = [p for p in picked if p in keep]
+        picked = _named(prims, meshes, picked, f"bound to {', '.join(chosen)}", file)
     cloned = [m for m in chosen if any(p not in picked for p in used[m])]
     return picked, chosen, cloned
 
