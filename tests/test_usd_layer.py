@@ -792,3 +792,7 @@ def test_meshes_without_material_take_their_own_materials(tmp_path):
         stage.GetPrimAtPath("/Avatar/Body")
     ).ComputeBoundMaterial()
     assert str(body.GetPath()) == "/Avatar/Looks/Skin"
+    # each material's wrinkle textures read its own meshes' UVs (the head's st, the eye's UVMap)
+    for mat, uv in (("Skin_wrinkled", "st"), ("Eye", "UVMap")):
+        reader = stage.GetPrimAtPath(f"/Avatar/Looks/{mat}/StReader")
+        assert reader.GetAttribute("inputs:varname").Get() == uv

@@ -100,15 +100,13 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
     _deinstance(stage, [part.pointer for part in pkg.mesh.parts] + list(src.materials), notes)
     mat_paths = _materials(stage, src, pkg, fps, notes)
     for mat_path in mat_paths:
-        if src.uv_name != "st":  # the wrinkle textures read the meshes' own UV primvar
-            reader = stage.GetPrimAtPath(mat_path.AppendChild("StReader"))
-            reader.GetAttribute("inputs:varname").Set(src.uv_name)
+        _read_uvs_of_meshes(stage, mat_path, src, notes)
         marker = stage.GetPrimAtPath(mat_path).CreateAttribute(
             LAYERED_OVER, Sdf.ValueTypeNames.String, custom=True
         )
         marker.Set(src.path.name)  # read_usd reads the meshes in the source's topology
     for part in pkg.mesh.parts:
-        _mesh_overs(stage, part, pkg, src.added_uvs, src.uv_name)
+        _mesh_overs(stage, part, pkg, src.added_uvs, src.uv_names.get(part.pointer, "st"))
     if pkg.curves:  # the source's playback range stays; a source without one gets the curves'
         times = np.concatenate([np.asarray(c.times, np.float64) for c in pkg.curves]) * fps
         start, end = float(times.min()), float(times.max())
@@ -128,6 +126,20 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
         f"{', '.join(map(str, mat_paths))}; {pkg.name}.usdz is it flattened"
     )
     return stage, notes
+
+
+def _read_uvs_of_meshes(stage: Any, material: Any, src: UsdSource, notes: list[str]) -> None:
+    """The wrinkle textures of ``material`` read the UV primvar of the meshes bound to it."""
+    names = sorted({n for p, n in src.uv_names.items() if _bound(stage, p) == str(material)})
+    if not names or names == ["st"]:
+        return
+    reader = stage.GetPrimAtPath(material.AppendChild("StReader"))
+    reader.GetAttribute("inputs:varname").Set(names[0])
+    if len(names) > 1:
+        notes.append(
+            f"the meshes bound to {material} keep their UVs in different primvars "
+            f"({', '.join(names)}): its wrinkle textures read {names[0]!r}"
+        )
 
 
 def _deinstance(stage: Any, paths: list[str], notes: list[str]) -> None:

@@ -44,8 +44,8 @@ class UsdSource:
     ``materials``: the source Material prims the wrinkle data goes on (none: the layer defines
     one and binds the meshes to it); ``cloned``: those also bound to meshes that are not
     wrinkled, so the layer wrinkles a copy of each; ``added_uvs``: prims given front-projected
-    UVs; ``uv_name``: the primvar the meshes' UVs are read from (the wrinkle textures' reader
-    reads it; added UVs get that name)."""
+    UVs; ``uv_names``: each prim's UV primvar (the wrinkle textures' reader of its material
+    reads it; added UVs take the name most of the other meshes use, else ``st``)."""
 
     path: Path
     mesh: Mesh
@@ -54,7 +54,7 @@ class UsdSource:
     cloned: tuple[str, ...] = ()
     added_uvs: tuple[str, ...] = ()
     notes: list[str] = field(default_factory=list)
-    uv_name: str = "st"
+    uv_names: dict[str, str] = field(default_factory=dict)
 
 
 def _bindings(stage: Any, prims: list[str]) -> tuple[dict[str, str | None], dict[str, list[str]]]:
@@ -192,15 +192,11 @@ def read_usd_source(manifest: Any) -> UsdSource:
     by_name = {m.name: m for m in parts}
     chosen = [by_name[p] for p in prims]
     notes: list[str] = []
-    names = sorted(
-        {str(pv.GetPrimvarName()) for p in prims if (pv := uv_primvar(stage.GetPrimAtPath(p)))}
-    )
-    uv_name = names[0] if names else "st"
-    if len(names) > 1:
-        notes.append(
-            f"the wrinkled meshes read their UVs from different primvars ({', '.join(names)}): "
-            f"the wrinkle textures read {uv_name!r}"
-        )
+    uv_names = {
+        p: str(pv.GetPrimvarName()) for p in prims if (pv := uv_primvar(stage.GetPrimAtPath(p)))
+    }
+    found = sorted(uv_names.values())
+    uv_name = max(found, key=found.count) if found else "st"  # what added UVs are called
     bare = [m.name for m in chosen if m.normals is None]
     if bare:
         notes.append(
@@ -218,6 +214,7 @@ def read_usd_source(manifest: Any) -> UsdSource:
             if m.uvs is None:
                 chosen[i] = replace(m, uvs=uv[i])
                 added.append(m.name)
+                uv_names[m.name] = uv_name
         notes.append(
             f"no texture coordinates on {', '.join(added)}: front-projected UVs (u along +X, v "
             f"down -Y over the wrinkled meshes' bounds), added to the output layer as "
@@ -232,7 +229,7 @@ def read_usd_source(manifest: Any) -> UsdSource:
         + ", ".join(f"{p.name} ({p.count} vertices)" for p in mesh.parts)
     )
     return UsdSource(
-        path, mesh, tuple(prims), tuple(mats), tuple(cloned), tuple(added), notes, uv_name
+        path, mesh, tuple(prims), tuple(mats), tuple(cloned), tuple(added), notes, uv_names
     )
 
 
