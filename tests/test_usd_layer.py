@@ -796,3 +796,38 @@ def test_meshes_without_material_take_their_own_materials(tmp_path):
     for mat, uv in (("Skin_wrinkled", "st"), ("Eye", "UVMap")):
         reader = stage.GetPrimAtPath(f"/Avatar/Looks/{mat}/StReader")
         assert reader.GetAttribute("inputs:varname").Get() == uv
+
+
+def test_inspect_diff_of_source_and_layer_lists_only_the_additions(avatar, capsys):
+    """``inspect --diff SOURCE LAYER``: nothing removed; changed only the sublayer list, the
+    material count and the head's material binding (to the clone); added only the head's
+    wrinkle primvars and the clone with its shaders."""
+    import json
+
+    source, out, _ = avatar
+    code = main(
+        ["inspect", "--diff", str(source), str(out / "hero.usda"), "--json"]
+        + ["--allow-root", str(source.parent)]
+    )
+    lines = json.loads(capsys.readouterr().out)["differences"]
+    assert code == 1 and lines
+    assert not [x for x in lines if x.startswith("-")]
+    changed = sorted(x.split(":")[0] for x in lines if x.startswith("~"))
+    assert changed == [
+        "~ counts.materials",  # the clone
+        "~ layers",
+        "~ prims./Avatar/Head.material",
+        "~ prims./Avatar/Head.relationships.material",  # material:binding
+        "~ used_layers",
+    ]
+    added = [x[2:].split(": ")[0] for x in lines if x.startswith("+")]
+    assert added and all(
+        a.startswith("prims./Avatar/Head.attributes.primvars:wrinkle:")
+        or a.startswith("prims./Avatar/Looks/Skin_wrinkled")
+        for a in added
+    ), added
+    assert "prims./Avatar/Head.attributes.primvars:wrinkle:tangent" in added
+    # one file: the table names the layer's sublayer and the wrinkled material
+    assert main(["inspect", str(out / "hero.usda"), "--allow-root", str(source.parent)]) == 0
+    said = capsys.readouterr().out
+    assert "WrinkleMapsAPI" in said and "../assets/avatar.usda" in said

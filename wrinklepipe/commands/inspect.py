@@ -1,8 +1,10 @@
-"""``wrinklepipe inspect``: what a glTF holds (like ``gltf-transform inspect``), or what differs."""
+"""``wrinklepipe inspect``: what a glTF or USD file holds (like ``gltf-transform inspect``), or
+what differs between two."""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from rich.table import Table
@@ -10,28 +12,38 @@ from rich.table import Table
 from wrinklepipe.console import emit_json, out
 from wrinklepipe.document import read_document
 from wrinklepipe.document.inspect import diff, summary
+from wrinklepipe.document.usd_inspect import usd_summary
+from wrinklepipe.document.usd_source import USD_SUFFIXES
 from wrinklepipe.errors import input_error, plain_reason
 
 NAME = "inspect"
-HELP = "list a glTF's scenes, meshes, materials, textures, skins, animations; or diff two"
+HELP = "list a glTF's or USD stage's meshes, materials, skins, animations; or diff two"
 DESCRIPTION = """\
 Read a .gltf/.glb whole (meshopt and Draco geometry decoded) and list its scenes, nodes,
 meshes (primitives, vertices, morph targets, attributes with component types), materials
 (texture slots, alpha mode, extensions), textures (size, format, bytes), skins (joints,
 hierarchy depth), animations (channels, duration, keyframes) and extensions.
 
-With --diff A B, list what differs between two files, one line each: '-' only in A,
-'+' only in B, '~' changed. Exit 0 when they hold the same, 1 when something differs.
+A USD file (.usd/.usda/.usdc/.usdz) is opened composed (sublayers, references, payloads,
+variants) and listed by prim: type, applied schemas, authored attributes (type, count,
+interpolation, time samples), relationships; meshes (points, faces, material, skeleton),
+materials (surface shader), skeletons (joints).
+
+With --diff A B, list what differs between two files of one kind, one line each: '-' only in
+A, '+' only in B, '~' changed. Exit 0 when they hold the same, 1 when something differs.
 
 examples:
   wrinklepipe inspect RobotExpressive.glb
   wrinklepipe inspect build/robot/robot.glb --json
   wrinklepipe inspect --diff RobotExpressive.glb build/robot/robot.glb
+  wrinklepipe inspect --diff assets/hero.usd build/hero/hero.usda --allow-root assets
 """
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("files", metavar="FILE", nargs="+", help=".gltf or .glb (two with --diff)")
+    p.add_argument(
+        "files", metavar="FILE", nargs="+", help=".gltf/.glb or a USD file (two with --diff)"
+    )
     p.add_argument("--diff", action="store_true", help="list what differs between FILE A and B")
     p.add_argument("--json", action="store_true", help="print JSON on stdout")
 
@@ -99,6 +111,46 @@ def print_summary(s: dict[str, Any]) -> None:
     )
 
 
+def print_usd_summary(s: dict[str, Any]) -> None:
+    """A USD summary as rich tables on stdout."""
+    out.print(f"[bold]{s['file']}[/bold]  defaultPrim {s['defaultPrim']!r}")
+    out.print(f"sublayers: {', '.join(s['layers']) or 'none'} ({s['used_layers']} layers used)")
+    start, end, tcps = s["timeCodes"]
+    out.print(
+        f"upAxis {s['upAxis']}, metersPerUnit {s['metersPerUnit']:g}, time codes "
+        f"{start:g}..{end:g} at {tcps:g}/s; "
+        + ", ".join(f"{n} {k}" for k, n in s["counts"].items())
+    )
+    prims = s["prims"]
+
+    def rows(kind: str, cols: list[str]) -> list[dict[str, Any]]:
+        return [
+            {"path": p, **{c: r.get(c) for c in cols}}
+            for p, r in prims.items()
+            if r["type"] == kind
+        ]
+
+    meshes = rows("Mesh", ["points", "faces", "material", "skeleton"])
+    for m in meshes:
+        attrs = prims[m["path"]].get("attributes", {})
+        m["primvars"] = [a.removeprefix("primvars:") for a in attrs if a.startswith("primvars:")]
+    out.print(
+        _table("MESHES", meshes, ["path", "points", "faces", "material", "skeleton", "primvars"])
+    )
+    out.print(
+        _table(
+            "MATERIALS",
+            rows("Material", ["surface", "apiSchemas"]),
+            ["path", "surface", "apiSchemas"],
+        )
+    )
+    out.print(_table("SKELETONS", rows("Skeleton", ["joints"]), ["path", "joints"]))
+    anims = rows("SkelAnimation", ["attributes"])
+    for a in anims:
+        a["animated"] = [k for k, v in (a.pop("attributes") or {}).items() if "time samples" in v]
+    out.print(_table("ANIMATIONS", anims, ["path", "animated"]))
+
+
 def _summary(file: str, read: Any, summarize: Any) -> dict[str, Any]:
     """One file's summary; a structure the reader's checks did not foresee (an index into a
     missing array, a wrong type) is one message naming the file, not a traceback."""
@@ -114,10 +166,20 @@ def run(args: argparse.Namespace) -> int:
         raise input_error("<arguments>", f"--diff needs two files, got {len(args.files)}")
     if not args.diff and len(args.files) != 1:
         raise input_error("<arguments>", "give one file (or two with --diff)")
-    summaries = [_summary(f, read_document, summary) for f in args.files]
+    usd = [Path(f).suffix.lower() in USD_SUFFIXES for f in args.files]
+    if len(set(usd)) > 1:
+        raise input_error(
+            "<arguments>", "--diff compares two glTF files or two USD files, not one of each"
+        )
+    if usd[0]:
+        summaries = [usd_summary(f) for f in args.files]
+    else:
+        summaries = [_summary(f, read_document, summary) for f in args.files]
     if not args.diff:
         if args.json:
             emit_json(summaries[0])
+        elif usd[0]:
+            print_usd_summary(summaries[0])
         else:
             print_summary(summaries[0])
         return 0

@@ -289,7 +289,11 @@ def _bind(stage: Any, material: Any, meshes: list[str]) -> None:
 
     mat = UsdShade.Material(stage.GetPrimAtPath(material))
     for mesh in meshes:
-        UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(mesh)).Bind(mat)
+        prim = stage.GetPrimAtPath(mesh)
+        api = UsdShade.MaterialBindingAPI(prim)
+        if not prim.HasAPI(UsdShade.MaterialBindingAPI):  # applied only where it is not yet
+            api = UsdShade.MaterialBindingAPI.Apply(prim)
+        api.Bind(mat)
 
 
 def topology_values(
