@@ -4,6 +4,11 @@ Finds the Material with ``WrinkleMapsAPI`` and the Mesh bound to it, undoes the 
 (``uv = (s, 1 - t)``), reads the textures through Ar (so files inside a .usdz work) and returns the
 same :class:`~wrinklepipe.io.package.WrinklePackage` the glTF reader returns. Texture paths must be
 relative and stay inside the layer's folder or package.
+
+A layer over a USD source (:mod:`wrinklepipe.document.usd_layer`; its material carries
+``wrinkle:layeredOver``) keeps the source's topology: the meshes bound to its wrinkled
+material(s) are read by :func:`wrinklepipe.io.mesh_usd.read_usd_meshes` (render vertices through
+the corner map, wrinkle primvars vertex or faceVarying, the source's UsdSkel skin) and merged.
 """
 
 from __future__ import annotations
