@@ -831,3 +831,12 @@ def test_inspect_diff_of_source_and_layer_lists_only_the_additions(avatar, capsy
     assert main(["inspect", str(out / "hero.usda"), "--allow-root", str(source.parent)]) == 0
     said = capsys.readouterr().out
     assert "WrinkleMapsAPI" in said and "../assets/avatar.usda" in said
+
+
+def test_engine_export_from_the_flattened_usdz(avatar, tmp_path):
+    """The self-contained usdz is an input like any written asset: the Godot export reads it
+    (the layered mesh through the source topology) and writes its files."""
+    _, out, _ = avatar
+    dest = tmp_path / "godot"
+    assert main(["export", str(out / "hero.usdz"), "--engine", "godot", "-o", str(dest)]) == 0
+    assert (dest / "wrinkle.gdshader").is_file() and list(dest.glob("*.gltf"))
