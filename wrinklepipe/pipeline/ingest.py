@@ -29,7 +29,7 @@ from wrinklepipe.document.images import texture_normals
 from wrinklepipe.document.model import Document, read_document
 from wrinklepipe.document.render_mesh import wrinkled_mesh
 from wrinklepipe.document.repair import repair
-from wrinklepipe.document.usd_source import USD_SUFFIXES, UsdSource, read_usd_source
+from wrinklepipe.document.usd_source import UsdSource, read_usd_source
 from wrinklepipe.document.wrinkle_maps import WrinkleTarget
 from wrinklepipe.document.wrinkled import (
     add_wrinkle_attributes,
@@ -42,8 +42,6 @@ from wrinklepipe.io.images import read_image
 from wrinklepipe.io.mesh import load_mesh
 from wrinklepipe.io.readers import format_of
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
-
-_GLTF = (".gltf", ".glb")
 
 
 def _read_normals(
@@ -207,7 +205,7 @@ def ingest_all(manifest: Any) -> Ingested:
         base, states, mask_arr, notes = read_maps(manifest, source.base, stats)
         notes = source.notes + notes
         check_masks_on_mesh(mask_arr, mesh, manifest)
-    elif manifest.mesh.suffix.lower() in USD_SUFFIXES:
+    elif fmt is not None and fmt.name == "usd":
         usd = read_usd_source(manifest)
         mesh = usd.mesh
         base, states, mask_arr, notes = read_maps(manifest, None, stats)
