@@ -840,3 +840,20 @@ def test_engine_export_from_the_flattened_usdz(avatar, tmp_path):
     dest = tmp_path / "godot"
     assert main(["export", str(out / "hero.usdz"), "--engine", "godot", "-o", str(dest)]) == 0
     assert (dest / "wrinkle.gdshader").is_file() and list(dest.glob("*.gltf"))
+
+
+LBS = ARM.parents[1] / "testenv" / "testUsdSkelBakeSkinning" / "lbs.usda"
+
+
+@pytest.mark.skipif(not LBS.is_file(), reason="../shared/data is absent")
+def test_lbs_source_without_units_or_default_prim(tmp_path):
+    """OpenUSD's lbs.usda (skinned, animated extentsHint, no metersPerUnit, no defaultPrim:
+    UsdValidation errors of its own): the layer states USD's fallbacks (metersPerUnit 0.01, the
+    only root prim as defaultPrim), composes to the source, and validates with 0 errors."""
+    assert len(_errors(Usd.Stage.Open(str(LBS)))) == 2
+    out, report, _ = _convert(tmp_path, LBS, "lbs", regions=CENTRE)
+    _, stage = assert_composes_to_source(LBS, out / "lbs.usda")
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 0.01
+    assert stage.GetDefaultPrim().GetPath() == Sdf.Path("/Root")
+    assert any("to USD's fallbacks" in n for n in report["notes"])
+    assert _errors(stage) == [] and _errors(Usd.Stage.Open(str(out / "lbs.usdz"))) == []

@@ -97,6 +97,7 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
             root.pseudoRoot.SetInfo(key, source_layer.pseudoRoot.GetInfo(key))
     fps = stage.GetTimeCodesPerSecond()
     notes: list[str] = []
+    _explicit_stage_metadata(stage, source_layer, notes)
     _deinstance(stage, [part.pointer for part in pkg.mesh.parts] + list(src.materials), notes)
     mat_paths = _materials(stage, src, pkg, fps, notes)
     for mat_path in mat_paths:
@@ -126,6 +127,31 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
         f"{', '.join(map(str, mat_paths))}; {pkg.name}.usdz is it flattened"
     )
     return stage, notes
+
+
+def _explicit_stage_metadata(stage: Any, source_layer: Any, notes: list[str]) -> None:
+    """What the source leaves to USD's fallbacks, said explicitly in the layer (the same
+    meaning; a stage without them fails UsdValidation): ``upAxis`` (the fallback axis),
+    ``metersPerUnit`` (0.01, centimetres), and ``defaultPrim`` when there is one root prim."""
+    from pxr import UsdGeom  # deferred: usd-core, USD only
+
+    said = []
+    info = source_layer.pseudoRoot
+    if not info.HasInfo("upAxis"):
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.GetFallbackUpAxis())
+        said.append(f"upAxis {UsdGeom.GetFallbackUpAxis()}")
+    if not info.HasInfo("metersPerUnit"):
+        UsdGeom.SetStageMetersPerUnit(stage, UsdGeom.LinearUnits.centimeters)
+        said.append("metersPerUnit 0.01")
+    roots = list(stage.GetPseudoRoot().GetChildren())
+    if not stage.HasDefaultPrim() and len(roots) == 1:
+        stage.SetDefaultPrim(roots[0])
+        said.append(f"defaultPrim {roots[0].GetName()} (its only root prim)")
+    if said:
+        notes.append(
+            f"USD: the source leaves {', '.join(said)} to USD's fallbacks; the layer says them "
+            "(same meaning)"
+        )
 
 
 def _read_uvs_of_meshes(stage: Any, material: Any, src: UsdSource, notes: list[str]) -> None:
