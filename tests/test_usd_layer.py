@@ -486,14 +486,20 @@ def test_rigged_figure_layer_keeps_the_figure_and_adds_uvs(tmp_path):
 @pytest.mark.skipif(not CESIUM.is_file(), reason="../shared/data is absent")
 def test_cesium_man_layer_over_a_usdz_source(tmp_path):
     """CesiumMan.usdz (UsdSkel, a JPEG albedo inside the package): the layer sublayers the usdz;
-    UsdValidation finds only the source's own error (usdzconvert wrote its primvar reader's
-    varname as a token), none added; the flattened usdz carries the JPEG byte for byte."""
-    out, _, _ = _convert(tmp_path, CESIUM, "cesium", regions=CENTRE)
+    UsdValidation finds on it only the source's own error (usdzconvert wrote its primvar
+    reader's varname as a token; no layer can retype an attribute), none added; the flattened
+    usdz, whose specs are ours, has it as a string: 0 errors; it carries the JPEG byte for
+    byte."""
+    out, report, _ = _convert(tmp_path, CESIUM, "cesium", regions=CENTRE)
     assert_composes_to_source(CESIUM, out / "cesium.usda")
     source_errors = _errors(Usd.Stage.Open(str(CESIUM)))
     assert len(source_errors) == 1 and "varname" in source_errors[0]
     assert _errors(Usd.Stage.Open(str(out / "cesium.usda"))) == source_errors
-    assert _errors(Usd.Stage.Open(str(out / "cesium.usdz"))) == source_errors
+    flat = Usd.Stage.Open(str(out / "cesium.usdz"))
+    assert _errors(flat) == []
+    reader = flat.GetPrimAtPath("/CesiumMan/Materials/Cesium_Man_effect/uvReader_st")
+    assert reader.GetAttribute("inputs:varname").Get() == "st"
+    assert any("written as a string" in n for n in report["notes"])
     import zipfile
 
     inner = zipfile.ZipFile(CESIUM).read("0/CesiumMan_img0.jpg")

@@ -398,6 +398,44 @@ def layer_bytes(stage: Any, reference: str, suffix: str = ".usda") -> bytes:
         return tmp.read_bytes()
 
 
+def _retype_varnames(layer: Any) -> list[str]:
+    """UsdPrimvarReader ``inputs:varname`` authored as a token (older exporters; the shader's
+    input is a string since USD 20.11) rewritten as a string in the flattened layer, where we
+    own the spec (a layer over the source cannot retype an attribute)."""
+    from pxr import Sdf  # deferred: usd-core, USD only
+
+    fixed: list[str] = []
+
+    def visit(path: Any) -> None:
+        if not path.IsPrimPropertyPath() or path.name != "inputs:varname":
+            return
+        spec = layer.GetAttributeAtPath(path)
+        if spec is None or spec.typeName != Sdf.ValueTypeNames.Token:
+            return
+        owner = layer.GetPrimAtPath(path.GetPrimPath())
+        info = owner.attributes.get("info:id") if owner else None
+        if info is None or not str(info.default).startswith("UsdPrimvarReader"):
+            return
+        value = str(spec.default) if spec.HasDefaultValue() else None
+        variability = spec.variability
+        owner.RemoveProperty(spec)
+        new = Sdf.AttributeSpec(owner, "inputs:varname", Sdf.ValueTypeNames.String, variability)
+        if value is not None:
+            new.default = value
+        fixed.append(str(path))
+
+    paths: list[Any] = []
+    layer.Traverse(Sdf.Path.absoluteRootPath, paths.append)
+    for path in paths:
+        visit(path)
+    if not fixed:
+        return []
+    return [
+        f"usdz: {', '.join(fixed)} authored as a token; written as a string (the type "
+        "UsdPrimvarReader's varname has had since USD 20.11)"
+    ]
+
+
 def flattened_usdz(stage: Any, pkg: WrinklePackage, name: str) -> tuple[bytes, list[str]]:
     """The composed stage flattened into one usdc, packed with every texture it uses: the
     package's under ``textures/``, the source's (found through USD's resolver, inside usdz
@@ -437,6 +475,7 @@ def flattened_usdz(stage: Any, pkg: WrinklePackage, name: str) -> tuple[bytes, l
         return rel
 
     UsdUtils.ModifyAssetPaths(flat, remap)
+    notes += _retype_varnames(flat)
     with tempfile.TemporaryDirectory(prefix="wrinklepipe-usdz-") as work:
         tmp = Path(work) / f"{name}.usdc"
         if not flat.Export(str(tmp)):
