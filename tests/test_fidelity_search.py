@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy import ndimage
+from scipy.ndimage import map_coordinates
 
+from wrinklepipe import codec, model
 from wrinklepipe import fidelity as fd
-from wrinklepipe import model
+from wrinklepipe.demo import demo_asset
 from wrinklepipe.fidelity import pyramid, ship
 from wrinklepipe.fidelity import search as fs
 from wrinklepipe.io.package import encode_base, encode_state
@@ -103,3 +105,67 @@ def test_a_fixed_choice_is_measured_not_searched():
     choice = fs.search(scene(width=2.0), fd.Budget(p99=1.0), fixed=fs.Fixed(wrinkle=16))
     assert choice.wrinkle_size == 16 and not choice.png.meets(fd.Budget(p99=1.0))
     assert not [t for t in choice.tried if t.step == "wrinkle"]
+
+
+def test_the_measure_equals_the_plain_formula_on_the_demo():
+    """The measure's planar, per-pose path against the model's whole-map blend: every shipped
+    map magnified by scipy (bilinear between texel centres, edges clamped), decoded as the
+    shader decodes sampled values, both blends on the whole grid, the angle in float64,
+    weighted stats by sorting; active texels: the source's or the shipped masks'."""
+    a = demo_asset(128)
+    poses = fd.expression_poses(a.region_names, a.region_state_matrix(), a.expressions)
+    slopes = model.normal_to_pd(a.states) - model.normal_to_pd(a.base)[None]
+    ref = fd.prepare(a.base, slopes, a.masks, poses, a.region_names)
+    base_q = ship.base_texels(a.base)
+    states_q = np.stack([ship.pd_texels(x, 0.5)[0] for x in pyramid.levels(slopes, 32)[32]])
+    masks_q = ship.mask_values(a.masks, 32)
+    got = fd.evaluate(
+        ref,
+        fd.merge(
+            fd.sample(ref, base=base_q, base_reader=ship.base_reader()),
+            fd.sample(ref, masks=masks_q),
+            fd.sample(ref, states=states_q, states_reader=ship.pd_reader(0.5, quantise=False)),
+        ),
+        regions=False,
+    )
+
+    def magnify(img):  # [h, w, C] -> [128, 128, C], float64
+        c = (np.arange(128) + 0.5) * (img.shape[0] / 128) - 0.5
+        yy, xx = np.meshgrid(c, c, indexing="ij")
+        v = np.asarray(img, np.float64)
+        return np.stack(
+            [
+                map_coordinates(v[..., k], [yy, xx], order=1, mode="nearest")
+                for k in range(v.shape[-1])
+            ],
+            axis=-1,
+        )
+
+    base = codec.decode_sampled(codec.BASE, magnify(base_q) / 255.0, "rgb", bits=8)
+    base = model.normalize(np.asarray(base, np.float32))
+    states = np.stack(
+        [
+            codec.decode_sampled(
+                "pd", magnify(q) / 255.0, "rg", bits=8, param=0.5, version=ship.MAPPING_VERSION
+            )
+            for q in states_q
+        ]
+    ).astype(np.float32)
+    masks = np.moveaxis(magnify(np.moveaxis(masks_q, 0, -1)), -1, 0).astype(np.float32)
+    src_base = model.normalize(a.base)
+    for p, g in zip(poses, got.poses):
+        a_src = model.activations(a.masks, p.weights, a.policy)
+        a_got = model.activations(masks, p.weights, a.policy)
+        w = np.maximum(np.abs(a_src).sum(0), np.abs(a_got).sum(0))
+        on = w > 0
+        err = model.angular_error_deg(
+            model.combine(base, states, a_got)[on], model.combine(src_base, slopes, a_src)[on]
+        )
+        order = np.argsort(err)
+        cw = np.cumsum(w[on][order])
+        p99 = err[order][np.searchsorted(cw, 0.99 * cw[-1])]
+        mean = float((err * w[on]).sum() / w[on].sum())
+        assert g.overall.texels == int(on.sum()), p.name
+        assert g.overall.mean == pytest.approx(mean, abs=1e-4), p.name
+        assert g.overall.p99 == pytest.approx(p99, abs=1e-3), p.name
+        assert g.overall.max == pytest.approx(err.max(), abs=1e-3), p.name

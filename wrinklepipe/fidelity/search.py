@@ -173,41 +173,44 @@ class _Judge:
     A candidate is a function of the reference it is judged on returning what
     :func:`~wrinklepipe.fidelity.metric.sample` takes (``base=``, ``states=`` with
     ``states_reader=``, ``masks=`` with ``support=``), so a block-format candidate encodes only the
-    blocks that reference reads."""
+    blocks that reference reads. Each candidate is sampled once per reference (screened, then
+    kept, then confirmed: the same samples); the search's factories hand out one candidate
+    object per choice (:func:`_once`)."""
 
     def __init__(self, ref: fm.Reference, screen_texels: int) -> None:
         self.fine = ref
         self.coarse = ref.coarse(screen_texels)
-        self.parts: dict[str, tuple[fm.Samples, fm.Samples | None]] = {}
-        self.makers: dict[str, Candidate] = {}
+        self.parts: dict[str, Candidate] = {}
+        self._sampled: dict[tuple[int, bool], tuple[Candidate, fm.Samples]] = {}
 
     @property
     def screens(self) -> bool:
         return self.coarse is not self.fine
 
+    def sampled(self, make: Candidate, fine: bool) -> fm.Samples:
+        """The samples of a candidate on the full (``fine``) or the coarse reference."""
+        fine = fine and self.screens
+        key = (id(make), fine)
+        hit = self._sampled.get(key)
+        if hit is None:
+            ref = self.fine if fine else self.coarse
+            hit = (make, fm.sample(ref, **make(ref)))  # the candidate kept: its id stays its own
+            self._sampled[key] = hit
+        return hit[1]
+
     def set(self, name: str, make: Candidate) -> None:
-        """Keep samples of a shipped part (the full reference's are made when first needed)."""
-        self.parts[name] = (fm.sample(self.coarse, **make(self.coarse)), None)
-        self.makers[name] = make
+        """Keep a shipped part (its samples are made when first needed)."""
+        self.parts[name] = make
 
     def full(self, name: str) -> fm.Samples:
         """The full reference's samples of a part."""
-        c, f = self.parts[name]
-        if f is None:
-            f = c if not self.screens else fm.sample(self.fine, **self.makers[name](self.fine))
-            self.parts[name] = (c, f)
-        return f
-
-    def _samples(self, fine: bool) -> list[fm.Samples]:
-        if not fine:
-            return [p[0] for p in self.parts.values()]
-        return [self.full(name) for name in self.parts]
+        return self.sampled(self.parts[name], True)
 
     def run(self, fine: bool, make: Candidate | None = None, regions: bool = False) -> fm.Fidelity:
         ref = self.fine if fine else self.coarse
-        parts = self._samples(fine)
+        parts = [self.sampled(m, fine) for m in self.parts.values()]
         if make is not None:
-            parts.append(fm.sample(ref, **make(ref)))
+            parts.append(self.sampled(make, fine))
         return fm.evaluate(ref, fm.merge(*parts), regions=regions)
 
     def screen(
@@ -219,6 +222,32 @@ class _Judge:
 
 
 Candidate = Callable[[fm.Reference], dict[str, Any]]
+
+
+def _once(make: Candidate) -> Candidate:
+    """``make`` computed once per reference (a block-format candidate encodes its blocks once,
+    whether it is screened, measured alone or kept)."""
+    memo: dict[int, tuple[fm.Reference, dict[str, Any]]] = {}
+
+    def cached(ref: fm.Reference) -> dict[str, Any]:
+        hit = memo.get(id(ref))
+        if hit is None:
+            hit = memo[id(ref)] = (ref, make(ref))
+        return hit[1]
+
+    return cached
+
+
+def _factory(build: Callable[..., Candidate]) -> Callable[..., Candidate]:
+    """One candidate object per argument tuple (the judge's samples are keyed by it)."""
+    made: dict[tuple[Any, ...], Candidate] = {}
+
+    def get(*args: Any) -> Candidate:
+        if args not in made:
+            made[args] = _once(build(*args))
+        return made[args]
+
+    return get
 
 
 def _smallest_passing(values: Sequence[Any], passes: Callable[[Any], bool]) -> Any | None:
@@ -236,6 +265,7 @@ def _smallest_passing(values: Sequence[Any], passes: Callable[[Any], bool]) -> A
     return values[lo]
 
 
+@fm.one_blas_thread
 def search(
     src: Source,
     budget: Budget,
@@ -273,6 +303,7 @@ def search(
     mask_lv = ship.mask_levels(src.masks, o.min_mask_size)
     m0 = int(src.masks.shape[1])
 
+    @_factory
     def masks(m: int) -> Candidate:
         # the source's own masks cannot leak
         return lambda r: {"masks": mask_lv[m], "support": None if m != m0 else False}
@@ -282,6 +313,7 @@ def search(
     levels = pyramid.levels(slopes, smallest)
     sizes = sorted(s for s in levels if s >= smallest)
 
+    @_factory
     def states(size: int, scale: float) -> Candidate:
         return lambda r: {"states": levels[size], "states_reader": ship.pd_reader(scale)}
 
@@ -375,10 +407,11 @@ def search(
     face = ref.face_texels(o.screen_texels)
 
     def reads(r: fm.Reference) -> np.ndarray:
-        part = judge.full("masks") if r is judge.fine else judge.parts["masks"][0]
+        part = judge.sampled(judge.parts["masks"], r is judge.fine)
         leaks = [lk[0] for lk in (part.leaks or []) if lk is not None]
         return np.concatenate([r.union, *leaks])
 
+    @_factory
     def state_format(f: str) -> Candidate:
         def make(r: fm.Reference) -> dict[str, Any]:
             need = fm.taps(state_q.shape[1:3], ref.shape, reads(r))
@@ -387,6 +420,7 @@ def search(
 
         return make
 
+    @_factory
     def base_format(f: str) -> Candidate:
         def make(r: fm.Reference) -> dict[str, Any]:
             need = fm.taps(base_texels.shape[:2], ref.shape, np.concatenate([reads(r), face]))
