@@ -169,3 +169,24 @@ def test_the_measure_equals_the_plain_formula_on_the_demo():
         assert g.overall.mean == pytest.approx(mean, abs=1e-4), p.name
         assert g.overall.p99 == pytest.approx(p99, abs=1e-3), p.name
         assert g.overall.max == pytest.approx(err.max(), abs=1e-3), p.name
+
+
+@pytest.mark.parametrize("fmt", ship.BLOCK_FORMATS)
+def test_one_pass_for_several_maps_gives_each_maps_own_encoding(fmt, monkeypatch):
+    """Several maps' blocks in one encoder pass: each map's texels are its own whole-map round
+    trip, and (inside a conversion's memo) encoding a map whole afterwards is a hit with the
+    bytes the encoder gives that map alone."""
+    from wrinklepipe import reuse
+    from wrinklepipe.normals import compress as nc
+
+    monkeypatch.setattr(reuse, "MIN_INPUT_BYTES", 0)
+    rng = np.random.default_rng(5)
+    maps = [np.clip(rng.normal(128, 40, (s, s, 2)), 0, 255).astype(np.uint8) for s in (16, 12)]
+    alone = [nc.encode_bc(nc.pack_rgba(nc.pad_to_blocks(q)[0], fmt), fmt) for q in maps]
+    with reuse.reuse() as memo:
+        got = ship.block_roundtrip_many(maps, fmt, [None, None])
+        again = [nc.encode_bc(nc.pack_rgba(nc.pad_to_blocks(q)[0], fmt), fmt) for q in maps]
+    assert memo.hits.get("wrinklepipe.normals.compress.encode_bc") == 2
+    assert again == alone
+    for q, g in zip(maps, got):
+        assert np.array_equal(g, ship.block_roundtrip(q, fmt))

@@ -155,6 +155,33 @@ def _private(value: Any) -> Any:
     return copy.deepcopy(value)  # any other result (a dataclass of arrays): a deep copy
 
 
+def _key(name: str, args: tuple, kwargs: dict[str, Any]) -> tuple[tuple, int]:
+    """The memo key of a call and the bytes of its array / bytes arguments."""
+    sizes: list[int] = []
+    key = (
+        name,
+        tuple(_digest(a, sizes) for a in args),
+        tuple(sorted((k, _digest(v, sizes)) for k, v in kwargs.items())),
+    )
+    return key, sum(sizes)
+
+
+def remember(fn: Callable[..., Any], result: Any, *args: Any, **kwargs: Any) -> None:
+    """Store ``result`` as what the :func:`reused` function ``fn`` gives for these arguments
+    (a caller that computed it another way, e.g. several maps' blocks in one encoder pass, so
+    that the call made later is a hit). Only for results equal to what ``fn`` computes; nothing
+    happens outside a :func:`reuse` block."""
+    memo = _MEMO.get()
+    if memo is None:
+        return
+    try:
+        key, size = _key(f"{fn.__module__}.{fn.__qualname__}", args, kwargs)
+    except _Unkeyable:
+        return
+    if size >= MIN_INPUT_BYTES:
+        memo.put(key, _private(result))
+
+
 def reused(fn: F) -> F:
     """Decorate a pure function of arrays / bytes / plain values (see the module doc)."""
     name = f"{fn.__module__}.{fn.__qualname__}"
@@ -164,16 +191,11 @@ def reused(fn: F) -> F:
         memo = _MEMO.get()
         if memo is None:
             return fn(*args, **kwargs)
-        sizes: list[int] = []
         try:
-            key = (
-                name,
-                tuple(_digest(a, sizes) for a in args),
-                tuple(sorted((k, _digest(v, sizes)) for k, v in kwargs.items())),
-            )
+            key, size = _key(name, args, kwargs)
         except _Unkeyable:
             return fn(*args, **kwargs)
-        if sum(sizes) < MIN_INPUT_BYTES:
+        if size < MIN_INPUT_BYTES:
             return fn(*args, **kwargs)
         found, value = memo.get(key)
         if found:

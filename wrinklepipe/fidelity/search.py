@@ -51,6 +51,9 @@ class SearchOptions:
     #: The validator's WP-MAP-004 limit: a state format whose copy puts more of a map's texels
     #: at the end of the range (than this fraction, and than the PNG) is not chosen.
     max_clipped_fraction: float = 0.001
+    #: Maps of the format searches holding at most this many 4x4 blocks together are encoded
+    #: whole, each format in one encoder pass (small assets: a pass costs tens of ms).
+    whole_map_blocks: int = 4096
 
 
 @dataclass
@@ -402,9 +405,15 @@ def search(
         )
     png.base = fm.base_fidelity(ref, base_texels, None, png_base["base_reader"])  # all the face
     # 6. block formats for the compressed copies (states first, then the base): only the
-    # blocks the reference being judged reads are encoded (blocks are independent)
+    # blocks the reference being judged reads are encoded (blocks are independent); small maps
+    # are encoded whole, every map of a format in one encoder pass
     state_q = np.stack([ship.pd_texels(x, scale)[0] for x in levels[size]])
     face = ref.face_texels(o.screen_texels)
+    trips = _RoundTrips(
+        {**{f"state {k}": q for k, q in enumerate(state_q)}, "base": base_texels[..., :2]},
+        o.whole_map_blocks,
+    )
+    state_names = [f"state {k}" for k in range(len(state_q))]
 
     def reads(r: fm.Reference) -> np.ndarray:
         part = judge.sampled(judge.parts["masks"], r is judge.fine)
@@ -415,7 +424,8 @@ def search(
     def state_format(f: str) -> Candidate:
         def make(r: fm.Reference) -> dict[str, Any]:
             need = fm.taps(state_q.shape[1:3], ref.shape, reads(r))
-            texels = np.stack([ship.block_roundtrip_at(q, f, need) for q in state_q])
+            got = trips.get(f, dict.fromkeys(state_names, need))
+            texels = np.stack([got[n] for n in state_names])
             return {"states": texels, "states_reader": ship.pd_reader(scale, quantise=False)}
 
         return make
@@ -424,7 +434,7 @@ def search(
     def base_format(f: str) -> Candidate:
         def make(r: fm.Reference) -> dict[str, Any]:
             need = fm.taps(base_texels.shape[:2], ref.shape, np.concatenate([reads(r), face]))
-            xy = ship.block_roundtrip_at(base_texels[..., :2], f, need)
+            xy = trips.get(f, {"base": need})["base"]
             return {"base": xy, "base_reader": ship.base_reader("rg")}
 
         return make
@@ -432,8 +442,9 @@ def search(
     def state_edges_ok(f: str) -> bool:
         # the copy must not clip where the PNG does not (the validator's rule, WP-MAP-004)
         limit = o.max_clipped_fraction * state_q.shape[1] * state_q.shape[2]
-        for q in state_q:
-            edges = ship.block_edge_texels(q, f)
+        got = trips.get(f, {n: ship.near_edge_texels(q) for n, q in zip(state_names, state_q)})
+        for n, q in zip(state_names, state_q):
+            edges = ship.edge_texels(got[n])
             if edges > max(limit, ship.edge_texels(q)):
                 at = f"{f}: {edges} texels at the end of the range"
                 tried.append(Tried("state format (clipping, WP-MAP-004)", at, 0.0, 0.0, False))
@@ -500,6 +511,37 @@ def search(
         budget=budget,
         compressed_budget=cbudget,
     )
+
+
+class _RoundTrips:
+    """Block-format round trips of the maps the format searches try
+    (:func:`~wrinklepipe.fidelity.ship.block_roundtrip_many`).
+
+    Maps that hold at most ``whole_blocks`` 4x4 blocks together are encoded whole, all of
+    them in one encoder pass per format, the first time a format is asked for (an encoder call
+    costs tens of ms however small the map); larger ones encode the blocks each request reads,
+    every map of the request in one pass."""
+
+    def __init__(self, maps: dict[str, np.ndarray], whole_blocks: int) -> None:
+        self.maps = maps
+        blocks = sum(((m.shape[0] + 3) // 4) * ((m.shape[1] + 3) // 4) for m in maps.values())
+        self.eager = blocks <= whole_blocks
+        self.whole: dict[str, dict[str, np.ndarray]] = {}
+
+    def get(self, fmt: str, need: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """``{map name: its texels through fmt}`` (at least those of ``need`` are exact)."""
+        if self.eager:
+            if fmt not in self.whole:
+                names = list(self.maps)
+                maps = [self.maps[n] for n in names]
+                trips = ship.block_roundtrip_many(maps, fmt, [None] * len(names))
+                self.whole[fmt] = dict(zip(names, trips))
+            return {n: self.whole[fmt][n] for n in need}
+        names = list(need)
+        trips = ship.block_roundtrip_many(
+            [self.maps[n] for n in names], fmt, [need[n] for n in names]
+        )
+        return dict(zip(names, trips))
 
 
 def _base_alone(ref: fm.Reference, arrays: dict[str, Any], face: np.ndarray) -> Any:

@@ -7,9 +7,11 @@ and decoded by its independent decoder (texture2ddecoder), exactly as the compre
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from wrinklepipe import codec
+from wrinklepipe import codec, reuse
 from wrinklepipe.fidelity.metric import Reader
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.normals import compress as nc
@@ -80,18 +82,24 @@ def edge_texels(texels: np.ndarray) -> int:
 NEAR_EDGE_LEVELS = 16
 
 
+def near_edge_texels(texels: np.ndarray) -> np.ndarray:
+    """Flat indices of a stored 8-bit PD map's texels within :data:`NEAR_EDGE_LEVELS` of the end
+    of the range: the only ones a block format can move onto it."""
+    q = np.asarray(texels)[..., :2]
+    m = codec.mapping(MAPPING_VERSION)
+    near = np.any(np.abs(m.decode(q, 8)) >= 1.0 - NEAR_EDGE_LEVELS / m.centre(8)[1], axis=-1)
+    return np.flatnonzero(near)
+
+
 def block_edge_texels(texels: np.ndarray, fmt: str) -> int:
     """:func:`edge_texels` of an 8-bit PD map after a roundtrip through block format ``fmt``
     (what the validator's WP-MAP-004 counts on the compressed copy). Only the blocks holding a
     texel within :data:`NEAR_EDGE_LEVELS` of the end are encoded (blocks are independent; an
     encoder error of 16 levels is far beyond BC1's)."""
-    q = np.asarray(texels)[..., :2]
-    m = codec.mapping(MAPPING_VERSION)
-    near = np.any(np.abs(m.decode(q, 8)) >= 1.0 - NEAR_EDGE_LEVELS / m.centre(8)[1], axis=-1)
-    idx = np.flatnonzero(near)
+    idx = near_edge_texels(texels)
     if idx.size == 0:
         return 0
-    return edge_texels(block_roundtrip_at(q, fmt, idx))
+    return edge_texels(block_roundtrip_at(texels, fmt, idx))
 
 
 def block_roundtrip(xy: np.ndarray, fmt: str) -> np.ndarray:
@@ -109,29 +117,61 @@ def block_roundtrip_at(xy: np.ndarray, fmt: str, texels: np.ndarray) -> np.ndarr
     """Like :func:`block_roundtrip`, but only the 4x4 blocks that hold ``texels`` (flat indices)
     are encoded and decoded (blocks are independent, so those texels come out as a whole-map
     roundtrip gives them); every other texel is returned unchanged."""
-    q = np.ascontiguousarray(xy[..., :2], np.uint8)
-    h, w = q.shape[:2]
-    qp, _ = nc.pad_to_blocks(q)
-    hp, wp = qp.shape[:2]
-    bw = wp // 4
-    t = np.asarray(texels, np.int64)
-    mark = np.zeros((hp // 4) * bw, bool)
-    mark[(t // w) // 4 * bw + (t % w) // 4] = True
-    ids = np.flatnonzero(mark)
-    if ids.size == 0:
-        return q.copy()
-    blocks = qp.reshape(hp // 4, 4, bw, 4, 2).transpose(0, 2, 1, 3, 4).reshape(-1, 4, 4, 2)
-    side = int(np.ceil(np.sqrt(ids.size)))
-    pick = np.concatenate([ids, np.repeat(ids[-1:], side * side - ids.size)])
-    tile = blocks[pick].reshape(side, side, 4, 4, 2).transpose(0, 2, 1, 3, 4)
-    tile = np.ascontiguousarray(tile.reshape(side * 4, side * 4, 2))
-    data = nc.encode_bc(nc.pack_rgba(tile, fmt), fmt)
-    dec = nc.unpack_u8(nc.decode_bc(data, side * 4, side * 4, fmt), fmt, 2)
-    dec = dec.reshape(side, 4, side, 4, 2).transpose(0, 2, 1, 3, 4).reshape(-1, 4, 4, 2)
-    out = blocks.copy()
-    out[ids] = dec[: ids.size]
-    out = out.reshape(hp // 4, bw, 4, 4, 2).transpose(0, 2, 1, 3, 4).reshape(hp, wp, 2)
-    return np.ascontiguousarray(out[:h, :w])
+    return block_roundtrip_many([xy], fmt, [texels])[0]
+
+
+def block_roundtrip_many(
+    maps: Sequence[np.ndarray], fmt: str, texels: Sequence[np.ndarray | None]
+) -> list[np.ndarray]:
+    """:func:`block_roundtrip_at` of several maps in one encoder pass: the blocks that hold each
+    map's ``texels`` (None: every block of it) are laid out side by side in one tile, encoded
+    and decoded once (an encoder call has a fixed cost of tens of ms on a small map, and blocks
+    are independent), and scattered back."""
+    picked, layouts = [], []
+    for xy, t in zip(maps, texels):
+        q = np.ascontiguousarray(np.asarray(xy)[..., :2], np.uint8)
+        h, w = q.shape[:2]
+        qp, _ = nc.pad_to_blocks(q)
+        hp, wp = qp.shape[:2]
+        bw = wp // 4
+        blocks = qp.reshape(hp // 4, 4, bw, 4, 2).transpose(0, 2, 1, 3, 4).reshape(-1, 4, 4, 2)
+        if t is None:
+            ids = np.arange(blocks.shape[0])
+        else:
+            ti = np.asarray(t, np.int64)
+            mark = np.zeros(blocks.shape[0], bool)
+            mark[(ti // w) // 4 * bw + (ti % w) // 4] = True
+            ids = np.flatnonzero(mark)
+        picked.append(blocks[ids])
+        layouts.append((h, w, hp, wp, blocks, ids))
+    allb = np.concatenate(picked) if picked else np.zeros((0, 4, 4, 2), np.uint8)
+    if allb.shape[0]:
+        side = int(np.ceil(np.sqrt(allb.shape[0])))
+        pad = np.repeat(allb[-1:], side * side - allb.shape[0], axis=0)
+        tile = np.concatenate([allb, pad]).reshape(side, side, 4, 4, 2).transpose(0, 2, 1, 3, 4)
+        tile = np.ascontiguousarray(tile.reshape(side * 4, side * 4, 2))
+        data = nc.encode_bc(nc.pack_rgba(tile, fmt), fmt)
+        dec = nc.unpack_u8(nc.decode_bc(data, side * 4, side * 4, fmt), fmt, 2)
+        dec = dec.reshape(side, 4, side, 4, 2).transpose(0, 2, 1, 3, 4).reshape(-1, 4, 4, 2)
+        # a map encoded whole here is the copy convert writes: its blocks' bytes are what
+        # encoding that map alone gives (blocks are independent), so that call is a hit
+        bb, at = nc.BLOCK_BYTES[fmt], 0
+        for xy, layout in zip(maps, layouts):
+            ids = layout[5]
+            if ids.size == layout[4].shape[0]:
+                qp, _ = nc.pad_to_blocks(np.ascontiguousarray(np.asarray(xy)[..., :2], np.uint8))
+                part = data[at * bb : (at + ids.size) * bb]
+                reuse.remember(nc.encode_bc, part, nc.pack_rgba(qp, fmt), fmt)
+            at += ids.size
+    out, at = [], 0
+    for h, w, hp, wp, blocks, ids in layouts:
+        got = blocks.copy()
+        if ids.size:
+            got[ids] = dec[at : at + ids.size]
+            at += ids.size
+        got = got.reshape(hp // 4, wp // 4, 4, 4, 2).transpose(0, 2, 1, 3, 4).reshape(hp, wp, 2)
+        out.append(np.ascontiguousarray(got[:h, :w]))
+    return out
 
 
 class MaskLevels(dict):
