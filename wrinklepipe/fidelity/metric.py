@@ -234,6 +234,10 @@ class Reference:
     footprint: np.ndarray | None = None  # [H, W] bool: the mesh's UV footprint (the face)
     support: np.ndarray | None = None  # [H, W] bool: source-active in some pose
     step: int = 1  # a coarse reference keeps every step-th active texel (and leak texel)
+    #: face_texels' answers by max_texels, with the footprint they were made from
+    _faces: dict[int | None, tuple[np.ndarray | None, np.ndarray]] = field(
+        default_factory=dict, repr=False, compare=False
+    )
 
     @property
     def texels(self) -> int:
@@ -247,6 +251,12 @@ class Reference:
     def face_texels(self, max_texels: int | None = None) -> np.ndarray:
         """Flat indices of the footprint's texels (all of them, or whole 4x4 blocks of it, every
         k-th block, so that about ``max_texels`` remain: a block-format screen's sample)."""
+        hit = self._faces.get(max_texels)
+        if hit is None or hit[0] is not self.footprint:
+            hit = self._faces[max_texels] = (self.footprint, self._face_texels(max_texels))
+        return hit[1]
+
+    def _face_texels(self, max_texels: int | None) -> np.ndarray:
         H, W = self.shape
         fp = self.footprint if self.footprint is not None else np.ones((H, W), bool)
         flat = np.flatnonzero(fp.reshape(-1))
@@ -682,7 +692,11 @@ def _leak_texels(
 def _leak_normals(ref: Reference, s: Samples) -> tuple[np.ndarray, np.ndarray]:
     """Every pose's leak texels (sorted, unique) and the shipped base and states sampled there
     once: ``(flat indices, base [n, 3], states [K, n, C])``."""
-    idx = np.unique(np.concatenate([lk[0] for lk in s.leaks if lk is not None]))
+    mark = np.zeros(ref.texels, bool)  # sorted and unique (a mark is cheaper than a sort)
+    for lk in s.leaks:
+        if lk is not None:
+            mark[lk[0]] = True
+    idx = np.flatnonzero(mark)
     b = s.raw.get("base")
     base = (
         model.normalize(sample_at(b, ref.shape, idx, s.readers.get("base")))

@@ -515,18 +515,21 @@ def search(
 
 class _RoundTrips:
     """Block-format round trips of the maps the format searches try
-    (:func:`~wrinklepipe.fidelity.ship.block_roundtrip_many`).
+    (:func:`~wrinklepipe.fidelity.ship.block_roundtrip_many`), each block encoded once.
 
     Maps that hold at most ``whole_blocks`` 4x4 blocks together are encoded whole, all of
     them in one encoder pass per format, the first time a format is asked for (an encoder call
-    costs tens of ms however small the map); larger ones encode the blocks each request reads,
-    every map of the request in one pass."""
+    costs tens of ms however small the map). Larger ones encode the blocks a request reads that
+    no earlier request of that format did (the screen's blocks are most of what the
+    confirmation reads), every map of the request in one pass; blocks are independent, so the
+    texels are those of a whole-map round trip."""
 
     def __init__(self, maps: dict[str, np.ndarray], whole_blocks: int) -> None:
         self.maps = maps
         blocks = sum(((m.shape[0] + 3) // 4) * ((m.shape[1] + 3) // 4) for m in maps.values())
         self.eager = blocks <= whole_blocks
         self.whole: dict[str, dict[str, np.ndarray]] = {}
+        self.done: dict[tuple[str, str], np.ndarray] = {}  # (format, map): blocks encoded
 
     def get(self, fmt: str, need: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """``{map name: its texels through fmt}`` (at least those of ``need`` are exact)."""
@@ -537,11 +540,25 @@ class _RoundTrips:
                 trips = ship.block_roundtrip_many(maps, fmt, [None] * len(names))
                 self.whole[fmt] = dict(zip(names, trips))
             return {n: self.whole[fmt][n] for n in need}
-        names = list(need)
-        trips = ship.block_roundtrip_many(
-            [self.maps[n] for n in names], fmt, [need[n] for n in names]
-        )
-        return dict(zip(names, trips))
+        have = self.whole.setdefault(fmt, {})
+        todo: dict[str, np.ndarray] = {}
+        for n, t in need.items():
+            h, w = self.maps[n].shape[:2]
+            bw = (w + 3) // 4
+            done = self.done.setdefault((fmt, n), np.zeros(((h + 3) // 4) * bw, bool))
+            ti = np.asarray(t, np.int64)
+            block = (ti // w) // 4 * bw + (ti % w) // 4
+            new = ti[~done[block]]
+            if new.size:
+                todo[n] = new
+                done[block] = True
+        if todo:
+            names = list(todo)
+            sources = [have.get(n, self.maps[n]) for n in names]  # encoded blocks kept
+            trips = ship.block_roundtrip_many(sources, fmt, [todo[n] for n in names])
+            for n, got in zip(names, trips):
+                have[n] = got
+        return {n: have.get(n, self.maps[n]) for n in need}
 
 
 def _base_alone(ref: fm.Reference, arrays: dict[str, Any], face: np.ndarray) -> Any:
