@@ -171,20 +171,46 @@ def _to_srgb(img: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
 
 
+#: Heat-map range (degrees) of the fidelity pictures: shipped vs full-resolution source.
+FIDELITY_HEAT_DEG = 5.0
+
 #: Pictures of the HTML page: image key (or key prefix ending in /) -> heat-map range in
-#: degrees (None: the image itself, in sRGB).
-_PICTURES: tuple[tuple[str, float | None], ...] = (
+#: degrees (None: the image itself, linear, shown in sRGB; "unorm": values in 0..1 as they are,
+#: e.g. a normal map's 0.5 + 0.5 n or a mask's grey levels).
+_PICTURES: tuple[tuple[str, float | str | None], ...] = (
     ("render/", None),
     ("mask_overlay", None),
     ("gpu_error/", 2.0),
     ("change/", 10.0),
     ("shipping_error/", 5.0),
+    ("fidelity_source/", "unorm"),
+    ("fidelity_shipped/", "unorm"),
+    ("fidelity_error/", FIDELITY_HEAT_DEG),
+    ("fidelity_render/", FIDELITY_HEAT_DEG),
+    ("region_mask/", "unorm"),
 )
 
 
-def _html_pictures(report: Report) -> dict[str, tuple[str, float | None]]:
+def _rgb_hex(c: np.ndarray) -> str:
+    v = np.clip(np.rint(np.asarray(c, np.float64) * 255.0), 0, 255).astype(int)
+    return "#" + "".join(f"{int(x):02x}" for x in v[:3])
+
+
+def colour_bar(vmax: float, unit: str = "degrees") -> str:
+    """HTML of a heat map's colour bar: the ramp of :func:`heat` left to right, ticks at 0,
+    half and ``vmax`` (the unit beside the last)."""
+    stops = ", ".join(
+        f"{_rgb_hex(c)} {100.0 * i / (len(_RAMP) - 1):g}%" for i, c in enumerate(_RAMP)
+    )
+    return (
+        f"<div class='cbar'><div style='background:linear-gradient(to right, {stops})'></div>"
+        f"<span>0</span><span>{vmax / 2:g}</span><span>{vmax:g} {html.escape(unit)}</span></div>"
+    )
+
+
+def _html_pictures(report: Report) -> dict[str, tuple[str, float | str | None]]:
     """File name -> (image key, heat-map range or None) of every picture the HTML shows."""
-    out: dict[str, tuple[str, float | None]] = {}
+    out: dict[str, tuple[str, float | str | None]] = {}
     for key in sorted(report.images):
         if key.startswith("_"):
             continue
@@ -199,9 +225,13 @@ def html_images(report: Report) -> dict[str, bytes]:
     """File name -> PNG bytes of every picture the HTML shows."""
     pictures = _html_pictures(report)
 
-    def picture(item: tuple[str, float | None]) -> bytes:
+    def picture(item: tuple[str, float | str | None]) -> bytes:
         arr = report.images[item[0]]
-        return _png(_to_srgb(arr) if item[1] is None else heat(arr, item[1]))
+        if item[1] is None:
+            return _png(_to_srgb(arr))
+        if isinstance(item[1], str):
+            return _png(arr)
+        return _png(heat(arr, item[1]))
 
     # numpy and zlib release the GIL: the pictures encode on two cores, in order
     return dict(zip(pictures, map_threads(picture, pictures.values())))
@@ -215,12 +245,16 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'>",
         f"<title>validate-asset: {e(str(doc['input']['name']))}</title>",
-        "<style>body{font:14px sans-serif;margin:24px;max-width:1400px}"
+        "<style>body{font:14px sans-serif;margin:24px;max-width:1700px}"
         "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
         "vertical-align:top}th{background:#eee}.error{color:#b00}.warning{color:#a60}"
         ".info{color:#067}figure{display:inline-block;margin:4px;text-align:center}"
         "figure img{width:240px;image-rendering:pixelated;border:1px solid #999}"
-        "figcaption{font-size:12px}</style></head><body>",
+        "figcaption{font-size:12px}figure img.big{width:512px}"
+        ".cbar{width:512px;font-size:12px;display:flex;flex-wrap:wrap;"
+        "justify-content:space-between}.cbar div{width:100%;height:12px;border:1px solid #999}"
+        ".swatch{display:inline-block;width:12px;height:12px;border:1px solid #666;"
+        "margin:0 4px 0 12px;vertical-align:middle}</style></head><body>",
         f"<h1>validate-asset: {e(str(doc['input']['name']))}</h1>",
         f"<p>{e(str(doc['input']['kind']))} <code>{e(str(doc['input']['path']))}</code> - "
         f"encoding <b>{e(doc['input']['encoding'])}</b>, policy "
@@ -247,13 +281,16 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
         parts.append("<p>No issues.</p>")
     images = _html_pictures(report)  # names only: the PNGs are encoded once, by html_images
 
-    def fig(name: str, caption: str) -> str:
+    def fig(name: str, caption: str, big: bool = False) -> str:
         if name not in images:
             return ""
+        cls = " class='big'" if big else ""
         return (
-            f"<figure><img src='{e(files_dir)}/{e(name)}' alt='{e(caption)}'>"
+            f"<figure><img{cls} src='{e(files_dir)}/{e(name)}' alt='{e(caption)}'>"
             f"<figcaption>{e(caption)}</figcaption></figure>"
         )
+
+    parts.extend(_fidelity_html(doc, images, fig))
 
     poses = list(report.render.get("poses", {}))
     if poses:
@@ -272,16 +309,30 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
             parts.append(fig(f"change_{p}.png", f"{p}: change from neutral"))
             parts.append(fig(f"gpu_error_{p}.png", f"{p}: GPU vs reference"))
             parts.append(fig(f"shipping_error_{p}.png", f"{p}: shipped vs source (0..5 deg)"))
+            parts.append(fig(f"fidelity_render_{p}.png", f"{p}: GPU vs source render (0..5 deg)"))
             parts.append("</div>")
         parts.append("</div>")
         parts.append(
             "<h2>Mask overlay</h2>" + fig("mask_overlay.png", "shipped masks over neutral")
         )
+        colours = report.images.get("_region_colors")
+        if colours is not None and "mask_overlay.png" in images:
+            legend = "".join(
+                f"<span class='swatch' style='background:{_rgb_hex(_to_srgb(c))}'></span>"
+                f"{e(str(r))}"
+                for r, c in zip(doc["input"].get("regions", []), np.asarray(colours))
+            )
+            parts.append(f"<p>{legend}</p>")
     elif any(k.startswith("shipping_error_") for k in images):
         parts.append("<h2>Shipped vs source (texture space, 0..5 degrees)</h2><div>")
         for k in sorted(images):
             if k.startswith("shipping_error_"):
                 parts.append(fig(k, k[len("shipping_error_") : -4]))
+        parts.append("</div>")
+    masks = sorted(k for k in images if k.startswith("region_mask_"))
+    if masks:
+        parts.append("<h2>Masks as shipped</h2><p>Each region's mask, 0 black to 1 white.</p><div>")
+        parts.extend(fig(k, k[len("region_mask_") : -4]) for k in masks)
         parts.append("</div>")
     parts.append("<h2>Metrics</h2>")
     for key, val in sorted(doc["metrics"].items()):
@@ -306,6 +357,61 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
         parts.append(f"<h2>Render pass</h2><pre>{e(dumps_json(r))}</pre>")
     parts.append("</body></html>\n")
     return "\n".join(p for p in parts if p)
+
+
+def _stat_cells(st: dict[str, Any]) -> str:
+    return "".join(
+        f"<td>{st.get(k, '')}</td>" for k in ("mean_deg", "p99_deg", "max_deg", "texels")
+    )
+
+
+def _fidelity_html(doc: dict[str, Any], images: dict[str, Any], fig: Any) -> list[str]:
+    """The fidelity section: the per-pose and per-region tables of the measure (the shipped
+    asset against the full-resolution source, inside each pose's active region) and, per pose,
+    the source's and the shipped blended normal maps beside the error heat map."""
+    f = doc["metrics"].get("fidelity")
+    if not isinstance(f, dict) or not f.get("poses"):
+        return []
+    e = html.escape
+    budget = ", ".join(f"{k} {v:g}" for k, v in sorted(f.get("budget", {}).items()))
+    head = "<tr><th></th><th>mean</th><th>p99</th><th>max</th><th>texels</th>"
+    out = [
+        "<h2>Fidelity against the full-resolution source</h2>",
+        "<p>For each pose: the blend of the shipped textures (decoded, magnified as a GPU "
+        "samples them) against the blend of the full-resolution source, on the texels the "
+        "pose activates (in the source or in the shipped masks), weighted by the activation; "
+        f"degrees. The {e(str(f.get('applies', 'budget')))}: {e(budget)}. "
+        f"Wrinkled share of the UV area: {100.0 * float(f.get('active_fraction', 0)):.2f} %.</p>",
+        f"<table>{head}<th>leak texels</th></tr>",
+    ]
+    for p in f["poses"]:
+        out.append(
+            f"<tr><th>{e(str(p['pose']))}</th>{_stat_cells(p)}<td>{p.get('leak_texels', 0)}</td>"
+            "</tr>"
+        )
+    if f.get("base"):
+        out.append(f"<tr><th>base alone (face)</th>{_stat_cells(f['base'])}<td></td></tr>")
+    out.append("</table><h3>Per region</h3>")
+    out.append(f"<table><tr><th>pose</th><th>region</th>{head[len('<tr><th></th>') :]}</tr>")
+    for p in f["poses"]:
+        for r, st in sorted(p.get("regions", {}).items()):
+            out.append(f"<tr><td>{e(str(p['pose']))}</td><th>{e(r)}</th>{_stat_cells(st)}</tr>")
+    out.append("</table>")
+    if any(k.startswith("fidelity_error_") for k in images):
+        out.append(
+            "<h3>Source vs shipped, per pose</h3><p>Cropped to the pose's wrinkled area, on "
+            "the source grid: the full-resolution source's blended normal map, the shipped "
+            "one, and the error where the pose is active (0 elsewhere).</p>"
+        )
+        for p in f["poses"]:
+            key = str(p["pose"]).replace("/", "_")
+            out.append("<div>")
+            out.append(fig(f"fidelity_source_{key}.png", f"{p['pose']}: source", True))
+            out.append(fig(f"fidelity_shipped_{key}.png", f"{p['pose']}: shipped", True))
+            out.append(fig(f"fidelity_error_{key}.png", f"{p['pose']}: error", True))
+            out.append("</div>")
+        out.append(colour_bar(FIDELITY_HEAT_DEG))
+    return out
 
 
 def _ours(folder: Path, html_path: Path) -> bool:

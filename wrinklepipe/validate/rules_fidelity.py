@@ -23,6 +23,7 @@ from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.masks import infer_side
 from wrinklepipe.normals.compress import angle_deg
+from wrinklepipe.validate import fidelity_pictures as fp
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context, encode_source_states, resize_normals
@@ -154,13 +155,21 @@ def shipped_fidelity(ctx: Context) -> fd.Fidelity | None:
 
 
 def check_fidelity(ctx: Context) -> list[Issue]:
+    masks = ctx.shipped_masks
+    pictures: dict[str, np.ndarray] = {}
+    if masks is not None:
+        pictures.update(fp.mask_pictures(masks, ctx.asset.region_names))
+    ctx.metrics["fidelity_pictures"] = pictures  # the HTML page's (validate.run moves them)
     fid = shipped_fidelity(ctx)
     if fid is None:
         return []
     budget, which = budgets(ctx)
     where = ctx.inp.pointer("textures")
     ctx.metrics["fidelity"] = {**fid.to_json(), "budget": _budget_json(budget), "applies": which}
-    ctx.metrics["fidelity_error_maps"] = fid.errors
+    ref = reference(ctx)
+    base, states = ctx.shipped_base, ctx.shipped_states
+    if ref is not None and base is not None and states is not None and masks is not None:
+        pictures.update(fp.pose_pictures(ref, fid, base, np.stack(states), masks))
     out: list[Issue] = []
     for p in sorted(fid.over(budget), key=lambda p: -p.overall.p99):
         o = p.overall

@@ -124,13 +124,11 @@ def validate(
         r_issues, render_info, images = render.render_pass(ctx)
         issues += r_issues
         ctx.timings["render"] = time.perf_counter() - t0
-    for key, prefix in (
-        ("shipping_error_maps", "shipping_error"),
-        ("fidelity_error_maps", "fidelity_error"),
-    ):
+    for key, prefix in (("shipping_error_maps", "shipping_error"),):
         if key in ctx.metrics:
             for e, m in ctx.metrics.pop(key).items():
                 images[f"{prefix}/{e}"] = m
+    images.update(ctx.metrics.pop("fidelity_pictures", {}))  # keyed as the page shows them
     issues, dropped = cfg.apply(issues)
     issues.sort(key=lambda i: (_RANK[i.severity], i.code, i.pointer, i.message))
     return Report(

@@ -1,0 +1,155 @@
+"""The fidelity pictures of the validator's HTML page: the numbers in them computed by hand (a
+tiny asset), the PNGs read back by OpenImageIO, and the page of a converted demo."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from wrinklepipe import fidelity as fd
+from wrinklepipe import model
+from wrinklepipe.cli import main
+from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.io.images import read_image
+from wrinklepipe.validate import fidelity_pictures as fp
+from wrinklepipe.validate import report as vr
+from wrinklepipe.validate.run import Report
+
+
+def tiny():
+    """8x8, flat base, one state of slope 0.3 in x, one region: columns 2..3 (mask 1) and 4
+    (mask 0.5); the shipped state lost its wrinkle at texel (row 5, column 3)."""
+    base = np.zeros((8, 8, 3), np.float32)
+    base[..., 2] = 1
+    masks = np.zeros((1, 8, 8), np.float32)
+    masks[0, :, 2:4] = 1.0
+    masks[0, :, 4] = 0.5
+    states = np.zeros((1, 8, 8, 2), np.float32)
+    states[0, ..., 0] = 0.3
+    poses = [fd.Pose("on", np.ones((1, 1), np.float32))]
+    ref = fd.prepare(base, states, masks, poses, ["brow_L"])
+    shipped = states.copy()
+    shipped[0, 5, 3, 0] = 0.25
+    fid = fd.measure(ref, base, shipped, masks, error_maps=True)
+    return ref, fid, base, shipped, masks
+
+
+def test_the_pictures_hold_the_hand_computed_normals_and_errors():
+    ref, fid, base, shipped, masks = tiny()
+    pics = fp.pose_pictures(ref, fid, base, shipped, masks)
+    # active columns 2..4 with a 4-texel margin: the whole 8x8 grid
+    err = pics["fidelity_error/on"]
+    assert err.shape == (8, 8)
+    want = np.degrees(np.arctan(0.3) - np.arctan(0.25))  # both tilts about the same axis
+    assert err[5, 3] == pytest.approx(want, abs=1e-4)
+    assert err[5, 2] == pytest.approx(0.0, abs=1e-4) and err[0, 0] == 0.0
+    src = pics["fidelity_source/on"]
+    n = np.array([0.15, 0.0, 1.0]) / np.sqrt(1 + 0.15**2)  # column 4: activation 0.5
+    assert np.allclose(src[1, 4], 0.5 + 0.5 * n, atol=1e-5)
+    assert np.allclose(src[1, 0], [0.5, 0.5, 1.0])  # inactive: the base
+    shp = pics["fidelity_shipped/on"]
+    n = np.array([0.25, 0.0, 1.0]) / np.sqrt(1 + 0.25**2)
+    assert np.allclose(shp[5, 3], 0.5 + 0.5 * n, atol=1e-5)  # the weakened wrinkle
+    assert np.allclose(shp[1, 4], src[1, 4], atol=1e-5)
+
+
+def test_a_crop_keeps_the_wrinkled_area_and_large_crops_are_strided():
+    assert fp.crop_box(np.array([2 * 100 + 40, 30 * 100 + 50]), (100, 100)) == (0, 37, 27, 64)
+    flat, h, w = fp._crop_texels((0, 1024, 0, 1024), 2048, 512)
+    assert (h, w) == (512, 512) and flat[1] == 2 and flat[512] == 2 * 2048
+
+
+def test_the_heat_map_png_pixel_is_the_error_and_the_mask_thumbnail_its_value(tmp_path):
+    ref, fid, base, shipped, masks = tiny()
+    images = {
+        **fp.pose_pictures(ref, fid, base, shipped, masks),
+        **fp.mask_pictures(masks, ["brow_L"]),
+    }
+    report = Report(input={"name": "tiny", "regions": ["brow_L"]}, issues=[], images=images)
+    pngs = vr.html_images(report)
+    for name in ("fidelity_error_on.png", "region_mask_brow_L.png", "fidelity_source_on.png"):
+        (tmp_path / name).write_bytes(pngs[name])
+    heat, _ = read_image(tmp_path / "fidelity_error_on.png")
+    e = np.degrees(np.arctan(0.3) - np.arctan(0.25))
+    # the ramp at e / 5 degrees, by hand: between its stops i and i + 1
+    t = e / vr.FIDELITY_HEAT_DEG * (len(vr._RAMP) - 1)
+    i = int(t)
+    want = vr._RAMP[i] * (1 - (t - i)) + vr._RAMP[i + 1] * (t - i)
+    assert np.abs(heat[5, 3, :3] - want).max() <= 0.5 / 255 + 1e-6
+    assert np.abs(heat[0, 0, :3] - vr._RAMP[0]).max() <= 0.5 / 255 + 1e-6  # 0 degrees
+    mask, _ = read_image(tmp_path / "region_mask_brow_L.png")
+    assert mask[0, 4, 0] == pytest.approx(128 / 255) and mask[0, 2, 0] == 1.0
+    assert mask[0, 0, 0] == 0.0  # visible: grey levels, not a transparent channel
+    src, _ = read_image(tmp_path / "fidelity_source_on.png")
+    assert src[0, 0, :3] == pytest.approx([128 / 255, 128 / 255, 1.0])
+
+
+@pytest.fixture(scope="module")
+def page(tmp_path_factory):
+    d = tmp_path_factory.mktemp("pictures")
+    manifest = write_demo_source(d / "demo", 32)
+    out = d / "out"
+    assert main(["convert", str(manifest), "-o", str(out), "--no-render"]) == 0
+    pages = []
+    for run in ("a", "b"):
+        html = d / run / "page.html"
+        code = main(
+            [
+                "validate-asset",
+                str(out),
+                "--source",
+                str(manifest),
+                "--no-render",
+                "--html",
+                str(html),
+            ]
+            + ["--report", str(d / run / "report.json")]
+        )
+        assert code == 0
+        pages.append(html)
+    return pages, d
+
+
+def test_the_page_shows_the_measure_the_report_holds(page):
+    (html, again), d = page
+    text = html.read_text()
+    doc = json.loads((d / "a" / "report.json").read_text())
+    fid = doc["metrics"]["fidelity"]
+    for p in fid["poses"]:
+        row = re.search(rf"<tr><th>{p['pose']}</th>((?:<td>[^<]*</td>)+)</tr>", text)
+        cells = re.findall(r"<td>([^<]*)</td>", row.group(1))
+        assert cells[:4] == [
+            str(p["mean_deg"]),
+            str(p["p99_deg"]),
+            str(p["max_deg"]),
+            str(p["texels"]),
+        ]
+        for r, st in p["regions"].items():
+            assert f"<td>{p['pose']}</td><th>{r}</th><td>{st['mean_deg']}</td>" in text
+        for kind in ("source", "shipped", "error"):
+            assert f"page_files/fidelity_{kind}_{p['pose']}.png" in text
+    for r in doc["input"]["regions"]:
+        assert f"page_files/region_mask_{r}.png" in text
+    assert "linear-gradient" in text and "5 degrees" in text  # the colour bar, with its unit
+    files = sorted(p.name for p in (d / "a" / "page_files").iterdir())
+    assert [f for f in files if f"page_files/{f}" not in text] == []
+    # a rerun writes the same bytes
+    assert again.read_bytes() == html.read_bytes()
+    for f in files:
+        assert (d / "b" / "page_files" / f).read_bytes() == (
+            d / "a" / "page_files" / f
+        ).read_bytes()
+
+
+def test_source_pictures_are_the_full_resolution_blend(page):
+    (html, _), d = page
+    doc = json.loads((d / "a" / "report.json").read_text())
+    pose = doc["metrics"]["fidelity"]["poses"][0]["pose"]
+    img, _ = read_image(d / "a" / "page_files" / f"fidelity_source_{pose}.png")
+    # a normal map's picture: unit vectors 2 v - 1 (to 8-bit rounding)
+    n = 2 * img[..., :3].astype(np.float64) - 1
+    assert np.abs(np.linalg.norm(n, axis=-1) - 1).max() < 0.02
+    assert model.normalize(n.astype(np.float32)).shape == n.shape
