@@ -112,9 +112,13 @@ def image_pixels(doc: Document, image: int) -> np.ndarray:
     return np.clip(np.rint(values.astype(np.float64) * top), 0, top).astype(dtype)
 
 
-def texture_normals(doc: Document, texture: int, key: str) -> tuple[np.ndarray, list[str]]:
+def texture_normals(
+    doc: Document, texture: int, key: str, stats: dict[str, Any] | None = None
+) -> tuple[np.ndarray, list[str]]:
     """Texture ``texture`` as unit normals ``[H, W, 3]`` (+Y: glTF normal textures are OpenGL
-    tangent space by the spec) and notes on what was read."""
+    tangent space by the spec) and notes on what was read. ``stats``: filled with the reader's
+    counts of problem texels (off unit length, z < 0: ``file``, ``stats``, ``tolerance``), as
+    ingest records a manifest's own map files."""
     image = texture_source(doc, texture)
     data, suffix = _decodable(doc, image)
     options = ReadOptions(convention="opengl", detect=False)
@@ -125,4 +129,12 @@ def texture_normals(doc: Document, texture: int, key: str) -> tuple[np.ndarray, 
     img = doc.array("images")[image]
     label = img.get("name") or img.get("uri") or f"image {image}"
     notes = [f"base normal map: {doc.path.name} {key} ({label}, {nm.source_format})"]
+    if stats is not None:
+        stats.update(
+            {
+                "file": f"{doc.path.name} {key} ({label})",
+                "stats": nm.stats.to_json(),
+                "tolerance": options.unit_tolerance,
+            }
+        )
     return np.asarray(nm.normals, np.float32), notes

@@ -130,6 +130,8 @@ class SourceDocument:
     mesh: Mesh
     base: np.ndarray | None
     notes: list[str]
+    #: the reader's problem-texel counts of the material's normalTexture (when it is the base)
+    base_stats: dict[str, Any] | None = None
 
 
 def read_source_document(manifest: Any) -> SourceDocument:
@@ -143,11 +145,13 @@ def read_source_document(manifest: Any) -> SourceDocument:
     notes += sel.notes
     base = None
     base_texture = None
+    base_stats: dict[str, Any] | None = None
     if manifest.base is None:
         info = material_normal_texture(doc, sel.materials, manifest.path)
         base_texture = int(info["index"])
         key = f"/materials/{sel.materials[0]}/normalTexture"
-        base, n = texture_normals(doc, base_texture, key)
+        base_stats = {}
+        base, n = texture_normals(doc, base_texture, key, base_stats)
         notes += n
     for part in add_wrinkle_attributes(doc, sel.refs):
         where = f"{doc.mesh_name(part.ref.mesh)}/{part.ref.primitive}"
@@ -157,7 +161,7 @@ def read_source_document(manifest: Any) -> SourceDocument:
     mats = ", ".join(repr(doc.material_name(m)) for m in sel.materials)
     notes.append(f"wrinkled material(s) {mats}: primitives {listing}")
     target = WrinkleTarget(tuple(sel.materials), tuple(sel.refs), base_texture)
-    return SourceDocument(doc, target, mesh, base, notes)
+    return SourceDocument(doc, target, mesh, base, notes, base_stats)
 
 
 def check_masks_on_mesh(masks: np.ndarray, mesh: Mesh, manifest: Any) -> None:
@@ -201,6 +205,8 @@ def ingest_all(manifest: Any) -> Ingested:
     fmt = format_of(manifest.mesh)
     if fmt is not None and fmt.name == "gltf":
         source = read_source_document(manifest)
+        if source.base_stats:
+            stats["base"] = source.base_stats  # counted as the manifest's own base file is
         mesh = source.mesh
         base, states, mask_arr, notes = read_maps(manifest, source.base, stats)
         notes = source.notes + notes
