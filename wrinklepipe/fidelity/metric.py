@@ -468,20 +468,27 @@ def prepare(
     out = []
     for p, o in zip(poses, on):
         rows = np.flatnonzero(o)
-        sel = np.flatnonzero((m_u[rows] > 0).any(axis=0)) if o.any() else np.zeros(0, np.int64)
-        act = _activations_at(m_u, sel, p.weights, policy)
-        keep = np.abs(act).sum(axis=0) > 0
-        sel, act = sel[keep], act[:, keep]
-        normal = _blend_at(base_u, base_pd, states_u, sel, act, encoding)
         w = np.asarray(p.weights, _F)
+        # activations on every union texel (flat ops on the weighted masks), then the texels
+        # a weighted region touches where some state is active
+        act_u = _activations_at(m_u, None, w, policy)
+        weight_u = _activation_weight(act_u)
+        touched = (m_u[rows] > 0).any(axis=0) if rows.size else np.zeros(union.size, bool)
+        sel = np.flatnonzero(touched & (weight_u > 0))
+        act = np.take(act_u, sel, axis=1)
+        normal = _blend_at(base_u, base_pd, states_u, sel, act, encoding)
+        per_region = np.abs(w) if w.ndim == 1 else np.abs(w).max(axis=1)
+        share = np.empty((rows.size, sel.size), _F)
+        for g, r in enumerate(rows):
+            np.multiply(m_u[r][sel], per_region[r], out=share[g])
         out.append(
             PoseReference(
                 pose=p,
                 sel=sel,
                 act=act,
                 normal=normal.T,  # [n, 3], a view of the planes the measure reads
-                weight=_activation_weight(act),
-                share=_region_share(m_u[np.ix_(rows, sel)], w[rows]),
+                weight=weight_u[sel],
+                share=share,
                 active=union[sel],
                 regions=rows,
             )

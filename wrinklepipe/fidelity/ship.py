@@ -202,8 +202,14 @@ def mask_levels(masks: np.ndarray, min_size: int = 1) -> MaskLevels:
     acc = m
     while h % 2 == 0 and h // 2 >= min_size and acc.shape[2] % 2 == 0:
         r, w = acc.shape[0], acc.shape[2]
-        quad = acc.reshape(r, h // 2, 2, w // 2, 2).sum(axis=(2, 4), dtype=np.float64)
-        acc = (quad * 0.25).astype(_F)
+        half = np.empty((r, h // 2, w // 2), _F)
+        for i in range(r):  # one mask at a time: its float64 temporaries stay small
+            pairs = acc[i].reshape(h // 2, 2, w)
+            rows = np.add(pairs[:, 0], pairs[:, 1], dtype=np.float64).reshape(h // 2, w // 2, 2)
+            quad = np.add(rows[..., 0], rows[..., 1])  # the 2x2 sum in float64 (exact for 4
+            quad *= 0.25  # float32 values of a mask's range), rounded to float32 once
+            half[i] = quad
+        acc = half
         h //= 2
         out[h] = acc
     return MaskLevels(out, int(m.shape[1]))
