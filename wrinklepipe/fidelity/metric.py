@@ -145,7 +145,7 @@ def sample_at(
         return np.asarray(v if store is None else store(v), _F)
 
     if (h, w) == (H, W):
-        out = texels(flat)
+        out = texels(flat) if store is not None else _gather_planes(src, flat).T
     elif h * W < 2 * flat.size:
         rows, cols = flat // W, flat % W
         r0, r1, fr = _taps(H, h)
@@ -174,6 +174,15 @@ def sample_at(
             res[c] = top * (1 - ty) + bot * ty
         out = res.T
     return np.asarray(out if read is None else read(out), _F)
+
+
+def _gather_planes(rows: np.ndarray, flat: np.ndarray) -> np.ndarray:
+    """``rows[flat]`` of an ``[N, C]`` array as float32 planes ``[C, n]`` (one take per channel:
+    several times faster than gathering C-value rows)."""
+    out = np.empty((rows.shape[1], flat.size), _F)
+    for c in range(rows.shape[1]):
+        out[c] = rows[:, c][flat]
+    return out
 
 
 def taps(shape: tuple[int, int], grid: tuple[int, int], flat: np.ndarray) -> np.ndarray:
@@ -792,7 +801,7 @@ def base_fidelity(
     if flat is None:
         flat = ref.face_texels()
     got = model.normalize(sample_at(base, ref.shape, flat, reader))
-    err = angle_deg(got, ref.base.reshape(-1, 3)[flat])
+    err = angle_deg(got, _gather_planes(ref.base.reshape(-1, 3), flat).T)
     return weighted_stats(err, np.ones(err.shape, _F))
 
 
