@@ -15,6 +15,7 @@ from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.io.images import read_image
 from wrinklepipe.validate import fidelity_pictures as fp
+from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate import report as vr
 from wrinklepipe.validate.run import Report
 
@@ -153,3 +154,35 @@ def test_source_pictures_are_the_full_resolution_blend(page):
     n = 2 * img[..., :3].astype(np.float64) - 1
     assert np.abs(np.linalg.norm(n, axis=-1) - 1).max() < 0.02
     assert model.normalize(n.astype(np.float32)).shape == n.shape
+
+
+def _gl() -> bool:
+    try:
+        glw.create_context().release()
+        return True
+    except glw.GLUnavailable:
+        return False
+
+
+@pytest.mark.skipif(not _gl(), reason="no OpenGL 3.3 (EGL) on this machine")
+def test_the_source_render_beside_the_shipped_one_shows_the_measured_angle(page, tmp_path):
+    """With the render pass: per pose the source's and the shipped render (blended normals per
+    pixel); the angle between the two pictures, read back from the PNGs, is the screen-space
+    fidelity the report states (to the pictures' 8-bit rounding)."""
+    _, d = page
+    html = tmp_path / "page.html"
+    args = ["validate-asset", str(d / "out"), "--source", str(d / "demo" / "manifest.toml")]
+    assert main([*args, "--html", str(html), "--report", str(tmp_path / "r.json")]) == 0
+    measured = json.loads((tmp_path / "r.json").read_text())["metrics"]["fidelity_render_deg"]
+    text = html.read_text()
+    for pose, st in measured.items():
+        src, _ = read_image(tmp_path / "page_files" / f"render_source_{pose}.png")
+        got, _ = read_image(tmp_path / "page_files" / f"render_shipped_{pose}.png")
+        assert f"page_files/render_source_{pose}.png" in text
+        covered = ~np.all(src[..., :3] == 1.0, axis=-1)  # white: no face there
+        ns = 2 * src[..., :3][covered].astype(np.float64) - 1
+        ng = 2 * got[..., :3][covered].astype(np.float64) - 1
+        assert np.abs(np.linalg.norm(ns, axis=-1) - 1).max() < 0.01  # unit normals
+        cos = (ns * ng).sum(-1) / np.linalg.norm(ns, axis=-1) / np.linalg.norm(ng, axis=-1)
+        angle = np.degrees(np.arccos(np.clip(cos, -1, 1)))
+        assert abs(angle.max() - st["max"]) < 0.6, (pose, angle.max(), st)

@@ -31,6 +31,7 @@ from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents
 from wrinklepipe.shading import glsl
 from wrinklepipe.shading.setup import MaskEntry, ShaderSetup
+from wrinklepipe.validate import fidelity_pictures as fp
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
@@ -556,6 +557,11 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
         emap = np.zeros(cov.shape, np.float32)
         emap[cov] = err
         images[f"fidelity_render/{e}"] = emap
+        # the full-resolution source's render beside the shipped one: blended normals per pixel
+        for key, n in (("render_source", f_info["normals"][e]), ("render_shipped", gpu[e])):
+            pic = np.ones(cov.shape + (3,), np.float32)
+            pic[cov] = fp.normal_picture(n)
+            images[f"{key}/{e}"] = pic
     # mask overlay from the UV buffer: shipped masks coloured per region over the neutral render
     overlay = np.zeros(cov.shape + (3,), np.float32)
     rng = np.random.default_rng(7)
@@ -574,7 +580,14 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
         y1, x1 = min(int(cy) + half, cov.shape[0]), min(int(cx) + half, cov.shape[1])
         info["crop"] = [int(x0), int(y0), int(x1), int(y1)]
         for k in list(images):
-            if k.split("/")[0] in ("render", "gpu_error", "change", "fidelity_render"):
+            if k.split("/")[0] in (
+                "render",
+                "gpu_error",
+                "change",
+                "fidelity_render",
+                "render_source",
+                "render_shipped",
+            ):
                 images[k] = images[k][y0:y1, x0:x1]
     if gpu_bad:
         worst = max(gpu_bad, key=lambda x: x[1]["p99"])

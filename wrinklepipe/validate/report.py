@@ -183,6 +183,8 @@ _PICTURES: tuple[tuple[str, float | str | None], ...] = (
     ("gpu_error/", 2.0),
     ("change/", 10.0),
     ("shipping_error/", 5.0),
+    ("render_source/", "unorm"),
+    ("render_shipped/", "unorm"),
     ("fidelity_source/", "unorm"),
     ("fidelity_shipped/", "unorm"),
     ("fidelity_error/", FIDELITY_HEAT_DEG),
@@ -309,6 +311,8 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
             parts.append(fig(f"change_{p}.png", f"{p}: change from neutral"))
             parts.append(fig(f"gpu_error_{p}.png", f"{p}: GPU vs reference"))
             parts.append(fig(f"shipping_error_{p}.png", f"{p}: shipped vs source (0..5 deg)"))
+            parts.append(fig(f"render_source_{p}.png", f"{p}: source render (normals)"))
+            parts.append(fig(f"render_shipped_{p}.png", f"{p}: shipped render (normals)"))
             parts.append(fig(f"fidelity_render_{p}.png", f"{p}: GPU vs source render (0..5 deg)"))
             parts.append("</div>")
         parts.append("</div>")

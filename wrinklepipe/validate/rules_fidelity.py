@@ -423,7 +423,8 @@ def render_fidelity(
     against the numpy blend of the full-resolution source sampled at the same UVs, on the pixels
     where the pose is active (source or shipped masks), weighted by the activation.
 
-    Returns the issues and ``{pose: Stats}`` (screen-space error per pixel under ``"maps"``)."""
+    Returns the issues and ``{pose: Stats}`` (screen-space error per pixel under ``"maps"``, the
+    source's blended normal per pixel under ``"normals"``)."""
     a = ctx.asset
     if not _measurable(ctx) or not gpu:
         return [], {}
@@ -443,6 +444,7 @@ def render_fidelity(
     )
     stats: dict[str, fd.Stats] = {}
     errs: dict[str, np.ndarray] = {}
+    normals: dict[str, np.ndarray] = {}  # the source's render: its blended normal per pixel
     for p in poses(ctx):
         if p.name not in gpu:
             continue
@@ -454,6 +456,7 @@ def render_fidelity(
         if not (w > 0).any():
             continue  # the pose's active region is not in view
         errs[p.name] = np.where(w > 0, err, 0.0).astype(np.float32)
+        normals[p.name] = src
         stats[p.name] = fd.weighted_stats(err, w)
     ctx.metrics["fidelity_render_deg"] = {
         k: {
@@ -479,4 +482,4 @@ def render_fidelity(
                 ctx.inp.pointer("meta"),
             )
         )
-    return issues, {"stats": stats, "maps": errs}
+    return issues, {"stats": stats, "maps": errs, "normals": normals}
