@@ -186,3 +186,21 @@ def test_the_source_render_beside_the_shipped_one_shows_the_measured_angle(page,
         cos = (ns * ng).sum(-1) / np.linalg.norm(ns, axis=-1) / np.linalg.norm(ng, axis=-1)
         angle = np.degrees(np.arccos(np.clip(cos, -1, 1)))
         assert abs(angle.max() - st["max"]) < 0.6, (pose, angle.max(), st)
+
+
+def test_converts_report_shows_each_mask_as_visible_grey_levels(page):
+    """convert's report.html shows each region's mask beside the regions table: the validator's
+    thumbnail, grey levels equal to the texels of the channel that holds it in the shipped
+    mask texture (read by OpenImageIO with alpha unassociated)."""
+    _, d = page
+    out = d / "out"
+    text = (out / "report.html").read_text()
+    report = json.loads((out / "report.json").read_text())
+    for r in report["asset"]["regions"]:
+        thumb = f"validation_files/region_mask_{r['name']}.png"
+        assert f"src='{thumb}'" in text
+        grey, _ = read_image(out / thumb)
+        tex, _ = read_image(out / "textures" / f"mask_{r['mask']['texture']}.png")
+        want = tex[..., "rgba".index(r["mask"]["channel"])]
+        assert grey.shape[:2] == want.shape and np.abs(grey[..., 0] - want).max() <= 0.5 / 255
+        assert grey[..., 0].max() > 0  # the region is there, not black

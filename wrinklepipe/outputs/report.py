@@ -142,6 +142,32 @@ def _validation_html(validation: dict[str, Any], table: Any) -> str:
     )
 
 
+def _regions_html(report: dict[str, Any], table: Any) -> str:
+    """The regions table; with the validator's page, each region's shipped mask beside it as
+    grey levels (its thumbnail there: a mask packed in a channel, alpha above all, would show
+    black or transparent as the texture itself)."""
+    a = report["asset"]
+    files = {o["file"] for o in report["outputs"]}
+    thumbs = {
+        r["name"]: f"{Path(VALIDATION_HTML).stem}_files/region_mask_{r['name']}.png"
+        for r in a["regions"]
+    }
+    if not all(t in files for t in thumbs.values()):
+        return table(
+            [[r["name"], r["side"], json.dumps(r["mask"])] for r in a["regions"]],
+            ["region", "side", "channel table"],
+        )
+    esc = html.escape
+    rows = "".join(
+        f"<tr><td>{esc(r['name'])}</td><td>{esc(str(r['side']))}</td>"
+        f"<td>{esc(json.dumps(r['mask']))}</td><td><img src='{esc(thumbs[r['name']])}' "
+        f"style='width:96px;image-rendering:pixelated' alt='{esc(r['name'])} mask'></td></tr>"
+        for r in a["regions"]
+    )
+    head = "<tr><th>region</th><th>side</th><th>channel table</th><th>mask (0 black, 1 white)</th>"
+    return f"<table><thead>{head}</tr></thead><tbody>{rows}</tbody></table>"
+
+
 def report_html(report: dict[str, Any]) -> str:
     """A static, self-contained HTML summary of report.json (textures linked, not embedded)."""
     esc = html.escape
@@ -174,10 +200,7 @@ def report_html(report: dict[str, Any]) -> str:
             if o["file"].startswith("textures/")
         ),
         "</div><h2>Regions</h2>",
-        table(
-            [[r["name"], r["side"], json.dumps(r["mask"])] for r in a["regions"]],
-            ["region", "side", "channel table"],
-        ),
+        _regions_html(report, table),
         "<h2>Decode error of the stored states</h2>",
         table(
             [
