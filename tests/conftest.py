@@ -1,4 +1,19 @@
-"""Fixtures several test files share (each built once per test session and worker)."""
+"""Fixtures several test files share (each built once per test session and worker).
+
+How the suite shares out on ``pytest -n 2`` (the CI machine: 2 cores):
+
+``pyproject.toml`` runs xdist with ``--dist loadfile --no-loadscope-reorder``: every test module
+goes whole to one worker, so a module-scoped fixture (a conversion, a browser page) is built
+once, not once on each worker that happens to run one of its tests (the three.js page test built
+its ~30 s page twice under ``--dist load``).
+
+With whole modules as the units, the two longest modules must not start last: a worker that
+picks up a long module at the end leaves the other idle. So under xdist the modules below go
+first, longest first (the rest follow in file order; they are a few seconds each). The list is
+the modules' share of the suite's time in a ``--durations=0`` run (main 704a46f, 2026-12-02);
+refresh it from such a run when a module's cost changes a lot. The order changes nothing but
+when a test starts; ``-n 0`` runs keep file order.
+"""
 
 from __future__ import annotations
 
@@ -24,3 +39,31 @@ def robot_converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dic
         res = convert(manifest, root / "out", ConvertOptions(glb=True, render=False))
     assert res.exit_code == 0
     return root / "out", res.report
+
+
+LONGEST_FIRST = [
+    "test_batch_run.py",  # 8 % of the suite (17 small converts in the isolation test)
+    "test_batch_bench.py",  # 5 %
+    "test_export_engines.py",  # 5 %
+    "test_convert_fidelity.py",  # 5 %
+    "test_safety_faults.py",  # 5 % (22 killed and rerun CLI runs)
+    "test_convert_formats.py",  # 5 %
+    "test_capture_cli.py",  # 5 %
+    "test_convert_cli.py",  # 4 %
+    "test_document_convert.py",  # 4 %
+    "test_validate_render.py",  # 3 %
+    "test_batch_ci.py",  # 3 %
+    "test_normals_containers.py",  # 3 %
+    "test_validate_cli.py",  # 3 %
+    "test_face_fixture.py",  # 3 %
+    "test_safety_fuzz.py",  # 3 %
+    "test_viewer.py",  # 2 % (one browser page)
+]
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if not hasattr(config, "workerinput"):  # not an xdist worker: keep file order
+        return
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: file order kept
