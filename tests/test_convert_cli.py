@@ -29,6 +29,13 @@ def source(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
+def small_source(tmp_path_factory) -> Path:
+    """The demo at 32, for the tests of how a run ends (refused, failed, --json), which do not
+    depend on the size: a quarter of the 256 run's cost."""
+    return write_demo_source(tmp_path_factory.mktemp("small") / "demo", size=32)
+
+
+@pytest.fixture(scope="module")
 def converted(source, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("conv") / "out"
     # validation runs its rules; its GPU render pass is the validator's own tests' business
@@ -164,19 +171,21 @@ def test_output_containing_the_input(source, capsys):
     assert "input" in capsys.readouterr().err
 
 
-def test_existing_output_needs_force(source, converted, tmp_path, capsys):
+def test_existing_output_needs_force(small_source, converted, tmp_path, capsys):
     out = tmp_path / "prev"
     shutil.copytree(converted, out)
     (out / "keep.txt").write_text("mine")
     before = _tree(out)
-    assert main(["convert", str(source), "-o", str(out)]) == 2
+    assert main(["convert", str(small_source), "-o", str(out)]) == 2
     assert "--force" in capsys.readouterr().err
     assert _tree(out) == before
-    assert main(["convert", str(source), "-o", str(out), "--force", "--no-validate"]) == 0
+    assert main(["convert", str(small_source), "-o", str(out), "--force", "--no-validate"]) == 0
     assert not (out / "keep.txt").exists()
 
 
-def test_full_disk_leaves_previous_output_intact(source, converted, tmp_path, monkeypatch, capsys):
+def test_full_disk_leaves_previous_output_intact(
+    small_source, converted, tmp_path, monkeypatch, capsys
+):
     out = tmp_path / "prev"
     shutil.copytree(converted, out)
     before = _tree(out)
@@ -190,7 +199,7 @@ def test_full_disk_leaves_previous_output_intact(source, converted, tmp_path, mo
         return real(path, data, inputs)
 
     monkeypatch.setattr(output_folder, "write_bytes", failing)
-    assert main(["convert", str(source), "-o", str(out), "--force", "--no-validate"]) == 2
+    assert main(["convert", str(small_source), "-o", str(out), "--force", "--no-validate"]) == 2
     err = capsys.readouterr().err
     assert "No space left on device" in err and "nothing was changed" in err
     assert "Traceback" not in err
@@ -208,7 +217,8 @@ def test_missing_input_file(source, tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
-def test_json_output(source, tmp_path, capsys):
-    assert main(["convert", str(source), "-o", str(tmp_path / "j"), "--json", "--no-validate"]) == 0
+def test_json_output(small_source, tmp_path, capsys):
+    out = tmp_path / "j"
+    assert main(["convert", str(small_source), "-o", str(out), "--json", "--no-validate"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["name"] == "demo_head" and report["validation"]["status"] == "skipped"
