@@ -43,21 +43,21 @@ def robot_converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dic
 
 LONGEST_FIRST = [
     "test_batch_run.py",  # 8 % of the suite (17 small converts in the isolation test)
+    "test_viewer.py",  # one browser page: ~45 s wall in one piece at a load of 3
     "test_batch_bench.py",  # 5 %
     "test_export_engines.py",  # 5 %
     "test_convert_fidelity.py",  # 5 %
-    "test_safety_faults.py",  # 5 % (22 killed and rerun CLI runs)
     "test_convert_formats.py",  # 5 %
     "test_capture_cli.py",  # 5 %
+    "test_safety_faults.py",  # 22 killed and rerun CLI runs (5 % with interpreter start-ups)
     "test_convert_cli.py",  # 4 %
     "test_document_convert.py",  # 4 %
     "test_validate_render.py",  # 3 %
     "test_batch_ci.py",  # 3 %
-    "test_normals_containers.py",  # 3 %
     "test_validate_cli.py",  # 3 %
     "test_face_fixture.py",  # 3 %
     "test_safety_fuzz.py",  # 3 %
-    "test_viewer.py",  # 2 % (one browser page)
+    "test_normals_containers.py",  # 3 % (half since its bench smoke run shrank)
 ]
 
 
