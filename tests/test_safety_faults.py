@@ -25,6 +25,7 @@ from pathlib import Path
 import pytest
 
 from wrinklepipe import atomic
+from wrinklepipe.batch import engines
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 
@@ -44,15 +45,13 @@ def _tree(folder: Path) -> dict[str, bytes]:
     }
 
 
-#: What the fork server imports once: the CLI, both commands, the USD modules convert loads.
+#: What the fork server imports once: what ``wrinklepipe batch``'s fork server imports (there is
+#: one fork server per process, whichever test starts it), plus the CLI and both commands.
 PRELOAD = [
+    *engines._PRELOAD,
     "wrinklepipe.cli",
     "wrinklepipe.commands.convert",
     "wrinklepipe.commands.export",
-    "pxr.Usd",
-    "pxr.UsdGeom",
-    "pxr.UsdShade",
-    "pxr.UsdSkel",
 ]
 
 
