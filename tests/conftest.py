@@ -10,8 +10,9 @@ its ~30 s page twice under ``--dist load``).
 With whole modules as the units, the two longest modules must not start last: a worker that
 picks up a long module at the end leaves the other idle. So under xdist the modules below go
 first, longest first (the rest follow in file order; they are a few seconds each). The list is
-the modules' share of the suite's time in a ``--durations=0`` run (main 704a46f, 2026-12-02);
-refresh it from such a run when a module's cost changes a lot. The order changes nothing but
+the modules' share of the suite's time in a ``--durations=0`` run (2026-12-02, 03:05 UTC) and
+their ``-n 0`` times after that day's first merge train; refresh it from such a run when a
+module's cost changes a lot. The order changes nothing but
 when a test starts; ``-n 0`` runs keep file order.
 """
 
@@ -42,22 +43,24 @@ def robot_converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dic
 
 
 LONGEST_FIRST = [
-    "test_batch_run.py",  # 8 % of the suite (17 small converts in the isolation test)
-    "test_viewer.py",  # one browser page: ~45 s wall in one piece at a load of 3
-    "test_batch_bench.py",  # 5 %
-    "test_export_engines.py",  # 5 %
-    "test_convert_fidelity.py",  # 5 %
-    "test_convert_formats.py",  # 5 %
-    "test_capture_cli.py",  # 5 %
-    "test_safety_faults.py",  # 22 killed and rerun CLI runs (5 % with interpreter start-ups)
+    "test_batch_run.py",  # 11 % (the isolation test: converts, a LocalCluster)
+    "test_viewer.py",  # one browser page, ~40 s in one piece
+    "test_export_engines.py",  # 9 %
+    "test_convert_fidelity.py",  # 7 %
+    "test_convert_formats.py",  # 6 %
+    "test_validate_render.py",  # 5 %
+    "test_safety_faults.py",  # 6 % (22 killed CLI runs and their reruns)
+    "test_capture_cli.py",  # 4 %
     "test_convert_cli.py",  # 4 %
-    "test_document_convert.py",  # 4 %
-    "test_validate_render.py",  # 3 %
-    "test_batch_ci.py",  # 3 %
-    "test_validate_cli.py",  # 3 %
-    "test_face_fixture.py",  # 3 %
-    "test_safety_fuzz.py",  # 3 %
-    "test_normals_containers.py",  # 3 % (half since its bench smoke run shrank)
+    "test_safety_outputs.py",  # 3 %
+    "test_document_convert.py",  # 3 %
+    "test_batch_bench.py",  # 3 %
+    "test_validate_cli.py",  # 2 %
+    "test_validate_corpus.py",  # 2 %
+    "test_safety_fuzz.py",  # 2 %
+    "test_face_fixture.py",  # 1-2 %
+    "test_batch_ci.py",  # 1-2 %
+    "test_normals_bc4.py",  # 1-2 %
 ]
 
 
