@@ -28,7 +28,7 @@ from wrinklepipe.capture.orientation import (
     integrability_residual,
     orient,
 )
-from wrinklepipe.capture.ratio import RatioOptions, RatioResult, ratio_image
+from wrinklepipe.capture.ratio import RatioOptions, RatioResult, masked_blur, ratio_image
 from wrinklepipe.model import normalize
 
 
@@ -237,6 +237,10 @@ def capture(
         nzn = np.broadcast_to(np.asarray(nz_neutral, np.float64), (h, w))
         extra = np.arccos(np.clip(rr.plain * nzn, 0.0, 1.0)) - np.arccos(np.clip(nzn, 0.0, 1.0))
         r_model = np.where(nzn < 1.0, np.cos(np.clip(extra, 0.0, np.pi / 2)), rr.plain)
+    # the solve's own blur on top of the ratio's (Gaussians compose in quadrature)
+    more = float(np.sqrt(max((o.sfs.blur * k) ** 2 - ratio_opts.blur_sigma**2, 0.0)))
+    if more > 0:
+        r_model = masked_blur(r_model, rr.valid.astype(np.float64), more)
     sfs_res = None
     if "sfs" in methods:
         prior = photo["integrable"].astype(np.float64)

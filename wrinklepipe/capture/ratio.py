@@ -120,7 +120,8 @@ def upper_noise(values: np.ndarray) -> float:
     return float(1.4826 * np.median(up)) if len(up) else 0.0
 
 
-def _masked_blur(values: np.ndarray, weight: np.ndarray, sigma: float) -> np.ndarray:
+def masked_blur(values: np.ndarray, weight: np.ndarray, sigma: float) -> np.ndarray:
+    """A normalised Gaussian blur: pixels of weight 0 do not bleed in (1 where none is near)."""
     if sigma <= 0:
         return values
     num = ndimage.gaussian_filter(values * weight, sigma, mode="nearest")
@@ -160,7 +161,7 @@ def ratio_image(
     reference = "ROI"
     if o.normalize_exposure and sel.any():
         # On the blurred ratio: quantised photos give a spiky histogram of raw ratios.
-        smooth = _masked_blur(raw, valid.astype(np.float64), max(o.blur_sigma, 1.0))
+        smooth = masked_blur(raw, valid.astype(np.float64), max(o.blur_sigma, 1.0))
         ref = sel
         if o.exposure_ring > 0 and not in_roi.all():
             ring = valid & (ndimage.distance_transform_edt(~in_roi) <= o.exposure_ring) & ~in_roi
@@ -170,7 +171,7 @@ def ratio_image(
         if level > 1e-6:
             exposure = level
     r = np.where(valid, raw / exposure, 1.0)
-    r = _masked_blur(r, valid.astype(np.float64), o.blur_sigma)
+    r = masked_blur(r, valid.astype(np.float64), o.blur_sigma)
     plain = r.copy()
     noise = upper_noise(r[sel]) if sel.any() else 0.0
     deadband = o.deadband if o.deadband is not None else o.deadband_sigmas * noise
