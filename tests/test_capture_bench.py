@@ -10,6 +10,8 @@ def test_capture_benchmark_quick():
     steps = [r.step for r in res.rows]
     assert steps[0] == res.baseline and "whole stage (4 methods)" in steps
     assert "orientation sfs" in steps  # the new method's time beside the others
+    # and on a curved neutral, where the eikonal starts run
+    assert {"sfs eikonal start, curved forehead", "orientation sfs, curved forehead"} <= set(steps)
     assert all(r.median_s > 0 and r.ratio > 0 for r in res.rows)
     acc = res.extra["accuracy_deg"]
     assert set(acc) == {"gradient", "furrow", "integrable"}  # no neutral normals: no solve

@@ -10,6 +10,7 @@ normals, on the issue-like curved forehead session (:mod:`wrinklepipe.capture.se
 
 from __future__ import annotations
 
+import numpy as np
 from scipy import ndimage
 
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
@@ -45,10 +46,10 @@ def bench_capture(quick: bool) -> BenchResult:
     warp1 = W.fit_tps(sc.lm_neutral, sc.lm_expression)
     row(
         "warp expression -> neutral",
-        lambda: W.sample(sc.expression, W.dense_map(warp1, sc.neutral.shape)),
-        "TPS at every pixel + bilinear sampling",
+        lambda: W.sample(sc.expression, W.dense_map(warp1, sc.neutral.shape), 3),
+        "TPS at every pixel + cubic sampling (the stage's)",
     )
-    warped, inside = W.sample(sc.expression, W.dense_map(warp1, sc.neutral.shape))
+    warped, inside = W.sample(sc.expression, W.dense_map(warp1, sc.neutral.shape), 3)
     row("ratio image", lambda: ratio_image(sc.neutral, warped, inside, sc.roi))
     rr = ratio_image(sc.neutral, warped, inside, sc.roi)
     for m in PRIORS:
@@ -101,6 +102,27 @@ def bench_capture(quick: bool) -> BenchResult:
         neutral_normals=fs.neutral_normals,
     )
     curved = {m: errors(n, fs.truth_texture, fs.roi_texture) for m, n in cur.normal_texture.items()}
+    # the solve on a curved neutral (its eikonal starts run only where the neutral is tilted)
+    n0 = fs.neutral_normals.astype(float)
+    fpix = fs.neutral.size / 1e6
+    in_roi = fs.roi > 0.5
+    n1z = np.clip(cur.ratio.plain * n0[..., 2], 1e-3, 1.0)
+    h0 = S.neutral_height(in_roi, S.neutral_slopes(n0))
+    slope = np.sqrt(1.0 / (n1z * n1z) - 1.0)
+    for step, fn, note in (
+        (
+            "sfs eikonal start, curved forehead",
+            lambda: S.eikonal_height(slope, in_roi, h0),
+            f"{fs.neutral.shape[0]}^2 photo, one of the two viscosity solutions",
+        ),
+        (
+            "orientation sfs, curved forehead",
+            lambda: S.solve_crease(cur.ratio.plain, n0, fs.roi, cur.ratio.valid),
+            f"{fs.neutral.shape[0]}^2 photo, neutral normals: zero + 2 eikonal starts + fusion",
+        ),
+    ):
+        t = median_time(fn, repeat, warmup)
+        res.rows.append(BenchRow(step, t, mpix_per_s=fpix / t if t > 0 else None, note=note))
     res.extra = {
         "accuracy_deg": {
             m: {
