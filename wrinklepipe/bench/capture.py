@@ -113,7 +113,8 @@ def bench_capture(quick: bool) -> BenchResult:
         (
             "sfs eikonal start, curved forehead",
             lambda: S.eikonal_height(slope, in_roi, h0),
-            f"{fs.neutral.shape[0]}^2 photo, one of the two viscosity solutions",
+            f"{fs.neutral.shape[0]}^2, one of the two viscosity solutions at the photo's size "
+            "(the solve runs both on its grid of at most 320 px)",
         ),
         (
             "orientation sfs, curved forehead",
