@@ -251,8 +251,7 @@ def _string_keyed_meta(tree: ast.AST) -> list[int]:
 
 def test_package_metadata_is_read_by_field():
     """``WrinklePackage.meta`` is a typed :class:`wrinklepipe.metadata.WrinkleMeta`: the package
-    reads its fields (``pkg.meta.states[0].texture``), never string keys (the transitional
-    ``__getitem__`` is for code in flight only)."""
+    reads its fields (``pkg.meta.states[0].texture``), never string keys."""
     found = [
         f"{name}:{line}"
         for name, path in _modules().items()

@@ -215,12 +215,3 @@ def test_every_description_round_trips_through_both_json_forms(meta):
     ext = json.loads(json.dumps(ext))
     back = WrinkleMeta.from_extension(ext, lambda info, key, role: name_of[info["index"]], _err)
     assert back == meta
-
-
-def test_old_string_keys_still_read_with_a_warning(metas):
-    """Code written against the old dict keeps working while it moves to the fields."""
-    meta = metas["rgba"]
-    with pytest.warns(DeprecationWarning, match="typed fields"):
-        assert meta["states"][0]["texture"] == meta.states[0].texture
-    with pytest.warns(DeprecationWarning):
-        assert meta.get("mapping", 1) == meta.mapping and meta.get("nope", 7) == 7

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import functools
 import json
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -40,7 +39,6 @@ SCHEMA_FILE = SCHEMAS_DIR / EXTENSION / "schema" / f"material.{EXTENSION}.schema
 LEGACY_MAPPING = 1
 #: The vertex attribute holding the spatial-hash vertex IDs, unless the extension names another.
 VERTEX_ID_ATTRIBUTE = "_WRINKLE_VERTEX_ID"
-_OLD_KEYS = "WrinkleMeta[...] / .get(): read the typed fields (meta.states[0].texture, ...)"
 #: Longest schema message quoted in an error (a message quotes the offending value).
 _MAX_MESSAGE = 240
 
@@ -232,19 +230,6 @@ class WrinkleMeta:
     #: one static weight per region
     weights: tuple[float, ...] = ()
     compressed: tuple[CompressedCopy, ...] = ()
-
-    # -- transitional string keys ----------------------------------------------------------
-    def __getitem__(self, key: str) -> Any:
-        """``meta["states"]`` as before the typed metadata: the value of :meth:`to_json` (plain
-        JSON, a copy), with a DeprecationWarning. Only for code written against the old dict
-        while it moves to the fields; the package itself reads fields."""
-        warnings.warn(_OLD_KEYS, DeprecationWarning, stacklevel=2)
-        return self.to_json()[key]
-
-    def get(self, key: str, default: Any = None) -> Any:
-        """``meta.get(key, default)`` as before the typed metadata (see :meth:`__getitem__`)."""
-        warnings.warn(_OLD_KEYS, DeprecationWarning, stacklevel=2)
-        return self.to_json().get(key, default)
 
     # -- views --------------------------------------------------------------------------------
     @property
