@@ -14,6 +14,7 @@ the corner map, wrinkle primvars vertex or faceVarying, the source's UsdSkel ski
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
@@ -277,7 +278,6 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
             break
     if mat_prim is None:
         raise input_error(file, f"no Material with {API_NAME}: not a wrinklepipe asset")
-    mat = UsdShade.Material(mat_prim)
     layered = mat_prim.HasAttribute(LAYERED_OVER)
     wrinkled = {  # a layer over a source may wrinkle several of its materials alike
         p.GetPath()
@@ -315,6 +315,20 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         )
     base_file = base_shader.GetInput("file").Get()
     add_texture(base_file, f"{base_shader.GetPath()}.inputs:file", "base_normal", "base_normal")
+
+    meta = _meta(mat_prim, add_texture, file)
+    curves = _curves(stage, mat_prim, len(meta.regions), len(mesh.morph_names), file)
+    name = stage.GetDefaultPrim().GetName() if stage.GetDefaultPrim() else path.stem
+    return WrinklePackage(name, mesh, textures, meta, curves)
+
+
+def _meta(mat_prim: Any, add_texture: Callable[[Any, str, str], str], file: str) -> WrinkleMeta:
+    """The wrinkle description the material's ``WrinkleMapsAPI`` attributes and inputs hold (a
+    map onto :class:`~wrinklepipe.metadata.WrinkleMeta`, checked by the extension's schema);
+    ``add_texture(asset, key, role)`` reads each texture input and names it."""
+    from pxr import Tf, Usd, UsdShade  # deferred: usd-core, USD only
+
+    mat = UsdShade.Material(mat_prim)
 
     def api(name: str) -> Any:
         a = mat_prim.GetAttribute(f"wrinkle:{name}")
@@ -394,6 +408,16 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         weights=tuple(float(w) for w in (default if default is not None else [0.0] * r)),
         compressed=_compressed(mat_prim, mapping),
     ).check(lambda message, key: input_error(file, message, key), where)
+    return meta
+
+
+def _curves(stage: Any, mat_prim: Any, r: int, n_morphs: int, file: str) -> list[WeightCurves]:
+    """The weight curves: ``wrinkle:weights`` time samples (the first), ``wrinkle:curves:curveI``
+    (the others, named by ``wrinkle:curveNames``) and each one's ``wrinkle:morphCurves:curveI``
+    morph weights."""
+    from pxr import Usd  # deferred: usd-core, USD only
+
+    weights_attr = mat_prim.GetAttribute("wrinkle:weights")
     fps = stage.GetTimeCodesPerSecond()
 
     def curve(attr: Any, name: str) -> WeightCurves | None:
@@ -419,7 +443,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
             return c
         codes = a.GetTimeSamples()
         mw = np.stack([np.asarray(a.Get(Usd.TimeCode(t)), np.float32) for t in codes])
-        if len(codes) != len(c.times) or mw.shape[1] != len(mesh.morph_names):
+        if len(codes) != len(c.times) or mw.shape[1] != n_morphs:
             raise input_error(file, f"{a.GetPath()}: morph weights do not match the curve")
         return WeightCurves(c.name, c.times, c.values, mw)
 
@@ -433,5 +457,4 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         if c is not None:
             curves.append(c)
     curves = [morphs(i, c) for i, c in enumerate(curves)]
-    name = stage.GetDefaultPrim().GetName() if stage.GetDefaultPrim() else path.stem
-    return WrinklePackage(name, mesh, textures, meta, curves)
+    return curves
