@@ -291,9 +291,25 @@ def package_from_gltf(
         json.dumps(meta.to_json(), allow_nan=False)
     except ValueError:
         raise err("the extension block holds a NaN or infinite number", pkey) from None
-    regions = meta.regions
+    curves = _weight_curves(
+        doc, ext, accessor, err, pkey, len(meta.regions), len(mesh.morph_names), morph_nodes
+    )
+    return WrinklePackage(name, mesh, textures, meta, curves)
 
-    # -- weight curves ----------------------------------------------------------------------
+
+def _weight_curves(
+    doc: dict[str, Any],
+    ext: dict[str, Any],
+    accessor: Callable[[int], np.ndarray],
+    err: Callable[[str, str], Exception],
+    pkey: str,
+    n_regions: int,
+    n_morphs: int,
+    morph_nodes: dict[int, list[int]],
+) -> list[WeightCurves]:
+    """The extension's ``weightCurves``: each names a glTF animation whose
+    ``KHR_animation_pointer`` channel plays the region weights, and whose morph ``weights``
+    channels (on the nodes of ``morph_nodes``) play the blendshape inputs with them."""
     curves = []
     anims = doc.get("animations", [])
     for i, wc in enumerate(ext.get("weightCurves", [])):
@@ -325,21 +341,21 @@ def package_from_gltf(
                     f"/animations/{ai}",
                 )
             if morph is None:
-                morph = np.zeros((times.size, len(mesh.morph_names)), np.float32)
+                morph = np.zeros((times.size, n_morphs), np.float32)
             cols = np.asarray(columns, np.int64)
             keep = cols >= 0
             morph[:, cols[keep]] = mv.reshape(times.size, n_m)[:, keep]
-        if vals.size != times.size * len(regions):
+        if vals.size != times.size * n_regions:
             raise err(
-                f"animation output has {vals.size} values, expected {times.size} x {len(regions)}",
+                f"animation output has {vals.size} values, expected {times.size} x {n_regions}",
                 f"/animations/{ai}",
             )
         curves.append(
             WeightCurves(
                 str(wc.get("name", f"curve_{i}")),
                 times,
-                vals.reshape(times.size, len(regions)),
+                vals.reshape(times.size, n_regions),
                 morph,
             )
         )
-    return WrinklePackage(name, mesh, textures, meta, curves)
+    return curves
