@@ -129,7 +129,28 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
         )
     ext = mats[0]["extensions"][EXTENSION]
 
-    # -- mesh -------------------------------------------------------------------------------
+    mesh = _first_mesh(r, ext)
+    name = str(
+        doc.get("scenes", [{}])[doc.get("scene", 0)].get("name")
+        or doc.get("nodes", [{}])[0].get("name")
+        or Path(path).stem
+    )
+    return package_from_gltf(
+        doc,
+        0,
+        mesh,
+        r.image,
+        r.accessor,
+        r.err,
+        name,
+        {0: list(range(len(mesh.morph_names)))},
+    )
+
+
+def _first_mesh(r: _Reader, ext: dict[str, Any]) -> Mesh:
+    """``meshes[0]``'s first primitive as the render mesh of a file wrinklepipe wrote
+    (``io.gltf_write``): its attributes, morph targets, the skin of the node instancing it."""
+    doc = r.doc
     meshes = doc.get("meshes", [])
     if not meshes or not meshes[0].get("primitives"):
         raise r.err("no mesh primitive", "/meshes/0")
@@ -211,21 +232,7 @@ def _read_gltf(path: str | Path, options: GltfReadOptions | None = None) -> Wrin
                 "attribute counts differ from POSITION", "/meshes/0/primitives/0/attributes"
             )
 
-    name = str(
-        doc.get("scenes", [{}])[doc.get("scene", 0)].get("name")
-        or doc.get("nodes", [{}])[0].get("name")
-        or Path(path).stem
-    )
-    return package_from_gltf(
-        doc,
-        0,
-        mesh,
-        r.image,
-        r.accessor,
-        r.err,
-        name,
-        {0: list(range(len(mesh.morph_names)))},
-    )
+    return mesh
 
 
 def package_from_gltf(
