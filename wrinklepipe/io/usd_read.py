@@ -25,9 +25,8 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.document.usd_source import merge_parts
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
-from wrinklepipe.io.confine import confine_usd
 from wrinklepipe.io.json_safe import loads_json
-from wrinklepipe.io.mesh_usd import read_usd_meshes
+from wrinklepipe.io.mesh_usd import open_stage, read_usd_meshes
 from wrinklepipe.io.package import (
     PackedTexture,
     WeightCurves,
@@ -256,7 +255,7 @@ def _own_mesh(stage: Any, mesh_prim: Any, file: str) -> Mesh:
 
 def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> WrinklePackage:
     """Load a wrinklepipe USD stage as a :class:`WrinklePackage`."""
-    from pxr import Tf, Usd, UsdGeom, UsdShade  # deferred: usd-core, USD only
+    from pxr import UsdGeom, UsdShade  # deferred: usd-core, USD only
 
     opt = options or UsdReadOptions()
     path = Path(path)
@@ -264,13 +263,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     if not path.is_file():
         raise input_error(file, "file not found")
     register_schema()
-    confine_usd(path)  # sublayers, references, payloads: inside the asset's folder
-    try:
-        stage = Usd.Stage.Open(str(path))
-    except Tf.ErrorException as exc:
-        raise input_error(file, f"cannot open USD: {str(exc).strip()}") from None
-    if stage is None:
-        raise input_error(file, "cannot open USD stage")
+    stage = open_stage(path)  # the one confined Stage.Open (io.mesh_usd)
     mat_prim = None
     for prim in stage.Traverse():
         if prim.IsA(UsdShade.Material) and _has_api(prim):
