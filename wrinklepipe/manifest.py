@@ -55,8 +55,8 @@ class Manifest:
     states: list[StateSpec]
     regions: list[RegionSpec]
     mesh: Path | None = None
-    material: str | list[str] | None = None  # the wrinkled glTF material(s); None: the only one
-    meshes: tuple[str, ...] = ()  # restrict the wrinkled primitives to these meshes / nodes
+    material: str | list[str] | None = None  # the wrinkled glTF/USD material(s); None: the only one
+    meshes: tuple[str, ...] = ()  # restrict the wrinkled primitives to these meshes / nodes / prims
     convention: str = "auto"
     encoding: str = "pd"
     policy: str = "clamp01"
