@@ -684,9 +684,12 @@ def _leak_texels(
     st = max(1, int(round(np.sqrt(ref.step))))
     rows = np.arange(0, H, st)
     cols = np.arange(0, W, st)
-    cand = np.ascontiguousarray(  # (a column gather is not C-ordered: flat writes need it)
-        support[np.minimum((rows * hm) // H, hm - 1)][:, np.minimum((cols * wm) // W, wm - 1)]
-    )
+    if st == 1 and H % hm == 0 and W % wm == 0:  # every texel, a whole factor: repeats
+        cand = np.repeat(np.repeat(support, H // hm, axis=0), W // wm, axis=1)
+    else:
+        cand = np.ascontiguousarray(  # (a column gather is not C-ordered: flat writes need it)
+            support[np.minimum((rows * hm) // H, hm - 1)][:, np.minimum((cols * wm) // W, wm - 1)]
+        )
     act_idx = pr.active if pr.active is not None else ref.union[pr.sel]
     if st == 1:
         cand.reshape(-1)[act_idx] = False
