@@ -684,8 +684,9 @@ def _leak_texels(
     st = max(1, int(round(np.sqrt(ref.step))))
     rows = np.arange(0, H, st)
     cols = np.arange(0, W, st)
-    if st == 1 and H % hm == 0 and W % wm == 0:  # every texel, a whole factor: repeats
-        cand = np.repeat(np.repeat(support, H // hm, axis=0), W // wm, axis=1)
+    if H % st == 0 and W % st == 0 and rows.size % hm == 0 and cols.size % wm == 0:
+        # the lattice a whole factor of the masks' grid: the support repeated
+        cand = np.repeat(np.repeat(support, rows.size // hm, axis=0), cols.size // wm, axis=1)
     else:
         cand = np.ascontiguousarray(  # (a column gather is not C-ordered: flat writes need it)
             support[np.minimum((rows * hm) // H, hm - 1)][:, np.minimum((cols * wm) // W, wm - 1)]
