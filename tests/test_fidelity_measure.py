@@ -77,6 +77,31 @@ def test_a_leaking_mask_is_an_error_outside_the_source_region():
     assert p.overall.max == pytest.approx(tilt_deg(0.3), abs=1e-4)
 
 
+@pytest.mark.parametrize("mask_size", [16, 8, 64])
+def test_leak_texels_are_every_texel_a_smaller_shipped_mask_activates_outside_the_source(
+    mask_size,
+):
+    """Every grid texel where the shipped masks (magnified bilinearly) give an activation the
+    source does not, counted by brute force over the whole 64 x 64 grid."""
+    rng = np.random.default_rng(mask_size)
+    masks = np.zeros((2, 64, 64), np.float32)
+    masks[0, 10:30, 12:40] = 1.0
+    masks[1, 40:50, 5:60] = 0.5
+    states = rng.normal(0, 0.2, (1, 64, 64, 2)).astype(np.float32)
+    poses = [fd.Pose("a", np.array([[1.0], [0.0]], np.float32)), fd.Pose("b", np.ones((2, 1)))]
+    ref = fd.prepare(flat(64, 64), states, masks, poses, ["r0", "r1"])
+    shipped = np.clip(rng.random((2, mask_size, mask_size)) - 0.7, 0, 1).astype(np.float32)
+    s = fd.sample(ref, masks=shipped)
+    every = np.arange(64 * 64)
+    for p, leak in zip(poses, s.leaks):
+        shipped_act = model.activations(fd.sample_masks_at(shipped, (64, 64), every), p.weights)
+        source_act = model.activations(masks.reshape(2, -1), p.weights)
+        want = np.flatnonzero((np.abs(shipped_act).sum(0) > 0) & (np.abs(source_act).sum(0) == 0))
+        got = np.zeros(0, np.int64) if leak is None else leak[0]
+        assert np.array_equal(np.sort(got), want), p.name
+        assert want.size > 0
+
+
 def test_the_base_is_measured_alone_over_the_footprint():
     ref, states, masks = one_region()
     base = flat(8, 8)
