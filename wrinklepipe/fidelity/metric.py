@@ -33,12 +33,11 @@ from wrinklepipe import model
 from wrinklepipe.codec.vectors import EPS
 from wrinklepipe.fidelity.stats import Budget, Stats, weighted_stats, weighted_stats_many
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
-from wrinklepipe.normals.compress import angle_deg
+from wrinklepipe.normals.compress import angle_deg, angle_deg_planes
 from wrinklepipe.reuse import reused
 
 _F = np.float32
 _BLAS = ThreadpoolController()
-_DEG = _F(360.0 / np.pi)  # angle_deg's: 2 degrees(asin(c / 2)) = (360 / pi) asin(c / 2)
 _Fn = TypeVar("_Fn", bound=Callable[..., Any])
 
 
@@ -418,23 +417,6 @@ def _blend_at(
     return out
 
 
-def _angle_planes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`wrinklepipe.normals.compress.angle_deg` of normal planes ``[3, n]`` (the same
-    float32 operations)."""
-    d = a[0] - b[0]
-    c2 = d * d
-    for c in (1, 2):
-        np.subtract(a[c], b[c], out=d)
-        d *= d
-        c2 += d
-    np.sqrt(c2, out=c2)
-    c2 *= _F(0.5)
-    np.minimum(c2, _F(1.0), out=c2)
-    np.arcsin(c2, out=c2)
-    c2 *= _DEG
-    return c2
-
-
 @reused  # the search's full-resolution reference is the validator's (fidelity rules)
 @one_blas_thread
 def prepare(
@@ -760,7 +742,7 @@ def evaluate(
         else:
             act = pr.act
         got = _blend_at(base_u, base_pd, states, pr.sel, act, ref.encoding)
-        err = _angle_planes(got, planes(pr.normal))
+        err = angle_deg_planes(got, planes(pr.normal))
         w = np.maximum(pr.weight, _activation_weight(act))
         errs, ws = [err], [w]
         n_leak = 0

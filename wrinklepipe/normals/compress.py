@@ -246,14 +246,18 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     a = np.asarray(a, dtype=_F)
     b = np.asarray(b, dtype=_F)
-    d = a[..., 0] - b[..., 0]
+    return angle_deg_planes(np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0))
+
+
+def angle_deg_planes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`angle_deg` of float32 vectors stored as component planes ``[3, ...]`` (the
+    fidelity measure's layout); the same float32 operations in the same order."""
+    d = a[0] - b[0]
     c2 = d * d
-    np.subtract(a[..., 1], b[..., 1], out=d)
-    d *= d
-    c2 += d
-    np.subtract(a[..., 2], b[..., 2], out=d)
-    d *= d
-    c2 += d
+    for c in (1, 2):
+        np.subtract(a[c], b[c], out=d)
+        d *= d
+        c2 += d
     np.sqrt(c2, out=c2)
     c2 *= _F(0.5)
     np.minimum(c2, _F(1.0), out=c2)
