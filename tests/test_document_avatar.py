@@ -22,7 +22,11 @@ from test_document_inspect import GLTF_TRANSFORM, gltf_transform_inspect
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo import avatar
+from wrinklepipe.document.images import image_pixels
+from wrinklepipe.document.model import read_document
+from wrinklepipe.errors import InputError
 from wrinklepipe.io import khronos
+from wrinklepipe.io.gltf_limits import GltfReadOptions
 from wrinklepipe.io.gltf_write import glb_bytes
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
 from wrinklepipe.sources.validation import load_input
@@ -265,6 +269,10 @@ def test_basisu_base_is_decoded_with_alktx2_and_passed_through(tmp_path):
         return new
 
     manifest = _variant(tmp_path, change)
+    # the KTX2 is held to the reader's pixel cap by its header, before alktx2 transcodes it
+    capped = read_document(manifest.parent / "avatar.glb", GltfReadOptions(max_pixels=1))
+    with pytest.raises(InputError, match=r"/images/\d+.*over the cap of 1 pixels"):
+        image_pixels(capped, len(capped.array("images")) - 1)
     res = convert(manifest, tmp_path / "out", ConvertOptions(validate=False, compressed=False))
     assert res.exit_code == 0
     assert any("base normal map" in n and "png" in n for n in res.report["notes"])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import json
+import shutil
 import struct
 from dataclasses import replace
 from pathlib import Path
@@ -14,10 +15,13 @@ import pytest
 
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.demo.package import demo_package
+from wrinklepipe.document.images import image_pixels, texture_normals
+from wrinklepipe.document.model import read_document
 from wrinklepipe.errors import InputError
 from wrinklepipe.io import khronos
 from wrinklepipe.io.gltf_read import GltfReadOptions, read_gltf
 from wrinklepipe.io.gltf_write import write_glb, write_gltf
+from wrinklepipe.io.images import write_image
 from wrinklepipe.io.package import EXTENSION, package_from_asset, png_bytes, png_pixels
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.pipeline.prepare import prepare_mesh
@@ -244,6 +248,27 @@ def test_reader_caps_data_uris(written):
 def test_reader_caps_pixels(written):
     with pytest.raises(InputError, match="over the cap"):
         read_gltf(written / "demo.gltf", GltfReadOptions(max_pixels=100))
+
+
+@pytest.mark.parametrize("suffix", [".png", ".jpg"])
+def test_document_images_honour_the_pixel_cap(written, tmp_path, suffix):
+    """Every image read from a document is held to its ``max_pixels`` before decoding: the
+    demo's maps are 256 x 256 (``demo_package(256)``); a JPEG base goes through OpenImageIO's
+    header check."""
+    path = written / "demo.gltf"
+    if suffix == ".jpg":
+        shutil.copytree(written, tmp_path / "c")
+        write_image(tmp_path / "c" / "base.jpg", np.full((256, 256, 3), 0.5, np.float32), 8)
+        path = _rewrite(tmp_path / "c", lambda d: d["images"][0].update(uri="base.jpg"))
+    doc = read_document(path, GltfReadOptions(max_pixels=256 * 256 - 1))
+    with pytest.raises(InputError) as exc:
+        image_pixels(doc, 0)
+    msg = str(exc.value)
+    assert "256 x 256" in msg and "over the cap" in msg and "/images/0" in msg, msg
+    with pytest.raises(InputError, match="over the cap"):
+        texture_normals(doc, 0, "/materials/0/normalTexture")
+    fits = read_document(path, GltfReadOptions(max_pixels=256 * 256))
+    assert image_pixels(fits, 0).shape[:2] == (256, 256)
 
 
 def test_reader_requires_the_extension(written):

@@ -12,11 +12,15 @@ every image's bytes as they are either way.
 - :func:`texture_normals`: a texture as unit normals (+Y, what glTF's normalTexture holds).
 
 OpenImageIO reads files, so the bytes go through a private temporary folder that is removed
-afterwards (nothing is written beside the source). Problems name the glTF file and pointer.
+afterwards (nothing is written beside the source). Every image is held to the document's
+``max_pixels`` (:class:`~wrinklepipe.io.gltf_limits.GltfReadOptions`) before a pixel is decoded:
+PNG and KTX2 by their headers (a KTX2 before it is transcoded), JPEG and WebP by OpenImageIO's
+header. Problems name the glTF file and pointer.
 """
 
 from __future__ import annotations
 
+import struct
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -53,6 +57,24 @@ def texture_source(doc: Document, texture: int) -> int:
     return src
 
 
+def _stored_size(data: bytes, mime: str) -> tuple[int, int] | None:
+    """Width and height from a PNG's IHDR or a KTX2 header (None: another format, or too short
+    to say; the decoder refuses those)."""
+    if mime == "image/png" and len(data) >= 24:
+        return struct.unpack(">II", data[16:24])
+    if mime == "image/ktx2" and len(data) >= 28:  # identifier, vkFormat, typeSize, then the size
+        return struct.unpack("<II", data[20:28])
+    return None
+
+
+def _check_pixels(doc: Document, image: int, size: tuple[int, int] | None) -> None:
+    """Refuse an image over the document's ``max_pixels`` (before decoding it)."""
+    cap = doc.options.max_pixels
+    if size is not None and size[0] * size[1] > cap:
+        w, h = size
+        raise doc.err(f"image is {w} x {h}, over the cap of {cap} pixels", f"/images/{image}")
+
+
 def _ktx2_to_png(data: bytes, doc: Document, key: str) -> bytes:
     # alktx2 (Basis Universal transcoder) is imported only when a KTX2 map must be read.
     import alktx2
@@ -76,6 +98,7 @@ def _decodable(doc: Document, image: int) -> tuple[bytes, str]:
     data = doc.image_bytes(image)
     img = doc.array("images")[image]
     mime = mime_type(data, str(img.get("uri", "")))
+    _check_pixels(doc, image, _stored_size(data, mime))
     if mime == "image/ktx2":
         return _ktx2_to_png(data, doc, key), ".png"
     if mime not in _SUFFIX:
@@ -93,7 +116,7 @@ def image_values(doc: Document, image: int) -> tuple[np.ndarray, int]:
     key = f"/images/{image}"
     data, suffix = _decodable(doc, image)
     try:
-        values, info = _with_file(data, suffix, read_image)
+        values, info = _with_file(data, suffix, lambda p: read_image(p, doc.options.max_pixels))
     except InputError as exc:
         raise _renamed(exc, doc, key) from None
     return values, 16 if info.format == "uint16" else 8
@@ -121,7 +144,7 @@ def texture_normals(
     ingest records a manifest's own map files."""
     image = texture_source(doc, texture)
     data, suffix = _decodable(doc, image)
-    options = ReadOptions(convention="opengl", detect=False)
+    options = ReadOptions(convention="opengl", detect=False, max_pixels=doc.options.max_pixels)
     try:
         nm = _with_file(data, suffix, lambda p: read_normal_map(p, options))
     except InputError as exc:

@@ -84,6 +84,8 @@ class Document:
     notes: list[str] = field(default_factory=list)
     #: Extensions whose data ingest decoded, so the output is written without them.
     decoded_extensions: list[str] = field(default_factory=list)
+    #: The caps it was read with (``max_pixels`` also bounds every image decoded from it).
+    options: GltfReadOptions = field(default_factory=GltfReadOptions)
 
     # -- errors ----------------------------------------------------------------------------
     @property
@@ -246,7 +248,7 @@ def read_document(path: str | Path, options: GltfReadOptions | None = None) -> D
     c = open_container(path, options)
     gltf = copy.deepcopy(c.gltf)
     views, decoded, decoded_views = _views(c, gltf)
-    doc = Document(Path(path), gltf, views, decoded_extensions=decoded)
+    doc = Document(Path(path), gltf, views, decoded_extensions=decoded, options=c.options)
     decoded_views |= _decode_draco(doc)
     _true_bounds(doc, decoded_views)
     for name in doc.decoded_extensions:
