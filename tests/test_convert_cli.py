@@ -12,8 +12,8 @@ import pytest
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.io import khronos
-from wrinklepipe.io.gltf_read import read_gltf
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.outputs import folder as output_folder
 from wrinklepipe.presets import jimenez
@@ -101,7 +101,7 @@ def test_two_runs_are_byte_identical(source, converted, tmp_path):
 
 
 def test_output_gltf_and_usd_agree(converted):
-    g = read_gltf(converted / "demo_head.gltf")
+    g = read_wrinkled(converted / "demo_head.gltf")
     u = read_usd(converted / "demo_head.usda")
     z = read_usd(converted / "demo_head.usdz")
     for other in (u, z):

@@ -17,9 +17,10 @@ from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.demo.package import demo_package
 from wrinklepipe.document.images import image_pixels, texture_normals
 from wrinklepipe.document.model import read_document
+from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.errors import InputError
 from wrinklepipe.io import khronos
-from wrinklepipe.io.gltf_read import GltfReadOptions, read_gltf
+from wrinklepipe.io.gltf_limits import GltfReadOptions
 from wrinklepipe.io.gltf_write import write_glb, write_gltf
 from wrinklepipe.io.images import write_image
 from wrinklepipe.io.package import EXTENSION, package_from_asset, png_bytes, png_pixels
@@ -138,7 +139,7 @@ def test_trimesh_keeps_vertex_ids(written, pkg):
 
 @pytest.mark.parametrize("name", ["demo.gltf", "demo.glb"])
 def test_reader_round_trip(written, pkg, name):
-    back = read_gltf(written / name)
+    back = read_wrinkled(written / name)
     assert back.meta == pkg.meta
     assert [t.name for t in back.textures] == [t.name for t in pkg.textures]
     for t in back.textures:
@@ -147,7 +148,17 @@ def test_reader_round_trip(written, pkg, name):
         assert np.array_equal(getattr(back.mesh, f), getattr(pkg.mesh, f)), f
     assert back.mesh.morph_names == pkg.mesh.morph_names
     assert np.array_equal(back.curves[0].values, pkg.curves[0].values)
+    assert back.name == "demo"  # the file's stem (the rule of the one glTF package reader)
     assert np.array_equal(back.curves[0].times, pkg.curves[0].times)
+
+
+def test_package_is_named_by_the_file_stem(written):
+    """A renamed file, or one whose scene and nodes are named otherwise, is read by its stem."""
+    path = _rewrite(
+        written, lambda d: (d["scenes"][0].update(name="Scene"), d["nodes"][0].update(name="Body"))
+    )
+    assert json.loads(path.read_text())["scenes"][0]["name"] == "Scene"
+    assert read_wrinkled(path).name == "edited"
 
 
 def test_writer_is_deterministic(pkg, tmp_path):
@@ -230,7 +241,7 @@ def _rewrite(folder: Path, edit) -> Path:
 def test_reader_refuses_unsafe_uris(written, uri, words):
     path = _rewrite(written, lambda d: d["buffers"][0].update(uri=uri))
     with pytest.raises(InputError) as exc:
-        read_gltf(path)
+        read_wrinkled(path)
     msg = str(exc.value)
     assert words in msg and "edited.gltf" in msg and "/buffers/0/uri" in msg
 
@@ -242,12 +253,12 @@ def test_reader_caps_data_uris(written):
         lambda d: d["images"][1].update(uri="data:image/png;base64," + blob),
     )
     with pytest.raises(InputError, match="over the cap of 1024"):
-        read_gltf(path, GltfReadOptions(max_data_uri_bytes=1024))
+        read_wrinkled(path, GltfReadOptions(max_data_uri_bytes=1024))
 
 
 def test_reader_caps_pixels(written):
     with pytest.raises(InputError, match="over the cap"):
-        read_gltf(written / "demo.gltf", GltfReadOptions(max_pixels=100))
+        read_wrinkled(written / "demo.gltf", GltfReadOptions(max_pixels=100))
 
 
 @pytest.mark.parametrize("suffix", [".png", ".jpg"])
@@ -276,7 +287,7 @@ def test_reader_requires_the_extension(written):
         del d["materials"][0]["extensions"]
 
     with pytest.raises(InputError, match="not a wrinklepipe asset"):
-        read_gltf(_rewrite(written, drop))
+        read_wrinkled(_rewrite(written, drop))
 
 
 def test_reader_truncated_buffer(written, tmp_path):
@@ -286,7 +297,7 @@ def test_reader_truncated_buffer(written, tmp_path):
     bin_path = tmp_path / "c" / "demo.bin"
     bin_path.write_bytes(bin_path.read_bytes()[:100])
     with pytest.raises(InputError, match="byteLength"):
-        read_gltf(tmp_path / "c" / "demo.gltf")
+        read_wrinkled(tmp_path / "c" / "demo.gltf")
 
 
 def test_vertex_ids_beyond_float_precision_refused(pkg, tmp_path):
@@ -348,5 +359,5 @@ def test_every_mask_layout_matches_the_schema_and_round_trips(layout, tmp_path):
     ext = doc["materials"][0]["extensions"][EXTENSION]
     jsonschema.validate(ext, json.loads(SCHEMA.read_text()), cls=jsonschema.Draft202012Validator)
     assert ext["masks"]["layout"] == layout
-    back = asset_from_package(read_gltf(tmp_path / "t.gltf"))
+    back = asset_from_package(read_wrinkled(tmp_path / "t.gltf"))
     assert np.allclose(back.masks, masks, atol=0.5 / 255 + 1e-6)

@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 from wrinklepipe import model
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.demo.package import demo_package
+from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.errors import InputError, input_error
-from wrinklepipe.io.gltf_read import read_gltf
 from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.masks.layouts import LAYOUTS
@@ -129,11 +129,11 @@ def test_gltf_reader_refuses_what_the_schema_refuses(tmp_path):
     write_gltf(pkg, tmp_path, "a")
     path = tmp_path / "a.gltf"
     doc = json.loads(path.read_text())
-    assert read_gltf(path).meta == pkg.meta
+    assert read_wrinkled(path).meta == pkg.meta
     doc["materials"][0]["extensions"][EXTENSION]["regions"][1]["side"] = "up"
     path.write_text(json.dumps(doc))
     with pytest.raises(InputError) as exc:
-        read_gltf(path)
+        read_wrinkled(path)
     msg = str(exc.value)
     assert str(path) in msg and "'up' is not one of" in msg
     assert f"/materials/0/extensions/{EXTENSION}/regions/1/side" in msg

@@ -340,14 +340,14 @@ def test_threejs_viewer_renders_a_real_skinned_character(browser):
 def test_weights_animation_plays_the_curves(browser):
     """KHR_animation_pointer channels became tracks of the glTF animation's clip: the weights
     the mixer gives at t equal the stored curve, linearly interpolated (numpy)."""
-    from wrinklepipe.io.gltf_read import read_gltf
+    from wrinklepipe.document.package import read_wrinkled
 
     loads = [r for r in browser["results"] if r["fn"] == "load"]
     anim = loads[-1]["value"]["animations"]
     assert anim[0]["tracks"] == 8 and anim[0]["duration"] > 0
     samples = [r for r in browser["results"] if r["fn"] == "sampleWeights"]
     got = np.asarray(samples[-1]["value"])  # the demo's (the last load)
-    curve = read_gltf(browser["assets"]["pd-clamp01"]).curves[0]
+    curve = read_wrinkled(browser["assets"]["pd-clamp01"]).curves[0]
     times = np.asarray(browser["times"])
     expect = np.stack(
         [np.interp(times, curve.times, curve.values[:, r]) for r in range(curve.values.shape[1])],

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
 from wrinklepipe.demo.package import demo_package
-from wrinklepipe.io.gltf_read import read_gltf
+from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.io.gltf_write import glb_bytes, gltf_document, write_gltf
 from wrinklepipe.io.images import write_image
 from wrinklepipe.io.package import DEFAULT_PNG_LEVEL, png_bytes
@@ -76,7 +76,11 @@ def bench_output(quick: bool = False) -> BenchResult:
                 median_time(usda_text, repeat),
                 None,
             ),
-            ("read_gltf", median_time(lambda: read_gltf(w / "g" / "demo.gltf"), repeat), mpix),
+            (
+                "read_wrinkled (glTF package)",
+                median_time(lambda: read_wrinkled(w / "g" / "demo.gltf"), repeat),
+                mpix,
+            ),
             ("read_usd", median_time(lambda: read_usd(w / "u" / "demo.usda"), repeat), mpix),
         ]
     for step, t, mp in rows:

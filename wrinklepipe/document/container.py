@@ -1,8 +1,9 @@
 """The glTF container: a .glb or .gltf file -> its JSON tree and the bytes it names.
 
-Safety as in :mod:`wrinklepipe.io.gltf_read`: every URI is relative and stays inside the asset's
+Every glTF reader opens its file here. Every URI is relative and stays inside the asset's
 folder (:func:`~wrinklepipe.io.gltf_limits.safe_uri_path`), data URIs and external files are capped
-(:class:`~wrinklepipe.io.gltf_limits.GltfReadOptions`), GLB chunk lengths are checked. Every problem
+(:class:`~wrinklepipe.io.gltf_limits.GltfReadOptions`; :func:`data_uri_bytes` also for the
+document's data-URI images), GLB chunk lengths are checked. Every problem
 is an :class:`~wrinklepipe.errors.InputError` naming the file and the JSON pointer.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import base64
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,20 +47,7 @@ class Container:
         if not isinstance(uri, str):
             raise self.err("uri must be a string", key)
         if uri.startswith("data:"):
-            head, _, payload = uri.partition(",")
-            est = len(payload) * 3 // 4
-            if est > self.options.max_data_uri_bytes:
-                raise self.err(
-                    f"data URI of ~{est} bytes is over the cap of "
-                    f"{self.options.max_data_uri_bytes}",
-                    key,
-                )
-            if not head.endswith(";base64"):
-                raise self.err("data URI is not base64", key)
-            try:
-                return base64.b64decode(payload, validate=True)
-            except ValueError:
-                raise self.err("data URI is not valid base64", key) from None
+            return data_uri_bytes(uri, self.options, self.err, key)
         p = safe_uri_path(self.path.parent, uri, self.file, key)
         if not p.is_file():
             raise self.err(f"referenced file {uri!r} not found", key)
@@ -100,6 +89,23 @@ class Container:
                 key,
             )
         return data[offset : offset + length]
+
+
+def data_uri_bytes(
+    uri: str, options: GltfReadOptions, err: Callable[[str, str], InputError], key: str
+) -> bytes:
+    """A base64 ``data:`` URI's bytes, refused over ``options.max_data_uri_bytes`` (estimated
+    from its length, before decoding) or when it is not valid base64."""
+    head, _, payload = uri.partition(",")
+    est = len(payload) * 3 // 4
+    if est > options.max_data_uri_bytes:
+        raise err(f"data URI of ~{est} bytes is over the cap of {options.max_data_uri_bytes}", key)
+    if not head.endswith(";base64"):
+        raise err("data URI is not base64", key)
+    try:
+        return base64.b64decode(payload, validate=True)
+    except ValueError:
+        raise err("data URI is not valid base64", key) from None
 
 
 def split_glb(data: bytes, file: str) -> tuple[bytes, bytes | None]:

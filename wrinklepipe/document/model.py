@@ -23,7 +23,6 @@ tree is rewritten except what ingest had to decode:
 
 from __future__ import annotations
 
-import base64
 import copy
 import urllib.parse
 from dataclasses import dataclass, field
@@ -33,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.document import decompress
-from wrinklepipe.document.container import Container, open_container
+from wrinklepipe.document.container import Container, data_uri_bytes, open_container
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.io import accessors as acc
 from wrinklepipe.io.gltf_limits import GltfReadOptions
@@ -123,7 +122,7 @@ class Document:
         if "bufferView" in img:
             return self.view_bytes(img["bufferView"])[0]
         if isinstance(img.get("uri"), str) and img["uri"].startswith("data:"):
-            return base64.b64decode(img["uri"].partition(",")[2])
+            return data_uri_bytes(img["uri"], self.options, self.err, f"/images/{i}/uri")
         raise self.err("image has neither uri nor bufferView", f"/images/{i}")
 
     def primitives(self) -> list[PrimitiveRef]:

@@ -1,26 +1,43 @@
-"""A written glTF -> :class:`~wrinklepipe.io.package.WrinklePackage`, whole documents included.
+"""The glTF package reader: a written .gltf/.glb -> :class:`~wrinklepipe.io.package.WrinklePackage`.
 
-The wrinkled material is the one carrying ``WRINKLEPIPE_wrinkle_maps`` (the first, when a list
-of materials was wrinkled: they carry the same block); the render mesh is every triangle
-primitive using a material with the extension (:func:`wrinklepipe.document.render_mesh.
-wrinkled_mesh`), so a character converted in place validates on its wrinkled primitives only.
-A single-mesh file (the demo, an OBJ source's output) is the same case with one primitive. The
-extension block maps to the package by :func:`wrinklepipe.io.gltf_read.package_from_gltf`.
+The one reader of glTF packages (``read_package``, ``validate-asset``, ``export``, the tests and
+the output bench all read through :func:`read_wrinkled`), built on the document model: the file
+is opened by :func:`wrinklepipe.document.model.read_document` (the one container reader, its caps
+and URI confinement), images are decoded by :mod:`wrinklepipe.document.images` (held to
+``max_pixels`` first) and accessors by :mod:`wrinklepipe.io.accessors`.
+
+- The wrinkled material is the one carrying ``WRINKLEPIPE_wrinkle_maps`` (the first, when a list
+  of materials was wrinkled: they carry the same block).
+- The render mesh is every triangle primitive using a material with the extension
+  (:func:`wrinklepipe.document.render_mesh.wrinkled_mesh`), so a character converted in place
+  validates on its wrinkled primitives only; a single-mesh file (the demo, an OBJ source's
+  output) is the same case with one primitive.
+- The package's **name is the file's stem** (``demo_head.gltf`` -> ``demo_head``), whatever the
+  scene or node names say: ``convert`` writes ``NAME.gltf``, and a character converted into its
+  own document keeps the source's scene names, so the stem is the name the user gave it.
+- The extension block maps onto :class:`~wrinklepipe.metadata.WrinkleMeta` by
+  :meth:`~wrinklepipe.metadata.WrinkleMeta.from_extension` (checked by the shipped JSON Schema);
+  ``weightCurves`` name the animations that play the region weights (``KHR_animation_pointer``)
+  and the blendshape inputs (morph ``weights`` channels).
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.images import image_pixels
+from wrinklepipe.asset import Mesh
+from wrinklepipe.document.images import image_pixels, texture_source
 from wrinklepipe.document.model import Document, read_document
 from wrinklepipe.document.render_mesh import wrinkled_mesh
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE, wrinkled_primitives
 from wrinklepipe.errors import input_error, plain_reason
-from wrinklepipe.io.gltf_read import GltfReadOptions, package_from_gltf
-from wrinklepipe.io.package import EXTENSION, WrinklePackage
+from wrinklepipe.io.gltf_limits import GltfReadOptions
+from wrinklepipe.io.package import EXTENSION, PackedTexture, WeightCurves, WrinklePackage, safe_name
+from wrinklepipe.metadata import WrinkleMeta
 
 
 def wrinkled_materials(doc: Document) -> list[int]:
@@ -47,7 +64,8 @@ def morph_columns(doc: Document, refs: list, names: tuple[str, ...]) -> dict[int
 
 
 def read_wrinkled(path: str | Path, options: GltfReadOptions | None = None) -> WrinklePackage:
-    """Load a .gltf/.glb whose material(s) carry the wrinkle extension as a package.
+    """Load a .gltf/.glb whose material(s) carry the wrinkle extension as a package (see the
+    module doc; ``options``: the reader's caps, ``max_pixels`` included).
 
     Raises :class:`~wrinklepipe.errors.InputError` naming the file (and JSON pointer) for
     anything malformed."""
@@ -72,22 +90,133 @@ def _read_wrinkled(path: str | Path, options: GltfReadOptions | None) -> Wrinkle
             if need not in attrs:
                 raise doc.err(f"wrinkled primitive has no {need} attribute", r.pointer)
     mesh = wrinkled_mesh(doc, refs)
+    morph_nodes = morph_columns(doc, refs, mesh.morph_names)
+    return package_from_document(doc, materials[0], mesh, Path(path).stem, morph_nodes)
 
-    def image(i: int) -> tuple[str, np.ndarray]:
-        img = doc.array("images")[i] if 0 <= i < len(doc.array("images")) else {}
-        return str(img.get("name") or f"image_{i}"), image_pixels(doc, i)
 
-    def accessor(i: int) -> np.ndarray:
-        a = doc.accessor(i)
-        return a[:, 0] if a.ndim == 2 and a.shape[1] == 1 else a
+def _scalar(doc: Document, i: int) -> np.ndarray:
+    """Accessor ``i``'s values (a SCALAR accessor as ``[count]``)."""
+    a = doc.accessor(i)
+    return a[:, 0] if a.ndim == 2 and a.shape[1] == 1 else a
 
-    return package_from_gltf(
-        doc.gltf,
-        materials[0],
-        mesh,
-        image,
-        accessor,
-        doc.err,
-        Path(path).stem,
-        morph_columns(doc, refs, mesh.morph_names),
-    )
+
+def package_from_document(
+    doc: Document, material: int, mesh: Mesh, name: str, morph_nodes: dict[int, list[int]]
+) -> WrinklePackage:
+    """The package the wrinkled material ``material`` of ``doc`` describes, over the render
+    ``mesh``. ``morph_nodes`` maps each node whose morph-weight channel plays a curve's
+    blendshape inputs to the column of ``mesh.morph_names`` of each of its targets (-1: none)."""
+    mat = doc.array("materials")[material]
+    ext = mat["extensions"][EXTENSION]
+    pkey = f"/materials/{material}/extensions/{EXTENSION}"
+    mkey = f"/materials/{material}"
+    # -- textures ---------------------------------------------------------------------------
+    textures: list[PackedTexture] = []
+    by_image: dict[int, str] = {}
+    taken: set[str] = set()
+
+    def source(info: Any, key: str) -> int:
+        if not isinstance(info, dict) or "index" not in info:
+            raise doc.err("expected a textureInfo object with 'index'", key)
+        return texture_source(doc, info["index"])
+
+    def tex(info: Any, key: str, role: str) -> str:
+        src = source(info, key)
+        if src not in by_image:
+            pixels = image_pixels(doc, src)  # refuses a missing image by its index
+            img = doc.array("images")[src]
+            label = safe_name(str(img.get("name") or f"image_{src}"), taken)
+            textures.append(PackedTexture(label, pixels, role))
+            by_image[src] = label
+        return by_image[src]
+
+    if "normalTexture" not in mat:
+        raise doc.err("material has no normalTexture (the base normal map)", mkey)
+    base_name = tex(mat["normalTexture"], f"{mkey}/normalTexture", "base_normal")
+    if base_name != "base_normal":
+        if "base_normal" in taken:
+            raise doc.err("an image other than the base normal map is named 'base_normal'")
+        textures[-1].name = "base_normal"
+        taken.add("base_normal")
+        by_image = {k: ("base_normal" if v == base_name else v) for k, v in by_image.items()}
+
+    def named(info: Any, key: str, role: str) -> str:
+        if role != "copy":
+            return tex(info, key, role)
+        src = source(info, key)
+        if src not in by_image:
+            raise doc.err("a compressed copy of a texture the extension does not use", key)
+        return by_image[src]
+
+    try:
+        meta = WrinkleMeta.from_extension(ext, named, doc.err, pkey)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise doc.err(f"malformed extension block: {plain_reason(exc)}", pkey) from None
+    try:
+        json.dumps(meta.to_json(), allow_nan=False)
+    except ValueError:
+        raise doc.err("the extension block holds a NaN or infinite number", pkey) from None
+    curves = _weight_curves(doc, ext, pkey, len(meta.regions), len(mesh.morph_names), morph_nodes)
+    return WrinklePackage(name, mesh, textures, meta, curves)
+
+
+def _weight_curves(
+    doc: Document,
+    ext: dict[str, Any],
+    pkey: str,
+    n_regions: int,
+    n_morphs: int,
+    morph_nodes: dict[int, list[int]],
+) -> list[WeightCurves]:
+    """The extension's ``weightCurves``: each names a glTF animation whose
+    ``KHR_animation_pointer`` channel plays the region weights, and whose morph ``weights``
+    channels (on the nodes of ``morph_nodes``) play the blendshape inputs with them."""
+    curves = []
+    anims = doc.array("animations")
+    for i, wc in enumerate(ext.get("weightCurves", [])):
+        ai = wc.get("animation")
+        if not isinstance(ai, int) or not 0 <= ai < len(anims):
+            raise doc.err(f"animation {ai!r} does not exist", f"{pkey}/weightCurves/{i}")
+        anim = anims[ai]
+        pointer = [
+            ch for ch in anim.get("channels", []) if ch.get("target", {}).get("path") == "pointer"
+        ]
+        if not pointer:
+            raise doc.err("animation has no KHR_animation_pointer channel", f"/animations/{ai}")
+        s = anim["samplers"][pointer[0]["sampler"]]
+        times = _scalar(doc, s["input"]).astype(np.float32)
+        vals = _scalar(doc, s["output"]).astype(np.float32).reshape(-1)
+        morph = None
+        for ch in anim.get("channels", []):
+            tgt = ch.get("target", {})
+            node = tgt.get("node")
+            columns = morph_nodes.get(node) if isinstance(node, int) else None
+            if tgt.get("path") != "weights" or columns is None:
+                continue
+            ms = anim["samplers"][ch["sampler"]]
+            mv = _scalar(doc, ms["output"]).astype(np.float32).reshape(-1)
+            n_m = len(columns)
+            if not n_m or mv.size != times.size * n_m:
+                raise doc.err(
+                    f"morph weights: {mv.size} values for {times.size} keys x {n_m} targets",
+                    f"/animations/{ai}",
+                )
+            if morph is None:
+                morph = np.zeros((times.size, n_morphs), np.float32)
+            cols = np.asarray(columns, np.int64)
+            keep = cols >= 0
+            morph[:, cols[keep]] = mv.reshape(times.size, n_m)[:, keep]
+        if vals.size != times.size * n_regions:
+            raise doc.err(
+                f"animation output has {vals.size} values, expected {times.size} x {n_regions}",
+                f"/animations/{ai}",
+            )
+        curves.append(
+            WeightCurves(
+                str(wc.get("name", f"curve_{i}")),
+                times,
+                vals.reshape(times.size, n_regions),
+                morph,
+            )
+        )
+    return curves

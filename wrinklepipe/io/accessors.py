@@ -1,13 +1,14 @@
 """glTF accessors -> numpy arrays, per the glTF 2.0 spec (section 3.6).
 
-THE accessor reader: the glTF document model (:mod:`wrinklepipe.document`), the package reader
-(:mod:`wrinklepipe.io.gltf_read`) and the glTF animations the drivers are given all decode
-accessors here, so every one of them reads any component type (little-endian), every
-element type (``MAT2``/``MAT3`` with byte-aligned columns as the spec requires for 1- and 2-byte
-components), byte strides, sparse substitution, accessors without a bufferView (zeros),
-``normalized`` integers (unsigned ``c / MAX``, signed ``max(c / MAX, -1)``). The bytes of each
-bufferView come from a callable, so compressed views (``EXT_meshopt_compression``) are decoded
-once by :mod:`wrinklepipe.document.decompress` and read here like any other.
+THE accessor reader: the glTF document model (:mod:`wrinklepipe.document`), the mesh reader
+(:mod:`wrinklepipe.io.mesh_gltf` over :mod:`wrinklepipe.io.gltf_read`) and the glTF animations
+the drivers are given all decode accessors here, so every one of them reads any component type
+(little-endian), every element type (``MAT2``/``MAT3`` with byte-aligned columns as the spec
+requires for 1- and 2-byte components), byte strides, sparse substitution, accessors without a
+bufferView (zeros), ``normalized`` integers (unsigned ``c / MAX``, signed ``max(c / MAX, -1)``).
+The bytes of each bufferView come from a callable, so compressed views
+(``EXT_meshopt_compression``) are decoded once by :mod:`wrinklepipe.document.decompress` and
+read here like any other.
 """
 
 from __future__ import annotations

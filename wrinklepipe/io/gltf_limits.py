@@ -1,10 +1,10 @@
 """What a glTF reader may open: the size caps and the one URI confinement rule.
 
-Shared by the container of the glTF document model (:mod:`wrinklepipe.document.container`,
-which every glTF reader opens files through) and the package reader
-(:mod:`wrinklepipe.io.gltf_read`): every URI must be relative and stay inside the asset's folder
-(no ``..``, no absolute paths, no schemes other than ``data:``), data URIs, external files and
-images are capped.
+Used by the container of the glTF document model (:mod:`wrinklepipe.document.container`,
+which every glTF reader opens files through) and the document's images
+(:mod:`wrinklepipe.document.images`: ``max_pixels``): every URI must be relative and stay
+inside the asset's folder (no ``..``, no absolute paths, no schemes other than ``data:``), data
+URIs, external files and images are capped.
 """
 
 from __future__ import annotations

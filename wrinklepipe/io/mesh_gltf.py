@@ -20,7 +20,8 @@ inverse bind matrices) and that node's world transform.
   when ``bake_transforms``; skinned meshes stay in their bind space, as the spec says the node
   transform of a skinned mesh is ignored.
 
-Container, buffer and URI safety come from :mod:`wrinklepipe.io.gltf_read`.
+Container, buffer and URI safety come from :mod:`wrinklepipe.document.container` (through
+:mod:`wrinklepipe.io.gltf_read`).
 """
 
 from __future__ import annotations
