@@ -5,7 +5,9 @@ docs/architecture.md shows the table as it is."""
 
 from __future__ import annotations
 
+import argparse
 import ast
+import dataclasses
 import functools
 import importlib
 import sys
@@ -13,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from wrinklepipe import layers
+from wrinklepipe import cli, layers
 from wrinklepipe.paths import ROOT
 
 PACKAGE = ROOT / "wrinklepipe"
@@ -259,3 +261,34 @@ def test_package_metadata_is_read_by_field():
     ]
     assert not found, found
     assert _string_keyed_meta(ast.parse('pkg.meta["states"]\nex.pkg.meta.get("x")')) == [1, 2]
+
+
+def _options_defaults(module: object) -> dict[str, object]:
+    """Field -> default of every ``*Options`` dataclass a command module names."""
+    out: dict[str, object] = {}
+    for name, obj in vars(module).items():
+        if name.endswith("Options") and dataclasses.is_dataclass(obj) and isinstance(obj, type):
+            try:
+                d = obj()
+            except TypeError:  # a required field: no defaults to feed
+                continue
+            for f in dataclasses.fields(obj):
+                out.setdefault(f.name, getattr(d, f.name))
+    return out
+
+
+def test_command_defaults_come_from_their_options():
+    """A command's argparse defaults are its job's options defaults (one place): every option
+    whose destination is a field of an options dataclass the command uses defaults to the
+    field's default (None: the job decides), and pack-masks has one."""
+    parser = cli.build_parser()
+    subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    checked = {}
+    for name, sub in subs.choices.items():
+        module = sys.modules[f"wrinklepipe.commands.{name.replace('-', '_')}"]
+        defaults = _options_defaults(module)
+        fed = [a for a in sub._actions if a.dest in defaults and a.default is not None]
+        for a in fed:
+            assert a.default == defaults[a.dest], (name, a.dest, a.default, defaults[a.dest])
+        checked[name] = len(fed)
+    assert checked["pack-masks"] >= 3 and checked["convert"] >= 4, checked

@@ -97,6 +97,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.pipeline.validation",
             "wrinklepipe.export.job",
             "wrinklepipe.capture.job",
+            "wrinklepipe.masks.job",
             "wrinklepipe.batch",
             "wrinklepipe.view",
         ),

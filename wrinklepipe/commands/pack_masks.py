@@ -4,17 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from wrinklepipe.atomic import staged_folder
 from wrinklepipe.console import emit_json, err, status
-from wrinklepipe.errors import InputError
-from wrinklepipe.masks import (
-    LAYOUTS,
-    check_masks,
-    pack,
-    read_masks,
-    resample_masks,
-    write_packed,
-)
+from wrinklepipe.masks import LAYOUTS
+from wrinklepipe.masks.job import PackMasksOptions, pack_mask_files
 
 NAME = "pack-masks"
 HELP = "pack region masks into RGBA textures, a texture array or the left/right split layout"
@@ -39,21 +31,28 @@ examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    d = PackMasksOptions()  # the defaults: one place
     p.add_argument("masks", nargs="+", metavar="MASK", help="grey mask images, one per region")
-    p.add_argument("--layout", choices=LAYOUTS, default="rgba", help="packing layout (rgba)")
+    p.add_argument(
+        "--layout", choices=LAYOUTS, default=d.layout, help=f"packing layout ({d.layout})"
+    )
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
-    p.add_argument("--size", type=int, default=None, metavar="N", help="resample to N x N")
+    p.add_argument("--size", type=int, default=d.size, metavar="N", help="resample to N x N")
     p.add_argument(
         "--invert", action="store_true", help="inputs are painted white = none, black = full"
     )
     p.add_argument("--names", default=None, help="comma-separated region names (default: stems)")
     p.add_argument(
-        "--bits", type=int, choices=(8, 16), default=None, help="bits per channel (default: input)"
+        "--bits",
+        type=int,
+        choices=(8, 16),
+        default=d.bits,
+        help="bits per channel (default: input)",
     )
     p.add_argument(
         "--lr-conflict",
         choices=("error", "dominant"),
-        default="error",
+        default=d.lr_conflict,
         help="lr-split: texels covered by both sides are an error (default) or go to the larger",
     )
     p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
@@ -61,40 +60,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    names = [n.strip() for n in args.names.split(",")] if args.names else None
-    if args.size is not None and args.size <= 0:
-        raise InputError(f"--size must be positive, got {args.size}", "<arguments>")
-    with status(f"reading {len(args.masks)} masks"):
-        ms = read_masks(args.masks, names, invert=args.invert)
-    masks = ms.masks
-    if args.size is not None:
-        masks = resample_masks(masks, args.size)
-    report = check_masks(masks, ms.names)
-    packed = pack(masks, ms.names, args.layout, lr_conflict=args.lr_conflict)
-    bits = args.bits or ms.bits
-    with (
-        status("writing packed masks"),
-        staged_folder(args.output, force=args.force, inputs=ms.files) as tmp,
-    ):
-        write_packed(tmp, packed, bits=bits, invert=args.invert, inputs=ms.files)
+    opts = PackMasksOptions(
+        layout=args.layout,
+        size=args.size,
+        invert=args.invert,
+        names=tuple(n.strip() for n in args.names.split(",")) if args.names else None,
+        bits=args.bits,
+        lr_conflict=args.lr_conflict,
+        force=args.force,
+    )
+    with status(f"packing {len(args.masks)} masks"):
+        res = pack_mask_files(args.masks, args.output, opts)
     if args.json:
-        emit_json(
-            {
-                "output": str(args.output),
-                "layout": args.layout,
-                "bits": bits,
-                "table": packed.table,
-                "report": report.to_json(),
-                "notes": packed.notes,
-            }
-        )
-    else:
-        n_tex = packed.textures.shape[0]
-        kind = "layers" if packed.layout == "array" else "textures"
-        err.print(
-            f"packed {len(ms.names)} regions into {n_tex} {kind} ({args.layout}, "
-            f"{masks.shape[2]} x {masks.shape[1]}, {bits}-bit) -> {args.output}"
-        )
-        for w in [*report.warnings, *packed.notes]:
-            err.print(f"[yellow]warning:[/] {w}")
+        emit_json(res.to_json())
+        return 0
+    n_tex = res.packed.textures.shape[0]
+    kind = "layers" if res.packed.layout == "array" else "textures"
+    w, h = res.size
+    err.print(
+        f"packed {len(res.names)} regions into {n_tex} {kind} ({res.layout}, {w} x {h}, "
+        f"{res.bits}-bit) -> {args.output}"
+    )
+    for warning in [*res.report.warnings, *res.packed.notes]:
+        err.print(f"[yellow]warning:[/] {warning}")
     return 0
