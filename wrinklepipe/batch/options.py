@@ -9,11 +9,13 @@ from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 from wrinklepipe.io.package import DEFAULT_PNG_LEVEL
+from wrinklepipe.masks.layouts import LAYOUTS
 from wrinklepipe.pipeline.convert import ConvertOptions
+from wrinklepipe.validate.catalogue import SEVERITIES
 
 USD_FORMATS = ("usda", "usdc", "usdz")
-MASK_LAYOUTS = ("rgba", "array", "lr-split", "jimenez8", "metahuman")
-FAIL_ON = ("error", "warning", "info")
+MASK_LAYOUTS = LAYOUTS  # masks.layouts: the packing layouts
+FAIL_ON = SEVERITIES  # validate.catalogue: a severity fails an asset
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,8 @@ from pathlib import Path
 from typing import Any
 
 from wrinklepipe.batch import Cache, DaskEngine, LocalEngine, parse_size, plan_batch
+from wrinklepipe.batch.cache import DEFAULT_MAX_BYTES
+from wrinklepipe.batch.options import FAIL_ON, MASK_LAYOUTS, AssetOptions
 from wrinklepipe.batch.publish import run_and_publish
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.demo.source import cache_root
@@ -39,6 +41,9 @@ examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    # Conversion options default to None here (the batch file's value, else AssetOptions'):
+    # the defaults shown in the help come from AssetOptions, the one place.
+    d = AssetOptions()
     p.add_argument(
         "sources", nargs="+", metavar="SOURCE", help="manifests, folders, globs or a batch file"
     )
@@ -72,8 +77,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     cache.add_argument(
         "--cache-size",
         metavar="SIZE",
-        default="20G",
-        help="size cap, least recently used evicted first (default 20G)",
+        default=f"{DEFAULT_MAX_BYTES >> 30}G",
+        help=f"size cap, least recently used evicted first (default {DEFAULT_MAX_BYTES >> 30}G)",
     )
     conv = p.add_argument_group("conversion (every asset; win over the batch file)")
     conv.add_argument("--glb", action="store_const", const=True, help="also write NAME.glb")
@@ -84,10 +89,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     usd.add_argument(
         "--usdz", dest="usd", action="store_const", const="usdz", help="also write NAME.usdz"
     )
-    conv.add_argument("--bits", type=int, choices=(8, 16), help="PNG bits of normal maps (8)")
+    conv.add_argument(
+        "--bits", type=int, choices=(8, 16), help=f"PNG bits of normal maps ({d.bits})"
+    )
     conv.add_argument(
         "--mask-layout",
-        choices=("rgba", "array", "lr-split", "jimenez8", "metahuman"),
+        choices=MASK_LAYOUTS,
         help="mask packing",
     )
     conv.add_argument(
@@ -108,12 +115,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=int,
         choices=range(10),
         metavar="0-9",
-        help="zlib level of PNGs (default 6)",
+        help=f"zlib level of PNGs (default {d.png_level})",
     )
     conv.add_argument(
         "--fail-on",
-        choices=("error", "warning", "info"),
-        help="severity that fails an asset (error)",
+        choices=FAIL_ON,
+        help=f"severity that fails an asset ({d.fail_on})",
     )
     rep = p.add_argument_group("reports")
     rep.add_argument("--json", action="store_true", help="print the JSON summary on stdout")

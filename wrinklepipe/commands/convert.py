@@ -6,6 +6,7 @@ import argparse
 from typing import Any
 
 from wrinklepipe.console import emit_json, err
+from wrinklepipe.masks.layouts import LAYOUTS
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
 NAME = "convert"
@@ -53,7 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--mask-layout",
-        choices=("rgba", "array", "lr-split", "jimenez8", "metahuman"),
+        choices=LAYOUTS,
         default=None,
         help="mask packing (default: the manifest's formats.mask_layout, else rgba)",
     )

@@ -14,6 +14,7 @@ from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import validate
+from wrinklepipe.validate.catalogue import SEVERITIES
 from wrinklepipe.validate.config import Config, load_config
 from wrinklepipe.validate.context import ValidateOptions
 from wrinklepipe.validate.report import print_summary, report_json, write_reports
@@ -52,7 +53,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--fail-on",
-        choices=("error", "warning", "info"),
+        choices=SEVERITIES,
         default=AssetOptions().fail_on,
         help=f"lowest severity that makes the exit code 1 (default: {AssetOptions().fail_on})",
     )
