@@ -5,13 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
 from wrinklepipe.console import emit_json, err, status
-from wrinklepipe.errors import input_error
-from wrinklepipe.geometry.vertex_ids import VertexIdOptions, compute_vertex_ids
-from wrinklepipe.io.mesh import LoadOptions, load_mesh
+from wrinklepipe.geometry.vertex_ids import VertexIdOptions
 from wrinklepipe.outputs.per_vertex import write_per_vertex
+from wrinklepipe.pipeline.vertex_ids import mesh_vertex_ids
 
 NAME = "vertex-ids"
 HELP = "spatial-hash vertex IDs: render vertices at the same position share an ID"
@@ -48,30 +45,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.tolerance is not None and not args.tolerance >= 0:
-        raise input_error("<arguments>", f"--tolerance must be >= 0, got {args.tolerance}")
-    if not args.relative >= 0:
-        raise input_error("<arguments>", f"--relative must be >= 0, got {args.relative}")
-    with status(f"reading {args.mesh}"):
-        mesh = load_mesh(args.mesh, LoadOptions(generate_uvs=False))
     opts = VertexIdOptions(relative_tolerance=args.relative, tolerance=args.tolerance)
-    p = mesh.positions.astype(np.float64)
-    tol = (
-        args.tolerance
-        if args.tolerance is not None
-        else float(np.linalg.norm(p.max(0) - p.min(0))) * args.relative
-    )
-    ids = compute_vertex_ids(mesh.positions, options=opts, source=str(args.mesh))
-    counts = np.bincount(ids)
-    summary = {
-        "mesh": str(args.mesh),
-        "vertices": int(len(ids)),
-        "ids": int(counts.size),
-        "shared_ids": int((counts > 1).sum()),
-        "vertices_sharing": int(counts[counts > 1].sum()),
-        "tolerance": float(tol),
-        "notes": list(mesh.notes),
-    }
+    with status(f"reading {args.mesh}"):
+        ids, summary = mesh_vertex_ids(args.mesh, opts)
     if args.output:
         write_per_vertex(Path(args.output), ids, summary, [args.mesh])
         summary["output"] = str(args.output)
@@ -80,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         err.print(
             f"{summary['vertices']} vertices -> {summary['ids']} IDs; {summary['shared_ids']} IDs"
-            f" shared by {summary['vertices_sharing']} split vertices (tolerance {tol:.3g})"
-            + (f" -> {args.output}" if args.output else "")
+            f" shared by {summary['vertices_sharing']} split vertices (tolerance "
+            f"{summary['tolerance']:.3g})" + (f" -> {args.output}" if args.output else "")
         )
     return 0
