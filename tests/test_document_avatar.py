@@ -388,7 +388,7 @@ def test_usd_output_carries_the_whole_avatar(source, converted):
     stage = Usd.Stage.Open(str(out / "avatar.usda"))
     assert _usd_errors(stage) == []
     meshes = {p.GetName(): p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)}
-    assert sorted(meshes) == sorted(m.name for m in g.meshes)  # Head = the wrinkle layer's
+    assert sorted(meshes) == sorted(m.name for m in g.meshes)  # Head too, in the scene
     # every part: its points, triangles, UVs (v flipped), material (double-sided flag kept)
     for m in g.meshes[1:]:
         prim = meshes[m.name]

@@ -277,7 +277,7 @@ def test_robot_usd_carries_every_part_at_its_place(robot):
     assert errors == []
     meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
     instanced = sum(len(g.meshes[n.mesh].primitives) for n in g.nodes if n.mesh is not None)
-    assert len(meshes) == instanced  # every primitive: 18 below Scene + the wrinkle layer's
+    assert len(meshes) == instanced  # every primitive below Scene, the wrinkled head too
     # rigid parts sit where the glTF puts them at rest: USD's composed transform of the points
     # equals pygltflib's node world matrix applied to the accessor (struct) positions
     worlds = _gltf_worlds(g)

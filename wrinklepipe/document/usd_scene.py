@@ -27,16 +27,34 @@ transforms, node animations); the glTF output beside it keeps everything.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from wrinklepipe.document.model import Document, PrimitiveRef
+from wrinklepipe.document.render_mesh import BIAS_ATTRIBUTE
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles
+from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
 from wrinklepipe.document.write import mime_type
 from wrinklepipe.io.mesh_gltf import _node_matrix  # the one glTF TRS -> matrix
+from wrinklepipe.io.package import WrinklePackage
+from wrinklepipe.io.usd_write import SCENE_MESHES
 
 _EXT = {"image/png": "png", "image/jpeg": "jpg"}
+
+
+@dataclass(frozen=True)
+class WrinkledPrims:
+    """The wrinkled primitives and what binds them: ``refs`` in the package's order,
+    ``material`` the wrinkle material's prim path, ``morph_names`` the package mesh's morph
+    target names and ``morph_curve`` the first weight curve's (time codes ``[F]``, morph weights
+    ``[F, M]``) when it drives them."""
+
+    refs: tuple[PrimitiveRef, ...]
+    material: Any
+    morph_names: tuple[str, ...] = ()
+    morph_curve: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class _Names:
@@ -65,7 +83,9 @@ def _gf(m: np.ndarray) -> Any:
 
 
 class _Scene:
-    def __init__(self, stage: Any, root: Any, doc: Document, texture_dir: str) -> None:
+    def __init__(
+        self, stage: Any, root: Any, doc: Document, texture_dir: str, wrinkled: WrinkledPrims
+    ) -> None:
         self.stage, self.root, self.doc = stage, root, doc
         self.names = _Names()
         self.tdir = texture_dir
@@ -74,7 +94,23 @@ class _Scene:
         self.materials: dict[int, Any] = {}
         self.images: dict[int, str | None] = {}
         self.skeletons: dict[int, Any] = {}
+        self.morph_skeleton: Any = None
         self.worlds = node_world_matrices(doc)
+        self.wrinkled = wrinkled
+        nodes = doc.array("nodes")
+        self.parent = {int(c): i for i, n in enumerate(nodes) for c in n.get("children", [])}
+        # each wrinkled primitive -> its index and the node whose instance the render mesh reads
+        self.wrinkle_index: dict[tuple[int, int], tuple[int, int | None]] = {}
+        for k, r in enumerate(wrinkled.refs):
+            inst = doc.mesh_nodes(r.mesh)
+            first = next((i for i in inst if i in self.worlds), inst[0] if inst else None)
+            self.wrinkle_index[(r.mesh, r.primitive)] = (k, first)
+        self.wrinkled_paths: dict[int, Any] = {}
+        self.morph_skeletons: list[Any] = []  # skeletons a wrinkled blend shape plays through
+        self.joint_skin: dict[int, tuple[int, int]] = {}  # joint node -> (first skin, index)
+        for si, sk in enumerate(doc.array("skins")):
+            for k, j in enumerate(sk.get("joints", [])):
+                self.joint_skin.setdefault(int(j), (si, k))
 
     # -- materials ---------------------------------------------------------------------------
     def image_path(self, texture: int) -> str | None:
@@ -268,6 +304,80 @@ class _Scene:
         self.skeletons[skin] = skel
         return skel
 
+    def joint_of(self, node: int) -> tuple[int, int, int] | None:
+        """The joint a rigid node moves with: itself or its nearest joint ancestor, as
+        ``(joint node, skin, index in the skin)``; None when no joint is above it."""
+        n: int | None = node
+        while n is not None:
+            if n in self.joint_skin:
+                return (n, *self.joint_skin[n])
+            n = self.parent.get(n)
+        return None
+
+    def rigid_bind(self, node: int) -> tuple[Any, int, np.ndarray]:
+        """(skeleton, joint index, geomBindTransform) binding a rigid node's mesh: to its
+        joint (``bind_k inv(rest_k) world``), else to the one-joint ``Morphs`` skeleton
+        (``world``)."""
+        from pxr import UsdGeom, UsdSkel, Vt  # deferred: usd-core, USD only
+
+        world = self.worlds.get(node, np.eye(4))
+        got = self.joint_of(node)
+        if got is not None:
+            j, skin, k = got
+            skel = self.skeleton(skin)
+            bind = np.asarray(skel.GetBindTransformsAttr().Get()[k], np.float64).T
+            rest = self.worlds.get(j, _node_matrix(self.doc.array("nodes")[j]))
+            return skel, k, bind @ np.linalg.inv(rest) @ world
+        if self.morph_skeleton is None:
+            holder = self.root.AppendChild("Skeletons")
+            if not self.stage.GetPrimAtPath(holder):
+                UsdGeom.Scope.Define(self.stage, holder)
+            path = holder.AppendChild(self.names(holder, "Morphs"))
+            skel = UsdSkel.Skeleton.Define(self.stage, path)
+            skel.CreateJointsAttr(Vt.TokenArray(["root"]))
+            skel.CreateRestTransformsAttr(Vt.Matrix4dArray([_gf(np.eye(4))]))
+            skel.CreateBindTransformsAttr(Vt.Matrix4dArray([_gf(np.eye(4))]))
+            self.morph_skeleton = skel
+        return self.morph_skeleton, 0, world
+
+    def wrinkle_primvars(self, mesh: Any, ref: PrimitiveRef) -> None:
+        """The wrinkle primvars of a wrinkled primitive, from the attributes ingest added."""
+        from pxr import Sdf, UsdGeom, Vt  # deferred: usd-core, USD only
+
+        doc = self.doc
+        attrs = doc.primitive(ref).get("attributes", {})
+        pv = UsdGeom.PrimvarsAPI(mesh)
+        vid = np.rint(doc.accessor(attrs[VERTEX_ID_ATTRIBUTE]).reshape(-1)).astype(np.int32)
+        pv.CreatePrimvar("wrinkle:vertexId", Sdf.ValueTypeNames.IntArray, "vertex").Set(
+            Vt.IntArray.FromNumpy(np.ascontiguousarray(vid))
+        )
+        for attr, name in (("TANGENT", "tangent"), (BIAS_ATTRIBUTE, "bias")):
+            if attr in attrs:
+                a = np.ascontiguousarray(doc.accessor(attrs[attr]), np.float32)
+                pv.CreatePrimvar(f"wrinkle:{name}", Sdf.ValueTypeNames.Float4Array, "vertex").Set(
+                    Vt.Vec4fArray.FromNumpy(a)
+                )
+
+    def animate_morphs(self) -> None:
+        """The first weight curve's morph weights on each skeleton a wrinkled blend shape is
+        bound through (a SkelAnimation of blend-shape weights only)."""
+        from pxr import Tf, Usd, UsdSkel, Vt  # deferred: usd-core, USD only
+
+        w = self.wrinkled
+        if w.morph_curve is None or not w.morph_names:
+            return
+        codes, weights = w.morph_curve
+        tokens = Vt.TokenArray([Tf.MakeValidIdentifier(n) for n in w.morph_names])
+        for skel in self.morph_skeletons:
+            anim = UsdSkel.Animation.Define(self.stage, skel.GetPath().AppendChild("WrinkleMorphs"))
+            anim.CreateBlendShapesAttr(tokens)
+            attr = anim.CreateBlendShapeWeightsAttr()
+            for code, row in zip(codes, np.asarray(weights, np.float32)):
+                attr.Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(row)), Usd.TimeCode(code))
+            UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
+                [anim.GetPath()]
+            )
+
     # -- meshes ------------------------------------------------------------------------------
     def mesh(self, parent: Any, name: str, ref: PrimitiveRef, node: int) -> None:
         from pxr import Gf, Sdf, UsdGeom, UsdShade, UsdSkel, Vt  # deferred: usd-core, USD only
@@ -321,14 +431,34 @@ class _Scene:
         material = prim.get("material")
         mat = doc.array("materials")[material] if isinstance(material, int) else {}
         mesh.CreateDoubleSidedAttr(bool(mat.get("doubleSided", False)))
-        bound = self.material(material if isinstance(material, int) else None)
+        wrinkled = self.wrinkle_index.get((ref.mesh, ref.primitive))
+        if wrinkled is not None:
+            self.wrinkle_primvars(mesh, ref)
+            bound = UsdShade.Material(self.stage.GetPrimAtPath(self.wrinkled.material))
+            if wrinkled[1] == node:  # the instance the render mesh reads
+                self.wrinkled_paths[wrinkled[0]] = path
+        else:
+            bound = self.material(material if isinstance(material, int) else None)
         if bound is not None:
             UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(bound)
         skin = doc.array("nodes")[node].get("skin")
         targets = prim.get("targets") or []
-        if not isinstance(skin, int) and not targets:
+        rigid = None
+        if not isinstance(skin, int) and (targets or self.joint_of(node) is not None):
+            rigid = self.rigid_bind(node)
+        if not isinstance(skin, int) and rigid is None:
             return
         binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+        if rigid is not None:
+            skel, k, geom = rigid
+            binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+            binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([k]))
+            binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+            binding.CreateGeomBindTransformAttr(_gf(geom))
+        if wrinkled is not None and targets:
+            skel = rigid[0] if rigid is not None else self.skeleton(int(skin))
+            if all(s.GetPath() != skel.GetPath() for s in self.morph_skeletons):
+                self.morph_skeletons.append(skel)
         if isinstance(skin, int):
             skel = self.skeleton(skin)
             binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
@@ -365,7 +495,7 @@ class _Scene:
             binding.CreateBlendShapeTargetsRel().SetTargets(paths)
 
     # -- nodes -------------------------------------------------------------------------------
-    def node(self, parent: Any, i: int, skip: set[tuple[int, int]], seen: set[int]) -> None:
+    def node(self, parent: Any, i: int, seen: set[int]) -> None:
         from pxr import UsdGeom  # deferred: usd-core, USD only
 
         if i in seen or not 0 <= i < len(self.doc.array("nodes")):
@@ -387,29 +517,43 @@ class _Scene:
             if skinned and not self.stage.GetPrimAtPath(holder):
                 UsdGeom.Xform.Define(self.stage, holder)
             for k in range(len(prims)):
-                if (mi, k) in skip:
-                    continue
                 ref = PrimitiveRef(mi, k, prims[k].get("material"))
                 label = doc.mesh_name(mi) if not skinned else name
                 self.mesh(holder, label if len(prims) == 1 else f"{label}_{k}", ref, i)
         for c in n.get("children", []):
-            self.node(path, int(c), skip, seen)
+            self.node(path, int(c), seen)
+
+
+def wrinkled_prims(
+    stage: Any, pkg: WrinklePackage, refs: tuple[PrimitiveRef, ...]
+) -> WrinkledPrims:
+    """What binds the package's wrinkled primitives in a stage :func:`~wrinklepipe.io.
+    usd_write.build_stage` made (``with_mesh=False``): its wrinkle material, the morph names
+    and the first curve's morph weights at the stage's time codes."""
+    material = stage.GetDefaultPrim().GetPath().AppendPath("Looks/skin")
+    curve = None
+    c = pkg.curves[0] if pkg.curves else None
+    if c is not None and c.morph_weights is not None:
+        fps = stage.GetTimeCodesPerSecond()
+        codes = np.asarray(c.times, np.float32).astype(np.float64) * fps
+        curve = (codes, np.asarray(c.morph_weights, np.float32))
+    return WrinkledPrims(tuple(refs), material, tuple(pkg.mesh.morph_names), curve)
 
 
 def add_scene(
-    stage: Any, root: Any, doc: Document, skip: set[tuple[int, int]], texture_dir: str
+    stage: Any, root: Any, doc: Document, wrinkled: WrinkledPrims, texture_dir: str
 ) -> tuple[dict[str, bytes], list[str]]:
-    """Add ``doc``'s scene, less the primitives ``skip`` (``(mesh, primitive)``: the wrinkled
-    ones, which the wrinkle layer holds), below ``root/Scene``; return the image files it
-    references ``{relative path: bytes}`` and notes (see the module doc)."""
-    from pxr import UsdGeom, UsdSkel  # deferred: usd-core, USD only
+    """Add ``doc``'s scene below ``root/Scene``, its wrinkled primitives bound to the wrinkle
+    material (which lists their paths in ``wrinkle:meshes``, the package's order); return the
+    image files it references ``{relative path: bytes}`` and notes (see the module doc)."""
+    from pxr import Sdf, UsdGeom, UsdSkel, Vt  # deferred: usd-core, USD only
 
     scene_path = root.AppendChild("Scene")
     if stage.GetPrimAtPath(root).IsA(UsdSkel.Root):
         UsdGeom.Xform.Define(stage, scene_path)
     else:
         UsdSkel.Root.Define(stage, scene_path)
-    s = _Scene(stage, scene_path, doc, texture_dir)
+    s = _Scene(stage, scene_path, doc, texture_dir, wrinkled)
     scenes = doc.array("scenes")
     which = doc.gltf.get("scene", 0)
     if scenes and isinstance(which, int) and 0 <= which < len(scenes):
@@ -419,10 +563,19 @@ def add_scene(
         roots = [i for i in range(len(doc.array("nodes"))) if i not in children]
     seen: set[int] = set()
     for r in roots:
-        s.node(scene_path, r, skip, seen)
+        s.node(scene_path, r, seen)
+    s.animate_morphs()
+    missing = [r.pointer for k, r in enumerate(wrinkled.refs) if k not in s.wrinkled_paths]
+    if missing:
+        raise doc.err(f"wrinkled primitive(s) {missing} are in no scene: cannot bind them in USD")
     if doc.array("animations"):
         s.notes.append(
             f"USD: the {len(doc.array('animations'))} glTF animation(s) of the source are not "
             "carried into the USD scene (kept in the glTF); the wrinkle weights are"
         )
+    order = stage.GetPrimAtPath(wrinkled.material).CreateAttribute(
+        SCENE_MESHES, Sdf.ValueTypeNames.StringArray
+    )
+    order.SetCustom(True)
+    order.Set(Vt.StringArray([str(s.wrinkled_paths[k]) for k in range(len(wrinkled.refs))]))
     return s.files, s.notes

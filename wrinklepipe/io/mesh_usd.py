@@ -45,11 +45,16 @@ class UsdMeshOptions:
     bake_transforms: apply the local-to-world transform of non-skinned meshes (default True).
     time: time code for points and transforms (default: the default time).
     prim: only read meshes at or under this prim path (default: all).
+    rigid_at_rest: a mesh bound rigidly to one joint (constant ``jointIndices``, e.g. a head
+    attached to a bone) is read as a rigid mesh at the skeleton's rest pose (UsdSkel's
+    ``rest_k inv(bind_k) geomBindTransform``, then the skeleton's world transform), without
+    skin, as glTF holds a mesh parented to a joint (default False: skinned, in bind space).
     """
 
     bake_transforms: bool = True
     time: float | None = None
     prim: str | None = None
+    rigid_at_rest: bool = False
 
 
 def open_stage(path: Path) -> Any:
@@ -286,7 +291,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     if prim.HasAPI(UsdSkel.BindingAPI):
         binding = UsdSkel.BindingAPI(prim)
         _blend_shapes(file, ppath, binding, mesh, vmap, n_p)
-        skinned, applied = _skin(file, prim, mesh, vmap, n_p, time)
+        skinned, applied = _skin(file, prim, mesh, vmap, n_p, time, opts.rigid_at_rest)
     if not skinned and opts.bake_transforms:
         m = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time)).T
         if not np.allclose(m, np.eye(4)):
@@ -396,10 +401,11 @@ def _blend_shapes(
 
 
 def _skin(
-    file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: Any
+    file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: Any, rigid_at_rest: bool
 ) -> tuple[bool, np.ndarray]:
-    """Read the UsdSkel skin onto ``mesh``: (skinned, the geomBindTransform applied)."""
-    from pxr import Usd, UsdSkel  # deferred: usd-core, USD only
+    """Read the UsdSkel skin onto ``mesh``: (placed by the skeleton, the transform applied:
+    the geomBindTransform, or for ``rigid_at_rest`` the rigid joint's rest placement)."""
+    from pxr import Usd, UsdGeom, UsdSkel  # deferred: usd-core, USD only
 
     root = UsdSkel.Root.Find(prim)
     if not root:
@@ -452,6 +458,18 @@ def _skin(
     bind_col = np.asarray(bind, dtype=np.float64).transpose(0, 2, 1)  # row- to column-vector
     ibm = np.linalg.inv(bind_col)[[skel_joints.index(j) for j in joint_names]]
     geom = np.asarray(sq.GetGeomBindTransform(time), dtype=np.float64).T
+    if rigid_at_rest and sq.IsRigidlyDeformed():
+        k0 = skel_joints.index(joint_names[int(ji[0, 0])])
+        rest = np.asarray(skel_q.ComputeJointSkelTransforms(time, True), np.float64)[k0].T
+        world = np.asarray(
+            UsdGeom.Xformable(skel.GetPrim()).ComputeLocalToWorldTransform(time), np.float64
+        ).T
+        placed = world @ rest @ np.linalg.inv(bind_col[k0]) @ geom
+        _apply(mesh, placed)
+        mesh.notes.append(
+            f"rigidly bound to joint {joint_names[int(ji[0, 0])]}: read at the skeleton's rest pose"
+        )
+        return True, placed
     if not np.allclose(geom, np.eye(4)):
         _apply(mesh, geom)
         mesh.notes.append("applied geomBindTransform")

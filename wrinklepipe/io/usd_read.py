@@ -9,6 +9,12 @@ A layer over a USD source (:mod:`wrinklepipe.document.usd_layer`; its material c
 ``wrinkle:layeredOver``) keeps the source's topology: the meshes bound to its wrinkled
 material(s) are read by :func:`wrinklepipe.io.mesh_usd.read_usd_meshes` (render vertices through
 the corner map, wrinkle primvars vertex or faceVarying, the source's UsdSkel skin) and merged.
+
+The USD of a glTF source (:mod:`wrinklepipe.document.usd_scene`; its material lists the
+wrinkled prims in ``wrinkle:meshes``) is read the same way, in that order, meshes bound rigidly
+to a joint at the skeleton's rest pose (``UsdMeshOptions.rigid_at_rest``), skinned ones in bind
+space with the glTF joint names (the Skeleton's ``wrinkle:jointNames``): the render mesh the
+glTF path reads from the glTF beside it.
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from wrinklepipe.document.usd_source import merge_parts
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.io.json_safe import loads_json
-from wrinklepipe.io.mesh_usd import open_stage, read_usd_meshes
+from wrinklepipe.io.mesh_usd import UsdMeshOptions, open_stage, read_usd_meshes
 from wrinklepipe.io.package import (
     PackedTexture,
     WeightCurves,
@@ -34,7 +40,7 @@ from wrinklepipe.io.package import (
     png_pixels,
     safe_name,
 )
-from wrinklepipe.io.usd_write import API_NAME, LAYERED_OVER, register_schema
+from wrinklepipe.io.usd_write import API_NAME, LAYERED_OVER, SCENE_MESHES, register_schema
 from wrinklepipe.metadata import (
     CompressedCopy,
     MaskChannel,
@@ -146,10 +152,15 @@ def _own_layout(prim: Any) -> bool:
     )
 
 
-def _layered_mesh(path: Path, file: str, prims: list[str]) -> Mesh:
+def _layered_mesh(
+    path: Path, file: str, prims: list[str], joint_names: dict[str, tuple[str, ...]] | None = None
+) -> Mesh:
     """The wrinkled meshes of a layer over a source, as the mesh reader reads them (render
-    vertices through the corner map; wrinkle primvars vertex or faceVarying), merged."""
-    parts = {m.name: m for m in read_usd_meshes(path)}
+    vertices through the corner map; wrinkle primvars vertex or faceVarying), merged.
+    ``joint_names``: a glTF source's scene (prim -> the glTF names of its skeleton's joints):
+    rigidly bound meshes at the rest pose, joints named as in the glTF."""
+    opts = UsdMeshOptions(rigid_at_rest=joint_names is not None)
+    parts = {m.name: m for m in read_usd_meshes(path, opts)}
     got = []
     for p in prims:
         m = parts.get(p)
@@ -160,11 +171,35 @@ def _layered_mesh(path: Path, file: str, prims: list[str]) -> Mesh:
                 raise input_error(file, f"primvars:{what} missing or unreadable", p)
         if m.uvs is None:
             raise input_error(file, "texture coordinates (primvars:st) missing", p)
+        names = (joint_names or {}).get(p)
+        if names is not None and m.joint_names:
+            m.joint_names = names
         got.append(m)
     mesh = merge_parts(got, keep_ids=True)
     if mesh.normals is None:  # as convert made them: area-weighted, over the merged meshes
         mesh.normals = vertex_normals(mesh.positions, mesh.indices).astype(np.float32)
     return mesh
+
+
+def _gltf_joint_names(stage: Any, prims: list[str], file: str) -> dict[str, tuple[str, ...]]:
+    """Each skinned prim -> the glTF names of its skeleton's joints, in the skeleton's order
+    (``wrinkle:jointNames``; the joint tokens are paths made valid as USD identifiers)."""
+    from pxr import UsdSkel  # deferred: usd-core, USD only
+
+    out: dict[str, tuple[str, ...]] = {}
+    for p in prims:
+        prim = stage.GetPrimAtPath(p)
+        skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton() if prim else None
+        names = skel.GetPrim().GetAttribute("wrinkle:jointNames") if skel else None
+        if not names or not names.HasAuthoredValue():
+            continue
+        got = tuple(str(n) for n in names.Get())
+        if len(got) != len(skel.GetJointsAttr().Get() or []):
+            raise input_error(
+                file, "wrinkle:jointNames differs from the joints", str(skel.GetPath())
+            )
+        out[p] = got
+    return out
 
 
 def _own_mesh(stage: Any, mesh_prim: Any, file: str) -> Mesh:
@@ -286,7 +321,17 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     ]
     if not meshes:
         raise input_error(file, f"no Mesh bound to {mat_prim.GetPath()}")
-    if not layered and len(meshes) == 1 and _own_layout(meshes[0]):
+    order = mat_prim.GetAttribute(SCENE_MESHES)
+    if order and order.HasAuthoredValue():  # a glTF source's scene (document.usd_scene)
+        listed = [str(p) for p in order.Get()]
+        if sorted(listed) != sorted(str(m.GetPath()) for m in meshes):
+            raise input_error(
+                file,
+                f"{SCENE_MESHES} does not list the meshes bound to the material",
+                str(mat_prim.GetPath()),
+            )
+        mesh = _layered_mesh(path, file, listed, _gltf_joint_names(stage, listed, file))
+    elif not layered and len(meshes) == 1 and _own_layout(meshes[0]):
         mesh = _own_mesh(stage, meshes[0], file)
     else:  # a layer over a source (wrinklepipe.document.usd_layer): the source's topology
         mesh = _layered_mesh(path, file, [str(m.GetPath()) for m in meshes])

@@ -80,6 +80,11 @@ API_ATTRIBUTES: dict[str, str] = {
 #: name; :mod:`wrinklepipe.document.usd_layer`): its meshes keep the source's topology.
 LAYERED_OVER = "wrinkle:layeredOver"
 
+#: Custom attribute on the wrinkle material of a glTF source's USD: the paths of the wrinkled
+#: primitives' Mesh prims in its scene, in the package's order
+#: (:mod:`wrinklepipe.document.usd_scene`); they are read back through the mesh reader.
+SCENE_MESHES = "wrinkle:meshes"
+
 
 def register_schema() -> None:
     """Register the codeless ``WrinkleMapsAPI`` (``schemas/usd/plugInfo.json``); idempotent.
@@ -205,19 +210,26 @@ def _morph_curves(stage: Any, root_path: Any, prim: Any, pkg: WrinklePackage, fp
         codes = [Usd.TimeCode(float(t) * fps) for t in np.asarray(c.times, np.float32)]
         for code, row in zip(codes, mw):
             a.Set(Vt.FloatArray.FromNumpy(row), code)
-        if i == 0:
-            anim = UsdSkel.Animation(stage.GetPrimAtPath(root_path.AppendPath("Skel/Anim")))
+        anim_prim = stage.GetPrimAtPath(root_path.AppendPath("Skel/Anim"))
+        if i == 0 and anim_prim:  # none without the mesh: the scene's skeletons play them
+            anim = UsdSkel.Animation(anim_prim)
             bsw = anim.GetBlendShapeWeightsAttr()
             for code, row in zip(codes, mw):
                 bsw.Set(Vt.FloatArray.FromNumpy(row), code)
 
 
-def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
+def build_stage(
+    pkg: WrinklePackage, options: UsdOptions | None = None, with_mesh: bool = True
+) -> Any:
     """Build an in-memory ``Usd.Stage`` for the package (textures referenced, not written).
 
-    Keep the returned stage referenced while using its layers (they die with it).
+    ``with_mesh=False``: the wrinkle material only (``/NAME`` an Xform, no ``MESH`` and no
+    ``Skel``): a glTF source's wrinkled primitives are written into its scene instead, bound
+    to that material and to the scene's skeleton
+    (:func:`wrinklepipe.document.usd_scene.add_scene`). Keep the returned stage referenced
+    while using its layers (they die with it).
     """
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt  # deferred: usd-core, USD only
+    from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdSkel  # deferred: usd-core, USD only
 
     opt = options or UsdOptions()
     register_schema()
@@ -238,14 +250,27 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
     root_path = Sdf.Path("/" + root_name)
     has_morphs = m.morph_deltas is not None and len(m.morph_names) > 0
     has_skin = m.joints is not None and m.skin_weights is not None and len(m.joint_names) > 0
-    if has_morphs or has_skin:
+    if with_mesh and (has_morphs or has_skin):
         root = UsdSkel.Root.Define(stage, root_path).GetPrim()
     else:
         root = UsdGeom.Xform.Define(stage, root_path).GetPrim()
     stage.SetDefaultPrim(root)
     Usd.ModelAPI(root).SetKind("component")
 
-    # -- mesh --------------------------------------------------------------------------------
+    if with_mesh:
+        mesh = _mesh(stage, root_path, m)
+        if has_morphs or has_skin:
+            _skel(stage, root_path, mesh, m)
+    mat = _material(stage, root_path, pkg, opt)
+    if with_mesh:
+        UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
+    return stage
+
+
+def _mesh(stage: Any, root_path: Any, m: Mesh) -> Any:
+    """``/NAME/MESH``: the package's render mesh with the wrinkle primvars."""
+    from pxr import Gf, Sdf, UsdGeom, Vt  # deferred: usd-core, USD only
+
     mesh = UsdGeom.Mesh.Define(stage, root_path.AppendChild(_ident(m.name)))
     pts = np.ascontiguousarray(m.positions, np.float32)
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
@@ -274,12 +299,14 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
         pv.CreatePrimvar("wrinkle:bias", Sdf.ValueTypeNames.Float4Array, UsdGeom.Tokens.vertex).Set(
             Vt.Vec4fArray.FromNumpy(np.ascontiguousarray(m.colors, np.float32))
         )
+    return mesh
 
-    # -- skin and blend shapes (UsdSkel) ------------------------------------------------------
-    if has_morphs or has_skin:
-        _skel(stage, root_path, mesh, m)
 
-    # -- material --------------------------------------------------------------------------------
+def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) -> Any:
+    """``/NAME/Looks/skin``: the wrinkle material (``WrinkleMapsAPI``, its textures, the weight
+    curves as time samples)."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt  # deferred: usd-core, USD only
+
     looks = UsdGeom.Scope.Define(stage, root_path.AppendChild("Looks"))
     mat = UsdShade.Material.Define(stage, looks.GetPath().AppendChild("skin"))
     surf = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("Surface"))
@@ -404,9 +431,7 @@ def build_stage(pkg: WrinklePackage, options: UsdOptions | None = None) -> Any:
             ):
                 a.Set(Vt.FloatArray.FromNumpy(row), Usd.TimeCode(float(t) * opt.fps))
         _morph_curves(stage, root_path, prim, pkg, opt.fps)
-
-    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
-    return stage
+    return mat
 
 
 def write_usd(

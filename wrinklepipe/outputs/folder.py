@@ -27,7 +27,7 @@ from wrinklepipe.document.usd_layer import (
     layer_stage,
     source_reference,
 )
-from wrinklepipe.document.usd_scene import add_scene
+from wrinklepipe.document.usd_scene import add_scene, wrinkled_prims
 from wrinklepipe.document.usd_source import UsdSource
 from wrinklepipe.document.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
 from wrinklepipe.document.write import document_files
@@ -126,13 +126,16 @@ def write_folder(
     flattened (:mod:`wrinklepipe.document.usd_layer`)."""
     if usd_source is not None:
         return _write_layered(folder, files, pkg, usd_format, usd_source, final or folder)
-    stage = build_stage(pkg)
+    stage = build_stage(pkg, with_mesh=source is None)
     extra: dict[str, bytes] = {}
     notes: list[str] = []
     if source is not None:
-        skip = {(r.mesh, r.primitive) for r in source[1].refs}
         extra, notes = add_scene(
-            stage, stage.GetDefaultPrim().GetPath(), source[0], skip, "textures"
+            stage,
+            stage.GetDefaultPrim().GetPath(),
+            source[0],
+            wrinkled_prims(stage, pkg, source[1].refs),
+            "textures",
         )
     for rel, data in sorted({**files, **extra}.items()):
         write_bytes(folder / rel, data)

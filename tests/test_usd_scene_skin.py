@@ -1,0 +1,296 @@
+"""The USD of a glTF source keeps the character rigged: its wrinkled primitives sit in the scene,
+bound to the scene's UsdSkel Skeleton, and pose with it as the glTF skin poses them.
+
+Three characters: the generated avatar (its Head skinned to 20 joints whose rest pose is not
+the bind pose), RobotExpressive (its head a rigid part under the ``Head`` bone, CC0) and
+CesiumMan (skinned, 19 joints, textured). Checked by pxr.UsdSkel's own queries (skinning query,
+skeleton query, topology) against a numpy linear-blend skinning of the glTF's accessors read by
+pygltflib + struct (the test's reader), by pxr.UsdValidation, and by validate-asset on the USD
+giving the glTF's issues and metrics."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gltf_reference as ref
+import numpy as np
+import pytest
+from wrinkle_setups import ROBOT, write_setup
+
+from wrinklepipe.cli import main
+from wrinklepipe.demo import avatar
+from wrinklepipe.document.package import read_wrinkled
+from wrinklepipe.io.confine import allowed_roots
+from wrinklepipe.io.usd_read import read_usd
+from wrinklepipe.pipeline.convert import ConvertOptions, convert
+
+CESIUM = ROBOT.parents[1] / "CesiumMan" / "glTF-Binary" / "CesiumMan.glb"
+
+
+def _convert(root: Path, manifest: Path) -> Path:
+    with allowed_roots([ROBOT.parents[1]]):
+        res = convert(manifest, root / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0, res.report["validation"]
+    return root / "out"
+
+
+@pytest.fixture(scope="module")
+def characters(tmp_path_factory, robot_converted) -> dict[str, tuple[Path, Path, str]]:
+    """name -> (source glTF, output folder, asset name)."""
+    out = {}
+    root = tmp_path_factory.mktemp("skin")
+    src = avatar.avatar_source_dir()
+    out["avatar"] = (
+        src.parent / "avatar.glb",
+        _convert(root / "a", src),
+        "avatar",
+    )
+    out["robot"] = (ROBOT, robot_converted[0], "robot")
+    if CESIUM.is_file():
+        # one centre region over the whole layout (CesiumMan's UVs are no face layout)
+        whole = {"skin": ((0.0, 0.0, 1.0, 1.0), "center")}
+        manifest = write_setup(root / "c" / "src", CESIUM, "cesium", regions=whole)
+        out["cesium"] = (CESIUM, _convert(root / "c", manifest), "cesium")
+    return out
+
+
+def _local(n) -> np.ndarray:
+    if n.matrix is not None:
+        return np.asarray(n.matrix, np.float64).reshape(4, 4).T
+    x, y, z, w = n.rotation or [0, 0, 0, 1]
+    m = np.eye(4)
+    m[:3, :3] = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    ) * np.asarray(n.scale or [1, 1, 1])
+    m[:3, 3] = n.translation or [0, 0, 0]
+    return m
+
+
+def _worlds(g, pose: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+    """Node world matrices with ``pose`` (node -> rotation) applied after each node's local."""
+    parents = {c: i for i, n in enumerate(g.nodes) for c in n.children or []}
+    out: dict[int, np.ndarray] = {}
+
+    def world(i: int) -> np.ndarray:
+        if i not in out:
+            local = _local(g.nodes[i]) @ pose.get(i, np.eye(4))
+            out[i] = local if i not in parents else world(parents[i]) @ local
+        return out[i]
+
+    for i in range(len(g.nodes)):
+        world(i)
+    return out
+
+
+def _rot_x(deg: float) -> np.ndarray:
+    a = np.radians(deg)
+    m = np.eye(4)
+    m[1:3, 1:3] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    return m
+
+
+def _wrinkled_prims(stage):
+    from pxr import UsdShade
+
+    mat = next(
+        p for p in stage.Traverse() if p.IsA(UsdShade.Material) and p.HasAttribute("wrinkle:meshes")
+    )
+    return [stage.GetPrimAtPath(p) for p in mat.GetAttribute("wrinkle:meshes").Get()]
+
+
+def _wrinkled_node(g, src: Path) -> tuple[int, int, int]:
+    """(node, mesh, primitive) of the first wrinkled primitive: the one using the output's
+    wrinkled material, found by its vertex ID attribute."""
+    for i, n in enumerate(g.nodes):
+        if n.mesh is None:
+            continue
+        for k, p in enumerate(g.meshes[n.mesh].primitives):
+            if getattr(p.attributes, "_WRINKLE_VERTEX_ID", None) is not None:
+                return i, n.mesh, k
+    raise AssertionError("no wrinkled primitive")
+
+
+def _usd_posed(path: Path, prim_path: str, joint: str | None, rot: np.ndarray) -> np.ndarray:
+    """World points of a prim skinned by UsdSkel (SkinningQuery.ComputeSkinnedPoints), the
+    joint ``joint`` of its Skeleton turned by ``rot`` after its rest transform."""
+    from pxr import Gf, Usd, UsdGeom, UsdSkel, Vt
+
+    stage = Usd.Stage.Open(str(path))
+    stage.SetEditTarget(stage.GetSessionLayer())
+    prim = stage.GetPrimAtPath(prim_path)
+    skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+    if joint is not None:
+        names = list(skel.GetPrim().GetAttribute("wrinkle:jointNames").Get())
+        k = names.index(joint)
+        rest = [np.asarray(m, np.float64) for m in skel.GetRestTransformsAttr().Get()]
+        rest[k] = rot.T @ rest[k]  # row vectors: local' = local @ rot
+        skel.GetRestTransformsAttr().Set(Vt.Matrix4dArray([Gf.Matrix4d(m.tolist()) for m in rest]))
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root.Find(prim), Usd.TraverseInstanceProxies())
+    sq = cache.GetSkinningQuery(prim)
+    xf = cache.GetSkelQuery(skel).ComputeSkinningTransforms(Usd.TimeCode.Default())
+    pts = Vt.Vec3fArray(UsdGeom.Mesh(prim).GetPointsAttr().Get())
+    assert sq.ComputeSkinnedPoints(xf, pts, Usd.TimeCode.Default())
+    skel_world = np.asarray(
+        UsdGeom.Xformable(skel.GetPrim()).ComputeLocalToWorldTransform(Usd.TimeCode.Default())
+    ).T
+    p = np.asarray(pts, np.float64)
+    return p @ skel_world[:3, :3].T + skel_world[:3, 3]
+
+
+def _gltf_posed(g, src: Path, node: int, mesh: int, prim: int, pose: dict) -> np.ndarray:
+    """numpy linear-blend skinning of the glTF accessors (a rigid node: its world matrix)."""
+    p = g.meshes[mesh].primitives[prim]
+    pos = ref.accessor(g, src, p.attributes.POSITION).astype(np.float64)
+    worlds = _worlds(g, pose)
+    skin = g.nodes[node].skin
+    if skin is None:
+        m = worlds[node]
+        return pos @ m[:3, :3].T + m[:3, 3]
+    s = g.skins[skin]
+    ibm = ref.accessor(g, src, s.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)
+    joints = ref.accessor(g, src, p.attributes.JOINTS_0).astype(np.int64)
+    weights = ref.accessor(g, src, p.attributes.WEIGHTS_0).astype(np.float64)
+    mats = np.stack([worlds[j] for j in s.joints]) @ ibm  # [J, 4, 4]
+    h = np.concatenate([pos, np.ones((len(pos), 1))], 1)
+    per = np.einsum("vkab,vb->vka", mats[joints], h)[..., :3]
+    return np.einsum("vk,vka->va", weights, per)
+
+
+def _pose_joint(g, src: Path, node: int, mesh: int, prim: int) -> int:
+    """The joint to turn: the parent of the joint that moves the wrinkled primitive (rigid: its
+    nearest joint ancestor; skinned: its most-weighted joint), so the hierarchy carries the
+    motion down."""
+    parents = {c: i for i, n in enumerate(g.nodes) for c in n.children or []}
+    joints = {j for s in g.skins for j in s.joints}
+    skin = g.nodes[node].skin
+    if skin is None:
+        n = node
+        while n not in joints:
+            n = parents[n]
+    else:
+        p = g.meshes[mesh].primitives[prim]
+        j = ref.accessor(g, src, p.attributes.JOINTS_0).astype(np.int64)
+        w = ref.accessor(g, src, p.attributes.WEIGHTS_0)
+        total = np.bincount(j.reshape(-1), w.reshape(-1), len(g.skins[skin].joints))
+        n = g.skins[skin].joints[int(np.argmax(total))]
+    return parents[n] if parents.get(n) in joints else n
+
+
+@pytest.mark.parametrize("name", ["avatar", "robot", "cesium"])
+def test_wrinkled_prims_pose_with_the_skeleton_as_the_gltf_skin(characters, name):
+    from pxr import Usd, UsdSkel
+
+    if name not in characters:
+        pytest.skip("../shared/data is absent")
+    src, out, asset = characters[name]
+    g = ref.load(src)
+    usda = out / f"{asset}.usda"
+    stage = Usd.Stage.Open(str(usda))
+    prims = _wrinkled_prims(stage)
+    assert len(prims) == 1
+    prim = prims[0]
+    node, mesh, k = _wrinkled_node(ref.load(out / f"{asset}.gltf"), out / f"{asset}.gltf")
+    binding = UsdSkel.BindingAPI(prim)
+    skel = binding.GetInheritedSkeleton()
+    assert "/Scene/Skeletons/" in str(skel.GetPath())  # the scene's, not a flat one
+    # the Skeleton is the glTF skin: joint names, hierarchy (parents) and bind = inv(IBM)
+    gskin = g.nodes[node].skin
+    joint = _pose_joint(g, src, node, mesh, k)
+    sidx = (
+        gskin if gskin is not None else next(i for i, s in enumerate(g.skins) if joint in s.joints)
+    )
+    joints = list(g.skins[sidx].joints)
+    names = list(skel.GetPrim().GetAttribute("wrinkle:jointNames").Get())
+    assert names == [g.nodes[j].name or f"node{j}" for j in joints]
+    parents = {c: i for i, n in enumerate(g.nodes) for c in n.children or []}
+    topo = UsdSkel.Topology(skel.GetJointsAttr().Get())
+    assert [joints[p] if p >= 0 else None for p in topo.GetParentIndices()] == [
+        parents.get(j) if parents.get(j) in joints else None for j in joints
+    ]
+    ibm = ref.accessor(g, src, g.skins[sidx].inverseBindMatrices).reshape(-1, 4, 4)
+    np.testing.assert_allclose(
+        np.asarray(skel.GetBindTransformsAttr().Get()), np.linalg.inv(ibm), atol=1e-5
+    )
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root.Find(prim), Usd.TraverseInstanceProxies())
+    sq = cache.GetSkinningQuery(prim)
+    assert sq.HasJointInfluences()
+    ji, jw = sq.ComputeJointInfluences()
+    p = g.meshes[mesh].primitives[k]
+    if gskin is not None:  # the glTF's JOINTS_0 / WEIGHTS_0, per point
+        w = ref.accessor(g, src, p.attributes.WEIGHTS_0)
+        j = ref.accessor(g, src, p.attributes.JOINTS_0).astype(np.int64)
+        n = sq.GetNumInfluencesPerComponent()
+        np.testing.assert_allclose(np.asarray(jw).reshape(-1, n), w, atol=1e-6)
+        np.testing.assert_array_equal(np.asarray(ji).reshape(-1, n), np.where(w > 0, j, 0))
+        np.testing.assert_allclose(np.asarray(sq.GetGeomBindTransform()), np.eye(4))
+    else:  # rigid: bound to its joint whole
+        assert sq.IsRigidlyDeformed() and list(jw) == [1.0]
+        assert names[int(ji[0])] == g.nodes[parents[node]].name
+    # at rest and with a joint turned 30 degrees: UsdSkel's points = the glTF skin's
+    scale = float(np.ptp(ref.accessor(g, src, p.attributes.POSITION), axis=0).max())
+    for deg in (0.0, 30.0):
+        pose = {joint: _rot_x(deg)}
+        want = _gltf_posed(g, src, node, mesh, k, pose)
+        got = _usd_posed(usda, str(prim.GetPath()), g.nodes[joint].name, _rot_x(deg))
+        np.testing.assert_allclose(got, want, atol=2e-5 * max(scale, 1.0))
+        if deg:  # the pose moves the wrinkled vertices (the check can fail)
+            rest = _gltf_posed(g, src, node, mesh, k, {})
+            assert np.abs(want - rest).max() > 0.05 * scale
+
+
+@pytest.mark.parametrize("name", ["avatar", "robot", "cesium"])
+def test_usd_reads_the_wrinkled_mesh_the_gltf_path_measures(characters, name):
+    if name not in characters:
+        pytest.skip("../shared/data is absent")
+    _, out, asset = characters[name]
+    u = read_usd(out / f"{asset}.usda").mesh
+    g = read_wrinkled(out / f"{asset}.gltf").mesh
+    np.testing.assert_array_equal(u.indices, g.indices)
+    np.testing.assert_array_equal(u.vertex_ids, g.vertex_ids)
+    np.testing.assert_allclose(u.positions, g.positions, atol=1e-5)
+    np.testing.assert_allclose(u.tangents, g.tangents, atol=1e-5)
+    np.testing.assert_allclose(u.normals, g.normals, atol=1e-5)
+    np.testing.assert_allclose(u.uvs, g.uvs, atol=1e-6)
+    assert u.joint_names == g.joint_names and u.morph_names == g.morph_names
+    for f in ("joints", "skin_weights", "inverse_bind", "morph_deltas"):
+        a, b = getattr(u, f), getattr(g, f)
+        assert (a is None) == (b is None), f
+        if a is not None:
+            np.testing.assert_allclose(a, b, atol=1e-6)
+
+
+def _usd_errors(path: Path) -> list[str]:
+    from pxr import Usd, UsdValidation
+
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    return [
+        e.GetMessage()
+        for e in UsdValidation.ValidationContext(validators).Validate(Usd.Stage.Open(str(path)))
+        if e.GetType() == UsdValidation.ValidationErrorType.Error
+    ]
+
+
+@pytest.mark.parametrize("name", ["avatar", "robot", "cesium"])
+def test_usd_validation_and_validate_asset_are_clean(characters, name, capsys):
+    if name not in characters:
+        pytest.skip("../shared/data is absent")
+    _, out, asset = characters[name]
+    assert _usd_errors(out / f"{asset}.usda") == []
+    reports = {}
+    for suffix in ("usda", "gltf"):
+        args = [str(out / f"{asset}.{suffix}"), "--no-render", "--json"]
+        code = main(["validate-asset", *args, "--allow-root", str(ROBOT.parents[1])])
+        text = capsys.readouterr().out
+        reports[suffix] = json.loads(text[: text.rindex("}") + 1])
+        assert code == 0 and reports[suffix]["counts"]["error"] == 0
+    u, g = reports["usda"], reports["gltf"]
+    assert [i["code"] for i in u["issues"]] == [i["code"] for i in g["issues"]]
+    assert [i["message"] for i in u["issues"]] == [i["message"] for i in g["issues"]]
+    assert u["metrics"] == g["metrics"]
