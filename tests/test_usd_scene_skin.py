@@ -294,3 +294,112 @@ def test_usd_validation_and_validate_asset_are_clean(characters, name, capsys):
     assert [i["code"] for i in u["issues"]] == [i["code"] for i in g["issues"]]
     assert [i["message"] for i in u["issues"]] == [i["message"] for i in g["issues"]]
     assert u["metrics"] == g["metrics"]
+
+
+def _avatar_variant(tmp_path: Path, change) -> Path:
+    """The avatar source folder with its GLB's JSON changed by ``change(doc)``."""
+    from wrinklepipe.io.gltf_write import glb_bytes
+
+    folder = tmp_path / "src"
+    for rel, data in avatar.avatar_source_files().items():
+        (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+        (folder / rel).write_bytes(data)
+    doc, data = avatar.avatar_document()
+    change(doc)
+    (folder / "avatar.glb").write_bytes(glb_bytes(doc, data))
+    return folder / "manifest.toml"
+
+
+def test_wrinkled_mesh_outside_the_scene_is_written_unplaced(tmp_path):
+    from pxr import Usd, UsdSkel
+
+    def change(doc):  # the Head node (20) taken out of the scene
+        doc["scenes"][0]["nodes"] = [n for n in doc["scenes"][0]["nodes"] if n != 20]
+
+    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    assert any(
+        "is in no scene: written below /avatar/Scene/Unplaced" in n for n in res.report["notes"]
+    )
+    usda = tmp_path / "out" / "avatar.usda"
+    stage = Usd.Stage.Open(str(usda))
+    (prim,) = _wrinkled_prims(stage)
+    assert str(prim.GetPath()) == "/avatar/Scene/Unplaced/Head"
+    assert "/Scene/Skeletons/" in str(UsdSkel.BindingAPI(prim).GetInheritedSkeleton().GetPath())
+    u, g = read_usd(usda).mesh, read_wrinkled(tmp_path / "out" / "avatar.gltf").mesh
+    np.testing.assert_allclose(u.positions, g.positions, atol=1e-6)
+    np.testing.assert_array_equal(u.vertex_ids, g.vertex_ids)
+    assert _usd_errors(usda) == []
+
+
+def test_rigid_morph_head_under_no_joint_plays_its_blend_shapes(tmp_path):
+    """The Head made rigid (no skin) at the scene root: bound to the one-joint Morphs skeleton
+    (geomBindTransform = its world matrix), whose SkelAnimation plays the glTF output's morph
+    weight animation; UsdSkel's blend-shape query applies them to the points as glTF does."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    def change(doc):
+        del doc["nodes"][20]["skin"]
+        doc["nodes"][20]["translation"] = [0.0, 0.25, 0.0]
+        for p in doc["meshes"][0]["primitives"]:
+            p["attributes"].pop("JOINTS_0"), p["attributes"].pop("WEIGHTS_0")
+
+    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    out = tmp_path / "out"
+    stage = Usd.Stage.Open(str(out / "avatar.usda"))
+    (prim,) = _wrinkled_prims(stage)
+    skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+    assert skel.GetPath().name == "Morphs"
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root.Find(prim), Usd.TraverseInstanceProxies())
+    sq = cache.GetSkinningQuery(prim)
+    assert sq.IsRigidlyDeformed()
+    np.testing.assert_allclose(
+        np.asarray(sq.GetGeomBindTransform())[3, :3], [0.0, 0.25, 0.0], atol=1e-7
+    )
+    # the glTF output's morph-weight channel on the Head node = the SkelAnimation's samples
+    g = ref.load(out / "avatar.gltf")
+    names = g.meshes[0].extras["targetNames"]
+    channel = [  # the last: convert's curve animation (after the source's own)
+        (a, c)
+        for a in g.animations
+        for c in a.channels
+        if c.target.node == 20 and c.target.path == "weights"
+    ][-1]
+    sampler = channel[0].samplers[channel[1].sampler]
+    t = ref.accessor(g, out / "avatar.gltf", sampler.input).reshape(-1)
+    w = ref.accessor(g, out / "avatar.gltf", sampler.output).reshape(len(t), len(names))
+    anim = UsdSkel.Animation(UsdSkel.BindingAPI(skel.GetPrim()).GetAnimationSource())
+    assert list(anim.GetBlendShapesAttr().Get()) == names
+    attr = anim.GetBlendShapeWeightsAttr()
+    fps = stage.GetTimeCodesPerSecond()
+    np.testing.assert_allclose(np.asarray(attr.GetTimeSamples()) / fps, t, atol=1e-6)
+    got = np.stack([np.asarray(attr.Get(c)) for c in attr.GetTimeSamples()])
+    np.testing.assert_allclose(got, w, atol=1e-6)
+    # UsdSkel applies them: points at the busiest frame = positions + sum w deltas (glTF)
+    f = int(np.argmax(w.sum(1)))
+    code = attr.GetTimeSamples()[f]
+    skel_q = cache.GetSkelQuery(skel)
+    bsq = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(prim))
+    weights = sq.GetBlendShapeMapper().Remap(skel_q.GetAnimQuery().ComputeBlendShapeWeights(code))
+    sub = bsq.ComputeSubShapeWeights(weights)
+    pts = np.asarray(UsdGeom.Mesh(prim).GetPointsAttr().Get(), np.float32)
+    from pxr import Vt
+
+    posed = Vt.Vec3fArray.FromNumpy(pts.copy())
+    assert bsq.ComputeDeformedPoints(
+        sub[0],
+        sub[1],
+        sub[2],
+        bsq.ComputeBlendShapePointIndices(),
+        bsq.ComputeSubShapePointOffsets(),
+        posed,
+    )
+    p = g.meshes[0].primitives[0]
+    want = ref.accessor(g, out / "avatar.gltf", p.attributes.POSITION).astype(np.float64)
+    for i, target in enumerate(p.targets):
+        want = want + w[f, i] * ref.accessor(g, out / "avatar.gltf", target["POSITION"])
+    np.testing.assert_allclose(np.asarray(posed), want, atol=1e-5)
+    assert np.abs(want - pts).max() > 1e-3  # the frame moves the face
+    assert _usd_errors(out / "avatar.usda") == []

@@ -379,7 +379,7 @@ class _Scene:
             )
 
     # -- meshes ------------------------------------------------------------------------------
-    def mesh(self, parent: Any, name: str, ref: PrimitiveRef, node: int) -> None:
+    def mesh(self, parent: Any, name: str, ref: PrimitiveRef, node: int | None) -> None:
         from pxr import Gf, Sdf, UsdGeom, UsdShade, UsdSkel, Vt  # deferred: usd-core, USD only
 
         doc = self.doc
@@ -441,11 +441,12 @@ class _Scene:
             bound = self.material(material if isinstance(material, int) else None)
         if bound is not None:
             UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(bound)
-        skin = doc.array("nodes")[node].get("skin")
+        skin = doc.array("nodes")[node].get("skin") if node is not None else None
         targets = prim.get("targets") or []
         rigid = None
-        if not isinstance(skin, int) and (targets or self.joint_of(node) is not None):
-            rigid = self.rigid_bind(node)
+        if node is not None and not isinstance(skin, int):
+            if targets or self.joint_of(node) is not None:
+                rigid = self.rigid_bind(node)
         if not isinstance(skin, int) and rigid is None:
             return
         binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
@@ -493,6 +494,25 @@ class _Scene:
                 paths.append(bs.GetPath())
             binding.CreateBlendShapesAttr(Vt.TokenArray(tokens))
             binding.CreateBlendShapeTargetsRel().SetTargets(paths)
+
+    def unplaced(self) -> None:
+        """Wrinkled primitives no scene node instances (a mesh outside the scene): below
+        ``Scene/Unplaced`` in the space the render mesh reads them in (noted)."""
+        from pxr import UsdGeom  # deferred: usd-core, USD only
+
+        for k, r in enumerate(self.wrinkled.refs):
+            if k in self.wrinkled_paths:
+                continue
+            holder = self.root.AppendChild("Unplaced")
+            if not self.stage.GetPrimAtPath(holder):
+                UsdGeom.Xform.Define(self.stage, holder)
+            node = self.wrinkle_index[(r.mesh, r.primitive)][1]
+            self.wrinkle_index[(r.mesh, r.primitive)] = (k, node)
+            self.mesh(holder, self.doc.mesh_name(r.mesh), r, node)
+            self.notes.append(
+                f"USD: wrinkled primitive {r.pointer} is in no scene: written below "
+                f"{holder} in its mesh's space"
+            )
 
     # -- nodes -------------------------------------------------------------------------------
     def node(self, parent: Any, i: int, seen: set[int]) -> None:
@@ -565,9 +585,7 @@ def add_scene(
     for r in roots:
         s.node(scene_path, r, seen)
     s.animate_morphs()
-    missing = [r.pointer for k, r in enumerate(wrinkled.refs) if k not in s.wrinkled_paths]
-    if missing:
-        raise doc.err(f"wrinkled primitive(s) {missing} are in no scene: cannot bind them in USD")
+    s.unplaced()
     if doc.array("animations"):
         s.notes.append(
             f"USD: the {len(doc.array('animations'))} glTF animation(s) of the source are not "
