@@ -163,3 +163,51 @@ def test_usd_bad_inputs(tmp_path):
     (tmp_path / "junk.usda").write_text("this is not usd")
     with pytest.raises(InputError, match="cannot open"):
         load_mesh(tmp_path / "junk.usda")
+
+
+@needs_data
+def test_points_only_time_sampled_are_read_at_the_start_time_code():
+    """OpenUSD's baked blend-shape baseline: /GroundTruth/Mesh has points (and topology) only
+    as time samples (113 frames), the stage startTimeCode = 1: read at time code 1 (pxr's own
+    points there), the choice in the notes; /TestPlane/Mesh (a default value) as before."""
+    f = SKEL / "baseline/blendshapes.baked.usda"
+    meshes = {m.name: m for m in load_meshes(f, RAW)}
+    assert set(meshes) == {"/GroundTruth/Mesh", "/TestPlane/Mesh"}  # before: GroundTruth skipped
+    m = meshes["/GroundTruth/Mesh"]
+    stage = Usd.Stage.Open(str(f))
+    attr = UsdGeom.Mesh(stage.GetPrimAtPath("/GroundTruth/Mesh")).GetPointsAttr()
+    assert attr.Get(Usd.TimeCode.Default()) is None and len(attr.GetTimeSamples()) == 113
+    at_start = np.asarray(attr.Get(1.0), np.float32)
+    moves = max(np.abs(np.asarray(attr.Get(t)) - at_start).max() for t in attr.GetTimeSamples())
+    assert moves > 0.1  # so which sample is read matters
+    np.testing.assert_array_equal(m.positions, at_start[nearest(at_start, m.positions)])
+    assert len(np.unique(nearest(at_start, m.positions))) == len(at_start)  # every point
+    assert any(
+        "only 113 time sample(s): read at time code 1 (the stage's startTimeCode)" in n
+        for n in m.notes
+    )
+    assert not any("time sample" in n for n in meshes["/TestPlane/Mesh"].notes)
+
+
+def test_points_only_time_sampled_without_a_range_use_the_earliest_sample(tmp_path):
+    """A generated stage (no time-code range): points sampled at 5 and 10 only, the transform
+    animated too: read whole at 5 (the earliest sample); an explicit time still wins."""
+    path = tmp_path / "sampled.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    xf = UsdGeom.Xform.Define(stage, "/W")
+    op = xf.AddTranslateOp()
+    op.Set((0.0, 1.0, 0.0), 5.0)
+    op.Set((0.0, 3.0, 0.0), 10.0)
+    mesh = UsdGeom.Mesh.Define(stage, "/W/M")
+    mesh.CreateFaceVertexCountsAttr([3])
+    mesh.CreateFaceVertexIndicesAttr([0, 1, 2])
+    pts = mesh.CreatePointsAttr()
+    pts.Set(Vt.Vec3fArray([(0, 0, 0), (1, 0, 0), (0, 1, 0)]), 5.0)
+    pts.Set(Vt.Vec3fArray([(0, 0, 0), (2, 0, 0), (0, 2, 0)]), 10.0)
+    stage.GetRootLayer().Save()
+    (m,) = load_meshes(path, RAW)
+    np.testing.assert_array_equal(m.positions, [[0, 1, 0], [1, 1, 0], [0, 2, 0]])  # t = 5
+    assert any("read at time code 5 (the earliest of 2 samples)" in n for n in m.notes)
+    (late,) = load_meshes(path, LoadOptions(generate_uvs=False, usd_time=10.0))
+    np.testing.assert_array_equal(late.positions, [[0, 3, 0], [2, 3, 0], [0, 5, 0]])
+    assert not any("time sample" in n for n in late.notes)

@@ -863,3 +863,31 @@ def test_lbs_source_without_units_or_default_prim(tmp_path):
     assert stage.GetDefaultPrim().GetPath() == Sdf.Path("/Root")
     assert any("to USD's fallbacks" in n for n in report["notes"])
     assert _errors(stage) == [] and _errors(Usd.Stage.Open(str(out / "lbs.usdz"))) == []
+
+
+def test_eye_with_only_time_sampled_points_is_wrinkled_at_the_start_time_code(tmp_path):
+    """The eye's points only as time samples (0 and 24; the stage's startTimeCode = 0): the
+    selection and the layer read it at time code 0 (said in the report); its wrinkle primvars
+    are one per point; reading the layer back gives the t = 0 points, baked to world."""
+    source = write_avatar(tmp_path / "assets")
+    text = source.read_text()
+    rest = "point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]"
+    assert text.count(rest) == 1  # the eye's quad (z = 0, y0 = 0)
+    moved = "[(0, 0, 0.5), (1, 0, 0.5), (1, 1, 0.5), (0, 1, 0.5)]"
+    sampled = f"point3f[] points.timeSamples = {{0: {rest.split(' = ')[1]}, 24: {moved}}}"
+    source.write_text(text.replace(rest, sampled))
+    out, report, _ = _convert(tmp_path, source, "eye", material="/Avatar/Looks/Eye")
+    assert any(
+        "only 2 time sample(s): read at time code 0 (the stage's startTimeCode)" in n
+        for n in report["notes"]
+    ), report["notes"]
+    stage = Usd.Stage.Open(str(out / "eye.usda"))
+    eye = stage.GetPrimAtPath("/Avatar/EyeRig/Eye")
+    ids = UsdGeom.PrimvarsAPI(eye).GetPrimvar("wrinkle:vertexId")
+    assert ids.GetInterpolation() == "vertex" and len(ids.Get()) == 4
+    with allowed_roots([source.parent]):
+        pkg = read_usd(out / "eye.usda")
+    # world = translate (0, 1.6, 0.2) rotateY(90): local (x, y, 0) -> (0, 1.6 + y, 0.2 - x)
+    want = [[0, 1.6, 0.2], [0, 1.6, -0.8], [0, 2.6, -0.8], [0, 2.6, 0.2]]
+    np.testing.assert_allclose(np.sort(pkg.mesh.positions, 0), np.sort(want, 0), atol=1e-6)
+    assert _errors(stage) == []

@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from wrinklepipe.io.mesh_usd import open_stage
+from wrinklepipe.io.mesh_usd import mesh_time, open_stage
 
 
 def _value_label(attr: Any) -> str:
@@ -46,7 +46,7 @@ def _value_label(attr: Any) -> str:
 
 
 def _prim(prim: Any) -> dict[str, Any]:
-    from pxr import UsdGeom, UsdShade, UsdSkel  # deferred: usd-core, USD only
+    from pxr import Usd, UsdGeom, UsdShade, UsdSkel  # deferred: usd-core, USD only
 
     row: dict[str, Any] = {"type": str(prim.GetTypeName()) or "(over)"}
     applied = list(prim.GetAppliedSchemas())
@@ -60,7 +60,8 @@ def _prim(prim: Any) -> dict[str, Any]:
         row["instance"] = True
     if prim.IsA(UsdGeom.Mesh):
         m = UsdGeom.Mesh(prim)
-        row["points"] = len(m.GetPointsAttr().Get() or [])
+        time, _ = mesh_time(prim, Usd.TimeCode.Default())  # only time-sampled: a sample's count
+        row["points"] = len(m.GetPointsAttr().Get(time) or [])
         row["faces"] = len(m.GetFaceVertexCountsAttr().Get() or [])
         mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
         row["material"] = str(mat.GetPath()) if mat else ""

@@ -45,6 +45,7 @@ import numpy as np
 
 from wrinklepipe.document.usd_source import UsdSource
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.mesh_usd import mesh_time
 from wrinklepipe.io.package import WrinklePackage, png_bytes
 from wrinklepipe.io.usd_write import LAYERED_OVER, UsdOptions, build_stage, usdz_bytes
 
@@ -338,12 +339,12 @@ def topology_values(
 def _mesh_overs(
     stage: Any, part: Any, pkg: WrinklePackage, added_uvs: tuple[str, ...], uv_name: str
 ) -> None:
-    from pxr import Sdf, UsdGeom, Vt  # deferred: usd-core, USD only
+    from pxr import Sdf, Usd, UsdGeom, Vt  # deferred: usd-core, USD only
 
     prim = stage.GetPrimAtPath(part.pointer)
     gm = UsdGeom.Mesh(prim)
     fvi = np.asarray(gm.GetFaceVertexIndicesAttr().Get(), np.int64)
-    n_p = len(gm.GetPointsAttr().Get())
+    n_p = len(gm.GetPointsAttr().Get(mesh_time(prim, Usd.TimeCode.Default())[0]) or [])
     if part.corners is None or len(part.corners) != len(fvi):
         raise input_error(part.pointer, "the render mesh does not map onto the prim's corners")
     rows = slice(part.start, part.start + part.count)

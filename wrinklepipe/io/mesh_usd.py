@@ -1,6 +1,9 @@
 """USD mesh ingest (usd-core): UsdGeom.Mesh + UsdSkel blend shapes and skinning -> Meshes.
 
-- Points at the requested time; ``faceVertexCounts``/``faceVertexIndices`` fan-triangulated
+- Points at the requested time (default: the default value; a mesh whose points are only
+  time-sampled is read whole at the stage's ``startTimeCode`` when the stage authors one, else
+  at its earliest sample, said in ``Mesh.notes``: :func:`mesh_time`);
+  ``faceVertexCounts``/``faceVertexIndices`` fan-triangulated
   (``leftHanded`` orientation flips the winding); holes are not cut (noted when present).
 - UVs: the ``st`` primvar (else the first ``texCoord2f`` primvar), with ``vertex``,
   ``faceVarying`` or ``uniform`` interpolation, indexed or not. USD's v points up: v is flipped
@@ -101,6 +104,34 @@ def read_usd_meshes(path: str | Path, options: UsdMeshOptions | None = None) -> 
     return out
 
 
+def mesh_time(prim: Any, time: Any) -> tuple[Any, str]:
+    """The time code a Mesh prim is read at, and a note when a choice was made: ``time``, except
+    the default time for points that have no default value but time samples: the stage's
+    ``startTimeCode`` when it authors a time-code range, else the earliest sample."""
+    from pxr import Usd, UsdGeom  # deferred: usd-core, USD only
+
+    if not time.IsDefault():
+        return time, ""
+    attr = UsdGeom.Mesh(prim).GetPointsAttr()
+    if attr.Get(time) is not None:
+        return time, ""
+    samples = attr.GetTimeSamples()
+    if not samples:
+        return time, ""
+    stage = prim.GetStage()
+    if stage.HasAuthoredTimeCodeRange():
+        code = float(stage.GetStartTimeCode())
+        why = "the stage's startTimeCode"
+    else:
+        code = float(samples[0])
+        why = f"the earliest of {len(samples)} samples"
+    note = (
+        f"points have no default value, only {len(samples)} time sample(s): read at time code "
+        f"{code:g} ({why})"
+    )
+    return Usd.TimeCode(code), note
+
+
 def _primvar_corners(
     pv: Any, time: Any, counts: np.ndarray, fvi: np.ndarray, n_points: int, width: int
 ) -> tuple[np.ndarray | None, str]:
@@ -160,6 +191,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     file = str(path)
     ppath = str(prim.GetPath())
     gm = UsdGeom.Mesh(prim)
+    time, time_note = mesh_time(prim, time)
     pts_v = gm.GetPointsAttr().Get(time)
     counts_v = gm.GetFaceVertexCountsAttr().Get(time)
     fvi_v = gm.GetFaceVertexIndicesAttr().Get(time)
@@ -169,7 +201,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     counts = np.asarray(counts_v, dtype=np.int64)
     fvi = np.asarray(fvi_v, dtype=np.int64)
     n_p = len(pts)
-    notes: list[str] = []
+    notes: list[str] = [time_note] if time_note else []
     if counts.sum() != len(fvi) or (counts < 3).any():
         raise input_error(file, "faceVertexCounts do not match faceVertexIndices (or a face has"
                           " fewer than 3 corners)", key=f"{ppath}.faceVertexCounts")  # fmt: skip
