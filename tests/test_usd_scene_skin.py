@@ -403,3 +403,50 @@ def test_rigid_morph_head_under_no_joint_plays_its_blend_shapes(tmp_path):
     np.testing.assert_allclose(np.asarray(posed), want, atol=1e-5)
     assert np.abs(want - pts).max() > 1e-3  # the frame moves the face
     assert _usd_errors(out / "avatar.usda") == []
+
+
+def test_texture_transform_becomes_a_usd_transform2d(tmp_path):
+    """KHR_texture_transform on the Body's base colour (offset, rotation, scale, texCoord): a
+    UsdTransform2d between its primvar reader and the texture whose transform of USD's st,
+    applied as the UsdPreviewSurface spec says (scale, then rotate counter-clockwise by
+    degrees, then translate), is the glTF transform of uv (the spec's T * R * S, written out
+    here as three.js's GLTFLoader builds its matrix) with v flipped."""
+    from pxr import Usd, UsdShade
+
+    xf = {"offset": [0.25, -0.5], "rotation": 0.4, "scale": [0.5, 2.0], "texCoord": 0}
+
+    def change(doc):
+        doc["materials"][3]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
+            "KHR_texture_transform": xf
+        }
+        doc["extensionsUsed"].append("KHR_texture_transform")
+
+    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    assert not any("KHR_texture_transform" in n for n in res.report["notes"])
+    usda = tmp_path / "out" / "avatar.usda"
+    stage = Usd.Stage.Open(str(usda))
+    body = next(p for p in stage.Traverse() if p.IsA(UsdShade.Material) and p.GetName() == "Body")
+    tex = UsdShade.Shader(body.GetChild("baseColorTexture"))
+    src, _, _ = tex.GetInput("st").GetConnectedSource()
+    t2d = UsdShade.Shader(src.GetPrim())
+    assert t2d.GetIdAttr().Get() == "UsdTransform2d"
+    reader, _, _ = t2d.GetInput("in").GetConnectedSource()
+    assert reader.GetPrim().GetAttribute("inputs:varname").Get() == "st"
+    scale = np.asarray(t2d.GetInput("scale").Get(), np.float64)
+    deg = float(t2d.GetInput("rotation").Get())
+    move = np.asarray(t2d.GetInput("translation").Get(), np.float64)
+    # glTF: uv' = M (u, v, 1), M as three.js sets it (row-major) for T * R * S
+    (ox, oy), r, (sx, sy) = xf["offset"], xf["rotation"], xf["scale"]
+    c, s = np.cos(r), np.sin(r)
+    m = np.array([[sx * c, sy * s, ox], [-sx * s, sy * c, oy], [0, 0, 1]])
+    uv = np.stack(np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 5)), -1).reshape(-1, 2)
+    want = (np.concatenate([uv, np.ones((len(uv), 1))], 1) @ m.T)[:, :2]
+    # USD: st = (u, 1 - v); st' = translation + rotate(deg) (scale * st); back to uv
+    st = np.stack([uv[:, 0], 1 - uv[:, 1]], -1) * scale
+    a = np.radians(deg)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    st2 = st @ rot.T + move
+    got = np.stack([st2[:, 0], 1 - st2[:, 1]], -1)
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    assert _usd_errors(usda) == []

@@ -21,8 +21,10 @@ character below ``/NAME/Scene``::
                                  texture, alpha), metallic / roughness, normal, occlusion,
                                  emissive; the images copied byte for byte (PNG, JPEG)
 
-What USD's preview surface cannot hold is said in a note (KTX2 / WebP images, texture
-transforms, node animations); the glTF output beside it keeps everything.
+A ``KHR_texture_transform`` on a texture becomes a ``UsdTransform2d`` between its primvar
+reader and the texture (:func:`usd_texture_transform`; its ``texCoord`` honoured). What USD's
+preview surface cannot hold is said in a note (KTX2 / WebP images, node animations); the glTF
+output beside it keeps everything.
 """
 
 from __future__ import annotations
@@ -55,6 +57,20 @@ class WrinkledPrims:
     material: Any
     morph_names: tuple[str, ...] = ()
     morph_curve: tuple[np.ndarray, np.ndarray] | None = None
+
+
+def usd_texture_transform(xf: dict[str, Any]) -> tuple[tuple[float, float], float, tuple]:
+    """A glTF ``KHR_texture_transform`` (``uv' = offset + R(rotation) scale uv``, v down, R
+    turning ``(u, v)`` to ``(c u + s v, -s u + c v)``) as ``UsdTransform2d`` inputs on USD's
+    ``st = (u, 1 - v)``: (scale, rotation in degrees counter-clockwise, translation); USD
+    applies scale, then the rotation, then the translation. Flipping v conjugates R into the
+    ordinary counter-clockwise rotation by the same angle and moves the origin:
+    ``translation = (ox + s sy, 1 - oy - c sy)``."""
+    ox, oy = (float(x) for x in xf.get("offset", [0.0, 0.0]))
+    sx, sy = (float(x) for x in xf.get("scale", [1.0, 1.0]))
+    r = float(xf.get("rotation", 0.0))
+    c, s = float(np.cos(r)), float(np.sin(r))
+    return (sx, sy), float(np.degrees(r)), (ox + s * sy, 1.0 - oy - c * sy)
 
 
 class _Names:
@@ -174,16 +190,26 @@ class _Scene:
             path = self.image_path(info["index"])
             if path is None:
                 return None
-            if "KHR_texture_transform" in (info.get("extensions") or {}):
-                self.notes.append(
-                    f"USD: /materials/{index}/{key} has KHR_texture_transform; not carried "
-                    "into the USD preview surface (kept in the glTF)"
+            tc = int(info.get("texCoord", 0))
+            xf = (info.get("extensions") or {}).get("KHR_texture_transform")
+            st = None
+            if isinstance(xf, dict):
+                tc = int(xf.get("texCoord", tc))
+                st = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(f"{key}_uv"))
+                st.CreateIdAttr("UsdTransform2d")
+                st.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(
+                    reader(tc).ConnectableAPI(), "result"
                 )
+                uv_scale, degrees, uv_move = usd_texture_transform(xf)
+                st.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*uv_scale))
+                st.CreateInput("rotation", Sdf.ValueTypeNames.Float).Set(degrees)
+                st.CreateInput("translation", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*uv_move))
+                st.CreateOutput("result", Sdf.ValueTypeNames.Float2)
             tex = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(key))
             tex.CreateIdAttr("UsdUVTexture")
             tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"./{path}"))
             tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
-                reader(int(info.get("texCoord", 0))).ConnectableAPI(), "result"
+                (st or reader(tc)).ConnectableAPI(), "result"
             )
             tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(color_space)
             tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*scale))
