@@ -305,7 +305,7 @@ def _avatar_variant(tmp_path: Path, change) -> Path:
         (folder / rel).parent.mkdir(parents=True, exist_ok=True)
         (folder / rel).write_bytes(data)
     doc, data = avatar.avatar_document()
-    change(doc)
+    data = change(doc, data, folder) or data
     (folder / "avatar.glb").write_bytes(glb_bytes(doc, data))
     return folder / "manifest.toml"
 
@@ -313,7 +313,7 @@ def _avatar_variant(tmp_path: Path, change) -> Path:
 def test_wrinkled_mesh_outside_the_scene_is_written_unplaced(tmp_path):
     from pxr import Usd, UsdSkel
 
-    def change(doc):  # the Head node (20) taken out of the scene
+    def change(doc, data, folder):  # the Head node (20) taken out of the scene
         doc["scenes"][0]["nodes"] = [n for n in doc["scenes"][0]["nodes"] if n != 20]
 
     res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
@@ -338,7 +338,7 @@ def test_rigid_morph_head_under_no_joint_plays_its_blend_shapes(tmp_path):
     weight animation; UsdSkel's blend-shape query applies them to the points as glTF does."""
     from pxr import Usd, UsdGeom, UsdSkel
 
-    def change(doc):
+    def change(doc, data, folder):
         del doc["nodes"][20]["skin"]
         doc["nodes"][20]["translation"] = [0.0, 0.25, 0.0]
         for p in doc["meshes"][0]["primitives"]:
@@ -415,7 +415,7 @@ def test_texture_transform_becomes_a_usd_transform2d(tmp_path):
 
     xf = {"offset": [0.25, -0.5], "rotation": 0.4, "scale": [0.5, 2.0], "texCoord": 0}
 
-    def change(doc):
+    def change(doc, data, folder):
         doc["materials"][3]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
             "KHR_texture_transform": xf
         }
@@ -450,3 +450,90 @@ def test_texture_transform_becomes_a_usd_transform2d(tmp_path):
     got = np.stack([st2[:, 0], 1 - st2[:, 1]], -1)
     np.testing.assert_allclose(got, want, atol=1e-6)
     assert _usd_errors(usda) == []
+
+
+def _image(doc: dict, data: bytes, i: int) -> bytes:
+    view = doc["bufferViews"][doc["images"][i]["bufferView"]]
+    return data[view.get("byteOffset", 0) :][: view["byteLength"]]
+
+
+def _append_image(doc: dict, data: bytes, blob: bytes, mime: str, name: str) -> tuple[int, bytes]:
+    pad = b"\0" * ((-len(data)) % 4)
+    doc["bufferViews"].append(
+        {"buffer": 0, "byteOffset": len(data) + len(pad), "byteLength": len(blob)}
+    )
+    doc["images"].append(
+        {"name": name, "mimeType": mime, "bufferView": len(doc["bufferViews"]) - 1}
+    )
+    new = data + pad + blob
+    new += b"\0" * ((-len(new)) % 4)
+    doc["buffers"][0]["byteLength"] = len(new)
+    return len(doc["images"]) - 1, new
+
+
+def test_ktx2_and_webp_images_are_transcoded_to_png_for_usd(tmp_path):
+    """The Body's base colour only as a UASTC KTX2 image (KHR_texture_basisu, no fallback
+    source) and the Teeth's only as a lossless WebP (EXT_texture_webp): the USD's textures are
+    PNGs of their pixels (PIL reads them: the WebP's exactly, the KTX2's as alktx2 decodes it,
+    close to the source PNG), noted; the glTF keeps both images byte for byte."""
+    import io
+
+    alktx2 = pytest.importorskip("alktx2")
+    from PIL import Image
+    from pxr import Usd, UsdShade
+
+    blobs: dict[str, bytes] = {}
+
+    def change(doc, data, folder):
+        body = doc["materials"][3]["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+        teeth = doc["materials"][2]["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+        png = folder / "body.png"
+        blobs["body_png"] = _image(doc, data, doc["textures"][body]["source"])
+        png.write_bytes(blobs["body_png"])
+        ktx = folder / "body.ktx2"
+        alktx2.encode_image_to_ktx2(
+            str(png), str(ktx), codec="uastc", srgb=True, quality=255, effort=5
+        )
+        blobs["ktx2"] = ktx.read_bytes()
+        png.unlink(), ktx.unlink()
+        blobs["teeth_png"] = _image(doc, data, doc["textures"][teeth]["source"])
+        webp = io.BytesIO()
+        Image.open(io.BytesIO(blobs["teeth_png"])).save(webp, "WEBP", lossless=True)
+        blobs["webp"] = webp.getvalue()
+        k, data = _append_image(doc, data, blobs["ktx2"], "image/ktx2", "body_ktx2")
+        doc["textures"][body] = {"extensions": {"KHR_texture_basisu": {"source": k}}}
+        w, data = _append_image(doc, data, blobs["webp"], "image/webp", "teeth_webp")
+        doc["textures"][teeth] = {"extensions": {"EXT_texture_webp": {"source": w}}}
+        doc["extensionsUsed"] += ["KHR_texture_basisu", "EXT_texture_webp"]
+        doc.setdefault("extensionsRequired", []).extend(["KHR_texture_basisu", "EXT_texture_webp"])
+        return data
+
+    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    notes = [n for n in res.report["notes"] if "transcoded to PNG for the USD" in n]
+    assert (
+        len(notes) == 2 and "image/ktx2" in notes[0] + notes[1] and "image/webp" in "".join(notes)
+    )
+    out = tmp_path / "out"
+    stage = Usd.Stage.Open(str(out / "avatar.usda"))
+
+    def usd_pixels(material: str) -> np.ndarray:
+        mat = next(
+            p for p in stage.Traverse() if p.IsA(UsdShade.Material) and p.GetName() == material
+        )
+        f = UsdShade.Shader(mat.GetChild("baseColorTexture")).GetInput("file").Get().path
+        assert f.endswith(".png")
+        return np.asarray(Image.open(out / f).convert("RGBA"), np.int64)
+
+    teeth = np.asarray(Image.open(io.BytesIO(blobs["teeth_png"])).convert("RGBA"), np.int64)
+    np.testing.assert_array_equal(usd_pixels("Teeth"), teeth)  # lossless WebP: exact
+    decoded, _ = alktx2.decode_ktx2_to_bytes(blobs["ktx2"], format="png")
+    ktx_px = np.asarray(Image.open(io.BytesIO(bytes(decoded))).convert("RGBA"), np.int64)
+    np.testing.assert_array_equal(usd_pixels("Body"), ktx_px)
+    body = np.asarray(Image.open(io.BytesIO(blobs["body_png"])).convert("RGBA"), np.int64)
+    assert np.abs(ktx_px - body).mean() < 4  # UASTC: close to the source
+    # the glTF output keeps both images as they were
+    g = ref.load(out / "avatar.gltf")
+    got = {ref.image_bytes(g, out / "avatar.gltf", i) for i in range(len(g.images))}
+    assert {blobs["ktx2"], blobs["webp"]} <= got
+    assert _usd_errors(out / "avatar.usda") == []

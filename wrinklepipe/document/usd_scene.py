@@ -19,12 +19,13 @@ character below ``/NAME/Scene``::
                                  names in ``wrinkle:jointNames``
       Looks/<material>           UsdPreviewSurface per glTF material: base colour (factor,
                                  texture, alpha), metallic / roughness, normal, occlusion,
-                                 emissive; the images copied byte for byte (PNG, JPEG)
+                                 emissive; PNG / JPEG images copied byte for byte
 
 A ``KHR_texture_transform`` on a texture becomes a ``UsdTransform2d`` between its primvar
 reader and the texture (:func:`usd_texture_transform`; its ``texCoord`` honoured). What USD's
-preview surface cannot hold is said in a note (KTX2 / WebP images, node animations); the glTF
-output beside it keeps everything.
+preview surface cannot read (a KTX2 / Basis Universal or WebP image) is transcoded to PNG for
+it (noted); node animations are not carried (noted); the glTF output beside it keeps
+everything as it was.
 """
 
 from __future__ import annotations
@@ -34,13 +35,15 @@ from typing import Any
 
 import numpy as np
 
+from wrinklepipe.document.images import image_pixels, texture_source
 from wrinklepipe.document.model import Document, PrimitiveRef
 from wrinklepipe.document.render_mesh import BIAS_ATTRIBUTE
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
 from wrinklepipe.document.write import mime_type
+from wrinklepipe.errors import InputError, plain_reason
 from wrinklepipe.io.mesh_gltf import _node_matrix  # the one glTF TRS -> matrix
-from wrinklepipe.io.package import WrinklePackage
+from wrinklepipe.io.package import WrinklePackage, png_bytes
 from wrinklepipe.io.usd_write import SCENE_MESHES
 
 _EXT = {"image/png": "png", "image/jpeg": "jpg"}
@@ -130,28 +133,49 @@ class _Scene:
 
     # -- materials ---------------------------------------------------------------------------
     def image_path(self, texture: int) -> str | None:
+        """The file a texture's image is in for the USD (relative to the layer): its PNG/JPEG
+        ``source`` byte for byte; else its KHR_texture_basisu / EXT_texture_webp image (or a
+        source in another format) transcoded to PNG (noted); None when none decodes."""
         doc = self.doc
         tex = doc.array("textures")[texture] if 0 <= texture < len(doc.array("textures")) else {}
-        src = tex.get("source")
-        if not isinstance(src, int):
-            self.notes.append(f"USD: texture {texture} has no PNG/JPEG source; left out")
-            return None
+        plain = tex.get("source")
+        if isinstance(plain, int) and self.mime(plain) in _EXT:
+            src = plain
+        else:
+            try:
+                src = texture_source(doc, texture)
+            except InputError:
+                self.notes.append(f"USD: texture {texture} has no source image; left out")
+                return None
         if src not in self.images:
             data = doc.image_bytes(src)
             img = doc.array("images")[src]
-            ext = _EXT.get(mime_type(data, str(img.get("uri", ""))))
+            mime = self.mime(src)
+            ext = _EXT.get(mime)
             if ext is None:
+                try:
+                    data, ext = png_bytes(image_pixels(doc, src)), "png"
+                except InputError as exc:
+                    self.notes.append(
+                        f"USD: image {src} ({img.get('name', '')!r}, {mime}) does not decode "
+                        f"({plain_reason(exc)}): left out of the USD (kept in the glTF)"
+                    )
+                    self.images[src] = None
+                    return None
                 self.notes.append(
-                    f"USD: image {src} ({img.get('name', '')!r}) is not PNG or JPEG; "
-                    "UsdPreviewSurface cannot read it: left out of the USD (kept in the glTF)"
+                    f"USD: image {src} ({img.get('name', '')!r}) is {mime}, which "
+                    "UsdPreviewSurface cannot read: transcoded to PNG for the USD (the glTF "
+                    "keeps it as it is)"
                 )
-                self.images[src] = None
-            else:
-                stem = self.names("images", str(img.get("name") or f"image_{src}"))
-                rel = f"{self.tdir}/source/{stem}.{ext}" if self.tdir else f"source/{stem}.{ext}"
-                self.files[rel] = data
-                self.images[src] = rel
+            stem = self.names("images", str(img.get("name") or f"image_{src}"))
+            rel = f"{self.tdir}/source/{stem}.{ext}" if self.tdir else f"source/{stem}.{ext}"
+            self.files[rel] = data
+            self.images[src] = rel
         return self.images[src]
+
+    def mime(self, image: int) -> str:
+        img = self.doc.array("images")[image]
+        return mime_type(self.doc.image_bytes(image), str(img.get("uri", "")))
 
     def material(self, index: int | None) -> Any:
         from pxr import Gf, Sdf, UsdGeom, UsdShade  # deferred: usd-core, USD only
