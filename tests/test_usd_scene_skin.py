@@ -537,3 +537,92 @@ def test_ktx2_and_webp_images_are_transcoded_to_png_for_usd(tmp_path):
     got = {ref.image_bytes(g, out / "avatar.gltf", i) for i in range(len(g.images))}
     assert {blobs["ktx2"], blobs["webp"]} <= got
     assert _usd_errors(out / "avatar.usda") == []
+
+
+def _clip_pose(g, src: Path, a: int) -> tuple[float, dict[int, np.ndarray]]:
+    """A time that is a key of every TRS channel of animation ``a`` (the middle key of the
+    first) and each animated node's local matrix there, read from the accessors."""
+    anim = g.animations[a]
+    chans = [c for c in anim.channels if c.target.path in ("translation", "rotation", "scale")]
+    times = [ref.accessor(g, src, anim.samplers[c.sampler].input).reshape(-1) for c in chans]
+    t = float(times[0][len(times[0]) // 2])
+    trs: dict[int, dict[str, np.ndarray]] = {}
+    for c, keys in zip(chans, times):
+        (k,) = np.flatnonzero(np.isclose(keys, t, atol=1e-6))  # a key of every channel
+        values = ref.accessor(g, src, anim.samplers[c.sampler].output)
+        trs.setdefault(c.target.node, {})[c.target.path] = values[k]
+    locals_ = {}
+    for n, got in trs.items():
+        node = g.nodes[n]
+        tr = got.get("translation", node.translation or [0, 0, 0])
+        x, y, z, w = got.get("rotation", node.rotation or [0, 0, 0, 1])
+        sc = got.get("scale", node.scale or [1, 1, 1])
+        m = np.eye(4)
+        m[:3, :3] = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+            ]
+        ) * np.asarray(sc)
+        m[:3, 3] = tr
+        locals_[n] = m
+    return t, locals_
+
+
+@pytest.mark.parametrize(("name", "clip"), [("robot", "Wave"), ("cesium", None)])
+def test_gltf_clips_play_as_skel_animations(characters, name, clip):
+    """Each glTF animation is a SkelAnimation variant of Scene's 'animation' set: with the clip
+    selected, UsdSkel's skinned points of the wrinkled primitive at a key time equal the glTF
+    skin (numpy LBS of the accessors, the keyed TRS put on the nodes) at that time."""
+    from pxr import Usd, UsdGeom, UsdSkel, Vt
+
+    if name not in characters:
+        pytest.skip("../shared/data is absent")
+    src, out, asset = characters[name]
+    g = ref.load(src)
+    a = next(i for i, x in enumerate(g.animations) if x.name == clip) if clip else 0
+    t, locals_ = _clip_pose(g, src, a)
+    stage = Usd.Stage.Open(str(out / f"{asset}.usda"))
+    vset = stage.GetDefaultPrim().GetChild("Scene").GetVariantSets().GetVariantSet("animation")
+    variant = clip or "animation_0"
+    assert variant in vset.GetVariantNames()
+    stage.SetEditTarget(stage.GetSessionLayer())
+    vset.SetVariantSelection(variant)
+    (prim,) = _wrinkled_prims(stage)
+    node, mesh, k = _wrinkled_node(ref.load(out / f"{asset}.gltf"), out / f"{asset}.gltf")
+    skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root.Find(prim), Usd.TraverseInstanceProxies())
+    code = Usd.TimeCode(t * stage.GetTimeCodesPerSecond())
+    xf = cache.GetSkelQuery(skel).ComputeSkinningTransforms(code)
+    pts = Vt.Vec3fArray(UsdGeom.Mesh(prim).GetPointsAttr().Get())
+    assert cache.GetSkinningQuery(prim).ComputeSkinnedPoints(xf, pts, code)
+    got = np.asarray(pts, np.float64)
+
+    parents = {c: i for i, n in enumerate(g.nodes) for c in n.children or []}
+    worlds: dict[int, np.ndarray] = {}
+
+    def world(i: int) -> np.ndarray:
+        if i not in worlds:
+            local = locals_.get(i, _local(g.nodes[i]))
+            worlds[i] = local if i not in parents else world(parents[i]) @ local
+        return worlds[i]
+
+    p = g.meshes[mesh].primitives[k]
+    pos = ref.accessor(g, src, p.attributes.POSITION).astype(np.float64)
+    if g.nodes[node].skin is None:
+        m = world(node)
+        want = pos @ m[:3, :3].T + m[:3, 3]
+    else:
+        s = g.skins[g.nodes[node].skin]
+        ibm = ref.accessor(g, src, s.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)
+        j = ref.accessor(g, src, p.attributes.JOINTS_0).astype(np.int64)
+        w = ref.accessor(g, src, p.attributes.WEIGHTS_0).astype(np.float64)
+        mats = np.stack([world(x) for x in s.joints]) @ ibm
+        h = np.concatenate([pos, np.ones((len(pos), 1))], 1)
+        want = np.einsum("vk,vka->va", w, np.einsum("vkab,vb->vka", mats[j], h)[..., :3])
+    size = float(np.ptp(pos, axis=0).max())
+    np.testing.assert_allclose(got, want, atol=1e-4 * max(size, 1.0))
+    rest = _gltf_posed(g, src, node, mesh, k, {})
+    assert np.abs(want - rest).max() > 0.01 * size  # the clip moves it at that time

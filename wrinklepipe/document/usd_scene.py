@@ -39,6 +39,7 @@ from wrinklepipe.document.images import image_pixels, texture_source
 from wrinklepipe.document.model import Document, PrimitiveRef
 from wrinklepipe.document.render_mesh import BIAS_ATTRIBUTE
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles
+from wrinklepipe.document.usd_animation import SkeletonInfo, add_animations
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
 from wrinklepipe.document.write import mime_type
 from wrinklepipe.errors import InputError, plain_reason
@@ -114,6 +115,7 @@ class _Scene:
         self.images: dict[int, str | None] = {}
         self.skeletons: dict[int, Any] = {}
         self.morph_skeleton: Any = None
+        self.skel_info: dict[str, SkeletonInfo] = {}  # skeleton path -> joints, morph meshes
         self.worlds = node_world_matrices(doc)
         self.wrinkled = wrinkled
         nodes = doc.array("nodes")
@@ -352,6 +354,7 @@ class _Scene:
         a.SetCustom(True)
         a.Set(Vt.StringArray([doc.node_name(j) for j in joints]))
         self.skeletons[skin] = skel
+        self.skel_info[str(skel.GetPath())] = SkeletonInfo(skel, joints, [token(j) for j in joints])
         return skel
 
     def joint_of(self, node: int) -> tuple[int, int, int] | None:
@@ -388,6 +391,7 @@ class _Scene:
             skel.CreateRestTransformsAttr(Vt.Matrix4dArray([_gf(np.eye(4))]))
             skel.CreateBindTransformsAttr(Vt.Matrix4dArray([_gf(np.eye(4))]))
             self.morph_skeleton = skel
+            self.skel_info[str(skel.GetPath())] = SkeletonInfo(skel, [], ["root"])
         return self.morph_skeleton, 0, world
 
     def wrinkle_primvars(self, mesh: Any, ref: PrimitiveRef) -> None:
@@ -408,25 +412,30 @@ class _Scene:
                     Vt.Vec4fArray.FromNumpy(a)
                 )
 
-    def animate_morphs(self) -> None:
-        """The first weight curve's morph weights on each skeleton a wrinkled blend shape is
-        bound through (a SkelAnimation of blend-shape weights only)."""
+    def wrinkle_morphs(self) -> Any:
+        """A callable authoring the first weight curve's morph weights (a SkelAnimation of
+        blend-shape weights only) as the animation source of each skeleton a wrinkled blend
+        shape is bound through, inside the ``wrinkle`` variant; None when the curve drives
+        no morph target."""
         from pxr import Tf, Usd, UsdSkel, Vt  # deferred: usd-core, USD only
 
         w = self.wrinkled
-        if w.morph_curve is None or not w.morph_names:
-            return
+        if w.morph_curve is None or not w.morph_names or not self.morph_skeletons:
+            return None
         codes, weights = w.morph_curve
         tokens = Vt.TokenArray([Tf.MakeValidIdentifier(n) for n in w.morph_names])
-        for skel in self.morph_skeletons:
-            anim = UsdSkel.Animation.Define(self.stage, skel.GetPath().AppendChild("WrinkleMorphs"))
+
+        def author(variant: str) -> None:
+            path = self.root.AppendPath(f"Animations/{variant}")
+            anim = UsdSkel.Animation.Define(self.stage, path)
             anim.CreateBlendShapesAttr(tokens)
             attr = anim.CreateBlendShapeWeightsAttr()
             for code, row in zip(codes, np.asarray(weights, np.float32)):
                 attr.Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(row)), Usd.TimeCode(code))
-            UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
-                [anim.GetPath()]
-            )
+            for skel in self.morph_skeletons:
+                UsdSkel.BindingAPI(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([path])
+
+        return author
 
     # -- meshes ------------------------------------------------------------------------------
     def mesh(self, parent: Any, name: str, ref: PrimitiveRef, node: int | None) -> None:
@@ -506,9 +515,14 @@ class _Scene:
             binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([k]))
             binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
             binding.CreateGeomBindTransformAttr(_gf(geom))
-        if wrinkled is not None and targets:
+        if targets:
             skel = rigid[0] if rigid is not None else self.skeleton(int(skin))
-            if all(s.GetPath() != skel.GetPath() for s in self.morph_skeletons):
+            info = self.skel_info[str(skel.GetPath())]
+            if node is not None:
+                info.morph_nodes.setdefault(node, doc.target_names(ref.mesh))
+            if wrinkled is not None and all(
+                s.GetPath() != skel.GetPath() for s in self.morph_skeletons
+            ):
                 self.morph_skeletons.append(skel)
         if isinstance(skin, int):
             skel = self.skeleton(skin)
@@ -634,13 +648,12 @@ def add_scene(
     seen: set[int] = set()
     for r in roots:
         s.node(scene_path, r, seen)
-    s.animate_morphs()
     s.unplaced()
-    if doc.array("animations"):
-        s.notes.append(
-            f"USD: the {len(doc.array('animations'))} glTF animation(s) of the source are not "
-            "carried into the USD scene (kept in the glTF); the wrinkle weights are"
-        )
+    for info in s.skel_info.values():  # the animation source is a variant's choice
+        UsdSkel.BindingAPI.Apply(info.skel.GetPrim())
+    s.notes += add_animations(
+        stage, scene_path, doc, list(s.skel_info.values()), s.worlds, s.wrinkle_morphs()
+    )
     order = stage.GetPrimAtPath(wrinkled.material).CreateAttribute(
         SCENE_MESHES, Sdf.ValueTypeNames.StringArray
     )

@@ -1,0 +1,303 @@
+"""The glTF source's animations in its USD: one UsdSkel SkelAnimation per clip, chosen by a
+variant set.
+
+Every glTF animation (a clip) whose channels move joints (``translation`` / ``rotation`` /
+``scale`` of a skin's joint nodes) or morph weights (``weights`` of a node whose mesh is bound
+to a Skeleton) becomes a SkelAnimation below ``Scene/Animations``: ``joints`` = the animated
+joints (the others keep their rest transforms), their transforms time-sampled in the
+skeleton's convention (a root joint's includes its non-joint ancestors at rest),
+``blendShapes`` / ``blendShapeWeights`` the animated targets (names made USD identifiers, as
+the meshes' ``skel:blendShapes``). Skeletons with the same joints share one animation.
+
+``Scene`` gets the variant set ``animation``: one variant per clip (its name made a USD
+identifier, unique) and, when convert's weight curve drives morph targets, ``wrinkle`` (the
+first curve's morph weights; selected by default, as the material's ``wrinkle:weights`` play
+that curve), else the first clip selected. Each variant sets the skeletons'
+``skel:animationSource``.
+
+Times: seconds x the stage's ``timeCodesPerSecond``; samples at every key of the clip's
+channels (USD interpolates linearly and slerps quaternions, as glTF's LINEAR does);
+CUBICSPLINE channels are sampled besides at every frame of the stage's rate, STEP channels get
+a second sample 1 ms before each key (held values). Channels on nodes that are no joints (an
+animated prop, a camera) are not carried: a note counts them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wrinklepipe.document.model import Document
+from wrinklepipe.io.mesh_gltf import _node_matrix  # the one glTF TRS -> matrix
+
+#: The variant that plays convert's weight curve (morph weights) on the wrinkled meshes.
+WRINKLE_VARIANT = "wrinkle"
+STEP_LEAD = 1e-3  # seconds: the sample before a STEP key that holds the previous value
+
+
+@dataclass
+class SkeletonInfo:
+    """A Skeleton of the scene: its prim, joint nodes and tokens, and the morph-target meshes
+    bound to it (``node -> target names``)."""
+
+    skel: Any
+    joints: list[int]
+    tokens: list[str]
+    morph_nodes: dict[int, list[str]] = field(default_factory=dict)
+
+
+def _slerp(q0: np.ndarray, q1: np.ndarray, a: np.ndarray) -> np.ndarray:
+    d = np.sum(q0 * q1, axis=1)
+    q1 = np.where(d[:, None] < 0, -q1, q1)
+    d = np.abs(d)
+    near = d > 0.9995
+    theta = np.arccos(np.clip(d, -1.0, 1.0))
+    sin = np.where(near, 1.0, np.sin(theta))
+    w0 = np.where(near, 1 - a, np.sin((1 - a) * theta) / sin)
+    w1 = np.where(near, a, np.sin(a * theta) / sin)
+    q = w0[:, None] * q0 + w1[:, None] * q1
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def sample_channel_at(
+    t: np.ndarray, v: np.ndarray, times: np.ndarray, interp: str, path: str
+) -> np.ndarray:
+    """A glTF channel sampled at ``times`` ``[F, C]`` (glTF 2.0 Appendix C: STEP, LINEAR with
+    slerp for rotations, CUBICSPLINE Hermite; clamped outside the keys). ``v`` is ``[N, C]``,
+    ``[N, 3, C]`` for CUBICSPLINE (in-tangent, value, out-tangent)."""
+    vals = v[:, 1] if interp == "CUBICSPLINE" else v
+    times = np.asarray(times, np.float64)
+    if len(t) == 1:
+        return np.repeat(vals[:1], len(times), axis=0)
+    k = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
+    td = t[k + 1] - t[k]
+    a = np.clip((times - t[k]) / np.where(td > 0, td, 1.0), 0.0, 1.0)
+    if interp == "STEP":
+        out = vals[k].copy()
+    elif interp == "CUBICSPLINE":
+        a2, a3 = a * a, a * a * a
+        out = (
+            (2 * a3 - 3 * a2 + 1)[:, None] * v[k, 1]
+            + (td * (a3 - 2 * a2 + a))[:, None] * v[k, 2]
+            + (-2 * a3 + 3 * a2)[:, None] * v[k + 1, 1]
+            + (td * (a3 - a2))[:, None] * v[k + 1, 0]
+        )
+        if path == "rotation":
+            out /= np.linalg.norm(out, axis=1, keepdims=True)
+    elif path == "rotation":
+        out = _slerp(vals[k], vals[k + 1], a)
+    else:
+        out = (1 - a)[:, None] * vals[k] + a[:, None] * vals[k + 1]
+    out[times <= t[0]] = vals[0]
+    out[times >= t[-1]] = vals[-1]
+    return out
+
+
+def trs_matrices(t: np.ndarray, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``[F, 4, 4]`` (column vectors) of translations ``[F, 3]``, unit quaternions ``[F, 4]``
+    (x, y, z, w) and scales ``[F, 3]``: T R S, as glTF composes a node."""
+    x, y, z, w = q.T
+    r = np.empty((len(q), 3, 3))
+    r[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], 1)
+    r[:, 1] = np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], 1)
+    r[:, 2] = np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], 1)
+    m = np.tile(np.eye(4), (len(q), 1, 1))
+    m[:, :3, :3] = r * s[:, None, :]
+    m[:, :3, 3] = t
+    return m
+
+
+@dataclass
+class _Channel:
+    node: int
+    path: str
+    t: np.ndarray
+    v: np.ndarray
+    interp: str
+
+
+def _channels(doc: Document, a: int) -> list[_Channel]:
+    anim = doc.array("animations")[a]
+    samplers = anim.get("samplers") or []
+    out = []
+    for ch in anim.get("channels") or []:
+        tgt = ch.get("target") or {}
+        node, path, si = tgt.get("node"), tgt.get("path"), ch.get("sampler")
+        if not isinstance(node, int) or not isinstance(si, int) or not 0 <= si < len(samplers):
+            continue
+        if path not in ("translation", "rotation", "scale", "weights"):
+            continue
+        smp = samplers[si]
+        t = doc.accessor(smp["input"]).reshape(-1).astype(np.float64)
+        v = doc.accessor(smp["output"]).astype(np.float64)
+        interp = str(smp.get("interpolation", "LINEAR"))
+        width = {"translation": 3, "rotation": 4, "scale": 3}.get(path)
+        if width is None:  # weights: outputs are keys x targets
+            per_key = v.size // max(len(t), 1)
+            width = per_key // 3 if interp == "CUBICSPLINE" else per_key
+        v = v.reshape(len(t), 3, width) if interp == "CUBICSPLINE" else v.reshape(len(t), width)
+        out.append(_Channel(node, path, t, v, interp))
+    return out
+
+
+def _times(channels: list[_Channel], fps: float) -> np.ndarray:
+    keys = [c.t for c in channels]
+    for c in channels:
+        if c.interp == "CUBICSPLINE" and len(c.t) > 1:
+            keys.append(np.arange(c.t[0], c.t[-1], 1.0 / fps))
+        if c.interp == "STEP":
+            keys.append(c.t[1:] - STEP_LEAD)
+    return np.unique(np.round(np.concatenate(keys) * fps, 6)) / fps
+
+
+def _rest_trs(node: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return (
+        np.asarray(node.get("translation", [0, 0, 0]), np.float64),
+        np.asarray(node.get("rotation", [0, 0, 0, 1]), np.float64),
+        np.asarray(node.get("scale", [1, 1, 1]), np.float64),
+    )
+
+
+def add_animations(
+    stage: Any,
+    scene: Any,
+    doc: Document,
+    skeletons: list[SkeletonInfo],
+    worlds: dict[int, np.ndarray],
+    wrinkle: Any = None,
+) -> list[str]:
+    """Author the clips (see the module doc) below ``scene`` (the ``Scene`` prim path);
+    ``wrinkle``: a callable ``(variant name) -> None`` authoring convert's morph-weight
+    animation inside the ``wrinkle`` variant, or None. Returns notes."""
+    from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel, Vt  # deferred: usd-core, USD only
+
+    nodes = doc.array("nodes")
+    parent = {int(c): i for i, n in enumerate(nodes) for c in n.get("children", [])}
+    joint_nodes = {j for s in skeletons for j in s.joints}
+    morph_nodes = {n for s in skeletons for n in s.morph_nodes}
+    fps = stage.GetTimeCodesPerSecond()
+    notes: list[str] = []
+    clips = []  # (glTF name, {skeleton index: anim spec}) per clip with something to play
+    skipped = 0
+    for a in range(len(doc.array("animations"))):
+        chans = _channels(doc, a)
+        usable = [
+            c
+            for c in chans
+            if (c.path == "weights" and c.node in morph_nodes)
+            or (c.path != "weights" and c.node in joint_nodes)
+        ]
+        skipped += len(chans) - len(usable)
+        if usable:
+            name = str(doc.array("animations")[a].get("name") or f"animation_{a}")
+            clips.append((name, usable))
+    if skipped:
+        notes.append(
+            f"USD: {skipped} animation channel(s) on nodes that are no joints (or weights of "
+            "meshes bound to no skeleton) are not carried (kept in the glTF)"
+        )
+    if not clips and wrinkle is None:
+        return notes
+    holder = scene.AppendChild("Animations")
+    UsdGeom.Scope.Define(stage, holder)
+    vset = stage.GetPrimAtPath(scene).GetVariantSets().AddVariantSet("animation")
+    taken: set[str] = set()
+
+    def variant_name(name: str) -> str:
+        base = Tf.MakeValidIdentifier(name)
+        tok, k = base, 1
+        while tok in taken:
+            k += 1
+            tok = f"{base}_{k}"
+        taken.add(tok)
+        return tok
+
+    if wrinkle is not None:
+        variant_name(WRINKLE_VARIANT)
+        vset.AddVariant(WRINKLE_VARIANT)
+        vset.SetVariantSelection(WRINKLE_VARIANT)
+        with vset.GetVariantEditContext():
+            wrinkle(WRINKLE_VARIANT)
+        vset.ClearVariantSelection()
+    first_clip = ""
+    groups: dict[tuple[str, ...], list[SkeletonInfo]] = {}
+    for s in skeletons:
+        groups.setdefault(tuple(s.tokens), []).append(s)
+    for name, chans in clips:
+        var = variant_name(name)
+        first_clip = first_clip or var
+        vset.AddVariant(var)
+        vset.SetVariantSelection(var)
+        times = _times(chans, fps)
+        codes = times * fps
+        by_node: dict[int, dict[str, _Channel]] = {}
+        for c in chans:
+            by_node.setdefault(c.node, {})[c.path] = c
+        with vset.GetVariantEditContext():
+            for g, (tokens, members) in enumerate(groups.items()):
+                first = members[0]
+                moved = [k for k, j in enumerate(first.joints) if j in by_node]
+                shapes: list[str] = []
+                weights: list[np.ndarray] = []
+                for s in members:
+                    for node, targets in s.morph_nodes.items():
+                        c = by_node.get(node, {}).get("weights")
+                        if c is None:
+                            continue
+                        w = sample_channel_at(c.t, c.v, times, c.interp, "weights")
+                        for i, target in enumerate(targets[: w.shape[1]]):
+                            tok = Tf.MakeValidIdentifier(target)
+                            if tok not in shapes:
+                                shapes.append(tok)
+                                weights.append(w[:, i])
+                if not moved and not shapes:
+                    continue
+                path = holder.AppendChild(var if len(groups) == 1 else f"{var}_{g}")
+                anim = UsdSkel.Animation.Define(stage, path)
+                if moved:
+                    anim.CreateJointsAttr(Vt.TokenArray([tokens[k] for k in moved]))
+                    mats = np.empty((len(times), len(moved), 4, 4))
+                    for col, k in enumerate(moved):
+                        j = first.joints[k]
+                        t0, q0, s0 = _rest_trs(nodes[j])
+                        got = by_node[j]
+                        tr, ro, sc = (
+                            sample_channel_at(got[p].t, got[p].v, times, got[p].interp, p)
+                            if p in got
+                            else np.repeat(rest[None], len(times), 0)
+                            for p, rest in (("translation", t0), ("rotation", q0), ("scale", s0))
+                        )
+                        local = trs_matrices(tr, ro, sc)
+                        up = parent.get(j)
+                        while up is not None and up not in first.joints:
+                            up = parent.get(up)
+                        if up is None and parent.get(j) is not None:  # a root: skeleton space
+                            local = worlds.get(parent[j], _node_matrix(nodes[parent[j]])) @ local
+                        mats[:, col] = local
+                    for f, code in enumerate(codes):
+                        anim.SetTransforms(
+                            Vt.Matrix4dArray.FromNumpy(
+                                np.ascontiguousarray(mats[f].transpose(0, 2, 1))
+                            ),
+                            Usd.TimeCode(float(code)),
+                        )
+                if shapes:
+                    anim.CreateBlendShapesAttr(Vt.TokenArray(shapes))
+                    attr = anim.CreateBlendShapeWeightsAttr()
+                    table = np.stack(weights, 1).astype(np.float32)
+                    for f, code in enumerate(codes):
+                        attr.Set(Vt.FloatArray.FromNumpy(table[f]), Usd.TimeCode(float(code)))
+                for s in members:
+                    api = UsdSkel.BindingAPI(s.skel.GetPrim())
+                    api.CreateAnimationSourceRel().SetTargets([Sdf.Path(path)])
+        vset.ClearVariantSelection()
+    default = WRINKLE_VARIANT if wrinkle is not None else first_clip
+    vset.SetVariantSelection(default)
+    if clips:
+        notes.append(
+            f"USD: the {len(clips)} glTF animation(s) are SkelAnimations, one variant each of "
+            f"the variant set 'animation' on {scene} (selected: {default})"
+        )
+    return notes
