@@ -30,7 +30,10 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.document.model import Document
-from wrinklepipe.io.mesh_gltf import _node_matrix  # the one glTF TRS -> matrix
+from wrinklepipe.io.mesh_gltf import (
+    _node_matrix,  # the one glTF TRS -> matrix
+    sample_channel_at,
+)
 
 #: The variant that plays convert's weight curve (morph weights) on the wrinkled meshes.
 WRINKLE_VARIANT = "wrinkle"
@@ -46,53 +49,6 @@ class SkeletonInfo:
     joints: list[int]
     tokens: list[str]
     morph_nodes: dict[int, list[str]] = field(default_factory=dict)
-
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, a: np.ndarray) -> np.ndarray:
-    d = np.sum(q0 * q1, axis=1)
-    q1 = np.where(d[:, None] < 0, -q1, q1)
-    d = np.abs(d)
-    near = d > 0.9995
-    theta = np.arccos(np.clip(d, -1.0, 1.0))
-    sin = np.where(near, 1.0, np.sin(theta))
-    w0 = np.where(near, 1 - a, np.sin((1 - a) * theta) / sin)
-    w1 = np.where(near, a, np.sin(a * theta) / sin)
-    q = w0[:, None] * q0 + w1[:, None] * q1
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
-
-
-def sample_channel_at(
-    t: np.ndarray, v: np.ndarray, times: np.ndarray, interp: str, path: str
-) -> np.ndarray:
-    """A glTF channel sampled at ``times`` ``[F, C]`` (glTF 2.0 Appendix C: STEP, LINEAR with
-    slerp for rotations, CUBICSPLINE Hermite; clamped outside the keys). ``v`` is ``[N, C]``,
-    ``[N, 3, C]`` for CUBICSPLINE (in-tangent, value, out-tangent)."""
-    vals = v[:, 1] if interp == "CUBICSPLINE" else v
-    times = np.asarray(times, np.float64)
-    if len(t) == 1:
-        return np.repeat(vals[:1], len(times), axis=0)
-    k = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
-    td = t[k + 1] - t[k]
-    a = np.clip((times - t[k]) / np.where(td > 0, td, 1.0), 0.0, 1.0)
-    if interp == "STEP":
-        out = vals[k].copy()
-    elif interp == "CUBICSPLINE":
-        a2, a3 = a * a, a * a * a
-        out = (
-            (2 * a3 - 3 * a2 + 1)[:, None] * v[k, 1]
-            + (td * (a3 - 2 * a2 + a))[:, None] * v[k, 2]
-            + (-2 * a3 + 3 * a2)[:, None] * v[k + 1, 1]
-            + (td * (a3 - a2))[:, None] * v[k + 1, 0]
-        )
-        if path == "rotation":
-            out /= np.linalg.norm(out, axis=1, keepdims=True)
-    elif path == "rotation":
-        out = _slerp(vals[k], vals[k + 1], a)
-    else:
-        out = (1 - a)[:, None] * vals[k] + a[:, None] * vals[k + 1]
-    out[times <= t[0]] = vals[0]
-    out[times >= t[-1]] = vals[-1]
-    return out
 
 
 def trs_matrices(t: np.ndarray, q: np.ndarray, s: np.ndarray) -> np.ndarray:
