@@ -115,19 +115,20 @@ def _wrinkled_node(g, src: Path) -> tuple[int, int, int]:
     raise AssertionError("no wrinkled primitive")
 
 
-def _usd_posed(path: Path, prim_path: str, joint: str | None, rot: np.ndarray) -> np.ndarray:
+def _usd_posed(stage, prim_path: str, joint: str | None, rot: np.ndarray) -> np.ndarray:
     """World points of a prim skinned by UsdSkel (SkinningQuery.ComputeSkinnedPoints), the
-    joint ``joint`` of its Skeleton turned by ``rot`` after its rest transform."""
+    joint ``joint`` of its Skeleton turned by ``rot`` after its rest transform (in the
+    stage's session layer, from the file's rest transforms)."""
     from pxr import Gf, Usd, UsdGeom, UsdSkel, Vt
 
-    stage = Usd.Stage.Open(str(path))
     stage.SetEditTarget(stage.GetSessionLayer())
     prim = stage.GetPrimAtPath(prim_path)
     skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
     if joint is not None:
         names = list(skel.GetPrim().GetAttribute("wrinkle:jointNames").Get())
         k = names.index(joint)
-        rest = [np.asarray(m, np.float64) for m in skel.GetRestTransformsAttr().Get()]
+        spec = stage.GetRootLayer().GetAttributeAtPath(skel.GetRestTransformsAttr().GetPath())
+        rest = [np.asarray(m, np.float64) for m in spec.default]
         rest[k] = rot.T @ rest[k]  # row vectors: local' = local @ rot
         skel.GetRestTransformsAttr().Set(Vt.Matrix4dArray([Gf.Matrix4d(m.tolist()) for m in rest]))
     cache = UsdSkel.Cache()
@@ -238,7 +239,7 @@ def test_wrinkled_prims_pose_with_the_skeleton_as_the_gltf_skin(characters, name
     for deg in (0.0, 30.0):
         pose = {joint: _rot_x(deg)}
         want = _gltf_posed(g, src, node, mesh, k, pose)
-        got = _usd_posed(usda, str(prim.GetPath()), g.nodes[joint].name, _rot_x(deg))
+        got = _usd_posed(stage, str(prim.GetPath()), g.nodes[joint].name, _rot_x(deg))
         np.testing.assert_allclose(got, want, atol=2e-5 * max(scale, 1.0))
         if deg:  # the pose moves the wrinkled vertices (the check can fail)
             rest = _gltf_posed(g, src, node, mesh, k, {})
