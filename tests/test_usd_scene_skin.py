@@ -588,6 +588,9 @@ def test_gltf_clips_play_as_skel_animations(characters, name, clip):
     vset = stage.GetDefaultPrim().GetChild("Scene").GetVariantSets().GetVariantSet("animation")
     variant = clip or "animation_0"
     assert variant in vset.GetVariantNames()
+    last = max(float(ref.accessor(g, src, s.input).max()) for x in g.animations for s in x.samplers)
+    fps = stage.GetTimeCodesPerSecond()
+    assert stage.GetEndTimeCode() == pytest.approx(max(last * fps, 0.0), abs=1e-4)  # whole clips
     stage.SetEditTarget(stage.GetSessionLayer())
     vset.SetVariantSelection(variant)
     (prim,) = _wrinkled_prims(stage)

@@ -18,8 +18,9 @@ that curve), else the first clip selected. Each variant sets the skeletons'
 Times: seconds x the stage's ``timeCodesPerSecond``; samples at every key of the clip's
 channels (USD interpolates linearly and slerps quaternions, as glTF's LINEAR does);
 CUBICSPLINE channels are sampled besides at every frame of the stage's rate, STEP channels get
-a second sample 1 ms before each key (held values). Channels on nodes that are no joints (an
-animated prop, a camera) are not carried: a note counts them.
+a second sample 1 ms before each key (held values). The stage's ``endTimeCode`` is extended to
+the longest clip (the wrinkle weights hold their last value after their curve). Channels on
+nodes that are no joints (an animated prop, a camera) are not carried: a note counts them.
 """
 
 from __future__ import annotations
@@ -251,6 +252,11 @@ def add_animations(
         vset.ClearVariantSelection()
     default = WRINKLE_VARIANT if wrinkle is not None else first_clip
     vset.SetVariantSelection(default)
+    ends = [float(_times(chans, fps)[-1]) * fps for _, chans in clips]
+    if ends and (not stage.HasAuthoredTimeCodeRange() or max(ends) > stage.GetEndTimeCode()):
+        if not stage.HasAuthoredTimeCodeRange():
+            stage.SetStartTimeCode(0.0)
+        stage.SetEndTimeCode(max(ends))  # the timeline holds the longest clip too
     if clips:
         notes.append(
             f"USD: the {len(clips)} glTF animation(s) are SkelAnimations, one variant each of "
