@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 import struct
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,18 +14,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wrinklepipe.asset import Mesh
+from wrinklepipe.demo import demo_asset
 from wrinklepipe.errors import InputError
 from wrinklepipe.model import height_to_normal, normal_to_pd
 from wrinklepipe.sources.validation import check_gltf_claims_wrinkles
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import RULES, issues_markdown, make_issue
 from wrinklepipe.validate.config import parse_config
+from wrinklepipe.validate.context import Context
 from wrinklepipe.validate.inputs import Texture
 from wrinklepipe.validate.render import triangle_layer_touch
 from wrinklepipe.validate.report import normalized
 from wrinklepipe.validate.rules_maps import convention_score
-from wrinklepipe.validate.rules_masks import side_centroids
+from wrinklepipe.validate.rules_masks import check_masks, side_centroids, stored_step
 from wrinklepipe.validate.rules_weights import group_spread, position_groups
+from wrinklepipe.validate.ship import ShipOptions, ship_asset
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -149,6 +153,32 @@ def test_position_groups_and_spread_by_hand():
     assert g[0] == g[2] and g[1] == g[3] and len(set(g.tolist())) == 3
     vals = np.array([1.0, 5.0, 1.5, 5.0, 9.0])
     assert group_spread(g, vals[:, None]) == pytest.approx([0.5, 0.0, 0.5, 0.0, 0.0])
+
+
+def _overlap_issues(levels: list[tuple[float, float, float]]) -> list[str]:
+    """WP-MASK-002 messages of an additive asset whose masks forehead_inner_l, forehead_inner_r
+    and glabella hold ``levels`` (of 255) at texels (0, 0), (0, 1), ...; every other mask zero."""
+    a = demo_asset(16, policy="additive", mesh_resolution=(12, 8))
+    m = np.zeros_like(a.masks)
+    for x, lv in enumerate(levels):
+        m[[2, 3, 6], 0, x] = np.asarray(lv, np.float32) / np.float32(255.0)
+    b = replace(a, masks=m)
+    ctx = Context(ship_asset(b, ShipOptions(compress=False)))
+    return [i.message for i in check_masks(ctx) if i.code == "WP-MASK-002"]
+
+
+def test_additive_masks_from_8bit_files_may_round_up_where_they_overlap():
+    # the studio's 'di' variant at 512: three 8-bit masks meet as 28 + 153 + 75 = 256 levels,
+    # a partition of 1 rounded to 8 bits (each mask up to half a level over): not an overlap
+    assert stored_step(np.array([28, 153, 75], np.float32) / np.float32(255)) == 1 / 255
+    assert stored_step(np.array([28.3, 153, 75], np.float32) / np.float32(255)) == 0.0
+    assert _overlap_issues([(28, 153, 75), (100, 100, 55)]) == []
+    # 6 levels over with three masks is more than rounding can do: one texel reported
+    got = _overlap_issues([(28, 153, 75), (28, 153, 80)])
+    assert len(got) == 1 and "source masks sum above 1 at 1 texels" in got[0], got
+    # the same 256 levels as float values off the 8-bit grid have no rounding to excuse them
+    got = _overlap_issues([(28.25, 153, 75), (100, 100, 55)])
+    assert len(got) == 1 and "source masks sum above 1 at 1 texels" in got[0], got
 
 
 def test_side_centroids_put_a_right_half_mask_on_the_left():

@@ -19,6 +19,17 @@ def _slot(inp: object, region: str) -> str:
     return f"{where} (channel {CHANNELS[e.channel] if e.channel < 4 else e.channel})"
 
 
+def stored_step(masks: np.ndarray) -> float:
+    """The value step of masks read from integer files: 1/255 when every value is a multiple
+    of it (8-bit files), 1/65535 (16-bit), 0 for float values (EXR, or painted in memory)."""
+    m = np.nan_to_num(np.asarray(masks, np.float64))
+    for levels in (255.0, 65535.0):
+        v = m * levels
+        if np.all(np.abs(v - np.rint(v)) <= 1e-2):
+            return 1.0 / levels
+    return 0.0
+
+
 def check_channel_table(ctx: Context) -> list[Issue]:
     inp, a = ctx.inp, ctx.asset
     if not inp.by_role("mask"):
@@ -147,8 +158,10 @@ def check_masks(ctx: Context) -> list[Issue]:
                 )
         if a.policy == "additive" and ("002", "") not in reported:
             total = np.nan_to_num(masks).sum(axis=0)
-            # 8-bit channels may each round up by half a step where several overlap
-            slack = 1e-4 if label == "source" else (0.5 / 255.0) * (masks > 0).sum(axis=0) + 1e-4
+            # stored channels may each round up by half a step where several overlap: the
+            # shipped ones are 8-bit, the source's have the step of the files they came from
+            step = 1.0 / 255.0 if label == "shipped" else stored_step(masks)
+            slack = (0.5 * step) * (masks > 0).sum(axis=0) + 1e-4
             over = total > 1.0 + slack
             if over.any():
                 reported.add(("002", ""))
