@@ -137,7 +137,14 @@ def summary_lines(rep: dict[str, Any], exit_code: int, where: str = "") -> list[
         f"{a['vertices']} vertices"
     ]
     fid = rep.get("fidelity")
-    if fid:
+    if fid and "wrinkle" not in fid:  # another encoding than pd: only the formats are chosen
+        out.append(
+            f"chosen: compressed copies: base {_fmt(fid['base_format'])}, states "
+            f"{_fmt(fid['state_format'])} (maps at the manifest's sizes)"
+        )
+        out += fidelity_table(fid, "compressed")
+        out += [f"note: {n}" for n in fid.get("notes", [])]
+    elif fid:
         out.append(
             f"chosen: states {fid['wrinkle']}^2, masks {fid['mask']}^2, pd_scale "
             f"{fid['pd_scale']:g}; compressed copies: base "

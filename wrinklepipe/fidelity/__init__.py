@@ -24,6 +24,7 @@ from wrinklepipe.fidelity.metric import (
     sample,
     sample_at,
     sample_masks_at,
+    source_states,
 )
 from wrinklepipe.fidelity.stats import Budget, Stats, weighted_quantile, weighted_stats
 
@@ -46,6 +47,7 @@ __all__ = [
     "sample",
     "sample_at",
     "sample_masks_at",
+    "source_states",
     "weighted_quantile",
     "weighted_stats",
 ]

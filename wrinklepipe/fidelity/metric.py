@@ -417,6 +417,20 @@ def _blend_at(
     return out
 
 
+def source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.ndarray:
+    """Source (float) wrinkled normals ``[K, H, W, 3]`` in the representation
+    :func:`wrinklepipe.model.combine` takes under ``encoding`` (``base`` on their grid): PD
+    slopes of the wrinkle only, the biased difference, the normals, or the wrinkle-only
+    normals (composite)."""
+    if encoding == "pd":
+        return model.normal_to_pd(states) - model.normal_to_pd(base)[None]
+    if encoding == "diff":
+        return model.normal_to_diff(states, base[None])
+    if encoding == "full":
+        return model.normalize(states)
+    return model.pd_to_normal(model.normal_to_pd(states) - model.normal_to_pd(base)[None])
+
+
 @reused  # the search's full-resolution reference is the validator's (fidelity rules)
 @one_blas_thread
 def prepare(

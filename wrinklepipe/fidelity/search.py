@@ -170,7 +170,7 @@ def clipped_texels(level: np.ndarray, scale: float) -> list[int]:
 # the search
 
 
-class _Judge:
+class Judge:
     """Evaluates candidates on the coarse and the full reference, keeping what does not change.
 
     A candidate is a function of the reference it is judged on returning what
@@ -297,7 +297,7 @@ def search(
         src.policy,
         src.footprint,
     )
-    judge = _Judge(ref, o.screen_texels)
+    judge = Judge(ref, o.screen_texels)
     tried: list[Tried] = []
     notes: list[str] = []
     base_texels = ship.base_texels(src.base)
@@ -451,7 +451,7 @@ def search(
                 return False
         return True
 
-    state_fmt = _pick_format(
+    state_fmt = pick_format(
         judge,
         fx.state_format,
         o.formats,
@@ -463,7 +463,7 @@ def search(
     )
     if state_fmt != "png":
         judge.set("states", state_format(state_fmt))
-    base_fmt = _pick_format(
+    base_fmt = pick_format(
         judge,
         fx.base_format,
         o.formats,
@@ -565,8 +565,8 @@ def _base_alone(ref: fm.Reference, arrays: dict[str, Any], face: np.ndarray) -> 
     return fm.base_fidelity(ref, arrays["base"], face, arrays.get("base_reader"))
 
 
-def _pick_format(
-    judge: _Judge,
+def pick_format(
+    judge: Judge,
     fixed: str | None,
     formats: Sequence[str],
     budget: Budget,

@@ -15,12 +15,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
+import numpy as np
+
 from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.fidelity import formats as ff
 from wrinklepipe.fidelity import search as fs
 from wrinklepipe.fidelity import ship
-from wrinklepipe.io.package import resize_normals_pd
+from wrinklepipe.io.package import WrinklePackage, resize_normals_pd
 
 #: Manifest format names that mean "no block-compressed copy".
 _NOT_BLOCK = ("png8", "png16", "exr")
@@ -41,6 +44,15 @@ def can_search(asset: WrinkleAsset, poses: Sequence[fd.Pose] | None = None) -> s
     expression table), else why not."""
     if asset.encoding != "pd":
         return f"encoding {asset.encoding!r} (the searches are for pd)"
+    return can_measure(asset, poses)
+
+
+def can_measure(asset: WrinkleAsset, poses: Sequence[fd.Pose] | None = None) -> str:
+    """Empty when fidelity can judge this asset's choices (any encoding), else why not."""
+    if asset.encoding not in model.ENCODINGS or asset.policy not in model.POLICIES:
+        return f"encoding {asset.encoding!r} / policy {asset.policy!r}"
+    if asset.policy == "signed" and len(asset.state_names) != 2:
+        return "policy 'signed' needs two states"
     if not (asset.expressions if poses is None else poses):
         return "no poses to judge by (no expressions, no driver curve)"
     k, h, w = asset.states.shape[:3]
@@ -151,6 +163,77 @@ def auto_choices(
     )
 
 
+def formats_by_fidelity(
+    source: WrinkleAsset,
+    shipped: WrinkleAsset,
+    pkg: WrinklePackage,
+    poses: Sequence[fd.Pose],
+    formats: dict[str, str] | None = None,
+) -> tuple[dict[str, str], list[str], dict[str, Any] | None]:
+    """The block formats of an asset the searches do not make (another encoding than pd: its
+    maps ship at the manifest's sizes) chosen by fidelity (:func:`ff.choose_formats`), from the
+    package's stored texels, against the source as read (``source``) inside each pose's active
+    region: ``({"base": fmt | "png8", "wrinkle": ...}`` for the copies, notes, the record for
+    report.json). Nothing is chosen (``{}``) when fidelity cannot be measured, or no format is
+    automatic; the copies then choose as they do."""
+    formats = formats or {}
+    want = {g: formats.get(g, "auto") for g in ("base", "wrinkle")}
+    if all(w != "auto" for w in want.values()) or can_measure(source, poses):
+        return {}, [], None
+    base_tex = next((t for t in pkg.textures if t.role == "base_normal"), None)
+    states = [pkg.texture(n) for n in pkg.meta.state_textures]
+    if base_tex is None or not states or not poses:
+        return {}, [], None
+    if any(t.pixels.dtype != np.uint8 for t in [base_tex, *states]):
+        return {}, [], None  # 16-bit maps ship as PNG only (the copies say so)
+    H = source.states.shape[1]
+    grid_base = resize_normals_pd(source.base, H, H)
+    mesh = shipped.mesh
+    ref = fd.prepare(
+        grid_base,
+        fd.source_states(grid_base, source.states, source.encoding),
+        source.masks,
+        list(poses),
+        source.region_names,
+        source.encoding,
+        source.policy,
+        fd.footprint(mesh.uvs, mesh.indices, (H, H)),
+    )
+    _, budget = budgets(shipped.budget)
+    c = ff.choose_formats(
+        ref,
+        base_tex.pixels,
+        [t.pixels for t in states],
+        ship.mask_values(shipped.masks),
+        pkg.meta.encoding,
+        float(pkg.meta.scale),
+        int(pkg.meta.mapping),
+        budget,
+        fixed_base=_fixed_format(want["base"]),
+        fixed_states=_fixed_format(want["wrinkle"]),
+    )
+    chosen = {
+        "base": _for_copies(want["base"], c.base_format),
+        "wrinkle": _for_copies(want["wrinkle"], c.state_format),
+    }
+    notes = [*c.notes, describe_formats(c, source.encoding)]
+    return chosen, notes, c.to_json()
+
+
+def describe_formats(c: ff.FormatChoice, encoding: str) -> str:
+    """One line for the notes: the block formats chosen by fidelity and what they give."""
+    got = (
+        f"; worst pose p99 {c.compressed.worst_p99():.2f} deg (compressed) inside the active "
+        "regions"
+        if c.compressed is not None
+        else ""
+    )
+    return (
+        f"block formats by fidelity ({encoding} maps at the manifest's sizes): base "
+        f"{c.base_format}, states {c.state_format}{got}; budget {c.budget.describe()}"
+    )
+
+
 def describe_choice(c: fs.Choice, auto: set[str], auto_scale: bool, formats: dict[str, str]) -> str:
     """One line for the notes: what was chosen (and how) and the fidelity it gives."""
 
@@ -172,4 +255,12 @@ def choice_report(c: fs.Choice) -> dict[str, Any]:
     return c.to_json()
 
 
-__all__ = ["Applied", "auto_choices", "budgets", "can_search", "choice_report"]
+__all__ = [
+    "Applied",
+    "auto_choices",
+    "budgets",
+    "can_measure",
+    "can_search",
+    "choice_report",
+    "formats_by_fidelity",
+]

@@ -46,6 +46,7 @@ from wrinklepipe.outputs.report import (
     output_rows,
     write_report,
 )
+from wrinklepipe.pipeline.auto import formats_by_fidelity
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
@@ -134,17 +135,25 @@ def convert(
                 if asset.mesh is not None and asset.mesh.uvs is not None:
                     asset = replace(asset, mesh=prepare_mesh(asset.mesh))
                 curves, drivers_notes = evaluate_drivers(asset, manifest.root)
+            poses = judged_poses(asset, curves)
             with console.status("choosing sizes, scale and formats by fidelity"):
                 asset, stage_rep = run_stages(
                     asset,
                     auto_scale=manifest.pd_scale == "auto",
                     formats=manifest.formats,
                     compressed=opt.compressed,
-                    poses=judged_poses(asset, curves),
+                    poses=poses,
                 )
             notes += stage_rep.notes + drivers_notes
             layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
             pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
+            if opt.compressed and not stage_rep.formats:  # not pd: the searches did not run
+                with console.status("choosing block formats by fidelity"):
+                    chosen, n, record = formats_by_fidelity(
+                        source, asset, pkg, poses, manifest.formats
+                    )
+                stage_rep.formats, stage_rep.fidelity = chosen, record
+                notes += n
             with console.status("encoding, packing, compressing"):
                 formats = {**manifest.formats, **stage_rep.formats}
                 files, n, choices = build_outputs(

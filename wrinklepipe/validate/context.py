@@ -9,6 +9,7 @@ import numpy as np
 
 from wrinklepipe import model
 from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.fidelity.metric import source_states
 from wrinklepipe.io.package import resize_normals_pd
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.validate import textures as tx
@@ -77,14 +78,9 @@ def resize_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:
 
 
 def encode_source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.ndarray:
-    """Source (float) states in the representation :func:`wrinklepipe.model.combine` takes."""
-    if encoding == "pd":
-        return model.normal_to_pd(states) - model.normal_to_pd(base)[None]
-    if encoding == "diff":
-        return model.normal_to_diff(states, base[None])
-    if encoding == "full":
-        return model.normalize(states)
-    return model.pd_to_normal(model.normal_to_pd(states) - model.normal_to_pd(base)[None])
+    """Source (float) states in the representation :func:`wrinklepipe.model.combine` takes
+    (:func:`wrinklepipe.fidelity.metric.source_states`, what the automatic choices measure)."""
+    return source_states(base, states, encoding)
 
 
 @dataclass
