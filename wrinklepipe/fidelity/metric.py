@@ -246,6 +246,12 @@ class Reference:
     _faces: dict[int | None, tuple[np.ndarray | None, np.ndarray]] = field(
         default_factory=dict, repr=False, compare=False
     )
+    #: per shipped mask samples (by identity, the array kept so its id stays its own): every
+    #: pose's activations and their weight (the same for every states candidate judged with
+    #: those masks)
+    _acts: dict[int, tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     @property
     def texels(self) -> int:
@@ -277,6 +283,19 @@ class Reference:
         rank = (np.cumsum(present) - 1)[block]
         k = max(1, -(-int(present.sum()) * 16 // max(int(max_texels), 1)))
         return flat[rank % k == 0]
+
+    def activations(self, masks: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per pose: :func:`wrinklepipe.model.activations` of shipped mask samples ``[R, n]``
+        (at the union texels) on its active texels, and their weight ``sum_k |a_k|``; computed
+        once per mask samples."""
+        hit = self._acts.get(id(masks))
+        if hit is None or hit[0] is not masks:
+            acts = []
+            for pr in self.poses:
+                act = _activations_at(masks, pr.sel, pr.pose.weights, self.policy)
+                acts.append((act, _activation_weight(act)))
+            hit = self._acts[id(masks)] = (masks, acts)
+        return hit[1]
 
     def coarse(self, max_texels: int) -> Reference:
         """A reference on the active texels of every k-th 4x4 block (whole blocks, so a block
@@ -750,14 +769,12 @@ def evaluate(
     leak_at = None
     if leaks and s.leaks is not None and any(lk is not None for lk in s.leaks):
         leak_at = _leak_normals(ref, s)
+    acts = ref.activations(s.masks) if s.masks is not None else None
     for pi, pr in enumerate(ref.poses):
-        if s.masks is not None:
-            act = _activations_at(s.masks, pr.sel, pr.pose.weights, ref.policy)
-        else:
-            act = pr.act
+        act, act_w = acts[pi] if acts is not None else (pr.act, None)
         got = _blend_at(base_u, base_pd, states, pr.sel, act, ref.encoding)
         err = angle_deg_planes(got, planes(pr.normal))
-        w = np.maximum(pr.weight, _activation_weight(act))
+        w = np.maximum(pr.weight, act_w if act_w is not None else _activation_weight(act))
         errs, ws = [err], [w]
         n_leak = 0
         leak = s.leaks[pi] if leak_at is not None else None
