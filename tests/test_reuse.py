@@ -152,7 +152,8 @@ def test_map_threads_keeps_order_and_the_callers_png_level():
         reuse.map_threads(lambda x: 1 // x, [1, 0, 2], workers=2)
 
 
-def test_warm_fills_the_memo_for_the_later_calls(counted):
+def test_warm_fills_the_memo_for_the_later_calls(counted, monkeypatch):
+    monkeypatch.setenv(reuse.THREADS_ENV, "2")
     a = np.arange(1 << 15, dtype=np.float32)
     assert reuse.warm([lambda: counted(a)])() is None and counted.calls == 0  # no memo: no-op
     with reuse.reuse() as memo:
@@ -187,3 +188,41 @@ def test_dataclass_arguments_are_keyed_by_content_and_results_deep_copied():
         assert np.array_equal(wrap(Box("a", v)).values, v + 1) and first.values[0] == 1
         wrap(Box("b", v))
         assert len(calls) == 2
+
+
+# ------------------------------------------------------------------------------------------------
+# the thread budget (a batch worker's share of the cores)
+
+
+def test_thread_budget_comes_from_the_environment_and_caps_every_pool(counted, monkeypatch):
+    import os
+    import threading
+
+    from wrinklepipe.normals import _chunks
+
+    for text, want in [("1", 1), ("3", 3), (" 6 ", 6), ("", None), ("0", None), ("two", None)]:
+        monkeypatch.setenv(reuse.THREADS_ENV, text)
+        assert reuse.thread_budget() == (want or os.cpu_count() or 1)
+    monkeypatch.setenv(reuse.THREADS_ENV, "6")
+    assert _chunks.threads() == 4  # the row-chunk pool's own cap
+    monkeypatch.setenv(reuse.THREADS_ENV, "1")
+    assert _chunks.threads() == 1
+    names = reuse.map_threads(lambda _: threading.current_thread().name, range(3))
+    assert names == [threading.current_thread().name] * 3  # one thread: the caller's
+    a = np.arange(1 << 15, dtype=np.float32)
+    with reuse.reuse() as memo:
+        reuse.warm([lambda: counted(a)])()
+        assert counted.calls == 0  # nothing beside the caller's work
+        assert np.array_equal(counted(a), a * 2) and counted.calls == 1 and not memo.hits
+
+
+def test_the_block_copies_are_the_same_bytes_on_one_thread_or_several(monkeypatch):
+    from wrinklepipe.normals.compress import encode_bc, pack_rgba
+
+    rng = np.random.default_rng(7)
+    q = rng.integers(0, 256, (272, 256, 2), dtype=np.uint8)  # 4352 blocks: BC5 on two threads
+    got = {}
+    for n in ("1", "2"):
+        monkeypatch.setenv(reuse.THREADS_ENV, n)
+        got[n] = [encode_bc(pack_rgba(q, fmt), fmt) for fmt in ("bc5", "bc7")]
+    assert got["1"] == got["2"]

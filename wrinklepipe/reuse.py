@@ -40,6 +40,10 @@ import numpy as np
 DEFAULT_MAX_BYTES = 1 << 30
 #: Calls whose array / bytes arguments total less than this are not worth a key: they just run.
 MIN_INPUT_BYTES = 1 << 16
+#: Environment variable capping the threads this process's own pools run at once (the block
+#: encoders' row chunks, PNGs beside other work): ``wrinklepipe batch --jobs N`` sets it in each
+#: worker to its share of the cores, so N workers never start N x cores threads.
+THREADS_ENV = "WRINKLEPIPE_THREADS"
 
 F = TypeVar("F", bound=Callable[..., Any])
 T = TypeVar("T")
@@ -209,12 +213,22 @@ def reused(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def thread_budget() -> int:
+    """Threads this process's work may run on at once: ``WRINKLEPIPE_THREADS`` when it is a
+    positive integer (a batch worker's share of the cores), else the CPU count. Results never
+    depend on it (work is split the same way whatever runs it), only the time does."""
+    text = os.environ.get(THREADS_ENV, "").strip()
+    n = int(text) if text.isdigit() else 0
+    return n if n > 0 else max(1, os.cpu_count() or 1)
+
+
 def _workers(workers: int | None) -> int:
-    return max(1, workers if workers is not None else min(2, os.cpu_count() or 1))
+    return max(1, workers if workers is not None else min(2, thread_budget()))
 
 
 def map_threads(fn: Callable[[T], R], items: Iterable[T], workers: int | None = None) -> list[R]:
-    """``[fn(x) for x in items]`` on ``workers`` threads (default: 2, or 1 on one core), each
+    """``[fn(x) for x in items]`` on ``workers`` threads (default: 2, or 1 when
+    :func:`thread_budget` is 1), each
     call in a copy of the caller's context, so the PNG level (:func:`png_compression`) and this
     run's memo apply as they do in the caller. For work that releases the GIL (zlib, the block
     encoders); results in order; the first exception is raised."""
@@ -232,8 +246,10 @@ def warm(calls: Sequence[Callable[[], object]], workers: int = 1) -> Callable[[]
     memo, so that the same calls made later are hits while the caller does other work; returns
     ``wait()``, to call before those later calls. Without an active memo nothing starts (the
     results would have nowhere to go). A call that fails here is simply not stored: the later
-    call computes it again and raises where it is made."""
-    if _MEMO.get() is None or not calls:
+    call computes it again and raises where it is made. With a budget of one thread
+    (:func:`thread_budget`) nothing starts either: the later calls compute where they are made
+    rather than beside the caller's work."""
+    if _MEMO.get() is None or not calls or thread_budget() < 2:
         return lambda: None
     ex = ThreadPoolExecutor(max_workers=_workers(workers), thread_name_prefix="wp-warm")
     futures = [ex.submit(contextvars.copy_context().run, c) for c in calls]

@@ -86,8 +86,8 @@ class LocalEngine:
         self.jobs = max(1, int(jobs or cpu_count()))
         self.timeout = timeout
         self.target = target or worker.child_main
-        #: threads each worker's thread pools (llvmpipe, OpenImageIO) may use: the cores shared
-        #: out, so N workers do not start N x cores threads
+        #: threads each worker's thread pools (wrinklepipe's, OpenBLAS, llvmpipe, OpenImageIO)
+        #: may use: the cores shared out, so N workers do not start N x cores threads
         self.threads = max(1, cpu_count() // self.jobs)
         self.description = f"{self.jobs} local worker process{'es' if self.jobs > 1 else ''}"
 

@@ -16,12 +16,14 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import OpenImageIO
+from threadpoolctl import threadpool_limits
 
 from wrinklepipe.batch.plan import Job
 from wrinklepipe.batch.results import AssetResult, counts_of, status_for
 from wrinklepipe.console import stage_listener
 from wrinklepipe.errors import InputError
 from wrinklepipe.pipeline.convert import convert
+from wrinklepipe.reuse import THREADS_ENV
 from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import validate
 from wrinklepipe.validate.config import Config, load_config
@@ -182,10 +184,15 @@ def run_job(job: Job, emit: Callable[[str], None] = _ignore) -> AssetResult:
 
 
 def limit_threads(threads: int) -> None:
-    """Let this process's thread pools use ``threads`` threads: llvmpipe (read when the GL
-    context is made, so before any) and OpenImageIO's."""
+    """Let every thread pool of this process use ``threads`` threads: wrinklepipe's own (the
+    block encoders' row chunks, PNGs beside other work: ``WRINKLEPIPE_THREADS``), OpenBLAS's
+    (numpy's products; it read its count when numpy was imported, so through threadpoolctl),
+    llvmpipe's (read when the GL context is made, so before any) and OpenImageIO's. The work is
+    split the same way whatever the count, so the outputs do not change."""
+    os.environ[THREADS_ENV] = str(threads)
     os.environ["LP_NUM_THREADS"] = str(threads)
     OpenImageIO.attribute("threads", int(threads))
+    threadpool_limits(limits=int(threads), user_api="blas")
 
 
 def child_main(job: Job, conn: Any, threads: int | None = None) -> None:

@@ -6,10 +6,11 @@ enough that a kernel's temporaries stay in the CPU cache.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
+
+from wrinklepipe.reuse import thread_budget
 
 #: Texels per chunk (512 KB per float32 plane; measured best on a 2-core EPYC).
 CHUNK_TEXELS = 1 << 17
@@ -18,8 +19,9 @@ _POOL: ThreadPoolExecutor | None = None
 
 
 def threads() -> int:
-    """Worker threads used (the CPU count, at most 4)."""
-    return max(1, min(4, os.cpu_count() or 1))
+    """Worker threads used (the process's thread budget, :func:`wrinklepipe.reuse.thread_budget`:
+    the CPU count unless a batch worker set its share; at most 4)."""
+    return max(1, min(4, thread_budget()))
 
 
 def pool() -> ThreadPoolExecutor:
