@@ -15,6 +15,13 @@ def test_batch_bench_quick_runs():
     assert res.extra["converted_in_cached_rerun"] == 0
     assert res.extra["statuses"] == ["passed"]
     assert res.rows[0].ratio == 1.0 and res.failures() == []
+    # every converted asset reports its worker's CPU seconds; the cold steps are their sum
+    # (and this process's), the cached rerun's only this process's (nothing converted)
+    per_asset = res.extra["asset_cpu_s_jobs1"]
+    assert len(per_asset) == 3 and all(s > 0 for s in per_asset.values())
+    cpu = res.extra["cpu_s"]
+    assert cpu["--jobs 1, cold"] >= round(sum(per_asset.values()), 2) - 0.01
+    assert cpu["--jobs 2, cold"] > 0 and cpu["--jobs 2, cached rerun"] < cpu["--jobs 2, cold"]
 
 
 def test_convert_bench_quick_runs():

@@ -19,7 +19,9 @@ class AssetResult:
     ``source``: ``converted`` (ran here or on a worker), ``cache`` (restored), ``validated``
     (validate-asset on an existing output) or ``none`` (could not run). ``problems``: why it
     could not run (file, key, message); ``issues``: validation issues (code, severity, message,
-    pointer, fix). ``stages``: seconds per stage, in order."""
+    pointer, fix). ``stages``: seconds per stage, in order. ``cpu_seconds``: CPU time (all
+    threads) of the process that ran it, while it ran (on a Dask worker running several tasks
+    at once, theirs too); 0 when restored from the cache."""
 
     id: str
     manifest: str
@@ -29,6 +31,7 @@ class AssetResult:
     name: str = ""
     fail_on: str = "error"
     seconds: float = 0.0
+    cpu_seconds: float = 0.0
     stages: dict[str, float] = field(default_factory=dict)
     problems: list[dict[str, str]] = field(default_factory=list)
     issues: list[dict[str, Any]] = field(default_factory=list)

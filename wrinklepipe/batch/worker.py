@@ -170,12 +170,13 @@ def _validate(job: Job, stages: _Stages) -> AssetResult:
 def run_job(job: Job, emit: Callable[[str], None] = _ignore) -> AssetResult:
     """Run one job; ``emit(stage)`` is told each stage as it starts. Never raises (but for
     KeyboardInterrupt / SystemExit)."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     stages = _Stages(emit)
     result = _validate(job, stages) if job.kind == "validate" else _convert(job, stages)
     stages.close()
     result.stages = stages.seconds
     result.seconds = round(time.perf_counter() - t0, 4)
+    result.cpu_seconds = round(time.process_time() - c0, 4)
     return result
 
 

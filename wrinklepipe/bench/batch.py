@@ -9,7 +9,9 @@ policies, a second manifest name), each with an empty cache of its own:
 * ``--jobs 2, cached rerun``: the second batch again, unchanged: every asset restored from the
   cache, no conversion (checked); limit 5 % of the cold ``--jobs 2`` run.
 
-The outputs of the two cold runs are compared byte for byte (``extra.identical``). The fork
+The outputs of the two cold runs are compared byte for byte (``extra.identical``).
+``extra.cpu_s``: each step's CPU seconds (this process and every worker process, all threads),
+``extra.busy_cores``: the cores a cold step kept busy on average (CPU over wall). The fork
 server is started before the clock runs (it is paid once per batch, not per asset). Each timed
 step runs once: a cold batch is minutes of work, and a repeat would no longer be cold.
 ``--quick``: three of the variants (two PD policies, a diff map) at 32^2, validated without the
@@ -56,16 +58,22 @@ def bench_batch(quick: bool = False) -> BenchResult:
         write_studio(repo, size, count=3 if quick else None)
         LocalEngine.warm()
 
-        def timed(out: str, jobs: int, cache: str, force: bool = False) -> tuple[float, object]:
+        cpu: dict[str, float] = {}
+
+        def timed(
+            step: str, out: str, jobs: int, cache: str, force: bool = False
+        ) -> tuple[float, object]:
             quick_opts = {"render": False} if quick else {}
             plan = plan_batch([str(repo)], w / out, force=force, cli_options=quick_opts)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             run = run_plan(plan, LocalEngine(jobs), Cache(w / cache))
+            # this process (hashing, the cache) + every worker process (all threads)
+            cpu[step] = round(time.process_time() - c0 + sum(r.cpu_seconds for r in run.results), 2)
             return time.perf_counter() - t0, run
 
-        t1, run1 = timed("out1", 1, "cache1")
-        t2, run2 = timed("out2", 2, "cache2")
-        t3, run3 = timed("out2", 2, "cache2", force=True)
+        t1, run1 = timed(COLD_1, "out1", 1, "cache1")
+        t2, run2 = timed(COLD_2, "out2", 2, "cache2")
+        t3, run3 = timed(CACHED, "out2", 2, "cache2", force=True)
         identical = _tree(w / "out1") == _tree(w / "out2")
         statuses = sorted({r.status for r in run1.results + run2.results})
     res.rows = [
@@ -85,6 +93,11 @@ def bench_batch(quick: bool = False) -> BenchResult:
         "identical": identical,
         "statuses": statuses,
         "cores": os.cpu_count(),
+        # CPU seconds (all threads) of each step, and the cores each cold step kept busy on
+        # average: what a loaded machine cannot inflate much, beside the wall times
+        "cpu_s": cpu,
+        "busy_cores": {COLD_1: round(cpu[COLD_1] / t1, 2), COLD_2: round(cpu[COLD_2] / t2, 2)},
+        "asset_cpu_s_jobs1": {r.id: r.cpu_seconds for r in run1.results},
         "load_average_before": [round(x, 2) for x in load_before],
         "load_average_after": [round(x, 2) for x in os.getloadavg()],
     }
