@@ -85,6 +85,42 @@ def test_neutral_is_the_base_and_split_draw_is_identical():
     assert (full.uv[cov][:, 2] > 0).sum() > 100
 
 
+def test_reading_back_the_covered_box_gives_the_full_read_back():
+    inp = ship_asset(demo_asset(64), ShipOptions(compress=False))
+    r = Renderer(inp, 96)
+    try:
+        w = inp.asset.expression_weights({"fear": 1.0})
+        first = r.draw(np.zeros_like(w))  # read whole: the box comes from it
+        box = r.covered_box
+        boxed = [r.draw(w), r.draw(None, plain=True)]
+        x, y, bw, bh = box
+        r.covered_box = (x, 0, bw, y + bh)  # down to the bottom row: not centred
+        low = r.draw(w)
+        r.covered_box = None  # whole read-backs again
+        whole = [r.draw(w), r.draw(None, plain=True)]
+    finally:
+        r.release()
+    assert y > 0 and 0 < bw * bh < 96 * 96  # the face does not fill the target: less is read back
+    cov = first.covered
+    rows, cols = np.flatnonzero(cov.any(axis=1)), np.flatnonzero(cov.any(axis=0))
+    # the box in GL coordinates (origin bottom-left) is that of the covered pixels (row 0 top)
+    assert (x, x + bw - 1, 95 - (y + bh - 1), 95 - y) == (cols[0], cols[-1], rows[0], rows[-1])
+    for b, f in zip(boxed + [low], whole + [whole[0]], strict=True):
+        for name in ("color", "normal", "uv"):
+            assert np.array_equal(getattr(b, name), getattr(f, name)), name  # bit for bit
+    assert np.array_equal(boxed[0].covered, cov)
+
+
+def test_alpha_box_is_in_gl_window_coordinates():
+    from wrinklepipe.validate.render import alpha_box
+
+    img = np.zeros((10, 8, 4), np.float32)
+    assert alpha_box(img) is None
+    img[1:4, 2:6, 3] = 1.0  # rows 1..3 from the top, columns 2..5
+    img[2, 2, :3] = 0.5
+    assert alpha_box(img) == (2, 6, 4, 3)  # x, y from the bottom (10 - 1 - 3), w, h
+
+
 def test_ortho_front_maps_the_bounding_box_into_clip_space():
     pts = np.array([[-1.0, -2.0, -0.5], [3.0, 2.0, 0.5]])
     m = ortho_front(pts, margin=1.0).T  # row-major

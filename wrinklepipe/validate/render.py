@@ -120,6 +120,11 @@ class Renderer:
     gl: glw.RawGL | None = None
     names: list[int] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
+    #: (x, y, w, h) in GL window coordinates: the box of the pixels the mesh covers, from the
+    #: first image read back (None before). Every draw covers the same pixels (the geometry
+    #: does not move; the split draw only partitions the triangles) and every fragment writes
+    #: alpha 1 into each target, so outside the box every target holds the clear value 0.
+    covered_box: tuple[int, int, int, int] | None = None
 
     def __post_init__(self) -> None:
         self.ctx = glw.create_context()
@@ -279,15 +284,36 @@ class Renderer:
         if not read:
             ctx.finish()
             return None
-        s = self.size
-        imgs: list[np.ndarray | None] = []
-        for i, wanted in enumerate((color, True, uv)):
-            if not wanted:
-                imgs.append(None)
-                continue
-            raw = self.fbo.read(components=4, attachment=i, dtype="f4")
-            imgs.append(np.frombuffer(raw, np.float32).reshape(s, s, 4)[::-1].copy())
+        imgs = [self._read(i) if wanted else None for i, wanted in enumerate((color, True, uv))]
+        if self.covered_box is None:
+            self.covered_box = alpha_box(imgs[1])
         return Frame(*imgs)
+
+    def _read(self, attachment: int) -> np.ndarray:
+        """One target as ``[H, W, 4]`` float32, row 0 at the top. Once the covered box is
+        known, only the box is read back (each float read costs as much as a draw on
+        llvmpipe); the rest is the clear value, as a whole read would give."""
+        s, box = self.size, self.covered_box
+        if box is None:
+            raw = self.fbo.read(components=4, attachment=attachment, dtype="f4")
+            return np.frombuffer(raw, np.float32).reshape(s, s, 4)[::-1].copy()
+        x, y, w, h = box
+        raw = self.fbo.read(viewport=box, components=4, attachment=attachment, dtype="f4")
+        out = np.zeros((s, s, 4), np.float32)
+        out[s - y - h : s - y, x : x + w] = np.frombuffer(raw, np.float32).reshape(h, w, 4)[::-1]
+        return out
+
+
+def alpha_box(image: np.ndarray) -> tuple[int, int, int, int] | None:
+    """(x, y, w, h) in GL window coordinates (origin bottom-left) of the pixels with a
+    non-zero alpha in ``image`` ``[H, W, 4]`` (row 0 at the top); None when there are none."""
+    written = image[..., 3] != 0
+    rows, cols = np.flatnonzero(written.any(axis=1)), np.flatnonzero(written.any(axis=0))
+    if not len(rows):
+        return None
+    h = image.shape[0]
+    r0, r1, c0, c1 = int(rows[0]), int(rows[-1]), int(cols[0]), int(cols[-1])
+    return c0, h - 1 - r1, c1 - c0 + 1, r1 - r0 + 1
 
 
 def triangle_layer_touch(layers: list[Texture], mesh: Mesh) -> np.ndarray:
