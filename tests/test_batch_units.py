@@ -222,6 +222,54 @@ def test_parse_size():
         parse_size("lots")
 
 
+def test_the_longest_assets_start_first_by_the_caches_record(tmp_path, monkeypatch):
+    from wrinklepipe.batch import AssetOptions, run
+    from wrinklepipe.batch.plan import BatchPlan
+
+    seconds = {"a": 2.0, "b": 9.0, "c": 0.5, "d": 4.0}
+    salt = ["1"]  # a new salt: every input "changed", every asset converts again
+    monkeypatch.setattr(
+        run, "asset_key", lambda m, o, out: (format(abs(hash((out.name, salt[0]))), "064x"), 0)
+    )
+
+    class Timed:  # an engine that "converts" in the order it is given
+        def __init__(self):
+            self.order = []
+
+        def run(self, jobs, on_stage):
+            for job in jobs:
+                self.order.append(job.id)
+                job.output.mkdir(parents=True, exist_ok=True)
+                (job.output / "f.txt").write_text(job.id)
+                yield Result(
+                    job.id, job.manifest_rel, job.id, "passed", "converted", seconds=seconds[job.id]
+                )
+
+    jobs = [
+        Job(n, tmp_path / "m.toml", "m.toml", tmp_path / "out" / n, AssetOptions(), force=True)
+        for n in "abcd"
+    ]
+    cache = Cache(tmp_path / "cache")
+    plan = BatchPlan(tmp_path, tmp_path / "out", jobs)
+    first = Timed()
+    run.run_plan(plan, first, cache)
+    assert first.order == list("abcd")  # nothing known: plan order
+    assert [cache.last_seconds(n) for n in "abcd"] == [2.0, 9.0, 0.5, 4.0]
+    salt[0] = "2"
+    seconds["e"] = 1.0  # a new asset: never timed, so it goes first
+    plan.jobs = [
+        *jobs,
+        Job("e", tmp_path / "m.toml", "m.toml", tmp_path / "out" / "e", AssetOptions(), force=True),
+    ]
+    second = Timed()
+    got = run.run_plan(plan, second, cache)
+    assert second.order == ["e", "b", "d", "a", "c"]
+    assert [r.id for r in got.results] == list("abcde")  # reported in plan order
+    assert run.longest_first(plan.jobs, None) == plan.jobs  # no cache, no record
+    (cache.root / "times").rename(cache.root / "gone")
+    assert cache.last_seconds("b") is None
+
+
 # ------------------------------------------------------------------------------------------------
 # the local engine: one crash fails one asset
 

@@ -5,6 +5,8 @@ Layout under the cache folder::
     entries/<k[:2]>/<key>/entry.json    key, files (path, bytes, sha256), total bytes, result
     entries/<k[:2]>/<key>/files/...     the output folder, byte for byte
     tmp/<random>/                       entries being built, and entries being evicted
+    times/<h>.json                      how long the last conversion of each asset took (h:
+                                        hash of its output path): the longest start first
 
 The protocol is rename-based, so no lock is needed:
 
@@ -169,6 +171,33 @@ class Cache:
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
+
+    # -- how long each asset took ---------------------------------------------------------------
+
+    def _times_file(self, job_id: str) -> Path:
+        return (
+            self.root / "times" / f"{hashlib.sha256(job_id.encode('utf-8')).hexdigest()[:32]}.json"
+        )
+
+    def remember_seconds(self, job_id: str, seconds: float) -> None:
+        """Record how long converting the asset ``job_id`` took (written whole by a rename;
+        the last batch to finish one wins). A hint for scheduling, never part of a result."""
+        f = self._times_file(job_id)
+        f.parent.mkdir(parents=True, exist_ok=True)
+        tmp = f.with_name(f".{uuid.uuid4().hex}.tmp")
+        tmp.write_text(json.dumps({"id": job_id, "seconds": round(float(seconds), 3)}))
+        os.replace(tmp, f)
+
+    def last_seconds(self, job_id: str) -> float | None:
+        """How long the last conversion of ``job_id`` took, if this cache saw one."""
+        try:
+            got = json.loads(self._times_file(job_id).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+        if not isinstance(got, dict) or got.get("id") != job_id:
+            return None
+        sec = got.get("seconds")
+        return float(sec) if isinstance(sec, int | float) and sec >= 0 else None
 
     # -- size -----------------------------------------------------------------------------------
 

@@ -2,7 +2,8 @@
 
 For every convert job, with a cache: hash the inputs (:func:`asset_key`); a complete entry is
 restored into the output folder (hashes checked) and the asset never reaches an engine. The
-others run on the engine; each one that was written (exit 0 or 1) is stored, unless its inputs
+others run on the engine, the longest first by the cache's record of their last conversion
+(:func:`longest_first`); each one that was written (exit 0 or 1) is stored, unless its inputs
 changed while it ran (the key is taken again afterwards). Then the cache is trimmed to its cap.
 An asset that cannot be hashed (a broken manifest) fails on its own, like any other.
 """
@@ -85,6 +86,17 @@ def _from_entry(job: Job, entry: Entry, seconds: float) -> AssetResult:
     )
 
 
+def longest_first(jobs: list[Job], cache: Cache | None) -> list[Job]:
+    """The order the engine gets the jobs in: those the cache never saw converted first (in
+    plan order: their cost is unknown, so they are not left for the end), then the others by
+    their last conversion time, longest first, so the batch does not end on one long asset
+    while the other workers idle. Results are reported in plan order whatever the order."""
+    if cache is None:
+        return list(jobs)
+    last = {j.id: cache.last_seconds(j.id) if j.kind == "convert" else None for j in jobs}
+    return sorted(jobs, key=lambda j: (last[j.id] is not None, -(last[j.id] or 0.0)))
+
+
 def run_plan(
     plan: BatchPlan,
     engine: Any,
@@ -134,9 +146,12 @@ def run_plan(
         stats.misses += 1
         to_run.append(job)
 
+    to_run = longest_first(to_run, cache)
     by_id = {j.id: j for j in to_run}
     for result in engine.run(to_run, stage):
         job = by_id[result.id]
+        if cache is not None and result.source == "converted" and job.kind == "convert":
+            cache.remember_seconds(job.id, result.seconds)
         key = keys.get(job.id)
         if cache is not None and key and result.status != "error":
             result.key = key
