@@ -30,10 +30,14 @@ def test_convert_bench_quick_runs():
     assert steps[:4] == [
         "decode inputs + encode outputs",
         "decode inputs (ingest)",
-        "encode outputs (PNG, BC, glTF, USD)",
+        "encode outputs (PNG, BC with mip chains, glTF, USD)",
         "convert (whole)",
     ]
     assert "convert: validating" in steps
     base = res.rows[0].median_s
     assert base == pytest.approx(res.rows[1].median_s + res.rows[2].median_s)
     assert res.rows[3].ratio > 1  # converting costs more than its I/O alone
+    # the mip chains are encoded too: more than the level-0-only baseline of older records
+    cpu = res.extra["cpu_s"]
+    assert cpu["encode outputs (PNG, BC with mip chains, glTF, USD)"] > 0
+    assert res.extra["level0_baseline_s"] > 0 and res.extra["cpu_ratio"] > 1
