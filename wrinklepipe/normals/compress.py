@@ -44,6 +44,7 @@ from wrinklepipe import codec
 from wrinklepipe.normals import _chunks, bc4
 from wrinklepipe.normals import encode as enc
 from wrinklepipe.normals._chunks import map_rows, pool, threads
+from wrinklepipe.normals.blocks import encode_distinct
 from wrinklepipe.reuse import reused
 
 _F = np.float32
@@ -125,6 +126,8 @@ def encode_bc(rgba: np.ndarray, fmt: str, targets: np.ndarray | None = None) -> 
     BC1 and BC3nm's colour half by quicktex; BC7 by ispc_texcomp. ``targets`` ([H, W, C]
     float texel values, the unrounded map) lets the BC4-based encoders fit the source instead
     of its 8-bit rounding: BC5 reads x, y from its two components, BC3nm x from the first.
+    Without ``targets`` each distinct 4x4 block is encoded once
+    (:func:`wrinklepipe.normals.blocks.encode_distinct`: the same bytes).
     """
     check_format(fmt)
     a = np.ascontiguousarray(rgba, dtype=np.uint8)
@@ -133,6 +136,13 @@ def encode_bc(rgba: np.ndarray, fmt: str, targets: np.ndarray | None = None) -> 
     h, w = a.shape[:2]
     if h % 4 or w % 4 or h == 0 or w == 0:
         raise ValueError(f"block formats need sizes that are multiples of 4, got {w} x {h}")
+    if targets is None:
+        return encode_distinct(a, lambda t: _encode_bc(t, fmt, None), BLOCK_BYTES[fmt])
+    return _encode_bc(a, fmt, targets)
+
+
+def _encode_bc(a: np.ndarray, fmt: str, targets: np.ndarray | None) -> bytes:
+    h, w = a.shape[:2]
     if fmt == "bc5":
         if targets is not None:
             return bc4.encode_bc5(targets[..., 0], targets[..., 1])
