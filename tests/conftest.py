@@ -10,8 +10,8 @@ its ~30 s page twice under ``--dist load``).
 With whole modules as the units, the two longest modules must not start last: a worker that
 picks up a long module at the end leaves the other idle. So under xdist the modules below go
 first, longest first (the rest follow in file order; they are a few seconds each). The list is
-the modules' share of the suite's time in a ``--durations=0`` run (2026-12-02, 03:05 UTC) and
-their ``-n 0`` times after that day's first merge train; refresh it from such a run when a
+the modules' summed test durations in a ``-n 2 --durations=0`` run (main 3546b79, 2026-12-02
+04:42 UTC, test_validate_render's share after a99a71b); refresh it from such a run when a
 module's cost changes a lot. The order changes nothing but
 when a test starts; ``-n 0`` runs keep file order.
 """
@@ -42,25 +42,26 @@ def robot_converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dic
     return root / "out", res.report
 
 
-LONGEST_FIRST = [
-    "test_batch_run.py",  # 11 % (the isolation test: converts, a LocalCluster)
-    "test_viewer.py",  # one browser page, ~40 s in one piece
-    "test_export_engines.py",  # 9 %
-    "test_convert_fidelity.py",  # 7 %
-    "test_convert_formats.py",  # 6 %
-    "test_validate_render.py",  # 5 %
-    "test_safety_faults.py",  # 6 % (22 killed CLI runs and their reruns)
-    "test_capture_cli.py",  # 4 %
-    "test_convert_cli.py",  # 4 %
-    "test_safety_outputs.py",  # 3 %
-    "test_document_convert.py",  # 3 %
-    "test_batch_bench.py",  # 3 %
-    "test_validate_cli.py",  # 2 %
-    "test_validate_corpus.py",  # 2 %
-    "test_safety_fuzz.py",  # 2 %
-    "test_face_fixture.py",  # 1-2 %
-    "test_batch_ci.py",  # 1-2 %
-    "test_normals_bc4.py",  # 1-2 %
+LONGEST_FIRST = [  # the modules' summed test durations in that run, seconds
+    "test_export_engines.py",  # 79 (whole characters: avatar + RobotExpressive, 4 engines)
+    "test_convert_formats.py",  # 63
+    "test_batch_run.py",  # 60 (the isolation test: converts, a LocalCluster)
+    "test_convert_fidelity.py",  # 45 (one CesiumMan convert at 1024)
+    "test_safety_faults.py",  # 43 (22 killed CLI runs and their reruns)
+    "test_viewer.py",  # 41 (one browser page in one piece)
+    "test_validate_render.py",  # 39
+    "test_validate_cli.py",  # 12
+    "test_capture_cli.py",  # 12
+    "test_document_convert.py",  # 12
+    "test_batch_ci.py",  # 11
+    "test_safety_fuzz.py",  # 9
+    "test_validate_corpus.py",  # 8
+    "test_document_read.py",  # 8
+    "test_face_fixture.py",  # 8
+    "test_convert_speed.py",  # 8
+    "test_normals_bc4.py",  # 7
+    "test_engine_shaders.py",  # 7
+    "test_batch_bench.py",  # 7
 ]
 
 
