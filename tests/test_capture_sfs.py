@@ -128,3 +128,17 @@ def test_ratio_residual_on_a_downsampled_grid():
     half = S.ratio_residual(truth, n0, ratio, roi, max_side=48)
     assert full < 2e-3 and half < 4e-3
     assert S.ratio_residual(truth * [-1.0, -1.0, 1.0], n0, ratio, roi, max_side=48) > 5 * half
+
+
+def test_sign_ambiguity_is_reported_where_the_photos_do_not_fix_it():
+    # c and -c give the same R on a neutral facing the camera (checked above): the two starts
+    # end equally good and lean opposite ways on every crease pixel. On a tilted neutral the
+    # wrong sign cannot explain R, so nothing is ambiguous.
+    for tilt, lo, hi in ((0.0, 0.9, 1.0), (0.25, 0.0, 0.05)):
+        ratio, n0, n1, roi = _scene(1.0, tilt=tilt)
+        q = (S.neutral_slopes(n1) - S.neutral_slopes(n0)) * (roi > 0.5)[..., None]
+        res = S.solve_crease(ratio, n0, roi, starts={"truth": q, "mirror": -q})
+        assert lo <= res.ambiguous_fraction <= hi, tilt
+        crease = np.hypot(*np.moveaxis(res.slopes - S.neutral_slopes(n0), -1, 0)) > S.CREASE_SLOPE
+        assert res.ambiguous.shape == ratio.shape
+        assert not (res.ambiguous & ~crease).any()  # only crease pixels are flagged

@@ -489,6 +489,12 @@ def _summary(self: CaptureOutput, out: Path) -> list[str]:
                 f"{t['flat']['mean']:.2f} deg)"
             )
         lines.append(line)
+    amb = r.get("sfs", {}).get("sign_ambiguous_fraction")
+    if amb:
+        lines.append(
+            f"  sfs: the photos leave the sign of {100 * amb:.0f} % of its crease pixels open "
+            "(another height explains R as well): see pictures/sfs_ambiguous.png"
+        )
     return lines
 
 

@@ -123,15 +123,26 @@ class CaptureResult:
 AUTO_SFS_BELOW_NZ = 0.97
 
 
+#: ``auto`` on a nearly flat neutral takes the solve only where the photos fixed most crease
+#: signs: at most this share of its crease pixels ambiguous (``SfsResult.ambiguous_fraction``).
+AUTO_MAX_AMBIGUOUS = 0.5
+
+
 def solve_explains_better(result: S.SfsResult) -> bool:
     """Whether the solve's winning start is not its first (the integrable prior): another start
     ended with a residual lower by more than ``SfsOptions.tie``, so the photos, not the prior,
-    decided the sign. ``auto`` takes ``sfs`` then even on a nearly flat neutral. Measured:
-    nearly flat foreheads with ridges and furrows (the prior's mirror or the eikonal start wins;
-    the solve orients 90 % right against the prior's 8-53 %); the example session (all dents:
-    the prior's start is kept, and the prior is better than its refinement)."""
+    decided the sign; and no other solution explaining R as well disagrees on most crease signs
+    (``AUTO_MAX_AMBIGUOUS``). ``auto`` takes ``sfs`` then even on a nearly flat neutral.
+    Measured: nearly flat foreheads with ridges and furrows (the prior's mirror or the coarse
+    solve wins, 10-16 % ambiguous; the solve orients 77-91 % right against the prior's 8-53 %);
+    the nearly flat mixed session (80 % ambiguous: equally good heights disagree, the prior is
+    kept); the example session (all dents: the prior's start is kept)."""
     first = next(iter(result.starts), None)
-    return first is not None and result.start != first
+    return (
+        first is not None
+        and result.start != first
+        and result.ambiguous_fraction <= AUTO_MAX_AMBIGUOUS
+    )
 
 
 def resolve_method(method: str, neutral_nz: np.ndarray | None) -> str:

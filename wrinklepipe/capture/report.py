@@ -112,6 +112,9 @@ def build_report(
             "starts_ratio_residual": result.sfs.starts,
             "exposure_refit": result.sfs.exposure,
             "grid_factor": result.sfs.factor,
+            # crease pixels whose sign the photos do not fix (another height explains R as
+            # well and leans the other way): do not trust the orientation there
+            "sign_ambiguous_fraction": result.sfs.ambiguous_fraction,
         }
     return _round_tree(report)
 
@@ -164,6 +167,17 @@ def picture_images(
             ratio_rgb,
         ),
     ]
+    if result.sfs is not None and result.sfs.ambiguous is not None:
+        amb = np.repeat(_grey(rr.ratio, r_lo, 1.0)[..., None], 3, axis=-1) * 0.6
+        amb[result.sfs.ambiguous] = (0.9, 0.1, 0.1)
+        items.append(
+            (
+                "sfs: crease sign not fixed by the photos (red: another height explains R as "
+                "well and leans the other way)",
+                "sfs_ambiguous.png",
+                amb,
+            )
+        )
     for m in result.normal_photo:
         items.append(
             (
