@@ -630,3 +630,33 @@ def test_gltf_clips_play_as_skel_animations(characters, name, clip):
     np.testing.assert_allclose(got, want, atol=1e-4 * max(size, 1.0))
     rest = _gltf_posed(g, src, node, mesh, k, {})
     assert np.abs(want - rest).max() > 0.01 * size  # the clip moves it at that time
+
+
+def test_two_wrinkled_materials_read_back_in_the_package_order(tmp_path):
+    """material = ["Skin", "Teeth"]: both skinned meshes in the scene, listed in the package's
+    order in wrinkle:meshes; read_usd's merged mesh = read_wrinkled's, vertex for vertex."""
+    from wrinklepipe.io.images import write_image
+
+    manifest = _avatar_variant(tmp_path, lambda doc, data, folder: None)
+    flat = np.zeros((64, 64, 3))  # the states' size
+    flat[...] = (0.5, 0.5, 1.0)
+    write_image(manifest.parent / "flat.png", flat, 8)  # Teeth has no normalTexture
+    text = manifest.read_text().replace(
+        'material = "Skin"', 'material = ["Skin", "Teeth"]\nbase = "flat.png"'
+    )
+    manifest.write_text(text)
+    res = convert(manifest, tmp_path / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    u = read_usd(tmp_path / "out" / "avatar.usda").mesh
+    g = read_wrinkled(tmp_path / "out" / "avatar.gltf").mesh
+    assert [p.name for p in u.parts] == [
+        "/avatar/Scene/Skinned/Head",
+        "/avatar/Scene/Skinned/Teeth",
+    ]
+    assert [p.name for p in g.parts] == ["Head", "Teeth"]
+    assert [p.count for p in u.parts] == [p.count for p in g.parts]
+    np.testing.assert_array_equal(u.indices, g.indices)
+    np.testing.assert_array_equal(u.vertex_ids, g.vertex_ids)
+    np.testing.assert_array_equal(u.positions, g.positions)
+    np.testing.assert_array_equal(u.joints, g.joints)
+    assert u.morph_names == g.morph_names and u.joint_names == g.joint_names
