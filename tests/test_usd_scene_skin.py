@@ -660,3 +660,88 @@ def test_two_wrinkled_materials_read_back_in_the_package_order(tmp_path):
     np.testing.assert_array_equal(u.positions, g.positions)
     np.testing.assert_array_equal(u.joints, g.joints)
     assert u.morph_names == g.morph_names and u.joint_names == g.joint_names
+
+
+def _append_accessor(doc: dict, data: bytes, values: np.ndarray, kind: str) -> tuple[int, bytes]:
+    blob = np.ascontiguousarray(values, np.float32).tobytes()
+    pad = b"\0" * ((-len(data)) % 4)
+    doc["bufferViews"].append(
+        {"buffer": 0, "byteOffset": len(data) + len(pad), "byteLength": len(blob)}
+    )
+    acc = {"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126}
+    acc.update(count=len(values), type=kind)
+    if kind == "SCALAR":
+        acc.update(min=[float(values.min())], max=[float(values.max())])
+    doc["accessors"].append(acc)
+    new = data + pad + blob
+    doc["buffers"][0]["byteLength"] = len(new)
+    return len(doc["accessors"]) - 1, new
+
+
+def test_non_joint_nodes_animate_their_xforms_and_carry_the_skeleton(tmp_path):
+    """A clip moving two nodes that are no joints: the Avatar root (the skeleton's parent:
+    translated) and the Eyes made rigid (rotated about Y): with its variant selected, at the
+    key time 1 s the Eyes' Xform (UsdGeom.XformCache) places its points where glTF does, and
+    UsdSkel's skinned Head follows the moved root as the glTF skin; at the default time the
+    rest pose (what validate reads)."""
+    from pxr import Usd, UsdGeom, UsdSkel, Vt
+
+    half = np.sin(0.3), np.cos(0.3)
+
+    def change(doc, data, folder):
+        del doc["nodes"][21]["skin"]  # the Eyes: a rigid part under the scene root
+        for p in doc["meshes"][1]["primitives"]:
+            p["attributes"].pop("JOINTS_0"), p["attributes"].pop("WEIGHTS_0")
+        t, data = _append_accessor(doc, data, np.array([0.0, 1.0]), "SCALAR")
+        move, data = _append_accessor(doc, data, np.array([[0, 0, 0], [0.5, 0.1, 0]]), "VEC3")
+        turn, data = _append_accessor(
+            doc, data, np.array([[0, 0, 0, 1], [0, half[0], 0, half[1]]]), "VEC4"
+        )
+        doc["animations"].append(
+            {
+                "name": "Props",
+                "samplers": [{"input": t, "output": move}, {"input": t, "output": turn}],
+                "channels": [
+                    {"sampler": 0, "target": {"node": 24, "path": "translation"}},
+                    {"sampler": 1, "target": {"node": 21, "path": "rotation"}},
+                ],
+            }
+        )
+        return data
+
+    manifest = _avatar_variant(tmp_path, change)
+    res = convert(manifest, tmp_path / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    src = manifest.parent / "avatar.glb"
+    g = ref.load(src)
+    out = tmp_path / "out"
+    stage = Usd.Stage.Open(str(out / "avatar.usda"))
+    stage.SetEditTarget(stage.GetSessionLayer())
+    vset = stage.GetDefaultPrim().GetChild("Scene").GetVariantSets().GetVariantSet("animation")
+    vset.SetVariantSelection("Props")
+    code = Usd.TimeCode(1.0 * stage.GetTimeCodesPerSecond())
+    pose = {24: np.eye(4), 21: np.eye(4)}
+    pose[24][:3, 3] = [0.5, 0.1, 0]
+    pose[21][:3, :3] = [[half[1] ** 2 - half[0] ** 2, 0, 2 * half[0] * half[1]], [0, 1, 0],
+                        [-2 * half[0] * half[1], 0, half[1] ** 2 - half[0] ** 2]]  # fmt: skip
+    worlds = _worlds(g, pose)  # rest: no rotation/scale, the root at 0: keyed TRS = rest @ pose
+    eyes = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh) and p.GetName() == "Eyes")
+    pos = ref.accessor(g, src, g.meshes[1].primitives[0].attributes.POSITION).astype(np.float64)
+    for time, w in ((code, worlds[21]), (Usd.TimeCode.Default(), _worlds(g, {})[21])):
+        m = np.asarray(UsdGeom.XformCache(time).GetLocalToWorldTransform(eyes)).T
+        got = np.asarray(UsdGeom.Mesh(eyes).GetPointsAttr().Get(), np.float64)
+        np.testing.assert_allclose(
+            got @ m[:3, :3].T + m[:3, 3], pos @ w[:3, :3].T + w[:3, 3], atol=1e-5
+        )
+    (head,) = _wrinkled_prims(stage)
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root.Find(head), Usd.TraverseInstanceProxies())
+    skel = UsdSkel.BindingAPI(head).GetInheritedSkeleton()
+    xf = cache.GetSkelQuery(skel).ComputeSkinningTransforms(code)
+    pts = Vt.Vec3fArray(UsdGeom.Mesh(head).GetPointsAttr().Get())
+    assert cache.GetSkinningQuery(head).ComputeSkinnedPoints(xf, pts, code)
+    want = _gltf_posed(g, src, 20, 0, 0, pose)
+    np.testing.assert_allclose(np.asarray(pts), want, atol=1e-5)
+    assert np.abs(want - _gltf_posed(g, src, 20, 0, 0, {})).max() > 0.4  # moved by the root
+    assert read_usd(out / "avatar.usda").mesh.positions.shape[0] > 0
+    assert _usd_errors(out / "avatar.usda") == []

@@ -1,9 +1,9 @@
 """The glTF source's animations in its USD: one UsdSkel SkelAnimation per clip, chosen by a
 variant set.
 
-Every glTF animation (a clip) whose channels move joints (``translation`` / ``rotation`` /
-``scale`` of a skin's joint nodes) or morph weights (``weights`` of a node whose mesh is bound
-to a Skeleton) becomes a SkelAnimation below ``Scene/Animations``: ``joints`` = the animated
+Every glTF animation (a clip) whose channels move nodes (``translation`` / ``rotation`` /
+``scale``) or morph weights (``weights`` of a node whose mesh is bound to a Skeleton) becomes
+a SkelAnimation below ``Scene/Animations``: ``joints`` = the animated
 joints (the others keep their rest transforms), their transforms time-sampled in the
 skeleton's convention (a root joint's includes its non-joint ancestors at rest),
 ``blendShapes`` / ``blendShapeWeights`` the animated targets (names made USD identifiers, as
@@ -19,8 +19,13 @@ Times: seconds x the stage's ``timeCodesPerSecond``; samples at every key of the
 channels (USD interpolates linearly and slerps quaternions, as glTF's LINEAR does);
 CUBICSPLINE channels are sampled besides at every frame of the stage's rate, STEP channels get
 a second sample 1 ms before each key (held values). The stage's ``endTimeCode`` is extended to
-the longest clip (the wrinkle weights hold their last value after their curve). Channels on
-nodes that are no joints (an animated prop, a camera) are not carried: a note counts them.
+the longest clip (the wrinkle weights hold their last value after their curve).
+
+Nodes that are no joints but move (an animated prop, a character's root object): their Xform's
+transform op gets its value from the variants only (a local value would be stronger than any
+variant's samples): every variant authors the rest matrix, the clips that move it time samples
+too; a joint below such a node takes its motion into its skeleton-space transform (a root
+joint through its ancestors, a joint below non-joint nodes relative to its joint parent).
 """
 
 from __future__ import annotations
@@ -117,26 +122,43 @@ def _rest_trs(node: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     )
 
 
+def xform_animated_nodes(doc: Document) -> set[int]:
+    """Nodes that are no joint of any skin and that some clip moves (translation / rotation /
+    scale channels): their Xform's transform is authored by the variants."""
+    joints = {int(j) for sk in doc.array("skins") for j in sk.get("joints", [])}
+    return {
+        int(c["target"]["node"])
+        for a in doc.array("animations")
+        for c in a.get("channels") or []
+        if isinstance((c.get("target") or {}).get("node"), int)
+        and c["target"].get("path") in ("translation", "rotation", "scale")
+        and int(c["target"]["node"]) not in joints
+    }
+
+
 def add_animations(
     stage: Any,
     scene: Any,
     doc: Document,
     skeletons: list[SkeletonInfo],
     worlds: dict[int, np.ndarray],
+    xforms: dict[int, Any],
     wrinkle: Any = None,
 ) -> list[str]:
-    """Author the clips (see the module doc) below ``scene`` (the ``Scene`` prim path);
-    ``wrinkle``: a callable ``(variant name) -> None`` authoring convert's morph-weight
-    animation inside the ``wrinkle`` variant, or None. Returns notes."""
+    """Author the clips (see the module doc) below ``scene`` (the ``Scene`` prim path).
+    ``xforms``: the Xform prim path of each node of :func:`xform_animated_nodes` in the scene
+    (its transform op left without a value: every variant authors its rest matrix, a clip that
+    moves it time samples too); ``wrinkle``: a callable ``(variant name) -> None`` authoring
+    convert's morph-weight animation inside the ``wrinkle`` variant, or None. Returns notes."""
     from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel, Vt  # deferred: usd-core, USD only
 
     nodes = doc.array("nodes")
     parent = {int(c): i for i, n in enumerate(nodes) for c in n.get("children", [])}
-    joint_nodes = {j for s in skeletons for j in s.joints}
-    morph_nodes = {n for s in skeletons for n in s.morph_nodes}
+    joint_nodes = {j for sk in skeletons for j in sk.joints}
+    morph_nodes = {n for sk in skeletons for n in sk.morph_nodes}
     fps = stage.GetTimeCodesPerSecond()
     notes: list[str] = []
-    clips = []  # (glTF name, {skeleton index: anim spec}) per clip with something to play
+    clips = []  # (glTF name, its usable channels)
     skipped = 0
     for a in range(len(doc.array("animations"))):
         chans = _channels(doc, a)
@@ -144,7 +166,7 @@ def add_animations(
             c
             for c in chans
             if (c.path == "weights" and c.node in morph_nodes)
-            or (c.path != "weights" and c.node in joint_nodes)
+            or (c.path != "weights" and (c.node in joint_nodes or c.node in xforms))
         ]
         skipped += len(chans) - len(usable)
         if usable:
@@ -152,10 +174,12 @@ def add_animations(
             clips.append((name, usable))
     if skipped:
         notes.append(
-            f"USD: {skipped} animation channel(s) on nodes that are no joints (or weights of "
+            f"USD: {skipped} animation channel(s) on nodes outside the scene (or weights of "
             "meshes bound to no skeleton) are not carried (kept in the glTF)"
         )
     if not clips and wrinkle is None:
+        for n, path in xforms.items():  # no variant set: the rest matrix, as authored
+            _xform_op(stage, path).Set(_gf(_node_matrix(nodes[n])))
         return notes
     holder = scene.AppendChild("Animations")
     UsdGeom.Scope.Define(stage, holder)
@@ -171,17 +195,23 @@ def add_animations(
         taken.add(tok)
         return tok
 
+    def rest_xforms() -> None:
+        for n, path in xforms.items():
+            _xform_op(stage, path).Set(_gf(_node_matrix(nodes[n])))
+
     if wrinkle is not None:
         variant_name(WRINKLE_VARIANT)
         vset.AddVariant(WRINKLE_VARIANT)
         vset.SetVariantSelection(WRINKLE_VARIANT)
         with vset.GetVariantEditContext():
             wrinkle(WRINKLE_VARIANT)
+            rest_xforms()
         vset.ClearVariantSelection()
     first_clip = ""
     groups: dict[tuple[str, ...], list[SkeletonInfo]] = {}
-    for s in skeletons:
-        groups.setdefault(tuple(s.tokens), []).append(s)
+    for sk in skeletons:
+        groups.setdefault(tuple(sk.tokens), []).append(sk)
+    ends = []
     for name, chans in clips:
         var = variant_name(name)
         first_clip = first_clip or var
@@ -189,17 +219,36 @@ def add_animations(
         vset.SetVariantSelection(var)
         times = _times(chans, fps)
         codes = times * fps
+        ends.append(float(codes[-1]))
         by_node: dict[int, dict[str, _Channel]] = {}
         for c in chans:
             by_node.setdefault(c.node, {})[c.path] = c
+        local = _Locals(nodes, parent, worlds, by_node, times)
         with vset.GetVariantEditContext():
+            rest_xforms()
+            for n, path in xforms.items():
+                if n in by_node:
+                    op = _xform_op(stage, path)
+                    mats = local.local(n)
+                    for f, code in enumerate(codes):
+                        op.Set(_gf(mats[f]), Usd.TimeCode(float(code)))
             for g, (tokens, members) in enumerate(groups.items()):
                 first = members[0]
-                moved = [k for k, j in enumerate(first.joints) if j in by_node]
+                in_skel = set(first.joints)
+
+                moved = [  # animated joints, and those a moving non-joint ancestor carries
+                    k
+                    for k, j in enumerate(first.joints)
+                    if j in by_node
+                    or (
+                        parent.get(j) not in in_skel
+                        and local.moves(parent.get(j), _joint_parent(j, parent, in_skel))
+                    )
+                ]
                 shapes: list[str] = []
                 weights: list[np.ndarray] = []
-                for s in members:
-                    for node, targets in s.morph_nodes.items():
+                for sk in members:
+                    for node, targets in sk.morph_nodes.items():
                         c = by_node.get(node, {}).get("weights")
                         if c is None:
                             continue
@@ -218,21 +267,13 @@ def add_animations(
                     mats = np.empty((len(times), len(moved), 4, 4))
                     for col, k in enumerate(moved):
                         j = first.joints[k]
-                        t0, q0, s0 = _rest_trs(nodes[j])
-                        got = by_node[j]
-                        tr, ro, sc = (
-                            sample_channel_at(got[p].t, got[p].v, times, got[p].interp, p)
-                            if p in got
-                            else np.repeat(rest[None], len(times), 0)
-                            for p, rest in (("translation", t0), ("rotation", q0), ("scale", s0))
-                        )
-                        local = trs_matrices(tr, ro, sc)
-                        up = parent.get(j)
-                        while up is not None and up not in first.joints:
-                            up = parent.get(up)
-                        if up is None and parent.get(j) is not None:  # a root: skeleton space
-                            local = worlds.get(parent[j], _node_matrix(nodes[parent[j]])) @ local
-                        mats[:, col] = local
+                        up = _joint_parent(j, parent, in_skel)
+                        if up is None:  # a root: skeleton space (its ancestors' world)
+                            mats[:, col] = local.world(j)
+                        elif parent.get(j) == up:
+                            mats[:, col] = local.local(j)
+                        else:  # non-joint nodes between it and its joint parent
+                            mats[:, col] = np.linalg.inv(local.world(up)) @ local.world(j)
                     for f, code in enumerate(codes):
                         anim.SetTransforms(
                             Vt.Matrix4dArray.FromNumpy(
@@ -246,20 +287,88 @@ def add_animations(
                     table = np.stack(weights, 1).astype(np.float32)
                     for f, code in enumerate(codes):
                         attr.Set(Vt.FloatArray.FromNumpy(table[f]), Usd.TimeCode(float(code)))
-                for s in members:
-                    api = UsdSkel.BindingAPI(s.skel.GetPrim())
+                for sk in members:
+                    api = UsdSkel.BindingAPI(sk.skel.GetPrim())
                     api.CreateAnimationSourceRel().SetTargets([Sdf.Path(path)])
         vset.ClearVariantSelection()
     default = WRINKLE_VARIANT if wrinkle is not None else first_clip
     vset.SetVariantSelection(default)
-    ends = [float(_times(chans, fps)[-1]) * fps for _, chans in clips]
     if ends and (not stage.HasAuthoredTimeCodeRange() or max(ends) > stage.GetEndTimeCode()):
         if not stage.HasAuthoredTimeCodeRange():
             stage.SetStartTimeCode(0.0)
         stage.SetEndTimeCode(max(ends))  # the timeline holds the longest clip too
     if clips:
         notes.append(
-            f"USD: the {len(clips)} glTF animation(s) are SkelAnimations, one variant each of "
-            f"the variant set 'animation' on {scene} (selected: {default})"
+            f"USD: the {len(clips)} glTF animation(s) are SkelAnimations (and time-sampled "
+            f"Xforms), one variant each of the variant set 'animation' on {scene} "
+            f"(selected: {default})"
         )
     return notes
+
+
+def _gf(m: np.ndarray) -> Any:
+    from pxr import Gf  # deferred: usd-core, USD only
+
+    return Gf.Matrix4d(np.asarray(m, np.float64).T.tolist())  # Gf: row vectors
+
+
+def _xform_op(stage: Any, path: Any) -> Any:
+    from pxr import UsdGeom  # deferred: usd-core, USD only
+
+    return UsdGeom.Xformable(stage.GetPrimAtPath(path)).GetOrderedXformOps()[0]
+
+
+def _joint_parent(j: int, parent: dict[int, int], in_skel: set[int]) -> int | None:
+    up = parent.get(j)
+    while up is not None and up not in in_skel:
+        up = parent.get(up)
+    return up
+
+
+class _Locals:
+    """Each node's local and world matrices ``[F, 4, 4]`` over a clip's times (the clip's
+    channels where it has them, the node's rest TRS elsewhere)."""
+
+    def __init__(self, nodes: list, parent: dict, worlds: dict, by_node: dict, times: np.ndarray):
+        self.nodes, self.parent, self.rest_worlds = nodes, parent, worlds
+        self.by_node, self.times = by_node, times
+        self.locals: dict[int, np.ndarray] = {}
+        self.worlds: dict[int, np.ndarray] = {}
+
+    def local(self, n: int) -> np.ndarray:
+        if n not in self.locals:
+            got = self.by_node.get(n, {})
+            f = len(self.times)
+            if not any(p in got for p in ("translation", "rotation", "scale")):
+                self.locals[n] = np.broadcast_to(_node_matrix(self.nodes[n]), (f, 4, 4))
+            else:
+                t0, q0, s0 = _rest_trs(self.nodes[n])
+                tr, ro, sc = (
+                    sample_channel_at(got[p].t, got[p].v, self.times, got[p].interp, p)
+                    if p in got
+                    else np.repeat(rest[None], f, 0)
+                    for p, rest in (("translation", t0), ("rotation", q0), ("scale", s0))
+                )
+                self.locals[n] = trs_matrices(tr, ro, sc)
+        return self.locals[n]
+
+    def world(self, n: int) -> np.ndarray:
+        if n not in self.worlds:
+            if not self.moves(n):  # nothing at or above it moves: the rest world
+                rest = self.rest_worlds.get(n)
+                if rest is None:
+                    rest = _node_matrix(self.nodes[n])
+                self.worlds[n] = np.broadcast_to(rest, (len(self.times), 4, 4))
+            else:
+                p = self.parent.get(n)
+                here = self.local(n)
+                self.worlds[n] = here if p is None else self.world(p) @ here
+        return self.worlds[n]
+
+    def moves(self, n: int | None, stop: int | None = None) -> bool:
+        """Whether ``n`` or an ancestor below ``stop`` is animated in the clip."""
+        while n is not None and n != stop:
+            if n in self.by_node:
+                return True
+            n = self.parent.get(n)
+        return False

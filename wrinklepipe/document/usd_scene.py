@@ -39,7 +39,11 @@ from wrinklepipe.document.images import image_pixels, texture_source
 from wrinklepipe.document.model import Document, PrimitiveRef
 from wrinklepipe.document.render_mesh import BIAS_ATTRIBUTE
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles
-from wrinklepipe.document.usd_animation import SkeletonInfo, add_animations
+from wrinklepipe.document.usd_animation import (
+    SkeletonInfo,
+    add_animations,
+    xform_animated_nodes,
+)
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
 from wrinklepipe.document.write import mime_type
 from wrinklepipe.errors import InputError, plain_reason
@@ -128,6 +132,8 @@ class _Scene:
             self.wrinkle_index[(r.mesh, r.primitive)] = (k, first)
         self.wrinkled_paths: dict[int, Any] = {}
         self.morph_skeletons: list[Any] = []  # skeletons a wrinkled blend shape plays through
+        self.xform_animated = xform_animated_nodes(doc)
+        self.xform_paths: dict[int, Any] = {}
         self.joint_skin: dict[int, tuple[int, int]] = {}  # joint node -> (first skin, index)
         for si, sk in enumerate(doc.array("skins")):
             for k, j in enumerate(sk.get("joints", [])):
@@ -592,7 +598,11 @@ class _Scene:
         xf = UsdGeom.Xform.Define(self.stage, path)
         if path.name != name:  # the glTF name where it is no USD identifier ('Foot.L')
             xf.GetPrim().SetDisplayName(name)
-        xf.AddTransformOp().Set(_gf(_node_matrix(n)))
+        op = xf.AddTransformOp()
+        if i in self.xform_animated:  # its value is the animation variants' (usd_animation)
+            self.xform_paths[i] = path
+        else:
+            op.Set(_gf(_node_matrix(n)))
         if isinstance(n.get("mesh"), int):
             mi = int(n["mesh"])
             prims = doc.array("meshes")[mi].get("primitives", [])
@@ -652,7 +662,13 @@ def add_scene(
     for info in s.skel_info.values():  # the animation source is a variant's choice
         UsdSkel.BindingAPI.Apply(info.skel.GetPrim())
     s.notes += add_animations(
-        stage, scene_path, doc, list(s.skel_info.values()), s.worlds, s.wrinkle_morphs()
+        stage,
+        scene_path,
+        doc,
+        list(s.skel_info.values()),
+        s.worlds,
+        s.xform_paths,
+        s.wrinkle_morphs(),
     )
     order = stage.GetPrimAtPath(wrinkled.material).CreateAttribute(
         SCENE_MESHES, Sdf.ValueTypeNames.StringArray
