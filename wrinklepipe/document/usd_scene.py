@@ -1,9 +1,8 @@
-"""The whole glTF source scene in the USD output: every part the wrinkle layer does not hold.
+"""The whole glTF source scene in the USD output, rigged, its wrinkled primitives included.
 
-The USD layer convert writes keeps its wrinkle prims as they are (``/NAME/MESH`` with the
-wrinkled primitives at their rest pose, ``/NAME/Looks/skin`` with ``WrinkleMapsAPI``:
-:mod:`wrinklepipe.io.usd_write`); for a glTF source, :func:`add_scene` adds the rest of the
-character below ``/NAME/Scene``::
+For a glTF source, the USD convert writes holds the wrinkle material (``/NAME/Looks/skin``
+with ``WrinkleMapsAPI``: :func:`wrinklepipe.io.usd_write.build_stage` with
+``with_mesh=False``) and, from :func:`add_scene`, the whole character below ``/NAME/Scene``::
 
     Scene                        Xform (SkelRoot when /NAME is none)
       <node>/<node>/...          Xform per glTF node: its name (as displayName where it is no
