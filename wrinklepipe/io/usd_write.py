@@ -17,6 +17,11 @@ Layout of the stage (``defaultPrim`` = the asset name, Y up, metres)::
 V flip: glTF's ``uv`` has v = 0 at the top of the image; USD's ``st`` has t = 0 at the bottom,
 so ``st = (u, 1 - v)`` over the very same image files. Region weights go to ``wrinkle:weights``,
 as time samples when there is a weight curve (time code = seconds x ``timeCodesPerSecond``).
+
+That is the layout of a package on its own (an OBJ source, ``write_usd`` of a package). For a
+glTF source convert writes the material only (``build_stage(with_mesh=False)``) and the whole
+rigged scene beside it, the wrinkled primitives among its meshes
+(:mod:`wrinklepipe.document.usd_scene`; the material lists them in ``wrinkle:meshes``).
 """
 
 from __future__ import annotations
