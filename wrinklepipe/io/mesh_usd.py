@@ -48,6 +48,7 @@ class UsdMeshOptions:
     bake_transforms: apply the local-to-world transform of non-skinned meshes (default True).
     time: time code for points and transforms (default: the default time).
     prim: only read meshes at or under this prim path (default: all).
+    paths: only read the Mesh prims at these paths (default: all; with ``prim``, both apply).
     rigid_at_rest: a mesh bound rigidly to one joint (constant ``jointIndices``, e.g. a head
     attached to a bone) is read as a rigid mesh at the skeleton's rest pose (UsdSkel's
     ``rest_k inv(bind_k) geomBindTransform``, then the skeleton's world transform), without
@@ -57,6 +58,7 @@ class UsdMeshOptions:
     bake_transforms: bool = True
     time: float | None = None
     prim: str | None = None
+    paths: tuple[str, ...] | None = None
     rigid_at_rest: bool = False
 
 
@@ -89,6 +91,8 @@ def read_usd_meshes(path: str | Path, options: UsdMeshOptions | None = None) -> 
             continue
         ppath = str(prim.GetPath())
         if opts.prim and not (ppath == opts.prim or ppath.startswith(opts.prim.rstrip("/") + "/")):
+            continue
+        if opts.paths is not None and ppath not in opts.paths:
             continue
         mesh = _read_mesh(p, prim, time, opts)
         if mesh is None:

@@ -159,7 +159,7 @@ def _layered_mesh(
     vertices through the corner map; wrinkle primvars vertex or faceVarying), merged.
     ``joint_names``: a glTF source's scene (prim -> the glTF names of its skeleton's joints):
     rigidly bound meshes at the rest pose, joints named as in the glTF."""
-    opts = UsdMeshOptions(rigid_at_rest=joint_names is not None)
+    opts = UsdMeshOptions(paths=tuple(prims), rigid_at_rest=joint_names is not None)
     parts = {m.name: m for m in read_usd_meshes(path, opts)}
     got = []
     for p in prims:
