@@ -211,3 +211,14 @@ def test_points_only_time_sampled_without_a_range_use_the_earliest_sample(tmp_pa
     (late,) = load_meshes(path, LoadOptions(generate_uvs=False, usd_time=10.0))
     np.testing.assert_array_equal(late.positions, [[0, 3, 0], [2, 3, 0], [0, 5, 0]])
     assert not any("time sample" in n for n in late.notes)
+
+
+@needs_data
+def test_paths_option_reads_only_those_meshes():
+    from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
+
+    f = SKEL / "baseline/blendshapes.baked.usda"
+    (only,) = read_usd_meshes(f, UsdMeshOptions(paths=("/TestPlane/Mesh",)))
+    assert only.name == "/TestPlane/Mesh"
+    with pytest.raises(InputError, match="no UsdGeom.Mesh with faces"):
+        read_usd_meshes(f, UsdMeshOptions(paths=("/Nowhere",)))
