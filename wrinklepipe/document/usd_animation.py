@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.document.model import Document
+from wrinklepipe.document.usd_looks import gf_matrix
 from wrinklepipe.io.mesh_gltf import (
     _node_matrix,  # the one glTF TRS -> matrix
     sample_channel_at,
@@ -179,7 +180,7 @@ def add_animations(
         )
     if not clips and wrinkle is None:
         for n, path in xforms.items():  # no variant set: the rest matrix, as authored
-            _xform_op(stage, path).Set(_gf(_node_matrix(nodes[n])))
+            _xform_op(stage, path).Set(gf_matrix(_node_matrix(nodes[n])))
         return notes
     holder = scene.AppendChild("Animations")
     UsdGeom.Scope.Define(stage, holder)
@@ -197,7 +198,7 @@ def add_animations(
 
     def rest_xforms() -> None:
         for n, path in xforms.items():
-            _xform_op(stage, path).Set(_gf(_node_matrix(nodes[n])))
+            _xform_op(stage, path).Set(gf_matrix(_node_matrix(nodes[n])))
 
     if wrinkle is not None:
         variant_name(WRINKLE_VARIANT)
@@ -231,7 +232,7 @@ def add_animations(
                     op = _xform_op(stage, path)
                     mats = local.local(n)
                     for f, code in enumerate(codes):
-                        op.Set(_gf(mats[f]), Usd.TimeCode(float(code)))
+                        op.Set(gf_matrix(mats[f]), Usd.TimeCode(float(code)))
             for g, (tokens, members) in enumerate(groups.items()):
                 first = members[0]
                 in_skel = set(first.joints)
@@ -304,12 +305,6 @@ def add_animations(
             f"(selected: {default})"
         )
     return notes
-
-
-def _gf(m: np.ndarray) -> Any:
-    from pxr import Gf  # deferred: usd-core, USD only
-
-    return Gf.Matrix4d(np.asarray(m, np.float64).T.tolist())  # Gf: row vectors
 
 
 def _xform_op(stage: Any, path: Any) -> Any:

@@ -16,15 +16,35 @@ with ``WrinkleMapsAPI``: :func:`wrinklepipe.io.usd_write.build_stage` with
                                  restTransforms = each joint's local matrix (roots: world),
                                  bindTransforms = inverse(inverseBindMatrices), the glTF joint
                                  names in ``wrinkle:jointNames``
+      Skeletons/Morphs           one-joint Skeleton (identity) for rigid meshes with morph
+                                 targets under no joint: blend shapes play only when bound
+      Animations/<clip>          SkelAnimation per glTF clip, and ``wrinkle`` (convert's first
+                                 weight curve's morph weights), chosen by the variant set
+                                 ``animation`` on Scene (:mod:`wrinklepipe.document.usd_animation`)
       Looks/<material>           UsdPreviewSurface per glTF material: base colour (factor,
                                  texture, alpha), metallic / roughness, normal, occlusion,
                                  emissive; PNG / JPEG images copied byte for byte
 
-A ``KHR_texture_transform`` on a texture becomes a ``UsdTransform2d`` between its primvar
-reader and the texture (:func:`usd_texture_transform`; its ``texCoord`` honoured). What USD's
-preview surface cannot read (a KTX2 / Basis Universal or WebP image) is transcoded to PNG for
-it (noted); node animations are not carried (noted); the glTF output beside it keeps
-everything as it was.
+A rigid primitive (a non-skinned node) whose node is a joint or lies below one (RobotExpressive's
+head under the ``Head`` bone) is bound rigidly to that joint of the first skin holding it:
+constant ``jointIndices`` ``[k]``, weight 1, ``geomBindTransform = bind_k inv(rest_k) world``,
+so UsdSkel puts it at its glTF rest place (``rest_k inv(bind_k) geomBind = world``) and moves it
+with the joint; its points stay in the node's space below the node Xforms (what an app without
+UsdSkel shows: the same rest place).
+
+The wrinkled primitives (``WrinkledPrims.refs``, the package's order) are written like the
+others, in place, bound to the wrinkle material, with ``primvars:wrinkle:vertexId`` (int),
+``wrinkle:tangent`` (float4: the primitive's TANGENT, in its own space) and ``wrinkle:bias``
+(from ``_WRINKLE_BIAS`` where present), all ``vertex``: the glTF output's wrinkled primitives,
+one for one. The material lists their prim paths in ``wrinkle:meshes``;
+:func:`wrinklepipe.io.usd_read.read_usd` reads them back through the mesh reader, rigid ones at
+the skeleton's rest pose: what the glTF path measures. A wrinkled primitive no scene node
+instances goes below ``Scene/Unplaced`` in the space the render mesh reads it in (noted).
+
+Materials and their images: :mod:`wrinklepipe.document.usd_looks` (texture transforms as
+``UsdTransform2d``, KTX2 / WebP images transcoded to PNG); animations:
+:mod:`wrinklepipe.document.usd_animation`. The glTF output beside it keeps everything as it
+was.
 """
 
 from __future__ import annotations
@@ -34,7 +54,6 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.images import image_pixels, texture_source
 from wrinklepipe.document.model import Document, PrimitiveRef
 from wrinklepipe.document.render_mesh import BIAS_ATTRIBUTE
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles
@@ -43,14 +62,11 @@ from wrinklepipe.document.usd_animation import (
     add_animations,
     xform_animated_nodes,
 )
+from wrinklepipe.document.usd_looks import Looks, Names, gf_matrix
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
-from wrinklepipe.document.write import mime_type
-from wrinklepipe.errors import InputError, plain_reason
 from wrinklepipe.io.mesh_gltf import _node_matrix  # the one glTF TRS -> matrix
-from wrinklepipe.io.package import WrinklePackage, png_bytes
+from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.io.usd_write import SCENE_MESHES
-
-_EXT = {"image/png": "png", "image/jpeg": "jpg"}
 
 
 @dataclass(frozen=True)
@@ -66,56 +82,15 @@ class WrinkledPrims:
     morph_curve: tuple[np.ndarray, np.ndarray] | None = None
 
 
-def usd_texture_transform(xf: dict[str, Any]) -> tuple[tuple[float, float], float, tuple]:
-    """A glTF ``KHR_texture_transform`` (``uv' = offset + R(rotation) scale uv``, v down, R
-    turning ``(u, v)`` to ``(c u + s v, -s u + c v)``) as ``UsdTransform2d`` inputs on USD's
-    ``st = (u, 1 - v)``: (scale, rotation in degrees counter-clockwise, translation); USD
-    applies scale, then the rotation, then the translation. Flipping v conjugates R into the
-    ordinary counter-clockwise rotation by the same angle and moves the origin:
-    ``translation = (ox + s sy, 1 - oy - c sy)``."""
-    ox, oy = (float(x) for x in xf.get("offset", [0.0, 0.0]))
-    sx, sy = (float(x) for x in xf.get("scale", [1.0, 1.0]))
-    r = float(xf.get("rotation", 0.0))
-    c, s = float(np.cos(r)), float(np.sin(r))
-    return (sx, sy), float(np.degrees(r)), (ox + s * sy, 1.0 - oy - c * sy)
-
-
-class _Names:
-    """Valid, unique USD identifiers per parent path."""
-
-    def __init__(self) -> None:
-        self.taken: dict[str, set[str]] = {}
-
-    def __call__(self, parent: Any, name: str) -> str:
-        from pxr import Tf  # deferred: usd-core, USD only
-
-        base = Tf.MakeValidIdentifier(name or "unnamed")
-        used = self.taken.setdefault(str(parent), set())
-        tok, k = base, 1
-        while tok in used:
-            k += 1
-            tok = f"{base}_{k}"
-        used.add(tok)
-        return tok
-
-
-def _gf(m: np.ndarray) -> Any:
-    from pxr import Gf  # deferred: usd-core, USD only
-
-    return Gf.Matrix4d(np.asarray(m, np.float64).T.tolist())  # Gf: row vectors
-
-
 class _Scene:
     def __init__(
         self, stage: Any, root: Any, doc: Document, texture_dir: str, wrinkled: WrinkledPrims
     ) -> None:
         self.stage, self.root, self.doc = stage, root, doc
-        self.names = _Names()
-        self.tdir = texture_dir
-        self.files: dict[str, bytes] = {}
+        self.names = Names()
+        self.looks = Looks(stage, root, doc, texture_dir, self.names)
+        self.material = self.looks.material
         self.notes: list[str] = []
-        self.materials: dict[int, Any] = {}
-        self.images: dict[int, str | None] = {}
         self.skeletons: dict[int, Any] = {}
         self.morph_skeleton: Any = None
         self.skel_info: dict[str, SkeletonInfo] = {}  # skeleton path -> joints, morph meshes
@@ -138,177 +113,6 @@ class _Scene:
             for k, j in enumerate(sk.get("joints", [])):
                 self.joint_skin.setdefault(int(j), (si, k))
 
-    # -- materials ---------------------------------------------------------------------------
-    def image_path(self, texture: int) -> str | None:
-        """The file a texture's image is in for the USD (relative to the layer): its PNG/JPEG
-        ``source`` byte for byte; else its KHR_texture_basisu / EXT_texture_webp image (or a
-        source in another format) transcoded to PNG (noted); None when none decodes."""
-        doc = self.doc
-        tex = doc.array("textures")[texture] if 0 <= texture < len(doc.array("textures")) else {}
-        plain = tex.get("source")
-        if isinstance(plain, int) and self.mime(plain) in _EXT:
-            src = plain
-        else:
-            try:
-                src = texture_source(doc, texture)
-            except InputError:
-                self.notes.append(f"USD: texture {texture} has no source image; left out")
-                return None
-        if src not in self.images:
-            data = doc.image_bytes(src)
-            img = doc.array("images")[src]
-            mime = self.mime(src)
-            ext = _EXT.get(mime)
-            if ext is None:
-                try:
-                    data, ext = png_bytes(image_pixels(doc, src)), "png"
-                except InputError as exc:
-                    self.notes.append(
-                        f"USD: image {src} ({img.get('name', '')!r}, {mime}) does not decode "
-                        f"({plain_reason(exc)}): left out of the USD (kept in the glTF)"
-                    )
-                    self.images[src] = None
-                    return None
-                self.notes.append(
-                    f"USD: image {src} ({img.get('name', '')!r}) is {mime}, which "
-                    "UsdPreviewSurface cannot read: transcoded to PNG for the USD (the glTF "
-                    "keeps it as it is)"
-                )
-            stem = self.names("images", str(img.get("name") or f"image_{src}"))
-            rel = f"{self.tdir}/source/{stem}.{ext}" if self.tdir else f"source/{stem}.{ext}"
-            self.files[rel] = data
-            self.images[src] = rel
-        return self.images[src]
-
-    def mime(self, image: int) -> str:
-        img = self.doc.array("images")[image]
-        return mime_type(self.doc.image_bytes(image), str(img.get("uri", "")))
-
-    def material(self, index: int | None) -> Any:
-        from pxr import Gf, Sdf, UsdGeom, UsdShade  # deferred: usd-core, USD only
-
-        if index is None:
-            return None
-        if index in self.materials:
-            return self.materials[index]
-        doc = self.doc
-        m = doc.array("materials")[index]
-        looks = self.root.AppendChild("Looks")
-        if not self.stage.GetPrimAtPath(looks):
-            UsdGeom.Scope.Define(self.stage, looks)
-        mat = UsdShade.Material.Define(
-            self.stage, looks.AppendChild(self.names(looks, doc.material_name(index)))
-        )
-        surf = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild("Surface"))
-        surf.CreateIdAttr("UsdPreviewSurface")
-        mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
-        readers: dict[int, Any] = {}
-
-        def reader(tc: int) -> Any:
-            if tc not in readers:
-                r = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(f"StReader{tc}"))
-                r.CreateIdAttr("UsdPrimvarReader_float2")
-                r.CreateInput("varname", Sdf.ValueTypeNames.String).Set(
-                    "st" if tc == 0 else f"st{tc}"
-                )
-                r.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-                readers[tc] = r
-            return readers[tc]
-
-        def texture(key: str, info: Any, color_space: str, scale: tuple, bias: tuple) -> Any:
-            if not isinstance(info, dict) or not isinstance(info.get("index"), int):
-                return None
-            path = self.image_path(info["index"])
-            if path is None:
-                return None
-            tc = int(info.get("texCoord", 0))
-            xf = (info.get("extensions") or {}).get("KHR_texture_transform")
-            st = None
-            if isinstance(xf, dict):
-                tc = int(xf.get("texCoord", tc))
-                st = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(f"{key}_uv"))
-                st.CreateIdAttr("UsdTransform2d")
-                st.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(
-                    reader(tc).ConnectableAPI(), "result"
-                )
-                uv_scale, degrees, uv_move = usd_texture_transform(xf)
-                st.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*uv_scale))
-                st.CreateInput("rotation", Sdf.ValueTypeNames.Float).Set(degrees)
-                st.CreateInput("translation", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*uv_move))
-                st.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-            tex = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(key))
-            tex.CreateIdAttr("UsdUVTexture")
-            tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"./{path}"))
-            tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
-                (st or reader(tc)).ConnectableAPI(), "result"
-            )
-            tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(color_space)
-            tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*scale))
-            tex.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*bias))
-            for out, kind in (("rgb", "Float3"), ("r", "Float"), ("g", "Float"), ("b", "Float")):
-                tex.CreateOutput(out, getattr(Sdf.ValueTypeNames, kind))
-            tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
-            return tex
-
-        pbr = m.get("pbrMetallicRoughness") or {}
-        f = [float(x) for x in pbr.get("baseColorFactor", [1, 1, 1, 1])]
-        base = texture("baseColorTexture", pbr.get("baseColorTexture"), "sRGB", tuple(f), (0,) * 4)
-        mode = m.get("alphaMode", "OPAQUE")
-        if base is not None:
-            surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(
-                base.ConnectableAPI(), "rgb"
-            )
-            if mode != "OPAQUE":
-                surf.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(
-                    base.ConnectableAPI(), "a"
-                )
-        else:
-            surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*f[:3]))
-            if mode != "OPAQUE":
-                surf.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(f[3])
-        if mode == "MASK":
-            surf.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(
-                float(m.get("alphaCutoff", 0.5))
-            )
-        metal, rough = float(pbr.get("metallicFactor", 1.0)), float(pbr.get("roughnessFactor", 1.0))
-        mr = texture(
-            "metallicRoughnessTexture",
-            pbr.get("metallicRoughnessTexture"),
-            "raw",
-            (1, rough, metal, 1),
-            (0,) * 4,
-        )
-        for name, value, channel in (("metallic", metal, "b"), ("roughness", rough, "g")):
-            inp = surf.CreateInput(name, Sdf.ValueTypeNames.Float)
-            if mr is not None:
-                inp.ConnectToSource(mr.ConnectableAPI(), channel)
-            else:
-                inp.Set(value)
-        nt = m.get("normalTexture")
-        s = float(nt.get("scale", 1.0)) if isinstance(nt, dict) else 1.0
-        normal = texture("normalTexture", nt, "raw", (2 * s, 2 * s, 2, 1), (-s, -s, -1, 0))
-        if normal is not None:
-            surf.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(
-                normal.ConnectableAPI(), "rgb"
-            )
-        occ = texture("occlusionTexture", m.get("occlusionTexture"), "raw", (1,) * 4, (0,) * 4)
-        if occ is not None:
-            surf.CreateInput("occlusion", Sdf.ValueTypeNames.Float).ConnectToSource(
-                occ.ConnectableAPI(), "r"
-            )
-        e = [float(x) for x in m.get("emissiveFactor", [0, 0, 0])]
-        strength = (m.get("extensions") or {}).get("KHR_materials_emissive_strength", {})
-        k = float(strength.get("emissiveStrength", 1.0)) if isinstance(strength, dict) else 1.0
-        e = [x * k for x in e]
-        em = texture("emissiveTexture", m.get("emissiveTexture"), "sRGB", (*e, 1), (0,) * 4)
-        emissive = surf.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f)
-        if em is not None:
-            emissive.ConnectToSource(em.ConnectableAPI(), "rgb")
-        elif any(e):
-            emissive.Set(Gf.Vec3f(*e))
-        self.materials[index] = mat
-        return mat
-
     # -- skins -------------------------------------------------------------------------------
     def skeleton(self, skin: int) -> Any:
         from pxr import Sdf, UsdGeom, UsdSkel, Vt  # deferred: usd-core, USD only
@@ -321,7 +125,7 @@ class _Scene:
         nodes = doc.array("nodes")
         parent = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
         in_skin = set(joints)
-        names = _Names()
+        names = Names()
         tokens: dict[int, str] = {}
 
         def joint_parent(j: int) -> int | None:
@@ -352,9 +156,9 @@ class _Scene:
         name = str(s.get("name") or f"skin_{skin}")
         skel = UsdSkel.Skeleton.Define(self.stage, holder.AppendChild(self.names(holder, name)))
         skel.CreateJointsAttr(Vt.TokenArray([token(j) for j in joints]))
-        skel.CreateRestTransformsAttr(Vt.Matrix4dArray([_gf(r) for r in rest]))
+        skel.CreateRestTransformsAttr(Vt.Matrix4dArray([gf_matrix(r) for r in rest]))
         bind = np.linalg.inv(np.asarray(ibm, np.float64))
-        skel.CreateBindTransformsAttr(Vt.Matrix4dArray([_gf(b) for b in bind]))
+        skel.CreateBindTransformsAttr(Vt.Matrix4dArray([gf_matrix(b) for b in bind]))
         a = skel.GetPrim().CreateAttribute("wrinkle:jointNames", Sdf.ValueTypeNames.StringArray)
         a.SetCustom(True)
         a.Set(Vt.StringArray([doc.node_name(j) for j in joints]))
@@ -393,8 +197,8 @@ class _Scene:
             path = holder.AppendChild(self.names(holder, "Morphs"))
             skel = UsdSkel.Skeleton.Define(self.stage, path)
             skel.CreateJointsAttr(Vt.TokenArray(["root"]))
-            skel.CreateRestTransformsAttr(Vt.Matrix4dArray([_gf(np.eye(4))]))
-            skel.CreateBindTransformsAttr(Vt.Matrix4dArray([_gf(np.eye(4))]))
+            skel.CreateRestTransformsAttr(Vt.Matrix4dArray([gf_matrix(np.eye(4))]))
+            skel.CreateBindTransformsAttr(Vt.Matrix4dArray([gf_matrix(np.eye(4))]))
             self.morph_skeleton = skel
             self.skel_info[str(skel.GetPath())] = SkeletonInfo(skel, [], ["root"])
         return self.morph_skeleton, 0, world
@@ -519,7 +323,7 @@ class _Scene:
             binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
             binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([k]))
             binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
-            binding.CreateGeomBindTransformAttr(_gf(geom))
+            binding.CreateGeomBindTransformAttr(gf_matrix(geom))
         if targets:
             skel = rigid[0] if rigid is not None else self.skeleton(int(skin))
             info = self.skel_info[str(skel.GetPath())]
@@ -548,7 +352,7 @@ class _Scene:
             binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
         if targets:
             names = doc.target_names(ref.mesh) or [f"target_{t}" for t in range(len(targets))]
-            shape_names = _Names()
+            shape_names = Names()
             tokens, paths = [], []
             for t, target in enumerate(targets):
                 tok = shape_names(path, names[t] if t < len(names) else f"target_{t}")
@@ -601,7 +405,7 @@ class _Scene:
         if i in self.xform_animated:  # its value is the animation variants' (usd_animation)
             self.xform_paths[i] = path
         else:
-            op.Set(_gf(_node_matrix(n)))
+            op.Set(gf_matrix(_node_matrix(n)))
         if isinstance(n.get("mesh"), int):
             mi = int(n["mesh"])
             prims = doc.array("meshes")[mi].get("primitives", [])
@@ -674,4 +478,4 @@ def add_scene(
     )
     order.SetCustom(True)
     order.Set(Vt.StringArray([str(s.wrinkled_paths[k]) for k in range(len(wrinkled.refs))]))
-    return s.files, s.notes
+    return s.looks.files, s.looks.notes + s.notes
