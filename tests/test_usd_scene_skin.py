@@ -745,3 +745,47 @@ def test_non_joint_nodes_animate_their_xforms_and_carry_the_skeleton(tmp_path):
     assert np.abs(want - _gltf_posed(g, src, 20, 0, 0, {})).max() > 0.4  # moved by the root
     assert read_usd(out / "avatar.usda").mesh.positions.shape[0] > 0
     assert _usd_errors(out / "avatar.usda") == []
+
+
+def test_clearcoat_and_ior_reach_the_preview_surface_and_others_are_named(tmp_path):
+    """KHR_materials_clearcoat (factor 0.6 with a clearcoatTexture, roughness factor 0.3) and
+    KHR_materials_ior (1.4) on the Body; KHR_materials_sheen on the Teeth: the Body's
+    UsdPreviewSurface has clearcoat <- the texture's r scaled by 0.6, clearcoatRoughness 0.3 and
+    ior 1.4; the sheen is named in the report."""
+    from pxr import Usd, UsdShade
+
+    def change(doc, data, folder):
+        body = doc["materials"][3]
+        tex = body["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+        body["extensions"] = {
+            "KHR_materials_clearcoat": {
+                "clearcoatFactor": 0.6,
+                "clearcoatTexture": {"index": tex},
+                "clearcoatRoughnessFactor": 0.3,
+            },
+            "KHR_materials_ior": {"ior": 1.4},
+        }
+        doc["materials"][2]["extensions"] = {"KHR_materials_sheen": {"sheenRoughnessFactor": 0.5}}
+        doc["extensionsUsed"] += [
+            "KHR_materials_clearcoat",
+            "KHR_materials_ior",
+            "KHR_materials_sheen",
+        ]
+
+    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    assert any(
+        "material 'Teeth' has KHR_materials_sheen, which UsdPreviewSurface cannot hold" in n
+        for n in res.report["notes"]
+    )
+    assert not any("'Body' has" in n for n in res.report["notes"])
+    stage = Usd.Stage.Open(str(tmp_path / "out" / "avatar.usda"))
+    body = next(p for p in stage.Traverse() if p.IsA(UsdShade.Material) and p.GetName() == "Body")
+    surf = UsdShade.Shader(body.GetChild("Surface"))
+    src, out, _ = surf.GetInput("clearcoat").GetConnectedSource()
+    assert out == "r" and src.GetPrim().GetName() == "clearcoatTexture"
+    scale = UsdShade.Shader(src.GetPrim()).GetInput("scale").Get()
+    np.testing.assert_allclose(list(scale), [0.6] * 4, atol=1e-7)
+    assert surf.GetInput("clearcoatRoughness").Get() == pytest.approx(0.3)
+    assert surf.GetInput("ior").Get() == pytest.approx(1.4)
+    assert _usd_errors(tmp_path / "out" / "avatar.usda") == []

@@ -3,11 +3,13 @@
 :class:`Looks` writes ``Looks/<material>`` below the scene (see
 :mod:`wrinklepipe.document.usd_scene`): base colour (factor, texture, alpha, cutoff), metallic /
 roughness, normal (with its scale), occlusion, emissive (with
-``KHR_materials_emissive_strength``). Images: a PNG / JPEG ``source`` copied byte for byte into
-``textures/source/``; a KTX2 (Basis Universal, ``KHR_texture_basisu``) or WebP
-(``EXT_texture_webp``) image, which UsdPreviewSurface cannot read, transcoded to PNG (noted).
-A ``KHR_texture_transform`` becomes a ``UsdTransform2d`` between the primvar reader and the
-texture (:func:`usd_texture_transform`; its ``texCoord`` honoured).
+``KHR_materials_emissive_strength``), ``KHR_materials_clearcoat`` (clearcoat and its roughness,
+factors and textures) and ``KHR_materials_ior``; other material extensions are named in a
+note. Images: a PNG / JPEG ``source`` copied byte for byte into ``textures/source/``; a KTX2
+(Basis Universal, ``KHR_texture_basisu``) or WebP (``EXT_texture_webp``) image, which
+UsdPreviewSurface cannot read, transcoded to PNG (noted). A ``KHR_texture_transform`` becomes
+a ``UsdTransform2d`` between the primvar reader and the texture (:func:`usd_texture_transform`;
+its ``texCoord`` honoured).
 """
 
 from __future__ import annotations
@@ -23,6 +25,13 @@ from wrinklepipe.errors import InputError, plain_reason
 from wrinklepipe.io.package import png_bytes
 
 _EXT = {"image/png": "png", "image/jpeg": "jpg"}
+
+#: Material extensions the preview surface carries (the others are named in a note).
+CARRIED_EXTENSIONS = {
+    "KHR_materials_emissive_strength",
+    "KHR_materials_clearcoat",
+    "KHR_materials_ior",
+}
 
 
 def usd_texture_transform(xf: dict[str, Any]) -> tuple[tuple[float, float], float, tuple]:
@@ -246,5 +255,33 @@ class Looks:
             emissive.ConnectToSource(em.ConnectableAPI(), "rgb")
         elif any(e):
             emissive.Set(Gf.Vec3f(*e))
+        exts = m.get("extensions") or {}
+        cc = exts.get("KHR_materials_clearcoat")
+        if isinstance(cc, dict):  # UsdPreviewSurface's clearcoat layer (its normal: none)
+            for key, inp, channel in (
+                ("clearcoat", "clearcoat", "r"),
+                ("clearcoatRoughness", "clearcoatRoughness", "g"),
+            ):
+                f = float(cc.get(f"{key}Factor", 0.0))
+                tex = texture(f"{key}Texture", cc.get(f"{key}Texture"), "raw", (f,) * 4, (0,) * 4)
+                value = surf.CreateInput(inp, Sdf.ValueTypeNames.Float)
+                if tex is not None:
+                    value.ConnectToSource(tex.ConnectableAPI(), channel)
+                else:
+                    value.Set(f)
+            if "clearcoatNormalTexture" in cc:
+                self.notes.append(
+                    f"USD: /materials/{index} clearcoatNormalTexture has no UsdPreviewSurface "
+                    "input; left out (kept in the glTF)"
+                )
+        ior = exts.get("KHR_materials_ior")
+        if isinstance(ior, dict):
+            surf.CreateInput("ior", Sdf.ValueTypeNames.Float).Set(float(ior.get("ior", 1.5)))
+        other = sorted(set(exts) - CARRIED_EXTENSIONS)
+        if other:
+            self.notes.append(
+                f"USD: material {doc.material_name(index)!r} has {', '.join(other)}, which "
+                "UsdPreviewSurface cannot hold: not carried (kept in the glTF)"
+            )
         self.materials[index] = mat
         return mat
