@@ -789,3 +789,62 @@ def test_clearcoat_and_ior_reach_the_preview_surface_and_others_are_named(tmp_pa
     assert surf.GetInput("clearcoatRoughness").Get() == pytest.approx(0.3)
     assert surf.GetInput("ior").Get() == pytest.approx(1.4)
     assert _usd_errors(tmp_path / "out" / "avatar.usda") == []
+
+
+def test_gltf_cameras_become_usd_cameras(tmp_path):
+    """A perspective camera (yfov 0.6, aspect 1.5, 0.05 .. 100) on a node translated to
+    (0, 1.6, 2) and an orthographic one (xmag 2, ymag 1, 0.1 .. 50): pxr's Gf.Frustum of each
+    UsdGeom.Camera has the glTF projection window (tan(yfov / 2) x aspect; +-xmag, +-ymag), the
+    clipping range and the node's place; a KHR_lights_punctual light is named in the report."""
+    from pxr import Gf, Usd, UsdGeom
+
+    def change(doc, data, folder):
+        doc["cameras"] = [
+            {
+                "type": "perspective",
+                "perspective": {"yfov": 0.6, "aspectRatio": 1.5, "znear": 0.05, "zfar": 100},
+            },
+            {
+                "type": "orthographic",
+                "orthographic": {"xmag": 2, "ymag": 1, "znear": 0.1, "zfar": 50},
+            },
+        ]
+        doc["nodes"] += [
+            {"name": "Shot", "camera": 0, "translation": [0, 1.6, 2]},
+            {"name": "Plan", "camera": 1},
+            {"name": "Key", "extensions": {"KHR_lights_punctual": {"light": 0}}},
+        ]
+        doc["extensions"] = {"KHR_lights_punctual": {"lights": [{"type": "point"}]}}
+        doc["extensionsUsed"].append("KHR_lights_punctual")
+        doc["scenes"][0]["nodes"] += [
+            len(doc["nodes"]) - 3,
+            len(doc["nodes"]) - 2,
+            len(doc["nodes"]) - 1,
+        ]
+
+    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    assert res.exit_code == 0
+    assert any("node 'Key' holds a KHR_lights_punctual light" in n for n in res.report["notes"])
+    stage = Usd.Stage.Open(str(tmp_path / "out" / "avatar.usda"))
+    cams = {
+        p.GetParent().GetName(): UsdGeom.Camera(p)
+        for p in stage.Traverse()
+        if p.IsA(UsdGeom.Camera)
+    }
+    assert sorted(cams) == ["Plan", "Shot"]
+    shot = cams["Shot"].GetCamera(Usd.TimeCode.Default())
+    assert shot.projection == Gf.Camera.Perspective
+    win = shot.frustum.GetWindow()
+    half = np.tan(0.3)
+    np.testing.assert_allclose([win.GetMin()[1], win.GetMax()[1]], [-half, half], rtol=1e-6)
+    np.testing.assert_allclose(
+        [win.GetMin()[0], win.GetMax()[0]], [-1.5 * half, 1.5 * half], rtol=1e-6
+    )
+    rng = shot.frustum.GetNearFar()
+    np.testing.assert_allclose([rng.GetMin(), rng.GetMax()], [0.05, 100], rtol=1e-6)
+    np.testing.assert_allclose(list(shot.frustum.GetPosition()), [0, 1.6, 2], atol=1e-6)
+    plan = cams["Plan"].GetCamera(Usd.TimeCode.Default())
+    assert plan.projection == Gf.Camera.Orthographic
+    win = plan.frustum.GetWindow()
+    np.testing.assert_allclose([*win.GetMin(), *win.GetMax()], [-2, -1, 2, 1], rtol=1e-6)
+    assert _usd_errors(tmp_path / "out" / "avatar.usda") == []

@@ -21,6 +21,8 @@ with ``WrinkleMapsAPI``: :func:`wrinklepipe.io.usd_write.build_stage` with
       Animations/<clip>          SkelAnimation per glTF clip, and ``wrinkle`` (convert's first
                                  weight curve's morph weights), chosen by the variant set
                                  ``animation`` on Scene (:mod:`wrinklepipe.document.usd_animation`)
+        Camera                   UsdGeom.Camera of a node's glTF camera (perspective: yfov and
+                                 aspectRatio as apertures; orthographic: xmag / ymag; clipping)
       Looks/<material>           UsdPreviewSurface per glTF material: base colour (factor,
                                  texture, alpha), metallic / roughness, normal, occlusion,
                                  emissive; PNG / JPEG images copied byte for byte
@@ -417,8 +419,51 @@ class _Scene:
                 ref = PrimitiveRef(mi, k, prims[k].get("material"))
                 label = doc.mesh_name(mi) if not skinned else name
                 self.mesh(holder, label if len(prims) == 1 else f"{label}_{k}", ref, i)
+        if isinstance(n.get("camera"), int):
+            self.camera(path, int(n["camera"]))
+        if "KHR_lights_punctual" in (n.get("extensions") or {}):
+            self.notes.append(
+                f"USD: node {name!r} holds a KHR_lights_punctual light: not carried (glTF's "
+                "photometric units have no agreed UsdLux mapping; kept in the glTF)"
+            )
         for c in n.get("children", []):
             self.node(path, int(c), seen)
+
+    def camera(self, parent: Any, index: int) -> None:
+        """A glTF camera as a UsdGeom.Camera below its node's Xform (both look down -Z, +Y
+        up). Perspective: focal length 50 (tenths of a unit, USD's convention) and the vertical
+        aperture that gives ``yfov``, the horizontal one by ``aspectRatio`` (1 when the glTF
+        leaves it to the viewport, noted); orthographic: apertures ``2 xmag``, ``2 ymag``
+        (in tenths of a unit); clipping ``znear`` .. ``zfar`` (1e6 when infinite)."""
+        from pxr import Gf, UsdGeom  # deferred: usd-core, USD only
+
+        cams = self.doc.array("cameras")
+        if not 0 <= index < len(cams):
+            return
+        c = cams[index]
+        cam = UsdGeom.Camera.Define(self.stage, parent.AppendChild(self.names(parent, "Camera")))
+        if c.get("type") == "orthographic":
+            o = c.get("orthographic") or {}
+            cam.CreateProjectionAttr(UsdGeom.Tokens.orthographic)
+            cam.CreateHorizontalApertureAttr(float(2 * 10 * float(o.get("xmag", 1.0))))
+            cam.CreateVerticalApertureAttr(float(2 * 10 * float(o.get("ymag", 1.0))))
+            near, far = float(o.get("znear", 0.0)), float(o.get("zfar", 1e6))
+        else:
+            p = c.get("perspective") or {}
+            focal = 50.0
+            vertical = 2 * focal * float(np.tan(float(p.get("yfov", 0.8)) / 2))
+            aspect = p.get("aspectRatio")
+            if aspect is None:
+                self.notes.append(
+                    f"USD: camera {index} leaves its aspect ratio to the viewport: square "
+                    "aperture written"
+                )
+            cam.CreateProjectionAttr(UsdGeom.Tokens.perspective)
+            cam.CreateFocalLengthAttr(focal)
+            cam.CreateVerticalApertureAttr(vertical)
+            cam.CreateHorizontalApertureAttr(vertical * float(aspect or 1.0))
+            near, far = float(p.get("znear", 0.01)), float(p.get("zfar", 1e6))
+        cam.CreateClippingRangeAttr(Gf.Vec2f(near, far))
 
 
 def wrinkled_prims(
