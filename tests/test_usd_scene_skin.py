@@ -260,6 +260,7 @@ def test_usd_reads_the_wrinkled_mesh_the_gltf_path_measures(characters, name):
     np.testing.assert_allclose(u.normals, g.normals, atol=1e-5)
     np.testing.assert_allclose(u.uvs, g.uvs, atol=1e-6)
     assert u.joint_names == g.joint_names and u.morph_names == g.morph_names
+    assert u.name == g.name  # the package mesh's name, not a prim path
     for f in ("joints", "skin_weights", "inverse_bind", "morph_deltas"):
         a, b = getattr(u, f), getattr(g, f)
         assert (a is None) == (b is None), f

@@ -68,7 +68,7 @@ from wrinklepipe.document.usd_looks import Looks, Names, gf_matrix
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
 from wrinklepipe.io.mesh_gltf import _node_matrix  # the one glTF TRS -> matrix
 from wrinklepipe.io.package import WrinklePackage
-from wrinklepipe.io.usd_write import SCENE_MESHES
+from wrinklepipe.io.usd_write import SCENE_MESH_NAME, SCENE_MESHES
 
 
 @dataclass(frozen=True)
@@ -76,12 +76,14 @@ class WrinkledPrims:
     """The wrinkled primitives and what binds them: ``refs`` in the package's order,
     ``material`` the wrinkle material's prim path, ``morph_names`` the package mesh's morph
     target names and ``morph_curve`` the first weight curve's (time codes ``[F]``, morph weights
-    ``[F, M]``) when it drives them."""
+    ``[F, M]``) when it drives them; ``mesh_name`` the package mesh's name (the material's
+    ``wrinkle:meshName``: what read_usd names the merged mesh, as the glTF path does)."""
 
     refs: tuple[PrimitiveRef, ...]
     material: Any
     morph_names: tuple[str, ...] = ()
     morph_curve: tuple[np.ndarray, np.ndarray] | None = None
+    mesh_name: str = ""
 
 
 class _Scene:
@@ -479,7 +481,9 @@ def wrinkled_prims(
         fps = stage.GetTimeCodesPerSecond()
         codes = np.asarray(c.times, np.float32).astype(np.float64) * fps
         curve = (codes, np.asarray(c.morph_weights, np.float32))
-    return WrinkledPrims(tuple(refs), material, tuple(pkg.mesh.morph_names), curve)
+    return WrinkledPrims(
+        tuple(refs), material, tuple(pkg.mesh.morph_names), curve, str(pkg.mesh.name)
+    )
 
 
 def add_scene(
@@ -523,4 +527,10 @@ def add_scene(
     )
     order.SetCustom(True)
     order.Set(Vt.StringArray([str(s.wrinkled_paths[k]) for k in range(len(wrinkled.refs))]))
+    if wrinkled.mesh_name:
+        named = stage.GetPrimAtPath(wrinkled.material).CreateAttribute(
+            SCENE_MESH_NAME, Sdf.ValueTypeNames.String
+        )
+        named.SetCustom(True)
+        named.Set(wrinkled.mesh_name)
     return s.looks.files, s.looks.notes + s.notes

@@ -40,7 +40,13 @@ from wrinklepipe.io.package import (
     png_pixels,
     safe_name,
 )
-from wrinklepipe.io.usd_write import API_NAME, LAYERED_OVER, SCENE_MESHES, register_schema
+from wrinklepipe.io.usd_write import (
+    API_NAME,
+    LAYERED_OVER,
+    SCENE_MESH_NAME,
+    SCENE_MESHES,
+    register_schema,
+)
 from wrinklepipe.metadata import (
     CompressedCopy,
     MaskChannel,
@@ -331,6 +337,9 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
                 str(mat_prim.GetPath()),
             )
         mesh = _layered_mesh(path, file, listed, _gltf_joint_names(stage, listed, file))
+        named = mat_prim.GetAttribute(SCENE_MESH_NAME)
+        if named and named.HasAuthoredValue():
+            mesh.name = str(named.Get())
     elif not layered and len(meshes) == 1 and _own_layout(meshes[0]):
         mesh = _own_mesh(stage, meshes[0], file)
     else:  # a layer over a source (wrinklepipe.document.usd_layer): the source's topology

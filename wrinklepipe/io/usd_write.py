@@ -89,6 +89,8 @@ LAYERED_OVER = "wrinkle:layeredOver"
 #: primitives' Mesh prims in its scene, in the package's order
 #: (:mod:`wrinklepipe.document.usd_scene`); they are read back through the mesh reader.
 SCENE_MESHES = "wrinkle:meshes"
+#: ... and the name of the package mesh they make (the glTF path's name for it).
+SCENE_MESH_NAME = "wrinkle:meshName"
 
 
 def register_schema() -> None:
