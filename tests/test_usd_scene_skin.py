@@ -21,6 +21,7 @@ from wrinkle_setups import ROBOT, write_setup
 from wrinklepipe.cli import main
 from wrinklepipe.demo import avatar
 from wrinklepipe.document.package import read_wrinkled
+from wrinklepipe.document.usd_inspect import usd_summary
 from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
@@ -589,6 +590,12 @@ def test_gltf_clips_play_as_skel_animations(characters, name, clip):
     vset = stage.GetDefaultPrim().GetChild("Scene").GetVariantSets().GetVariantSet("animation")
     variant = clip or "animation_0"
     assert variant in vset.GetVariantNames()
+    # inspect lists the set: a variant per clip, and wrinkle (selected) where the curve drives
+    # morphs (the robot's face; CesiumMan has none: its clip is selected)
+    row = usd_summary(out / f"{asset}.usda")["prims"][f"/{asset}/Scene"]["variantSets"]
+    morphs = name == "robot"
+    assert row["animation"]["selected"] == ("wrinkle" if morphs else "animation_0")
+    assert len(row["animation"]["variants"]) == len(g.animations) + morphs
     last = max(float(ref.accessor(g, src, s.input).max()) for x in g.animations for s in x.samplers)
     fps = stage.GetTimeCodesPerSecond()
     assert stage.GetEndTimeCode() == pytest.approx(max(last * fps, 0.0), abs=1e-4)  # whole clips

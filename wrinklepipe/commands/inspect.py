@@ -122,6 +122,13 @@ def print_usd_summary(s: dict[str, Any]) -> None:
         + ", ".join(f"{n} {k}" for k, n in s["counts"].items())
     )
     prims = s["prims"]
+    for path, r in prims.items():
+        for name, vs in r.get("variantSets", {}).items():
+            out.print(
+                f"variant set {name!r} on {path}: {len(vs['variants'])} variants "
+                f"({', '.join(vs['variants'][:6])}{', ...' if len(vs['variants']) > 6 else ''}), "
+                f"selected {vs['selected']!r}"
+            )
 
     def rows(kind: str, cols: list[str]) -> list[dict[str, Any]]:
         return [

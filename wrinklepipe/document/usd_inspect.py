@@ -3,7 +3,8 @@
 
 :func:`usd_summary` opens the stage composed (sublayers, references, payloads, the selected
 variants; instance proxies included) and lists its layers and stage metadata, then every prim
-by path: its type, applied API schemas, and each authored attribute (``type (count)
+by path: its type, applied API schemas, variant sets (variants, selection), and each authored
+attribute (``type (count)
 interpolation``, ``N time samples``) and relationship (its targets); for a Mesh also its points
 and faces, for a Skeleton its joints, for a Material its surface shader. ``inspect --diff
 SOURCE LAYER`` therefore lists exactly what a layer over a source adds.
@@ -58,6 +59,13 @@ def _prim(prim: Any) -> dict[str, Any]:
         row["apiSchemas"] = applied
     if prim.IsInstance():
         row["instance"] = True
+    vsets = prim.GetVariantSets()
+    for name in vsets.GetNames():  # e.g. a glTF source's clips (document.usd_animation)
+        vs = vsets.GetVariantSet(name)
+        row.setdefault("variantSets", {})[name] = {
+            "variants": list(vs.GetVariantNames()),
+            "selected": vs.GetVariantSelection(),
+        }
     if prim.IsA(UsdGeom.Mesh):
         m = UsdGeom.Mesh(prim)
         time, _ = mesh_time(prim, Usd.TimeCode.Default())  # only time-sampled: a sample's count
