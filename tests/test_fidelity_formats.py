@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from wrinklepipe.commands.convert import summary_lines
 from wrinklepipe.demo.studio import write_studio
 from wrinklepipe.pipeline.convert import ConvertOptions, ConvertResult, convert
 
@@ -51,6 +52,11 @@ def test_automatic_formats_of_other_encodings_validate(auto_runs, variant):
     assert tried and all(t["ok"] == (t["value"] == chosen) for t in tried), tried
     for t in tried:  # a format is rejected only for being over the budget
         assert t["ok"] or t["worst_p99_deg"] > 2.0 or t["worst_mean_deg"] > 0.5, t
+    # convert says what it tried: each state format with its worst pose, "over" when rejected
+    line = next(x for x in summary_lines(r.report, r.exit_code) if "tried for the states" in x)
+    for t in tried:
+        want = f"{t['value']} {t['worst_p99_deg']:.2f} / {t['worst_mean_deg']:.2f}"
+        assert want + ("" if t["ok"] else " over") in line, (want, line)
 
 
 def test_a_rejected_format_is_over_the_budget_in_the_validator_too(studio, auto_runs, tmp_path):

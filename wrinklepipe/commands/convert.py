@@ -97,6 +97,24 @@ def _fmt(f: str) -> str:
     return "none (PNG only)" if f == "png" else f
 
 
+def _formats_tried(tried: list[dict[str, Any]]) -> list[str]:
+    """One line per group: each block format tried, its worst pose inside the active regions
+    (p99 / mean degrees) and whether it met the budget."""
+    out = []
+    for step, label in (("state format", "states"), ("base format", "base")):
+        rows = [t for t in tried if t["step"] == step]
+        if rows:
+            out.append(
+                f"formats tried for the {label} (worst pose p99 / mean deg): "
+                + ", ".join(
+                    f"{t['value']} {t['worst_p99_deg']:.2f} / {t['worst_mean_deg']:.2f}"
+                    + ("" if t["ok"] else " over")
+                    for t in rows
+                )
+            )
+    return out
+
+
 def fidelity_table(fid: dict[str, Any], which: str) -> list[str]:
     """The per-pose fidelity table of report.json's ``fidelity`` record (worst first)."""
     part = fid.get(which)
@@ -144,6 +162,7 @@ def summary_lines(rep: dict[str, Any], exit_code: int, where: str = "") -> list[
         )
         out += fidelity_table(fid, "compressed")
         out += [f"note: {n}" for n in fid.get("notes", [])]
+        out += _formats_tried(fid.get("tried", []))
     elif fid:
         out.append(
             f"chosen: states {fid['wrinkle']}^2, masks {fid['mask']}^2, pd_scale "
