@@ -24,7 +24,7 @@ import numpy as np
 from wrinklepipe import codec
 from wrinklepipe.fidelity import metric as fm
 from wrinklepipe.fidelity import ship
-from wrinklepipe.fidelity.search import Judge, Tried, pick_format
+from wrinklepipe.fidelity.search import Candidate, Judge, Tried, pick_format
 from wrinklepipe.fidelity.stats import Budget
 from wrinklepipe.normals import compress as nc
 
@@ -127,50 +127,46 @@ def choose_formats(
     judge.set("masks", lambda r: {"masks": masks})
     judge.set("states", lambda r: {"states": states_png})
     face = ref.face_texels()
-    made: dict[tuple[str, str], dict[str, Any]] = {}
+    made: dict[tuple[str, str], Candidate] = {}  # one candidate per format: the judge keys by id
 
-    def states_in(f: str) -> Any:
-        def make(r: fm.Reference) -> dict[str, Any]:
-            if ("states", f) not in made:
-                got = [
-                    decode_stored(
-                        roundtrip(stored_components(q, encoding, f), f), encoding, param, version
-                    )
-                    for q in state_texels
-                ]
-                made[("states", f)] = {"states": np.stack(got)}
-            return made[("states", f)]
+    def states_in(f: str) -> Candidate:
+        if ("states", f) not in made:
+            got = [
+                decode_stored(
+                    roundtrip(stored_components(q, encoding, f), f), encoding, param, version
+                )
+                for q in state_texels
+            ]
+            arrays = {"states": np.stack(got)}
+            made[("states", f)] = lambda r: arrays
+        return made[("states", f)]
 
-        return make
-
-    def base_in(f: str) -> Any:
-        def make(r: fm.Reference) -> dict[str, Any]:
-            if ("base", f) not in made:
-                q = roundtrip(stored_components(base_texels, "full", f), f)
-                made[("base", f)] = {"base": decode_stored(q, "base", 1.0, 1)}
-            return made[("base", f)]
-
-        return make
-
-    cands = {"states": {}, "base": {}}  # one candidate object per format (the judge keys by id)
-
-    def candidate(group: str, build: Any) -> Any:
-        return lambda f: cands[group].setdefault(f, build(f))
+    def base_in(f: str) -> Candidate:
+        if ("base", f) not in made:
+            q = roundtrip(stored_components(base_texels, "full", f), f)
+            arrays = {"base": decode_stored(q, "base", 1.0, 1)}
+            made[("base", f)] = lambda r: arrays
+        return made[("base", f)]
 
     state_fmts = [f for f in formats if codec.storage_format(f).holds(encoding)]
     base_fmts = [f for f in formats if codec.storage_format(f).holds("full")]
     state_fmt = pick_format(
-        judge, fixed_states, state_fmts, budget, tried, "state format",
-        candidate("states", states_in),
-    )  # fmt: skip
+        judge, fixed_states, state_fmts, budget, tried, "state format", states_in
+    )
     if state_fmt != "png":
-        judge.set("states", candidate("states", states_in)(state_fmt))
+        judge.set("states", states_in(state_fmt))
     base_fmt = pick_format(
-        judge, fixed_base, base_fmts, budget, tried, "base format", candidate("base", base_in),
+        judge,
+        fixed_base,
+        base_fmts,
+        budget,
+        tried,
+        "base format",
+        base_in,
         alone=lambda make: fm.base_fidelity(ref, make(ref)["base"], face),
-    )  # fmt: skip
+    )
     if base_fmt != "png":
-        judge.set("base", candidate("base", base_in)(base_fmt))
+        judge.set("base", base_in(base_fmt))
     automatic = {"base": fixed_base in (None, "auto"), "states": fixed_states in (None, "auto")}
     compressed = None
     while state_fmt != "png" or base_fmt != "png":
