@@ -22,16 +22,19 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from wrinkle_setups import ROBOT, write_robot_setup
-
-from wrinklepipe.io.confine import allowed_roots
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
 
 @pytest.fixture(scope="session")
 def robot_converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
     """RobotExpressive converted once (:func:`wrinkle_setups.write_robot_setup`; .gltf + .glb,
     validation without the render pass): (output folder, report). Read only."""
+    # Deferred on purpose: the xdist controller loads this file too and runs no test; importing
+    # convert there costs ~1.4 s CPU while the two workers start and collect.
+    from wrinkle_setups import ROBOT, write_robot_setup
+
+    from wrinklepipe.io.confine import allowed_roots
+    from wrinklepipe.pipeline.convert import ConvertOptions, convert
+
     if not ROBOT.is_file():
         pytest.skip("../shared/data is absent")
     root = tmp_path_factory.mktemp("robot")
