@@ -198,7 +198,8 @@ def converted(tmp_path_factory):
 
     root = tmp_path_factory.mktemp("conv")
     manifest = write_demo_source(root / "src", size=128)
-    convert(manifest, root / "out", ConvertOptions(glb=True, usd_format="usdz"))
+    # without the render pass: these tests validate the folder themselves (--no-render)
+    convert(manifest, root / "out", ConvertOptions(glb=True, usd_format="usdz", render=False))
     return manifest, root / "out"
 
 
