@@ -249,13 +249,25 @@ def test_batch_isolation_reports_cache_and_localcluster(studio, tmp_path):
         manifest.write_bytes(text)
 
     # -- 4. the same batch on a Dask LocalCluster: byte-identical to --jobs 1 -----------------
+    import dask
     from distributed import LocalCluster
 
     out4 = tmp_path / "dask-out"
     plan4 = plan_batch([str(batch_file)], out4)
-    with LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
-    ) as cluster:
+    # the worker processes fork from the multiprocessing fork server that step 1's LocalEngine
+    # started (wrinklepipe imported once), instead of each spawning an interpreter that imports
+    # distributed and wrinklepipe again (~2.5 s CPU each)
+    forkserver = {"distributed.worker.multiprocessing-method": "forkserver"}
+    with (
+        dask.config.set(forkserver),
+        LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+        ) as cluster,
+    ):
         run4 = run_plan(plan4, DaskEngine(cluster.scheduler_address), None)
     by_id4 = {r.id: r for r in run4.results}
     assert by_id4[BROKEN].status == "error"
