@@ -252,13 +252,14 @@ def capture(
     more = float(np.sqrt(max((o.sfs.blur * k) ** 2 - ratio_opts.blur_sigma**2, 0.0)))
     if more > 0:
         r_model = masked_blur(r_model, rr.valid.astype(np.float64), more)
+    r_blur = float(np.hypot(ratio_opts.blur_sigma, more))  # R's blur in all: the model's too
     sfs_res = None
     if "sfs" in methods:
         prior = photo["integrable"].astype(np.float64)
         z = np.maximum(prior[..., 2], 1e-3)
         q = np.stack([-prior[..., 0] / z, prior[..., 1] / z], axis=-1)  # the prior's slopes
         sfs_res = S.solve_crease(
-            r_model, n0, roi_m, rr.valid, {"integrable": q, "mirror": -q}, o.sfs
+            r_model, n0, roi_m, rr.valid, {"integrable": q, "mirror": -q}, o.sfs, r_blur
         )
         n1z = np.clip(r_model * n0[..., 2] / sfs_res.exposure, 0.0, 1.0)
         photo["sfs"] = apply_roi(
@@ -272,7 +273,7 @@ def capture(
     integrability = {m: integrability_residual(n, roi_m) for m, n in photo.items()}
     exposure = sfs_res.exposure if sfs_res is not None else 1.0
     explained = {
-        m: S.ratio_residual(n, n0, r_model, roi_m, rr.valid, exposure, o.sfs.max_side)
+        m: S.ratio_residual(n, n0, r_model, roi_m, rr.valid, exposure, o.sfs.max_side, r_blur)
         for m, n in photo.items()
     }
 
