@@ -134,6 +134,11 @@ def test_neutral_normals_choose_the_solve(session, tmp_path):
     assert set(resid) == {"gradient", "furrow", "integrable", "sfs"}
     assert min(resid, key=resid.get) == "sfs"
     assert rep["sfs"]["start"] in rep["sfs"]["starts_ratio_residual"]
+    # the share of crease pixels whose sign the photos leave open, in the JSON, HTML, picture
+    amb = rep["sfs"]["sign_ambiguous_fraction"]
+    assert 0.0 <= amb <= 1.0
+    assert f"{100 * amb:.0f} %</b> of its crease pixels" in (out / "report.html").read_text()
+    assert (out / "pictures" / "sfs_ambiguous.png").is_file()
     truth = rep["orientation"]["sfs"]["truth"]
     # measured 0.51x: the solve's own blur (1.2 px) is set on the curved sessions, whose creases
     # are wider than this example's 2-5 px (0.45x with 1.0 px); the default here is the prior

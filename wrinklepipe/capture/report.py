@@ -357,6 +357,14 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
             names.index(report["method"]) if report["method"] in names else None,
         )
     )
+    amb = report.get("sfs", {}).get("sign_ambiguous_fraction")
+    if amb is not None:
+        parts.append(
+            f"<p>sfs: the photos leave the sign of <b>{100 * amb:.0f} %</b> of its crease pixels "
+            "open (another height explains R about as well and leans the other way; red in the "
+            "picture below): do not trust the orientation there. A second photo lit from one "
+            "side would fix it.</p>"
+        )
     parts.append("<h2>Pictures</h2><div>")
     for caption, rel in pictures.items():
         parts.append(
