@@ -76,3 +76,47 @@ def test_a_hash_collision_falls_back_to_every_block(monkeypatch):
     first, inverse = nb.distinct(nb.to_blocks(a))
     assert np.array_equal(first, np.arange(16)) and np.array_equal(inverse, np.arange(16))
     assert nc.encode_bc(a, "bc7") == nc._encode_bc(a, "bc7", None)
+
+
+def test_inside_a_run_blocks_encoded_before_are_not_encoded_again():
+    from wrinklepipe import reuse
+
+    a = _map(11, 8, 8, 3)  # 64 blocks
+    b = a.copy()
+    b[:8] = _map(12, 2, 8, 50)  # its first two block rows new, the rest as in a
+    encoded = []
+
+    def counting(t: np.ndarray) -> bytes:
+        encoded.append(t.shape[0] * t.shape[1] // 16)
+        return nc._encode_bc(t, "bc7", None)
+
+    with reuse.reuse():
+        assert nb.encode_distinct(a, counting, 16, "t") == nc._encode_bc(a, "bc7", None)
+        n_a = len(nb.distinct(nb.to_blocks(a))[0])
+        new = {bytes(x) for x in nb.to_blocks(b)} - {bytes(x) for x in nb.to_blocks(a)}
+        assert nb.encode_distinct(b, counting, 16, "t") == nc._encode_bc(b, "bc7", None)
+        assert nb.encode_distinct(b, counting, 16, "t") == nc._encode_bc(b, "bc7", None)
+    # a: its distinct blocks in a tile (padded to a square); b: only its new blocks; b again:
+    # nothing (every block known)
+    side = lambda k: int(np.ceil(np.sqrt(k))) ** 2  # noqa: E731
+    assert encoded == [side(n_a), side(len(new))]
+    encoded.clear()
+    assert nb.encode_distinct(b, counting, 16, "t") == nc._encode_bc(b, "bc7", None)
+    assert len(encoded) == 1  # outside the run nothing is remembered
+
+
+def test_rows_are_found_by_their_bytes_not_only_their_hash():
+    from wrinklepipe import reuse
+
+    keys = np.arange(24, dtype=np.uint8).reshape(3, 8)
+    h = np.array([5, 7, 5], np.uint64)  # rows 0 and 2 share a hash
+    vals = np.array([[1], [2], [3]], np.uint8)
+    reuse.remember_rows("r", h, keys, vals)  # outside a run: nothing kept
+    with reuse.reuse():
+        assert reuse.known_rows("r", h, keys)[1] is None
+        reuse.remember_rows("r", h, keys, vals)
+        found, got = reuse.known_rows("r", h, keys)
+        assert found.tolist() == [True, True, False]  # row 2: same hash, other bytes
+        assert got[:2, 0].tolist() == [1, 2]
+        reuse.remember_rows("r", h[2:], keys[2:], vals[2:])  # its hash is taken: not stored
+        assert reuse.known_rows("r", h, keys)[0].tolist() == [True, True, False]

@@ -51,6 +51,21 @@ R = TypeVar("R")
 
 
 @dataclass
+class Rows:
+    """Results of a row-wise function (each row's result depends on that row's bytes alone):
+    ``keys`` [N, K] uint8 rows, their ``hashes`` [N] uint64 (sorted, distinct), ``values``
+    [N, V] uint8 the result of each."""
+
+    hashes: np.ndarray
+    keys: np.ndarray
+    values: np.ndarray
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.hashes.nbytes + self.keys.nbytes + self.values.nbytes)
+
+
+@dataclass
 class Memo:
     """One run's stored results and what they saved (``hits`` / ``misses`` per function)."""
 
@@ -60,6 +75,7 @@ class Memo:
     hits: dict[str, int] = field(default_factory=dict)
     misses: dict[str, int] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    rows: dict[str, Rows] = field(default_factory=dict)  # see known_rows / remember_rows
 
     def get(self, key: tuple) -> tuple[bool, Any]:
         with self.lock:
@@ -184,6 +200,50 @@ def remember(fn: Callable[..., Any], result: Any, *args: Any, **kwargs: Any) -> 
         return
     if size >= MIN_INPUT_BYTES:
         memo.put(key, _private(result))
+
+
+def known_rows(
+    name: str, hashes: np.ndarray, keys: np.ndarray
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Which of the rows ``keys`` [M, K] uint8 (with their ``hashes`` [M] uint64) this run's
+    memo holds a result of under ``name`` (:func:`remember_rows`), and those results [M, V]
+    (zeros where not held); ``(all False, None)`` outside :func:`reuse` or when it holds none.
+    A row is found only when its bytes equal the stored row's (hashes only narrow the search)."""
+    found = np.zeros(len(hashes), bool)
+    memo = _MEMO.get()
+    store = None if memo is None else memo.rows.get(name)
+    if store is None or not len(hashes):
+        return found, None
+    pos = np.minimum(np.searchsorted(store.hashes, hashes), len(store.hashes) - 1)
+    found = store.hashes[pos] == hashes
+    idx = np.flatnonzero(found)
+    found[idx] = np.all(store.keys[pos[idx]] == keys[idx], axis=1)
+    values = np.zeros((len(hashes), store.values.shape[1]), store.values.dtype)
+    values[found] = store.values[pos[found]]
+    return found, values
+
+
+def remember_rows(name: str, hashes: np.ndarray, keys: np.ndarray, values: np.ndarray) -> None:
+    """Store the results ``values`` [M, V] of rows ``keys`` [M, K] (``hashes`` [M] uint64) under
+    ``name`` in this run's memo, for :func:`known_rows`. Only for a function whose result for a
+    row depends on that row's bytes alone; nothing happens outside :func:`reuse`. Of rows with
+    one hash only the first is kept (another with the same hash is simply not found); stores
+    stop growing past a quarter of the memo's bound."""
+    memo = _MEMO.get()
+    if memo is None or not len(hashes):
+        return
+    with memo.lock:
+        old = memo.rows.get(name)
+        h, k, v = np.asarray(hashes, np.uint64), np.asarray(keys), np.asarray(values)
+        if old is not None:
+            if old.nbytes + h.nbytes + k.nbytes + v.nbytes > memo.max_bytes // 4:
+                return
+            h, k, v = (np.concatenate(p) for p in ((old.hashes, h), (old.keys, k), (old.values, v)))
+        order = np.argsort(h, kind="stable")  # the stored rows first among equal hashes
+        h, k, v = h[order], k[order], v[order]
+        first = np.ones(len(h), bool)
+        first[1:] = h[1:] != h[:-1]
+        memo.rows[name] = Rows(h[first].copy(), k[first].copy(), v[first].copy())
 
 
 def reused(fn: F) -> F:

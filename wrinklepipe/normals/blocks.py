@@ -6,7 +6,9 @@ BC1 / BC3 and :mod:`wrinklepipe.normals.bc4`, keep to that). And most of a wrink
 same block over and over: outside the wrinkles the stored slope or difference is flat. So
 :func:`encode_distinct` encodes the distinct blocks once, side by side in one tile, and lays
 their bytes out where each block occurs: the same bytes as encoding the whole map, for a
-fraction of the work (the demo's 512^2 states: about 1 000 distinct blocks of 16 384).
+fraction of the work (the demo's 512^2 states: about 1 000 distinct blocks of 16 384). Inside a
+conversion (:func:`wrinklepipe.reuse.reuse`) the blocks encoded are also remembered, so a block
+the searches' round trips already encoded is not encoded again by the compressed copy.
 """
 
 from __future__ import annotations
@@ -14,6 +16,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+
+from wrinklepipe import reuse
 
 #: Encode the distinct blocks alone when they are at most this fraction of all blocks (else the
 #: whole map: hashing the blocks is cheap next to encoding them, regrouping is not free).
@@ -38,10 +42,8 @@ def tile(blocks: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(t.reshape(side * 4, side * 4, c))
 
 
-def distinct(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(first, inverse)``: the index of each distinct block's first occurrence (in order of
-    first occurrence) and, for every block, which of them it is (``blocks[first][inverse]``
-    equals ``blocks``; exact: hashes are checked against the bytes)."""
+def _rows(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each block's bytes as a row [N, K] (K a multiple of 8) and a 64-bit hash of them."""
     n = blocks.shape[0]
     rows = np.ascontiguousarray(blocks.reshape(n, -1))
     if rows.shape[1] % 8:
@@ -51,6 +53,11 @@ def distinct(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     for k in range(words.shape[1]):
         h = (h ^ words[:, k]) * _MIX
         h ^= h >> np.uint64(29)
+    return rows, h
+
+
+def _group(rows: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = len(h)
     _, first, inverse = np.unique(h, return_index=True, return_inverse=True)
     if not np.array_equal(rows[first[inverse]], rows):  # a hash collision: no regrouping
         return np.arange(n), np.arange(n)
@@ -60,17 +67,43 @@ def distinct(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first[order], rank[inverse.reshape(-1)]
 
 
+def distinct(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, inverse)``: the index of each distinct block's first occurrence (in order of
+    first occurrence) and, for every block, which of them it is (``blocks[first][inverse]``
+    equals ``blocks``; exact: hashes are checked against the bytes)."""
+    return _group(*_rows(blocks))
+
+
 def encode_distinct(
-    a: np.ndarray, encode: Callable[[np.ndarray], bytes], block_bytes: int
+    a: np.ndarray,
+    encode: Callable[[np.ndarray], bytes],
+    block_bytes: int,
+    memo_name: str | None = None,
 ) -> bytes:
     """``encode(a)`` (``a``: ``[H, W, C]`` uint8, H and W multiples of 4; ``encode`` a BC
-    encoder returning row-major blocks of ``block_bytes``), each distinct block encoded once."""
+    encoder returning row-major blocks of ``block_bytes``), each distinct block encoded once.
+    ``memo_name``: the encoder's name in this run's memo (:func:`wrinklepipe.reuse.known_rows`):
+    blocks an earlier call of this run encoded (the searches' partial round trips, a map's
+    other levels) are taken from it, and the ones encoded here are stored in it."""
     blocks = to_blocks(a)
     n = blocks.shape[0]
-    if n < 2:
-        return encode(a)
-    first, inverse = distinct(blocks)
-    if first.size > MAX_DISTINCT_FRACTION * n:
-        return encode(a)
-    data = np.frombuffer(encode(tile(blocks[first])), np.uint8).reshape(-1, block_bytes)
-    return data[: first.size][inverse].tobytes()
+    rows, h = _rows(blocks)
+    first, inverse = _group(rows, h)
+    d_rows, d_h = rows[first], h[first]
+    found, known = np.zeros(first.size, bool), None
+    if memo_name:
+        found, known = reuse.known_rows(memo_name, d_h, d_rows)
+    todo = np.flatnonzero(~found)
+    if not found.any() and first.size > MAX_DISTINCT_FRACTION * n:
+        data = encode(a)  # few repeats and nothing known: the whole map as it is
+        if memo_name:
+            out = np.frombuffer(data, np.uint8).reshape(n, block_bytes)
+            reuse.remember_rows(memo_name, d_h, d_rows, out[first])
+        return data
+    values = known if known is not None else np.zeros((first.size, block_bytes), np.uint8)
+    if todo.size:
+        got = np.frombuffer(encode(tile(blocks[first[todo]])), np.uint8)
+        values[todo] = got.reshape(-1, block_bytes)[: todo.size]
+        if memo_name:
+            reuse.remember_rows(memo_name, d_h[todo], d_rows[todo], values[todo])
+    return values[inverse].tobytes()

@@ -126,8 +126,9 @@ def encode_bc(rgba: np.ndarray, fmt: str, targets: np.ndarray | None = None) -> 
     BC1 and BC3nm's colour half by quicktex; BC7 by ispc_texcomp. ``targets`` ([H, W, C]
     float texel values, the unrounded map) lets the BC4-based encoders fit the source instead
     of its 8-bit rounding: BC5 reads x, y from its two components, BC3nm x from the first.
-    Without ``targets`` each distinct 4x4 block is encoded once
-    (:func:`wrinklepipe.normals.blocks.encode_distinct`: the same bytes).
+    Without ``targets`` each distinct 4x4 block is encoded once, and inside a conversion not
+    again when this run encoded it before (:func:`wrinklepipe.normals.blocks.encode_distinct`:
+    the same bytes).
     """
     check_format(fmt)
     a = np.ascontiguousarray(rgba, dtype=np.uint8)
@@ -137,7 +138,8 @@ def encode_bc(rgba: np.ndarray, fmt: str, targets: np.ndarray | None = None) -> 
     if h % 4 or w % 4 or h == 0 or w == 0:
         raise ValueError(f"block formats need sizes that are multiples of 4, got {w} x {h}")
     if targets is None:
-        return encode_distinct(a, lambda t: _encode_bc(t, fmt, None), BLOCK_BYTES[fmt])
+        memo = f"encode_bc:{fmt}:{QUICKTEX_LEVEL}:{ISPC_BC7_PROFILE}:{bc4.HARD_STEP}"
+        return encode_distinct(a, lambda t: _encode_bc(t, fmt, None), BLOCK_BYTES[fmt], memo)
     return _encode_bc(a, fmt, targets)
 
 
