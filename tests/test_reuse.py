@@ -137,6 +137,9 @@ def test_png_bytes_are_the_same_from_the_memo():
         assert png_bytes(px) == plain and png_bytes(px.copy()) == plain
         assert png_bytes(px, level=1) != plain  # the level is part of the key
     assert memo.hits["wrinklepipe.io.package._png"] == 1
+    with reuse.reuse() as memo:
+        assert png_bytes(px, shared=False) == plain  # a picture: the same bytes, not keyed
+        assert png_bytes(px, shared=False) == plain and not memo.hits and not memo.misses
 
 
 def test_map_threads_keeps_order_and_the_callers_png_level():

@@ -358,14 +358,17 @@ def png_level() -> int:
     return _PNG_LEVEL.get()
 
 
-def png_bytes(pixels: np.ndarray, level: int | None = None) -> bytes:
+def png_bytes(pixels: np.ndarray, level: int | None = None, shared: bool = True) -> bytes:
     """Encode ``[H, W, C]`` uint8/uint16 (C = 1..4) as a minimal PNG: IHDR, IDAT, IEND only.
 
     Rows use the Up filter (vectorised); zlib at ``level`` (default: :func:`png_level`, set by
     :func:`png_compression`, else :data:`DEFAULT_PNG_LEVEL`). Same pixels and level -> same bytes.
+    ``shared=False``: not through the run's memo (an image nothing else encodes, e.g. a
+    report's picture: keying it would only cost a hash of its pixels).
     """
     level = _PNG_LEVEL.get() if level is None else int(level)
-    return _png(np.asarray(pixels), level)
+    encode = _png if shared else _png.__wrapped__  # type: ignore[attr-defined]
+    return encode(np.asarray(pixels), level)
 
 
 @reused  # a texture the glTF document and the folder (or the GLB) both hold is encoded once

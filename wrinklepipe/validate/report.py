@@ -165,7 +165,7 @@ def heat(values: np.ndarray, vmax: float) -> np.ndarray:
 
 def _png(img: np.ndarray) -> bytes:
     arr = np.clip(np.rint(np.asarray(img, np.float64) * 255.0), 0, 255).astype(np.uint8)
-    return png_bytes(arr)
+    return png_bytes(arr, shared=False)  # a picture: no other part of a run encodes it
 
 
 def _to_srgb(img: np.ndarray) -> np.ndarray:
