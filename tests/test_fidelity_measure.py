@@ -142,3 +142,28 @@ def test_describe_lists_every_pose_worst_first():
     lines = fd.describe(f, fd.Budget(p99=1.0))
     assert lines[1].startswith("on") and "over budget" not in lines[1]
     assert lines[-1].startswith("base (face)")
+
+
+def test_the_footprint_wraps_whole_triangles_across_the_texture_edge():
+    # A quad over u 0.9..1.1, v 0.2..0.4 on a 20x20 grid: texel centres (i + 0.5) / 20 inside
+    # it are columns 18, 19 and (wrapped) 0, 1, rows 4..7 -> 16 texels, nothing in between.
+    uv = np.array([[0.9, 0.2], [1.1, 0.2], [1.1, 0.4], [0.9, 0.4]])
+    quad = np.array([[0, 1, 2], [0, 2, 3]])
+    fp = fd.footprint(uv, quad, (20, 20))
+    expected = np.zeros((20, 20), bool)
+    expected[4:8, [0, 1, 18, 19]] = True
+    np.testing.assert_array_equal(fp, expected)
+    # A triangle with two vertices on u = 1 stays at the right edge (wrapping u = 1 to 0 per
+    # vertex stretched it over the whole row): (0.9, 0.1), (1, 0.1), (1, 0.3) holds the
+    # centres with u >= 0.9 + (v - 0.1) / 2: row 2 columns 18-19, rows 3 and 4 column 19.
+    tri = np.array([[0.9, 0.1], [1.0, 0.1], [1.0, 0.3]])
+    fp = fd.footprint(tri, quad[:1], (20, 20))
+    expected = np.zeros((20, 20), bool)
+    expected[2, [18, 19]] = True
+    expected[3:5, 19] = True
+    np.testing.assert_array_equal(fp, expected)
+    # A triangle in the next tile (u 1.2..1.4) covers what its copy in [0, 1) covers.
+    np.testing.assert_array_equal(
+        fd.footprint(tri + [[-0.5, 0.0]], quad[:1], (20, 20)),
+        fd.footprint(tri + [[0.5, 0.0]], quad[:1], (20, 20)),
+    )

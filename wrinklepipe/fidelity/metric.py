@@ -840,9 +840,22 @@ def footprint(uvs: np.ndarray, indices: np.ndarray, shape: tuple[int, int]) -> n
     H, W = shape
     if H != W:
         raise ValueError("footprint needs a square grid")
-    uv = np.asarray(uvs, np.float64)
-    uv = uv - np.floor(uv)  # repeat wrapping, as samplers do by default
-    return rasterise_triangle_ids(uv, indices, H) >= 0
+    tri = np.asarray(uvs, np.float64)[np.asarray(indices, np.int64)]  # [T, 3, 2]
+    # Repeat wrapping, as samplers do by default, per triangle (not per vertex: a vertex on
+    # u = 1 wrapped alone would stretch its triangle over the whole texture): each triangle
+    # moves whole into the tile of its centroid, and one that crosses a tile edge is also
+    # drawn shifted by a tile, so the texels it covers beyond that edge count where they wrap.
+    tri = tri - np.floor(tri.mean(axis=1, keepdims=True))
+    lo, hi = tri.min(axis=1), tri.max(axis=1)  # [T, 2]
+    copies = []
+    for du in (-1.0, 0.0, 1.0):
+        for dv in (-1.0, 0.0, 1.0):
+            shift = np.array([du, dv])
+            keep = np.all((lo + shift < 1.0) & (hi + shift > 0.0), axis=1)
+            copies.append(tri[keep] + shift)
+    drawn = np.concatenate(copies)
+    ids = np.arange(3 * len(drawn), dtype=np.int64).reshape(-1, 3)
+    return rasterise_triangle_ids(drawn.reshape(-1, 2), ids, H) >= 0
 
 
 def describe(fid: Fidelity, budget: Budget | None = None) -> list[str]:
