@@ -12,6 +12,7 @@ from wrinklepipe.demo.package import demo_package
 from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.io import khronos
 from wrinklepipe.io.gltf_write import skin_weights_normalized, write_gltf
+from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.io.usd_write import write_usd
 
@@ -104,3 +105,28 @@ def test_weights_normalized_only_where_needed():
     assert out[0].tolist() == [0.5, 0.5, 0, 0]  # untouched (bits kept)
     assert out[1].tolist() == [0.5, 0.5, 0, 0]
     assert out[2].tolist() == [1, 0, 0, 0]
+
+
+def test_usd_mesh_reader_reads_the_gltf_joint_names_and_exact_inverse_binds(skinned, tmp_path):
+    """The one USD mesh reader (which the package reader reads through) names the joints as in
+    the glTF ('cheek.L', not the USD token 'cheek_L') and takes the exact inverse binds the
+    Skeleton carries, for a rotated joint too; UsdSkel's bindTransforms agree with them."""
+    from pxr import Usd, UsdSkel
+
+    a = 0.3
+    ibm = skinned.mesh.inverse_bind.copy()
+    ibm[1, :3, :3] = np.array(
+        [[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]], np.float32
+    )
+    pkg = replace(skinned, mesh=replace(skinned.mesh, inverse_bind=ibm))
+    write_usd(pkg, tmp_path / "r.usda")
+    m = read_usd_meshes(tmp_path / "r.usda", UsdMeshOptions(exact=True))[0]
+    assert m.joint_names == ("head", "cheek.L", "cheek.R")
+    assert np.array_equal(m.inverse_bind, ibm)
+    assert np.array_equal(m.skin_weights, skin_weights_normalized(pkg.mesh.skin_weights))
+    assert np.array_equal(read_usd(tmp_path / "r.usda").mesh.inverse_bind, ibm)
+    stage = Usd.Stage.Open(str(tmp_path / "r.usda"))
+    skel = next(UsdSkel.Skeleton(p) for p in stage.Traverse() if p.IsA(UsdSkel.Skeleton))
+    assert [str(t) for t in skel.GetJointsAttr().Get()] == ["head", "cheek_L", "cheek_R"]
+    bind = np.asarray(skel.GetBindTransformsAttr().Get(), np.float64).transpose(0, 2, 1)
+    assert np.allclose(np.linalg.inv(bind), ibm, atol=1e-6)

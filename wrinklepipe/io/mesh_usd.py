@@ -21,7 +21,10 @@
 - Non-skinned meshes are baked to world space when ``bake_transforms``.
 - Wrinkle data a wrinklepipe layer adds (``primvars:wrinkle:vertexId``, ``wrinkle:tangent``,
   ``wrinkle:bias``; vertex or faceVarying) is read per render vertex, tangents transformed
-  with the points.
+  with the points; a Skeleton's ``wrinkle:jointNames`` and ``wrinkle:inverseBindTransforms``
+  (the glTF joint names and exact inverse binds wrinklepipe writes beside the joint tokens)
+  name the joints and give their inverse binds. ``exact`` reads normals and joint weights as
+  stored (the package reader of a stage wrinklepipe wrote); ingest renormalises them.
 - ``Mesh.parts`` holds one :class:`~wrinklepipe.asset.MeshPart` per mesh: the prim path, the
   render vertex of every ``faceVertexIndices`` corner and the transform applied (what a layer
   over the source needs to write per-vertex data back in the prim's own topology and space).
@@ -53,6 +56,8 @@ class UsdMeshOptions:
     attached to a bone) is read as a rigid mesh at the skeleton's rest pose (UsdSkel's
     ``rest_k inv(bind_k) geomBindTransform``, then the skeleton's world transform), without
     skin, as glTF holds a mesh parented to a joint (default False: skinned, in bind space).
+    exact: values as stored: normals and joint weights are not renormalised (a stage wrinklepipe
+    wrote holds a package's mesh bit for bit; default False: ingest renormalises them).
     """
 
     bake_transforms: bool = True
@@ -60,6 +65,7 @@ class UsdMeshOptions:
     prim: str | None = None
     paths: tuple[str, ...] | None = None
     rigid_at_rest: bool = False
+    exact: bool = False
 
 
 def open_stage(path: Path) -> Any:
@@ -289,7 +295,8 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     normals = None
     if n_c is not None:
         nn = n_c[src]
-        nn /= np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-30)
+        if not opts.exact:
+            nn /= np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-30)
         normals = nn
 
     vertex_ids = None
@@ -327,7 +334,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     if prim.HasAPI(UsdSkel.BindingAPI):
         binding = UsdSkel.BindingAPI(prim)
         _blend_shapes(file, ppath, binding, mesh, vmap, n_p)
-        skinned, applied = _skin(file, prim, mesh, vmap, n_p, time, opts.rigid_at_rest)
+        skinned, applied = _skin(file, prim, mesh, vmap, n_p, time, opts)
     if not skinned and opts.bake_transforms:
         m = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time)).T
         if not np.allclose(m, np.eye(4)):
@@ -437,10 +444,15 @@ def _blend_shapes(
 
 
 def _skin(
-    file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: Any, rigid_at_rest: bool
+    file: str, prim: Any, mesh: Mesh, vmap: np.ndarray, n_p: int, time: Any, opts: UsdMeshOptions
 ) -> tuple[bool, np.ndarray]:
     """Read the UsdSkel skin onto ``mesh``: (placed by the skeleton, the transform applied:
-    the geomBindTransform, or for ``rigid_at_rest`` the rigid joint's rest placement)."""
+    the geomBindTransform, or for ``rigid_at_rest`` the rigid joint's rest placement).
+
+    The joint names and inverse bind matrices wrinklepipe authors on a Skeleton
+    (``wrinkle:jointNames``: the glTF names the joint tokens were made from;
+    ``wrinkle:inverseBindTransforms``: the glTF matrices, exact) win over the tokens and
+    ``inv(bindTransforms)``."""
     from pxr import Usd, UsdGeom, UsdSkel  # deferred: usd-core, USD only
 
     root = UsdSkel.Root.Find(prim)
@@ -483,8 +495,9 @@ def _skin(
     elif k < 4:
         ji = np.pad(ji, ((0, 0), (0, 4 - k)))
         jw = np.pad(jw, ((0, 0), (0, 4 - k)))
-    total = jw.sum(axis=1, keepdims=True)
-    jw = np.where(total > 0, jw / np.where(total > 0, total, 1.0), 0.0)
+    if not opts.exact:
+        total = jw.sum(axis=1, keepdims=True)
+        jw = np.where(total > 0, jw / np.where(total > 0, total, 1.0), 0.0)
     if ji.max(initial=0) >= len(joint_names) or ji.min(initial=0) < 0:
         raise input_error(file, "joint indices out of range", key=f"{prim.GetPath()}.skel")
     bind = skel.GetBindTransformsAttr().Get()
@@ -492,16 +505,23 @@ def _skin(
         mesh.notes.append("skin ignored: Skeleton bindTransforms missing or wrong length")
         return False, np.eye(4)
     bind_col = np.asarray(bind, dtype=np.float64).transpose(0, 2, 1)  # row- to column-vector
-    ibm = np.linalg.inv(bind_col)[[skel_joints.index(j) for j in joint_names]]
+    rows = [skel_joints.index(j) for j in joint_names]
+    ibm = np.linalg.inv(bind_col)[rows]
+    authored = _authored_joints(file, skel, len(skel_joints))
+    if authored is not None:
+        names, exact_ibm = authored
+        if exact_ibm is not None:
+            ibm = exact_ibm[rows]
     geom = np.asarray(sq.GetGeomBindTransform(time), dtype=np.float64).T
-    if rigid_at_rest and sq.IsRigidlyDeformed():
+    if opts.rigid_at_rest and sq.IsRigidlyDeformed():
         k0 = skel_joints.index(joint_names[int(ji[0, 0])])
         rest = np.asarray(skel_q.ComputeJointSkelTransforms(time, True), np.float64)[k0].T
         world = np.asarray(
             UsdGeom.Xformable(skel.GetPrim()).ComputeLocalToWorldTransform(time), np.float64
         ).T
         placed = world @ rest @ np.linalg.inv(bind_col[k0]) @ geom
-        _apply(mesh, placed)
+        if not (opts.exact and np.allclose(placed, np.eye(4))):  # exact: as stored
+            _apply(mesh, placed)
         mesh.notes.append(
             f"rigidly bound to joint {joint_names[int(ji[0, 0])]}: read at the skeleton's rest pose"
         )
@@ -511,10 +531,31 @@ def _skin(
         mesh.notes.append("applied geomBindTransform")
     mesh.joints = ji[vmap]
     mesh.skin_weights = jw[vmap].astype(np.float32)
-    mesh.joint_names = tuple(joint_names)
+    mesh.joint_names = tuple(joint_names if authored is None else [names[r] for r in rows])
     mesh.inverse_bind = ibm.astype(np.float32)
     mesh.notes.append(f"UsdSkel skin: {len(joint_names)} joints, {k} influence(s) per point")
     return True, geom
+
+
+def _authored_joints(file: str, skel: Any, n: int) -> tuple[list[str], np.ndarray | None] | None:
+    """A Skeleton's ``wrinkle:jointNames`` and ``wrinkle:inverseBindTransforms`` (column
+    vectors; None when not authored), in its joint order; None without the names."""
+    names_attr = skel.GetPrim().GetAttribute("wrinkle:jointNames")
+    if not names_attr or not names_attr.HasAuthoredValue():
+        return None
+    names = [str(x) for x in names_attr.Get()]
+    if len(names) != n:
+        raise input_error(file, "wrinkle:jointNames differs from the joints", str(skel.GetPath()))
+    ibm_attr = skel.GetPrim().GetAttribute("wrinkle:inverseBindTransforms")
+    value = ibm_attr.Get() if ibm_attr and ibm_attr.HasAuthoredValue() else None
+    ibm = None
+    if value is not None:
+        ibm = np.asarray(value, np.float64).transpose(0, 2, 1)  # row- to column-vector
+        if ibm.shape != (n, 4, 4):
+            raise input_error(
+                file, "wrinkle:inverseBindTransforms differs from the joints", str(skel.GetPath())
+            )
+    return names, ibm
 
 
 def usd_joint_world_matrices(path: str | Path, mesh: Mesh, time: float | None = None) -> np.ndarray:

@@ -5,23 +5,28 @@ Finds the Material with ``WrinkleMapsAPI`` and the Mesh bound to it, undoes the 
 same :class:`~wrinklepipe.io.package.WrinklePackage` the glTF reader returns. Texture paths must be
 relative and stay inside the layer's folder or package.
 
-A layer over a USD source (:mod:`wrinklepipe.document.usd_layer`; its material carries
-``wrinkle:layeredOver``) keeps the source's topology: the meshes bound to its wrinkled
-material(s) are read by :func:`wrinklepipe.io.mesh_usd.read_usd_meshes` (render vertices through
-the corner map, wrinkle primvars vertex or faceVarying, the source's UsdSkel skin) and merged.
+Its meshes are read by the one USD mesh reader, :func:`wrinklepipe.io.mesh_usd.read_usd_meshes`
+(render vertices through the corner map, wrinkle primvars vertex or faceVarying, UsdSkel blend
+shapes and skin, the glTF joint names and inverse binds a wrinklepipe Skeleton carries), and
+merged; the kind of stage only sets its options:
 
-The USD of a glTF source (:mod:`wrinklepipe.document.usd_scene`; its material lists the
-wrinkled prims in ``wrinkle:meshes``) is read the same way, in that order, meshes bound rigidly
-to a joint at the skeleton's rest pose (``UsdMeshOptions.rigid_at_rest``), skinned ones in bind
-space with the glTF joint names (the Skeleton's ``wrinkle:jointNames``): the render mesh the
-glTF path reads from the glTF beside it.
+- a stage :func:`~wrinklepipe.io.usd_write.build_stage` wrote (one Mesh): read ``exact`` (normals
+  and joint weights as stored, so glTF -> USD -> glTF is byte-identical), its one-joint
+  Skeleton of a mesh without skin read as no skin (``rigid_at_rest``), named as its prim;
+- the USD of a glTF source (:mod:`wrinklepipe.document.usd_scene`; its material lists the
+  wrinkled prims in ``wrinkle:meshes``): in that order, meshes bound rigidly to a joint at the
+  skeleton's rest pose (``UsdMeshOptions.rigid_at_rest``), skinned ones in bind space: the
+  render mesh the glTF path reads from the glTF beside it;
+- a layer over a USD source (:mod:`wrinklepipe.document.usd_layer`; its material carries
+  ``wrinkle:layeredOver``): the meshes bound to its wrinkled material(s), the source's
+  topology, as ingest reads them.
 """
 
 from __future__ import annotations
 
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path, PurePosixPath
 from typing import Any
 
@@ -139,34 +144,12 @@ def _stem(asset: Any) -> str:
     return PurePosixPath(asset.path.replace("\\", "/")).stem
 
 
-def _own_layout(prim: Any) -> bool:
-    """The layout :func:`~wrinklepipe.io.usd_write.build_stage` writes: triangles, one point per
-    render vertex (``primvars:st`` and ``wrinkle:tangent`` per vertex)."""
-    from pxr import UsdGeom  # deferred: usd-core, USD only
-
-    gm = UsdGeom.Mesh(prim)
-    counts = gm.GetFaceVertexCountsAttr().Get()
-    pv = UsdGeom.PrimvarsAPI(prim)
-    return (
-        counts is not None
-        and len(counts) > 0
-        and bool(np.all(np.asarray(counts) == 3))
-        and all(
-            pv.GetPrimvar(n) and pv.GetPrimvar(n).GetInterpolation() == UsdGeom.Tokens.vertex
-            for n in ("st", "wrinkle:tangent")
-        )
-    )
-
-
-def _layered_mesh(
-    path: Path, file: str, prims: list[str], joint_names: dict[str, tuple[str, ...]] | None = None
-) -> Mesh:
-    """The wrinkled meshes of a layer over a source, as the mesh reader reads them (render
-    vertices through the corner map; wrinkle primvars vertex or faceVarying), merged.
-    ``joint_names``: a glTF source's scene (prim -> the glTF names of its skeleton's joints):
-    rigidly bound meshes at the rest pose, joints named as in the glTF."""
-    opts = UsdMeshOptions(paths=tuple(prims), rigid_at_rest=joint_names is not None)
-    parts = {m.name: m for m in read_usd_meshes(path, opts)}
+def _wrinkled_mesh(path: Path, file: str, prims: list[str], options: UsdMeshOptions) -> Mesh:
+    """The wrinkled meshes ``prims``, read by the mesh reader
+    (:func:`~wrinklepipe.io.mesh_usd.read_usd_meshes`: render vertices through the corner map,
+    wrinkle primvars vertex or faceVarying, UsdSkel skin and blend shapes; only those prims) and
+    merged."""
+    parts = {m.name: m for m in read_usd_meshes(path, replace(options, paths=tuple(prims)))}
     got = []
     for p in prims:
         m = parts.get(p)
@@ -177,120 +160,10 @@ def _layered_mesh(
                 raise input_error(file, f"primvars:{what} missing or unreadable", p)
         if m.uvs is None:
             raise input_error(file, "texture coordinates (primvars:st) missing", p)
-        names = (joint_names or {}).get(p)
-        if names is not None and m.joint_names:
-            m.joint_names = names
         got.append(m)
     mesh = merge_parts(got, keep_ids=True)
     if mesh.normals is None:  # as convert made them: area-weighted, over the merged meshes
         mesh.normals = vertex_normals(mesh.positions, mesh.indices).astype(np.float32)
-    return mesh
-
-
-def _gltf_joint_names(stage: Any, prims: list[str], file: str) -> dict[str, tuple[str, ...]]:
-    """Each skinned prim -> the glTF names of its skeleton's joints, in the skeleton's order
-    (``wrinkle:jointNames``; the joint tokens are paths made valid as USD identifiers)."""
-    from pxr import UsdSkel  # deferred: usd-core, USD only
-
-    out: dict[str, tuple[str, ...]] = {}
-    for p in prims:
-        prim = stage.GetPrimAtPath(p)
-        skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton() if prim else None
-        names = skel.GetPrim().GetAttribute("wrinkle:jointNames") if skel else None
-        if not names or not names.HasAuthoredValue():
-            continue
-        got = tuple(str(n) for n in names.Get())
-        if len(got) != len(skel.GetJointsAttr().Get() or []):
-            raise input_error(
-                file, "wrinkle:jointNames differs from the joints", str(skel.GetPath())
-            )
-        out[p] = got
-    return out
-
-
-def _own_mesh(stage: Any, mesh_prim: Any, file: str) -> Mesh:
-    """The mesh of a stage :func:`~wrinklepipe.io.usd_write.build_stage` wrote."""
-    from pxr import UsdGeom, UsdSkel  # deferred: usd-core, USD only
-
-    mkey = str(mesh_prim.GetPath())
-    gm = UsdGeom.Mesh(mesh_prim)
-    counts = np.asarray(gm.GetFaceVertexCountsAttr().Get() or [], np.int64)
-    if counts.size == 0 or np.any(counts != 3):
-        raise input_error(file, "mesh must be triangles (faceVertexCounts all 3)", mkey)
-    positions = np.asarray(gm.GetPointsAttr().Get(), np.float32)
-    nv = positions.shape[0]
-    indices = np.asarray(gm.GetFaceVertexIndicesAttr().Get(), np.int64)
-    if indices.min() < 0 or indices.max() >= nv:
-        raise input_error(file, "faceVertexIndices out of range", mkey)
-    pv = UsdGeom.PrimvarsAPI(gm)
-
-    def primvar(name: str, required: bool = True) -> np.ndarray | None:
-        p = pv.GetPrimvar(name)
-        if not p or not p.HasValue():
-            if required:
-                raise input_error(file, f"primvars:{name} missing", mkey)
-            return None
-        if p.GetInterpolation() != UsdGeom.Tokens.vertex:
-            raise input_error(file, f"primvars:{name} must have vertex interpolation", mkey)
-        arr = np.asarray(p.Get())
-        if arr.shape[0] != nv:
-            raise input_error(
-                file, f"primvars:{name} has {arr.shape[0]} values for {nv} points", mkey
-            )
-        return arr
-
-    st = primvar("st").astype(np.float32)
-    uvs = np.stack([st[:, 0], np.float32(1.0) - st[:, 1]], -1).astype(np.float32)
-    normals = np.asarray(gm.GetNormalsAttr().Get(), np.float32)
-    bias = primvar("wrinkle:bias", required=False)
-    morph_names: tuple[str, ...] = ()
-    deltas = None
-    skin: dict[str, Any] = {}
-    if mesh_prim.HasAPI(UsdSkel.BindingAPI):
-        binding = UsdSkel.BindingAPI(mesh_prim)
-        names_attr = binding.GetBlendShapesAttr().Get()
-        targets = binding.GetBlendShapeTargetsRel().GetTargets()
-        if names_attr:
-            morph_names = tuple(str(n) for n in names_attr)
-            deltas = np.stack(
-                [
-                    np.asarray(
-                        UsdSkel.BlendShape(stage.GetPrimAtPath(t)).GetOffsetsAttr().Get(),
-                        np.float32,
-                    )
-                    for t in targets
-                ]
-            )
-        skel_targets = binding.GetSkeletonRel().GetTargets()
-        skel_prim = stage.GetPrimAtPath(skel_targets[0]) if skel_targets else None
-        names = skel_prim.GetAttribute("wrinkle:jointNames") if skel_prim else None
-        if names and names.HasAuthoredValue():
-            ji = binding.GetJointIndicesPrimvar()
-            jw = binding.GetJointWeightsPrimvar()
-            k = ji.GetElementSize()
-            skin["joint_names"] = tuple(str(x) for x in names.Get())
-            skin["joints"] = np.asarray(ji.Get(), np.int64).reshape(-1, k)
-            skin["skin_weights"] = np.asarray(jw.Get(), np.float32).reshape(-1, k)
-            ibm = skel_prim.GetAttribute("wrinkle:inverseBindTransforms").Get()
-            if ibm is not None:
-                skin["inverse_bind"] = np.ascontiguousarray(
-                    np.asarray(ibm, np.float64).transpose(0, 2, 1).astype(np.float32)
-                )
-            if skin["joints"].shape[0] != nv or skin["skin_weights"].shape[0] != nv:
-                raise input_error(file, "joint indices/weights do not match the points", mkey)
-    mesh = Mesh(
-        positions=positions,
-        indices=indices.reshape(-1, 3).astype(np.uint32),
-        uvs=uvs,
-        normals=normals,
-        tangents=primvar("wrinkle:tangent").astype(np.float32),
-        morph_names=morph_names,
-        morph_deltas=deltas,
-        vertex_ids=primvar("wrinkle:vertexId").astype(np.int64),
-        colors=None if bias is None else bias.astype(np.float32),
-        name=mesh_prim.GetName(),
-        **skin,
-    )
     return mesh
 
 
@@ -336,14 +209,16 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
                 f"{SCENE_MESHES} does not list the meshes bound to the material",
                 str(mat_prim.GetPath()),
             )
-        mesh = _layered_mesh(path, file, listed, _gltf_joint_names(stage, listed, file))
+        mesh = _wrinkled_mesh(path, file, listed, UsdMeshOptions(rigid_at_rest=True))
         named = mat_prim.GetAttribute(SCENE_MESH_NAME)
         if named and named.HasAuthoredValue():
             mesh.name = str(named.Get())
-    elif not layered and len(meshes) == 1 and _own_layout(meshes[0]):
-        mesh = _own_mesh(stage, meshes[0], file)
+    elif not layered and len(meshes) == 1:  # a stage build_stage wrote: its mesh as stored
+        prim = str(meshes[0].GetPath())
+        exact = UsdMeshOptions(rigid_at_rest=True, exact=True)
+        mesh = replace(_wrinkled_mesh(path, file, [prim], exact), name=meshes[0].GetName())
     else:  # a layer over a source (wrinklepipe.document.usd_layer): the source's topology
-        mesh = _layered_mesh(path, file, [str(m.GetPath()) for m in meshes])
+        mesh = _wrinkled_mesh(path, file, [str(m.GetPath()) for m in meshes], UsdMeshOptions())
 
     # -- textures ----------------------------------------------------------------------------
     textures: list[PackedTexture] = []
