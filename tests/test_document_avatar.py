@@ -19,6 +19,7 @@ import pytest
 from passthrough import EXTENSION, WRINKLE_ATTRIBUTES, compare
 from PIL import Image
 from test_document_inspect import GLTF_TRANSFORM, gltf_transform_inspect
+from wrinkle_setups import avatar_variant
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo import avatar
@@ -27,7 +28,6 @@ from wrinklepipe.document.model import read_document
 from wrinklepipe.errors import InputError
 from wrinklepipe.io import khronos
 from wrinklepipe.io.gltf_limits import GltfReadOptions
-from wrinklepipe.io.gltf_write import glb_bytes
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
 from wrinklepipe.sources.validation import load_input
 
@@ -199,18 +199,6 @@ def test_avatar_base_is_the_materials_own_normal_texture(converted):
     assert got.shape == truth.shape and float(err.max()) < 0.5  # 8-bit quantisation
 
 
-def _variant(tmp_path: Path, change) -> Path:
-    """The avatar source folder with its GLB's JSON changed by ``change(doc)``."""
-    folder = tmp_path / "src"
-    for rel, data in avatar.avatar_source_files().items():
-        (folder / rel).parent.mkdir(parents=True, exist_ok=True)
-        (folder / rel).write_bytes(data)
-    doc, data = avatar.avatar_document()
-    data = change(doc, data, folder) or data
-    (folder / "avatar.glb").write_bytes(glb_bytes(doc, data))
-    return folder / "manifest.toml"
-
-
 def test_texture_transform_on_the_base_is_refused(tmp_path, capsys):
     def change(doc, data, folder):
         doc["materials"][0]["normalTexture"]["extensions"] = {
@@ -218,7 +206,7 @@ def test_texture_transform_on_the_base_is_refused(tmp_path, capsys):
         }
         doc["extensionsUsed"].append("KHR_texture_transform")
 
-    manifest = _variant(tmp_path, change)
+    manifest = avatar_variant(tmp_path, change)
     out = tmp_path / "out"
     assert main(["convert", str(manifest), "-o", str(out)]) == 2 and not out.exists()
     err = " ".join(capsys.readouterr().err.split())
@@ -268,7 +256,7 @@ def test_basisu_base_is_decoded_with_alktx2_and_passed_through(tmp_path):
         doc["buffers"][0]["byteLength"] = len(new)
         return new
 
-    manifest = _variant(tmp_path, change)
+    manifest = avatar_variant(tmp_path, change)
     # the KTX2 is held to the reader's pixel cap by its header, before alktx2 transcodes it
     capped = read_document(manifest.parent / "avatar.glb", GltfReadOptions(max_pixels=1))
     with pytest.raises(InputError, match=r"/images/\d+.*over the cap of 1 pixels"):

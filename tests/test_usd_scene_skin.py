@@ -16,7 +16,7 @@ from pathlib import Path
 import gltf_reference as ref
 import numpy as np
 import pytest
-from wrinkle_setups import ROBOT, write_setup
+from wrinkle_setups import ROBOT, avatar_variant, write_setup
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo import avatar
@@ -299,27 +299,13 @@ def test_usd_validation_and_validate_asset_are_clean(characters, name, capsys):
     assert u["metrics"] == g["metrics"]
 
 
-def _avatar_variant(tmp_path: Path, change) -> Path:
-    """The avatar source folder with its GLB's JSON changed by ``change(doc)``."""
-    from wrinklepipe.io.gltf_write import glb_bytes
-
-    folder = tmp_path / "src"
-    for rel, data in avatar.avatar_source_files().items():
-        (folder / rel).parent.mkdir(parents=True, exist_ok=True)
-        (folder / rel).write_bytes(data)
-    doc, data = avatar.avatar_document()
-    data = change(doc, data, folder) or data
-    (folder / "avatar.glb").write_bytes(glb_bytes(doc, data))
-    return folder / "manifest.toml"
-
-
 def test_wrinkled_mesh_outside_the_scene_is_written_unplaced(tmp_path):
     from pxr import Usd, UsdSkel
 
     def change(doc, data, folder):  # the Head node (20) taken out of the scene
         doc["scenes"][0]["nodes"] = [n for n in doc["scenes"][0]["nodes"] if n != 20]
 
-    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    res = convert(avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
     assert res.exit_code == 0
     assert any(
         "is in no scene: written below /avatar/Scene/Unplaced" in n for n in res.report["notes"]
@@ -347,7 +333,7 @@ def test_rigid_morph_head_under_no_joint_plays_its_blend_shapes(tmp_path):
         for p in doc["meshes"][0]["primitives"]:
             p["attributes"].pop("JOINTS_0"), p["attributes"].pop("WEIGHTS_0")
 
-    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    res = convert(avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
     assert res.exit_code == 0
     out = tmp_path / "out"
     stage = Usd.Stage.Open(str(out / "avatar.usda"))
@@ -424,7 +410,7 @@ def test_texture_transform_becomes_a_usd_transform2d(tmp_path):
         }
         doc["extensionsUsed"].append("KHR_texture_transform")
 
-    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    res = convert(avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
     assert res.exit_code == 0
     assert not any("KHR_texture_transform" in n for n in res.report["notes"])
     usda = tmp_path / "out" / "avatar.usda"
@@ -511,7 +497,7 @@ def test_ktx2_and_webp_images_are_transcoded_to_png_for_usd(tmp_path):
         doc.setdefault("extensionsRequired", []).extend(["KHR_texture_basisu", "EXT_texture_webp"])
         return data
 
-    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    res = convert(avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
     assert res.exit_code == 0
     notes = [n for n in res.report["notes"] if "transcoded to PNG for the USD" in n]
     assert (
@@ -645,7 +631,7 @@ def test_two_wrinkled_materials_read_back_in_the_package_order(tmp_path):
     order in wrinkle:meshes; read_usd's merged mesh = read_wrinkled's, vertex for vertex."""
     from wrinklepipe.io.images import write_image
 
-    manifest = _avatar_variant(tmp_path, lambda doc, data, folder: None)
+    manifest = avatar_variant(tmp_path, lambda doc, data, folder: None)
     flat = np.zeros((64, 64, 3))  # the states' size
     flat[...] = (0.5, 0.5, 1.0)
     write_image(manifest.parent / "flat.png", flat, 8)  # Teeth has no normalTexture
@@ -717,7 +703,7 @@ def test_non_joint_nodes_animate_their_xforms_and_carry_the_skeleton(tmp_path):
         )
         return data
 
-    manifest = _avatar_variant(tmp_path, change)
+    manifest = avatar_variant(tmp_path, change)
     res = convert(manifest, tmp_path / "out", ConvertOptions(render=False))
     assert res.exit_code == 0
     src = manifest.parent / "avatar.glb"
@@ -780,7 +766,7 @@ def test_clearcoat_and_ior_reach_the_preview_surface_and_others_are_named(tmp_pa
             "KHR_materials_sheen",
         ]
 
-    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    res = convert(avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
     assert res.exit_code == 0
     assert any(
         "material 'Teeth' has KHR_materials_sheen, which UsdPreviewSurface cannot hold" in n
@@ -830,7 +816,7 @@ def test_gltf_cameras_become_usd_cameras(tmp_path):
             len(doc["nodes"]) - 1,
         ]
 
-    res = convert(_avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
+    res = convert(avatar_variant(tmp_path, change), tmp_path / "out", ConvertOptions(render=False))
     assert res.exit_code == 0
     assert any("node 'Key' holds a KHR_lights_punctual light" in n for n in res.report["notes"])
     stage = Usd.Stage.Open(str(tmp_path / "out" / "avatar.usda"))

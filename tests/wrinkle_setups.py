@@ -10,7 +10,8 @@ import numpy as np
 
 from wrinklepipe import model
 from wrinklepipe.asset import WrinkleAsset
-from wrinklepipe.demo import demo_asset
+from wrinklepipe.demo import avatar, demo_asset
+from wrinklepipe.io.gltf_write import glb_bytes
 from wrinklepipe.io.images import write_image
 
 #: Regions as UV boxes (u0, v0, u1, v1) with their side; glTF characters face +Z, so their
@@ -139,3 +140,17 @@ def overlapping_demo(encoding: str, policy: str) -> WrinkleAsset:
     lo = model.POLICY_WEIGHT_RANGE[policy].low
     ex = {e: {r: max(w, lo) for r, w in row.items()} for e, row in ex.items()}
     return replace(a, masks=masks, expressions=ex)
+
+
+def avatar_variant(tmp_path: Path, change) -> Path:
+    """The generated avatar's source folder under ``tmp_path/src`` with its GLB changed by
+    ``change(doc, data, folder)`` (which edits ``doc`` in place and may return new binary
+    data); the manifest's path."""
+    folder = tmp_path / "src"
+    for rel, data in avatar.avatar_source_files().items():
+        (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+        (folder / rel).write_bytes(data)
+    doc, data = avatar.avatar_document()
+    data = change(doc, data, folder) or data
+    (folder / "avatar.glb").write_bytes(glb_bytes(doc, data))
+    return folder / "manifest.toml"
