@@ -206,3 +206,39 @@ def test_one_pass_for_several_maps_gives_each_maps_own_encoding(fmt, monkeypatch
     assert again == alone
     for q, g in zip(maps, got):
         assert np.array_equal(g, ship.block_roundtrip(q, fmt))
+
+
+def test_compressed_copies_are_judged_at_the_sizes_the_confirmation_raised_to():
+    """The block formats are screened beside the PNG confirmation (for the screened sizes);
+    when the confirmation raises a size, the compressed copies are judged at the raised one:
+    their fidelity is that of the chosen formats' whole-map round trips with the masks
+    shipped, and differs from what the screened (smaller) masks give."""
+    src = scene(width=8.0)
+    c = fs.search(src, fd.Budget(mean=0.3, p99=1.0), options=fs.SearchOptions(screen_texels=64))
+    steps = [t.step for t in c.tried]
+    assert (
+        steps.index("confirmed (png)") < steps.index("raised (png)") < steps.index("state format")
+    )
+    assert (c.wrinkle_size, c.mask_size) == (64, 64) and c.compressed is not None
+    ref = fd.prepare(src.base, src.slopes, src.masks, src.poses, src.region_names)
+    states = np.stack(
+        [ship.block_roundtrip(ship.pd_texels(x, c.pd_scale)[0], c.state_format) for x in c.states]
+    )
+    base = ship.base_texels(src.base)
+    base_reader = ship.base_reader("rgb")
+    if c.base_format != "png":
+        base, base_reader = ship.block_roundtrip(base, c.base_format), ship.base_reader("rg")
+
+    def measured(mask_size: int) -> tuple[float, float]:
+        s = fd.sample(
+            ref,
+            base=base,
+            base_reader=base_reader,
+            states=states,
+            states_reader=ship.pd_reader(c.pd_scale, quantise=False),
+            masks=ship.mask_values(src.masks, mask_size),
+        )
+        return fd.evaluate(ref, s, regions=False).score()
+
+    assert measured(64) == pytest.approx(c.compressed.score(), abs=1e-6)
+    assert measured(32) != pytest.approx(c.compressed.score(), abs=1e-3)

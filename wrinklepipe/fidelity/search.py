@@ -21,12 +21,14 @@ compressed copies. A choice fixed in the manifest is measured, not searched.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from wrinklepipe import reuse
 from wrinklepipe.fidelity import metric as fm
 from wrinklepipe.fidelity import pyramid, ship
 from wrinklepipe.fidelity.stats import Budget
@@ -185,20 +187,26 @@ class Judge:
         self.coarse = ref.coarse(screen_texels)
         self.parts: dict[str, Candidate] = {}
         self._sampled: dict[tuple[int, bool], tuple[Candidate, fm.Samples]] = {}
+        self._lock = threading.Lock()
+        self._making: dict[tuple[int, bool], threading.Lock] = {}
 
     @property
     def screens(self) -> bool:
         return self.coarse is not self.fine
 
     def sampled(self, make: Candidate, fine: bool) -> fm.Samples:
-        """The samples of a candidate on the full (``fine``) or the coarse reference."""
+        """The samples of a candidate on the full (``fine``) or the coarse reference (made
+        once: a thread asking for samples another is making waits for them)."""
         fine = fine and self.screens
         key = (id(make), fine)
-        hit = self._sampled.get(key)
-        if hit is None:
-            ref = self.fine if fine else self.coarse
-            hit = (make, fm.sample(ref, **make(ref)))  # the candidate kept: its id stays its own
-            self._sampled[key] = hit
+        with self._lock:
+            making = self._making.setdefault(key, threading.Lock())
+        with making:
+            hit = self._sampled.get(key)
+            if hit is None:
+                ref = self.fine if fine else self.coarse
+                hit = (make, fm.sample(ref, **make(ref)))  # the candidate kept: its id its own
+                self._sampled[key] = hit
         return hit[1]
 
     def set(self, name: str, make: Candidate) -> None:
@@ -209,12 +217,20 @@ class Judge:
         """The full reference's samples of a part."""
         return self.sampled(self.parts[name], True)
 
-    def run(self, fine: bool, make: Candidate | None = None, regions: bool = False) -> fm.Fidelity:
+    def run(
+        self,
+        fine: bool,
+        make: Candidate | None = None,
+        regions: bool = False,
+        parts: dict[str, Candidate] | None = None,
+    ) -> fm.Fidelity:
+        """The fidelity of the kept parts (or of ``parts``), with ``make`` over them."""
         ref = self.fine if fine else self.coarse
-        parts = [self.sampled(m, fine) for m in self.parts.values()]
+        kept = self.parts if parts is None else parts
+        samples = [self.sampled(m, fine) for m in kept.values()]
         if make is not None:
-            parts.append(self.sampled(make, fine))
-        return fm.evaluate(ref, fm.merge(*parts), regions=regions)
+            samples.append(self.sampled(make, fine))
+        return fm.evaluate(ref, fm.merge(*samples), regions=regions)
 
     def screen(
         self, budget: Budget, tried: list[Tried], step: str, value: Any, make: Candidate
@@ -253,6 +269,10 @@ def _factory(build: Callable[..., Candidate]) -> Callable[..., Candidate]:
     return get
 
 
+def _call(fn: Callable[[], Any]) -> Any:
+    return fn()
+
+
 def _smallest_passing(values: Sequence[Any], passes: Callable[[Any], bool]) -> Any | None:
     """The smallest of ascending ``values`` for which ``passes`` holds, by bisection (the error
     falls as a size grows); the largest is taken to pass (the confirmation checks it)."""
@@ -287,23 +307,35 @@ def search(
     grid_base = src.source_base if src.source_base is not None else src.base
     if grid_base.shape[:2] != (H, W):
         raise ValueError("the source base must be given on the state grid (source_base)")
-    ref = fm.prepare(
-        np.asarray(grid_base, _F),
-        slopes,
-        src.masks,
-        src.poses,
-        src.region_names,
-        "pd",
-        src.policy,
-        src.footprint,
-    )
+    smallest = min(fx.wrinkle or o.min_size, H)
+
+    def reference() -> fm.Reference:
+        return fm.prepare(
+            np.asarray(grid_base, _F),
+            slopes,
+            src.masks,
+            src.poses,
+            src.region_names,
+            "pd",
+            src.policy,
+            src.footprint,
+        )
+
+    def shippable() -> tuple[np.ndarray, dict[int, np.ndarray], ship.MaskLevels]:
+        return (
+            ship.base_texels(src.base),
+            pyramid.levels(slopes, smallest),
+            ship.mask_levels(src.masks, o.min_mask_size),
+        )
+
+    # the source's full-resolution pass beside what the candidates are made from (independent
+    # work, numpy's loops release the GIL: two threads when the thread budget allows)
+    ref, (base_texels, levels, mask_lv) = reuse.map_threads(_call, [reference, shippable])
     judge = Judge(ref, o.screen_texels)
     tried: list[Tried] = []
     notes: list[str] = []
-    base_texels = ship.base_texels(src.base)
     png_base = {"base": base_texels, "base_reader": ship.base_reader("rgb")}
     judge.set("base", lambda r: png_base)
-    mask_lv = ship.mask_levels(src.masks, o.min_mask_size)
     m0 = int(src.masks.shape[1])
 
     @_factory
@@ -312,8 +344,6 @@ def search(
         return lambda r: {"masks": mask_lv[m], "support": None if m != m0 else False}
 
     judge.set("masks", masks(m0))
-    smallest = min(fx.wrinkle or o.min_size, H)
-    levels = pyramid.levels(slopes, smallest)
     sizes = sorted(s for s in levels if s >= smallest)
 
     @_factory
@@ -383,12 +413,119 @@ def search(
             or m0
         )
     judge.set("masks", masks(mask_size))
-    # 5. confirm on every active texel; raise sizes while it is over the budget
-    png = judge.run(True)
+    face = ref.face_texels(o.screen_texels)
+
+    def formats(size: int, scale: float) -> _Formats:
+        """6. block formats for the compressed copies (states first, then the base), screened
+        with the states at ``size`` / ``scale`` and the kept masks: only the blocks the
+        reference being judged reads are encoded (blocks are independent); small maps are
+        encoded whole, every map of a format in one encoder pass. The kept parts stay the PNG
+        copies'."""
+        found: list[Tried] = []
+        kept = dict(judge.parts)
+        state_q = np.stack([ship.pd_texels(x, scale)[0] for x in levels[size]])
+        trips = _RoundTrips(
+            {**{f"state {k}": q for k, q in enumerate(state_q)}, "base": base_texels[..., :2]},
+            o.whole_map_blocks,
+        )
+        state_names = [f"state {k}" for k in range(len(state_q))]
+
+        def reads(r: fm.Reference) -> np.ndarray:
+            part = judge.sampled(kept["masks"], r is judge.fine)
+            leaks = [lk[0] for lk in (part.leaks or []) if lk is not None]
+            return np.concatenate([r.union, *leaks])
+
+        @_factory
+        def state_format(f: str) -> Candidate:
+            def make(r: fm.Reference) -> dict[str, Any]:
+                need = fm.taps(state_q.shape[1:3], ref.shape, reads(r))
+                got = trips.get(f, dict.fromkeys(state_names, need))
+                texels = np.stack([got[n] for n in state_names])
+                return {"states": texels, "states_reader": ship.pd_reader(scale, quantise=False)}
+
+            return make
+
+        @_factory
+        def base_format(f: str) -> Candidate:
+            def make(r: fm.Reference) -> dict[str, Any]:
+                need = fm.taps(base_texels.shape[:2], ref.shape, np.concatenate([reads(r), face]))
+                xy = trips.get(f, {"base": need})["base"]
+                return {"base": xy, "base_reader": ship.base_reader("rg")}
+
+            return make
+
+        def state_edges_ok(f: str) -> bool:
+            # the copy must not clip where the PNG does not (the validator's rule, WP-MAP-004)
+            limit = o.max_clipped_fraction * state_q.shape[1] * state_q.shape[2]
+            got = trips.get(f, {n: ship.near_edge_texels(q) for n, q in zip(state_names, state_q)})
+            for n, q in zip(state_names, state_q):
+                edges = ship.edge_texels(got[n])
+                if edges > max(limit, ship.edge_texels(q)):
+                    at = f"{f}: {edges} texels at the end of the range"
+                    found.append(Tried("state format (clipping, WP-MAP-004)", at, 0.0, 0.0, False))
+                    return False
+            return True
+
+        state_fmt = pick_format(
+            judge,
+            fx.state_format,
+            o.formats,
+            cbudget,
+            found,
+            "state format",
+            state_format,
+            keeps=state_edges_ok,
+        )
+        if state_fmt != "png":
+            judge.set("states", state_format(state_fmt))
+        base_fmt = pick_format(
+            judge,
+            fx.base_format,
+            o.formats,
+            cbudget,
+            found,
+            "base format",
+            base_format,
+            alone=lambda make: _base_alone(ref, make(judge.coarse), face),
+        )
+        if base_fmt != "png":
+            judge.set("base", base_format(base_fmt))
+        parts = dict(judge.parts)
+        judge.parts = kept
+        return _Formats(state_fmt, base_fmt, parts, found)
+
+    def confirm_compressed(f: _Formats) -> fm.Fidelity | None:
+        """The compressed copies of ``f`` on every active texel (None: nothing compressed)."""
+        if f.state == "png" and f.base == "png":
+            return None
+        compressed = judge.run(True, parts=f.parts)
+        full_base = judge.sampled(f.parts["base"], True)
+        compressed.base = fm.base_fidelity(
+            ref, full_base.raw["base"], face, full_base.readers["base"]
+        )
+        return compressed
+
+    # 5. confirm on every active texel: the PNG copies, beside the compressed copies of the
+    # formats step 6 screens for these sizes and the PNG base alone over the whole face (three
+    # independent measurements: two threads when the thread budget allows; the formats'
+    # screens are what they would be after the confirmation, which changes no part they read).
+    # While the PNG is over the budget, raise sizes (then screen the formats again)
+    fmts = formats(size, scale)
+    kept = dict(judge.parts)
+    compressed, face_png, png = reuse.map_threads(
+        _call,
+        [
+            lambda: confirm_compressed(fmts),
+            lambda: fm.base_fidelity(ref, base_texels, None, png_base["base_reader"]),
+            lambda: judge.run(True, parts=kept),
+        ],
+    )
     tried.append(Tried("confirmed (png)", [size, mask_size], *png.score(), png.meets(budget)))
+    raised = False
     while not png.meets(budget) and (
         (fx.mask is None and mask_size < m0) or (fx.wrinkle is None and size < H)
     ):
+        raised = True
         if fx.mask is None and mask_size < m0:
             mask_size *= 2
             judge.set("masks", masks(mask_size))
@@ -405,81 +542,13 @@ def search(
             f"{size}^2 states and {mask_size}^2 masks: worst {png.worst.pose} p99 "
             f"{png.worst.overall.p99:.2f}"
         )
-    png.base = fm.base_fidelity(ref, base_texels, None, png_base["base_reader"])  # all the face
-    # 6. block formats for the compressed copies (states first, then the base): only the
-    # blocks the reference being judged reads are encoded (blocks are independent); small maps
-    # are encoded whole, every map of a format in one encoder pass
-    state_q = np.stack([ship.pd_texels(x, scale)[0] for x in levels[size]])
-    face = ref.face_texels(o.screen_texels)
-    trips = _RoundTrips(
-        {**{f"state {k}": q for k, q in enumerate(state_q)}, "base": base_texels[..., :2]},
-        o.whole_map_blocks,
-    )
-    state_names = [f"state {k}" for k in range(len(state_q))]
-
-    def reads(r: fm.Reference) -> np.ndarray:
-        part = judge.sampled(judge.parts["masks"], r is judge.fine)
-        leaks = [lk[0] for lk in (part.leaks or []) if lk is not None]
-        return np.concatenate([r.union, *leaks])
-
-    @_factory
-    def state_format(f: str) -> Candidate:
-        def make(r: fm.Reference) -> dict[str, Any]:
-            need = fm.taps(state_q.shape[1:3], ref.shape, reads(r))
-            got = trips.get(f, dict.fromkeys(state_names, need))
-            texels = np.stack([got[n] for n in state_names])
-            return {"states": texels, "states_reader": ship.pd_reader(scale, quantise=False)}
-
-        return make
-
-    @_factory
-    def base_format(f: str) -> Candidate:
-        def make(r: fm.Reference) -> dict[str, Any]:
-            need = fm.taps(base_texels.shape[:2], ref.shape, np.concatenate([reads(r), face]))
-            xy = trips.get(f, {"base": need})["base"]
-            return {"base": xy, "base_reader": ship.base_reader("rg")}
-
-        return make
-
-    def state_edges_ok(f: str) -> bool:
-        # the copy must not clip where the PNG does not (the validator's rule, WP-MAP-004)
-        limit = o.max_clipped_fraction * state_q.shape[1] * state_q.shape[2]
-        got = trips.get(f, {n: ship.near_edge_texels(q) for n, q in zip(state_names, state_q)})
-        for n, q in zip(state_names, state_q):
-            edges = ship.edge_texels(got[n])
-            if edges > max(limit, ship.edge_texels(q)):
-                at = f"{f}: {edges} texels at the end of the range"
-                tried.append(Tried("state format (clipping, WP-MAP-004)", at, 0.0, 0.0, False))
-                return False
-        return True
-
-    state_fmt = pick_format(
-        judge,
-        fx.state_format,
-        o.formats,
-        cbudget,
-        tried,
-        "state format",
-        state_format,
-        keeps=state_edges_ok,
-    )
-    if state_fmt != "png":
-        judge.set("states", state_format(state_fmt))
-    base_fmt = pick_format(
-        judge,
-        fx.base_format,
-        o.formats,
-        cbudget,
-        tried,
-        "base format",
-        base_format,
-        alone=lambda make: _base_alone(ref, make(judge.coarse), face),
-    )
-    compressed = None
-    if state_fmt != "png" or base_fmt != "png":
-        if base_fmt != "png":
-            judge.set("base", base_format(base_fmt))
-        compressed = judge.run(True)
+    png.base = face_png  # all the face
+    if raised:
+        fmts = formats(size, scale)
+        compressed = confirm_compressed(fmts)
+    tried.extend(fmts.tried)
+    state_fmt, base_fmt = fmts.state, fmts.base
+    if compressed is not None:
         tried.append(
             Tried(
                 "confirmed (compressed)",
@@ -487,10 +556,6 @@ def search(
                 *compressed.score(),
                 compressed.meets(cbudget),
             )
-        )
-        full_base = judge.full("base")
-        compressed.base = fm.base_fidelity(
-            ref, full_base.raw["base"], face, full_base.readers["base"]
         )
         if not compressed.meets(cbudget):
             notes.append(
@@ -513,6 +578,17 @@ def search(
         budget=budget,
         compressed_budget=cbudget,
     )
+
+
+@dataclass
+class _Formats:
+    """Step 6's choice: the block formats of states and base (``"png"``: none), the parts the
+    compressed copies are judged with, and the candidates tried."""
+
+    state: str
+    base: str
+    parts: dict[str, Candidate]
+    tried: list[Tried]
 
 
 class _RoundTrips:
