@@ -126,24 +126,29 @@ def block_roundtrip_many(
     """:func:`block_roundtrip_at` of several maps in one encoder pass: the blocks that hold each
     map's ``texels`` (None: every block of it) are laid out side by side in one tile, encoded
     and decoded once (an encoder call has a fixed cost of tens of ms on a small map, and blocks
-    are independent), and scattered back."""
+    are independent), and scattered back. Only the picked blocks are gathered and written
+    back (a copy of the map keeps every other texel)."""
     picked, layouts = [], []
     for xy, t in zip(maps, texels):
-        q = np.ascontiguousarray(np.asarray(xy)[..., :2], np.uint8)
+        q = np.asarray(xy)[..., :2]
+        if q.dtype != np.uint8:
+            q = q.astype(np.uint8)
         h, w = q.shape[:2]
         qp, _ = nc.pad_to_blocks(q)
         hp, wp = qp.shape[:2]
         bw = wp // 4
-        blocks = qp.reshape(hp // 4, 4, bw, 4, 2).transpose(0, 2, 1, 3, 4).reshape(-1, 4, 4, 2)
+        grid = qp.reshape(hp // 4, 4, bw, 4, 2)  # [block row, y, block column, x, c]
         if t is None:
-            ids = np.arange(blocks.shape[0])
+            ids = np.arange((hp // 4) * bw)
+            blocks = grid.transpose(0, 2, 1, 3, 4).reshape(-1, 4, 4, 2)
         else:
             ti = np.asarray(t, np.int64)
-            mark = np.zeros(blocks.shape[0], bool)
+            mark = np.zeros((hp // 4) * bw, bool)
             mark[(ti // w) // 4 * bw + (ti % w) // 4] = True
             ids = np.flatnonzero(mark)
-        picked.append(blocks[ids])
-        layouts.append((h, w, hp, wp, blocks, ids))
+            blocks = grid[ids // bw, :, ids % bw]  # [n, 4, 4, 2], the blocks in order
+        picked.append(blocks)
+        layouts.append((q, qp, ids))
     allb = np.concatenate(picked) if picked else np.zeros((0, 4, 4, 2), np.uint8)
     if allb.shape[0]:
         side = int(np.ceil(np.sqrt(allb.shape[0])))
@@ -156,21 +161,21 @@ def block_roundtrip_many(
         # a map encoded whole here is the copy convert writes: its blocks' bytes are what
         # encoding that map alone gives (blocks are independent), so that call is a hit
         bb, at = nc.BLOCK_BYTES[fmt], 0
-        for xy, layout in zip(maps, layouts):
-            ids = layout[5]
-            if ids.size == layout[4].shape[0]:
-                qp, _ = nc.pad_to_blocks(np.ascontiguousarray(np.asarray(xy)[..., :2], np.uint8))
+        for _, qp, ids in layouts:
+            if ids.size == (qp.shape[0] // 4) * (qp.shape[1] // 4):  # every block: whole
                 part = data[at * bb : (at + ids.size) * bb]
-                reuse.remember(nc.encode_bc, part, nc.pack_rgba(qp, fmt), fmt)
+                reuse.remember(nc.encode_bc, part, nc.pack_rgba(np.ascontiguousarray(qp), fmt), fmt)
             at += ids.size
     out, at = [], 0
-    for h, w, hp, wp, blocks, ids in layouts:
-        got = blocks.copy()
+    for q, qp, ids in layouts:
+        h, w = q.shape[:2]
+        hp, wp = qp.shape[:2]
+        got = np.array(qp, np.uint8, order="C")  # a copy: every texel not re-encoded kept
         if ids.size:
-            got[ids] = dec[at : at + ids.size]
+            grid = got.reshape(hp // 4, 4, wp // 4, 4, 2)
+            grid[ids // (wp // 4), :, ids % (wp // 4)] = dec[at : at + ids.size]
             at += ids.size
-        got = got.reshape(hp // 4, wp // 4, 4, 4, 2).transpose(0, 2, 1, 3, 4).reshape(hp, wp, 2)
-        out.append(np.ascontiguousarray(got[:h, :w]))
+        out.append(got if (hp, wp) == (h, w) else np.ascontiguousarray(got[:h, :w]))
     return out
 
 
