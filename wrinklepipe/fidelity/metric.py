@@ -489,6 +489,7 @@ def prepare(
     base_u = planes(b.reshape(H * W, 3)[union])  # [3, N]
     states_u = planes(st.reshape(st.shape[0], H * W, -1)[:, union])  # [K, C, N]
     base_pd = _pd_planes(base_u) if encoding == "pd" else None
+    positive = m_u > 0  # [R, N]: where each mask touches, for every pose
     out = []
     for p, o in zip(poses, on):
         rows = np.flatnonzero(o)
@@ -497,7 +498,9 @@ def prepare(
         # a weighted region touches where some state is active
         act_u = _activations_at(m_u, None, w, policy)
         weight_u = _activation_weight(act_u)
-        touched = (m_u[rows] > 0).any(axis=0) if rows.size else np.zeros(union.size, bool)
+        touched = np.zeros(union.size, bool)
+        for r in rows:  # one mask at a time (no copy of the weighted masks)
+            touched |= positive[r]
         sel = np.flatnonzero(touched & (weight_u > 0))
         act = np.take(act_u, sel, axis=1)
         normal = _blend_at(base_u, base_pd, states_u, sel, act, encoding)
