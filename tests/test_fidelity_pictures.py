@@ -204,3 +204,27 @@ def test_converts_report_shows_each_mask_as_visible_grey_levels(page):
         want = tex[..., "rgba".index(r["mask"]["channel"])]
         assert grey.shape[:2] == want.shape and np.abs(grey[..., 0] - want).max() <= 0.5 / 255
         assert grey[..., 0].max() > 0  # the region is there, not black
+
+
+def test_the_pictures_are_at_the_fastest_zlib_level_whatever_the_runs_png_level():
+    """The page's pictures are encoded at zlib level 1 (the zlib header says so: FLEVEL 0,
+    RFC 1950; level 6 is FLEVEL 2), the same bytes under any run level and on a rerun."""
+    import struct
+    import zlib
+
+    from wrinklepipe.io.package import png_compression
+
+    ref, fid, base, shipped, masks = tiny()
+    images = {**fp.pose_pictures(ref, fid, base, shipped, masks)}
+    report = Report(input={"name": "tiny", "regions": ["brow_L"]}, issues=[], images=images)
+    pngs = vr.html_images(report)
+    with png_compression(9):
+        assert vr.html_images(report) == pngs
+    assert vr.html_images(report) == pngs
+    assert vr.PICTURE_PNG_LEVEL == 1
+    for data in pngs.values():
+        (n,) = struct.unpack(">I", data[33:37])
+        assert data[37:41] == b"IDAT"
+        idat = data[41 : 41 + n]
+        assert idat[0] == 0x78 and idat[1] >> 6 == 0  # deflate, 32K window, fastest
+        assert zlib.decompress(idat)  # one whole stream

@@ -337,6 +337,7 @@ def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
 #: zlib level of the PNGs wrinklepipe writes: 6, zlib's and libpng's default. Level 9 makes the
 #: demo's textures and validation pictures 1-6 % smaller for 2-11x the time (measured on the 64
 #: and 512 demos: 0.75 s against 0.07 s for one 512^2 render); 1 is fastest (files ~25 % larger).
+#: The validation page's pictures are always at level 1 (validate.report.PICTURE_PNG_LEVEL).
 DEFAULT_PNG_LEVEL = 6
 _PNG_LEVEL: ContextVar[int] = ContextVar("wrinklepipe_png_level", default=DEFAULT_PNG_LEVEL)
 

@@ -64,8 +64,8 @@ class ConvertOptions:
     ``validate``: run :mod:`wrinklepipe.validate` on the written folder (``render``: with its GPU
     render pass). ``bits``: PNG
     depth of the base and state maps. ``mask_layout``: None = the manifest's ``formats``.
-    ``png_level``: zlib level of every PNG written (textures, the validator's pictures); the
-    same level gives the same bytes.
+    ``png_level``: zlib level of every PNG texture written (the validator's pictures are at
+    :data:`wrinklepipe.validate.report.PICTURE_PNG_LEVEL`); the same level gives the same bytes.
     """
 
     glb: bool = False
