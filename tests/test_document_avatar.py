@@ -293,10 +293,12 @@ def test_blendshapes_driver_renders_its_wrinkled_poses_and_frames_the_face(conve
         "regions": ["mouth"],
         "morphs": {"jawOpen": 1.0},
     }
+    covered = rep.render["covered_pixels"]
     for name in ("blendshapes@1.000s", "blendshapes@3.000s"):
-        assert poses[name]["changed_pixels"] > 1000 and poses[name]["leak_pixels"] == 0
+        # 8-12 % of the head changes (the render's size follows the 64^2 maps: 160^2)
+        assert poses[name]["changed_pixels"] > 0.05 * covered and poses[name]["leak_pixels"] == 0
         assert poses[name]["gpu_vs_reference_deg"]["p99"] < 1.0
-    # the view is the wrinkled head alone: it fills half the 512 x 512 frame (the ellipsoid's
+    # the view is the wrinkled head alone: it fills half the square frame (the ellipsoid's
     # area over its bounding square is pi / 4, less the framing margin)
     assert rep.render["covered_pixels"] / rep.render["size"] ** 2 > 0.5
     assert rep.counts.get("error", 0) == 0

@@ -338,3 +338,39 @@ def test_a_map_declared_directx_is_read_as_declared():
     assert {"WP-MAP-003", "WP-TEX-005"} <= {i.code for i in r.issues}
     msg = next(i.message for i in r.issues if i.code == "WP-MAP-003")
     assert "declared directx" in msg and "only as opengl" in msg
+
+
+@pytest.mark.parametrize(
+    "wh, option, want",
+    [((64, 64), None, 160), ((200, 100), None, 200), ((256, 256), None, 256)]
+    + [((1024, 2048), None, 512), ((1024, 1024), 96, 96), ((16, 16), 1024, 1024)],
+)
+def test_the_render_size_follows_the_base_map_within_160_to_512(wh, option, want):
+    from wrinklepipe.validate.inputs import Texture, ValidationInput
+
+    base = Texture("base", "base", "rgba8", wh[0], wh[1], b"")
+    inp = ValidationInput(demo_asset(16), [Texture("m", "mask", "rgba8", 4096, 4096, b""), base])
+    assert Context(inp, ValidateOptions(render_size=option)).render_size == want
+
+
+def test_the_render_cases_of_the_golden_corpus_give_their_codes_at_the_default_size():
+    """At the default size the corpus's 128^2 maps render at 160^2, the size its reports are
+    made at (tests/corpus/config.toml): the leak (WP-RND-002) and the missing wrinkle
+    (WP-RND-003) are found, the clean case stays clean, and the reports are the stored ones."""
+    import json
+    from pathlib import Path
+
+    from wrinklepipe.atomic import dumps_json
+    from wrinklepipe.validate.loader import read_bundle
+    from wrinklepipe.validate.report import normalized, report_json
+
+    corpus = Path(__file__).resolve().parent / "corpus"
+    cases = {c["name"]: c for c in json.loads((corpus / "cases.json").read_text())["cases"]}
+    for name in ("render_leak", "render_no_wrinkle", "clean"):
+        inp = read_bundle(corpus / name / "asset.wpv")
+        assert (inp.by_role("base")[0].width, inp.by_role("base")[0].height) == (128, 128)
+        report = validate(inp, ValidateOptions(grid=128))
+        assert report.render["size"] == 160
+        assert sorted({i.code for i in report.issues}) == cases[name]["expect"], name
+        want = json.loads((corpus / name / "expected.json").read_text())
+        assert dumps_json(normalized(report_json(report))) == dumps_json(want)

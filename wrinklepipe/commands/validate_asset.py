@@ -16,7 +16,7 @@ from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import validate
 from wrinklepipe.validate.catalogue import SEVERITIES
 from wrinklepipe.validate.config import Config, load_config
-from wrinklepipe.validate.context import ValidateOptions
+from wrinklepipe.validate.context import RENDER_SIZE_MAX, RENDER_SIZE_MIN
 from wrinklepipe.validate.report import print_summary, report_json, write_reports
 
 NAME = "validate-asset"
@@ -68,7 +68,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--render-size",
         type=int,
         default=None,
-        help=f"render target size (default {ValidateOptions().render_size})",
+        help=f"render target size (default: the base map's largest side, within "
+        f"{RENDER_SIZE_MIN}..{RENDER_SIZE_MAX})",
     )
     p.add_argument(
         "--source", metavar="MANIFEST", help="source manifest to measure the shipping error against"

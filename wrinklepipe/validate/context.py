@@ -15,12 +15,22 @@ from wrinklepipe.masks import resample_masks
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.inputs import Texture, ValidationInput
 
+#: The render target's side when the options do not set one follows the base map's largest
+#: side, within these bounds: at most 512 (the comparison samples the shipped texels at each
+#: pixel's UV: a larger target adds pixels, not texels), at least 160 so a small region of a
+#: small map still has hundreds of pixels (the avatar's 64^2 maps: its mouth pose's unchanged
+#: share for WP-RND-003 is 26-29 % at 160..512, 22 % at 128; the golden corpus renders at 160).
+RENDER_SIZE_MIN = 160
+RENDER_SIZE_MAX = 512
+
 
 @dataclass(frozen=True)
 class ValidateOptions:
     """What ``validate-asset`` checks and how strictly (defaults are the documented ones).
 
-    ``render``: run the GPU render pass. ``render_size``: square render target in pixels.
+    ``render``: run the GPU render pass. ``render_size``: square render target in pixels;
+    None (the default) follows the maps: the base map's largest side, clamped to
+    :data:`RENDER_SIZE_MIN`..:data:`RENDER_SIZE_MAX` (:meth:`Context.render_size`).
     ``gpu_max_mean_deg`` / ``gpu_max_p99_deg``: GPU normal buffer vs numpy reference.
     ``unit_tolerance``: allowed | |n| - 1 | of stored three-channel normals.
     ``max_bad_fraction``: fraction of texels allowed to break a per-texel rule (NaN, z < 0).
@@ -32,7 +42,7 @@ class ValidateOptions:
     """
 
     render: bool = True
-    render_size: int = 512
+    render_size: int | None = None
     gpu_max_mean_deg: float = 0.5
     gpu_max_p99_deg: float = 2.0
     unit_tolerance: float = 0.05
@@ -198,6 +208,18 @@ class Context:
         if not layers:
             return None
         return np.stack(layers).astype(np.float32)
+
+    @cached_property
+    def render_size(self) -> int:
+        """The render pass's square target: ``options.render_size`` when set, else the base
+        map's largest side clamped to RENDER_SIZE_MIN..RENDER_SIZE_MAX (RENDER_SIZE_MAX
+        without a base texture)."""
+        if self.options.render_size:
+            return int(self.options.render_size)
+        t = self.base_tex
+        if t is None:
+            return RENDER_SIZE_MAX
+        return min(max(int(t.width), int(t.height), RENDER_SIZE_MIN), RENDER_SIZE_MAX)
 
     # ---------------------------------------------------------------- comparison grid
     @cached_property
