@@ -421,78 +421,111 @@ def test_an_export_an_engine_cannot_express_is_refused(tmp_path):
         assert not (tmp_path / engine).exists()
 
 
-@pytest.mark.skipif(
+NEEDS_BLENDER = pytest.mark.skipif(
     shutil.which("blender") is None,
     reason="Debian's blender is not installed (WRINKLEPIPE_BLENDER=1 ci/bootstrap.sh installs it)",
 )
-def test_blender_script_builds_the_node_group(exports, tmp_path):
-    folder = exports[1]["blender"][0]
-    r = subprocess.run(
-        [
-            "blender",
-            "-b",
-            "--factory-startup",
-            "--python-exit-code",
-            "1",
-            "--python",
-            str(folder / "build_wrinkles.py"),
-            "--",
-            str(folder / "wrinkle_setup.json"),
-            "--save",
-            str(tmp_path / "face.blend"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
-    assert "Error" not in r.stderr, r.stderr[-3000:]
-    line = next(x for x in r.stdout.splitlines() if x.startswith('{"wrinklepipe"'))
-    summary = json.loads(line)
-    assert summary["wrinklepipe"] == "ok" and summary["drivers"] == 8 and summary["keys"] > 8
-    assert summary["object"] == "demo" and summary["material"] == "demo_skin"  # the glTF's face
-    assert (tmp_path / "face.blend").exists()
 
 
-@pytest.mark.shared
-def test_a_real_skinned_character_exports_for_every_engine(tmp_path):
+@pytest.fixture(scope="module")
+def cesium_exports(tmp_path_factory):
     """CesiumMan (../shared/data, a skinned Khronos sample) with the fidelity fixture's
-    wrinkles: every engine's folder is complete, the skin survives, the glTF validates."""
+    wrinkles, written and exported for every engine (None when ../shared/data is absent)."""
     from wrinklepipe.demo import face_fixture as ff
 
     mesh = DATA / ff.MESH_RELPATH
     if not mesh.is_file():
-        pytest.skip("../shared/data is absent")
+        return None
+    tmp = tmp_path_factory.mktemp("cesium_export")
     a = ff.build_fixture(mesh, 256).asset()
     a = replace(a, mesh=prepare_mesh(a.mesh))
     pkg = package_from_asset(a, PackOptions(), [expression_cycle(a)])
-    src = tmp_path / "cesium"
-    write_gltf(pkg, src, "cesium_face")
+    write_gltf(pkg, tmp / "cesium", "cesium_face")
+    return tmp, _export_all(tmp / "cesium", tmp)
+
+
+@pytest.fixture(scope="module")
+def blender_builds(request, exports, cesium_exports, tmp_path_factory):
+    """The exported build_wrinkles.py scripts run in ONE ``blender -b`` session
+    (tests/blender_session.py: each from the factory settings, with its own arguments and its own
+    stdout/stderr, as a separate ``blender -b --factory-startup --python-exit-code 1 --python``
+    run): the demo's (with its setup file and ``--save``), CesiumMan's and RobotExpressive's
+    (bare: the script finds wrinkle_setup.json beside itself). name -> (exit code, stdout,
+    stderr, the --save path)."""
+    tmp = tmp_path_factory.mktemp("blender")
+    demo = exports[1]["blender"][0]
+    scripts = {
+        "demo": (demo, [str(demo / "wrinkle_setup.json"), "--save", str(tmp / "face.blend")])
+    }
+    if cesium_exports is not None:
+        scripts["cesium"] = (cesium_exports[1]["blender"][0], [])
+    if ROBOT.is_file():
+        scripts["robot"] = (request.getfixturevalue("robot_exports")[1]["blender"][0], [])
+    jobs = [
+        {
+            "name": name,
+            "script": str(folder / "build_wrinkles.py"),
+            "args": args,
+            "stdout": str(tmp / f"{name}.out"),
+            "stderr": str(tmp / f"{name}.err"),
+        }
+        for name, (folder, args) in scripts.items()
+    ]
+    (tmp / "jobs.json").write_text(json.dumps(jobs))
+    r = subprocess.run(
+        ["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python"]
+        + [str(Path(__file__).parent / "blender_session.py"), "--", str(tmp / "jobs.json")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    results = json.loads((tmp / "jobs.json.results.json").read_text())
+    return {
+        j["name"]: (
+            results[j["name"]]["exit_code"],
+            Path(j["stdout"]).read_text(),
+            Path(j["stderr"]).read_text(),
+            tmp / "face.blend",
+        )
+        for j in jobs
+    }
+
+
+def _summary(stdout: str) -> dict:
+    return json.loads(next(x for x in stdout.splitlines() if x.startswith('{"wrinklepipe"')))
+
+
+@NEEDS_BLENDER
+def test_blender_script_builds_the_node_group(blender_builds):
+    code, out, err, saved = blender_builds["demo"]
+    assert code == 0, out[-3000:] + err[-3000:]
+    assert "Error" not in err, err[-3000:]
+    summary = _summary(out)
+    assert summary["wrinklepipe"] == "ok" and summary["drivers"] == 8 and summary["keys"] > 8
+    assert summary["object"] == "demo" and summary["material"] == "demo_skin"  # the glTF's face
+    assert saved.exists()
+
+
+@pytest.mark.shared
+def test_a_real_skinned_character_exports_for_every_engine(cesium_exports, request):
+    """CesiumMan (../shared/data, a skinned Khronos sample) with the fidelity fixture's
+    wrinkles: every engine's folder is complete, the skin survives, the glTF validates; Blender's
+    script builds its 8 drivers."""
+    if cesium_exports is None:
+        pytest.skip("../shared/data is absent")
+    tmp, out = cesium_exports
     for engine in ENGINES:
-        files, notes = export(src, tmp_path / engine, engine)
+        folder, files, notes = out[engine]
         setup = json.loads(files["wrinkle_setup.json"])
         doc = json.loads(files[setup["mesh"]])
         assert doc.get("skins"), engine  # the skeleton survives
         assert len(setup["regions"]) == 8 and setup["shader"]["slots"]
-        _validates(tmp_path / engine / setup["mesh"])
+        _validates(folder / setup["mesh"])
         if engine == "blender" and shutil.which("blender"):
-            r = subprocess.run(
-                [
-                    "blender",
-                    "-b",
-                    "--factory-startup",
-                    "--python-exit-code",
-                    "1",
-                    "--python",
-                    str(tmp_path / engine / "build_wrinkles.py"),
-                ],
-                capture_output=True,
-                text=True,
-                timeout=300,
-            )
-            assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-            line = next(x for x in r.stdout.splitlines() if x.startswith('{"wrinklepipe"'))
-            assert json.loads(line)["drivers"] == 8
+            code, stdout, stderr, _ = request.getfixturevalue("blender_builds")["cesium"]
+            assert code == 0, stdout[-2000:] + stderr[-2000:]
+            assert _summary(stdout)["drivers"] == 8
 
 
 def _materials_resolved(path: Path) -> list[dict]:
@@ -570,16 +603,10 @@ def test_a_whole_character_exports_whole(request, character, engine):
         added = compare(source, mesh, base_replaced=False)
         assert added.materials == [] and added.animations == ["blendshapes"]
     if engine == "blender" and character == "robot" and shutil.which("blender"):
-        r = subprocess.run(  # (the avatar's run adds nothing the robot's does not check)
-            ["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python"]
-            + [str(folder / "build_wrinkles.py")],
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
-        assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-        line = next(x for x in r.stdout.splitlines() if x.startswith('{"wrinklepipe"'))
-        summary = json.loads(line)
+        # (the avatar's run adds nothing the robot's does not check)
+        code, stdout, stderr, _ = request.getfixturevalue("blender_builds")["robot"]
+        assert code == 0, stdout[-2000:] + stderr[-2000:]
+        summary = _summary(stdout)
         assert summary["material"] == wrinkled_name and summary["drivers"] == 3
 
 
