@@ -450,8 +450,9 @@ def blender_builds(request, exports, cesium_exports, tmp_path_factory):
     (tests/blender_session.py: each from the factory settings, with its own arguments and its own
     stdout/stderr, as a separate ``blender -b --factory-startup --python-exit-code 1 --python``
     run): the demo's (with its setup file and ``--save``), CesiumMan's and RobotExpressive's
-    (bare: the script finds wrinkle_setup.json beside itself). name -> (exit code, stdout,
-    stderr, the --save path)."""
+    (bare: the script finds wrinkle_setup.json beside itself), and last tests/blender_render.py
+    over the BLENDER_CASES exports. name -> (exit code, stdout, stderr, the --save path);
+    "render_cases": (the EXR folder, the cases' inputs, their weight sets)."""
     tmp = tmp_path_factory.mktemp("blender")
     demo = exports[1]["blender"][0]
     scripts = {
@@ -471,6 +472,17 @@ def blender_builds(request, exports, cesium_exports, tmp_path_factory):
         }
         for name, (folder, args) in scripts.items()
     ]
+    render = tmp / "render"
+    setups, inputs, weights = _blender_render_cases(render)
+    jobs.append(
+        {
+            "name": "render",
+            "script": str(Path(__file__).parent / "blender_render.py"),
+            "args": [str(render), str(BLENDER_SIZE), str(render / "weights.json"), *setups],
+            "stdout": str(tmp / "render.out"),
+            "stderr": str(tmp / "render.err"),
+        }
+    )
     (tmp / "jobs.json").write_text(json.dumps(jobs))
     r = subprocess.run(
         ["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python"]
@@ -481,7 +493,7 @@ def blender_builds(request, exports, cesium_exports, tmp_path_factory):
     )
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     results = json.loads((tmp / "jobs.json.results.json").read_text())
-    return {
+    out = {
         j["name"]: (
             results[j["name"]]["exit_code"],
             Path(j["stdout"]).read_text(),
@@ -490,6 +502,7 @@ def blender_builds(request, exports, cesium_exports, tmp_path_factory):
         )
         for j in jobs
     }
+    return {**out, "render_cases": (render, inputs, weights)}
 
 
 def _summary(stdout: str) -> dict:
@@ -620,25 +633,17 @@ BLENDER_CASES = [  # every encoding, every policy (overlapping masks: the polici
 ]
 
 
-@pytest.mark.skipif(
-    shutil.which("blender") is None,
-    reason="Debian's blender is not installed (WRINKLEPIPE_BLENDER=1 ci/bootstrap.sh installs it)",
-)
-def test_blender_node_group_renders_the_model(tmp_path):
-    """The exported build_wrinkles.py's node group, rendered by Cycles in ``blender -b``
-    (tests/blender_render.py: emission on a UV-aligned plane, one centred sample per pixel,
-    float EXR read by OpenImageIO) equals numpy on the exported texels, for every encoding and
-    policy; strong weights move the normal."""
-    import OpenImageIO as oiio
-
+def _blender_render_cases(tmp: Path) -> tuple[list[str], list, list]:
+    """The Blender exports of BLENDER_CASES (64^2 demos, the policy edited into the glTF) and
+    the weight sets each is rendered at (weights.json under ``tmp``)."""
     setups, inputs = [], []
     for encoding, policy in BLENDER_CASES:
-        src = _source(tmp_path / f"{encoding}_{policy}", encoding, size=64, overlap=True)
+        src = _source(tmp / f"{encoding}_{policy}", encoding, size=64, overlap=True)
         gltf = src / "demo.gltf"
         doc = json.loads(gltf.read_text())
         doc["materials"][0]["extensions"][EXTENSION]["policy"] = policy
         gltf.write_text(json.dumps(doc))
-        folder = tmp_path / f"blender_{encoding}_{policy}"
+        folder = tmp / f"blender_{encoding}_{policy}"
         export(src, folder, "blender")
         setups.append(str(folder / "wrinkle_setup.json"))
         inputs.append(load_input(src))
@@ -649,18 +654,21 @@ def test_blender_node_group_renders_the_model(tmp_path):
         lo = model.POLICY_WEIGHT_RANGE[policy].low
         sets = [np.zeros(n), np.full(n, 0.9), rng.uniform(lo, 1.0, n), np.full(n, max(lo, -0.6))]
         weights.append([w.astype(np.float32) for w in sets])
-    (tmp_path / "weights.json").write_text(
-        json.dumps([[w.tolist() for w in sets] for sets in weights])
-    )
-    r = subprocess.run(
-        ["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python"]
-        + [str(Path(__file__).parent / "blender_render.py"), "--", str(tmp_path)]
-        + [str(BLENDER_SIZE), str(tmp_path / "weights.json"), *setups],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    (tmp / "weights.json").write_text(json.dumps([[w.tolist() for w in sets] for sets in weights]))
+    return setups, inputs, weights
+
+
+@NEEDS_BLENDER
+def test_blender_node_group_renders_the_model(blender_builds):
+    """The exported build_wrinkles.py's node group, rendered by Cycles in ``blender -b``
+    (tests/blender_render.py, in the module's Blender session: emission on a UV-aligned plane,
+    one centred sample per pixel, float EXR read by OpenImageIO) equals numpy on the exported
+    texels, for every encoding and policy; strong weights move the normal."""
+    import OpenImageIO as oiio
+
+    code, stdout, stderr, _ = blender_builds["render"]
+    assert code == 0, stdout[-3000:] + stderr[-3000:]
+    out, inputs, weights = blender_builds["render_cases"]
     c = (np.arange(BLENDER_SIZE) + 0.5) / BLENDER_SIZE
     u, v = np.meshgrid(c, c)  # EXR row i = glTF v (Blender's v is 1 - glTF's)
     uv = np.stack([u, v], -1).reshape(-1, 2).astype(np.float32)
@@ -671,7 +679,7 @@ def test_blender_node_group_renders_the_model(tmp_path):
         d = a.region_state_matrix()
         for k, w in enumerate(weights[e]):
             ww = w if policy == "signed" else w[:, None] * d
-            img = oiio.ImageBuf(str(tmp_path / f"{e}_{k}.exr")).get_pixels(oiio.FLOAT)
+            img = oiio.ImageBuf(str(out / f"{e}_{k}.exr")).get_pixels(oiio.FLOAT)
             normal = img * 2.0 - 1.0  # (the harness's compare reads x, y, z of RGBA)
             ref = model.blend(s.base, s.states, s.masks, ww, encoding, policy)
             st = h.compare(normal[None], ref)
