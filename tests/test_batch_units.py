@@ -293,7 +293,8 @@ def test_a_dying_worker_fails_only_its_asset(tmp_path):
         for name in ("a", "crash", "b", "hang", "c")
     ]
     stages = []
-    engine = LocalEngine(jobs=2, timeout=3, target=_crashing_child)
+    # 1 s: the clock starts at a job's first message; a, b and c send 'done' right after it
+    engine = LocalEngine(jobs=2, timeout=1, target=_crashing_child)
     results = {r.id: r for r in engine.run(jobs, lambda j, s: stages.append((j, s)))}
     assert set(results) == {"a", "crash", "b", "hang", "c"}
     assert [results[k].status for k in "abc"] == ["passed"] * 3
