@@ -128,8 +128,10 @@ def test_neutral_normals_choose_the_solve(session, tmp_path):
     args = _args(session, out) + ["--neutral-normals", str(session / "neutral_normals.png")]
     assert main(args) == 0
     rep = json.loads((out / "report.json").read_text())
-    # this dome turns by 8 degrees at most (N_z >= 0.99): auto keeps the prior, compares sfs
-    assert rep["method"] == "integrable" and rep["neutral_shape"] == "normal map"
+    # this dome turns by 8 degrees at most (N_z >= 0.99): auto takes the solve because one of
+    # its starts (the prior's height without its broad part) ended well below the prior's
+    # residual (measured 0.0018 vs 0.0023), and it is the better map against the truth
+    assert rep["method"] == "sfs" and rep["neutral_shape"] == "normal map"
     resid = {m: v["ratio_residual"] for m, v in rep["orientation"].items()}
     assert set(resid) == {"gradient", "furrow", "integrable", "sfs"}
     assert min(resid, key=resid.get) == "sfs"
@@ -139,12 +141,11 @@ def test_neutral_normals_choose_the_solve(session, tmp_path):
     assert 0.0 <= amb <= 1.0
     assert f"{100 * amb:.0f} %</b> of its crease pixels" in (out / "report.html").read_text()
     assert (out / "pictures" / "sfs_ambiguous.png").is_file()
-    truth = rep["orientation"]["sfs"]["truth"]
-    # measured 0.51x: the solve's own blur (1.2 px) is set on the curved sessions, whose creases
-    # are wider than this example's 2-5 px (0.45x with 1.0 px); the default here is the prior
-    assert truth["tilt"]["mean"] < 0.55 * truth["flat"]["mean"]
-    prior = rep["orientation"]["integrable"]["truth"]  # measured 3.38 of 7.42 degrees
-    assert prior["angular"]["mean"] < 0.5 * prior["flat"]["mean"]
+    truth = rep["orientation"]["sfs"]["truth"]  # measured 3.15 / 2.15 of 7.42 degrees, 92 %
+    prior = rep["orientation"]["integrable"]["truth"]  # measured 3.36 / 2.76 degrees, 84 %
+    assert truth["angular"]["mean"] < min(0.45 * truth["flat"]["mean"], prior["angular"]["mean"])
+    assert truth["tilt"]["mean"] < min(0.3 * truth["flat"]["mean"], prior["tilt"]["mean"])
+    assert truth["orientation_correct"] > max(0.9, prior["orientation_correct"])
 
 
 def test_bad_neutral_normals(session, tmp_path, capsys):

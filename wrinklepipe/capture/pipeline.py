@@ -136,7 +136,8 @@ def solve_explains_better(result: S.SfsResult) -> bool:
     Measured: nearly flat foreheads with ridges and furrows (the prior's mirror or the coarse
     solve wins, 10-16 % ambiguous; the solve orients 77-91 % right against the prior's 8-53 %);
     the nearly flat mixed session (80 % ambiguous: equally good heights disagree, the prior is
-    kept); the example session (all dents: the prior's start is kept)."""
+    kept); the example session (all dents: the prior's height without its broad part ends 22 %
+    lower than the prior, and the solve is the better map there, 3.15 against 3.36 degrees)."""
     first = next(iter(result.starts), None)
     return (
         first is not None
