@@ -138,7 +138,7 @@ def test_neutral_normals_choose_the_solve(session, tmp_path):
     assert rep["sfs"]["start"] in rep["sfs"]["starts_ratio_residual"]
     # the share of crease pixels whose sign the photos leave open, in the JSON, HTML, picture
     amb = rep["sfs"]["sign_ambiguous_fraction"]
-    assert 0.0 <= amb <= 1.0
+    assert 0.0 <= amb <= 1.0 and rep["sfs"]["sign_observable"] is True
     assert f"{100 * amb:.0f} %</b> of its crease pixels" in (out / "report.html").read_text()
     assert (out / "pictures" / "sfs_ambiguous.png").is_file()
     truth = rep["orientation"]["sfs"]["truth"]  # measured 3.15 / 2.15 of 7.42 degrees, 92 %
@@ -146,6 +146,23 @@ def test_neutral_normals_choose_the_solve(session, tmp_path):
     assert truth["angular"]["mean"] < min(0.45 * truth["flat"]["mean"], prior["angular"]["mean"])
     assert truth["tilt"]["mean"] < min(0.3 * truth["flat"]["mean"], prior["tilt"]["mean"])
     assert truth["orientation_correct"] > max(0.9, prior["orientation_correct"])
+
+
+def test_a_neutral_facing_the_camera_is_reported_unobservable(session, tmp_path, capsys):
+    # A neutral normal map facing the camera everywhere: c and -c give the same photos, so the
+    # solve's starts tie and lean opposite ways on every crease; the run says the sign is not
+    # observable, why, and which photos would make it so (summary, report.json, .html).
+    write_image(tmp_path / "flat.png", np.broadcast_to([0.5, 0.5, 1.0], (192, 192, 3)), bits=16)
+    out = tmp_path / "flat"
+    capsys.readouterr()
+    assert main(_args(session, out) + ["--neutral-normals", str(tmp_path / "flat.png")]) == 0
+    text = " ".join(capsys.readouterr().err.split())  # the summary goes to stderr
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["method"] == "integrable"  # auto keeps the prior
+    assert rep["sfs"]["sign_ambiguous_fraction"] > 0.9 and rep["sfs"]["sign_observable"] is False
+    for where in (text, " ".join((out / "report.html").read_text().split())):
+        assert "most crease signs are not in these photos" in where
+        assert "turned from the camera" in where and "lit from one side" in where
 
 
 def test_bad_neutral_normals(session, tmp_path, capsys):

@@ -23,7 +23,12 @@ from wrinklepipe.capture.evaluate import errors as truth_errors
 from wrinklepipe.capture.orientation import OrientationOptions
 from wrinklepipe.capture.pipeline import CaptureOptions, CaptureResult, capture
 from wrinklepipe.capture.ratio import RatioOptions, luminance, srgb_to_linear
-from wrinklepipe.capture.report import build_report, picture_images, render_html
+from wrinklepipe.capture.report import (
+    UNOBSERVABLE,
+    build_report,
+    picture_images,
+    render_html,
+)
 from wrinklepipe.capture.synthetic import dome_height, make_scene, normal_of
 from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image, write_image
@@ -495,6 +500,8 @@ def _summary(self: CaptureOutput, out: Path) -> list[str]:
             f"  sfs: the photos leave the sign of {100 * amb:.0f} % of its crease pixels open "
             "(another height explains R as well): see pictures/sfs_ambiguous.png"
         )
+    if r.get("sfs", {}).get("sign_observable") is False:
+        lines.append(f"  warning: {UNOBSERVABLE}")
     return lines
 
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.atomic import dumps_json, write_bytes
-from wrinklepipe.capture.pipeline import CaptureResult
+from wrinklepipe.capture.pipeline import AUTO_MAX_AMBIGUOUS, CaptureResult
 from wrinklepipe.io.images import write_image
 
 
@@ -115,8 +115,23 @@ def build_report(
             # crease pixels whose sign the photos do not fix (another height explains R as
             # well and leans the other way): do not trust the orientation there
             "sign_ambiguous_fraction": result.sfs.ambiguous_fraction,
+            # False: most crease signs are not in these photos (see UNOBSERVABLE)
+            "sign_observable": bool(result.sfs.ambiguous_fraction <= AUTO_MAX_AMBIGUOUS),
         }
     return _round_tree(report)
+
+
+#: What the command and report.html say when most crease signs are ambiguous (docs/capture.md,
+#: "the sign: observable or not"): why, and which photos would make the sign observable.
+UNOBSERVABLE = (
+    "most crease signs are not in these photos: with one light at the camera a crease's sign "
+    "shows only through the neutral's own slope (first order in it), and here the neutral "
+    "faces the camera too squarely for that, so a ridge and a valley give the same photos. "
+    "The orientation there is the prior's guess (creases are dents). To make it observable, "
+    "photograph the region turned from the camera and flash (its N_z down to 0.9 or lower over "
+    "the region, e.g. the head turned about 25 degrees; measured 94-100 % of crease texels "
+    "oriented right) with its --neutral-normals, or add a photo lit from one side."
+)
 
 
 def _grey(v: np.ndarray, lo: float, hi: float) -> np.ndarray:
@@ -365,6 +380,8 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
             "picture below): do not trust the orientation there. A second photo lit from one "
             "side would fix it.</p>"
         )
+        if amb > AUTO_MAX_AMBIGUOUS:
+            parts.append(f"<p><b>Sign not observable.</b> {html.escape(UNOBSERVABLE)}</p>")
     parts.append("<h2>Pictures</h2><div>")
     for caption, rel in pictures.items():
         parts.append(
