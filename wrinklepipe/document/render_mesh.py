@@ -18,7 +18,7 @@ from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.document.model import Document, PrimitiveRef
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
-from wrinklepipe.io.mesh_gltf import drop_degenerate
+from wrinklepipe.io.mesh_gltf import bake_world, drop_degenerate
 from wrinklepipe.io.mesh_merge import merge_meshes
 
 BIAS_ATTRIBUTE = "_WRINKLE_BIAS"
@@ -49,26 +49,6 @@ def _skin(doc: Document, skin: int) -> tuple[tuple[str, ...], np.ndarray]:
     else:
         ibm = np.tile(np.eye(4, dtype=np.float32), (len(joints), 1, 1))
     return names, ibm
-
-
-def _bake(mesh: Mesh, m: np.ndarray) -> None:
-    """Apply a world matrix to positions, normals, tangents and morph deltas (in place)."""
-    lin = m[:3, :3]
-    det = float(np.linalg.det(lin))
-    mesh.positions = (mesh.positions.astype(np.float64) @ lin.T + m[:3, 3]).astype(np.float32)
-    if mesh.morph_deltas is not None:
-        mesh.morph_deltas = (mesh.morph_deltas.astype(np.float64) @ lin.T).astype(np.float32)
-    if mesh.normals is not None:
-        n = mesh.normals.astype(np.float64) @ np.linalg.inv(lin)
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-        mesh.normals = n.astype(np.float32)
-    if mesh.tangents is not None:
-        t = mesh.tangents[:, :3].astype(np.float64) @ lin.T
-        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-30)
-        w = mesh.tangents[:, 3:] * (1.0 if det >= 0 else -1.0)
-        mesh.tangents = np.concatenate([t, w], axis=1).astype(np.float32)
-    if det < 0:  # mirrored instance: keep counter-clockwise front faces
-        mesh.indices = np.ascontiguousarray(mesh.indices[:, [0, 2, 1]])
 
 
 def primitive_mesh(
@@ -138,7 +118,7 @@ def primitive_mesh(
     elif node is not None and not np.allclose(worlds.get(node, np.eye(4)), np.eye(4)):
         if abs(np.linalg.det(worlds[node][:3, :3])) < 1e-30:
             raise doc.err("the node's world transform is singular", f"/nodes/{node}")
-        _bake(mesh, worlds[node])
+        bake_world(mesh, worlds[node])  # the ingest reader's bake: one
     mesh.parts = (MeshPart(mesh.name, ref.pointer, 0, n, node),)
     return mesh
 

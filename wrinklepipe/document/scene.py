@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.document.model import Document, PrimitiveRef
-from wrinklepipe.io.mesh_gltf import _triangles, world_matrices
+from wrinklepipe.io.mesh_gltf import triangulate, world_matrices
 
 
 def node_world_matrices(doc: Document) -> dict[int, np.ndarray]:
@@ -111,7 +111,7 @@ def primitive_triangles(doc: Document, ref: PrimitiveRef) -> np.ndarray:
     mode = int(prim.get("mode", 4))
     if mode not in (4, 5, 6):
         return np.zeros((0, 3), np.int64)
-    tris = _triangles(mode, idx)
+    tris = triangulate(mode, idx)
     if tris.size and (tris.min() < 0 or tris.max() >= n):
         raise doc.err(f"indices out of range 0..{n - 1}", ref.pointer + "/indices")
     return tris

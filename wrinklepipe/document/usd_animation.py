@@ -38,7 +38,7 @@ import numpy as np
 from wrinklepipe.document.model import Document
 from wrinklepipe.document.usd_looks import gf_matrix
 from wrinklepipe.io.mesh_gltf import (
-    _node_matrix,  # the one glTF TRS -> matrix
+    node_matrix,  # the one glTF TRS -> matrix
     sample_channel_at,
 )
 
@@ -180,7 +180,7 @@ def add_animations(
         )
     if not clips and wrinkle is None:
         for n, path in xforms.items():  # no variant set: the rest matrix, as authored
-            _xform_op(stage, path).Set(gf_matrix(_node_matrix(nodes[n])))
+            _xform_op(stage, path).Set(gf_matrix(node_matrix(nodes[n])))
         return notes
     holder = scene.AppendChild("Animations")
     UsdGeom.Scope.Define(stage, holder)
@@ -198,7 +198,7 @@ def add_animations(
 
     def rest_xforms() -> None:
         for n, path in xforms.items():
-            _xform_op(stage, path).Set(gf_matrix(_node_matrix(nodes[n])))
+            _xform_op(stage, path).Set(gf_matrix(node_matrix(nodes[n])))
 
     if wrinkle is not None:
         variant_name(WRINKLE_VARIANT)
@@ -335,7 +335,7 @@ class _Locals:
             got = self.by_node.get(n, {})
             f = len(self.times)
             if not any(p in got for p in ("translation", "rotation", "scale")):
-                self.locals[n] = np.broadcast_to(_node_matrix(self.nodes[n]), (f, 4, 4))
+                self.locals[n] = np.broadcast_to(node_matrix(self.nodes[n]), (f, 4, 4))
             else:
                 t0, q0, s0 = _rest_trs(self.nodes[n])
                 tr, ro, sc = (
@@ -352,7 +352,7 @@ class _Locals:
             if not self.moves(n):  # nothing at or above it moves: the rest world
                 rest = self.rest_worlds.get(n)
                 if rest is None:
-                    rest = _node_matrix(self.nodes[n])
+                    rest = node_matrix(self.nodes[n])
                 self.worlds[n] = np.broadcast_to(rest, (len(self.times), 4, 4))
             else:
                 p = self.parent.get(n)

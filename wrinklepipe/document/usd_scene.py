@@ -66,7 +66,7 @@ from wrinklepipe.document.usd_animation import (
 )
 from wrinklepipe.document.usd_looks import Looks, Names, gf_matrix
 from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
-from wrinklepipe.io.mesh_gltf import _node_matrix  # the one glTF TRS -> matrix
+from wrinklepipe.io.mesh_gltf import node_matrix  # the one glTF TRS -> matrix
 from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.io.usd_write import SCENE_MESH_NAME, SCENE_MESHES
 
@@ -148,7 +148,7 @@ class _Scene:
         rest = []
         for j in joints:
             p = joint_parent(j)
-            world = self.worlds.get(j, _node_matrix(nodes[j]))
+            world = self.worlds.get(j, node_matrix(nodes[j]))
             rest.append(world if p is None else np.linalg.inv(self.worlds[p]) @ world)
         if "inverseBindMatrices" in s:
             ibm = doc.accessor(s["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1)
@@ -192,7 +192,7 @@ class _Scene:
             j, skin, k = got
             skel = self.skeleton(skin)
             bind = np.asarray(skel.GetBindTransformsAttr().Get()[k], np.float64).T
-            rest = self.worlds.get(j, _node_matrix(self.doc.array("nodes")[j]))
+            rest = self.worlds.get(j, node_matrix(self.doc.array("nodes")[j]))
             return skel, k, bind @ np.linalg.inv(rest) @ world
         if self.morph_skeleton is None:
             holder = self.root.AppendChild("Skeletons")
@@ -409,7 +409,7 @@ class _Scene:
         if i in self.xform_animated:  # its value is the animation variants' (usd_animation)
             self.xform_paths[i] = path
         else:
-            op.Set(gf_matrix(_node_matrix(n)))
+            op.Set(gf_matrix(node_matrix(n)))
         if isinstance(n.get("mesh"), int):
             mi = int(n["mesh"])
             prims = doc.array("meshes")[mi].get("primitives", [])

@@ -15,7 +15,7 @@ import numpy as np
 
 from wrinklepipe.drivers.base import MorphTrack
 from wrinklepipe.errors import input_error, plain_reason
-from wrinklepipe.io.gltf_read import GltfReadOptions, _Reader
+from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
 
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 
@@ -32,7 +32,7 @@ def read_morph_tracks(path: str | Path, animation: int = 0) -> list[MorphTrack]:
 
 
 def _read(path: Path, animation: int) -> list[MorphTrack]:
-    r = _Reader(path, GltfReadOptions())
+    r = GltfFile(path, GltfReadOptions())
     doc = r.doc
     anims = doc.get("animations") or []
     if not 0 <= animation < len(anims):
@@ -78,7 +78,7 @@ def _read(path: Path, animation: int) -> list[MorphTrack]:
     return tracks
 
 
-def _finite(r: _Reader, index: object) -> np.ndarray:
+def _finite(r: GltfFile, index: object) -> np.ndarray:
     """An accessor as float64 (normalized integers scaled per the spec), all values finite."""
     a = np.asarray(r.accessor(index), np.float64)  # type: ignore[arg-type]
     if not np.isfinite(a).all():

@@ -25,7 +25,7 @@ from wrinklepipe.io.accessors import read_accessor
 from wrinklepipe.io.gltf_limits import GltfReadOptions as GltfReadOptions  # re-exported
 
 
-class _Reader:
+class GltfFile:
     """A glTF file opened by the one container reader (:func:`wrinklepipe.document.container.
     open_container`: GLB chunks, confined URIs, capped data URIs and files, buffers), with
     bufferViews and accessors on top."""

@@ -36,7 +36,7 @@ import numpy as np
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.accessors import read_accessor
-from wrinklepipe.io.gltf_read import GltfReadOptions, _Reader
+from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
 
 #: Required extensions that do not change geometry (textures/materials/lights): ignored.
 _HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_")
@@ -61,7 +61,7 @@ class GltfMeshOptions:
     bake_transforms: bool = True
 
 
-class _MeshReader(_Reader):
+class _MeshFile(GltfFile):
     """The safe container reader; accessors through :func:`wrinklepipe.io.accessors.
     read_accessor` (sparse, normalized, strides), refusing required meshopt views."""
 
@@ -90,7 +90,7 @@ def _vec(node: dict[str, Any], key: str, default: list[float], n: int) -> np.nda
     return a
 
 
-def _node_matrix(node: dict[str, Any]) -> np.ndarray:
+def node_matrix(node: dict[str, Any]) -> np.ndarray:
     """Local matrix of a node (column vectors); ValueError for malformed TRS / matrix."""
     if "matrix" in node:
         return _vec(node, "matrix", [], 16).reshape(4, 4).T  # column-major
@@ -142,14 +142,14 @@ def world_matrices(doc: dict[str, Any]) -> dict[int, np.ndarray]:
         if i in out or not 0 <= i < len(nodes):
             continue
         try:
-            out[i] = parent @ _node_matrix(nodes[i])
+            out[i] = parent @ node_matrix(nodes[i])
         except ValueError as exc:
             raise ValueError(f"nodes[{i}]: {exc}") from None
         stack.extend((int(c), out[i]) for c in nodes[i].get("children", []))
     return out
 
 
-def _triangles(mode: int, idx: np.ndarray) -> np.ndarray:
+def triangulate(mode: int, idx: np.ndarray) -> np.ndarray:
     if mode == 4:
         return idx[: len(idx) // 3 * 3].reshape(-1, 3)
     if mode == 5:  # strip: (i, i+1, i+2), every other one flipped
@@ -169,7 +169,7 @@ def _triangles(mode: int, idx: np.ndarray) -> np.ndarray:
     raise ValueError(mode)
 
 
-def check_extensions(r: _Reader) -> list[str]:
+def check_extensions(r: GltfFile) -> list[str]:
     """Refuse required extensions that change geometry and are not decoded; note the rest."""
     notes = []
     for name in r.doc.get("extensionsRequired", []):
@@ -204,7 +204,7 @@ def read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) -
         ) from None
 
 
-def _objects(r: _MeshReader, value: Any, key: str) -> list[dict[str, Any]]:
+def _objects(r: _MeshFile, value: Any, key: str) -> list[dict[str, Any]]:
     """``value`` as an array of JSON objects, or a message naming the first that is not one."""
     if not isinstance(value, list):
         raise r.err(f"must be an array of objects, got {json_type(value)}", key)
@@ -225,7 +225,7 @@ def json_type(v: Any) -> str:
 
 def _read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) -> list[Mesh]:
     opts = options or GltfMeshOptions()
-    r = _MeshReader(Path(path), GltfReadOptions())
+    r = _MeshFile(Path(path), GltfReadOptions())
     doc = r.doc
     file_notes = check_extensions(r)
     meshes = _objects(r, doc.get("meshes", []), "/meshes")
@@ -262,7 +262,7 @@ def _read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) 
             mesh.notes[:0] = file_notes
             if skin is None and opts.bake_transforms and not np.allclose(world, np.eye(4)):
                 try:
-                    mesh = _bake(mesh, world)
+                    mesh = bake_world(mesh, world)
                 except ValueError:
                     raise r.err("the node's world transform is singular", f"/nodes/{ni}") from None
                 mesh.notes.append(f"baked the world transform of node {ni}")
@@ -276,7 +276,7 @@ def _read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) 
     return out
 
 
-def _read_skin(r: _MeshReader, si: int) -> dict[str, Any]:
+def _read_skin(r: _MeshFile, si: int) -> dict[str, Any]:
     skins = r.doc.get("skins", [])
     if not 0 <= si < len(skins):
         raise r.err(f"skin {si} does not exist", "/skins")
@@ -297,7 +297,7 @@ def _read_skin(r: _MeshReader, si: int) -> dict[str, Any]:
 
 
 def _read_primitive(
-    r: _MeshReader,
+    r: _MeshFile,
     mi: int,
     pi: int,
     prim: dict[str, Any],
@@ -338,7 +338,7 @@ def _read_primitive(
         idx = np.arange(nv, dtype=np.int64)
     if len(idx) and (idx.min() < 0 or idx.max() >= nv):
         raise r.err(f"indices out of range 0..{nv - 1} (max {int(idx.max())})", key + "/indices")
-    tris = _triangles(int(prim.get("mode", 4)), idx)
+    tris = triangulate(int(prim.get("mode", 4)), idx)
     if int(prim.get("mode", 4)) != 4:
         notes.append(f"triangulated a {'strip' if prim.get('mode') == 5 else 'fan'}")
     if len(tris) == 0:
@@ -424,7 +424,9 @@ def drop_degenerate(positions: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray
     return t[keep], int((~keep).sum())
 
 
-def _bake(mesh: Mesh, m: np.ndarray) -> Mesh:
+def bake_world(mesh: Mesh, m: np.ndarray) -> Mesh:
+    """Apply world matrix ``m`` to positions, normals, tangents and morph deltas (in place;
+    a mirrored instance flips triangle winding); ValueError for a singular matrix."""
     lin = m[:3, :3]
     if abs(np.linalg.det(lin)) < 1e-30:
         raise ValueError("singular transform")
@@ -459,7 +461,7 @@ def gltf_joint_world_matrices_at(
 ) -> np.ndarray:
     """World matrices ``[F, J, 4, 4]`` of ``mesh``'s joints at each of ``times`` (None: the
     rest pose), reading the file once."""
-    r = _MeshReader(Path(path), GltfReadOptions())
+    r = _MeshFile(Path(path), GltfReadOptions())
     doc = r.doc
     if any(t is not None for t in times) and not doc.get("animations"):
         raise r.err("the file has no animation to sample", "/animations")
@@ -500,7 +502,7 @@ def gltf_joint_world_matrices_at(
 
 def gltf_animation_times(path: str | Path) -> np.ndarray:
     """Sorted key times (seconds) of the file's first animation, over all its channels."""
-    r = _MeshReader(Path(path), GltfReadOptions())
+    r = _MeshFile(Path(path), GltfReadOptions())
     anims = r.doc.get("animations") or []
     if not anims:
         raise r.err("the file has no animation", "/animations")
@@ -514,7 +516,7 @@ def gltf_animation_times(path: str | Path) -> np.ndarray:
 def gltf_morph_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, float]:
     """Morph-target weights at ``time`` (seconds) of the first animation's ``weights`` channels
     (else the node's / mesh's default ``weights``), by target name, for targets ``mesh`` has."""
-    r = _MeshReader(Path(path), GltfReadOptions())
+    r = _MeshFile(Path(path), GltfReadOptions())
     doc = r.doc
     if not doc.get("animations"):
         raise r.err("the file has no animation to sample", "/animations")
