@@ -21,7 +21,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 import texture2ddecoder as t2d
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from wrinklepipe import codec
@@ -41,14 +41,15 @@ FORMATS = ("png8", "png16", "exr", "bc1", "bc3nm", "bc5", "bc7", "bc7xy", "uastc
 #: values (BC5, BC3nm's x): 1/14 -> 1/7; BC1's 4 values on a line in RGB 565 (three components
 #: on one line: worst), BC3's colour block (y), BC7 and UASTC measured on these fields with
 #: margin (worst k at that c over 30 fields per encoding: BC1 0.56, BC3nm 0.14, BC7 0.06, UASTC
-#: 0.47).
+#: 0.47). UASTC's c is 5: on a nearly flat block (range 1 level) a diff field measured 4.52 levels
+#: off (hypothesis found it in a CI run; kept below as an explicit example).
 BLOCK_BOUND = {
     "bc1": (8, 0.75),
     "bc3nm": (4, 0.25),
     "bc5": (2, 1 / 7),
     "bc7": (4, 0.15),
     "bc7xy": (4, 0.15),
-    "uastc": (4, 0.6),
+    "uastc": (5, 0.6),
 }
 CASES = [(e, f) for e in ENCODINGS for f in FORMATS if codec.storage_format(f).holds(e)]
 
@@ -130,6 +131,7 @@ def _oiio(path: Path, kind: object) -> np.ndarray:
     freq=st.integers(0, 1),
     base_tilt=st.floats(-0.4, 0.4),
 )
+@example(tilt=(0.09375, 0.0), ripple=0.21875, phase=3.75, freq=1, base_tilt=0.0)
 @settings(
     max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
