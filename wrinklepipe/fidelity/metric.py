@@ -41,6 +41,34 @@ _BLAS = ThreadpoolController()
 _Fn = TypeVar("_Fn", bound=Callable[..., Any])
 
 
+#: Texels a whole-map pass of the measure (the base over the face, the source base's
+#: normalisation) handles at a time. Every step is per texel, so the values are those of one
+#: pass over the whole map; but its float32 temporaries stay below numpy's huge-page size (4 MB:
+#: a fresh huge page is zeroed, and on a loaded machine compacted, by the kernel: a 4M-texel
+#: pass spent 0.4-0.6 s of system time in page faults, five times its own arithmetic) and in the
+#: cache, and are reused from one chunk to the next.
+CHUNK_TEXELS = 1 << 18
+
+
+def chunks(n: int, step: int = CHUNK_TEXELS) -> list[slice]:
+    """Slices of ``range(n)`` of ``step`` items (the last shorter)."""
+    step = max(1, int(step))
+    return [slice(i, min(i + step, n)) for i in range(0, n, step)]
+
+
+def normalize_rows(v: np.ndarray) -> np.ndarray:
+    """:func:`wrinklepipe.model.normalize` of ``[..., C]`` vectors, in :data:`CHUNK_TEXELS`
+    chunks of the leading axis (the same values: each vector is normalised on its own)."""
+    a = np.asarray(v, _F)
+    if a.ndim < 2 or a.size <= CHUNK_TEXELS * a.shape[-1]:
+        return model.normalize(a)
+    out = np.empty(a.shape, _F)
+    per = max(1, a[0].size // a.shape[-1])  # vectors per leading index
+    for sl in chunks(a.shape[0], max(1, CHUNK_TEXELS // per)):
+        out[sl] = model.normalize(a[sl])
+    return out
+
+
 def one_blas_thread(fn: _Fn) -> _Fn:
     """Run ``fn`` with one BLAS thread: the measure's products are small (a few regions by a
     few states, dots of one pose's texels), and on a shared machine OpenBLAS's threads wait on
@@ -273,16 +301,20 @@ class Reference:
     def _face_texels(self, max_texels: int | None) -> np.ndarray:
         H, W = self.shape
         fp = self.footprint if self.footprint is not None else np.ones((H, W), bool)
-        flat = np.flatnonzero(fp.reshape(-1))
-        if max_texels is None or flat.size <= max_texels:
-            return flat
-        bw = (W + 3) // 4
-        block = (flat // W) // 4 * bw + (flat % W) // 4
-        present = np.zeros(((H + 3) // 4) * bw, bool)
-        present[block] = True
-        rank = (np.cumsum(present) - 1)[block]
+        fp = np.asarray(fp, bool).reshape(H, W)
+        n = int(np.count_nonzero(fp))
+        if max_texels is None or n <= max_texels:
+            return np.flatnonzero(fp)
+        # on the grid of 4x4 blocks (row-major block order): the blocks holding a footprint
+        # texel, every k-th of them kept whole
+        hb, wb = (H + 3) // 4, (W + 3) // 4
+        padded = np.zeros((hb * 4, wb * 4), bool)
+        padded[:H, :W] = fp
+        present = padded.reshape(hb, 4, wb, 4).any(axis=(1, 3)).reshape(-1)
         k = max(1, -(-int(present.sum()) * 16 // max(int(max_texels), 1)))
-        return flat[rank % k == 0]
+        keep = present & ((np.cumsum(present) - 1) % k == 0)
+        keep_texels = np.repeat(np.repeat(keep.reshape(hb, wb), 4, axis=0), 4, axis=1)[:H, :W]
+        return np.flatnonzero(fp & keep_texels)
 
     def activations(self, masks: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per pose: :func:`wrinklepipe.model.activations` of shipped mask samples ``[R, n]``
@@ -469,7 +501,7 @@ def prepare(
     Active texels come from the source masks at full resolution; the source's blended normal
     is computed there once per pose (the one full-resolution pass).
     """
-    b = model.normalize(np.asarray(base, _F))
+    b = normalize_rows(base)
     st = np.asarray(states, _F)
     H, W = b.shape[:2]
     if st.shape[1:3] != (H, W):
@@ -820,8 +852,17 @@ def base_fidelity(
     against the source base over the footprint (or at the grid texels ``flat``)."""
     if flat is None:
         flat = ref.face_texels()
-    got = model.normalize(sample_at(base, ref.shape, flat, reader))
-    err = angle_deg(got, _gather_planes(ref.base.reshape(-1, 3), flat).T)
+    flat = np.asarray(flat, np.int64)
+    src = ref.base.reshape(-1, 3)
+    err = np.empty(flat.size, _F)
+    # in chunks of texels (module CHUNK_TEXELS: the same per-texel values, small temporaries);
+    # a smaller map is sampled whole-row-first once (sample_at's separable path) when the
+    # texels are many, so its chunks are taken from one sampled copy only on the same grid
+    parts = chunks(flat.size) if np.asarray(base).shape[:2] == ref.shape else [slice(None)]
+    for sl in parts:
+        f = flat[sl]
+        got = planes(model.normalize(sample_at(base, ref.shape, f, reader)))
+        err[sl] = angle_deg_planes(got, _gather_planes(src, f))
     return weighted_stats(err, np.ones(err.shape, _F))
 
 

@@ -360,14 +360,14 @@ def search(
         # include the smallest scale that keeps every texel of the map inside the range
         limit = o.max_clipped_fraction * size * size
         level = levels[size]
-        # per texel the larger |component| (two planes: a reduction over a last axis of 2 is
-        # ten times slower than one elementwise maximum; the same values)
-        amax = np.maximum(np.abs(level[..., 0]), np.abs(level[..., 1]))
-        safe = scale_candidates(float(amax.max(initial=0.0)), (1.0,))[0]
+        # the largest |component| of the map: its largest and its most negative value (no
+        # temporaries: at full size the map is 4M texels)
+        big = max(float(level.max(initial=0.0)), -float(level.min(initial=0.0)))
+        safe = scale_candidates(big, (1.0,))[0]
         candidates = sorted({*scale_candidates(top, o.scale_factors), safe}, reverse=True)
         # only texels with a component above 0.99 of the smallest scale can reach the end of
         # the range (|t| >= 1 - 0.5/127): count clipping on that tail alone, as edge_texels does
-        tails = [x[a >= 0.99 * candidates[-1]][:, None, :] for x, a in zip(level, amax)]
+        tails = _tails(level, candidates[-1])
 
         def clips(s: float) -> bool:
             return max(clipped_texels(tails, s), default=0) > limit
@@ -578,6 +578,23 @@ def search(
         budget=budget,
         compressed_budget=cbudget,
     )
+
+
+def _tails(level: np.ndarray, smallest: float) -> list[np.ndarray]:
+    """Per state of ``level`` ``[K, s, s, 2]``: its texels ``[n, 1, 2]`` (in map order) whose
+    larger |component| is at least 0.99 of scale ``smallest`` (the only ones that can clip at
+    a scale of at least that). In chunks of rows (:func:`~wrinklepipe.fidelity.metric.chunks`:
+    the same texels, small temporaries) and two planes per chunk (a reduction over a last axis
+    of 2 is ten times slower than one elementwise maximum; the same values)."""
+    out = []
+    for x in level:
+        parts = []
+        for sl in fm.chunks(x.shape[0], max(1, fm.CHUNK_TEXELS // max(x.shape[1], 1))):
+            c = x[sl]
+            amax = np.maximum(np.abs(c[..., 0]), np.abs(c[..., 1]))
+            parts.append(c[amax >= 0.99 * smallest])
+        out.append(np.concatenate(parts)[:, None, :])
+    return out
 
 
 @dataclass

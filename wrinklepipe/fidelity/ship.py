@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from wrinklepipe import codec, reuse
-from wrinklepipe.fidelity.metric import Reader
+from wrinklepipe.fidelity.metric import CHUNK_TEXELS, Reader, chunks
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.normals import compress as nc
 
@@ -25,7 +25,19 @@ BLOCK_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")
 
 
 def base_texels(base: np.ndarray) -> np.ndarray:
-    """8-bit RGB texels of the base normal map (``0.5 + 0.5 n``)."""
+    """8-bit RGB texels of the base normal map (``0.5 + 0.5 n``), encoded in chunks of rows
+    (:data:`~wrinklepipe.fidelity.metric.CHUNK_TEXELS`: every step is per texel, so the bytes
+    are those of one pass; the temporaries stay small and are reused)."""
+    b = np.asarray(base, _F)
+    if b.ndim != 3 or b.shape[0] * b.shape[1] <= CHUNK_TEXELS:
+        return _base_texels(b)
+    out = np.empty(b.shape[:2] + (3,), np.uint8)
+    for sl in chunks(b.shape[0], max(1, CHUNK_TEXELS // b.shape[1])):
+        out[sl] = _base_texels(b[sl])
+    return out
+
+
+def _base_texels(base: np.ndarray) -> np.ndarray:
     q, _ = codec.encode(codec.BASE, codec.normalize(base), "png8", channels=3)
     return q
 
@@ -208,12 +220,14 @@ def mask_levels(masks: np.ndarray, min_size: int = 1) -> MaskLevels:
     while h % 2 == 0 and h // 2 >= min_size and acc.shape[2] % 2 == 0:
         r, w = acc.shape[0], acc.shape[2]
         half = np.empty((r, h // 2, w // 2), _F)
-        for i in range(r):  # one mask at a time: its float64 temporaries stay small
-            pairs = acc[i].reshape(h // 2, 2, w)
-            rows = np.add(pairs[:, 0], pairs[:, 1], dtype=np.float64).reshape(h // 2, w // 2, 2)
-            quad = np.add(rows[..., 0], rows[..., 1])  # the 2x2 sum in float64 (exact for 4
-            quad *= 0.25  # float32 values of a mask's range), rounded to float32 once
-            half[i] = quad
+        # one mask and a chunk of output rows at a time: its float64 temporaries stay small
+        for i in range(r):
+            for sl in chunks(h // 2, max(1, CHUNK_TEXELS // w)):
+                pairs = acc[i, 2 * sl.start : 2 * sl.stop].reshape(-1, 2, w)
+                rows = np.add(pairs[:, 0], pairs[:, 1], dtype=np.float64).reshape(-1, w // 2, 2)
+                quad = np.add(rows[..., 0], rows[..., 1])  # the 2x2 sum in float64 (exact for
+                quad *= 0.25  # 4 float32 values of a mask's range), rounded to float32 once
+                half[i, sl] = quad
         acc = half
         h //= 2
         out[h] = acc
