@@ -31,7 +31,13 @@ from threadpoolctl import ThreadpoolController
 
 from wrinklepipe import model
 from wrinklepipe.codec.vectors import EPS
-from wrinklepipe.fidelity.stats import Budget, Stats, weighted_stats, weighted_stats_many
+from wrinklepipe.fidelity.stats import (
+    Budget,
+    Stats,
+    unit_stats,
+    weighted_stats,
+    weighted_stats_many,
+)
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.normals.compress import angle_deg, angle_deg_planes
 from wrinklepipe.reuse import reused
@@ -863,7 +869,7 @@ def base_fidelity(
         f = flat[sl]
         got = planes(model.normalize(sample_at(base, ref.shape, f, reader)))
         err[sl] = angle_deg_planes(got, _gather_planes(src, f))
-    return weighted_stats(err, np.ones(err.shape, _F))
+    return unit_stats(err)
 
 
 def measure(
