@@ -84,13 +84,22 @@ def halve_axis(a: np.ndarray, axis: int, chunk_bytes: int = CHUNK_BYTES) -> np.n
     return out
 
 
-def halve(img: np.ndarray) -> np.ndarray:
-    """``[..., H, W, C]`` -> ``[..., H/2, W/2, C]``: rows, then columns (on a transposed copy,
-    so that the column pass also reads whole rows; the same values)."""
+def halve(img: np.ndarray, chunk_bytes: int = CHUNK_BYTES) -> np.ndarray:
+    """``[..., H, W, C]`` -> ``[..., H/2, W/2, C]``: rows, then columns (on transposed copies of
+    bands of about ``chunk_bytes`` of the halved rows, so that the column pass also reads whole
+    rows; each output is the same operations on the same values as one pass over the map,
+    without a transposed copy of the whole of it)."""
     a = np.asarray(img, _F)
     rows = halve_axis(a, a.ndim - 3)
-    cols = halve_axis(np.ascontiguousarray(np.swapaxes(rows, -2, -3)), a.ndim - 3)
-    return np.ascontiguousarray(np.swapaxes(cols, -2, -3))
+    h2, w, c = rows.shape[-3:]
+    lead = rows.shape[:-3]
+    out = np.empty(lead + (h2, w // 2, c), _F)
+    per_row = max(1, rows.size // max(h2, 1) * rows.itemsize)  # bytes of one halved row
+    step = max(1, chunk_bytes // per_row)
+    for r0 in range(0, h2, step):
+        band = np.ascontiguousarray(np.swapaxes(rows[..., r0 : r0 + step, :, :], -2, -3))
+        out[..., r0 : r0 + step, :, :] = np.swapaxes(halve_axis(band, a.ndim - 3), -2, -3)
+    return out
 
 
 def levels(img: np.ndarray, min_size: int = 1) -> dict[int, np.ndarray]:
