@@ -39,6 +39,8 @@ SCHEMA_FILE = SCHEMAS_DIR / EXTENSION / "schema" / f"material.{EXTENSION}.schema
 LEGACY_MAPPING = 1
 #: The vertex attribute holding the spatial-hash vertex IDs, unless the extension names another.
 VERTEX_ID_ATTRIBUTE = "_WRINKLE_VERTEX_ID"
+#: The vertex attribute holding the rest-pose wrinkle bias (``Mesh.colors``).
+BIAS_ATTRIBUTE = "_WRINKLE_BIAS"
 #: Longest schema message quoted in an error (a message quotes the offending value).
 _MAX_MESSAGE = 240
 

@@ -35,6 +35,7 @@ from wrinklepipe.document import decompress
 from wrinklepipe.document.container import Container, data_uri_bytes, open_container
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.io import accessors as acc
+from wrinklepipe.io import gltf_primitive
 from wrinklepipe.io.gltf_limits import GltfReadOptions
 
 ARRAY_BUFFER = 34962
@@ -149,8 +150,7 @@ class Document:
         return str(name) if name else f"mesh{i}"
 
     def node_name(self, i: int) -> str:
-        name = self.array("nodes")[i].get("name")
-        return str(name) if name else f"node{i}"
+        return gltf_primitive.node_name(self.gltf, i)
 
     def mesh_nodes(self, mesh: int) -> list[int]:
         """The nodes that instance mesh ``mesh``, in node order."""
@@ -158,11 +158,7 @@ class Document:
 
     def target_names(self, mesh: int) -> list[str]:
         """Morph target names of a mesh (``extras.targetNames``; ``target_<i>`` for the rest)."""
-        m = self.array("meshes")[mesh]
-        n = max((len(p.get("targets", [])) for p in m.get("primitives", [])), default=0)
-        names = (m.get("extras") or {}).get("targetNames", []) if isinstance(m, dict) else []
-        names = names if isinstance(names, list) else []
-        return [str(names[i]) if i < len(names) else f"target_{i}" for i in range(n)]
+        return gltf_primitive.target_names(self.gltf, mesh)
 
     # -- additions -------------------------------------------------------------------------
     def add_view(self, data: bytes, target: int | None = None, stride: int | None = None) -> int:

@@ -33,11 +33,11 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.document.images import image_pixels, texture_source
 from wrinklepipe.document.model import Document, read_document
 from wrinklepipe.document.render_mesh import wrinkled_mesh
-from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE, wrinkled_primitives
+from wrinklepipe.document.wrinkled import wrinkled_primitives
 from wrinklepipe.errors import input_error, plain_reason
 from wrinklepipe.io.gltf_limits import GltfReadOptions
 from wrinklepipe.io.package import EXTENSION, PackedTexture, WeightCurves, WrinklePackage, safe_name
-from wrinklepipe.metadata import WrinkleMeta
+from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE, WrinkleMeta
 
 
 def wrinkled_materials(doc: Document) -> list[int]:

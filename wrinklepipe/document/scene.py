@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.document.model import Document, PrimitiveRef
-from wrinklepipe.io.mesh_gltf import triangulate, world_matrices
+from wrinklepipe.io.gltf_primitive import primitive_triangles as gltf_triangles
+from wrinklepipe.io.gltf_primitive import world_matrices
 
 
 def node_world_matrices(doc: Document) -> dict[int, np.ndarray]:
@@ -100,18 +101,6 @@ def _skinned(
 
 
 def primitive_triangles(doc: Document, ref: PrimitiveRef) -> np.ndarray:
-    """``[T, 3]`` int64 vertex indices of a TRIANGLES primitive (strips and fans unrolled)."""
-
-    prim = doc.primitive(ref)
-    n = len(doc.accessor(prim["attributes"]["POSITION"]))
-    if "indices" in prim:
-        idx = doc.accessor(prim["indices"], normalize=False)[:, 0].astype(np.int64)
-    else:
-        idx = np.arange(n, dtype=np.int64)
-    mode = int(prim.get("mode", 4))
-    if mode not in (4, 5, 6):
-        return np.zeros((0, 3), np.int64)
-    tris = triangulate(mode, idx)
-    if tris.size and (tris.min() < 0 or tris.max() >= n):
-        raise doc.err(f"indices out of range 0..{n - 1}", ref.pointer + "/indices")
-    return tris
+    """``[T, 3]`` int64 vertex indices of a triangle primitive (strips and fans unrolled):
+    :func:`wrinklepipe.io.gltf_primitive.primitive_triangles`, the one triangle reader."""
+    return gltf_triangles(doc, ref.mesh, ref.primitive)

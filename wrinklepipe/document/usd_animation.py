@@ -37,10 +37,8 @@ import numpy as np
 
 from wrinklepipe.document.model import Document
 from wrinklepipe.document.usd_looks import gf_matrix
-from wrinklepipe.io.mesh_gltf import (
-    node_matrix,  # the one glTF TRS -> matrix
-    sample_channel_at,
-)
+from wrinklepipe.io.gltf_primitive import node_matrix  # the one glTF TRS -> matrix
+from wrinklepipe.io.mesh_gltf import sample_channel_at
 
 #: The variant that plays convert's weight curve (morph weights) on the wrinkled meshes.
 WRINKLE_VARIANT = "wrinkle"

@@ -57,7 +57,6 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.document.model import Document, PrimitiveRef
-from wrinklepipe.document.render_mesh import BIAS_ATTRIBUTE
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles
 from wrinklepipe.document.usd_animation import (
     SkeletonInfo,
@@ -65,10 +64,10 @@ from wrinklepipe.document.usd_animation import (
     xform_animated_nodes,
 )
 from wrinklepipe.document.usd_looks import Looks, Names, gf_matrix
-from wrinklepipe.document.wrinkled import VERTEX_ID_ATTRIBUTE
-from wrinklepipe.io.mesh_gltf import node_matrix  # the one glTF TRS -> matrix
+from wrinklepipe.io.gltf_primitive import node_matrix  # the one glTF TRS -> matrix
 from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.io.usd_write import SCENE_MESH_NAME, SCENE_MESHES
+from wrinklepipe.metadata import BIAS_ATTRIBUTE, VERTEX_ID_ATTRIBUTE
 
 
 @dataclass(frozen=True)

@@ -28,8 +28,8 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents_report
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
+from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE
 
-VERTEX_ID_ATTRIBUTE = "_WRINKLE_VERTEX_ID"
 #: Largest integer a float32 holds exactly (vertex IDs are FLOAT accessors).
 MAX_FLOAT_ID = 1 << 24
 

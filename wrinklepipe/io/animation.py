@@ -33,7 +33,7 @@ def read_morph_tracks(path: str | Path, animation: int = 0) -> list[MorphTrack]:
 
 def _read(path: Path, animation: int) -> list[MorphTrack]:
     r = GltfFile(path, GltfReadOptions())
-    doc = r.doc
+    doc = r.gltf
     anims = doc.get("animations") or []
     if not 0 <= animation < len(anims):
         raise r.err("no animation in this file", "/animations")

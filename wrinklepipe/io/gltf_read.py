@@ -6,9 +6,15 @@ The file is opened by the one container reader (:func:`wrinklepipe.document.cont
 open_container`), which is defensive because a glTF names other files: every URI must be
 relative and stay inside the asset's folder (no ``..``, no absolute paths, no schemes other than
 ``data:``); data URIs and external files are capped in size. bufferViews are bounds-checked here
-and accessors decoded by :func:`wrinklepipe.io.accessors.read_accessor`. Every problem is an
-:class:`~wrinklepipe.errors.InputError` naming the file and the JSON pointer.
+(a view compressed by a *required* ``EXT_meshopt_compression`` is refused: only the document
+model decodes it) and accessors decoded by :func:`wrinklepipe.io.accessors.read_accessor`.
+Every problem is an :class:`~wrinklepipe.errors.InputError` naming the file and the JSON
+pointer.
 
+:class:`GltfFile` is a :class:`wrinklepipe.io.gltf_primitive.GltfSource` (``gltf``,
+``accessor``, ``err``), as the document model (:class:`wrinklepipe.document.model.Document`)
+is: the one per-primitive reader (:func:`wrinklepipe.io.gltf_primitive.read_primitive`) reads
+either.
 A written wrinkle package is read by :func:`wrinklepipe.document.package.read_wrinkled` (the one
 glTF package reader, on the document model).
 """
@@ -16,13 +22,17 @@ glTF package reader, on the document model).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from wrinklepipe.document.container import open_container
-from wrinklepipe.errors import input_error
+from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.io.accessors import read_accessor
 from wrinklepipe.io.gltf_limits import GltfReadOptions as GltfReadOptions  # re-exported
+
+#: bufferView compressions only the document model decodes: refused here when required.
+MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
 
 
 class GltfFile:
@@ -36,27 +46,36 @@ class GltfFile:
         self.opt = options
         self.folder = path.parent
         self.container = open_container(path, options)
-        self.doc = self.container.gltf
+        self.gltf: dict[str, Any] = self.container.gltf
 
-    def err(self, message: str, key: str = "") -> Exception:
+    def err(self, message: str, key: str = "") -> InputError:
         return input_error(self.file, message, key)
 
     def buffer(self, i: int) -> bytes:
         return self.container.buffer(i)
 
-    def view(self, i: int) -> tuple[bytes, int]:
-        views = self.doc.get("bufferViews", [])
+    def view(self, i: Any) -> tuple[bytes, int]:
+        """bufferView ``i``'s bytes and byteStride (0 when tightly packed)."""
+        views = self.gltf.get("bufferViews", [])
         if not isinstance(i, int) or isinstance(i, bool) or not 0 <= i < len(views):
             raise self.err(f"bufferView {i!r} does not exist", "/bufferViews")
         v = views[i]
+        for name in MESHOPT:
+            if name in (v.get("extensions") or {}) and name in self.gltf.get(
+                "extensionsRequired", []
+            ):
+                raise self.err(
+                    f"meshopt-compressed buffer views ({name}) cannot be decoded here; "
+                    "re-export without meshopt (gltfpack without -c)",
+                    f"/bufferViews/{i}",
+                )
         data = self.buffer(int(v.get("buffer", 0)))
         off, n = int(v.get("byteOffset", 0)), int(v["byteLength"])
         if off < 0 or off + n > len(data):
             raise self.err("bufferView runs past the end of its buffer", f"/bufferViews/{i}")
         return data[off : off + n], int(v.get("byteStride", 0))
 
-    def accessor(self, i: int) -> np.ndarray:
-        """Accessor ``i`` through :func:`wrinklepipe.io.accessors.read_accessor` (the one
-        accessor reader); a SCALAR accessor as ``[count]``."""
-        arr = read_accessor(self.doc, i, self.view, self.err)
-        return arr[:, 0] if arr.shape[1] == 1 else arr
+    def accessor(self, i: Any, normalize: bool = True) -> np.ndarray:
+        """Accessor ``i`` as ``[count, components]`` through :func:`wrinklepipe.io.accessors.
+        read_accessor` (the one accessor reader; ``normalize``: normalized integers as floats)."""
+        return read_accessor(self.gltf, i, self.view, self.err, normalize)

@@ -37,11 +37,10 @@ from wrinklepipe.io.package import (
     png_bytes,
     safe_name,
 )
-from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE, WrinkleMeta
+from wrinklepipe.metadata import BIAS_ATTRIBUTE, VERTEX_ID_ATTRIBUTE, WrinkleMeta
 
 POINTER_EXTENSION = "KHR_animation_pointer"
 WEIGHTS_POINTER = f"/materials/0/extensions/{EXTENSION}/weights"
-BIAS_ATTRIBUTE = "_WRINKLE_BIAS"
 
 _FLOAT = 5126
 _UINT = 5125

@@ -15,7 +15,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.mesh_gltf import drop_degenerate
+from wrinklepipe.io.gltf_primitive import drop_degenerate
 
 
 def _floats(rows: list[list[str]], width: int, file: str, what: str) -> np.ndarray:

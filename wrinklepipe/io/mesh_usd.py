@@ -41,7 +41,7 @@ import numpy as np
 from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.confine import confine_usd
-from wrinklepipe.io.mesh_gltf import drop_degenerate
+from wrinklepipe.io.gltf_primitive import drop_degenerate
 
 
 @dataclass(frozen=True)
