@@ -18,6 +18,7 @@ from test_mesh_io_gltf import QUAD_I, QUAD_P, QUAD_UV, SAMPLES, needs_data, quad
 from wrinklepipe.document.model import read_document
 from wrinklepipe.document.render_mesh import OPTIONS, primitive_mesh
 from wrinklepipe.errors import InputError
+from wrinklepipe.io.animation import read_morph_tracks
 from wrinklepipe.io.gltf_primitive import (
     PrimitiveOptions,
     read_instance,
@@ -194,3 +195,24 @@ def test_mesh_ingest_and_the_document_read_every_primitive_alike(rel):
             if x is not None:
                 np.testing.assert_array_equal(x, y, err_msg=f"{a.name}.{field}")
         assert a.morph_names == b.morph_names and a.joint_names == b.joint_names
+
+
+def test_morph_tracks_name_targets_as_the_mesh_does(tmp_path):
+    """A weights animation on a mesh whose targetNames lists fewer names than targets: the
+    tracks' target names are the mesh's morph names (the driver matches them)."""
+    doc = quad_doc({"targets": [{"POSITION": 3}, {"POSITION": 3}]})
+    doc["meshes"][0]["extras"] = {"targetNames": ["smile"]}
+    doc["animations"] = [
+        {
+            "samplers": [{"input": 4, "output": 5}],
+            "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+        }
+    ]
+    times = np.array([0.0, 1.0], np.float32)
+    weights = np.array([0.0, 0.0, 1.0, 0.5], np.float32)
+    arrays = [(QUAD_P, {}), (QUAD_I, {}), (QUAD_UV, {}), (DELTA, {}), (times, {}), (weights, {})]
+    f = write_gltf(tmp_path / "a.gltf", arrays, doc)
+    (track,) = read_morph_tracks(f)
+    (mesh,) = read_gltf_meshes(f)
+    assert track.names == mesh.morph_names == ("smile", "target_1")
+    np.testing.assert_array_equal(track.values[1], [1.0, 0.5])

@@ -15,6 +15,7 @@ import numpy as np
 
 from wrinklepipe.drivers.base import MorphTrack
 from wrinklepipe.errors import input_error, plain_reason
+from wrinklepipe.io.gltf_primitive import target_names
 from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
 
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
@@ -23,8 +24,9 @@ INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 def read_morph_tracks(path: str | Path, animation: int = 0) -> list[MorphTrack]:
     """Every channel of animation ``animation`` that drives a mesh's morph-target ``weights``,
     one :class:`MorphTrack` each (targets named by ``mesh.extras.targetNames``, else
-    ``target<i>``). An :class:`~wrinklepipe.errors.InputError` names the file and JSON pointer
-    for anything malformed."""
+    ``target_<i>``, as the mesh readers name them: :func:`wrinklepipe.io.gltf_primitive.
+    target_names`). An :class:`~wrinklepipe.errors.InputError` names the file and JSON
+    pointer for anything malformed."""
     try:
         return _read(Path(path), animation)
     except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
@@ -53,11 +55,7 @@ def _read(path: Path, animation: int) -> list[MorphTrack]:
         mesh_i = nodes[node_i].get("mesh")
         if not isinstance(mesh_i, int) or not 0 <= mesh_i < len(meshes):
             raise r.err("weights channel targets a node without a mesh", key)
-        mesh = meshes[mesh_i]
-        names = tuple(str(n) for n in (mesh.get("extras") or {}).get("targetNames", ()))
-        n_targets = len(mesh["primitives"][0].get("targets") or [])
-        if len(names) != n_targets:
-            names = tuple(f"target{i}" for i in range(n_targets))
+        names = tuple(target_names(doc, mesh_i))  # the names the mesh readers give them
         s = samplers[si]
         interp = s.get("interpolation") or "LINEAR"
         if interp not in INTERPOLATIONS:
