@@ -39,6 +39,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import InputError
+from wrinklepipe.geometry.polygons import drop_degenerate
 from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE
 
 #: Modes read as triangles: TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN.
@@ -415,17 +416,6 @@ def read_instance(
     except ValueError:
         raise src.err("the node's world transform is singular", f"/nodes/{node}") from None
     return m, "baked"
-
-
-def drop_degenerate(positions: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, int]:
-    """Remove triangles with repeated indices or zero area; return (kept, removed count)."""
-    p = np.asarray(positions, dtype=np.float64)
-    t = np.asarray(tris, dtype=np.int64)
-    rep = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
-    tri = p[t]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    keep = ~rep & (area2 > 0)
-    return t[keep], int((~keep).sum())
 
 
 def bake_world(mesh: Mesh, m: np.ndarray) -> Mesh:

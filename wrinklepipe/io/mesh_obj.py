@@ -15,7 +15,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.gltf_primitive import drop_degenerate
+from wrinklepipe.geometry.polygons import drop_degenerate, fan_triangles, weld_corners
 
 
 def _floats(rows: list[list[str]], width: int, file: str, what: str) -> np.ndarray:
@@ -106,21 +106,10 @@ def _part(
     use_uv = bool(has[:, 1].all()) and len(uv_all) > 0
     use_n = bool(has[:, 2].all()) and len(nrm_all) > 0
     key = trip * np.array([1, int(use_uv), int(use_n)])
-    uniq, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    inv = inv.reshape(-1)
-    # Number render vertices by first appearance (stable, file order).
-    order = np.argsort(first, kind="stable")
-    rank = np.empty(len(order), np.int64)
-    rank[order] = np.arange(len(order))
-    corner_vertex = rank[inv]
-    verts = uniq[order]
-    # Fan triangulation of every polygon: corners (s, s+k, s+k+1).
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    n_tri = counts - 2
-    poly = np.repeat(np.arange(len(counts)), n_tri)
-    k = np.arange(n_tri.sum()) - np.repeat(np.cumsum(n_tri) - n_tri, n_tri)
-    s = starts[poly]
-    tris = corner_vertex[np.stack([s, s + k + 1, s + k + 2], axis=1)]
+    # Render vertices by first appearance (stable, file order); every polygon a fan.
+    corner_vertex, src = weld_corners(key)
+    verts = key[src]
+    tris = corner_vertex[fan_triangles(counts)]
     positions = pos_all[verts[:, 0]].astype(np.float32)
     tris, n_degen = drop_degenerate(positions, tris)
     notes = []

@@ -40,8 +40,8 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.errors import input_error
+from wrinklepipe.geometry.polygons import drop_degenerate, fan_triangles, weld_corners
 from wrinklepipe.io.confine import confine_usd
-from wrinklepipe.io.gltf_primitive import drop_degenerate
 
 
 @dataclass(frozen=True)
@@ -263,23 +263,12 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     if n_c is not None:
         cols.append(n_c)
     key = np.concatenate(cols, axis=1) + 0.0
-    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    inv = inv.reshape(-1)
-    order = np.lexsort((first, fvi[first]))
-    rank = np.empty(len(order), np.int64)
-    rank[order] = np.arange(len(order))
-    corner_v = rank[inv]
-    src = first[order]  # a corner of each render vertex
+    corner_v, src = weld_corners(key, fvi)  # src: a corner of each render vertex
     vmap = fvi[src]  # render vertex -> USD point
     if len(vmap) != n_p:
         notes.append(f"{len(vmap)} render vertices from {n_p} points (split by UVs/normals)")
 
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    n_tri = counts - 2
-    poly = np.repeat(np.arange(len(counts)), n_tri)
-    k = np.arange(n_tri.sum()) - np.repeat(np.cumsum(n_tri) - n_tri, n_tri)
-    s = starts[poly]
-    tris = corner_v[np.stack([s, s + k + 1, s + k + 2], axis=1)]
+    tris = corner_v[fan_triangles(counts)]
     if (counts > 3).any():
         notes.append(f"fan-triangulated {int((counts > 3).sum())} polygon(s)")
     if gm.GetOrientationAttr().Get(time) == UsdGeom.Tokens.leftHanded:
