@@ -30,6 +30,7 @@ LAYERS: tuple[Layer, ...] = (
         (
             "wrinklepipe",
             "wrinklepipe.paths",
+            "wrinklepipe.suffixes",
             "wrinklepipe.errors",
             "wrinklepipe.asset",
             "wrinklepipe.metadata",

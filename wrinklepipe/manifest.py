@@ -26,6 +26,7 @@ from wrinklepipe.io.readers import MESH_SUFFIXES
 from wrinklepipe.model import POLICY_WEIGHT_RANGE
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.presets import jimenez
+from wrinklepipe.suffixes import is_gltf, is_usd
 
 _CHANNELS = "rgba"
 
@@ -379,7 +380,7 @@ def _semantic_problems(m: Manifest, file: str, problems: ProblemList, check_file
 
 def _document_problems(m: Manifest, file: str, problems: ProblemList) -> None:
     """``material``, ``meshes`` and an omitted ``base`` select parts of a glTF document."""
-    gltf = m.mesh is not None and m.mesh.suffix.lower() in (".gltf", ".glb")
+    gltf = m.mesh is not None and is_gltf(m.mesh)
     what = f"a {m.mesh.suffix} mesh" if m.mesh is not None else "no mesh"
     if m.base is None and not gltf:
         problems.add(
@@ -388,7 +389,7 @@ def _document_problems(m: Manifest, file: str, problems: ProblemList) -> None:
             f"mesh, whose wrinkled material's normalTexture is then the base; here: {what})",
             "base",
         )
-    usd = m.mesh is not None and m.mesh.suffix.lower() in (".usd", ".usda", ".usdc", ".usdz")
+    usd = m.mesh is not None and is_usd(m.mesh)
     for key, value in (("material", m.material), ("meshes", m.meshes)):
         if value and not (gltf or usd):
             problems.add(file, f"selects parts of a .gltf/.glb or USD mesh; here: {what}", key)

@@ -33,9 +33,9 @@ from urllib.parse import unquote
 from wrinklepipe import __version__
 from wrinklepipe.batch.options import AssetOptions
 from wrinklepipe.document.usd_layer import source_reference
-from wrinklepipe.document.usd_source import USD_SUFFIXES
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.paths import ROOT
+from wrinklepipe.suffixes import USD_SUFFIXES
 
 KEY_SCHEMA = "wrinklepipe/batch-cache@1"
 #: Libraries whose version can change the bytes convert writes or the validation it records.

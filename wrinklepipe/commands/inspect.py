@@ -13,8 +13,8 @@ from wrinklepipe.console import emit_json, out
 from wrinklepipe.document import read_document
 from wrinklepipe.document.inspect import diff, summary
 from wrinklepipe.document.usd_inspect import usd_summary
-from wrinklepipe.document.usd_source import USD_SUFFIXES
 from wrinklepipe.errors import input_error, plain_reason
+from wrinklepipe.suffixes import USD_SUFFIXES
 
 NAME = "inspect"
 HELP = "list a glTF's or USD stage's meshes, materials, skins, animations; or diff two"

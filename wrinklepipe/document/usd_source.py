@@ -33,9 +33,6 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.io.mesh_merge import merge_meshes
 from wrinklepipe.io.mesh_usd import open_stage, read_usd_meshes, uv_primvar
 
-#: The mesh suffixes read as a USD source (a layer is written over them).
-USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
-
 
 @dataclass
 class UsdSource:

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -46,6 +45,7 @@ from wrinklepipe.drivers.curves import (
 )
 from wrinklepipe.errors import InputError, Problem
 from wrinklepipe.presets import arkit
+from wrinklepipe.suffixes import is_gltf
 
 
 @dataclass(frozen=True)
@@ -179,7 +179,7 @@ def blendshapes_driver(
     fps = float(spec.get("fps", ctx.fps))
     mesh_names = tuple(ctx.mesh.morph_names) if ctx.mesh is not None else ()
     file = spec.get("file")
-    if file is not None and Path(str(file)).suffix.lower() in (".gltf", ".glb"):
+    if file is not None and is_gltf(file):
         times, names, x = morph_animation(ctx, resolve(ctx, str(file)), times, fps)
         universe = mesh_names or names
         inputs = np.zeros((len(times), len(universe)))

@@ -45,6 +45,7 @@ import numpy as np
 
 from wrinklepipe.drivers.base import DriverContext, DriverResult, register, resolve, spec_problem
 from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.suffixes import is_gltf
 
 
 def theta(x: np.ndarray | float) -> np.ndarray:
@@ -157,7 +158,7 @@ def bones_driver(
     ctx: DriverContext, spec: Mapping[str, Any], times: np.ndarray | None
 ) -> DriverResult:
     doc: dict[str, Any] = {}
-    if "file" in spec and str(spec["file"]).lower().endswith((".gltf", ".glb")):
+    if "file" in spec and is_gltf(spec["file"]):
         doc = _gltf_bones_doc(ctx, spec, times)
     elif "file" in spec:
         path = resolve(ctx, str(spec["file"]))

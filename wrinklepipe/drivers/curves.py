@@ -41,6 +41,7 @@ from wrinklepipe.drivers.base import (
 )
 from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.suffixes import GLTF_SUFFIXES, is_gltf
 
 INTERPOLATIONS = ("linear", "cubic", "step")
 
@@ -203,7 +204,7 @@ def load_keys(ctx: DriverContext, spec: Mapping[str, Any]) -> tuple[Keys, str, l
             k, i = read_curves_json(path)
             keys.update(k)
             interp = interp or i
-        elif suffix not in (".gltf", ".glb"):
+        elif suffix not in GLTF_SUFFIXES:
             raise spec_problem(
                 ctx, f"unsupported curves file {path.name} (csv, json, gltf)", "file"
             )
@@ -269,7 +270,7 @@ def curves_driver(
     names: list[str] = []
     cols: list[np.ndarray] = []
     gltf = None
-    if "file" in spec and Path(str(spec["file"])).suffix.lower() in (".gltf", ".glb"):
+    if "file" in spec and is_gltf(spec["file"]):
         gltf = morph_animation(ctx, resolve(ctx, str(spec["file"])), times, fps)
         times = gltf[0]
     if not keys and gltf is None:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -28,6 +27,7 @@ from wrinklepipe.drivers.base import (
     spec_problem,
 )
 from wrinklepipe.drivers.curves import keys_range, load_keys, morph_animation, sample_keys
+from wrinklepipe.suffixes import is_gltf
 
 
 def _geometry() -> Any:
@@ -42,7 +42,7 @@ def _morph_frames(
 ) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
     fps = float(spec.get("fps", ctx.fps))
     file = spec.get("file")
-    if file is not None and Path(str(file)).suffix.lower() in (".gltf", ".glb"):
+    if file is not None and is_gltf(file):
         return morph_animation(ctx, resolve(ctx, str(file)), times, fps)
     if "morphs" in spec and "keys" not in spec:
         names = tuple(str(k) for k in spec["morphs"])

@@ -23,6 +23,7 @@ from wrinklepipe.io.mesh_obj import read_obj_meshes
 from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
 from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.io.usd_read import read_usd
+from wrinklepipe.suffixes import GLTF_SUFFIXES, OBJ_SUFFIXES, USD_SUFFIXES
 
 
 @dataclass(frozen=True)
@@ -63,9 +64,9 @@ def _obj_meshes(path: Path, o: LoadOptions) -> list[Mesh]:
 
 
 FORMATS: tuple[Format, ...] = (
-    Format("gltf", (".gltf", ".glb"), _gltf_meshes, read_wrinkled),
-    Format("usd", (".usd", ".usda", ".usdc", ".usdz"), _usd_meshes, read_usd),
-    Format("obj", (".obj",), _obj_meshes),
+    Format("gltf", GLTF_SUFFIXES, _gltf_meshes, read_wrinkled),
+    Format("usd", USD_SUFFIXES, _usd_meshes, read_usd),
+    Format("obj", OBJ_SUFFIXES, _obj_meshes),
 )
 #: suffix (lower case, with the dot) -> its format
 READERS: dict[str, Format] = {s: f for f in FORMATS for s in f.suffixes}

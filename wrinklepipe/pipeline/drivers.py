@@ -18,6 +18,7 @@ from wrinklepipe.drivers.curves import load_keys, morph_animation, sample_keys
 from wrinklepipe.io.animation import read_morph_tracks
 from wrinklepipe.io.package import WeightCurves
 from wrinklepipe.io.rig import GltfRig
+from wrinklepipe.suffixes import is_gltf
 
 
 def expression_cycle(asset: WrinkleAsset, seconds_per_expression: float = 1.0) -> WeightCurves:
@@ -66,7 +67,7 @@ def morph_inputs(
     so the output plays the face and its wrinkles together. None when it has none."""
     t = np.asarray(times, np.float64)
     file = spec.get("file")
-    if file is not None and Path(str(file)).suffix.lower() in (".gltf", ".glb"):
+    if file is not None and is_gltf(file):
         _, got, x = morph_animation(ctx, resolve(ctx, str(file)), t)
         out = np.zeros((t.size, len(names)), np.float32)
         for j, n in enumerate(got):
