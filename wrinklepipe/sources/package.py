@@ -12,10 +12,11 @@ from wrinklepipe.io.readers import READERS, read_package_file
 FOLDER_ORDER = (".gltf", ".glb", ".usda", ".usdc", ".usdz", ".usd")
 
 
-def asset_file(folder: Path) -> Path | None:
+def asset_file(folder: Path, suffixes: tuple[str, ...] = FOLDER_ORDER) -> Path | None:
     """The written asset a folder holds: its first .gltf, else .glb, else USD file (sorted
-    by name within a suffix), or None. The one place a convert folder is recognised."""
-    for suffix in FOLDER_ORDER:
+    by name within a suffix; only ``suffixes``, in their order), or None. The one place a
+    convert folder is recognised."""
+    for suffix in suffixes:
         found = sorted(q for q in folder.iterdir() if q.suffix.lower() == suffix and q.is_file())
         if found:
             return found[0]

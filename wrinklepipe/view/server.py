@@ -21,8 +21,9 @@ from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.readers import FORMATS
 from wrinklepipe.paths import ROOT
+from wrinklepipe.sources.package import asset_file
+from wrinklepipe.suffixes import GLTF_SUFFIXES, is_gltf
 
 DATA = Path(__file__).resolve().parent.parent / "data"
 VIEWER_DIR = DATA / "viewer"
@@ -68,16 +69,17 @@ def find_asset(path: str | Path) -> tuple[Path, Path]:
     p = Path(path)
     if not p.exists():
         raise input_error(p, "not found")
-    gltf = next(f for f in FORMATS if f.name == "gltf")
     if p.is_file():
-        if p.suffix.lower() not in gltf.suffixes:
+        if not is_gltf(p):
             raise input_error(p, "expected a .gltf or .glb (or a convert output folder)")
         return p.parent.resolve(), p.resolve()
-    found = [q for s in gltf.suffixes for q in sorted(p.glob("*" + s))]
-    found = found or [q for s in gltf.suffixes for q in sorted(p.rglob("*" + s))]
-    if not found:
+    found = asset_file(p, GLTF_SUFFIXES)  # a convert folder: its glTF
+    if found is None:  # any folder: its first glTF below
+        below = [q for s in GLTF_SUFFIXES for q in sorted(p.rglob("*" + s)) if q.is_file()]
+        found = below[0] if below else None
+    if found is None:
         raise input_error(p, "no .gltf or .glb in this folder (is it a convert output?)")
-    return p.resolve(), found[0].resolve()
+    return p.resolve(), found.resolve()
 
 
 @dataclass(frozen=True)
