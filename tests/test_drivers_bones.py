@@ -142,18 +142,6 @@ def test_bones_driver_takes_skin_from_the_mesh(tmp_path):
     np.testing.assert_allclose(res.weights[0, :, 0], [1.0, 0.0])
 
 
-def test_dynamic_driver_uses_the_geometry_hook(monkeypatch):
-    import sys
-    import types
-
-    fake = types.ModuleType("wrinklepipe.geometry.dynamic")
-    fake.driver = lambda ctx, spec, times: np.full((len(times), 5), 0.25)
-    monkeypatch.setitem(sys.modules, "wrinklepipe.geometry.dynamic", fake)
-    ctx = wd.DriverContext(["face"], ("stretch", "compress"), policy="signed")
-    res = wd.evaluate("dynamic", ctx, {}, times=[0.0, 1.0])
-    assert res.per_vertex and res.weights.shape == (2, 5, 1) and res.states == ("signed",)
-
-
 # --- bones from a skinned glTF's own animation (Khronos RiggedSimple) --------------------------
 
 _RIGGED = (

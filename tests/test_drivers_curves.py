@@ -91,7 +91,6 @@ def test_dynamic_is_registered():
 
 def test_dynamic_driver_plugs_in_the_geometry_module():
     """A grid shrunk uniformly by s has every triangle's area times s^2: weight 1 - s^2."""
-    pytest.importorskip("wrinklepipe.geometry.dynamic")
     from wrinklepipe.asset import Mesh
 
     n = 4

@@ -1,18 +1,14 @@
 """``dynamic``: weights from the mesh's own stretch (Oat), implemented by the geometry module.
 
-This driver is only the plug: the maths lives in :mod:`wrinklepipe.geometry.dynamic`. When that
-module defines ``driver(ctx, spec, times)`` it is called as is (it returns a
-:class:`DriverResult` or per-vertex weights ``[F, V]`` / ``[F, V, K]``). Otherwise the documented
-building blocks are used: the mesh is posed per frame from blend-shape weights (``keys``,
-``morphs`` or a glTF morph animation in ``file``) with ``morph_pose``, and
-``DynamicWeights.build(rest, indices, vertex_ids).frame(deformed)`` gives one signed weight per
-vertex (negative = stretched, positive = compressed), i.e. ``[F, V, 1]`` under state ``signed``.
-Without the geometry module the driver refuses with a clear message.
+This driver is only the plug: the maths lives in :mod:`wrinklepipe.geometry.dynamic`. The mesh
+is posed per frame from blend-shape weights (``keys``, ``morphs`` or a glTF morph animation in
+``file``) with ``morph_pose``, and ``DynamicWeights.build(rest, indices, vertex_ids).
+frame(deformed)`` gives one signed weight per vertex (negative = stretched, positive =
+compressed), i.e. ``[F, V, 1]`` under state ``signed``.
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Mapping
 from typing import Any
 
@@ -27,14 +23,8 @@ from wrinklepipe.drivers.base import (
     spec_problem,
 )
 from wrinklepipe.drivers.curves import keys_range, load_keys, morph_animation, sample_keys
+from wrinklepipe.geometry.dynamic import DynamicWeights, morph_pose
 from wrinklepipe.suffixes import is_gltf
-
-
-def _geometry() -> Any:
-    try:
-        return importlib.import_module("wrinklepipe.geometry.dynamic")
-    except ModuleNotFoundError:
-        return None
 
 
 def _morph_frames(
@@ -60,24 +50,6 @@ def _morph_frames(
 def dynamic_driver(
     ctx: DriverContext, spec: Mapping[str, Any], times: np.ndarray | None
 ) -> DriverResult:
-    geo = _geometry()
-    if geo is None:
-        raise spec_problem(
-            ctx,
-            "the 'dynamic' driver needs wrinklepipe.geometry.dynamic, which this build lacks",
-            "kind",
-        )
-    hook = getattr(geo, "driver", None)
-    if hook is not None:
-        res = hook(ctx, spec, times)
-        if isinstance(res, DriverResult):
-            return res
-        w = np.asarray(res, np.float32)
-        if w.ndim == 2:
-            w = w[..., None]
-        t = np.arange(w.shape[0]) / ctx.fps if times is None else np.asarray(times)
-        states = ("signed",) if w.shape[2] == 1 else ctx.states
-        return DriverResult("dynamic", t, w, (), states, per_vertex=True)
     mesh = ctx.mesh
     if mesh is None or mesh.morph_deltas is None:
         raise spec_problem(ctx, "the 'dynamic' driver needs a mesh with morph targets", "kind")
@@ -85,9 +57,9 @@ def dynamic_driver(
     unknown = [n for n in names if n not in mesh.morph_names]
     if unknown:
         raise spec_problem(ctx, f"unknown blend shape(s) {unknown}", "keys")
-    op = geo.DynamicWeights.build(mesh.positions, mesh.indices, vertex_ids=mesh.vertex_ids)
+    op = DynamicWeights.build(mesh.positions, mesh.indices, vertex_ids=mesh.vertex_ids)
     frames = [
-        np.asarray(op.frame(geo.morph_pose(mesh, dict(zip(names, map(float, row))))), np.float32)
+        np.asarray(op.frame(morph_pose(mesh, dict(zip(names, map(float, row))))), np.float32)
         for row in x
     ]
     w = np.stack(frames)[..., None]
