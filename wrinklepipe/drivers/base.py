@@ -50,6 +50,8 @@ class MorphTrack:
     times: np.ndarray
     values: np.ndarray
     interpolation: str = "LINEAR"
+    #: the glTF node whose morph weights the channel drives (None: not from a glTF node)
+    node: int | None = None
 
 
 @dataclass

@@ -35,6 +35,15 @@ def read_morph_tracks(path: str | Path, animation: int = 0) -> list[MorphTrack]:
 
 def _read(path: Path, animation: int) -> list[MorphTrack]:
     r = GltfFile(path, GltfReadOptions())
+    tracks = morph_tracks(r, animation)
+    if not tracks:
+        raise r.err("the animation drives no morph-target weights", f"/animations/{animation}")
+    return tracks
+
+
+def morph_tracks(r: GltfFile, animation: int = 0) -> list[MorphTrack]:
+    """The ``weights`` channels of animation ``animation`` of an opened file (possibly none),
+    each checked (finite, keys strictly increasing, one value per target per key)."""
     doc = r.gltf
     anims = doc.get("animations") or []
     if not 0 <= animation < len(anims):
@@ -70,9 +79,7 @@ def _read(path: Path, animation: int) -> list[MorphTrack]:
         if np.any(np.diff(kt) <= 0):
             raise r.err("key times must increase strictly", key)
         shape = (kt.size, 3, len(names)) if interp == "CUBICSPLINE" else (kt.size, len(names))
-        tracks.append(MorphTrack(names, kt, kv.reshape(shape), interp))
-    if not tracks:
-        raise r.err("the animation drives no morph-target weights", f"/animations/{animation}")
+        tracks.append(MorphTrack(names, kt, kv.reshape(shape), interp, node_i))
     return tracks
 
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.animation import morph_tracks
 from wrinklepipe.io.gltf_primitive import (
     TRIANGLE_MODES,
     GltfSource,
@@ -236,6 +237,9 @@ def gltf_morph_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, f
         raise r.err("the file has no animation to sample", "/animations")
     nodes = doc.get("nodes", [])
     meshes = doc.get("meshes", [])
+    # the one reader of weights channels (io/animation, as the drivers are given them); a
+    # node's last channel wins
+    channels = {t.node: t for t in morph_tracks(r, 0)}
     out: dict[str, float] = {}
     for ni, node in enumerate(nodes):
         if "mesh" not in node or not 0 <= int(node["mesh"]) < len(meshes):
@@ -246,23 +250,9 @@ def gltf_morph_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, f
             continue
         names = target_names(doc, int(node["mesh"]))
         w = np.asarray(node.get("weights", gm.get("weights", [0.0] * n_t)), dtype=np.float64)
-        for anim in doc.get("animations", [])[:1]:
-            for ch in anim.get("channels", []):
-                tgt = ch.get("target", {})
-                if tgt.get("path") != "weights" or tgt.get("node") != ni:
-                    continue
-                smp = anim["samplers"][ch["sampler"]]
-                t_in = r.accessor(smp["input"])[:, 0].astype(np.float64)
-                vals = r.accessor(smp["output"]).astype(np.float64).reshape(-1)
-                interp = smp.get("interpolation", "LINEAR")
-                shape = (len(t_in), 3, n_t) if interp == "CUBICSPLINE" else (len(t_in), n_t)
-                w = sample_channel(
-                    t_in,
-                    vals.reshape(shape),
-                    float(time),
-                    interp,
-                    "weights",
-                )
+        tr = channels.get(ni)
+        if tr is not None:
+            w = sample_channel(tr.times, tr.values, float(time), tr.interpolation, "weights")
         for name, value in zip(names, w):
             if name in mesh.morph_names:
                 out.setdefault(name, float(value))
