@@ -18,7 +18,7 @@ from test_mesh_io_gltf import QUAD_I, QUAD_P, QUAD_UV, SAMPLES, needs_data, quad
 from wrinklepipe.document.model import read_document
 from wrinklepipe.document.render_mesh import OPTIONS, primitive_mesh
 from wrinklepipe.errors import InputError
-from wrinklepipe.io.animation import read_morph_tracks
+from wrinklepipe.io.animation import read_channels, read_morph_tracks
 from wrinklepipe.io.gltf_primitive import (
     PrimitiveOptions,
     read_instance,
@@ -216,3 +216,32 @@ def test_morph_tracks_name_targets_as_the_mesh_does(tmp_path):
     (mesh,) = read_gltf_meshes(f)
     assert track.names == mesh.morph_names == ("smile", "target_1")
     np.testing.assert_array_equal(track.values[1], [1.0, 0.5])
+
+
+def test_channels_are_read_once_strictly_or_leniently(tmp_path):
+    """One channel reader for every glTF animation user: a rotation channel comes back
+    ``[N, 4]`` from both sources; keys that do not increase are refused when strict (the drivers'
+    and the skeleton's readers) and kept when lenient (the USD writer of a source)."""
+    doc = quad_doc()
+    doc["animations"] = [
+        {
+            "samplers": [{"input": 3, "output": 4}],
+            "channels": [
+                {"sampler": 0, "target": {"node": 0, "path": "rotation"}},
+                {"sampler": 0, "target": {"path": "rotation"}},  # no node: not a node channel
+            ],
+        }
+    ]
+    times = np.array([0.0, 1.0], np.float32)
+    quats = np.array([[0, 0, 0, 1], [0, 0, 1, 0]], np.float32)
+    arrays = [(QUAD_P, {}), (QUAD_I, {}), (QUAD_UV, {}), (times, {}), (quats, {})]
+    f = write_gltf(tmp_path / "r.gltf", arrays, doc)
+    for src in _sources(f):
+        (c,) = read_channels(src)
+        assert (c.node, c.path, c.interpolation) == (0, "rotation", "LINEAR")
+        np.testing.assert_array_equal(c.values, quats)
+    same_times = [*arrays[:3], (np.zeros(2, np.float32), {}), arrays[4]]
+    flat = write_gltf(tmp_path / "s.gltf", same_times, doc)
+    with pytest.raises(InputError, match="increase strictly"):
+        read_channels(GltfFile(flat, GltfReadOptions()))
+    assert len(read_channels(read_document(flat), strict=False)) == 1

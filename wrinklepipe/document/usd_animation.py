@@ -37,7 +37,8 @@ import numpy as np
 
 from wrinklepipe.document.model import Document
 from wrinklepipe.document.usd_looks import gf_matrix
-from wrinklepipe.io.gltf_primitive import node_matrix  # the one glTF TRS -> matrix
+from wrinklepipe.io.animation import Channel, read_channels
+from wrinklepipe.io.gltf_primitive import node_matrix, trs_matrices  # the one glTF TRS
 from wrinklepipe.io.mesh_gltf import sample_channel_at
 
 #: The variant that plays convert's weight curve (morph weights) on the wrinkled meshes.
@@ -56,60 +57,19 @@ class SkeletonInfo:
     morph_nodes: dict[int, list[str]] = field(default_factory=dict)
 
 
-def trs_matrices(t: np.ndarray, q: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """``[F, 4, 4]`` (column vectors) of translations ``[F, 3]``, unit quaternions ``[F, 4]``
-    (x, y, z, w) and scales ``[F, 3]``: T R S, as glTF composes a node."""
-    x, y, z, w = q.T
-    r = np.empty((len(q), 3, 3))
-    r[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], 1)
-    r[:, 1] = np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], 1)
-    r[:, 2] = np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], 1)
-    m = np.tile(np.eye(4), (len(q), 1, 1))
-    m[:, :3, :3] = r * s[:, None, :]
-    m[:, :3, 3] = t
-    return m
+def _channels(doc: Document, a: int) -> list[Channel]:
+    """The node and weights channels of animation ``a`` (:func:`wrinklepipe.io.animation.
+    read_channels`, the one channel reader; a channel naming no node or sampler passed over)."""
+    return read_channels(doc, a, strict=False)
 
 
-@dataclass
-class _Channel:
-    node: int
-    path: str
-    t: np.ndarray
-    v: np.ndarray
-    interp: str
-
-
-def _channels(doc: Document, a: int) -> list[_Channel]:
-    anim = doc.array("animations")[a]
-    samplers = anim.get("samplers") or []
-    out = []
-    for ch in anim.get("channels") or []:
-        tgt = ch.get("target") or {}
-        node, path, si = tgt.get("node"), tgt.get("path"), ch.get("sampler")
-        if not isinstance(node, int) or not isinstance(si, int) or not 0 <= si < len(samplers):
-            continue
-        if path not in ("translation", "rotation", "scale", "weights"):
-            continue
-        smp = samplers[si]
-        t = doc.accessor(smp["input"]).reshape(-1).astype(np.float64)
-        v = doc.accessor(smp["output"]).astype(np.float64)
-        interp = str(smp.get("interpolation", "LINEAR"))
-        width = {"translation": 3, "rotation": 4, "scale": 3}.get(path)
-        if width is None:  # weights: outputs are keys x targets
-            per_key = v.size // max(len(t), 1)
-            width = per_key // 3 if interp == "CUBICSPLINE" else per_key
-        v = v.reshape(len(t), 3, width) if interp == "CUBICSPLINE" else v.reshape(len(t), width)
-        out.append(_Channel(node, path, t, v, interp))
-    return out
-
-
-def _times(channels: list[_Channel], fps: float) -> np.ndarray:
-    keys = [c.t for c in channels]
+def _times(channels: list[Channel], fps: float) -> np.ndarray:
+    keys = [c.times for c in channels]
     for c in channels:
-        if c.interp == "CUBICSPLINE" and len(c.t) > 1:
-            keys.append(np.arange(c.t[0], c.t[-1], 1.0 / fps))
-        if c.interp == "STEP":
-            keys.append(c.t[1:] - STEP_LEAD)
+        if c.interpolation == "CUBICSPLINE" and len(c.times) > 1:
+            keys.append(np.arange(c.times[0], c.times[-1], 1.0 / fps))
+        if c.interpolation == "STEP":
+            keys.append(c.times[1:] - STEP_LEAD)
     return np.unique(np.round(np.concatenate(keys) * fps, 6)) / fps
 
 
@@ -219,7 +179,7 @@ def add_animations(
         times = _times(chans, fps)
         codes = times * fps
         ends.append(float(codes[-1]))
-        by_node: dict[int, dict[str, _Channel]] = {}
+        by_node: dict[int, dict[str, Channel]] = {}
         for c in chans:
             by_node.setdefault(c.node, {})[c.path] = c
         local = _Locals(nodes, parent, worlds, by_node, times)
@@ -251,7 +211,7 @@ def add_animations(
                         c = by_node.get(node, {}).get("weights")
                         if c is None:
                             continue
-                        w = sample_channel_at(c.t, c.v, times, c.interp, "weights")
+                        w = sample_channel_at(c.times, c.values, times, c.interpolation, "weights")
                         for i, target in enumerate(targets[: w.shape[1]]):
                             tok = Tf.MakeValidIdentifier(target)
                             if tok not in shapes:
@@ -337,8 +297,8 @@ class _Locals:
             else:
                 t0, q0, s0 = _rest_trs(self.nodes[n])
                 tr, ro, sc = (
-                    sample_channel_at(got[p].t, got[p].v, self.times, got[p].interp, p)
-                    if p in got
+                    sample_channel_at(c.times, c.values, self.times, c.interpolation, p)
+                    if (c := got.get(p)) is not None
                     else np.repeat(rest[None], f, 0)
                     for p, rest in (("translation", t0), ("rotation", q0), ("scale", s0))
                 )

@@ -1,4 +1,16 @@
-"""A glTF's morph-weight animation as the drivers are given it.
+"""glTF animation channels, read once: what the drivers are given and what the other glTF
+readers sample.
+
+:func:`read_channels` reads the channels of one animation of any
+:class:`wrinklepipe.io.gltf_primitive.GltfSource` (a file opened by
+:class:`wrinklepipe.io.gltf_read.GltfFile`, or the pass-through
+:class:`wrinklepipe.document.model.Document`): node, path (``translation``, ``rotation``,
+``scale``, ``weights``), key times and values (``[N, C]``; CUBICSPLINE ``[N, 3, C]``: in-tangent,
+value, out-tangent), interpolation. ``strict`` (the drivers' morph tracks, the skeleton
+reader): every channel must name a node and a sampler, its interpolation must be one of the
+spec's, its keys finite and strictly increasing and a ``weights`` channel must give one value
+per morph target of the node's mesh per key; otherwise (the USD writer of a source's
+animations) a channel that names no node or sampler is passed over.
 
 The ``curves``, ``blendshapes`` and ``dynamic`` drivers read no files: the pipeline puts
 :func:`read_morph_tracks` in :attr:`wrinklepipe.drivers.base.DriverContext.read_morph_tracks`,
@@ -9,16 +21,89 @@ file's folder, sizes capped) and accessors decoded by :mod:`wrinklepipe.io.acces
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from wrinklepipe.drivers.base import MorphTrack
 from wrinklepipe.errors import input_error, plain_reason
-from wrinklepipe.io.gltf_primitive import target_names
+from wrinklepipe.io.gltf_primitive import GltfSource, target_names
 from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
 
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
+#: Values per key of the node paths.
+WIDTHS = {"translation": 3, "rotation": 4, "scale": 3}
+PATHS = (*WIDTHS, "weights")
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One animation channel: ``values`` ``[N, C]`` (CUBICSPLINE ``[N, 3, C]``) at ``times``
+    ``[N]`` (float64) for ``path`` of node ``node``."""
+
+    node: int
+    path: str
+    times: np.ndarray
+    values: np.ndarray
+    interpolation: str
+
+
+def read_channels(
+    src: GltfSource,
+    animation: int = 0,
+    paths: tuple[str, ...] = PATHS,
+    strict: bool = True,
+) -> list[Channel]:
+    """The channels of animation ``animation`` whose path is one of ``paths`` (see the module
+    doc for ``strict``)."""
+    anims = src.gltf.get("animations") or []
+    if not 0 <= animation < len(anims):
+        raise src.err("no animation in this file", "/animations")
+    anim = anims[animation]
+    nodes, meshes = src.gltf.get("nodes") or [], src.gltf.get("meshes") or []
+    samplers = anim.get("samplers") or []
+    out = []
+    for ci, ch in enumerate(anim.get("channels") or []):
+        tgt = ch.get("target") or {}
+        node, path, si = tgt.get("node"), tgt.get("path"), ch.get("sampler")
+        if path not in paths or node is None:
+            continue
+        key = f"/animations/{animation}/channels/{ci}"
+        if not (isinstance(node, int) and isinstance(si, int) and 0 <= si < len(samplers)) or (
+            strict and not 0 <= node < len(nodes)
+        ):
+            if strict:
+                raise src.err("channel names a missing node or sampler", key)
+            continue
+        smp = samplers[si]
+        interp = str(smp.get("interpolation", "LINEAR"))
+        if strict and interp not in INTERPOLATIONS:
+            raise src.err(
+                f"unknown interpolation {interp!r}", f"/animations/{animation}/samplers/{si}"
+            )
+        t = np.asarray(src.accessor(smp["input"]), np.float64).reshape(-1)
+        v = np.asarray(src.accessor(smp["output"]), np.float64)
+        per_key = v.size // max(len(t), 1) // (3 if interp == "CUBICSPLINE" else 1)
+        width = WIDTHS.get(path, per_key)
+        if path == "weights" and strict:
+            mesh = nodes[node].get("mesh")
+            if not isinstance(mesh, int) or not 0 <= mesh < len(meshes):
+                raise src.err("weights channel targets a node without a mesh", key)
+            width = len(target_names(src.gltf, mesh))
+        if strict:
+            if not (np.isfinite(t).all() and np.isfinite(v).all()):
+                bad = smp["input"] if not np.isfinite(t).all() else smp["output"]
+                raise src.err("accessor holds non-finite values", f"/accessors/{bad}")
+            n = width * (3 if interp == "CUBICSPLINE" else 1)
+            if t.size == 0 or v.size != t.size * n:
+                what = "weight values" if path == "weights" else "values"
+                raise src.err(f"{v.size} {what} for {t.size} keys x {n} per key", key)
+            if np.any(np.diff(t) <= 0):
+                raise src.err("key times must increase strictly", key)
+        shape = (len(t), 3, width) if interp == "CUBICSPLINE" else (len(t), width)
+        out.append(Channel(node, path, t, v.reshape(shape), interp))
+    return out
 
 
 def read_morph_tracks(path: str | Path, animation: int = 0) -> list[MorphTrack]:
@@ -28,64 +113,26 @@ def read_morph_tracks(path: str | Path, animation: int = 0) -> list[MorphTrack]:
     target_names`). An :class:`~wrinklepipe.errors.InputError` names the file and JSON
     pointer for anything malformed."""
     try:
-        return _read(Path(path), animation)
+        r = GltfFile(Path(path), GltfReadOptions())
+        tracks = morph_tracks(r, animation)
+        if not tracks:
+            raise r.err("the animation drives no morph-target weights", f"/animations/{animation}")
+        return tracks
     except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
         raise input_error(path, f"malformed glTF animation: {plain_reason(exc)}") from None
 
 
-def _read(path: Path, animation: int) -> list[MorphTrack]:
-    r = GltfFile(path, GltfReadOptions())
-    tracks = morph_tracks(r, animation)
-    if not tracks:
-        raise r.err("the animation drives no morph-target weights", f"/animations/{animation}")
-    return tracks
-
-
-def morph_tracks(r: GltfFile, animation: int = 0) -> list[MorphTrack]:
-    """The ``weights`` channels of animation ``animation`` of an opened file (possibly none),
-    each checked (finite, keys strictly increasing, one value per target per key)."""
-    doc = r.gltf
-    anims = doc.get("animations") or []
-    if not 0 <= animation < len(anims):
-        raise r.err("no animation in this file", "/animations")
-    anim = anims[animation]
-    nodes, meshes = doc.get("nodes") or [], doc.get("meshes") or []
-    samplers = anim.get("samplers") or []
-    tracks = []
-    for ci, ch in enumerate(anim.get("channels") or []):
-        target = ch.get("target") or {}
-        node_i = target.get("node")
-        if target.get("path") != "weights" or node_i is None:
-            continue
-        key = f"/animations/{animation}/channels/{ci}"
-        si = ch.get("sampler")
-        if not 0 <= node_i < len(nodes) or not isinstance(si, int) or not 0 <= si < len(samplers):
-            raise r.err("channel names a missing node or sampler", key)
-        mesh_i = nodes[node_i].get("mesh")
-        if not isinstance(mesh_i, int) or not 0 <= mesh_i < len(meshes):
-            raise r.err("weights channel targets a node without a mesh", key)
-        names = tuple(target_names(doc, mesh_i))  # the names the mesh readers give them
-        s = samplers[si]
-        interp = s.get("interpolation") or "LINEAR"
-        if interp not in INTERPOLATIONS:
-            raise r.err(
-                f"unknown interpolation {interp!r}", f"/animations/{animation}/samplers/{si}"
-            )
-        kt = _finite(r, s["input"]).reshape(-1)
-        kv = _finite(r, s["output"]).reshape(-1)
-        per_key = len(names) * (3 if interp == "CUBICSPLINE" else 1)
-        if kt.size == 0 or kv.size != kt.size * per_key:
-            raise r.err(f"{kv.size} weight values for {kt.size} keys x {per_key} per key", key)
-        if np.any(np.diff(kt) <= 0):
-            raise r.err("key times must increase strictly", key)
-        shape = (kt.size, 3, len(names)) if interp == "CUBICSPLINE" else (kt.size, len(names))
-        tracks.append(MorphTrack(names, kt, kv.reshape(shape), interp, node_i))
-    return tracks
-
-
-def _finite(r: GltfFile, index: object) -> np.ndarray:
-    """An accessor as float64 (normalized integers scaled per the spec), all values finite."""
-    a = np.asarray(r.accessor(index), np.float64)  # type: ignore[arg-type]
-    if not np.isfinite(a).all():
-        raise r.err("accessor holds non-finite values", f"/accessors/{index}")
-    return a
+def morph_tracks(src: GltfSource, animation: int = 0) -> list[MorphTrack]:
+    """The ``weights`` channels of animation ``animation`` (possibly none) as morph tracks
+    (:func:`read_channels`, strict)."""
+    nodes = src.gltf.get("nodes") or []
+    return [
+        MorphTrack(
+            tuple(target_names(src.gltf, int(nodes[c.node]["mesh"]))),
+            c.times,
+            c.values,
+            c.interpolation,
+            c.node,
+        )
+        for c in read_channels(src, animation, ("weights",))
+    ]

@@ -99,18 +99,22 @@ def node_matrix(node: dict[str, Any]) -> np.ndarray:
     if "matrix" in node:
         return _vec(node, "matrix", [], 16).reshape(4, 4).T  # column-major
     t = _vec(node, "translation", [0, 0, 0], 3)
-    x, y, z, w = _vec(node, "rotation", [0, 0, 0, 1], 4)
+    q = _vec(node, "rotation", [0, 0, 0, 1], 4)
     s = _vec(node, "scale", [1, 1, 1], 3)
-    r = np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-    m = np.eye(4)
-    m[:3, :3] = r * s
-    m[:3, 3] = t
+    return trs_matrices(t[None], q[None], s[None])[0]
+
+
+def trs_matrices(t: np.ndarray, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``[F, 4, 4]`` (column vectors) of translations ``[F, 3]``, unit quaternions ``[F, 4]``
+    (x, y, z, w) and scales ``[F, 3]``: T R S, as glTF composes a node."""
+    x, y, z, w = q.T
+    r = np.empty((len(q), 3, 3))
+    r[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], 1)
+    r[:, 1] = np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], 1)
+    r[:, 2] = np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], 1)
+    m = np.tile(np.eye(4), (len(q), 1, 1))
+    m[:, :3, :3] = r * s[:, None, :]
+    m[:, :3, 3] = t
     return m
 
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.animation import morph_tracks
+from wrinklepipe.io.animation import WIDTHS, morph_tracks, read_channels
 from wrinklepipe.io.gltf_primitive import (
     TRIANGLE_MODES,
     GltfSource,
@@ -182,19 +182,10 @@ def gltf_joint_world_matrices_at(
     if any(t is not None for t in times) and not doc.get("animations"):
         raise r.err("the file has no animation to sample", "/animations")
     rest_nodes = [dict(n) for n in doc.get("nodes", [])]
-    channels = []
-    for ch in (doc.get("animations") or [{}])[0].get("channels", []):
-        tgt = ch.get("target", {})
-        path_ = tgt.get("path")
-        if path_ not in ("translation", "rotation", "scale") or "node" not in tgt:
-            continue
-        smp = doc["animations"][0]["samplers"][ch["sampler"]]
-        t_in = r.accessor(smp["input"])[:, 0].astype(np.float64)
-        vals = r.accessor(smp["output"]).astype(np.float64)
-        interp = smp.get("interpolation", "LINEAR")
-        if interp == "CUBICSPLINE":
-            vals = vals.reshape(len(t_in), 3, -1)
-        channels.append((int(tgt["node"]), path_, t_in, vals, interp))
+    channels = [  # the one channel reader (io/animation), the node paths of the first animation
+        (c.node, c.path, c.times, c.values, c.interpolation)
+        for c in (read_channels(r, 0, tuple(WIDTHS)) if doc.get("animations") else [])
+    ]
     names_to_node = {}
     for s in doc.get("skins", []):
         for j in s.get("joints", []):
