@@ -40,6 +40,7 @@ from wrinklepipe.document.usd_looks import gf_matrix
 from wrinklepipe.io.animation import Channel, read_channels
 from wrinklepipe.io.gltf_primitive import node_matrix, trs_matrices  # the one glTF TRS
 from wrinklepipe.io.mesh_gltf import sample_channel_at
+from wrinklepipe.io.package import unique_name
 
 #: The variant that plays convert's weight curve (morph weights) on the wrinkled meshes.
 WRINKLE_VARIANT = "wrinkle"
@@ -146,13 +147,7 @@ def add_animations(
     taken: set[str] = set()
 
     def variant_name(name: str) -> str:
-        base = Tf.MakeValidIdentifier(name)
-        tok, k = base, 1
-        while tok in taken:
-            k += 1
-            tok = f"{base}_{k}"
-        taken.add(tok)
-        return tok
+        return unique_name(Tf.MakeValidIdentifier(name), taken)
 
     def rest_xforms() -> None:
         for n, path in xforms.items():

@@ -22,7 +22,7 @@ from wrinklepipe.document.images import image_pixels, texture_source
 from wrinklepipe.document.model import Document
 from wrinklepipe.document.write import mime_type
 from wrinklepipe.errors import InputError, plain_reason
-from wrinklepipe.io.package import png_bytes
+from wrinklepipe.io.package import png_bytes, unique_name
 
 _EXT = {"image/png": "png", "image/jpeg": "jpg"}
 
@@ -58,13 +58,7 @@ class Names:
         from pxr import Tf  # deferred: usd-core, USD only
 
         base = Tf.MakeValidIdentifier(name or "unnamed")
-        used = self.taken.setdefault(str(parent), set())
-        tok, k = base, 1
-        while tok in used:
-            k += 1
-            tok = f"{base}_{k}"
-        used.add(tok)
-        return tok
+        return unique_name(base, self.taken.setdefault(str(parent), set()))
 
 
 def gf_matrix(m: np.ndarray) -> Any:

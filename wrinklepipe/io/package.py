@@ -53,13 +53,18 @@ def safe_name(name: str, taken: set[str] | None = None) -> str:
     from a manifest or a foreign glTF can never point outside the output folder."""
 
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)).lstrip(".") or "unnamed"
-    if taken is not None:
-        base, i = stem, 1
-        while stem in taken:
-            i += 1
-            stem = f"{base}_{i}"
-        taken.add(stem)
-    return stem
+    return stem if taken is None else unique_name(stem, taken)
+
+
+def unique_name(stem: str, taken: set[str]) -> str:
+    """``stem``, or ``stem_2``, ``stem_3`` ... the first not in ``taken`` (which it updates):
+    how file stems and USD prim / variant names are kept apart."""
+    out, i = stem, 1
+    while out in taken:
+        i += 1
+        out = f"{stem}_{i}"
+    taken.add(out)
+    return out
 
 
 @dataclass
