@@ -13,7 +13,7 @@ import numpy as np
 
 from wrinklepipe.document.model import Document, PrimitiveRef
 from wrinklepipe.io.gltf_primitive import primitive_triangles as gltf_triangles
-from wrinklepipe.io.gltf_primitive import world_matrices
+from wrinklepipe.io.gltf_primitive import read_skin, world_matrices
 
 
 def node_world_matrices(doc: Document) -> dict[int, np.ndarray]:
@@ -78,13 +78,8 @@ def _skinned(
     p: np.ndarray,
     worlds: dict[int, np.ndarray],
 ) -> np.ndarray:
-    skin = doc.array("skins")[skin_index]
-    joints = [int(j) for j in skin.get("joints", [])]
-    if "inverseBindMatrices" in skin:
-        ibm = doc.accessor(skin["inverseBindMatrices"]).astype(np.float64)
-        ibm = ibm.reshape(-1, 4, 4).transpose(0, 2, 1)
-    else:
-        ibm = np.tile(np.eye(4), (len(joints), 1, 1))
+    joints = [int(j) for j in doc.array("skins")[skin_index].get("joints", [])]
+    ibm = read_skin(doc, skin_index).inverse_bind.astype(np.float64)  # the one skin reader
     jm = np.stack([worlds.get(j, np.eye(4)) for j in joints]) @ ibm  # [J, 4, 4]
     out = np.zeros_like(p)
     k = 0
