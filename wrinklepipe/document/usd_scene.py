@@ -64,7 +64,7 @@ from wrinklepipe.document.usd_animation import (
     xform_animated_nodes,
 )
 from wrinklepipe.document.usd_looks import Looks, Names, gf_matrix
-from wrinklepipe.io.gltf_primitive import node_matrix  # the one glTF TRS -> matrix
+from wrinklepipe.io.gltf_primitive import node_matrix, read_skin  # the one TRS, the one skin
 from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.io.usd_write import SCENE_MESH_NAME, SCENE_MESHES
 from wrinklepipe.metadata import BIAS_ATTRIBUTE, VERTEX_ID_ATTRIBUTE
@@ -149,10 +149,7 @@ class _Scene:
             p = joint_parent(j)
             world = self.worlds.get(j, node_matrix(nodes[j]))
             rest.append(world if p is None else np.linalg.inv(self.worlds[p]) @ world)
-        if "inverseBindMatrices" in s:
-            ibm = doc.accessor(s["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1)
-        else:
-            ibm = np.tile(np.eye(4), (len(joints), 1, 1))
+        ibm = read_skin(doc, skin).inverse_bind  # the one skin reader (identity when absent)
         holder = self.root.AppendChild("Skeletons")
         if not self.stage.GetPrimAtPath(holder):
             UsdGeom.Scope.Define(self.stage, holder)
