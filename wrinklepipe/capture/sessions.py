@@ -81,6 +81,13 @@ class SessionOptions:
     landmarks: int = 6  # landmarks: n x n jittered grid over the ROI
     texture_rotation_deg: float = -5.0
     seed: int = 3
+    #: Also photograph the expression lit from one side (the direction towards that light in
+    #: the camera frame, +X right, +Y up, +Z to the camera; ``None``: no side-lit photo). Same
+    #: pose and camera as the expression photo (registered to it), exposure
+    #: ``exposure_side``, its own noise (drawn from a separate generator: the other photos are
+    #: the same with or without it).
+    side_light: tuple[float, float, float] | None = None
+    exposure_side: float = 0.7
 
 
 #: Horizontal forehead lines that rise and fall like a cosine (the issue's independent case).
@@ -122,6 +129,7 @@ class Session:
     crease: Callable[[np.ndarray, np.ndarray], np.ndarray] = field(repr=False)
     psi: Callable = field(repr=False)  # expression px -> neutral px
     tau: Callable = field(repr=False)  # texture px -> neutral px
+    side_lit: np.ndarray | None = None  # [S, S] the expression lit from ``side_light``
 
 
 def _fold_height(x: np.ndarray, y: np.ndarray, s: float, f: Fold) -> np.ndarray:
@@ -300,11 +308,23 @@ def make_session(options: SessionOptions | None = None) -> Session:
     neutral = _photo(shade0, albedo, lambda x, y: (x, y), o.size, ss, o.exposure)
     expression = _photo(shade1, albedo, psi, o.size, ss, o.exposure_expression)
     levels = float(2**o.bits - 1)
-    photos = []
-    for img in (neutral, expression):
+
+    def develop(img: np.ndarray, gen: np.random.Generator) -> np.ndarray:
         sigma = np.sqrt(o.read_noise**2 + o.shot_noise**2 * np.maximum(img, 0.0))
-        noisy = img + rng.normal(0.0, 1.0, img.shape) * sigma
-        photos.append(np.round(np.clip(noisy, 0.0, 1.0) * levels) / levels)
+        noisy = img + gen.normal(0.0, 1.0, img.shape) * sigma
+        return np.round(np.clip(noisy, 0.0, 1.0) * levels) / levels
+
+    photos = [develop(img, rng) for img in (neutral, expression)]
+    side_lit = None
+    if o.side_light is not None:
+        light = np.asarray(o.side_light, np.float64)
+        light = light / np.linalg.norm(light)
+
+        def shade_side(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+            return np.maximum(_unit_normals(height1, x, y) @ light, 0.0)  # Lambert, attached
+
+        side = _photo(shade_side, albedo, psi, o.size, ss, o.exposure_side)
+        side_lit = develop(side, np.random.default_rng([o.seed, 1])).astype(np.float32)
 
     # Landmarks: a jittered grid over the ROI's box in the neutral photo.
     rx, ry = o.roi_radii
@@ -349,6 +369,7 @@ def make_session(options: SessionOptions | None = None) -> Session:
         expression_normals=n1.astype(np.float32),
         truth_photo=truth_photo.astype(np.float32),
         truth_texture=truth_texture.astype(np.float32),
+        side_lit=side_lit,
         height0=height0,
         crease=crease,
         psi=psi,

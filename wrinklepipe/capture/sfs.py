@@ -111,6 +111,16 @@ class SfsOptions:
     #: neutral turned from the camera: on one facing it the detrended height's mirror would
     #: explain R as well but is not a start, so the sign ambiguity would go unreported.
     detrend: float = 8.0
+    #: Polish this many leading candidates of the search (lowest plain residual first, within
+    #: ``polish_window`` times the winner's) and choose among them by the polished residual.
+    polish_candidates: int = 1
+    #: Weight of the side-lit photo's misfit relative to the ratio image's (both ratios of
+    #: photos with similar noise).
+    side_weight: float = 1.0
+    #: The crease height at the ROI border: ``"zero"`` (the crease meets the neutral there) or
+    #: ``"free"`` (natural border: creases may run through the ROI's edge).
+    border: str = "zero"
+    polish_window: float = 1.5
 
 
 @dataclass
@@ -171,9 +181,12 @@ class _Grid:
     reg: sparse.csr_matrix  # forward differences (both axes, stacked), [E, U]
     #: the integration system's preconditioner, set up once per grid (it depends on the grid only)
     cache: dict = field(default_factory=dict, compare=False, repr=False)
+    free: bool = False  # the border is free (not tied to c = 0 outside)
 
 
-def _grid(mask: np.ndarray) -> _Grid:
+def _grid(mask: np.ndarray, free: bool = False) -> _Grid:
+    """The operators on the unknown pixels of ``mask``. ``free``: the height is not tied to 0
+    outside the mask (one-sided differences at its border, no smoothness edge across it)."""
     h, w = mask.shape
     flat = np.flatnonzero(mask.ravel())
     col_of = np.full(h * w, -1, np.int64)
@@ -192,9 +205,20 @@ def _grid(mask: np.ndarray) -> _Grid:
 
     def central(plus: np.ndarray, minus: np.ndarray) -> sparse.csr_matrix:
         ip, im = plus >= 0, minus >= 0
-        data = np.concatenate([np.full(ip.sum(), 0.5), np.full(im.sum(), -0.5)])
-        rr = np.concatenate([rows[ip], rows[im]])
-        cc = np.concatenate([plus[ip], minus[im]])
+        if not free:  # c = 0 outside: central differences with zeros there
+            data = np.concatenate([np.full(ip.sum(), 0.5), np.full(im.sum(), -0.5)])
+            rr = np.concatenate([rows[ip], rows[im]])
+            cc = np.concatenate([plus[ip], minus[im]])
+            return sparse.csr_matrix((data, (rr, cc)), shape=(n, n))
+        # free border: central inside, one-sided where one neighbour is outside, 0 where both
+        both, only_p, only_m = ip & im, ip & ~im, im & ~ip
+        half = np.where(both, 0.5, 1.0)
+        use_p, use_m = ip & (both | only_p), im & (both | only_m)
+        data = np.concatenate(
+            [half[use_p], -half[use_m], -np.ones(only_p.sum()), np.ones(only_m.sum())]
+        )
+        rr = np.concatenate([rows[use_p], rows[use_m], rows[only_p], rows[only_m]])
+        cc = np.concatenate([plus[use_p], minus[use_m], rows[only_p], rows[only_m]])
         return sparse.csr_matrix((data, (rr, cc)), shape=(n, n))
 
     dx = central(neighbour(0, 1), neighbour(0, -1))
@@ -205,6 +229,8 @@ def _grid(mask: np.ndarray) -> _Grid:
         # every edge from an unknown to its neighbour; edges to the outside (c = 0) count once
         # each way, edges between two unknowns only in the +col / +row direction
         keep = (nb < 0) | ((dr, dc) in ((0, 1), (1, 0)))
+        if free:  # no edge to the outside
+            keep &= nb >= 0
         k = np.flatnonzero(keep)
         m = len(k)
         inside = nb[k] >= 0
@@ -212,7 +238,7 @@ def _grid(mask: np.ndarray) -> _Grid:
         rr = np.concatenate([np.arange(m), np.arange(m)[inside]])
         cc = np.concatenate([k, nb[k][inside]])
         regs.append(sparse.csr_matrix((data, (rr, cc)), shape=(m, n)))
-    return _Grid((h, w), flat, dx, dy, sparse.vstack(regs).tocsr())
+    return _Grid((h, w), flat, dx, dy, sparse.vstack(regs).tocsr(), free=free)
 
 
 # --- the solve ---------------------------------------------------------------------------------
@@ -253,6 +279,22 @@ def _model(p_x: np.ndarray, p_y: np.ndarray, inv_nz0: np.ndarray) -> tuple[np.nd
     return rho, d * p_x, d * p_y
 
 
+@dataclass(frozen=True)
+class _Side:
+    """The side-lit photo's data on the unknowns: ``S = l_z - l_x p_col + l_y p_row`` (the
+    side-lit over the flash-lit expression, ``n1 . l / N1_z``: linear in the slopes ``p``)."""
+
+    ax: np.ndarray  # -l_x (per unknown)
+    ay: np.ndarray  # +l_y
+    base: np.ndarray  # the model at the neutral's slopes: l_z + ax g0x + ay g0y
+    target: np.ndarray  # the measured S (exposure normalised)
+    weight: float  # relative to the ratio image's term
+
+    def model(self, qx: np.ndarray, qy: np.ndarray, blur: _Blur | None) -> np.ndarray:
+        lin = self.ax * qx + self.ay * qy  # the crease's part (0 outside the unknowns)
+        return self.base + (blur(lin) if blur is not None else lin)
+
+
 def _solve(
     grid: _Grid,
     g0x: np.ndarray,
@@ -265,10 +307,12 @@ def _solve(
     exposure: float,
     o: SfsOptions,
     curvature: float = 0.0,
+    side: _Side | None = None,
 ) -> tuple[np.ndarray, float, float]:
     """Levenberg-Marquardt on the unknown heights; returns (c, exposure, weighted RMS). With
     ``blur`` the model ratio is blurred as R was (the Gauss-Newton systems are then solved
-    matrix-free, preconditioned by the unblurred system's multigrid)."""
+    matrix-free, preconditioned by the unblurred system's multigrid). ``side``: the side-lit
+    photo's term too (its RMS joins the residual, weighted)."""
     c = c0.copy()
     lam = o.smooth
     lap = (grid.reg.T @ grid.reg).tocsr()
@@ -285,16 +329,27 @@ def _solve(
         if blur is not None:
             rho = blur.ratio(rho)
         f = e * rho - ratio
-        return float(weight @ (f * f) + lam * (cc @ (reg_t_reg @ cc))), (px, py, rho, drx, dry, f)
+        total = float(weight @ (f * f) + lam * (cc @ (reg_t_reg @ cc)))
+        fs = None
+        if side is not None:
+            fs = side.model(px - g0x, py - g0y, blur) - side.target
+            total += side.weight * float(weight @ (fs * fs))
+        return total, (px, py, rho, drx, dry, f, fs)
 
     e = exposure
     energy_now, st = energy(c, e)
     mu = 1e-2
     diag_w = sparse.diags(weight)
+    if side is not None:  # the side term's Jacobian is constant (linear in the slopes)
+        jac_s = (sparse.diags(side.ax) @ grid.dx + sparse.diags(side.ay) @ grid.dy).tocsr()
+        jtj_s = side.weight * (jac_s.T @ diag_w @ jac_s)
     for _ in range(o.iterations):  # ten Gauss-Newton steps, each one sparse solve
-        px, py, rho, drx, dry, f = st
+        px, py, rho, drx, dry, f, fs = st
         jac = (sparse.diags(e * drx) @ grid.dx + sparse.diags(e * dry) @ grid.dy).tocsr()
-        jtj = (jac.T @ diag_w @ jac + lam * reg_t_reg).tocsr()
+        jtj = jac.T @ diag_w @ jac + lam * reg_t_reg
+        if side is not None:
+            jtj = jtj + jtj_s
+        jtj = jtj.tocsr()
         scale = float(jtj.diagonal().mean()) or 1.0
         a = (jtj + sparse.identity(jtj.shape[0]) * (mu * scale)).tocsr()
         # a fresh preconditioner per step: reusing the first step's was measured 2x slower
@@ -302,6 +357,8 @@ def _solve(
         precond = _multigrid(a)
         if blur is None:
             b = -(jac.T @ (weight * f) + lam * (reg_t_reg @ c))
+            if side is not None:
+                b = b - side.weight * (jac_s.T @ (weight * fs))
             op: spla.LinearOperator | sparse.csr_matrix = a
         else:
             jx, jy = e * drx, e * dry
@@ -314,9 +371,14 @@ def _solve(
                 v: np.ndarray, jx: np.ndarray = jx, jy: np.ndarray = jy, damp: float = mu * scale
             ) -> np.ndarray:
                 jv = blur(jx * (grid.dx @ v) + jy * (grid.dy @ v))
-                return jt(weight * jv) + lam * (reg_t_reg @ v) + damp * v
+                out = jt(weight * jv) + lam * (reg_t_reg @ v) + damp * v
+                if side is not None:
+                    out = out + side.weight * (jac_s.T @ blur(weight * blur(jac_s @ v)))
+                return out
 
             b = -(jt(weight * f) + lam * (reg_t_reg @ c))
+            if side is not None:
+                b = b - side.weight * (jac_s.T @ blur(weight * fs))
             op = spla.LinearOperator(a.shape, matvec=normal, dtype=np.float64)
         step, _ = spla.cg(op, b, rtol=o.cg_tol, maxiter=o.cg_maxiter, M=precond)
 
@@ -337,8 +399,11 @@ def _solve(
                 break
         else:
             mu *= 10.0
-    f = st[5]
-    return c, e, float(np.sqrt(float(weight @ (f * f)) / wsum))
+    f, fs = st[5], st[6]
+    sq = float(weight @ (f * f))
+    if fs is not None:
+        sq += side.weight * float(weight @ (fs * fs))  # type: ignore[union-attr]
+    return c, e, float(np.sqrt(sq / wsum))
 
 
 def neutral_height(mask: np.ndarray, g0: np.ndarray) -> np.ndarray:
@@ -429,6 +494,7 @@ def solve_crease(
     starts: dict[str, np.ndarray] | None = None,
     options: SfsOptions | None = None,
     blur: float = 0.0,
+    side: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SfsResult:
     """Solve for the crease height of every start; keep the one with the lowest residual.
 
@@ -442,11 +508,15 @@ def solve_crease(
     with; the model ratio is blurred alike (fitting an unblurred model to a blurred R pulls
     the creases' slopes towards the neutral's: measured on the N_z 0.8 forehead, the exact
     truth's ratio is 0.0053 RMS from the blurred R, blurred alike 0.0018).
+    ``side``: ``(S, l)``, a photo of the expression lit from the unit direction ``l`` (camera
+    frame) over the flash-lit expression photo, registered and blurred as R, exposure
+    normalised (``S = n1 . l / N1_z``, linear in the slopes: the crease's sign in every pixel);
+    its misfit joins the objective with weight ``SfsOptions.side_weight``.
     """
     o = options or SfsOptions()
     h, w = np.shape(ratio)
     k = max(1, int(np.ceil(max(h, w) / o.max_side)))
-    return _solve_on_grid(ratio, n0, roi, valid, starts or {}, o, k, o.coarse, blur)
+    return _solve_on_grid(ratio, n0, roi, valid, starts or {}, o, k, o.coarse, blur, side=side)
 
 
 def _solve_on_grid(
@@ -460,6 +530,7 @@ def _solve_on_grid(
     levels: int,
     blur: float = 0.0,
     polish: bool = True,
+    side: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SfsResult:
     """:func:`solve_crease` on the grid downsampled by ``k``, after ``levels`` coarser solves
     (each on a grid twice as coarse; the coarser result is a start here)."""
@@ -467,7 +538,9 @@ def _solve_on_grid(
     h, w = r_full.shape
     coarse = None
     if levels > 0 and min(h, w) // (2 * k) >= o.coarse_min_side:
-        coarse = _solve_on_grid(ratio, n0, roi, valid, starts, o, 2 * k, levels - 1, blur, False)
+        coarse = _solve_on_grid(
+            ratio, n0, roi, valid, starts, o, 2 * k, levels - 1, blur, False, side
+        )
     in_roi = np.asarray(roi, np.float64) > 0.5
     ok = in_roi if valid is None else in_roi & np.asarray(valid, bool)
     rr = _downsample(r_full, k)
@@ -475,13 +548,24 @@ def _solve_on_grid(
     nn = nn / np.linalg.norm(nn, axis=-1, keepdims=True)
     mask = _downsample(in_roi.astype(np.float64), k) > 0.5
     wgt = _downsample(ok.astype(np.float64), k)
-    grid = _grid(mask)
+    grid = _grid(mask, o.border == "free")
     u = grid.unknown
     g0 = neutral_slopes(nn)
     g0x, g0y = g0[..., 0].ravel()[u], g0[..., 1].ravel()[u]
     inv_nz0 = 1.0 / np.maximum(nn[..., 2].ravel()[u], 1e-3)
     rv = rr.ravel()[u]
     wv = np.where(wgt.ravel()[u] > 0.5, 1.0, 0.0)
+    sd = None
+    if side is not None:
+        light = np.asarray(side[1], np.float64)
+        ax, ay = np.full(len(u), -light[0]), np.full(len(u), light[1])
+        sd = _Side(
+            ax,
+            ay,
+            light[2] + ax * g0x + ay * g0y,
+            _downsample(np.asarray(side[0], np.float64), k).ravel()[u],
+            o.side_weight,
+        )
     tried: dict[str, tuple[np.ndarray, float, float]] = {}
     inits: dict[str, np.ndarray] = {}
     # the search (every start, the fusion, the choice) fits the plain model; the winner is then
@@ -489,6 +573,7 @@ def _solve_on_grid(
     blur_op = _blur_on_grid(blur, k, grid) if blur > 0 else None
     args = (g0x, g0y, inv_nz0, rv, wv, blur_op if not o.polish else None)
     tilted = np.abs(g0[mask]).max() > 1e-3 if mask.any() else False
+    tilted = tilted or sd is not None  # a side light shows the sign even on a flat neutral
     more = dict(starts)
     if coarse is not None:  # the coarser grid's solution, crease slopes at full resolution
         more["coarse"] = coarse.slopes - neutral_slopes(n0)
@@ -507,30 +592,49 @@ def _solve_on_grid(
             for name, up in (("eikonal", True), ("eikonal_down", False)):
                 inits[name] = (eikonal_height(slope, mask, h0, up) - h0).ravel()[u]
         for name, c0 in inits.items():
-            tried[name] = _solve(grid, *args, c0, 1.0, o)
+            tried[name] = _solve(grid, *args, c0, 1.0, o, side=sd)
         if len(tried) > 1:
-            fused = _fuse(grid, {n: v[0] for n, v in tried.items()}, args, mask.shape, o)
-            tried["fused"] = _solve(grid, *args, fused, 1.0, o)
+            fused = _fuse(grid, {n: v[0] for n, v in tried.items()}, args, mask.shape, o, sd)
+            tried["fused"] = _solve(grid, *args, fused, 1.0, o, side=sd)
         if o.detrend > 0 and tilted:  # the best so far without its broad part, solved again
             lead = min(tried, key=lambda n: tried[n][2])
             c_lead = tried[lead][0]
             c_flat = c_lead - _Blur(grid.shape, u, o.detrend)(c_lead)
-            tried["detrended"] = _solve(grid, *args, c_flat, 1.0, o)
+            tried["detrended"] = _solve(grid, *args, c_flat, 1.0, o, side=sd)
     best = min(tried, key=lambda n: tried[n][2])
     first = next(iter(tried))
     if tried[first][2] <= tried[best][2] * (1.0 + o.tie):
         best = first  # a tie keeps the preferred start (the prior's sign)
     c_small, exposure, resid = tried[best]
     if o.polish and blur_op is not None and polish:
+        lead = [best] + [
+            n
+            for n in sorted(tried, key=lambda n: tried[n][2])
+            if n != best and tried[n][2] <= tried[best][2] * o.polish_window
+        ][: max(o.polish_candidates - 1, 0)]
+        polished = {}
         with threadpool_limits(1):
-            c_small, exposure, resid = _solve(
-                grid, *args[:5], blur_op, c_small, exposure, o, o.polish_curvature
-            )
+            for name in lead:  # the few leading candidates
+                polished[name] = _solve(
+                    grid,
+                    *args[:5],
+                    blur_op,
+                    tried[name][0],
+                    tried[name][1],
+                    o,
+                    o.polish_curvature,
+                    sd,
+                )
+        pbest = min(polished, key=lambda n: polished[n][2])
+        if polished[best][2] > polished[pbest][2] * (1.0 + o.tie):
+            best = pbest
+        c_small, exposure, resid = polished[best]
+        tried.update({n: v for n, v in polished.items() if n != best})
     amb_small, amb_fraction = _ambiguity(grid, tried, best, o.ambiguity)
     amb = np.zeros(mask.shape, bool)
     amb.ravel()[u] = amb_small
-    c = _to_full(c_small, u, mask.shape, k, (h, w), in_roi)
-    d_row, d_col = np.gradient(c)
+    c = _to_full(c_small, u, mask.shape, k, (h, w), in_roi, grid.free)
+    d_row, d_col = np.gradient(_extend(c, in_roi) if grid.free else c)
     p = neutral_slopes(n0) + np.stack([d_col, d_row], axis=-1)
     return SfsResult(
         height=c,
@@ -570,6 +674,15 @@ def _ambiguity(
     return amb, float(amb.sum() / max(int(crease.sum()), 1))
 
 
+def _extend(c: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``c`` outside ``mask`` replaced by its nearest value inside (so that differences at the
+    mask's border are one-sided, as the free border's operators are)."""
+    if mask.all() or not mask.any():
+        return c
+    _, (ri, ci) = ndimage.distance_transform_edt(~mask, return_indices=True)
+    return c[ri, ci]
+
+
 def _up_nearest(img: np.ndarray, k: int, shape: tuple[int, int]) -> np.ndarray:
     """A solve grid's image at full resolution (nearest; edge rows repeated)."""
     if k == 1:
@@ -586,13 +699,19 @@ def _to_full(
     k: int,
     shape: tuple[int, int],
     in_roi: np.ndarray,
+    free: bool = False,
 ) -> np.ndarray:
     """A solve grid's unknown heights back at full resolution: heights scale with the pixel
-    size, bilinear in between, 0 outside the ROI."""
+    size, bilinear in between, 0 outside the ROI (``free``: the border's heights extended
+    outwards before the interpolation)."""
     c = np.zeros(small)
     c.ravel()[unknown] = c_small
     if k == 1:
         return c
+    if free:
+        inside = np.zeros(small, bool)
+        inside.ravel()[unknown] = True
+        c = _extend(c, inside)
     h, w = shape
     rows = (np.arange(h) + 0.5) / k - 0.5
     cols = (np.arange(w) + 0.5) / k - 0.5
@@ -607,6 +726,7 @@ def _fuse(
     args: tuple[np.ndarray, ...],
     shape: tuple[int, int],
     o: SfsOptions,
+    side: _Side | None = None,
 ) -> np.ndarray:
     """One more start: at every pixel the slopes of the solution whose residual is lowest
     nearby (Gaussian window), integrated (a fusion move: each crease from the start that
@@ -621,6 +741,8 @@ def _fuse(
             rho = blur.ratio(rho)
         f = np.zeros(shape[0] * shape[1])
         f[grid.unknown] = wv * (rho - rv) ** 2
+        if side is not None:
+            f[grid.unknown] += side.weight * wv * (side.model(qx, qy, blur) - side.target) ** 2
         local.append(ndimage.gaussian_filter(f.reshape(shape), o.fuse_sigma).ravel()[grid.unknown])
         slopes.append((qx, qy))
     pick = np.argmin(np.stack(local), axis=0)
@@ -632,7 +754,10 @@ def _fuse(
 def _integrate(grid: _Grid, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
     """Least-squares height with central-difference slopes ``q`` and ``c = 0`` outside."""
     if "integrate" not in grid.cache:
-        a = (grid.dx.T @ grid.dx + grid.dy.T @ grid.dy + 1e-3 * (grid.reg.T @ grid.reg)).tocsr()
+        a = grid.dx.T @ grid.dx + grid.dy.T @ grid.dy + 1e-3 * (grid.reg.T @ grid.reg)
+        if grid.free:  # the height's constant is free: a tiny shrink fixes it
+            a = a + 1e-6 * sparse.identity(a.shape[0])
+        a = a.tocsr()
         grid.cache["integrate"] = (a, _multigrid(a))
     a, precond = grid.cache["integrate"]
     b = grid.dx.T @ qx + grid.dy.T @ qy
