@@ -90,6 +90,50 @@ class WarpStats:
         }
 
 
+@dataclass(frozen=True)
+class SideRatio:
+    """The side-lit photo over the flash-lit expression photo, both registered onto the
+    neutral photo: ``S = k n1 . l / N1_z`` (albedo cancels), divided by ``k``."""
+
+    ratio: np.ndarray  # [H, W] S / k, blurred as R; 1 where not valid
+    light: np.ndarray  # [3] unit direction towards the side light (camera frame)
+    exposure: float  # k: the side light's level over the flash's (median over the ROI)
+
+
+def side_ratio(
+    side_warped: np.ndarray,
+    expression_warped: np.ndarray,
+    valid: np.ndarray,
+    roi: np.ndarray,
+    n0: np.ndarray,
+    light: np.ndarray | None,
+    blur: float,
+) -> SideRatio:
+    """``S = I_side / I'`` on the neutral photo's pixels, blurred as R (``blur`` px), divided
+    by its level ``k``: the median over the ROI of ``S`` over the neutral's own
+    ``n0 . l / N0_z`` (the model at the neutral's slopes; the neutral's normals are only known
+    inside the ROI)."""
+    if light is None:
+        raise ValueError("a side-lit photo needs its light direction (side_light)")
+    l_vec = np.asarray(light, np.float64)
+    if l_vec.shape != (3,) or not np.all(np.isfinite(l_vec)) or np.linalg.norm(l_vec) == 0:
+        raise ValueError(f"side_light must be a 3-vector, got {light!r}")
+    l_vec = l_vec / np.linalg.norm(l_vec)
+    if l_vec[2] <= 0.2:
+        raise ValueError("side_light must point towards the camera's side (z > 0.2)")
+    ie = np.asarray(expression_warped, np.float64)
+    ok = np.asarray(valid, bool) & (ie > 1e-6)
+    raw = np.where(ok, np.asarray(side_warped, np.float64) / np.where(ok, ie, 1.0), 1.0)
+    s_img = masked_blur(raw, ok.astype(np.float64), blur)
+    g0 = S.neutral_slopes(n0)
+    base = l_vec[2] - l_vec[0] * g0[..., 0] + l_vec[1] * g0[..., 1]
+    ref = ok & (np.asarray(roi, np.float64) > 0.5)
+    # the median over the ROI: a crease adds l . q, of both signs across it (its two flanks)
+    k = float(np.median(s_img[ref] / base[ref])) if ref.any() else 1.0
+    k = k if k > 1e-6 else 1.0
+    return SideRatio(np.where(ok, s_img / k, base).astype(np.float64), l_vec, k)
+
+
 @dataclass
 class CaptureResult:
     """Everything the stage computed; ``normal_texture`` is the product."""
@@ -108,6 +152,7 @@ class CaptureResult:
     #: method -> RMS of (ratio of the method's integrated height - R) over the ROI
     ratio_residual: dict[str, float] = field(default_factory=dict)
     sfs: S.SfsResult | None = None  # the shape-from-shading solve (starts, exposure)
+    side: SideRatio | None = None  # the side-lit photo's ratio (when one was given)
     neutral_shape: str = "facing the camera"  # where n0 came from
 
     @property
@@ -185,6 +230,8 @@ def capture(
     nz_neutral: np.ndarray | float = 1.0,
     options: CaptureOptions | None = None,
     neutral_normals: np.ndarray | None = None,
+    side_lit: np.ndarray | None = None,
+    side_light: np.ndarray | None = None,
 ) -> CaptureResult:
     """Run the capture on linear luminance photos ``[H, W]`` (and ``[H', W']``).
 
@@ -193,6 +240,10 @@ def capture(
     (texture pixels) for the second. ``texture_shape`` is ``(height, width)`` of the output.
     ``neutral_normals`` ``[H, W, 3]`` is the neutral face's shape seen from the camera (+Y up,
     +Z towards the camera); it replaces ``nz_neutral`` (its z is the per-pixel N_z).
+    ``side_lit`` ``[H', W']``: a photo of the expression (same pose and camera as
+    ``expression``, so the same landmarks) lit from the direction ``side_light`` (towards the
+    light, camera frame) instead of the flash; with it the solve sees every crease's sign
+    (:func:`side_ratio`), and ``auto`` takes ``sfs``. Needs ``neutral_normals``.
     """
     o = options or CaptureOptions()
     i0 = np.asarray(neutral, np.float32)
@@ -213,6 +264,8 @@ def capture(
     warp1 = W.fit_tps(lm_neutral, lm_expression)
     map1 = W.dense_map(warp1, (h, w), o.warp_step)
     warped, inside = W.sample(i1, map1, o.sample_order)
+    if side_lit is not None and neutral_normals is None:
+        raise ValueError("a side-lit photo needs the neutral's normals (neutral_normals)")
 
     # 2-3. ratio, tilt, orientation.
     if neutral_normals is not None:
@@ -227,6 +280,12 @@ def capture(
     chosen = resolve_method(
         o.orientation.method, n0[..., 2][roi_m > 0.5] if neutral_normals is not None else None
     )
+    side_args = None
+    if side_lit is not None:
+        if o.orientation.method == "auto":
+            chosen = "sfs"  # the side light shows every crease's sign
+        s_img, _ = W.sample(np.asarray(side_lit, np.float32), map1, o.sample_order)
+        side_args = (s_img, warped, inside & rr.valid, roi_m, n0, side_light)
     # The comparison runs every prior; the solve only when it can add something (the neutral's
     # normals are known) or when it was asked for: on a neutral facing the camera it is
     # measured worse than the integrable prior it starts from, and it is the slow step.
@@ -254,15 +313,27 @@ def capture(
     if more > 0:
         r_model = masked_blur(r_model, rr.valid.astype(np.float64), more)
     r_blur = float(np.hypot(ratio_opts.blur_sigma, more))  # R's blur in all: the model's too
+    side = None
+    if side_args is not None:
+        side = side_ratio(*side_args, r_blur)
     sfs_res = None
     if "sfs" in methods:
         prior = photo["integrable"].astype(np.float64)
         z = np.maximum(prior[..., 2], 1e-3)
         q = np.stack([-prior[..., 0] / z, prior[..., 1] / z], axis=-1)  # the prior's slopes
         sfs_res = S.solve_crease(
-            r_model, n0, roi_m, rr.valid, {"integrable": q, "mirror": -q}, o.sfs, r_blur
+            r_model,
+            n0,
+            roi_m,
+            rr.valid,
+            {"integrable": q, "mirror": -q},
+            o.sfs,
+            r_blur,
+            side=(side.ratio, side.light) if side is not None else None,
         )
-        n1z = np.clip(r_model * n0[..., 2] / sfs_res.exposure, 0.0, 1.0)
+        # the tilt: R's own (the data's detail), or with a side-lit photo the solve's slopes
+        # (fitted to both photos: measured on mixed N_z 0.995, tilt 0.33x -> 0.12x)
+        n1z = None if side is not None else np.clip(r_model * n0[..., 2] / sfs_res.exposure, 0, 1)
         photo["sfs"] = apply_roi(
             S.normals_from_slopes(sfs_res.slopes, n0, n1z).astype(np.float32), roi_m
         )
@@ -308,4 +379,5 @@ def capture(
         ratio_residual=explained,
         sfs=sfs_res,
         neutral_shape=shape_src,
+        side=side,
     )
