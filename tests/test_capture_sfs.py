@@ -163,3 +163,31 @@ def test_a_blurred_ratio_is_fitted_with_the_blur_in_the_model():
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(2, mask.sum()))
     assert a @ op(b) == pytest.approx(b @ op(a), rel=1e-12)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0], ids=["ridge", "valley"])
+def test_a_side_lit_photo_tells_ridge_from_valley_on_a_flat_neutral(sign):
+    # On a neutral facing the camera R cannot tell c from -c (above). A second photo lit from
+    # the unit direction l gives S = n1 . l / N1_z = l_z - l_x p_col + l_y p_row: first order
+    # in the slopes, so the sign is in every crease pixel.
+    ratio, n0, n1, roi = _scene(sign, tilt=0.0)
+    light = np.array([0.3, 0.4, 0.0])
+    light[2] = np.sqrt(1.0 - light @ light)
+    side = (n1 @ light) / n1[..., 2]  # the Lambertian side-lit photo over the flash-lit one
+    crease = (angular_error_deg(n1, n0) > 3.0) & (roi > 0.5)
+    lean_t = (n1 - n0)[..., :2]
+    for starts in ({}, None):  # no prior, and the default starts (zero, the eikonal ones)
+        res = S.solve_crease(ratio, n0, roi, starts=starts, side=(side, light))
+        lean_e = (S.slopes_to_normals(res.slopes) - n0)[..., :2]
+        right = np.einsum("...c,...c->...", lean_t, lean_e)[crease] > 0
+        assert right.mean() > 0.95, (sign, right.mean())
+        assert res.ambiguous_fraction < 0.05
+    # the mirrored crease cannot explain the side-lit photo
+    q = S.neutral_slopes(n1)
+    mirror = S.solve_crease(ratio, n0, roi, starts={"mirror": -q}, side=(side, light),
+                            options=S.SfsOptions(iterations=0, coarse=0, eikonal=False,
+                                                 detrend=0, polish=False))
+    truth = S.solve_crease(ratio, n0, roi, starts={"truth": q}, side=(side, light),
+                           options=S.SfsOptions(iterations=0, coarse=0, eikonal=False,
+                                                detrend=0, polish=False))
+    assert truth.starts["truth"] < 0.2 * mirror.starts["mirror"]

@@ -52,6 +52,7 @@ class CaptureJobOptions:
     scale: float | None = None
     nz: float = 1.0
     nz_regions: tuple[str, ...] = ()
+    side_light: str | None = None  # "X,Y,Z": towards the side-lit photo's light, camera frame
     max_pixels: int | None = None
 
 
@@ -69,6 +70,7 @@ class CaptureInputs:
     roi: str | None = None
     neutral_normals: str | None = None
     neutral_mesh: str | None = None
+    side_lit: str | None = None
     truth: str | None = None
 
     def given(self) -> dict[str, str]:
@@ -83,6 +85,7 @@ class CaptureInputs:
             "roi",
             "neutral_normals",
             "neutral_mesh",
+            "side_lit",
             "truth",
         )
         return {n: str(getattr(self, n)) for n in names if getattr(self, n)}
@@ -125,6 +128,26 @@ def parse_size(text: str | None) -> tuple[int, int] | None:
     if w <= 0 or h <= 0 or w * h > 16384 * 16384:
         raise input_error("<arguments>", f"--size out of range: {text!r}")
     return h, w
+
+
+def parse_light(text: str) -> np.ndarray:
+    """``X,Y,Z`` -> the unit direction towards the side light (camera frame)."""
+    try:
+        v = np.array([float(t) for t in text.split(",")], np.float64)
+    except ValueError:
+        v = np.zeros(0)
+    if v.shape != (3,) or not np.all(np.isfinite(v)) or np.linalg.norm(v) == 0:
+        raise input_error(
+            "<arguments>", f"--side-light must be X,Y,Z (three numbers), got {text!r}"
+        )
+    v = v / np.linalg.norm(v)
+    if v[2] <= 0.2:
+        raise input_error(
+            "<arguments>",
+            f"--side-light {text}: the light must be in front of the face, within about 78 "
+            "degrees of the camera (z > 0.2 of the unit direction)",
+        )
+    return v
 
 
 def read_photo(path: str, colorspace: str, max_pixels: int | None) -> tuple[np.ndarray, Any]:
@@ -318,6 +341,16 @@ def check_options(inputs: CaptureInputs, o: CaptureJobOptions) -> None:
                 "<arguments>",
                 f"{flag} gives the neutral's shape per pixel; drop --nz / --nz-region",
             )
+    if inputs.side_lit and not (inputs.neutral_normals or inputs.neutral_mesh):
+        raise input_error(
+            "<arguments>",
+            "--side-lit needs the neutral's shape (--neutral-normals or --neutral-mesh): the "
+            "side light's shading is measured against the neutral's normals",
+        )
+    if bool(inputs.side_lit) != bool(o.side_light):
+        raise input_error("<arguments>", "--side-lit and --side-light go together")
+    if o.side_light:
+        parse_light(o.side_light)
     if inputs.neutral_mesh and not inputs.texture_landmarks:
         raise input_error(
             "<arguments>",
@@ -420,7 +453,33 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
         orientation=OrientationOptions(method=o.orientation, furrow_sigma=o.furrow_sigma),
         scale=o.scale,
     )
-    res = capture(i0, i1, pn, pe, pp, pt, tuple(tex_shape), roi, nz, copts, neutral_normals=n0)
+    side_img = None
+    if inputs.side_lit:
+        side_img, info_s = read_photo(inputs.side_lit, o.colorspace, o.max_pixels)
+        if (info_s.width, info_s.height) != (info1.width, info1.height):
+            raise input_error(
+                inputs.side_lit,
+                f"photo is {info_s.width} x {info_s.height} but the expression photo "
+                f"{inputs.expression} is {info1.width} x {info1.height}; the side-lit photo is "
+                "the expression again, same pose and camera",
+            )
+        if not float(np.nanmax(side_img)) >= o.dark:
+            raise input_error(inputs.side_lit, "photo is all black; nothing to divide")
+    res = capture(
+        i0,
+        i1,
+        pn,
+        pe,
+        pp,
+        pt,
+        tuple(tex_shape),
+        roi,
+        nz,
+        copts,
+        neutral_normals=n0,
+        side_lit=side_img,
+        side_light=parse_light(o.side_light) if side_img is not None else None,
+    )
 
     te = None
     if truth is not None:
@@ -447,6 +506,7 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
         ),
         "colorspace": o.colorspace,
         "scale": o.scale,
+        "side_light": o.side_light,
     }
     report = build_report(res, inputs.given(), opts, outputs, te)
     if mesh_info is not None:

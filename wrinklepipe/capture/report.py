@@ -118,6 +118,12 @@ def build_report(
             # False: most crease signs are not in these photos (see UNOBSERVABLE)
             "sign_observable": bool(result.sfs.ambiguous_fraction <= AUTO_MAX_AMBIGUOUS),
         }
+    if result.side is not None:
+        report["side_lit"] = {
+            "light": [float(v) for v in result.side.light],
+            # the side light's level over the flash's (median over the ROI)
+            "exposure": result.side.exposure,
+        }
     return _round_tree(report)
 
 
@@ -130,7 +136,9 @@ UNOBSERVABLE = (
     "The orientation there is the prior's guess (creases are dents). To make it observable, "
     "photograph the region turned from the camera and flash (its N_z down to 0.9 or lower over "
     "the region, e.g. the head turned about 25 degrees; measured 94-100 % of crease texels "
-    "oriented right) with its --neutral-normals, or add a photo lit from one side."
+    "oriented right) with its --neutral-normals, or add the expression photographed again lit "
+    "from one side: --side-lit PHOTO --side-light X,Y,Z (measured 100 % oriented on a neutral "
+    "facing the camera)."
 )
 
 

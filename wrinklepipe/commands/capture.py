@@ -30,9 +30,15 @@ orthographic camera and the mesh's normals are rendered from it. With either, ra
 surface, and ridges are told from valleys where the neutral turns from the camera. Without them
 the neutral faces the camera (--nz, --nz-region give constants).
 
+A light at the camera shows a crease's sign only through the neutral's own slope: on a region
+facing the camera ridges and valleys look alike. --side-lit PHOTO (the expression again, same
+pose and camera, lit from --side-light X,Y,Z instead of the flash) shows it everywhere: the
+solve fits both photos.
+
 orientation (which way each wrinkle normal leans; the ratio only gives how much):
   auto        sfs with --neutral-normals on a neutral turned from the camera (N_z < 0.97
-              somewhere in the ROI), integrable otherwise (default; measured, docs/capture.md)
+              somewhere in the ROI) or with --side-lit, integrable otherwise (default;
+              measured, docs/capture.md)
   sfs         the crease height whose Lambertian ratio image matches R (integrable, zero at
               the ROI border; tells ridges from valleys where the neutral is tilted)
   integrable  a smooth surface's slope flips sign only where R peaks (one dent per crease)
@@ -81,6 +87,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="MESH",
         help="the character's neutral mesh (glTF/USD/OBJ with UVs): its normals are rendered "
         "from the camera the texture landmarks define (instead of --neutral-normals)",
+    )
+    p.add_argument(
+        "--side-lit",
+        metavar="PHOTO",
+        help="the expression photographed again lit from one side (same pose and camera as "
+        "EXPRESSION, so its landmarks): every crease's sign becomes observable; needs "
+        "--side-light and the neutral's shape",
+    )
+    p.add_argument(
+        "--side-light",
+        metavar="X,Y,Z",
+        help="direction towards the side light in the camera frame (+X right, +Y up, +Z "
+        "towards the camera), e.g. 0.4,0.3,0.87",
     )
     p.add_argument(
         "--nz",
@@ -161,6 +180,7 @@ def run(args: argparse.Namespace) -> int:
         roi=args.roi,
         neutral_normals=args.neutral_normals,
         neutral_mesh=args.neutral_mesh,
+        side_lit=args.side_lit,
         truth=args.truth,
     )
     options = CaptureJobOptions(
@@ -175,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
         scale=args.scale,
         nz=args.nz,
         nz_regions=tuple(args.nz_region),
+        side_light=args.side_light,
         max_pixels=args.max_pixels,
     )
     with status("capturing"):
