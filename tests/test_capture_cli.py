@@ -292,3 +292,84 @@ def test_photo_landmarks_and_nz_regions(session, base, tmp_path, capsys):
     capsys.readouterr()
     assert main(_args(session, tmp_path / "x") + ["--nz-region", "left.png"]) == 2
     assert "expects MASK=VALUE" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def side_session(tmp_path_factory) -> Path:
+    """The nearly flat mixed session (N_z 0.995: ridges and valleys whose signs a camera light
+    cannot show) at 128 px, with the expression photographed again lit from one side."""
+    from wrinklepipe.capture.sessions import MIXED, SessionOptions, make_session
+
+    s = make_session(
+        SessionOptions(size=128, texture_size=64, nz_min=0.995, folds=MIXED,
+                       side_light=(0.4, 0.3, 0.866))
+    )  # fmt: skip
+    d = tmp_path_factory.mktemp("cap_side")
+    for name, img in (("neutral", s.neutral), ("expression", s.expression), ("side", s.side_lit)):
+        write_image(d / f"{name}.png", img, bits=16)
+    write_image(d / "roi.png", s.roi, bits=8)
+    write_image(d / "n0.png", 0.5 + 0.5 * s.neutral_normals, bits=16)
+    write_image(d / "truth.png", 0.5 + 0.5 * s.truth_photo, bits=16)  # the map stays in photo space
+    for name, pts in (("n", s.lm_neutral), ("e", s.lm_expression)):
+        (d / f"{name}.json").write_text(json.dumps(pts.tolist()))
+    return d
+
+
+def _side_args(d: Path, out: Path) -> list[str]:
+    return [
+        "capture", str(d / "neutral.png"), str(d / "expression.png"), "--colorspace", "linear",
+        "--neutral-landmarks", str(d / "n.json"), "--expression-landmarks", str(d / "e.json"),
+        "--roi", str(d / "roi.png"),
+        "--neutral-normals", str(d / "n0.png"), "-o", str(out),
+    ]  # fmt: skip
+
+
+def test_a_side_lit_photo_makes_the_sign_observable(side_session, tmp_path):
+    d = side_session
+    out = tmp_path / "side"
+    args = _side_args(d, out) + ["--side-lit", str(d / "side.png"), "--side-light", "4,3,8.66"]
+    assert main(args) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["method"] == "sfs" and rep["sfs"]["sign_observable"] is True
+    assert rep["side_lit"]["exposure"] == pytest.approx(0.7 / 0.88, rel=0.01)  # the two lights
+    assert np.allclose(rep["side_lit"]["light"], [0.4, 0.3, 0.866], atol=1e-3)  # normalised
+    n = normalize(2.0 * read_image(out / "capture.png")[0] - 1.0)
+    t = normalize(2.0 * read_image(d / "truth.png")[0] - 1.0)
+    roi = read_image(out / "capture_roi.png")[0][..., 0] > 0.5
+    tilt = angular_error_deg(t, np.array([0.0, 0.0, 1.0]))
+    flat = tilt[roi].mean()
+    crease = roi & (tilt > 3.0)
+    right = np.einsum("...c,...c->...", n[..., :2], t[..., :2])[crease] > 0
+    # the issue's targets (measured in texture space 0.14x, 0.11x, 100 %; without the side
+    # photo the prior's 0.89x / 0.41x / 58 %, the sign flagged not observable)
+    assert angular_error_deg(n, t)[roi].mean() < 0.3 * flat
+    tilt_n = angular_error_deg(n, np.array([0.0, 0.0, 1.0]))
+    assert np.abs(tilt_n - tilt)[roi].mean() < 0.2 * flat
+    assert right.mean() > 0.95
+
+
+@pytest.mark.parametrize(
+    "extra, needle",
+    [
+        (["--side-lit", "SIDE"], "--side-lit and --side-light go together"),
+        (["--side-light", "1,0,1"], "--side-lit and --side-light go together"),
+        (["--side-lit", "SIDE", "--side-light", "1,0"], "must be X,Y,Z"),
+        (["--side-lit", "SIDE", "--side-light", "1,0,0"], "in front of the face"),
+    ],
+)
+def test_bad_side_lit_options(side_session, tmp_path, capsys, extra, needle):
+    args = _side_args(side_session, tmp_path / "x")
+    args += [str(side_session / "side.png") if a == "SIDE" else a for a in extra]
+    capsys.readouterr()
+    assert main(args) == 2
+    assert needle in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
+def test_side_lit_needs_the_neutral_shape(side_session, tmp_path, capsys):
+    args = _side_args(side_session, tmp_path / "x")
+    i = args.index("--neutral-normals")
+    del args[i : i + 2]
+    args += ["--side-lit", str(side_session / "side.png"), "--side-light", "1,0,2"]
+    assert main(args) == 2
+    assert "--side-lit needs the neutral's shape" in capsys.readouterr().err

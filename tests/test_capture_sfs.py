@@ -184,10 +184,20 @@ def test_a_side_lit_photo_tells_ridge_from_valley_on_a_flat_neutral(sign):
         assert res.ambiguous_fraction < 0.05
     # the mirrored crease cannot explain the side-lit photo
     q = S.neutral_slopes(n1)
-    mirror = S.solve_crease(ratio, n0, roi, starts={"mirror": -q}, side=(side, light),
-                            options=S.SfsOptions(iterations=0, coarse=0, eikonal=False,
-                                                 detrend=0, polish=False))
-    truth = S.solve_crease(ratio, n0, roi, starts={"truth": q}, side=(side, light),
-                           options=S.SfsOptions(iterations=0, coarse=0, eikonal=False,
-                                                detrend=0, polish=False))
+    mirror = S.solve_crease(
+        ratio,
+        n0,
+        roi,
+        starts={"mirror": -q},
+        side=(side, light),
+        options=S.SfsOptions(iterations=0, coarse=0, eikonal=False, detrend=0, polish=False),
+    )
+    truth = S.solve_crease(
+        ratio,
+        n0,
+        roi,
+        starts={"truth": q},
+        side=(side, light),
+        options=S.SfsOptions(iterations=0, coarse=0, eikonal=False, detrend=0, polish=False),
+    )
     assert truth.starts["truth"] < 0.2 * mirror.starts["mirror"]
