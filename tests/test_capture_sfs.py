@@ -201,3 +201,27 @@ def test_a_side_lit_photo_tells_ridge_from_valley_on_a_flat_neutral(sign):
         options=S.SfsOptions(iterations=0, coarse=0, eikonal=False, detrend=0, polish=False),
     )
     assert truth.starts["truth"] < 0.2 * mirror.starts["mirror"]
+
+
+def test_a_free_border_lets_a_crease_run_through_the_roi_edge():
+    # A straight valley across the whole photo on a tilted plane, the ROI a disc that cuts it:
+    # with c = 0 forced at the ROI border the solve must bend the crease to zero there; a free
+    # border does not, and its slopes stay closer to the truth near the edge.
+    n = 64
+    idx = np.arange(n) + 0.5
+    yy, xx = np.meshgrid(idx, idx, indexing="ij")
+    w = 3.0
+    c = -0.3 * w * np.sqrt(np.e) * np.exp(-0.5 * ((yy - n / 2) / w) ** 2)
+    g0 = np.stack([np.zeros_like(c), np.full_like(c, 0.25)], -1)
+    n0 = S.slopes_to_normals(g0)
+    q = np.stack([np.gradient(c, axis=1), np.gradient(c, axis=0)], -1)
+    n1 = S.slopes_to_normals(g0 + q)
+    ratio = n1[..., 2] / n0[..., 2]
+    r = np.hypot(xx - n / 2, yy - n / 2)
+    roi = (r <= 0.4 * n).astype(float)
+    edge = (roi > 0.5) & (r > 0.3 * n) & (np.abs(yy - n / 2) < 2 * w)
+    err = {}
+    for border in ("zero", "free"):
+        res = S.solve_crease(ratio, n0, roi, options=S.SfsOptions(border=border))
+        err[border] = np.hypot(*np.moveaxis(res.slopes - (g0 + q), -1, 0))[edge].mean()
+    assert err["free"] < 0.5 * err["zero"], err

@@ -111,16 +111,12 @@ class SfsOptions:
     #: neutral turned from the camera: on one facing it the detrended height's mirror would
     #: explain R as well but is not a start, so the sign ambiguity would go unreported.
     detrend: float = 8.0
-    #: Polish this many leading candidates of the search (lowest plain residual first, within
-    #: ``polish_window`` times the winner's) and choose among them by the polished residual.
-    polish_candidates: int = 1
     #: Weight of the side-lit photo's misfit relative to the ratio image's (both ratios of
     #: photos with similar noise).
     side_weight: float = 1.0
     #: The crease height at the ROI border: ``"zero"`` (the crease meets the neutral there) or
     #: ``"free"`` (natural border: creases may run through the ROI's edge).
     border: str = "zero"
-    polish_window: float = 1.5
 
 
 @dataclass
@@ -607,29 +603,10 @@ def _solve_on_grid(
         best = first  # a tie keeps the preferred start (the prior's sign)
     c_small, exposure, resid = tried[best]
     if o.polish and blur_op is not None and polish:
-        lead = [best] + [
-            n
-            for n in sorted(tried, key=lambda n: tried[n][2])
-            if n != best and tried[n][2] <= tried[best][2] * o.polish_window
-        ][: max(o.polish_candidates - 1, 0)]
-        polished = {}
         with threadpool_limits(1):
-            for name in lead:  # the few leading candidates
-                polished[name] = _solve(
-                    grid,
-                    *args[:5],
-                    blur_op,
-                    tried[name][0],
-                    tried[name][1],
-                    o,
-                    o.polish_curvature,
-                    sd,
-                )
-        pbest = min(polished, key=lambda n: polished[n][2])
-        if polished[best][2] > polished[pbest][2] * (1.0 + o.tie):
-            best = pbest
-        c_small, exposure, resid = polished[best]
-        tried.update({n: v for n, v in polished.items() if n != best})
+            c_small, exposure, resid = _solve(
+                grid, *args[:5], blur_op, c_small, exposure, o, o.polish_curvature, sd
+            )
     amb_small, amb_fraction = _ambiguity(grid, tried, best, o.ambiguity)
     amb = np.zeros(mask.shape, bool)
     amb.ravel()[u] = amb_small
