@@ -12,6 +12,7 @@ def test_capture_benchmark_quick():
     assert "orientation sfs" in steps  # the new method's time beside the others
     # and on a curved neutral, where the eikonal starts run
     assert {"sfs eikonal start, curved forehead", "orientation sfs, curved forehead"} <= set(steps)
+    assert "orientation sfs + side-lit photo, curved forehead" in steps  # the side-lit solve
     assert all(r.median_s > 0 and r.ratio > 0 for r in res.rows)
     acc = res.extra["accuracy_deg"]
     assert set(acc) == {"gradient", "furrow", "integrable"}  # no neutral normals: no solve
