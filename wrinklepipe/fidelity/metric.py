@@ -256,10 +256,26 @@ class PoseReference:
     act: np.ndarray  # [K, n] source activations
     normal: np.ndarray  # [n, 3] the source's blended normal
     weight: np.ndarray  # [n] activation weight sum_k |a_k|
-    share: np.ndarray  # [G, n] each weighted region's part: M_r * max_k |w_rk|
+    masks: np.ndarray  # [R, N] the source masks at Reference.union (one array for every pose)
     active: np.ndarray | None = None  # flat indices of every source-active texel (all of them,
     # also in a coarse reference)
     regions: np.ndarray | None = None  # [G] the regions of ``share`` (None: all of them)
+    _share: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def share(self) -> np.ndarray:
+        """``[G, n]`` each weighted region's part of the activation, ``M_r * max_k |w_rk|``
+        (what the per-region stats weigh by): made when first asked for (only the per-region
+        tables read it; the searches never do)."""
+        if self._share is None:
+            rows = np.arange(self.masks.shape[0]) if self.regions is None else self.regions
+            w = np.asarray(self.pose.weights, _F)
+            per_region = np.abs(w) if w.ndim == 1 else np.abs(w).max(axis=1)
+            share = np.empty((rows.size, self.sel.size), _F)
+            for g, r in enumerate(rows):
+                np.multiply(self.masks[r][self.sel], per_region[r], out=share[g])
+            self._share = share
+        return self._share
 
 
 @dataclass
@@ -353,8 +369,11 @@ class Reference:
         new_pos = np.full(n, -1, np.int64)
         new_pos[keep] = np.arange(keep.size)
         poses = []
+        masks: dict[int, np.ndarray] = {}  # the masks at the kept texels, once per array
         for pr in self.poses:
             m = new_pos[pr.sel] >= 0
+            if id(pr.masks) not in masks:
+                masks[id(pr.masks)] = np.ascontiguousarray(pr.masks[:, keep])
             poses.append(
                 PoseReference(
                     pr.pose,
@@ -362,9 +381,10 @@ class Reference:
                     pr.act[:, m],
                     planes(pr.normal)[:, m].T,
                     pr.weight[m],
-                    pr.share[:, m],
+                    masks[id(pr.masks)],
                     pr.active,
                     pr.regions,
+                    None if pr._share is None else pr._share[:, m],
                 )
             )
         return replace(self, union=self.union[keep], poses=poses, step=k * self.step)
@@ -542,10 +562,6 @@ def prepare(
         sel = np.flatnonzero(touched & (weight_u > 0))
         act = np.take(act_u, sel, axis=1)
         normal = _blend_at(base_u, base_pd, states_u, sel, act, encoding)
-        per_region = np.abs(w) if w.ndim == 1 else np.abs(w).max(axis=1)
-        share = np.empty((rows.size, sel.size), _F)
-        for g, r in enumerate(rows):
-            np.multiply(m_u[r][sel], per_region[r], out=share[g])
         out.append(
             PoseReference(
                 pose=p,
@@ -553,7 +569,7 @@ def prepare(
                 act=act,
                 normal=normal.T,  # [n, 3], a view of the planes the measure reads
                 weight=weight_u[sel],
-                share=share,
+                masks=m_u,  # the regions' shares are made from it when asked for
                 active=union[sel],
                 regions=rows,
             )
