@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wrinklepipe.fidelity import Budget, Stats, weighted_quantile, weighted_stats
-from wrinklepipe.fidelity.stats import weighted_stats_many
+from wrinklepipe.fidelity.stats import unit_stats, weighted_stats_many
 
 
 def brute_quantile(v, w, q):
@@ -88,3 +88,24 @@ def test_many_rows_at_once_equal_one_row_at_a_time(n, g, seed):
         want = weighted_stats(err, row)
         assert got.p99 == want.p99 and got.max == want.max and got.texels == want.texels
         assert got.mean == pytest.approx(want.mean, rel=1e-9, abs=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.floats(0.0, 90.0, width=32), min_size=1, max_size=400),
+    st.booleans(),
+)
+def test_unit_stats_are_the_nearest_rank_stats_of_unit_weights(values, overwrite):
+    # every weight 1: the p99 is the ceil(0.99 n)-th smallest value (a brute-force sort), the
+    # mean the plain mean; and weighted_stats with unit weights says the same
+    e = np.asarray(values, np.float32)
+    got = unit_stats(e.copy(), overwrite=overwrite)
+    want_p99 = brute_quantile(e, np.ones(e.size), 0.99)
+    assert got.p99 == want_p99
+    assert got.max == float(e.max())
+    assert (got.texels, got.weight) == (e.size, float(e.size))
+    assert got.mean == pytest.approx(float(np.mean(e.astype(np.float64))), rel=1e-12, abs=1e-12)
+    ws = weighted_stats(e, np.ones(e.size, np.float32))
+    assert (ws.p99, ws.max, ws.texels, ws.weight) == (got.p99, got.max, got.texels, got.weight)
+    assert ws.mean == pytest.approx(got.mean, rel=1e-12, abs=1e-12)
+    assert unit_stats(np.zeros(0, np.float32)).texels == 0

@@ -872,20 +872,30 @@ def base_fidelity(
 ) -> Stats:
     """The shipped base (unit normals, or what ``reader`` makes of its texels; any size)
     against the source base over the footprint (or at the grid texels ``flat``)."""
-    if flat is None:
-        flat = ref.face_texels()
-    flat = np.asarray(flat, np.int64)
     src = ref.base.reshape(-1, 3)
-    err = np.empty(flat.size, _F)
-    # in chunks of texels (module CHUNK_TEXELS: the same per-texel values, small temporaries);
-    # a smaller map is sampled whole-row-first once (sample_at's separable path) when the
-    # texels are many, so its chunks are taken from one sampled copy only on the same grid
-    parts = chunks(flat.size) if np.asarray(base).shape[:2] == ref.shape else [slice(None)]
-    for sl in parts:
-        f = flat[sl]
+    same_grid = np.asarray(base).shape[:2] == ref.shape
+    if flat is None and same_grid:
+        # the whole footprint, a band of rows at a time (its texels in the same order as
+        # face_texels gives them, without the array of all of them)
+        H, W = ref.shape
+        fp = ref.footprint if ref.footprint is not None else np.ones((H, W), bool)
+        bands = [
+            np.flatnonzero(fp[sl]) + sl.start * W
+            for sl in chunks(H, max(1, CHUNK_TEXELS // max(W, 1)))
+        ]
+    else:
+        flat = np.asarray(ref.face_texels() if flat is None else flat, np.int64)
+        # in chunks of texels (module CHUNK_TEXELS: the same per-texel values, small
+        # temporaries); a smaller map is sampled whole-row-first once (sample_at's separable
+        # path) when the texels are many, so it is chunked only on the same grid
+        bands = [flat[sl] for sl in chunks(flat.size)] if same_grid else [flat]
+    err = np.empty(sum(f.size for f in bands), _F)
+    at = 0
+    for f in bands:
         got = planes(model.normalize(sample_at(base, ref.shape, f, reader)))
-        err[sl] = angle_deg_planes(got, _gather_planes(src, f))
-    return unit_stats(err)
+        err[at : at + f.size] = angle_deg_planes(got, _gather_planes(src, f))
+        at += f.size
+    return unit_stats(err, overwrite=True)
 
 
 def measure(

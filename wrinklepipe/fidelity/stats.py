@@ -94,24 +94,27 @@ def weighted_stats(err: np.ndarray, weights: np.ndarray) -> Stats:
     )
 
 
-def unit_stats(err: np.ndarray) -> Stats:
-    """:func:`weighted_stats` of ``err`` with every weight 1 (the base over the face), the same
-    numbers without the weights' arrays: the total is the count, the mean the same float64
-    product, and the p99 the weighted quantile of unit weights, which is an order statistic
-    (the ``ceil(0.99 n (1 - 1e-12))``-th smallest: a selection, not a histogram and a sort)."""
+def unit_stats(err: np.ndarray, overwrite: bool = False) -> Stats:
+    """:func:`weighted_stats` of ``err`` with every weight 1 (the base over the face) without
+    the weights' arrays: the total is the count, the mean the float64 sum over it (pairwise,
+    converted as it goes: no float64 copies; equal to the weighted mean to rounding), and the
+    p99 the weighted quantile of unit weights, which is an order statistic (the
+    ``ceil(0.99 n (1 - 1e-12))``-th smallest, found by selection: the same value).
+    ``overwrite``: ``err`` may be reordered in place (the caller's own temporary)."""
     e = np.asarray(err).ravel()
     if e.size == 0:
         return EMPTY
     total = float(e.size)
     target = 0.99 * total * (1.0 - 1e-12)  # as _quantile: the first rank whose count reaches it
     k = min(max(int(np.ceil(target)), 1), e.size)
-    return Stats(
-        mean=float(np.dot(e.astype(np.float64), np.ones(e.size, np.float64)) / total),
-        p99=float(np.partition(e, k - 1)[k - 1]),
-        max=float(e.max()),
-        texels=int(e.size),
-        weight=total,
-    )
+    mean = float(e.sum(dtype=np.float64)) / total
+    hi = float(e.max())
+    if overwrite:
+        e.partition(k - 1)
+        p99 = float(e[k - 1])
+    else:
+        p99 = float(np.partition(e, k - 1)[k - 1])
+    return Stats(mean=mean, p99=p99, max=hi, texels=int(e.size), weight=total)
 
 
 def weighted_stats_many(err: np.ndarray, weights: np.ndarray) -> list[Stats]:
