@@ -421,7 +421,9 @@ def _activations_at(
     rows = _weighted(weights, policy)
     w = np.asarray(weights, _F)
     if sel is None:
-        m = masks[rows]
+        # a run of consecutive regions is a view (no copy of the masks; the same values)
+        run = rows.size > 0 and int(rows[-1] - rows[0]) + 1 == rows.size
+        m = masks[int(rows[0]) : int(rows[-1]) + 1] if run else masks[rows]
     elif rows.size:
         m = np.stack([masks[r][sel] for r in rows])  # one plane at a time: contiguous gathers
     else:
