@@ -505,17 +505,22 @@ def search(
         )
         return compressed
 
-    # 5. confirm on every active texel: the PNG copies, beside the compressed copies of the
-    # formats step 6 screens for these sizes and the PNG base alone over the whole face (three
-    # independent measurements: two threads when the thread budget allows; the formats'
-    # screens are what they would be after the confirmation, which changes no part they read).
+    # 5. confirm on every active texel: the PNG copies, beside step 6 (the formats screened
+    # for these sizes, then their compressed copies confirmed) and the PNG base alone over the
+    # whole face (three independent measurements: two threads when the thread budget allows;
+    # the formats' screens are what they would be after the confirmation, which changes no
+    # part they read, and the PNG's parts are its own copy of the kept ones).
     # While the PNG is over the budget, raise sizes (then screen the formats again)
-    fmts = formats(size, scale)
     kept = dict(judge.parts)
-    compressed, face_png, png = reuse.map_threads(
+
+    def formats_confirmed() -> tuple[_Formats, fm.Fidelity | None]:
+        f = formats(size, scale)
+        return f, confirm_compressed(f)
+
+    (fmts, compressed), face_png, png = reuse.map_threads(
         _call,
         [
-            lambda: confirm_compressed(fmts),
+            formats_confirmed,
             lambda: fm.base_fidelity(ref, base_texels, None, png_base["base_reader"]),
             lambda: judge.run(True, parts=kept),
         ],
