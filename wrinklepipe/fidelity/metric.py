@@ -261,6 +261,8 @@ class PoseReference:
     # also in a coarse reference)
     regions: np.ndarray | None = None  # [G] the regions of ``share`` (None: all of them)
     _share: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: by lattice step: the active texels on that lattice, as flat lattice indices
+    _lattice: dict[int, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def share(self) -> np.ndarray:
@@ -768,10 +770,13 @@ def _leak_texels(
     act_idx = pr.active if pr.active is not None else ref.union[pr.sel]
     if st == 1:
         cand.reshape(-1)[act_idx] = False
-    else:
-        ar, ac = act_idx // W, act_idx % W
-        on_lattice = (ar % st == 0) & (ac % st == 0)
-        cand[ar[on_lattice] // st, ac[on_lattice] // st] = False
+    else:  # the active texels on the lattice: the same for every masks candidate, kept
+        on = pr._lattice.get(st)
+        if on is None:
+            ar, ac = act_idx // W, act_idx % W
+            on_lattice = (ar % st == 0) & (ac % st == 0)
+            on = pr._lattice[st] = (ar[on_lattice] // st) * cols.size + ac[on_lattice] // st
+        cand.reshape(-1)[on] = False
     k = np.flatnonzero(cand)
     if k.size == 0:
         return None
