@@ -59,7 +59,9 @@ class GltfFile:
         views = self.gltf.get("bufferViews", [])
         if not isinstance(i, int) or isinstance(i, bool) or not 0 <= i < len(views):
             raise self.err(f"bufferView {i!r} does not exist", "/bufferViews")
-        v = views[i]
+        v, key = views[i], f"/bufferViews/{i}"
+        if not isinstance(v, dict):
+            raise self.err("bufferView must be an object", key)
         for name in MESHOPT:
             if name in (v.get("extensions") or {}) and name in self.gltf.get(
                 "extensionsRequired", []
@@ -67,13 +69,13 @@ class GltfFile:
                 raise self.err(
                     f"meshopt-compressed buffer views ({name}) cannot be decoded here; "
                     "re-export without meshopt (gltfpack without -c)",
-                    f"/bufferViews/{i}",
+                    key,
                 )
-        data = self.buffer(int(v.get("buffer", 0)))
-        off, n = int(v.get("byteOffset", 0)), int(v["byteLength"])
-        if off < 0 or off + n > len(data):
-            raise self.err("bufferView runs past the end of its buffer", f"/bufferViews/{i}")
-        return data[off : off + n], int(v.get("byteStride", 0))
+        # bounds-checked by the container, as the document model's views are
+        off, n = v.get("byteOffset", 0), v.get("byteLength")
+        data = self.container.slice(v.get("buffer"), off, n, key)
+        stride = v.get("byteStride", 0)
+        return data, stride if isinstance(stride, int) and not isinstance(stride, bool) else 0
 
     def accessor(self, i: Any, normalize: bool = True) -> np.ndarray:
         """Accessor ``i`` as ``[count, components]`` through :func:`wrinklepipe.io.accessors.
