@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import base64
 import json
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -12,11 +14,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from wrinklepipe.cli import main
+from wrinklepipe.document.decompress import compressed
 from wrinklepipe.errors import InputError
 from wrinklepipe.geometry.dynamic import skinned_pose, triangle_weights
 from wrinklepipe.geometry.tangents import ensure_tangents, mikktspace_tangents_report
+from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
 from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
 from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices
+from wrinklepipe.paths import ROOT
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 SAMPLES = DATA / "gltf-samples"
@@ -131,14 +137,44 @@ def test_sparse_accessor_applies(tmp_path):
     np.testing.assert_array_equal(load_mesh(f).positions[2], [5, 5, 0])
 
 
-@pytest.mark.parametrize(
-    "ext", ["EXT_meshopt_compression", "KHR_draco_mesh_compression", "EXT_made_up"]
-)
-def test_required_extensions_refused_by_name(tmp_path, ext):
+def test_unknown_required_extension_refused_by_name(tmp_path):
+    doc = quad_doc(extra={"extensionsUsed": ["EXT_made_up"], "extensionsRequired": ["EXT_made_up"]})
+    f = write_gltf(tmp_path / "e.gltf", [(QUAD_P, {}), (QUAD_I, {}), (QUAD_UV, {})], doc)
+    with pytest.raises(InputError, match="EXT_made_up") as exc:
+        load_mesh(f)
+    assert str(f) in str(exc.value)
+
+
+@pytest.mark.parametrize("ext", ["EXT_meshopt_compression", "KHR_draco_mesh_compression"])
+def test_required_compression_with_nothing_compressed_reads_the_plain_data(tmp_path, ext):
     doc = quad_doc(extra={"extensionsUsed": [ext], "extensionsRequired": [ext]})
     f = write_gltf(tmp_path / "e.gltf", [(QUAD_P, {}), (QUAD_I, {}), (QUAD_UV, {})], doc)
-    with pytest.raises(InputError, match=ext):
+    m = load_mesh(f)
+    np.testing.assert_array_equal(m.positions, QUAD_P)
+    np.testing.assert_array_equal(m.indices, QUAD_I.reshape(-1, 3))
+    assert not any(ext in n for n in m.notes)  # nothing was decoded
+
+
+def test_corrupt_draco_stream_is_one_line_naming_file_and_extension(tmp_path):
+    # the primitive's attributes live in a Draco bitstream (bufferView 3) of garbage bytes
+    garbage = np.frombuffer(b"DRACO\x02\x02" + bytes(range(57)), np.uint8)
+    ext = {"bufferView": 3, "attributes": {"POSITION": 0, "TEXCOORD_0": 1}}
+    doc = quad_doc(
+        extra_prim={"extensions": {"KHR_draco_mesh_compression": ext}},
+        extra={
+            "extensionsUsed": ["KHR_draco_mesh_compression"],
+            "extensionsRequired": ["KHR_draco_mesh_compression"],
+        },
+    )
+    f = write_gltf(
+        tmp_path / "d.gltf", [(QUAD_P, {}), (QUAD_I, {}), (QUAD_UV, {}), (garbage, {})], doc
+    )
+    with pytest.raises(InputError) as exc:
         load_mesh(f)
+    text = str(exc.value)
+    assert str(f) in text and "KHR_draco_mesh_compression" in text and "\n" not in text
+    key = exc.value.problems[0].key
+    assert key == "/meshes/0/primitives/0/extensions/KHR_draco_mesh_compression"
 
 
 def test_texture_extension_ignored_with_note(tmp_path):
@@ -376,3 +412,122 @@ def test_cubic_spline_hermite_by_hand():
     assert sample_channel(t, v, -1.0, "CUBICSPLINE", "translation")[0] == 1.0  # clamped
     assert sample_channel(t, v, 9.0, "CUBICSPLINE", "translation")[0] == 4.0
     assert sample_channel(t, v[:, 1], 1.5, "STEP", "translation")[0] == 1.0
+
+
+# -- compressed geometry against an independent decoder ---------------------------------------
+# `gltf-transform copy` (npm glTF Transform CLI) decodes Draco and meshopt on read and writes
+# plain accessors; wrinklepipe reads that copy on its plain path (nothing to decode) and the
+# compressed original through the document model's decoder. The two must be the same geometry.
+
+NODE_BIN = ROOT / "tools" / "node" / "node_modules" / ".bin"
+needs_node_tools = pytest.mark.skipif(
+    not (NODE_BIN / "gltf-transform").exists()
+    or not (NODE_BIN / "gltfpack").exists()
+    or shutil.which("node") is None,
+    reason="npm gltf-transform / gltfpack not installed (ci/bootstrap.sh setup)",
+)
+TOKYO = SAMPLES / "LittlestTokyo" / "LittlestTokyo.glb"
+MIRROR = SAMPLES / "NormalTangentMirrorTest" / "glTF-Binary" / "NormalTangentMirrorTest.glb"
+
+
+def _node_tool(*argv: str | Path) -> None:
+    subprocess.run(
+        [str(NODE_BIN / str(argv[0])), *map(str, argv[1:])],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+
+
+def _plain_copy(src: Path, out: Path) -> Path:
+    _node_tool("gltf-transform", "copy", src, out)
+    r = GltfFile(out, GltfReadOptions())
+    assert r.decoded == [] and not compressed(r.gltf)  # really plain: the plain path reads it
+    return out
+
+
+def _soup(mesh) -> tuple[np.ndarray, np.ndarray | None]:
+    """Triangles as corner positions [F, 9] and corner UVs [F, 6] (None without UVs), each
+    triangle rotated to start at its lexicographically smallest corner (winding kept), rows
+    sorted: the triangle set whatever the vertex and triangle order."""
+    p = mesh.positions.astype(np.float64)[mesh.indices]  # [F, 3, 3]
+    rank = np.argsort(np.lexsort(p.reshape(-1, 3).T[::-1])).reshape(-1, 3)
+    start = np.argmin(rank, axis=1)
+    rot = (start[:, None] + np.arange(3)) % 3
+    p = np.take_along_axis(p, rot[:, :, None], axis=1).reshape(-1, 9)
+    order = np.lexsort(p.T[::-1])
+    if mesh.uvs is None:
+        return p[order], None
+    uv = mesh.uvs.astype(np.float64)[mesh.indices]
+    uv = np.take_along_axis(uv, rot[:, :, None], axis=1).reshape(-1, 6)
+    return p[order], uv[order]
+
+
+def _same_geometry(compressed_file: Path, plain_file: Path, step: float) -> tuple[int, int]:
+    """Compare every mesh part; return the numbers of triangles and of parts with UVs."""
+    opts = LoadOptions(generate_uvs=False)
+    got, want = load_meshes(compressed_file, opts), load_meshes(plain_file, opts)
+    assert [m.name for m in got] == [m.name for m in want]
+    n = with_uvs = 0
+    for a, b in zip(got, want):
+        assert a.vertex_count == b.vertex_count and a.triangle_count == b.triangle_count
+        np.testing.assert_array_equal(a.indices.max(), b.indices.max())
+        pa, ua = _soup(a)
+        pb, ub = _soup(b)
+        span = float(np.ptp(b.positions, axis=0).max())
+        # the same quantized data through two decoders: far inside one quantization step
+        np.testing.assert_allclose(pa, pb, rtol=0, atol=1e-3 * step * span)
+        assert (ua is None) == (ub is None)
+        if ua is not None:
+            np.testing.assert_allclose(ua, ub, rtol=0, atol=1e-3 * step)
+            with_uvs += 1
+        n += a.triangle_count
+    return n, with_uvs
+
+
+@needs_data
+@needs_node_tools
+def test_draco_littlest_tokyo_matches_gltf_transform(tmp_path):
+    plain = _plain_copy(TOKYO, tmp_path / "plain.glb")
+    assert GltfFile(TOKYO, GltfReadOptions()).decoded == ["KHR_draco_mesh_compression"]
+    assert "decoded KHR_draco_mesh_compression" in load_meshes(TOKYO)[0].notes
+    # step: one of 10-bit quantization (Draco encoders default to 11 bits for positions, 10 for
+    # texture coordinates)
+    n, with_uvs = _same_geometry(TOKYO, plain, 1 / (2**10 - 1))
+    # every triangle: the 71 indices accessors' counts / 3 = 141802, less the 3 degenerate
+    # ones ingest skips (and notes); 68 of the 71 parts have texture coordinates
+    assert (n, with_uvs) == (141_802 - 3, 68)
+
+
+@needs_data
+@needs_node_tools
+def test_meshopt_gltfpack_file_matches_gltf_transform(tmp_path):
+    packed = tmp_path / "packed.glb"
+    _node_tool("gltfpack", "-i", MIRROR, "-o", packed, "-cc")
+    r = GltfFile(packed, GltfReadOptions())
+    assert r.decoded == ["EXT_meshopt_compression"]
+    plain = _plain_copy(packed, tmp_path / "plain.glb")
+    # gltfpack's default quantization: 14-bit positions, 12-bit texture coordinates
+    n, with_uvs = _same_geometry(packed, plain, 1 / (2**12 - 1))
+    assert n > 0 and with_uvs == 1
+    # and the geometry is the sample's, to within that quantization (gltfpack reorders and
+    # welds vertices, so compare the triangle sets' bounds and areas)
+    src, got = load_mesh(MIRROR), load_mesh(packed)
+    assert got.triangle_count == src.triangle_count
+    np.testing.assert_allclose(
+        got.positions.min(axis=0), src.positions.min(axis=0), atol=1e-3 * np.ptp(src.positions)
+    )
+
+
+@needs_data
+@needs_node_tools
+def test_vertex_ids_on_compressed_files_match_the_plain_copy(tmp_path, capsys):
+    plain = _plain_copy(TOKYO, tmp_path / "plain.glb")
+    summaries = []
+    for f in (TOKYO, plain):
+        capsys.readouterr()
+        assert main(["vertex-ids", str(f), "--json"]) == 0
+        summaries.append(json.loads(capsys.readouterr().out))
+    keys = ("vertices", "ids", "shared_ids", "vertices_sharing")
+    assert [summaries[0][k] for k in keys] == [summaries[1][k] for k in keys]
+    assert summaries[0]["vertices"] == 193_125

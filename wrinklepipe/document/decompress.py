@@ -27,6 +27,25 @@ MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
 DRACO = "KHR_draco_mesh_compression"
 
 
+def compressed(gltf: dict[str, Any]) -> bool:
+    """Whether a glTF tree holds compressed geometry: a bufferView carrying a meshopt extension
+    or a primitive carrying a Draco one (what :func:`wrinklepipe.document.model.
+    decode_geometry` decodes), whatever ``extensionsUsed`` says."""
+
+    def ext(obj: Any) -> dict[str, Any]:
+        e = obj.get("extensions") if isinstance(obj, dict) else None
+        return e if isinstance(e, dict) else {}
+
+    def array(obj: Any, key: str) -> list[Any]:
+        v = obj.get(key) if isinstance(obj, dict) else None
+        return v if isinstance(v, list) else []
+
+    if any(n in ext(v) for v in array(gltf, "bufferViews") for n in MESHOPT):
+        return True
+    prims = (p for m in array(gltf, "meshes") for p in array(m, "primitives"))
+    return any(DRACO in ext(p) for p in prims)
+
+
 class DecodeError(ValueError):
     """Compressed data that does not decode (the caller names the file and pointer)."""
 

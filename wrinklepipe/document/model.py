@@ -241,19 +241,31 @@ def read_document(path: str | Path, options: GltfReadOptions | None = None) -> D
     """Read a .gltf / .glb as a :class:`Document` (compressed geometry decoded, see the module
     doc). Bad input raises :class:`~wrinklepipe.errors.InputError` naming the file and pointer."""
     c = open_container(path, options)
-    gltf = copy.deepcopy(c.gltf)
-    views, decoded, decoded_views = _views(c, gltf)
-    doc = Document(Path(path), gltf, views, decoded_extensions=decoded, options=c.options)
-    decoded_views |= _decode_draco(doc)
-    _true_bounds(doc, decoded_views)
-    for name in doc.decoded_extensions:
-        doc.notes.append(f"{name}: decoded; written uncompressed")
-    _drop_extensions(doc.gltf, doc.decoded_extensions)
+    doc = decode_geometry(c)
     for i, img in enumerate(doc.array("images")):
         uri = img.get("uri")
         if isinstance(uri, str) and not uri.startswith("data:"):
             data = c.uri_bytes(uri, f"/images/{i}/uri")
             doc.images[i] = ImageFile(data, _clean_uri(uri))
+    return doc
+
+
+def decode_geometry(c: Container) -> Document:
+    """The document of an opened file without its external images: its tree (a copy) and
+    every bufferView's bytes, meshopt views and Draco primitives decoded (see the module doc).
+
+    The one decoder of compressed glTF geometry: :func:`read_document` adds the images, and
+    mesh ingest (:class:`wrinklepipe.io.gltf_read.GltfFile`) reads a compressed file through
+    it. Data that does not decode raises :class:`~wrinklepipe.errors.InputError` naming the
+    file and the pointer of the extension."""
+    gltf = copy.deepcopy(c.gltf)
+    views, decoded, decoded_views = _views(c, gltf)
+    doc = Document(c.path, gltf, views, decoded_extensions=decoded, options=c.options)
+    decoded_views |= _decode_draco(doc)
+    _true_bounds(doc, decoded_views)
+    for name in doc.decoded_extensions:
+        doc.notes.append(f"{name}: decoded; written uncompressed")
+    _drop_extensions(doc.gltf, doc.decoded_extensions)
     return doc
 
 

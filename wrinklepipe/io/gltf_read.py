@@ -6,10 +6,12 @@ The file is opened by the one container reader (:func:`wrinklepipe.document.cont
 open_container`), which is defensive because a glTF names other files: every URI must be
 relative and stay inside the asset's folder (no ``..``, no absolute paths, no schemes other than
 ``data:``); data URIs and external files are capped in size. bufferViews are bounds-checked here
-(a view compressed by a *required* ``EXT_meshopt_compression`` is refused: only the document
-model decodes it) and accessors decoded by :func:`wrinklepipe.io.accessors.read_accessor`.
-Every problem is an :class:`~wrinklepipe.errors.InputError` naming the file and the JSON
-pointer.
+and accessors decoded by :func:`wrinklepipe.io.accessors.read_accessor`. A file with
+compressed geometry (``EXT_meshopt_compression`` / ``KHR_meshopt_compression`` views,
+``KHR_draco_mesh_compression`` primitives) is decoded at open by the document model's own
+decoder (:func:`wrinklepipe.document.model.decode_geometry`): its tree and views are then the
+decoded document's, so mesh ingest and the document read the same numbers. Every problem is an
+:class:`~wrinklepipe.errors.InputError` naming the file and the JSON pointer.
 
 :class:`GltfFile` is a :class:`wrinklepipe.io.gltf_primitive.GltfSource` (``gltf``,
 ``accessor``, ``err``), as the document model (:class:`wrinklepipe.document.model.Document`)
@@ -27,18 +29,18 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.document.container import open_container
+from wrinklepipe.document.decompress import compressed
+from wrinklepipe.document.model import Document, decode_geometry
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.io.accessors import read_accessor
 from wrinklepipe.io.gltf_limits import GltfReadOptions as GltfReadOptions  # re-exported
-
-#: bufferView compressions only the document model decodes: refused here when required.
-MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
 
 
 class GltfFile:
     """A glTF file opened by the one container reader (:func:`wrinklepipe.document.container.
     open_container`: GLB chunks, confined URIs, capped data URIs and files, buffers), with
-    bufferViews and accessors on top."""
+    bufferViews and accessors on top; compressed geometry decoded by the document model's
+    decoder (``decoded``: the extensions it decoded, in the order it met them)."""
 
     def __init__(self, path: Path, options: GltfReadOptions) -> None:
         self.path = path
@@ -47,6 +49,11 @@ class GltfFile:
         self.folder = path.parent
         self.container = open_container(path, options)
         self.gltf: dict[str, Any] = self.container.gltf
+        self.decoded: list[str] = []
+        self._doc: Document | None = None
+        if compressed(self.gltf):  # plain files keep their views unread until asked for
+            self._doc = decode_geometry(self.container)
+            self.gltf, self.decoded = self._doc.gltf, self._doc.decoded_extensions
 
     def err(self, message: str, key: str = "") -> InputError:
         return input_error(self.file, message, key)
@@ -56,21 +63,14 @@ class GltfFile:
 
     def view(self, i: Any) -> tuple[bytes, int]:
         """bufferView ``i``'s bytes and byteStride (0 when tightly packed)."""
+        if self._doc is not None:  # decoded, and bounds-checked, by the document model
+            return self._doc.view_bytes(i)
         views = self.gltf.get("bufferViews", [])
         if not isinstance(i, int) or isinstance(i, bool) or not 0 <= i < len(views):
             raise self.err(f"bufferView {i!r} does not exist", "/bufferViews")
         v, key = views[i], f"/bufferViews/{i}"
         if not isinstance(v, dict):
             raise self.err("bufferView must be an object", key)
-        for name in MESHOPT:
-            if name in (v.get("extensions") or {}) and name in self.gltf.get(
-                "extensionsRequired", []
-            ):
-                raise self.err(
-                    f"meshopt-compressed buffer views ({name}) cannot be decoded here; "
-                    "re-export without meshopt (gltfpack without -c)",
-                    key,
-                )
         # bounds-checked by the container, as the document model's views are
         off, n = v.get("byteOffset", 0), v.get("byteLength")
         data = self.container.slice(v.get("buffer"), off, n, key)

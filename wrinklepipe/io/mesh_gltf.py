@@ -9,9 +9,10 @@ world space when ``bake_transforms``. What ingest adds to the per-primitive read
 
 - ``KHR_mesh_quantization``: decoded (quantised attributes are plain accessors; the
   dequantising node transform is applied by the bake), noted.
-- ``EXT_meshopt_compression`` / ``KHR_draco_mesh_compression``: the document model decodes
-  them; mesh ingest does not: when the extension is *required* the file is refused with a
-  message naming it, otherwise the uncompressed fallback data is read (noted).
+- ``EXT_meshopt_compression`` / ``KHR_meshopt_compression`` / ``KHR_draco_mesh_compression``:
+  decoded (noted) by the document model's decoder, which :class:`~wrinklepipe.io.gltf_read.
+  GltfFile` reads a compressed file through; data that does not decode is a one-line error
+  naming the file and the extension.
 - ``KHR_texture_basisu`` and other texture/material extensions: textures are not part of mesh
   ingest, so they are ignored (noted); any other required extension is refused.
 - POINTS and LINES primitives, and primitives whose triangles are all degenerate, are skipped
@@ -33,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.asset import Mesh
+from wrinklepipe.document.decompress import DRACO, MESHOPT
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.animation import WIDTHS, morph_tracks, read_channels
 from wrinklepipe.io.gltf_primitive import (
@@ -48,15 +50,10 @@ from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
 
 #: Required extensions that do not change geometry (textures/materials/lights): ignored.
 _HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_")
+#: Required extensions mesh ingest decodes (compressed geometry: by the document's decoder,
+#: which drops their names from the tree; one left there compressed nothing).
 _SUPPORTED = {"KHR_mesh_quantization"}
-_REFUSED = {
-    "EXT_meshopt_compression": "meshopt-compressed buffer views (EXT_meshopt_compression) are"
-    " not decoded by mesh ingest; re-export without meshopt (gltfpack without -c)",
-    "KHR_meshopt_compression": "meshopt-compressed buffer views (KHR_meshopt_compression) are"
-    " not decoded by mesh ingest; re-export without meshopt",
-    "KHR_draco_mesh_compression": "Draco-compressed primitives (KHR_draco_mesh_compression) are"
-    " not decoded by mesh ingest; re-export without Draco",
-}
+_COMPRESSION = {DRACO, *MESHOPT}
 
 
 @dataclass(frozen=True)
@@ -69,21 +66,18 @@ class GltfMeshOptions:
     bake_transforms: bool = True
 
 
-def check_extensions(r: GltfSource) -> list[str]:
-    """Refuse required extensions that change geometry and are not decoded; note the rest."""
-    notes = []
+def check_extensions(r: GltfFile) -> list[str]:
+    """Note the decoded and ignored extensions; refuse any other required one (by name)."""
+    notes = [f"decoded {name}" for name in r.decoded]
     for name in r.gltf.get("extensionsRequired", []):
-        if name in _REFUSED:
-            raise r.err(_REFUSED[name], "/extensionsRequired")
+        if name in _COMPRESSION:
+            continue
         if name in _SUPPORTED:
             notes.append(f"decoded {name}")
         elif name.startswith(_HARMLESS_PREFIXES):
             notes.append(f"ignored {name} (textures and materials are not part of mesh ingest)")
         else:
             raise r.err(f"required extension {name} is not supported", "/extensionsRequired")
-    for name in r.gltf.get("extensionsUsed", []):
-        if name in _REFUSED and name not in r.gltf.get("extensionsRequired", []):
-            notes.append(f"{name} used but not required: read the uncompressed fallback data")
     return notes
 
 
