@@ -18,6 +18,8 @@ tree is rewritten except what ingest had to decode:
 - ``KHR_texture_basisu``, ``EXT_texture_webp`` and every other texture are passed through byte for
   byte; they are decoded only when the pipeline must read one (:mod:`wrinklepipe.document.images`).
 
+The decoding is :func:`decode_geometry`, the one decoder of compressed glTF geometry: mesh
+ingest (:class:`wrinklepipe.io.gltf_read.GltfFile`) reads a compressed file through it too.
 :func:`wrinklepipe.document.write.pack` writes the document back (one buffer).
 """
 

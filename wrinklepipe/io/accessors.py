@@ -7,8 +7,9 @@ the drivers are given all decode accessors here, so every one of them reads any 
 requires for 1- and 2-byte components), byte strides, sparse substitution, accessors without a
 bufferView (zeros), ``normalized`` integers (unsigned ``c / MAX``, signed ``max(c / MAX, -1)``).
 The bytes of each bufferView come from a callable, so compressed views
-(``EXT_meshopt_compression``) are decoded once by :mod:`wrinklepipe.document.decompress` and
-read here like any other.
+(``EXT_meshopt_compression``) and Draco primitives are decoded once, for the document and mesh
+ingest alike, by :func:`wrinklepipe.document.model.decode_geometry` and read here like any
+other.
 """
 
 from __future__ import annotations
