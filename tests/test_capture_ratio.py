@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy import ndimage
 
 from wrinklepipe.capture.ratio import (
     RatioOptions,
@@ -134,3 +135,26 @@ def test_exposure_is_measured_on_the_skin_around_the_roi():
     whole = ratio_image(i0, i1, options=opts)
     assert whole.exposure_reference == "ROI"
     assert ratio_image(i0, i1, roi=roi, options=PLAIN).exposure_reference == "none"
+
+
+def test_pixel_noise_ignores_smooth_creases_and_flat_skin_is_found():
+    from wrinklepipe.capture.pipeline import flat_skin
+    from wrinklepipe.capture.ratio import blurred_noise, pixel_noise
+
+    rng = np.random.default_rng(5)
+    n = 128
+    yy, xx = np.mgrid[0:n, 0:n].astype(float)
+    crease = 0.06 * np.exp(-0.5 * ((yy - 40) / 3.0) ** 2)  # a dark line 3 px wide
+    raw = 1.0 - crease + rng.normal(0.0, 0.004, (n, n))
+    valid = np.ones((n, n), bool)
+    # the mixed second difference of white noise has the noise's sigma; the crease cancels
+    assert pixel_noise(raw, valid) == pytest.approx(0.004, rel=0.05)
+    assert pixel_noise(1.0 - crease, valid) < 2e-4
+    # a Gaussian blur of sigma s keeps 1 / (2 sqrt(pi) s) of white noise
+    blurred = ndimage.gaussian_filter(rng.normal(0.0, 1.0, (400, 400)), 1.5)
+    assert blurred_noise(1.0, 1.5) == pytest.approx(blurred.std(), rel=0.03)
+    r = ndimage.gaussian_filter(raw, 1.2)
+    noise = blurred_noise(pixel_noise(raw, valid), 1.2)
+    flat = flat_skin(r, valid, np.ones((n, n)), noise, 3.0, 3.0)
+    assert flat[90:110, 20:100].mean() > 0.9  # skin far from the line
+    assert flat[37:44, 20:100].max() < 0.05  # on the line

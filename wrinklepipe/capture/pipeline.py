@@ -28,7 +28,14 @@ from wrinklepipe.capture.orientation import (
     integrability_residual,
     orient,
 )
-from wrinklepipe.capture.ratio import RatioOptions, RatioResult, masked_blur, ratio_image
+from wrinklepipe.capture.ratio import (
+    RatioOptions,
+    RatioResult,
+    blurred_noise,
+    masked_blur,
+    pixel_noise,
+    ratio_image,
+)
 from wrinklepipe.model import normalize
 
 
@@ -56,6 +63,30 @@ class CaptureOptions:
     #: are given for a photo up to ``SCALE_REFERENCE_PX`` wide; ``None``: ``max(1, width / 384)``
     #: (wrinkles are wider in pixels in a larger photo of the same face).
     scale: float | None = None
+    #: Flat skin in the ``sfs`` map: where R stays at 1 within this many times its noise over
+    #: a window (``flat_window`` px before the sigma scale), the wrinkle normal is blended
+    #: to flat (the neutral itself), by ``exp(-m / 2 (level noise)^2)``, ``m`` the window's mean
+    #: of ``(R - 1)^2``. Why: R = 1 where the skin keeps the neutral's shape but also wherever
+    #: the expression's slope has the neutral's magnitude in another direction; near the
+    #: dome's apex the solve tilts flat skin that way at no cost in R (a "bow tie" between the
+    #: creases and the apex, measured on mixed N_z 0.9). 0 turns it off; not used with a
+    #: side-lit photo (which fixes those slopes).
+    flat_level: float = 3.0
+    flat_window: float = 3.0
+
+
+def flat_skin(
+    ratio: np.ndarray, valid: np.ndarray, roi: np.ndarray, noise: float, level: float, window: float
+) -> np.ndarray:
+    """How flat the skin looks per pixel, 0..1: ``exp(-m / 2 (level noise)^2)`` with ``m`` the
+    Gaussian-window (``window`` px) mean of ``(R - 1)^2`` over valid ROI pixels; 0 where
+    ``noise`` is 0."""
+    if noise <= 0 or level <= 0:
+        return np.zeros(np.shape(ratio))
+    wgt = (np.asarray(valid, bool) & (np.asarray(roi) > 0.5)).astype(np.float64)
+    dev = (np.asarray(ratio, np.float64) - 1.0) ** 2 * wgt
+    m = masked_blur(dev, wgt, window) if window > 0 else dev
+    return np.exp(-0.5 * m / (level * noise) ** 2)
 
 
 #: Photo width (pixels) at which the sigmas apply unscaled.
@@ -334,9 +365,19 @@ def capture(
         # the tilt: R's own (the data's detail), or with a side-lit photo the solve's slopes
         # (fitted to both photos: measured on mixed N_z 0.995, tilt 0.33x -> 0.12x)
         n1z = None if side is not None else np.clip(r_model * n0[..., 2] / sfs_res.exposure, 0, 1)
-        photo["sfs"] = apply_roi(
-            S.normals_from_slopes(sfs_res.slopes, n0, n1z).astype(np.float32), roi_m
-        )
+        n_sfs = S.normals_from_slopes(sfs_res.slopes, n0, n1z)
+        if side is None and o.flat_level > 0:  # flat skin stays flat (CaptureOptions.flat_level)
+            noise = blurred_noise(pixel_noise(rr.raw, rr.valid), r_blur)
+            flat = flat_skin(
+                r_model / sfs_res.exposure,
+                rr.valid,
+                roi_m,
+                noise,
+                o.flat_level,
+                o.flat_window * k,
+            )[..., None]
+            n_sfs = normalize((1.0 - flat) * n_sfs + flat * np.array([0.0, 0.0, 1.0]))
+        photo["sfs"] = apply_roi(n_sfs.astype(np.float32), roi_m)
         if auto_solve and chosen != "sfs" and solve_explains_better(sfs_res):
             chosen = "sfs"
     if not o.compare_methods:
