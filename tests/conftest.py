@@ -10,9 +10,10 @@ its ~30 s page twice under ``--dist load``).
 With whole modules as the units, the two longest modules must not start last: a worker that
 picks up a long module at the end leaves the other idle. So under xdist the modules below go
 first, longest first (the rest follow in file order; they are a few seconds each). The list is
-the modules' share of the summed test durations in a ``-n 2 --durations=0`` run (main dc531ee
-and four of mine, 2026-12-02 05:52 UTC, 1114 tests); refresh it from such a run when a
-module's cost changes a lot. The order changes nothing but
+the modules' share of the summed test durations in two ``-n 2`` runs on main 4e4b5d2 with
+../shared/data present (2026-12-02 14:43 and 15:00 UTC, 1134 tests; the mean of the two
+shares, the machine shared, load 3-5); refresh it from such a run when a module's cost
+changes a lot. The order changes nothing but
 when a test starts; ``-n 0`` runs keep file order.
 """
 
@@ -45,26 +46,27 @@ def robot_converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dic
     return root / "out", res.report
 
 
-LONGEST_FIRST = [  # share of the summed test durations in that run
-    "test_batch_run.py",  # 11 % (the isolation test: converts, a LocalCluster)
-    "test_export_engines.py",  # 10 % (whole characters: avatar + RobotExpressive, 4 engines)
-    "test_convert_formats.py",  # 6.5 %
-    "test_safety_faults.py",  # 6.5 % (22 killed CLI runs and their reruns)
-    "test_convert_fidelity.py",  # 5.5 % (one CesiumMan convert at 1024)
-    "test_capture_cli.py",  # 4.5 %
-    "test_viewer.py",  # 4 % (one browser page in one piece)
-    "test_validate_cli.py",  # 3.5 %
-    "test_validate_render.py",  # 3.4 %
+LONGEST_FIRST = [  # share of the summed test durations in those runs
+    "test_batch_run.py",  # 9 % (the isolation test: converts, a LocalCluster)
+    "test_safety_faults.py",  # 7.9 % (22 killed CLI runs and their reruns)
+    "test_viewer.py",  # 5.6 % (one browser page in one piece)
+    "test_capture_cli.py",  # 5.4 %
+    "test_batch_ci.py",  # 5.1 % (the CI script: three batch runs in their own processes)
+    "test_convert_fidelity.py",  # 4.3 % (one CesiumMan convert at 1024)
+    "test_safety_fuzz.py",  # 3.9 %
+    "test_validate_render.py",  # 3.3 %
     "test_document_convert.py",  # 3.2 %
-    "test_batch_ci.py",  # 2 %
-    "test_normals_bc4.py",  # 2 %
-    "test_convert_cli.py",  # 1.9 %
-    "test_batch_bench.py",  # 1.8 %
-    "test_usd_scene_skin.py",  # 1.8 %
-    "test_engine_shaders.py",  # 1.8 %
-    "test_safety_outputs.py",  # 1.7 %
-    "test_usd_write.py",  # 1.7 %
-    "test_demo.py",  # 1.6 %
+    "test_convert_formats.py",  # 3 %
+    "test_export_engines.py",  # 3 % (whole characters: avatar + RobotExpressive, 4 engines)
+    "test_validate_cli.py",  # 3 %
+    "test_face_fixture.py",  # 2.3 %
+    "test_safety_outputs.py",  # 2.3 %
+    "test_batch_bench.py",  # 2.2 %
+    "test_usd_scene_skin.py",  # 2.1 %
+    "test_engine_shaders.py",  # 2 %
+    "test_validate_corpus.py",  # 2 %
+    "test_normals_bc4.py",  # 1.9 %
+    "test_document_read.py",  # 1.5 %
 ]
 
 
