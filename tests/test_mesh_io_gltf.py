@@ -177,6 +177,51 @@ def test_corrupt_draco_stream_is_one_line_naming_file_and_extension(tmp_path):
     assert key == "/meshes/0/primitives/0/extensions/KHR_draco_mesh_compression"
 
 
+@pytest.mark.parametrize(
+    ("ext", "message"),
+    [
+        ({"bufferView": 99, "attributes": {"POSITION": 0}}, "Draco bufferView 99 does not exist"),
+        ({"attributes": {"POSITION": 0}}, "Draco bufferView None does not exist"),
+        ({"bufferView": 3, "attributes": [0]}, "attributes must be an object"),
+        ({"bufferView": 3, "attributes": {"POSITION": "0"}}, "'0' of POSITION is not an integer"),
+    ],
+)
+def test_malformed_draco_extension_is_one_line_naming_it(tmp_path, ext, message):
+    garbage = np.zeros(8, np.uint8)
+    doc = quad_doc(
+        extra_prim={"extensions": {"KHR_draco_mesh_compression": ext}},
+        extra={"extensionsUsed": ["KHR_draco_mesh_compression"]},
+    )
+    arrays = [(QUAD_P, {}), (QUAD_I, {}), (QUAD_UV, {}), (garbage, {})]
+    f = write_gltf(tmp_path / "d.gltf", arrays, doc)
+    with pytest.raises(InputError, match=message) as exc:
+        load_mesh(f)
+    assert exc.value.problems[0].key.endswith("/extensions/KHR_draco_mesh_compression")
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"mode": "SPIRAL"}, "unknown meshopt mode 'SPIRAL'"),
+        ({"filter": "FUZZY"}, "unknown meshopt filter 'FUZZY'"),
+        ({"byteStride": 6}, "byteStride 6 is not a multiple of 4"),
+        ({"count": "many"}, "lacks count, byteStride or mode"),
+    ],
+)
+def test_malformed_meshopt_view_is_one_line_naming_it(tmp_path, change, message):
+    ext = {"buffer": 0, "byteLength": 8, "count": 4, "byteStride": 12, "mode": "ATTRIBUTES"}
+    ext.update(change)
+    f = write_gltf(tmp_path / "m.gltf", [(QUAD_P, {}), (QUAD_I, {}), (QUAD_UV, {})], quad_doc())
+    tree = json.loads(f.read_text())
+    tree["bufferViews"][0]["extensions"] = {"EXT_meshopt_compression": ext}
+    tree["extensionsUsed"] = tree["extensionsRequired"] = ["EXT_meshopt_compression"]
+    f.write_text(json.dumps(tree))
+    with pytest.raises(InputError, match=message) as exc:
+        load_mesh(f)
+    assert exc.value.problems[0].key == "/bufferViews/0/extensions/EXT_meshopt_compression"
+    assert str(f) in str(exc.value)
+
+
 def test_texture_extension_ignored_with_note(tmp_path):
     doc = quad_doc(
         extra={

@@ -21,7 +21,7 @@ import DracoPy
 import meshoptimizer
 import numpy as np
 
-from wrinklepipe.io.accessors import WIDTH, component_dtype
+from wrinklepipe.io.accessors import COMPONENTS, WIDTH, component_dtype
 
 MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
 DRACO = "KHR_draco_mesh_compression"
@@ -59,6 +59,8 @@ def meshopt_view(ext: dict[str, Any], source: bytes) -> bytes:
     except (KeyError, TypeError, ValueError):
         raise DecodeError("meshopt extension lacks count, byteStride or mode") from None
     filt = str(ext.get("filter", "NONE"))
+    if filt not in ("NONE", "OCTAHEDRAL", "QUATERNION", "EXPONENTIAL"):
+        raise DecodeError(f"unknown meshopt filter {filt!r}")
     try:
         if mode == "ATTRIBUTES":
             if stride % 4 or not 0 < stride <= 256:
@@ -70,8 +72,6 @@ def meshopt_view(ext: dict[str, Any], source: bytes) -> bytes:
                 out = meshoptimizer.decode_filter_quat(out, count, stride)
             elif filt == "EXPONENTIAL":
                 out = meshoptimizer.decode_filter_exp(out, count, stride)
-            elif filt != "NONE":
-                raise DecodeError(f"unknown meshopt filter {filt!r}")
         elif mode in ("TRIANGLES", "INDICES"):
             if stride not in (2, 4):
                 raise DecodeError(f"index byteStride {stride} must be 2 or 4")
@@ -102,16 +102,22 @@ def draco_primitive(
     """Decode a Draco primitive: ``{accessor index: values [count, components]}`` in each
     accessor's component type (its indices accessor and every attribute the extension names)."""
 
+    named = ext.get("attributes") or {}  # the JSON first, then the bitstream
+    if not isinstance(named, dict):
+        raise DecodeError("the extension's attributes must be an object")
+    for semantic, uid in named.items():
+        if not isinstance(uid, int) or isinstance(uid, bool):
+            raise DecodeError(f"attribute id {uid!r} of {semantic} is not an integer")
     try:
         mesh = DracoPy.decode(data)
     except Exception as exc:  # DracoPy raises its own exception types for bad bitstreams
         raise DecodeError(f"Draco bitstream does not decode ({exc})") from None
     out: dict[int, np.ndarray] = {}
     attrs = prim.get("attributes", {})
-    for semantic, uid in (ext.get("attributes") or {}).items():
+    for semantic, uid in named.items():
         if semantic not in attrs:
             continue
-        att = mesh.get_attribute_by_unique_id(int(uid))
+        att = mesh.get_attribute_by_unique_id(uid)
         if att is None:
             raise DecodeError(f"Draco stream has no attribute {uid} ({semantic})")
         ai = attrs[semantic]
@@ -126,6 +132,11 @@ def draco_primitive(
 
 
 def _as_accessor(values: np.ndarray, acc: dict[str, Any], what: str) -> np.ndarray:
+    if acc.get("componentType") not in COMPONENTS or acc.get("type") not in WIDTH:
+        raise DecodeError(
+            f"Draco {what}: the accessor's componentType {acc.get('componentType')!r} / type "
+            f"{acc.get('type')!r} is not one glTF defines"
+        )
     dtype = component_dtype(acc["componentType"])
     width = WIDTH[acc["type"]]
     v = values.reshape(values.shape[0], -1)

@@ -317,11 +317,16 @@ def _decode_draco(doc: Document) -> set[int]:
         if ext is None:
             continue
         key = f"{ref.pointer}/extensions/{decompress.DRACO}"
-        data, _ = doc.view_bytes(ext.get("bufferView"))
+        view = ext.get("bufferView") if isinstance(ext, dict) else None
+        if not isinstance(view, int) or isinstance(view, bool) or not 0 <= view < len(doc.views):
+            raise doc.err(f"Draco bufferView {view!r} does not exist", key)
+        data, _ = doc.view_bytes(view)
         try:
             values = decompress.draco_primitive(ext, data, accessors, prim)
-        except (decompress.DecodeError, KeyError, IndexError, TypeError) as exc:
+        except (decompress.DecodeError, KeyError, IndexError, TypeError, ValueError) as exc:
             raise doc.err(f"Draco primitive does not decode: {exc}", key) from None
+        except AttributeError:  # a member that should be an object is not one
+            raise doc.err("Draco primitive does not decode: malformed extension", key) from None
         for ai, arr in values.items():
             a = accessors[ai]
             target = ELEMENT_ARRAY_BUFFER if ai == prim.get("indices") else ARRAY_BUFFER
