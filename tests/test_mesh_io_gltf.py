@@ -9,6 +9,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import meshoptimizer
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -21,7 +22,7 @@ from wrinklepipe.geometry.dynamic import skinned_pose, triangle_weights
 from wrinklepipe.geometry.tangents import ensure_tangents, mikktspace_tangents_report
 from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
 from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
-from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices
+from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, read_gltf_meshes
 from wrinklepipe.paths import ROOT
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -595,3 +596,96 @@ def test_dynamic_time_on_a_meshopt_file_matches_the_plain_copy(tmp_path):
     # and the source's, to within gltfpack's quantization of the morph deltas
     np.testing.assert_allclose(out["packed"], out["source"], rtol=0, atol=2e-3)
     assert out["source"].min() > 0.4  # the cube really deforms at t = 1 s
+
+
+def _meshopt_gltf(path: Path, pos: np.ndarray, uv: np.ndarray, idx: np.ndarray, mode: str) -> Path:
+    """A glTF whose three bufferViews are meshopt-compressed by PyPI meshoptimizer's encoder
+    (the fallback buffer 1 holds no data, as gltfpack writes it)."""
+    streams = [
+        (meshoptimizer.encode_vertex_buffer(pos, len(pos), 12), 12, len(pos), "ATTRIBUTES"),
+        (meshoptimizer.encode_vertex_buffer(uv, len(uv), 8), 8, len(uv), "ATTRIBUTES"),
+    ]
+    encode = (
+        meshoptimizer.encode_index_buffer
+        if mode == "TRIANGLES"
+        else meshoptimizer.encode_index_sequence
+    )
+    streams.append(
+        (encode(idx.astype(np.uint32), len(idx), len(pos)), idx.itemsize, len(idx), mode)
+    )
+    blob, views = b"", []
+    for data, stride, count, m in streams:
+        blob += b"\0" * (-len(blob) % 4)
+        ext = {"buffer": 0, "byteOffset": len(blob), "byteLength": len(data)}
+        ext.update(byteStride=stride, count=count, mode=m)
+        view = {"buffer": 1, "byteLength": stride * count}
+        if m == "ATTRIBUTES":  # index views have no byteStride (the extension has it)
+            view["byteStride"] = stride
+        view["extensions"] = {"EXT_meshopt_compression": ext}
+        views.append(view)
+        blob += data
+    comp = {2: 5123, 4: 5125}[idx.itemsize]
+    tree = {
+        "asset": {"version": "2.0"},
+        "buffers": [
+            {
+                "byteLength": len(blob),
+                "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode(),
+            },
+            {
+                "byteLength": sum(v["byteLength"] for v in views),
+                "extensions": {"EXT_meshopt_compression": {"fallback": True}},
+            },
+        ],
+        "bufferViews": views,
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": len(pos), "type": "VEC3"},
+            {"bufferView": 1, "componentType": 5126, "count": len(uv), "type": "VEC2"},
+            {"bufferView": 2, "componentType": comp, "count": len(idx), "type": "SCALAR"},
+        ],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2}]}
+        ],
+        "nodes": [{"mesh": 0}],
+        "scenes": [{"nodes": [0]}],
+        "extensionsUsed": ["EXT_meshopt_compression"],
+        "extensionsRequired": ["EXT_meshopt_compression"],
+    }
+    path.write_text(json.dumps(tree))
+    return path
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_vertices=st.integers(3, 300),
+    n_triangles=st.integers(1, 200),
+    index_bytes=st.sampled_from([2, 4]),
+    mode=st.sampled_from(["TRIANGLES", "INDICES"]),
+)
+def test_meshopt_is_lossless_through_ingest(
+    tmp_path_factory, seed, n_vertices, n_triangles, index_bytes, mode
+):
+    # law: meshopt is lossless, so ingest returns the encoded arrays (the TRIANGLES codec may
+    # rotate a triangle's corners, winding kept); 2-byte indices exercise the decoder's
+    # uint32-array trap
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(-1, 1, (n_vertices, 3)).astype(np.float32)
+    uv = rng.uniform(0, 1, (n_vertices, 2)).astype(np.float32)
+    # three distinct corners per triangle: the first 3 of a random permutation of the vertices
+    tris = np.argsort(rng.random((n_triangles, n_vertices)), axis=1)[:, :3]
+    idx = tris.reshape(-1).astype(np.uint16 if index_bytes == 2 else np.uint32)
+    f = _meshopt_gltf(tmp_path_factory.mktemp("mo") / "m.gltf", pos, uv, idx, mode)
+    (m,) = read_gltf_meshes(f)
+    assert m.notes[0] == "decoded EXT_meshopt_compression"
+    np.testing.assert_array_equal(m.positions, pos)
+    np.testing.assert_array_equal(m.uvs, uv)
+    got = m.indices.astype(np.int64)
+    if mode == "INDICES":
+        np.testing.assert_array_equal(got, tris)
+    else:  # each triangle rotated to start at its smallest index
+        rot = (np.argmin(got, 1)[:, None] + np.arange(3)) % 3
+        want = (np.argmin(tris, 1)[:, None] + np.arange(3)) % 3
+        np.testing.assert_array_equal(
+            np.take_along_axis(got, rot, 1), np.take_along_axis(tris, want, 1)
+        )
