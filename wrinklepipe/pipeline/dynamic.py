@@ -27,7 +27,7 @@ from wrinklepipe.geometry.dynamic import (
 )
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes, merge_meshes
-from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, gltf_morph_weights
+from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices_at, gltf_morph_weights
 from wrinklepipe.io.mesh_usd import usd_blend_shape_weights, usd_joint_world_matrices
 from wrinklepipe.io.readers import format_of
 
@@ -49,13 +49,22 @@ class DynamicJobOptions:
     blur: float = 4.0
 
 
-def deformed_pose(
+def rest_and_deformed(
     source: str | Path, mesh: Mesh, parts: list[Mesh], opt: DynamicJobOptions
-) -> np.ndarray:
-    """The deformed positions ``opt`` chooses (``parts``: the unmerged meshes of ``mesh``, in
-    merge order; USD poses each prim)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rest and the deformed positions ``[V, 3]`` (float64), in one space, of the pose
+    ``opt`` chooses (``parts``: the unmerged meshes of ``mesh``, in merge order; USD poses
+    each prim).
+
+    The rest is the mesh as read, except for a skinned glTF posed by ``time``: its deformed
+    shape is skinned into world space, so its rest is the skinned rest pose (the nodes'
+    default transforms, no animation), not the bind-space positions, which may be in another
+    space altogether (KHR_mesh_quantization: gltfpack stores integer positions and puts the
+    dequantization into the inverse bind matrices). A mesh without a skin is baked into
+    world space at read (positions and morph deltas alike), so its rest and pose agree."""
+    rest = mesh.positions.astype(np.float64)
     if opt.morphs:
-        return morph_pose(mesh, opt.morphs, source=str(source))
+        return rest, morph_pose(mesh, opt.morphs, source=str(source))
     if opt.pose:
         pose = Path(opt.pose)
         if pose.suffix.lower() == ".npy":
@@ -70,27 +79,28 @@ def deformed_pose(
             raise input_error(
                 pose, f"pose has shape {list(arr.shape)}, the mesh {list(mesh.positions.shape)}"
             )
-        return arr
+        return rest, arr
     fmt = format_of(source)
     kind = fmt.name if fmt is not None else None
     if kind == "usd":
-        return np.concatenate([_usd_part_pose(source, part, opt.time) for part in parts])
+        return rest, np.concatenate([_usd_part_pose(source, part, opt.time) for part in parts])
     if kind == "gltf":
-        p = mesh.positions.astype(np.float64)
+        p = rest
         if mesh.morph_names:
             w = gltf_morph_weights(source, mesh, opt.time)
             p = morph_pose(mesh, w, source=str(source))
         if mesh.joints is not None:
-            rest = mesh.positions
+            at_rest, at_time = gltf_joint_world_matrices_at(source, mesh, [None, opt.time])
+            rest = skinned_pose(mesh, at_rest, source=str(source))
+            bind = mesh.positions
             mesh.positions = p.astype(np.float32)
             try:
-                jm = gltf_joint_world_matrices(source, mesh, opt.time)
-                p = skinned_pose(mesh, jm, source=str(source))
+                p = skinned_pose(mesh, at_time, source=str(source))
             finally:
-                mesh.positions = rest
+                mesh.positions = bind
         elif not mesh.morph_names:
             raise input_error(source, "--time needs a skinned or morph-animated glTF mesh")
-        return p
+        return rest, p
     raise input_error(source, "--time needs a glTF or USD file with an animation")
 
 
@@ -120,7 +130,7 @@ def dynamic_weights(
         raise input_error("<arguments>", "--texture-space must be in 8..8192")
     parts = load_meshes(source, LoadOptions(generate_uvs=opt.texture_space is not None))
     mesh = parts[0] if len(parts) == 1 else merge_meshes(parts)
-    deformed = deformed_pose(source, mesh, parts, opt)
+    rest, deformed = rest_and_deformed(source, mesh, parts, opt)
     bias = None
     if opt.bias_channel is not None:
         if mesh.colors is None:
@@ -128,7 +138,7 @@ def dynamic_weights(
         bias = 2.0 * mesh.colors[:, opt.bias_channel] - 1.0
     ids = compute_vertex_ids(mesh.positions, source=str(source))
     op = DynamicWeights.build(
-        mesh.positions,
+        rest,
         mesh.indices,
         vertex_ids=ids,
         bias=bias,
