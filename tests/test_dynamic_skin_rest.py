@@ -141,3 +141,33 @@ def test_quantized_cesium_man_gives_the_original_weights(tmp_path):
         # everywhere, the quantized integers taken as the rest shape).
         assert err.max() < 0.048
         assert err.mean() < 2e-3
+
+
+@pytest.mark.parametrize("time", [0.5, 1.0])
+def test_unskinned_morph_under_a_node_scale_is_measured_in_world_space(tmp_path, time):
+    # No skin: the node's world transform (z scaled by 3) is baked into the rest positions and
+    # the morph deltas alike. The target lifts corner 2 by 0.25 in z (weight = time): in world
+    # space the triangle (0,0,0), (1,0,0), (0,1,0.75 t) has area 0.5 |(0, -0.75 t, 1)|, so
+    # weight = 1 - sqrt(1 + (0.75 t)^2) (in mesh space it would be 1 - sqrt(1 + (0.25 t)^2)).
+    arrays = [
+        (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), {}),
+        (np.arange(3, dtype=np.uint16), {}),
+        (np.array([[0, 0, 0], [0, 0, 0], [0, 0, 0.25]], np.float32), {}),
+        (np.array([0.0, 1.0], np.float32), {}),
+        (np.array([0.0, 1.0], np.float32), {}),  # the target's weight: 0 at rest, 1 at t = 1
+    ]
+    prim = {"attributes": {"POSITION": 0}, "indices": 1, "targets": [{"POSITION": 2}]}
+    doc = {
+        "meshes": [{"primitives": [prim], "weights": [0.0]}],
+        "nodes": [{"mesh": 0, "scale": [1.0, 1.0, 3.0]}],
+        "scenes": [{"nodes": [0]}],
+        "animations": [
+            {
+                "samplers": [{"input": 3, "output": 4, "interpolation": "LINEAR"}],
+                "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+            }
+        ],
+    }
+    f = write_gltf(tmp_path / "morph.gltf", arrays, doc)
+    w = _dynamic(f, time, tmp_path / "w.npy")
+    np.testing.assert_allclose(w, 1.0 - np.sqrt(1.0 + (0.75 * time) ** 2), rtol=0, atol=1e-5)
