@@ -60,7 +60,7 @@ class CaptureOptions:
     #: ``sfs`` only when the neutral's normals are given).
     compare_methods: bool = True
     #: Factor applied to every Gaussian sigma (ratio blur, structure tensor, furrow scale), which
-    #: are given for a photo up to ``SCALE_REFERENCE_PX`` wide; ``None``: ``max(1, width / 384)``
+    #: are given for a photo up to ``SCALE_REFERENCE_PX`` wide; ``None``: ``max(1, width / 256)``
     #: (wrinkles are wider in pixels in a larger photo of the same face).
     scale: float | None = None
     #: Flat skin in the ``sfs`` map: where R stays at 1 within this many times its noise over
@@ -89,8 +89,14 @@ def flat_skin(
     return np.exp(-0.5 * m / (level * noise) ** 2)
 
 
-#: Photo width (pixels) at which the sigmas apply unscaled.
-SCALE_REFERENCE_PX = 384.0
+#: Photo width (pixels) at which the sigmas apply unscaled (session 7: 384 -> 256). Measured
+#: with the sessions' faces photographed larger (creases wider in pixels in proportion):
+#: forehead N_z 0.99 at 384 px 1.13x / 0.46x / 39 % (scale 1, `auto` kept the prior) -> 0.30x /
+#: 0.18x / 93 % (1.5); forehead 0.9 at 384 px 0.70x -> 0.38x; the 512 px forehead 0.555x ->
+#: 0.33x (2); mixed 0.9 at 384 px 0.39x -> 0.41x; the flat-facing synthetic scene's
+#: `integrable` at 384 / 512 / 768 / 1024 px 3.74 / 3.41 / 3.27 / 3.39 -> 2.56 / 2.56 / 3.52 /
+#: 2.70 degrees. At 256 px and below nothing changes.
+SCALE_REFERENCE_PX = 256.0
 
 
 def sigma_scale(width: int, options: CaptureOptions) -> float:

@@ -67,7 +67,7 @@ class SfsOptions:
     #: eikonal start ends 7 % below the prior while orienting at chance; where the data carry
     #: the sign it ends 30-70 % below).
     tie: float = 0.1
-    #: Gaussian blur (pixels, for a photo up to 384 px wide: times the sigma scale) of the R the
+    #: Gaussian blur (pixels, for a photo up to 256 px wide: times the sigma scale) of the R the
     #: solve fits and takes its tilt from; it includes the ratio's own ``--blur``. Measured on
     #: the 256 px curved sessions against 1.0: the targets met go from 3/2/5 to 3/3/6 (angular /
     #: tilt / orientation, of 7); 1.4 is better on mixed creases, worse on the foreheads.

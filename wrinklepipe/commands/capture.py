@@ -150,7 +150,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--scale",
         type=float,
         default=d.scale,
-        help="multiply the blur/furrow sigmas (default: max(1, photo width / 384))",
+        help="multiply the blur/furrow sigmas (default: max(1, photo width / 256))",
     )
     p.add_argument("--truth", metavar="MAP", help="a true normal map (texture space) to score")
     p.add_argument("--example", metavar="DIR", help="write a synthetic session into DIR and stop")
