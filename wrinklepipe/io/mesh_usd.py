@@ -547,9 +547,14 @@ def _authored_joints(file: str, skel: Any, n: int) -> tuple[list[str], np.ndarra
     return names, ibm
 
 
-def usd_joint_world_matrices(path: str | Path, mesh: Mesh, time: float | None = None) -> np.ndarray:
+def usd_joint_world_matrices(
+    path: str | Path, mesh: Mesh, time: float | None = None, at_rest: bool = False
+) -> np.ndarray:
     """World matrices ``[J, 4, 4]`` (column vectors) of ``mesh``'s joints at ``time``, from the
-    skeleton bound to the mesh prim ``mesh.name`` and its animation source."""
+    skeleton bound to the mesh prim ``mesh.name`` and its animation source; ``at_rest``: the
+    skeleton's ``restTransforms`` instead (no animation; UsdSkel's own ``atRest``; a skeleton
+    without them: its ``bindTransforms``), placed by the skeleton's world transform at
+    ``time``."""
     from pxr import Usd, UsdGeom, UsdSkel  # deferred: usd-core, USD only
 
     p = Path(path)
@@ -566,7 +571,12 @@ def usd_joint_world_matrices(path: str | Path, mesh: Mesh, time: float | None = 
     cache.Populate(root, Usd.TraverseInstanceProxies())
     skel_q = cache.GetSkelQuery(skel)
     names = [str(j) for j in skel_q.GetJointOrder()]
-    xf = np.asarray(skel_q.ComputeJointSkelTransforms(tc), dtype=np.float64).transpose(0, 2, 1)
+    xf = skel_q.ComputeJointSkelTransforms(tc, at_rest)
+    if at_rest and not len(xf):  # no restTransforms: the bind pose is the rest
+        xf = skel.GetBindTransformsAttr().Get()
+    if xf is None or len(xf) != len(names):
+        raise input_error(p, f"{skel.GetPath()}: no joint transforms of its {len(names)} joints")
+    xf = np.asarray(xf, dtype=np.float64).transpose(0, 2, 1)
     skel_world = np.asarray(
         UsdGeom.Xformable(skel.GetPrim()).ComputeLocalToWorldTransform(tc), dtype=np.float64
     ).T

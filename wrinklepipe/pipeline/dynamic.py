@@ -56,7 +56,9 @@ def rest_and_deformed(
     ``opt`` chooses (``parts``: the unmerged meshes of ``mesh``, in merge order; USD poses
     each prim).
 
-    The rest is the mesh as read, except for a skinned glTF posed by ``time``: its deformed
+    The rest is the mesh as read, except for a skinned glTF or USD prim posed by ``time``. A
+    USD prim's rest is its points skinned with the skeleton's ``restTransforms`` (the bind
+    points are the rest only when rest equals bind). A glTF's deformed
     shape is skinned into world space, so its rest is the skinned rest pose (the nodes'
     default transforms, no animation), not the bind-space positions, which may be in another
     space altogether (KHR_mesh_quantization: gltfpack stores integer positions and puts the
@@ -83,7 +85,8 @@ def rest_and_deformed(
     fmt = format_of(source)
     kind = fmt.name if fmt is not None else None
     if kind == "usd":
-        return rest, np.concatenate([_usd_part_pose(source, part, opt.time) for part in parts])
+        posed = [_usd_part_pose(source, part, opt.time) for part in parts]
+        return np.concatenate([r for r, _ in posed]), np.concatenate([q for _, q in posed])
     if kind == "gltf":
         p = rest
         if mesh.morph_names:
@@ -104,21 +107,30 @@ def rest_and_deformed(
     raise input_error(source, "--time needs a glTF or USD file with an animation")
 
 
-def _usd_part_pose(source: str | Path, part: Mesh, time: float | None) -> np.ndarray:
-    p = part.positions.astype(np.float64)
+def _usd_part_pose(
+    source: str | Path, part: Mesh, time: float | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """One prim's rest and posed positions: a skinned prim's rest is its points skinned with
+    the skeleton's ``restTransforms`` (no animation, no blend shapes), in the posed shape's
+    space (the skeleton's world), not the bind-space points: they agree only when the rest
+    transforms equal the bind transforms."""
+    rest = p = part.positions.astype(np.float64)
     if part.morph_names:
         w = usd_blend_shape_weights(source, part, time)
         w = {k: v for k, v in w.items() if k in part.morph_names}
         p = morph_pose(part, w, source=str(source))
     if part.joints is not None:
+        rest = skinned_pose(
+            part, usd_joint_world_matrices(source, part, time, at_rest=True), source=str(source)
+        )
         jm = usd_joint_world_matrices(source, part, time)
-        rest = part.positions
+        bind = part.positions
         part.positions = p.astype(np.float32)
         try:
             p = skinned_pose(part, jm, source=str(source))
         finally:
-            part.positions = rest
-    return p
+            part.positions = bind
+    return rest, p
 
 
 def dynamic_weights(
