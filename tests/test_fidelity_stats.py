@@ -90,6 +90,48 @@ def test_many_rows_at_once_equal_one_row_at_a_time(n, g, seed):
         assert got.mean == pytest.approx(want.mean, rel=1e-9, abs=1e-12)
 
 
+def dense_stats_many(err, weights):
+    """Per row, by the whole sorted row: one stable sort of err, the float64 running sum of
+    the row's weights over every texel in that order (zeros included), the first texel
+    reaching 99 %, the mean as the dot over every texel."""
+    e = np.asarray(err).ravel()
+    order = np.argsort(e, kind="stable")
+    es = e[order].astype(np.float64)
+    out = []
+    for row in np.asarray(weights, np.float64):
+        ws = row[order]
+        pos = np.flatnonzero(ws > 0)
+        if pos.size == 0:
+            out.append(Stats(0.0, 0.0, 0.0, 0, 0.0))
+            continue
+        cw = np.cumsum(ws)
+        j = min(int(np.searchsorted(cw, 0.99 * cw[-1] * (1 - 1e-12))), int(pos[-1]))
+        mean = float(np.dot(es, ws) / cw[-1])
+        out.append(Stats(mean, float(es[j]), float(es[pos[-1]]), int(pos.size), float(cw[-1])))
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 400), st.integers(1, 6), st.floats(0.0, 1.0), st.integers(0, 2**31))
+def test_many_rows_read_on_their_own_texels_equal_the_whole_sorted_rows(n, g, density, seed):
+    # each row is read on its texels of positive weight only: the same running sums as over
+    # the whole sorted row (the others add 0), so p99, max, texels and weight are exactly the
+    # dense computation's, the mean to rounding; a row without positive weight is empty
+    rng = np.random.default_rng(seed)
+    err = np.round(rng.exponential(1.0, n), 2).astype(np.float32)  # ties
+    w = (rng.uniform(0, 1, (g, n)) * (rng.random((g, n)) < density)).astype(np.float32)
+    w[0] = 0.0  # always one empty row
+    for got, want in zip(weighted_stats_many(err, w), dense_stats_many(err, w)):
+        assert (got.p99, got.max, got.texels, got.weight) == (
+            want.p99,
+            want.max,
+            want.texels,
+            want.weight,
+        )
+        assert got.mean == pytest.approx(want.mean, rel=1e-12, abs=1e-12)
+    assert weighted_stats_many(err, w)[0] == Stats(0.0, 0.0, 0.0, 0, 0.0)
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     st.lists(st.floats(0.0, 90.0, width=32), min_size=1, max_size=400),

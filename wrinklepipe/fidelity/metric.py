@@ -853,10 +853,12 @@ def evaluate(
         overall = weighted_stats(np.concatenate(errs), np.concatenate(ws))
         per_region: dict[str, Stats] = {}
         if regions:
-            on = np.flatnonzero(pr.share.any(axis=1))
+            # the regions that touch the pose's texels (shares are >= 0: a region's stats
+            # are empty where it has no positive share)
             names = np.arange(len(ref.region_names)) if pr.regions is None else pr.regions
-            for r, st in zip(names[on], weighted_stats_many(err, pr.share[on])):
-                per_region[ref.region_names[r]] = st
+            for r, st in zip(names, weighted_stats_many(err, pr.share)):
+                if st.texels:
+                    per_region[ref.region_names[r]] = st
         out.append(PoseFidelity(pr.pose.name, overall, per_region, n_leak))
         if error_maps:
             emap = np.zeros(H * W, _F)

@@ -119,32 +119,41 @@ def unit_stats(err: np.ndarray, overwrite: bool = False) -> Stats:
 
 def weighted_stats_many(err: np.ndarray, weights: np.ndarray) -> list[Stats]:
     """:func:`weighted_stats` of one error array under each row of ``weights`` ``[G, n]`` (the
-    regions of a pose), with one sort for all rows: vectorised weighted percentiles."""
+    regions of a pose), with one sort for all rows: vectorised weighted percentiles.
+
+    Each row is read on its own texels of positive weight only (a region covers a small part
+    of a pose's active texels): their places in the one stable sort of ``err``, sorted, give
+    the row's values and weights in that order, whose float64 running sum is the one over the
+    whole sorted row (the texels left out add 0). Max, p99 and texels are those of the whole
+    row; the mean is its dot product over those texels (equal to rounding)."""
     e = np.asarray(err).ravel()
-    w = np.asarray(weights, np.float64).reshape(-1, e.size)
+    w = np.asarray(weights).reshape(-1, e.size)
     if e.size == 0:
         return [EMPTY] * w.shape[0]
     order = np.argsort(e, kind="stable")
-    es = e[order].astype(np.float64)
-    cw = np.cumsum(w[:, order], axis=1)  # [G, n]
-    total = cw[:, -1]
+    rank = np.empty(e.size, np.int64)  # each texel's place in the sorted order
+    rank[order] = np.arange(e.size)
     out = []
     for g in range(w.shape[0]):
-        if total[g] <= 0.0:
+        pos = np.flatnonzero(w[g] > 0)
+        if pos.size == 0:
             out.append(EMPTY)
             continue
-        pos = w[g, order] > 0
-        last = int(np.flatnonzero(pos)[-1])
-        # the first texel where the cumulative weight reaches 99 %: it has a positive weight
-        j = int(np.searchsorted(cw[g], 0.99 * total[g] * (1.0 - 1e-12), side="left"))
-        j = min(j, last)
+        at = order[np.sort(rank[pos])]  # the row's texels in the sorted order
+        wg = w[g][at].astype(np.float64)
+        es = e[at].astype(np.float64)
+        cw = np.cumsum(wg)
+        total = float(cw[-1])
+        # the first texel where the cumulative weight reaches 99 %
+        j = int(np.searchsorted(cw, 0.99 * total * (1.0 - 1e-12), side="left"))
+        j = min(j, pos.size - 1)
         out.append(
             Stats(
-                mean=float(np.dot(es, w[g, order]) / total[g]),
+                mean=float(np.dot(es, wg) / total),
                 p99=float(es[j]),
-                max=float(es[last]),
-                texels=int(pos.sum()),
-                weight=float(total[g]),
+                max=float(es[-1]),
+                texels=int(pos.size),
+                weight=total,
             )
         )
     return out
