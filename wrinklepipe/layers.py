@@ -31,6 +31,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe",
             "wrinklepipe.paths",
             "wrinklepipe.suffixes",
+            "wrinklepipe.names",
             "wrinklepipe.errors",
             "wrinklepipe.asset",
             "wrinklepipe.metadata",

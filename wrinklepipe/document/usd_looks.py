@@ -22,7 +22,8 @@ from wrinklepipe.document.images import image_pixels, texture_source
 from wrinklepipe.document.model import Document
 from wrinklepipe.document.write import mime_type
 from wrinklepipe.errors import InputError, plain_reason
-from wrinklepipe.io.package import png_bytes, unique_name
+from wrinklepipe.io.package import png_bytes
+from wrinklepipe.names import unique_name
 
 _EXT = {"image/png": "png", "image/jpeg": "jpg"}
 

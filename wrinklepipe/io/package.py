@@ -39,6 +39,7 @@ from wrinklepipe.metadata import (
     WrinkleMeta,
     table_from_json,
 )
+from wrinklepipe.names import unique_name
 from wrinklepipe.normals.resample import resize_normals
 from wrinklepipe.reuse import reused
 
@@ -54,17 +55,6 @@ def safe_name(name: str, taken: set[str] | None = None) -> str:
 
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)).lstrip(".") or "unnamed"
     return stem if taken is None else unique_name(stem, taken)
-
-
-def unique_name(stem: str, taken: set[str]) -> str:
-    """``stem``, or ``stem_2``, ``stem_3`` ... the first not in ``taken`` (which it updates):
-    how file stems and USD prim / variant names are kept apart."""
-    out, i = stem, 1
-    while out in taken:
-        i += 1
-        out = f"{stem}_{i}"
-    taken.add(out)
-    return out
 
 
 @dataclass

@@ -27,6 +27,7 @@ import re
 from dataclasses import dataclass
 
 from wrinklepipe.codec.shaders import decode_source
+from wrinklepipe.names import unique_name
 from wrinklepipe.shading import template as tpl
 from wrinklepipe.shading.setup import ShaderSetup
 
@@ -39,12 +40,7 @@ def identifier(name: str, taken: set[str], prefix: str = "") -> str:
     stem = prefix + (re.sub(r"[^A-Za-z0-9_]", "_", name) or "x")
     if stem[0].isdigit():
         stem = "_" + stem
-    out, i = stem, 1
-    while out in taken:
-        i += 1
-        out = f"{stem}_{i}"
-    taken.add(out)
-    return out
+    return unique_name(stem, taken)
 
 
 @dataclass(frozen=True)
