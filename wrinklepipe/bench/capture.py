@@ -20,8 +20,23 @@ from wrinklepipe.capture import warp as W
 from wrinklepipe.capture.evaluate import errors
 from wrinklepipe.capture.orientation import PRIORS, orient
 from wrinklepipe.capture.ratio import ratio_image
-from wrinklepipe.capture.sessions import FOREHEAD, SessionOptions, make_session
-from wrinklepipe.capture.synthetic import SceneOptions, make_scene
+from wrinklepipe.capture.sessions import FOREHEAD, Session, SessionOptions, make_session
+from wrinklepipe.capture.synthetic import Scene, SceneOptions, make_scene
+
+
+def _photos_and_landmarks(s: Scene | Session, texture_shape: tuple[int, int]) -> tuple:
+    """``capture``'s positional inputs for a synthetic session: the two photos, their landmarks,
+    the texture's landmarks (the neutral photo's stand in for the mesh's) and the ROI."""
+    return (
+        s.neutral,
+        s.expression,
+        s.lm_neutral,
+        s.lm_expression,
+        s.lm_neutral,
+        s.lm_texture,
+        texture_shape,
+        s.roi,
+    )
 
 
 @benchmark("capture", "ratio-image capture: warps, ratio, orientation methods, whole stage")
@@ -69,19 +84,7 @@ def bench_capture(quick: bool) -> BenchResult:
     last: list[CaptureResult] = []
 
     def whole() -> CaptureResult:
-        last[:] = [
-            capture(
-                sc.neutral,
-                sc.expression,
-                sc.lm_neutral,
-                sc.lm_expression,
-                sc.lm_neutral,
-                sc.lm_texture,
-                (tex, tex),
-                sc.roi,
-                options=CaptureOptions(),
-            )
-        ]
+        last[:] = [capture(*_photos_and_landmarks(sc, (tex, tex)), options=CaptureOptions())]
         return last[0]
 
     row("whole stage (4 methods)", whole, "includes leave-one-out landmark fits")
@@ -93,27 +96,11 @@ def bench_capture(quick: bool) -> BenchResult:
             size=64 if quick else 512, texture_size=tex // 2, folds=FOREHEAD, side_light=light
         )
     )
-    cur = capture(
-        fs.neutral,
-        fs.expression,
-        fs.lm_neutral,
-        fs.lm_expression,
-        fs.lm_neutral,
-        fs.lm_texture,
-        fs.truth_texture.shape[:2],
-        fs.roi,
-        neutral_normals=fs.neutral_normals,
-    )
+    shot = _photos_and_landmarks(fs, fs.truth_texture.shape[:2])
+    cur = capture(*shot, neutral_normals=fs.neutral_normals)
     curved = {m: errors(n, fs.truth_texture, fs.roi_texture) for m, n in cur.normal_texture.items()}
     lit = capture(
-        fs.neutral,
-        fs.expression,
-        fs.lm_neutral,
-        fs.lm_expression,
-        fs.lm_neutral,
-        fs.lm_texture,
-        fs.truth_texture.shape[:2],
-        fs.roi,
+        *shot,
         options=CaptureOptions(compare_methods=False),
         neutral_normals=fs.neutral_normals,
         side_lit=fs.side_lit,
