@@ -430,7 +430,7 @@ def test_morph_weight_animation_sampled_like_pygltflib():
 
 
 def test_linear_rotation_is_slerp():
-    from wrinklepipe.io.mesh_gltf import sample_channel
+    from wrinklepipe.geometry.keyframes import sample_channel
 
     t = np.array([0.0, 1.0])
     # identity to 90 degrees about Z: at a quarter of the way, 22.5 degrees (nlerp gives ~18.4)
@@ -441,7 +441,7 @@ def test_linear_rotation_is_slerp():
 
 
 def test_cubic_spline_hermite_by_hand():
-    from wrinklepipe.io.mesh_gltf import sample_channel
+    from wrinklepipe.geometry.keyframes import sample_channel
 
     t = np.array([0.0, 2.0])
     # [in-tangent, value, out-tangent] per key, one component

@@ -37,9 +37,9 @@ import numpy as np
 
 from wrinklepipe.document.model import Document
 from wrinklepipe.document.usd_looks import gf_matrix
+from wrinklepipe.geometry.keyframes import sample_channel_at
 from wrinklepipe.io.animation import Channel, read_channels
 from wrinklepipe.io.gltf_primitive import node_matrix, trs_matrices  # the one glTF TRS
-from wrinklepipe.io.mesh_gltf import sample_channel_at
 from wrinklepipe.names import unique_name
 
 #: The variant that plays convert's weight curve (morph weights) on the wrinkled meshes.

@@ -40,6 +40,7 @@ from wrinklepipe.drivers.base import (
     spec_problem,
 )
 from wrinklepipe.errors import InputError, Problem, input_error
+from wrinklepipe.geometry.keyframes import sample_channel_at
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.suffixes import GLTF_SUFFIXES, is_gltf
 
@@ -155,37 +156,18 @@ def sample_morph_tracks(
     all_names: list[str] = []
     cols: list[np.ndarray] = []
     for k in tracks:
-        kt = np.asarray(k.times, np.float64)
-        if k.interpolation == "CUBICSPLINE":
-            v = np.asarray(k.values, np.float64)
-            w = _hermite(kt, v[:, 1], v[:, 0], v[:, 2], times)
-        else:
-            v = np.asarray(k.values, np.float64)
-            mode = "step" if k.interpolation == "STEP" else "linear"
-            w = np.stack([sample(kt, v[:, j], times, mode) for j in range(len(k.names))], axis=1)
+        w = sample_channel_at(
+            np.asarray(k.times, np.float64),
+            np.asarray(k.values, np.float64),
+            times,
+            k.interpolation,
+            "weights",
+        )
         for j, n in enumerate(k.names):
             if n not in all_names:
                 all_names.append(n)
                 cols.append(w[:, j])
     return np.asarray(times, np.float64), tuple(all_names), np.stack(cols, axis=1)
-
-
-def _hermite(
-    kt: np.ndarray, v: np.ndarray, tin: np.ndarray, tout: np.ndarray, t: np.ndarray
-) -> np.ndarray:
-    """glTF CUBICSPLINE: Hermite between keys with tangents scaled by the key interval."""
-    t = np.clip(np.asarray(t, np.float64), kt[0], kt[-1])
-    i = np.clip(np.searchsorted(kt, t, side="right") - 1, 0, kt.size - 2)
-    dt = kt[i + 1] - kt[i]
-    s = ((t - kt[i]) / dt)[:, None]
-    s2, s3 = s * s, s * s * s
-    h00 = 2 * s3 - 3 * s2 + 1
-    h10 = s3 - 2 * s2 + s
-    h01 = -2 * s3 + 3 * s2
-    h11 = s3 - s2
-    return (
-        h00 * v[i] + h10 * dt[:, None] * tout[i] + h01 * v[i + 1] + h11 * dt[:, None] * tin[i + 1]
-    )
 
 
 def load_keys(ctx: DriverContext, spec: Mapping[str, Any]) -> tuple[Keys, str, list[str]]:
