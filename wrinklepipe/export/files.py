@@ -79,6 +79,18 @@ def _add_mesh(ex: Export, keep_normal: bool) -> str:
     return base_uri
 
 
+def _add_masks(ex: Export) -> None:
+    """The mask textures as PNG files, and the setup's ``masks`` block naming them."""
+    masks = ex.pkg.meta.masks
+    for n in masks.textures:
+        ex.files[f"textures/{n}.png"] = png_bytes(ex.pkg.texture(n).pixels)
+    ex.setup["masks"] = {
+        "layout": masks.layout,
+        "files": [f"textures/{n}.png" for n in masks.textures],
+        "table": masks.table_json(),
+    }
+
+
 def _names(regions: list[str], style: str) -> list[str]:
     taken: set[str] = set()
     if style == "region":
@@ -210,14 +222,7 @@ def _unreal(ex: Export) -> None:
                 f"states: BC5 is over the error budget (worst p99 {worst.p99_deg:.2f} deg): "
                 "shipped as PNG"
             )
-    masks = meta.masks.textures
-    for n in masks:
-        ex.files[f"textures/{n}.png"] = png_bytes(pkg.texture(n).pixels)
-    ex.setup["masks"] = {
-        "layout": meta.masks.layout,
-        "files": [f"textures/{n}.png" for n in masks],
-        "table": meta.masks.table_json(),
-    }
+    _add_masks(ex)
     setup = _shader_setup(ex, base_layout, state_layout, bits)
     try:
         nodes = hlsl.unreal_nodes(setup)
@@ -331,14 +336,7 @@ def _blender(ex: Export) -> None:
         t = pkg.texture(s.texture)
         ex.files[f"textures/{t.name}.png"] = png_bytes(t.pixels)
         ex.setup["states"].append({"name": s.name, "file": f"textures/{t.name}.png"})
-    masks = meta.masks.textures
-    for n in masks:
-        ex.files[f"textures/{n}.png"] = png_bytes(pkg.texture(n).pixels)
-    ex.setup["masks"] = {
-        "layout": meta.masks.layout,
-        "files": [f"textures/{n}.png" for n in masks],
-        "table": meta.masks.table_json(),
-    }
+    _add_masks(ex)
     st = pkg.texture(meta.states[0].texture)
     base = next(t for t in pkg.textures if t.role == "base_normal")
     ex.setup["shader"] = _shader_setup(
