@@ -95,7 +95,7 @@ def _timed_run(args: list[str], parent: Path, out: Path) -> tuple[float, float, 
     staged = published = None
     while proc.poll() is None:
         now = time.monotonic() - t0
-        if staged is None and any(parent.glob(f".*{atomic.STAGING_SUFFIX}")):
+        if staged is None and _staged(parent):
             staged = now
         if published is None and out.exists():
             published = now
@@ -105,8 +105,13 @@ def _timed_run(args: list[str], parent: Path, out: Path) -> tuple[float, float, 
     return staged or 0.0, published or end, end
 
 
-def _staged(parent: Path, name: str) -> bool:
-    return any(parent.glob(f".{name}.*{atomic.STAGING_SUFFIX}"))
+def _staged(parent: Path, name: str = "") -> bool:
+    """A staging folder of output ``name`` (any output without it) is in ``parent``: one
+    ``listdir``, as the ten killer threads poll this every few milliseconds."""
+    prefix = f".{name}." if name else "."
+    return any(
+        n.startswith(prefix) and n.endswith(atomic.STAGING_SUFFIX) for n in os.listdir(parent)
+    )
 
 
 def _kill_plan(seed: int, staged: float, published: float, end: float) -> list[tuple[str, float]]:
@@ -124,7 +129,7 @@ def _kill_at(proc: CliRun, parent: Path, name: str, phase: str, delay: float) ->
     if phase == "writing":
         deadline = time.monotonic() + 300
         while not _staged(parent, name) and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.001)
+            time.sleep(0.002)
     time.sleep(delay)
     proc.kill()
     proc.wait()

@@ -45,25 +45,44 @@ COMMAND_ORDER = (
 )
 
 
-def _command_modules() -> list:
-    mods = []
-    for info in pkgutil.iter_modules(pkg.__path__):
-        if info.name.startswith("_"):
-            continue
-        mods.append(importlib.import_module(f"wrinklepipe.commands.{info.name}"))
+def _module_names() -> dict[str, str]:
+    """Command name -> module name, from the files of :mod:`wrinklepipe.commands` (no import):
+    a command ``NAME`` lives in ``commands/<NAME with - as _>.py``."""
+    return {
+        info.name.replace("_", "-"): info.name
+        for info in pkgutil.iter_modules(pkg.__path__)
+        if not info.name.startswith("_")
+    }
+
+
+def _command_modules(only: str | None = None) -> list:
+    """The command modules (all of them, or only the command ``only``), in ``--help`` order."""
+    names = _module_names()
+    if only is not None:
+        names = {only: names[only]}
+    mods = [importlib.import_module(f"wrinklepipe.commands.{m}") for m in names.values()]
     order = {name: i for i, name in enumerate(COMMAND_ORDER)}
     mods.sort(key=lambda m: (order.get(m.NAME, len(order)), m.NAME))
     return mods
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _named_command(argv: Sequence[str]) -> str | None:
+    """The command ``argv`` runs when its first word names one, else None (help, --version,
+    a typo: those need every command's parser)."""
+    return argv[0] if argv and argv[0] in _module_names() else None
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or (``only``) of that one command alone: running one
+    command imports its module only, not the other commands' stages (``wrinklepipe convert``
+    starts without loading capture's solvers or the batch engines)."""
     parser = argparse.ArgumentParser(
         prog="wrinklepipe",
         description="Process and validate animated facial wrinkle maps.",
     )
     parser.add_argument("--version", action="version", version=f"wrinklepipe {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for mod in _command_modules():
+    for mod in _command_modules(only):
         p = sub.add_parser(
             mod.NAME,
             help=mod.HELP,
@@ -120,7 +139,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     Every failure ends in one message per problem and exit code 2, never a traceback; an
     unexpected error is reported as an internal error (``WRINKLEPIPE_DEBUG=1`` re-raises it)."""
 
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(_named_command(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "_run", None):
         parser.print_help(sys.stderr)
