@@ -33,7 +33,12 @@ def _quantile(v: np.ndarray, w: np.ndarray, q: float, lo: float, hi: float, tota
         return lo
     target = q * total * (1.0 - 1e-12)  # cumulative sums round; never miss the last texel
     nb = int(min(max(v.size // 64, 16), 1 << 16))
-    b = ((v - lo) * (nb / (hi - lo))).astype(np.int64)
+    scale = nb / (hi - lo)
+    # a range of a few denormals makes the scale overflow float32 (inf * 0 -> NaN bins): such
+    # values are binned in float64, where the scale of any float32 range is finite
+    small = v.dtype != np.float64 and scale >= float(np.finfo(np.float32).max) / 4
+    vv = v.astype(np.float64) if small else v
+    b = ((vv - lo) * scale).astype(np.int64)
     np.minimum(b, nb - 1, out=b)
     cum = np.cumsum(np.bincount(b, weights=w, minlength=nb))
     k = min(int(np.searchsorted(cum, target, side="left")), nb - 1)
