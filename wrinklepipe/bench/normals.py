@@ -214,6 +214,7 @@ def _format_quality(res: BenchResult, q: np.ndarray, ref: np.ndarray) -> None:
             "ispc_texcomp": lambda: ispc_texcomp.compress_blocks_bc1(
                 surf(rgb.tobytes(), w, h, w * 4)
             ),
+            "ours (quicktex levels 5 and 0, per block)": lambda: cmp.encode_bc(rgb, "bc1"),
         },
         "bc3": {
             "etcpak": lambda: etcpak.compress_bc3(nm, w, h),
