@@ -52,8 +52,9 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
 fi
 # The package's bytecode, as pip compiles what it installs (an editable install leaves the
 # project's own modules uncompiled): with PYTHONDONTWRITEBYTECODE set, every `wrinklepipe` run
-# and test process would compile the ~250 modules again (~0.2 s each). Up-to-date files are
-# skipped; Python checks each .pyc against its source's mtime, so a stale one is never used.
+# and test process would compile the ~250 modules again (0.16 s of CPU each: `wrinklepipe
+# convert --help` 1.27 -> 1.11 s). Up-to-date files are skipped; Python checks each .pyc
+# against its source's mtime, so a stale one is never used.
 .venv/bin/python -m compileall -q -j 0 wrinklepipe tests >/dev/null
 
 # 3. npm tools in a project-local folder: the Khronos glTF-Validator, glTF-Transform's CLI
