@@ -166,35 +166,24 @@ def _encode_bc(a: np.ndarray, fmt: str, targets: np.ndarray | None) -> bytes:
     return bytes(ispc_texcomp.compress_blocks_bc7(surface, settings))  # bc7 and bc7xy
 
 
-_QUICKTEX = {
-    "bc1": (quicktex_bc1.BC1Encoder, texture2ddecoder.decode_bc1),
-    "bc3nm": (quicktex_bc3.BC3Encoder, texture2ddecoder.decode_bc3),
-}
+_QUICKTEX = {"bc1": quicktex_bc1.BC1Encoder, "bc3nm": quicktex_bc3.BC3Encoder}
 
 
 def _quicktex_best(a: np.ndarray, fmt: str) -> np.ndarray:
     """quicktex's blocks [N, bytes] of RGBA8 ``a`` at each of :data:`QUICKTEX_LEVELS`, each
-    block the one whose decoded R, G, B (texture2ddecoder) are nearest ``a``'s (squared error);
-    BC3's alpha half is left to the caller."""
+    block the one whose decoded R, G, B (:func:`decode_bc_bgra`) are nearest ``a``'s (squared
+    error; a tie keeps the first level); BC3's alpha half is left to the caller."""
     h, w = a.shape[:2]
-    encoder, decode = _QUICKTEX[fmt]
     tex = quicktex.RawTexture.frombytes(a.tobytes(), w, h)
     want = a[..., 2::-1].astype(np.int32)  # B, G, R: texture2ddecoder's order
-    best = best_err = None
+    blocks, errors = [], []
     for level in QUICKTEX_LEVELS:
-        data = bytes(encoder(level).encode(tex).tobytes())
-        bgra = np.frombuffer(decode(data, w, h), np.uint8).reshape(h, w, 4)
-        d = bgra[..., :3].astype(np.int32) - want
-        err = (d * d).reshape(h // 4, 4, w // 4, 4, 3).sum(axis=(1, 3, 4)).ravel()
-        blocks = np.frombuffer(data, np.uint8).reshape(err.size, -1)
-        if best is None or best_err is None:
-            best, best_err = blocks.copy(), err
-            continue
-        better = err < best_err
-        best[better] = blocks[better]
-        best_err = np.minimum(best_err, err)
-    assert best is not None
-    return best
+        data = bytes(_QUICKTEX[fmt](level).encode(tex).tobytes())
+        d = decode_bc_bgra(data, w, h, fmt)[..., :3].astype(np.int32) - want
+        errors.append((d * d).reshape(h // 4, 4, w // 4, 4, 3).sum(axis=(1, 3, 4)).ravel())
+        blocks.append(np.frombuffer(data, np.uint8).reshape(errors[-1].size, -1))
+    pick = np.argmin(np.stack(errors), axis=0)  # the first of equal errors
+    return np.stack(blocks)[pick, np.arange(pick.size)]
 
 
 def block_data_size(fmt: str, width: int, height: int) -> int:
