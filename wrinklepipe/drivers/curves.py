@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from wrinklepipe.drivers.base import (
     DriverContext,
@@ -62,6 +61,10 @@ def sample(
         i = np.clip(np.searchsorted(kt, t, side="right") - 1, 0, kt.size - 1)
         return kv[i]
     if interpolation == "cubic" and kt.size >= 3:
+        # deferred: scipy.interpolate (and the scipy.optimize it brings) is ~0.4 s of every
+        # command's start-up, and only cubic curve keys need it
+        from scipy.interpolate import CubicSpline
+
         tc = np.clip(t, kt[0], kt[-1])
         return CubicSpline(kt, kv, bc_type="not-a-knot")(tc)
     return np.interp(t, kt, kv)
