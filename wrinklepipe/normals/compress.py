@@ -27,9 +27,10 @@ sort of one bin, so large maps need no full sort.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -167,18 +168,28 @@ def _encode_bc(a: np.ndarray, fmt: str, targets: np.ndarray | None) -> bytes:
 
 
 _QUICKTEX = {"bc1": quicktex_bc1.BC1Encoder, "bc3nm": quicktex_bc3.BC3Encoder}
-_QUICKTEX_ENCODERS = threading.local()
+#: Built quicktex encoders not in use, by (format, level).
+_QUICKTEX_FREE: dict[tuple[str, int], list[Any]] = {}
+_QUICKTEX_LOCK = threading.Lock()
 
 
-def _quicktex_encoder(fmt: str, level: int) -> Any:
-    """quicktex's encoder of ``fmt`` at ``level``, built once per thread: building one takes
-    20-27 ms (its tables), encoding a small level with it microseconds (the mip chains' levels
-    and the searches' partial round trips are many small encodings). Its settings are all its
-    state: a reused encoder gives the bytes a new one gives."""
-    cache = _QUICKTEX_ENCODERS.__dict__.setdefault("by_key", {})
-    if (fmt, level) not in cache:
-        cache[fmt, level] = _QUICKTEX[fmt](level)
-    return cache[fmt, level]
+@contextlib.contextmanager
+def _quicktex_encoder(fmt: str, level: int) -> Iterator[Any]:
+    """quicktex's encoder of ``fmt`` at ``level``, for this thread while the block lasts, then
+    kept for the next caller: building one takes 20-27 ms (its tables), encoding a small level
+    with it microseconds (mip levels and the searches' partial round trips are many small
+    encodings, often on short-lived pool threads). No encoder serves two threads at once; its
+    settings are all its state, so a kept encoder gives the bytes a new one gives."""
+    with _QUICKTEX_LOCK:
+        free = _QUICKTEX_FREE.setdefault((fmt, level), [])
+        encoder = free.pop() if free else None
+    if encoder is None:
+        encoder = _QUICKTEX[fmt](level)
+    try:
+        yield encoder
+    finally:
+        with _QUICKTEX_LOCK:
+            _QUICKTEX_FREE[fmt, level].append(encoder)
 
 
 def _quicktex_best(a: np.ndarray, fmt: str) -> np.ndarray:
@@ -190,7 +201,8 @@ def _quicktex_best(a: np.ndarray, fmt: str) -> np.ndarray:
     want = a[..., 2::-1].astype(np.int32)  # B, G, R: texture2ddecoder's order
     blocks, errors = [], []
     for level in QUICKTEX_LEVELS:
-        data = bytes(_quicktex_encoder(fmt, level).encode(tex).tobytes())
+        with _quicktex_encoder(fmt, level) as encoder:
+            data = bytes(encoder.encode(tex).tobytes())
         d = decode_bc_bgra(data, w, h, fmt)[..., :3].astype(np.int32) - want
         errors.append((d * d).reshape(h // 4, 4, w // 4, 4, 3).sum(axis=(1, 3, 4)).ravel())
         blocks.append(np.frombuffer(data, np.uint8).reshape(errors[-1].size, -1))
