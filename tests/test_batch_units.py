@@ -22,6 +22,7 @@ from wrinklepipe.batch.results import AssetResult as Result
 from wrinklepipe.batch.results import worst_exit_code
 from wrinklepipe.cli import main
 from wrinklepipe.errors import InputError
+from wrinklepipe.normals import compress
 
 SCHEMAS = Path(__file__).parent / "schemas"
 MANIFEST = 'schema = "wrinklepipe/manifest@1"\nname = "x"\n'
@@ -410,3 +411,20 @@ def test_bench_limit_against_a_second_reference():
     assert r.limit_text("cached") == "<= 0.05x two (is 0.08x)"
     r.rows[2].median_s = 0.2
     assert r.failures() == []
+
+
+def _exit_with_kept_encoders() -> None:
+    """In a process forked by the batch fork server: exit 0 when every quicktex encoder is
+    already built (inherited from the server), 3 otherwise."""
+    kept = all(compress._QUICKTEX_FREE.get((f, lv)) for f in ("bc1", "bc3nm") for lv in (5, 0))
+    os._exit(0 if kept else 3)
+
+
+def test_an_assets_process_starts_with_quicktex_encoders_built():
+    """The fork server builds quicktex's encoder tables once (~0.1 s an asset otherwise);
+    every asset's process inherits them; and kept, they encode as new ones do."""
+    assert set(compress.QUICKTEX_LEVELS) == {5, 0}
+    proc = LocalEngine._context().Process(target=_exit_with_kept_encoders)
+    proc.start()
+    proc.join()
+    assert proc.exitcode == 0

@@ -45,6 +45,7 @@ _PRELOAD = [
     "scipy.ndimage",
     "wrinklepipe.masks",
     "wrinklepipe.normals.compress",
+    "wrinklepipe.batch.forkserver_warm",  # quicktex's encoder tables, built once
     "wrinklepipe.io.gltf_write",
     "wrinklepipe.io.usd_write",
     "wrinklepipe.validate.render",

@@ -192,6 +192,18 @@ def _quicktex_encoder(fmt: str, level: int) -> Iterator[Any]:
             _QUICKTEX_FREE[fmt, level].append(encoder)
 
 
+def keep_quicktex_encoders() -> None:
+    """Build one quicktex encoder of each format and level now and keep it for the first
+    caller (a process that forks many workers builds them once instead of once per worker)."""
+    for fmt in _QUICKTEX:
+        for level in QUICKTEX_LEVELS:
+            with _QUICKTEX_LOCK:
+                if _QUICKTEX_FREE.get((fmt, level)):
+                    continue
+            with _quicktex_encoder(fmt, level):
+                pass
+
+
 def _quicktex_best(a: np.ndarray, fmt: str) -> np.ndarray:
     """quicktex's blocks [N, bytes] of RGBA8 ``a`` at each of :data:`QUICKTEX_LEVELS`, each
     block the one whose decoded R, G, B (:func:`decode_bc_bgra`) are nearest ``a``'s (squared
