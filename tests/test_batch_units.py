@@ -421,8 +421,9 @@ def _exit_with_kept_encoders() -> None:
 
 
 def test_an_assets_process_starts_with_quicktex_encoders_built():
-    """The fork server builds quicktex's encoder tables once (~0.1 s an asset otherwise);
-    every asset's process inherits them; and kept, they encode as new ones do."""
+    """The fork server builds quicktex's encoder tables once (~0.1 s an asset otherwise) and
+    every asset's process inherits them (that a kept encoder gives a new one's bytes is
+    test_normals_compress's)."""
     assert set(compress.QUICKTEX_LEVELS) == {5, 0}
     proc = LocalEngine._context().Process(target=_exit_with_kept_encoders)
     proc.start()
