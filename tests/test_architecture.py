@@ -28,8 +28,8 @@ DEFERRED = {
     "alktx2": "optional (Basis Universal UASTC only), may be absent",
     "moderngl": "imported where a GL context is made, inside the guard for 'no GL here'",
     "distributed": "Dask: about a second to import, only the Dask batch engine needs it",
-    "scipy.interpolate": "~0.4 s of every command's start-up (with the scipy.optimize it "
-    "imports); only cubic curve keys need it on the convert path",
+    "scipy.interpolate": "~0.4 s of import time with the scipy.optimize it imports (0.1-0.2 s "
+    "of a command's start-up); only cubic curve keys need it on the convert path",
 }
 
 #: Imports that still run up the layers, each to be removed (the test fails when one is no

@@ -197,11 +197,9 @@ def keep_quicktex_encoders() -> None:
     caller (a process that forks many workers builds them once instead of once per worker)."""
     for fmt in _QUICKTEX:
         for level in QUICKTEX_LEVELS:
-            with _QUICKTEX_LOCK:
-                if _QUICKTEX_FREE.get((fmt, level)):
-                    continue
-            with _quicktex_encoder(fmt, level):
-                pass
+            if not _QUICKTEX_FREE.get((fmt, level)):
+                with _quicktex_encoder(fmt, level):
+                    pass
 
 
 def _quicktex_best(a: np.ndarray, fmt: str) -> np.ndarray:
