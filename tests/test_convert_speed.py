@@ -112,6 +112,8 @@ def test_reuse_changes_no_byte_of_the_folder(manifest, tmp_path, monkeypatch):
     # roundtrip of the chosen format is the copy's encoding
     assert memo.hits["wrinklepipe.io.package._png"] >= 4
     assert memo.hits["wrinklepipe.normals.compress.encode_bc"] >= 1
+    # the validator's MikkTSpace reference of the mesh read back is the tangents convert made
+    assert memo.hits["wrinklepipe.geometry.tangents._mikktspace"] >= 1
     files = sorted(p.relative_to(tmp_path / "plain") for p in (tmp_path / "plain").rglob("*"))
     assert files == sorted(
         p.relative_to(tmp_path / "reused") for p in (tmp_path / "reused").rglob("*")

@@ -9,6 +9,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from wrinklepipe import reuse
+from wrinklepipe.demo import demo_asset
+from wrinklepipe.geometry.tangents import mikktspace_tangents_report
 from wrinklepipe.io.package import png_bytes
 from wrinklepipe.normals.resample import axis_weights, oiio_resize, resize
 
@@ -229,3 +231,17 @@ def test_the_block_copies_are_the_same_bytes_on_one_thread_or_several(monkeypatc
         monkeypatch.setenv(reuse.THREADS_ENV, n)
         got[n] = [encode_bc(pack_rgba(q, fmt), fmt) for fmt in ("bc5", "bc7")]
     assert got["1"] == got["2"]
+
+
+def test_tangents_of_one_mesh_are_computed_once_whatever_the_index_dtype():
+    """The validator reads indices back as uint32 where convert holds int64: one key."""
+    mesh = demo_asset(16).mesh
+    args = (mesh.positions, mesh.normals, mesh.uvs)
+    plain, plain_rep = mikktspace_tangents_report(*args, mesh.indices.astype(np.int64))
+    with reuse.reuse() as memo:
+        t64, _ = mikktspace_tangents_report(*args, mesh.indices.astype(np.int64))
+        t64[:] = 0  # the caller's own copy
+        t32, rep = mikktspace_tangents_report(*args, mesh.indices.astype(np.uint32))
+    assert memo.misses == {"wrinklepipe.geometry.tangents._mikktspace": 1}
+    assert memo.hits == {"wrinklepipe.geometry.tangents._mikktspace": 1}
+    assert np.array_equal(t32, plain) and rep == plain_rep

@@ -271,3 +271,42 @@ def test_html_report_never_deletes_a_files_folder_it_did_not_write(tmp_path, cap
     (docs / "summary_files" / "mine.png").write_bytes(b"x")
     assert main(args) == 2
     assert _tree(docs) == {**first, "summary_files/mine.png": b"x"}
+
+
+def _entries(folder: Path) -> set[str]:
+    return {p.relative_to(folder).as_posix() for p in folder.rglob("*")}
+
+
+def test_a_file_written_inside_a_staged_folder_is_replaced_in_place(tmp_path):
+    """Inside a folder being built the per-file temporary is a hidden sibling, not a marked
+    staging folder of its own; it is renamed over the name on success (a rewrite replaces the
+    bytes), and on failure neither it nor a folder it needed is left to be published."""
+    target = tmp_path / "out"
+    with atomic.staged_folder(target) as new:
+        atomic.write_bytes(new / "a" / "one.bin", b"first")
+        with atomic.temp_path(new / "a" / "one.bin") as tmp:
+            assert tmp.parent == new / "a" and tmp.suffix == ".bin" and tmp.name != "one.bin"
+            assert _entries(new) == {"a", "a/one.bin"}  # no staging folder inside
+            tmp.write_bytes(b"second")
+        assert (new / "a" / "one.bin").read_bytes() == b"second"
+        with pytest.raises(RuntimeError), atomic.temp_path(new / "b" / "two.png") as tmp:
+            tmp.write_bytes(b"partial")
+            raise RuntimeError("writer failed")
+        assert _entries(new) == {"a", "a/one.bin"}
+        [staging] = [p for p in tmp_path.iterdir() if p.name.endswith(atomic.STAGING_SUFFIX)]
+        assert new.parent == staging
+    assert _entries(target) == {"a", "a/one.bin"}
+    assert {p.name for p in tmp_path.iterdir()} == {"out"}  # staging folder and lock gone
+    assert oct((target / "a" / "one.bin").stat().st_mode & 0o777) == oct(atomic.default_mode())
+
+
+def test_a_file_beside_a_staged_folder_still_gets_its_own_staging(tmp_path):
+    """A name that only starts like an open staging folder's is outside it."""
+    target = tmp_path / "out"
+    with atomic.staged_folder(target) as new:
+        staging = new.parent
+        outside = staging.with_name(staging.name + "x") / "f.txt"
+        with atomic.temp_path(outside) as tmp:
+            assert tmp.name == "f.txt" and tmp.parent.name.endswith(atomic.STAGING_SUFFIX)
+            tmp.write_bytes(b"x")
+        assert outside.read_bytes() == b"x"

@@ -21,13 +21,13 @@ from wrinklepipe.sources.validation import check_gltf_claims_wrinkles
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import RULES, issues_markdown, make_issue
 from wrinklepipe.validate.config import parse_config
-from wrinklepipe.validate.context import Context
+from wrinklepipe.validate.context import Context, position_groups
 from wrinklepipe.validate.inputs import Texture
 from wrinklepipe.validate.render import triangle_layer_touch
 from wrinklepipe.validate.report import normalized
 from wrinklepipe.validate.rules_maps import convention_score
 from wrinklepipe.validate.rules_masks import check_masks, side_centroids, stored_step
-from wrinklepipe.validate.rules_weights import group_spread, position_groups
+from wrinklepipe.validate.rules_weights import group_spread
 from wrinklepipe.validate.ship import ShipOptions, ship_asset
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -37,6 +37,7 @@ import shutil
 import socket
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
@@ -300,9 +301,26 @@ class _Staging:
             _remove_staging(new, self.fd)
             raise
         self.dir = folder
+        with _OPEN_STAGING_LOCK:
+            _OPEN_STAGING.add(os.path.abspath(folder) + os.sep)
 
     def remove(self) -> None:
+        with _OPEN_STAGING_LOCK:
+            _OPEN_STAGING.discard(os.path.abspath(self.dir) + os.sep)
         _remove_staging(self.dir, self.fd)
+
+
+#: The staging folders this process has open (absolute, with a trailing separator). A file
+#: written inside one needs no staging folder of its own: the folder is published, or removed,
+#: as a whole (see :func:`temp_path`).
+_OPEN_STAGING: set[str] = set()
+_OPEN_STAGING_LOCK = threading.Lock()
+
+
+def _in_open_staging(path: Path) -> bool:
+    p = os.path.abspath(path)
+    with _OPEN_STAGING_LOCK:
+        return any(p.startswith(d) for d in _OPEN_STAGING)
 
 
 def _remove_staging(folder: Path, fd: int) -> None:
@@ -439,11 +457,19 @@ def _remove_created(created: list[Path]) -> None:
 def temp_path(path: str | Path, inputs: Iterable[str | Path] = ()) -> Iterator[Path]:
     """Yield a temporary path with ``path``'s name (so writers pick the same format) in a marked
     staging folder beside it; on success it gets umask permissions and is renamed over
-    ``path``, on failure it is removed and ``path`` is untouched."""
+    ``path``, on failure it is removed and ``path`` is untouched.
+
+    Inside a staging folder this process has open (a :func:`staged_folder` being built) the
+    temporary file is a hidden sibling with the same suffix instead: the whole folder is
+    published by one rename or removed, so a marked folder of its own per file (a ``mkdir``,
+    an flock'd marker, a ``rmdir``: most of the cost of writing a small file) adds nothing."""
     path = Path(path)
     check_not_input(path, inputs)
     if path.is_dir() and not path.is_symlink():
         raise input_error(path, "is a folder; expected a file name to write")
+    if _in_open_staging(path):
+        yield from _sibling_temp(path)
+        return
     created = _make_parents(path.parent)
     done = False
     try:
@@ -459,6 +485,23 @@ def temp_path(path: str | Path, inputs: Iterable[str | Path] = ()) -> Iterator[P
     finally:
         if not done:
             _remove_created(created)
+
+
+def _sibling_temp(path: Path) -> Iterator[Path]:
+    """:func:`temp_path` inside an open staging folder: ``.<random>.NAME`` beside ``path``
+    (same suffix, so writers pick the same format), renamed over it on success, removed on
+    failure."""
+    created = _make_parents(path.parent)
+    tmp = path.with_name(f".{secrets.token_hex(6)}.{path.name}")
+    try:
+        yield tmp
+        os.chmod(tmp, default_mode())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        _remove_created(created)
+        raise
 
 
 def write_bytes(path: str | Path, data: bytes, inputs: Iterable[str | Path] = ()) -> Path:

@@ -28,6 +28,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.reuse import reused
 
 NAME = "tangents"
 
@@ -58,10 +59,18 @@ def mikktspace_tangents_report(
     positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray, indices: np.ndarray
 ) -> tuple[np.ndarray, TangentReport]:
     """:func:`mikktspace_tangents` plus a :class:`TangentReport` of the approximations."""
+    # indices in one dtype, so that a mesh read back with uint32 indices is the same key
+    idx = np.asarray(indices).astype(np.int64, copy=False).reshape(-1, 3)
+    return _mikktspace(np.asarray(positions), np.asarray(normals), np.asarray(uvs), idx)
+
+
+@reused  # the tangents convert computes are the validator's reference (the same written mesh)
+def _mikktspace(
+    positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray, idx: np.ndarray
+) -> tuple[np.ndarray, TangentReport]:
     p = np.asarray(positions, dtype=np.float64)
     n_in = np.asarray(normals, dtype=np.float64)
     uv = np.asarray(uvs, dtype=np.float64)
-    idx = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
     nv = len(p)
     if n_in.shape != (nv, 3) or uv.shape != (nv, 2):
         raise input_error("mesh", f"normals [V,3] and uvs [V,2] must match {nv} positions")

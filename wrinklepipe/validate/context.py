@@ -56,6 +56,12 @@ class ValidateOptions:
     dynamic_targets: int = 16  # morph targets whose dynamic weights are checked across seams
 
 
+def position_groups(positions: np.ndarray) -> np.ndarray:
+    """Group index of every vertex: vertices at bit-identical positions share one group."""
+    _, inverse = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
+    return inverse.reshape(-1)
+
+
 def expression_weights(asset: WrinkleAsset, expr: str | None) -> np.ndarray:
     """Weights for one expression at full amount (None: neutral) in the policy's shape.
 
@@ -135,6 +141,13 @@ class Context:
         return tex.convention == "directx" and tex.role in ("base", "state")
 
     # ---------------------------------------------------------------- shipped, decoded
+    @cached_property
+    def vertex_groups(self) -> np.ndarray:
+        """:func:`position_groups` of the mesh's vertices (the mesh and the weight rules both
+        compare seam twins), computed once."""
+        mesh = self.asset.mesh
+        return position_groups(mesh.positions if mesh is not None else np.zeros((0, 3)))
+
     @cached_property
     def base_tex(self) -> Texture | None:
         b = self.inp.by_role("base")

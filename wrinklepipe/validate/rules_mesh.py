@@ -8,7 +8,7 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.geometry.tangents import mikktspace_tangents
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context
-from wrinklepipe.validate.rules_weights import group_spread, position_groups
+from wrinklepipe.validate.rules_weights import group_spread
 
 
 def reference_tangents(mesh: Mesh) -> tuple[np.ndarray, float, str]:
@@ -79,7 +79,7 @@ def check_mesh(ctx: Context) -> list[Issue]:
                 )
     if mesh.vertex_ids is not None and len(mesh.vertex_ids) == v:
         ids = np.asarray(mesh.vertex_ids, np.int64)
-        groups = position_groups(mesh.positions)
+        groups = ctx.vertex_groups
         spread = group_spread(groups, ids[:, None].astype(np.float64))
         bad = spread > 0
         if bad.any():

@@ -10,12 +10,6 @@ from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context
 
 
-def position_groups(positions: np.ndarray) -> np.ndarray:
-    """Group index of every vertex: vertices at bit-identical positions share one group."""
-    _, inverse = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
-    return inverse.reshape(-1)
-
-
 def group_spread(groups: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Per vertex: max minus min of ``values`` ``[V, C]`` over its group (0 for singletons)."""
     v = np.asarray(values, np.float64).reshape(len(groups), -1)
@@ -93,7 +87,7 @@ def check_weights(ctx: Context) -> list[Issue]:
     if mesh is not None:
         per_vertex.update(dynamic_weights(mesh, max_targets=ctx.options.dynamic_targets))
     if mesh is not None and per_vertex:
-        groups = position_groups(mesh.positions)
+        groups = ctx.vertex_groups
         for name, vals in sorted(per_vertex.items()):
             vals = np.asarray(vals)
             if vals.shape[0] != mesh.vertex_count:
