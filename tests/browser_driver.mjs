@@ -3,7 +3,8 @@
 //   node tests/browser_driver.mjs job.json
 // job: { url, playwright (path to playwright-core), chromium, out, calls: [{ fn, args, file }] }
 // Each call's result is written to results.json; a result with `data` (base64 float32) is
-// written to `file` under `out` instead. Requests to anything but 127.0.0.1 are refused.
+// written to `file` under `out` instead (split evenly over `files` when the call names
+// several). Requests to anything but 127.0.0.1 are refused.
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
@@ -41,7 +42,15 @@ try {
 		const t0 = Date.now();
 		const value = await page.evaluate( ( [ fn, args ] ) => window.wrinklepipe[ fn ]( ...args ), [ call.fn, call.args ] );
 		log.push( `time: ${ call.fn } ${ Date.now() - t0 } ms` );
-		if ( value && typeof value.data === 'string' && call.file ) {
+		if ( value && typeof value.data === 'string' && call.files ) {
+
+			// several images one after another (renderDebugSets): one file each
+			const data = Buffer.from( value.data, 'base64' );
+			const n = data.length / call.files.length;
+			call.files.forEach( ( file, i ) => fs.writeFileSync( path.join( job.out, file ), data.subarray( i * n, ( i + 1 ) * n ) ) );
+			results.push( { fn: call.fn, files: call.files, size: value.size } );
+
+		} else if ( value && typeof value.data === 'string' && call.file ) {
 
 			fs.writeFileSync( path.join( job.out, call.file ), Buffer.from( value.data, 'base64' ) );
 			results.push( { fn: call.fn, file: call.file, size: value.size } );

@@ -110,6 +110,14 @@ def _characters(root: Path) -> dict[str, Path]:
     return out
 
 
+def _debug_sets(key: str, sets: dict[str, list[float]], size: int, plan: list) -> dict:
+    """One call rendering the debug normal (mode 1) at every weight set of ``sets``, one file
+    per set (``KEY_SET.f32``), each recorded in ``plan`` for the comparison with numpy."""
+    files = [f"{key}_{name}.f32" for name in sets]
+    plan += [(key, name, w, f) for (name, w), f in zip(sets.items(), files)]
+    return {"fn": "renderDebugSets", "args": [1, list(sets.values()), size], "files": files}
+
+
 CHAR_TIMES = [0.0, 0.5, 1.25, 2.0, 2.6, 2.95]  # within both clips (the mixer loops)
 
 
@@ -125,9 +133,7 @@ def _character_calls(name: str, url: str, clip: int, plan: list) -> list[dict]:
         {"fn": "renderDebug", "args": [2, None, s], "file": f"{name}_uv.f32"},
         {"fn": "renderColor", "args": [strong, s], "file": f"{name}_lit_strong.u8"},
     ]
-    for wname, w in _weight_sets(3, "clamp01").items():
-        calls.append({"fn": "renderDebug", "args": [1, w, s], "file": f"{name}_{wname}.f32"})
-        plan.append((name, wname, w, f"{name}_{wname}.f32"))
+    calls.append(_debug_sets(name, _weight_sets(3, "clamp01"), s, plan))
     calls.append({"fn": "sampleWeights", "args": [clip, CHAR_TIMES], "character": name})
     calls.append({"fn": "load", "args": [url, {"plugin": False, "keepCamera": True}]})
     calls.append({"fn": "renderColor", "args": [None, s], "file": f"{name}_lit_plain.u8"})
@@ -196,24 +202,17 @@ def browser(tmp_path_factory):
                 calls.append(
                     {"fn": "renderDebug", "args": [2, None, SIZE], "file": f"{enc}_uv.f32"}
                 )
-            for name, w in _weight_sets(n_regions, pol).items():
-                file = f"{key}_{name}.f32"
-                calls.append({"fn": "renderDebug", "args": [1, w, SIZE], "file": file})
-                plan.append((key, name, w, file))
+            calls.append(_debug_sets(key, _weight_sets(n_regions, pol), SIZE, plan))
     multi = _with_occluder(assets["pd-clamp01"])
     calls.append({"fn": "load", "args": ["/asset/" + multi.relative_to(root).as_posix()]})
     calls.append({"fn": "renderDebug", "args": [2, None, SIZE], "file": "multi_uv.f32"})
-    for name, w in _weight_sets(8, "clamp01").items():
-        calls.append({"fn": "renderDebug", "args": [1, w, SIZE], "file": f"multi_{name}.f32"})
-        plan.append(("multi", name, w, f"multi_{name}.f32"))
+    calls.append(_debug_sets("multi", _weight_sets(8, "clamp01"), SIZE, plan))
     real = _real_character(root)
     if real is not None:
         calls.append({"fn": "load", "args": ["/asset/" + real.relative_to(root).as_posix()]})
         calls.append({"fn": "focusWrinkles", "args": []})
         calls.append({"fn": "renderDebug", "args": [2, None, SIZE], "file": "real_uv.f32"})
-        for name, w in _weight_sets(8, "clamp01").items():
-            calls.append({"fn": "renderDebug", "args": [1, w, SIZE], "file": f"real_{name}.f32"})
-            plan.append(("real", name, w, f"real_{name}.f32"))
+        calls.append(_debug_sets("real", _weight_sets(8, "clamp01"), SIZE, plan))
     characters = _characters(root)
     for name, path in characters.items():
         doc = json.loads(path.read_text())
@@ -226,6 +225,8 @@ def browser(tmp_path_factory):
     times = [0.0, 0.25, 0.5, 1.0, 1.6, 2.75, 3.3, 5.9]
     first = "/asset/" + assets["pd-clamp01"].relative_to(root).as_posix()
     calls += [{"fn": "load", "args": [first]}, {"fn": "sampleWeights", "args": [0, times]}]
+    strong = _weight_sets(n_regions, POLICIES[0])["strong"]  # alone, as renderDebugSets did it
+    calls.append({"fn": "renderDebug", "args": [1, strong, SIZE], "file": "single_strong.f32"})
     folder, gltf = find_asset(root)
     with ViewServer(Site(folder, gltf, NODE_MODULES / "three")) as srv:
         job = {
@@ -287,6 +288,14 @@ def test_threejs_viewer_renders_the_model(browser, encoding, policy):
         if name == "strong":  # the wrinkles are really there
             base_ref = model.blend(s.base, s.states, s.masks, ww * 0, inp.asset.encoding, policy)
             assert h.compare(_image(browser, file)[cov][None], base_ref)["p99"] > 2.0
+
+
+def test_a_set_of_debug_renders_equals_the_same_renders_one_by_one(browser):
+    """renderDebugSets (the weight sets of one load in one call, render targets kept between
+    renders) gives the bytes a lone renderDebug of the same weights gives."""
+    one = (browser["out"] / "single_strong.f32").read_bytes()
+    assert len(one) == SIZE * SIZE * 16
+    assert one == (browser["out"] / f"{ENCODINGS[0]}-{POLICIES[0]}_strong.f32").read_bytes()
 
 
 def test_only_the_wrinkled_material_writes_the_debug_buffers(browser):

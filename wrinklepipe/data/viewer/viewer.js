@@ -2,7 +2,8 @@
 // Expression sliders set the region weights (sum of expression x its table row), the timeline
 // plays the glTF animations (morph targets and wrinkle weights in one AnimationMixer), the
 // overlay colours each region's mask. `window.wrinklepipe` is the page's scripting interface
-// (the tests use it): load(url, { plugin }), setWeights(w), renderDebug(mode, w), renderColor(w),
+// (the tests use it): load(url, { plugin }), setWeights(w), renderDebug(mode, w),
+// renderDebugSets(mode, [w, ...]), renderColor(w),
 // focusWrinkles(), sampleWeights(clip, t).
 
 import * as THREE from 'three';
@@ -270,13 +271,31 @@ function swapOthers( on ) {
 
 }
 
+// Render targets by size and kind, kept between calls (making one per render cost more than
+// the render itself in SwiftShader); every render clears colour and depth first.
+const targets = new Map();
+
+function renderTarget( size, float ) {
+
+	const key = `${ size }:${ float }`;
+	if ( ! targets.has( key ) ) {
+
+		const options = float ? { type: THREE.FloatType, format: THREE.RGBAFormat, depthBuffer: true } : { depthBuffer: true };
+		targets.set( key, new THREE.WebGLRenderTarget( size, size, options ) );
+
+	}
+
+	return targets.get( key );
+
+}
+
 // Render one frame with the materials in debug `mode` (1 normal, 2 uv + activity, 3 view-space
-// position + activity), level-0 sampling, region weights `weights`, into a float32 target of
-// `size` x `size`; materials without wrinkles write 0.
-function renderDebug( mode, weights, size = 256 ) {
+// position + activity), level-0 sampling, region weights `weights`, into `out` (float32,
+// `size` x `size` x 4); materials without wrinkles write 0.
+function debugPixels( mode, weights, size, out ) {
 
 	if ( ! still ) renderer.setAnimationLoop( null );
-	const target = new THREE.WebGLRenderTarget( size, size, { type: THREE.FloatType, format: THREE.RGBAFormat, depthBuffer: true } );
+	const target = renderTarget( size, true );
 	for ( const w of state.wrinkles ) w.setDebug( mode, true );
 	if ( weights ) setWeights( weights );
 	const aspect = camera.aspect;
@@ -290,13 +309,11 @@ function renderDebug( mode, weights, size = 256 ) {
 	swapOthers( true );
 	renderer.render( scene, camera );
 	swapOthers( false );
-	const out = new Float32Array( size * size * 4 );
 	renderer.readRenderTargetPixels( target, 0, 0, size, size, out );
 	renderer.setRenderTarget( null );
 	scene.background = background;
 	camera.aspect = aspect;
 	camera.updateProjectionMatrix();
-	target.dispose();
 	if ( ! still ) {
 
 		for ( const w of state.wrinkles ) w.setDebug( 0, false );
@@ -304,7 +321,25 @@ function renderDebug( mode, weights, size = 256 ) {
 
 	}
 
-	return { size, data: toBase64( out ) };
+	return out;
+
+}
+
+// One debug render (see debugPixels), read back as base64 float32.
+function renderDebug( mode, weights, size = 256 ) {
+
+	return { size, data: toBase64( debugPixels( mode, weights, size, new Float32Array( size * size * 4 ) ) ) };
+
+}
+
+// One debug render per weight set in `weightSets`, the images one after another in `data`
+// (`count` of them): a single call for the several weight sets a test renders per asset.
+function renderDebugSets( mode, weightSets, size = 256 ) {
+
+	const n = size * size * 4;
+	const out = new Float32Array( n * weightSets.length );
+	weightSets.forEach( ( w, i ) => debugPixels( mode, w, size, out.subarray( i * n, ( i + 1 ) * n ) ) );
+	return { size, count: weightSets.length, data: toBase64( out ) };
 
 }
 
@@ -313,7 +348,7 @@ function renderDebug( mode, weights, size = 256 ) {
 function renderColor( weights, size = 256 ) {
 
 	if ( ! still ) renderer.setAnimationLoop( null );
-	const target = new THREE.WebGLRenderTarget( size, size, { depthBuffer: true } );
+	const target = renderTarget( size, false );
 	for ( const w of state.wrinkles ) w.setDebug( 0, false );
 	if ( weights ) setWeights( weights );
 	const aspect = camera.aspect;
@@ -327,7 +362,6 @@ function renderColor( weights, size = 256 ) {
 	renderer.setRenderTarget( null );
 	camera.aspect = aspect;
 	camera.updateProjectionMatrix();
-	target.dispose();
 	if ( ! still ) renderer.setAnimationLoop( animate );
 	return { size, data: toBase64( out ) };
 
@@ -355,6 +389,7 @@ function focusWrinkles( weights ) {
 	}
 
 	const size = 64;
+	const pixels = new Float32Array( size * size * 4 );
 	let best = null;
 	for ( const d of dirs ) {
 
@@ -365,7 +400,7 @@ function focusWrinkles( weights ) {
 		camera.near = radius * 0.5;
 		camera.far = radius * 6;
 		camera.updateMatrixWorld();
-		const img = new Float32Array( atob_f32( renderDebug( 3, w, size ).data ) );
+		const img = debugPixels( 3, w, size, pixels );
 		const pts = [];
 		for ( let i = 0; i < size * size; i ++ ) {
 
@@ -401,15 +436,6 @@ function focusWrinkles( weights ) {
 
 }
 
-function atob_f32( b64 ) {
-
-	const s = atob( b64 );
-	const bytes = new Uint8Array( s.length );
-	for ( let i = 0; i < s.length; i ++ ) bytes[ i ] = s.charCodeAt( i );
-	return bytes.buffer;
-
-}
-
 // The region weights the animation `clip` gives at each time (the mixer's own evaluation).
 function sampleWeights( clipIndex, times ) {
 
@@ -437,7 +463,7 @@ async function start() {
 
 }
 
-window.wrinklepipe = { ready: start(), load, setWeights, renderDebug, renderColor, focusWrinkles, sampleWeights, state, renderer, THREE };
+window.wrinklepipe = { ready: start(), load, setWeights, renderDebug, renderDebugSets, renderColor, focusWrinkles, sampleWeights, state, renderer, THREE };
 window.wrinklepipe.ready.catch( ( e ) => {
 
 	$( 'status' ).textContent = String( e );
