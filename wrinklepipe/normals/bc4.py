@@ -60,6 +60,21 @@ HARD_TAIL = 9.0
 HARD_BATCH = 4096
 
 
+#: Arrays up to this many values are clamped by two ufunc calls (see :func:`_clamp`).
+_SMALL = 1 << 14
+
+
+def _clamp(a: np.ndarray, lo: float, hi: float, out: np.ndarray | None = None) -> np.ndarray:
+    """``np.clip(a, lo, hi, out=out)``. Small arrays take two ufunc calls instead (the same
+    values, NaN stays NaN): np.clip's Python-level dispatch costs more than the work on a small
+    map's blocks (an encode of 16 blocks makes ~2000 calls), while on large arrays its single
+    pass over memory is faster than two."""
+    if a.size > _SMALL:
+        return np.clip(a, lo, hi, out=out)
+    out = np.maximum(a, lo, out=out)
+    return np.minimum(out, hi, out=out)
+
+
 def blocks_of(plane: np.ndarray) -> np.ndarray:
     """[H, W] (multiples of 4) -> [16, N] texel columns, blocks in row-major block order."""
     h, w = plane.shape
@@ -94,7 +109,7 @@ class _Scorer:
         np.add(u, _TRUNC, out=j)
         j *= _F(7) / np.maximum(r, _F(1))
         np.rint(j, out=j)
-        np.clip(j, _F(0), _F(7), out=j)
+        _clamp(j, _F(0), _F(7), out=j)
         j *= r
         j /= _F(7)  # j r is an exact integer; the quotient's floor is exact too
         np.floor(j, out=j)
@@ -110,8 +125,8 @@ def _positions(u: np.ndarray, r: np.ndarray, n: int) -> list[np.ndarray]:
     below u). The last two alone are exact; they matter when r is small, where truncation
     puts several positions on one value (r = 1: j = 0..n-1 all give 0)."""
     rr = np.maximum(r, _F(1))
-    j0 = np.clip(np.floor(u * (_F(n) / rr)), _F(0), _F(n))
-    up = np.clip(np.ceil((np.floor(u) + _F(1)) * _F(n) / rr), _F(0), _F(n))
+    j0 = _clamp(np.floor(u * (_F(n) / rr)), _F(0), _F(n))
+    up = _clamp(np.ceil((np.floor(u) + _F(1)) * _F(n) / rr), _F(0), _F(n))
     near = [np.minimum(j0 + _F(dj), _F(n)) for dj in (0, 1, 2)]
     return near + [np.maximum(up - _F(1), _F(0)), up]
 
@@ -155,22 +170,31 @@ def _exact6(x: np.ndarray, lo: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, n
 
 
 def _search(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Steps 1-3: endpoints (lo, hi) [N] of the 8-value mode for a batch ``x`` [16, N]."""
+    """Steps 1-3: endpoints (lo, hi) [N] of the 8-value mode for a batch ``x`` [16, N].
+
+    The candidates come in groups that do not depend on each other (step 1's nine pairs, one
+    fit's four roundings, one round's eight neighbours); each group is scored in one
+    :func:`_keep_best` pass, which keeps what considering its pairs one at a time in order
+    keeps (a small map's blocks: a few passes instead of 61 sets of numpy calls)."""
     sc = _Scorer(x)
     xmin, xmax = x.min(axis=0), x.max(axis=0)
     mn, mx = np.floor(xmin), np.ceil(xmax)
     best = np.full(x.shape[1], np.inf, _F)
     blo, bhi = mn.copy(), mx.copy()
 
-    def consider(lo: np.ndarray, hi: np.ndarray) -> None:
-        np.clip(lo, 0, 255, out=lo)
-        np.clip(hi, 0, 255, out=hi)
-        r = hi - lo
-        e = sc.sse8(lo, r)
-        m = (r >= 0) & (e < best)
-        np.copyto(best, e, where=m)
-        np.copyto(blo, lo, where=m)
-        np.copyto(bhi, hi, where=m)
+    def score(xb: np.ndarray, lo: np.ndarray, r: np.ndarray) -> np.ndarray:
+        return (sc if xb is x else _Scorer(xb)).sse8(lo, r)
+
+    def consider(los: list[np.ndarray], his: list[np.ndarray]) -> None:
+        """The pairs ``(los[k], his[k])`` (each [N], clamped to 0..255), in that order."""
+        lo = _clamp(np.stack(los), 0, 255)
+        hi = _clamp(np.stack(his), 0, 255)
+        ok = hi >= lo
+
+        def pairs(k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            return lo[k], hi[k], ok[k]
+
+        _keep_best(x, blo, bhi, best, pairs, len(los), score)
 
     def fit(j: np.ndarray) -> None:
         """Least-squares endpoints for palette positions ``j`` [16, N], rounded four ways."""
@@ -183,24 +207,20 @@ def _search(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         dd = np.where(ok, det, _F(1))
         lo = np.where(ok, (c * p - b * q) / dd, blo) + _TRUNC
         hi = np.where(ok, (a * q - b * p) / dd, bhi) + _TRUNC
-        for fl in (np.floor, np.ceil):
-            for fh in (np.floor, np.ceil):
-                consider(fl(lo), fh(hi))
+        rounded = [(fl(lo), fh(hi)) for fl in (np.floor, np.ceil) for fh in (np.floor, np.ceil)]
+        consider([r[0] for r in rounded], [r[1] for r in rounded])
 
-    for a in range(3):
-        for b in range(3):
-            consider(mn + _F(a), mx - _F(b))
+    steps = [(a, b) for a in range(3) for b in range(3)]
+    consider([mn + _F(a) for a, _ in steps], [mx - _F(b) for _, b in steps])
     frac = (x - xmin) / np.maximum(xmax - xmin, _F(1e-6))
     for j0, j1 in _EXTENDED:
         fit(np.rint(frac * _F(j1 - j0)) + _F(j0))
     for _ in range(2):
         fit(_exact8(x, blo, bhi - blo)[1])
+    moves = [(dl, dh) for dl in (-1, 0, 1) for dh in (-1, 0, 1) if dl or dh]
     for _ in range(2):
         lo0, hi0 = blo.copy(), bhi.copy()
-        for dl in (-1, 0, 1):
-            for dh in (-1, 0, 1):
-                if dl or dh:
-                    consider(lo0 + _F(dl), hi0 + _F(dh))
+        consider([lo0 + _F(dl) for dl, _ in moves], [hi0 + _F(dh) for _, dh in moves])
     return blo, bhi
 
 
@@ -287,7 +307,7 @@ def _window(
     top, out = -(-top // step) * step, -(-outside // step) * step
     dhs = np.arange(-top, outside + 1, step).astype(_F)
     for dl in range(-out, top + 1, step):
-        l_all = np.clip(fmn + _F(dl), 0, 255)
+        l_all = _clamp(fmn + _F(dl), 0, 255)
         sel = np.flatnonzero(l_all <= xmin + inside)
         if sel.size == 0:
             continue
@@ -306,7 +326,7 @@ def _hi_offsets(
     ``hi >= lo`` and ``hi >= lim``), for :func:`_keep_best`."""
 
     def pairs(k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        h2 = np.clip(cmx + dhs[k, None], 0, 255)
+        h2 = _clamp(cmx + dhs[k, None], 0, 255)
         ls = np.broadcast_to(lo, h2.shape)
         return ls, h2, (h2 >= ls) & (h2 >= lim)
 
@@ -330,8 +350,8 @@ def _polish(
     lo0, hi0 = lo.copy(), hi.copy()
 
     def pairs(k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        l2 = np.clip(lo0 + dl[k, None], 0, 255)
-        h2 = np.clip(hi0 + dh[k, None], 0, 255)
+        l2 = _clamp(lo0 + dl[k, None], 0, 255)
+        h2 = _clamp(hi0 + dh[k, None], 0, 255)
         return l2, h2, h2 >= l2
 
     _keep_best(x, lo, hi, best, pairs, dl.size, score)
