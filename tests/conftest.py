@@ -19,10 +19,32 @@ when a test starts; ``-n 0`` runs keep file order.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
 import pytest
+from threadpoolctl import threadpool_limits
+
+#: Libraries' own thread pools that read their size from the environment (OpenBLAS when numpy
+#: loads it, llvmpipe when a GL context is made), for the worker's tests and the processes they
+#: start.
+_POOL_ENV = ("OPENBLAS_NUM_THREADS", "LP_NUM_THREADS")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Under xdist each worker gets its share of the cores for the libraries' thread pools, as
+    ``wrinklepipe batch --jobs N`` gives each of its workers (``batch.worker.limit_threads``):
+    two workers on the CI machine's two cores, each with OpenBLAS and llvmpipe on two threads,
+    made four threads that wait on each other (the suite 153 -> 142 s with one each). An
+    explicit setting in the environment wins. wrinklepipe's own pools keep their default, so
+    the tests still run them on several threads."""
+    if not hasattr(config, "workerinput"):
+        return
+    share = max(1, (os.cpu_count() or 1) // int(config.workerinput["workercount"]))
+    for name in _POOL_ENV:
+        os.environ.setdefault(name, str(share))
+    threadpool_limits(limits=int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
 
 
 @pytest.fixture(scope="session")
