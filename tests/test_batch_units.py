@@ -315,17 +315,18 @@ def test_a_worker_limits_every_thread_pool_to_its_share():
         "from wrinklepipe.normals import _chunks\n"
         "from wrinklepipe import reuse\n"
         "import OpenImageIO, os\n"
+        "from pxr import Work\n"
         "limit_threads(1)\n"
         "blas = {p['num_threads'] for p in threadpool_info() if p['user_api'] == 'blas'}\n"
         "print(*blas, _chunks.threads(), reuse.thread_budget(), os.environ['LP_NUM_THREADS'],"
-        " OpenImageIO.get_int_attribute('threads'))\n"
+        " OpenImageIO.get_int_attribute('threads'), Work.GetConcurrencyLimit())\n"
     )
     env = {k: v for k, v in os.environ.items() if k != "WRINKLEPIPE_THREADS"}
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
     )
-    # every OpenBLAS loaded (numpy's, scipy's) at 1, then wrinklepipe's pools, llvmpipe, OIIO
-    assert out.stdout.split() == ["1", "1", "1", "1", "1"]
+    # every OpenBLAS loaded (numpy's, scipy's) at 1, then wrinklepipe's pools, llvmpipe, OIIO, USD
+    assert out.stdout.split() == ["1", "1", "1", "1", "1", "1"]
 
 
 # ------------------------------------------------------------------------------------------------

@@ -188,12 +188,16 @@ def limit_threads(threads: int) -> None:
     """Let every thread pool of this process use ``threads`` threads: wrinklepipe's own (the
     block encoders' row chunks, PNGs beside other work: ``WRINKLEPIPE_THREADS``), OpenBLAS's
     (numpy's products; it read its count when numpy was imported, so through threadpoolctl),
-    llvmpipe's (read when the GL context is made, so before any) and OpenImageIO's. The work is
-    split the same way whatever the count, so the outputs do not change."""
+    llvmpipe's (read when the GL context is made, so before any), OpenImageIO's and USD's
+    (its work threads, which spin while they wait). The work is split the same way whatever
+    the count, so the outputs do not change."""
+    from pxr import Work  # deferred: usd-core, USD only (the fork server has it loaded)
+
     os.environ[THREADS_ENV] = str(threads)
     os.environ["LP_NUM_THREADS"] = str(threads)
     OpenImageIO.attribute("threads", int(threads))
     threadpool_limits(limits=int(threads), user_api="blas")
+    Work.SetConcurrencyLimit(int(threads))
 
 
 def child_main(job: Job, conn: Any, threads: int | None = None) -> None:
