@@ -34,15 +34,16 @@ _POOL_ENV = ("OPENBLAS_NUM_THREADS", "LP_NUM_THREADS")
 
 def pytest_configure(config: pytest.Config) -> None:
     """Under xdist each worker gets its share of the cores for the libraries' thread pools
-    (OpenBLAS, llvmpipe, USD's work threads), as ``wrinklepipe batch --jobs N`` gives each of
-    its workers (``batch.worker.limit_threads``): two workers on the CI machine's two cores,
-    each with OpenBLAS and llvmpipe on two threads, made four threads that wait on each other
-    (the suite 153 -> 142 s with one each). An explicit setting in the environment wins.
-    wrinklepipe's own pools keep their default, so the tests still run them on several
-    threads."""
+    (OpenBLAS, llvmpipe, USD's work threads, OpenImageIO's), as ``wrinklepipe batch --jobs N``
+    gives each of its workers (``batch.worker.limit_threads``): two workers on the CI
+    machine's two cores, each with OpenBLAS and llvmpipe on two threads, made four threads
+    that wait on each other (the suite 153 -> 142 s with one each). An explicit setting in the
+    environment wins. wrinklepipe's own pools keep their default, so the tests still run them
+    on several threads."""
     if not hasattr(config, "workerinput"):
         return
     # deferred: the xdist controller, which runs no test, loads this file too
+    import OpenImageIO
     from pxr import Work
 
     share = max(1, (os.cpu_count() or 1) // int(config.workerinput["workercount"]))
@@ -50,6 +51,7 @@ def pytest_configure(config: pytest.Config) -> None:
         os.environ.setdefault(name, str(share))
     threadpool_limits(limits=int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
     Work.SetConcurrencyLimit(share)  # USD's work threads (they spin while they wait)
+    OpenImageIO.attribute("threads", share)
 
 
 @pytest.fixture(scope="session")
