@@ -195,3 +195,55 @@ def test_a_kill_while_the_staging_folder_is_made(tmp_path, step):
     with atomic.output_lock(target):
         assert sorted(p.name for p in tmp_path.iterdir()) == [".out.wrinklepipe-lock"]
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("step", ["mkdir", "rename", "renamed"])
+def test_a_run_on_another_output_removes_a_killed_runs_staging_with_its_lock(tmp_path, step):
+    """A run on another output in the same folder removes the dead run's lock file; the staging
+    folders that lock lists go with it (a ``-new`` folder killed before its marker was written
+    has no other proof that it is ours, and would be left for good: the flaky failure of
+    ``test_kill_9_during_convert``, where ten runs share one folder)."""
+    target = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _KILLED_WHILE_STAGING, str(target), step], env=env
+    )
+    assert proc.wait() == -signal.SIGKILL
+    assert len([p for p in tmp_path.iterdir() if p.name.startswith(".out.")]) == 2
+    with atomic.output_lock(tmp_path / "other"):
+        assert sorted(p.name for p in tmp_path.iterdir()) == [".other.wrinklepipe-lock"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_run_killed_while_removing_a_dead_runs_staging_leaves_it_recorded(tmp_path):
+    """The next holder of a dead run's lock records that run's staging folders as its own before
+    it removes them: killed in between, the run after it still finds them in the record."""
+    target = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _KILLED_WHILE_STAGING, str(target), "mkdir"], env=env
+    )
+    assert proc.wait() == -signal.SIGKILL
+    [new] = [p for p in tmp_path.iterdir() if p.name.endswith(atomic.STAGING_NEW_SUFFIX)]
+    second = subprocess.Popen([sys.executable, "-c", _KILLED_WHILE_REMOVING, str(target)], env=env)
+    assert second.wait() == -signal.SIGKILL
+    assert new.is_dir()  # the second run died before removing it
+    record = json.loads((tmp_path / ".out.wrinklepipe-lock").read_text())
+    assert record["pid"] == second.pid and new.name in record["staging"]
+    with atomic.output_lock(target):
+        assert sorted(p.name for p in tmp_path.iterdir()) == [".out.wrinklepipe-lock"]
+    assert list(tmp_path.iterdir()) == []
+
+
+_KILLED_WHILE_REMOVING = """
+import os, signal, sys
+from pathlib import Path
+from wrinklepipe import atomic
+
+def die(*a, **k):
+    os.kill(os.getpid(), signal.SIGKILL)
+
+atomic._remove_recorded = die  # the lock is taken and written, the dead run's folder not removed
+with atomic.output_lock(Path(sys.argv[1])):
+    pass
+"""

@@ -246,10 +246,12 @@ def output_lock(target: str | Path, wait: bool = False) -> Iterator[Path]:
     try:
         previous = _read_owner(fd)
         held = _HELD[lock] = _Held(fd, 1, _owner())
+        dead = list(previous.get("staging", [])) if _process_gone(previous) else []
+        if dead:  # ours to remove now: recorded first, so a kill below loses none of them
+            held.record["staging"] = dead
         _write_owner(fd, held.record)
-        if previous and _process_gone(previous):
-            for name in previous.get("staging", []):
-                _remove_recorded(target.parent, name, previous)
+        for name in dead:
+            _remove_recorded(target.parent, name, previous)
         remove_dead_leftovers(target.parent)
         yield lock
     finally:
@@ -386,7 +388,9 @@ def _dead_staging_fd(entry: Path) -> int | None:
 
 
 def _dead_lock(entry: Path) -> None:
-    """Remove a lock file whose holder is gone (its flock is free and its pid is dead)."""
+    """Remove a lock file whose holder is gone (its flock is free and its pid is dead), after
+    the staging folders its record lists: the record is the only proof that a ``-new`` folder
+    killed before its marker was written is that run's, so it goes with the lock."""
     if not entry.name.startswith(".") or not entry.name.endswith(LOCK_SUFFIX) or entry in _HELD:
         return
     try:
@@ -394,8 +398,11 @@ def _dead_lock(entry: Path) -> None:
     except OSError:
         return
     try:
-        if _try_flock(fd) and _process_gone(_read_owner(fd)):
+        owner = _read_owner(fd) if _try_flock(fd) else {}
+        if owner and _process_gone(owner):
             if os.fstat(fd).st_ino == os.stat(entry, follow_symlinks=False).st_ino:
+                for name in owner.get("staging", []):
+                    _remove_recorded(entry.parent, name, owner)
                 os.unlink(entry)
     except OSError:
         pass
