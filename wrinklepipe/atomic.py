@@ -389,8 +389,10 @@ def _dead_staging_fd(entry: Path) -> int | None:
 
 def _dead_lock(entry: Path) -> None:
     """Remove a lock file whose holder is gone (its flock is free and its pid is dead), after
-    the staging folders its record lists: the record is the only proof that a ``-new`` folder
-    killed before its marker was written is that run's, so it goes with the lock."""
+    the ``-new`` staging folders its record lists: the record is the only proof that one killed
+    before its marker was written is that run's, so it goes with the lock. (A ``-new`` folder
+    holds a marker at most, so the flock is held a moment only; renamed staging folders carry
+    their marker and are removed as any dead run's, by :func:`remove_dead_leftovers`.)"""
     if not entry.name.startswith(".") or not entry.name.endswith(LOCK_SUFFIX) or entry in _HELD:
         return
     try:
@@ -402,7 +404,8 @@ def _dead_lock(entry: Path) -> None:
         if owner and _process_gone(owner):
             if os.fstat(fd).st_ino == os.stat(entry, follow_symlinks=False).st_ino:
                 for name in owner.get("staging", []):
-                    _remove_recorded(entry.parent, name, owner)
+                    if str(name).endswith(STAGING_NEW_SUFFIX):
+                        _remove_recorded(entry.parent, name, owner)
                 os.unlink(entry)
     except OSError:
         pass
