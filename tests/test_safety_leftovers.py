@@ -171,16 +171,20 @@ with atomic.output_lock(target):
 """
 
 
+def _run_killed(script: str, *args: str) -> int:
+    """Run ``script`` (which SIGKILLs itself) in a Python of its own; return its pid."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-c", script, *args], env=env)
+    assert proc.wait() == -signal.SIGKILL
+    return proc.pid
+
+
 @pytest.mark.parametrize("step", ["mkdir", "rename", "renamed"])
 def test_a_kill_while_the_staging_folder_is_made(tmp_path, step):
     """The staging folder appears by a rename with its complete marker inside (never without
     it); a kill at any step of making it leaves only what the next run on that output removes."""
     target = tmp_path / "out"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(
-        [sys.executable, "-c", _KILLED_WHILE_STAGING, str(target), step], env=env
-    )
-    assert proc.wait() == -signal.SIGKILL
+    pid = _run_killed(_KILLED_WHILE_STAGING, str(target), step)
     left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".out."))
     want = atomic.STAGING_SUFFIX if step == "renamed" else atomic.STAGING_NEW_SUFFIX
     assert len(left) == 2 and left[0].endswith(want) and left[1] == ".out.wrinklepipe-lock"
@@ -189,7 +193,7 @@ def test_a_kill_while_the_staging_folder_is_made(tmp_path, step):
         assert not marker.exists()
     else:  # the marker names the killed run
         owner = json.loads(marker.read_text())
-        assert owner["tool"] == "wrinklepipe" and owner["pid"] == proc.pid
+        assert owner["tool"] == "wrinklepipe" and owner["pid"] == pid
         assert owner["host"] == socket.gethostname()
     assert _staging(tmp_path) == ([tmp_path / left[0]] if step == "renamed" else [])
     with atomic.output_lock(target):
@@ -204,11 +208,7 @@ def test_a_run_on_another_output_removes_a_killed_runs_staging_with_its_lock(tmp
     has no other proof that it is ours, and would be left for good: the flaky failure of
     ``test_kill_9_during_convert``, where ten runs share one folder)."""
     target = tmp_path / "out"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(
-        [sys.executable, "-c", _KILLED_WHILE_STAGING, str(target), step], env=env
-    )
-    assert proc.wait() == -signal.SIGKILL
+    _run_killed(_KILLED_WHILE_STAGING, str(target), step)
     assert len([p for p in tmp_path.iterdir() if p.name.startswith(".out.")]) == 2
     with atomic.output_lock(tmp_path / "other"):
         assert sorted(p.name for p in tmp_path.iterdir()) == [".other.wrinklepipe-lock"]
@@ -219,17 +219,12 @@ def test_a_run_killed_while_removing_a_dead_runs_staging_leaves_it_recorded(tmp_
     """The next holder of a dead run's lock records that run's staging folders as its own before
     it removes them: killed in between, the run after it still finds them in the record."""
     target = tmp_path / "out"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(
-        [sys.executable, "-c", _KILLED_WHILE_STAGING, str(target), "mkdir"], env=env
-    )
-    assert proc.wait() == -signal.SIGKILL
+    _run_killed(_KILLED_WHILE_STAGING, str(target), "mkdir")
     [new] = [p for p in tmp_path.iterdir() if p.name.endswith(atomic.STAGING_NEW_SUFFIX)]
-    second = subprocess.Popen([sys.executable, "-c", _KILLED_WHILE_REMOVING, str(target)], env=env)
-    assert second.wait() == -signal.SIGKILL
+    second = _run_killed(_KILLED_WHILE_REMOVING, str(target))
     assert new.is_dir()  # the second run died before removing it
     record = json.loads((tmp_path / ".out.wrinklepipe-lock").read_text())
-    assert record["pid"] == second.pid and new.name in record["staging"]
+    assert record["pid"] == second and new.name in record["staging"]
     with atomic.output_lock(target):
         assert sorted(p.name for p in tmp_path.iterdir()) == [".out.wrinklepipe-lock"]
     assert list(tmp_path.iterdir()) == []
