@@ -44,17 +44,18 @@ def block_texels(path: Path) -> np.ndarray:
 @pytest.fixture(scope="module")
 def converted(tmp_path_factory):
     src = tmp_path_factory.mktemp("fixture")
-    manifest = ff.write_fixture_source(src, MESH)
+    fx = ff.build_fixture(MESH)
+    manifest = ff.write_fixture_files(src, fx, MESH)
     out = tmp_path_factory.mktemp("conv") / "out"
     code = main(
         ["convert", str(manifest), "-o", str(out), "--no-render", "--allow-root", str(MESH.parent)]
     )
-    return manifest, out, code
+    return manifest, out, code, fx
 
 
 @needs_mesh
 def test_the_fixture_on_auto_is_within_budget_of_the_truth(converted):
-    manifest, out, code = converted
+    manifest, out, code, fx = converted
     assert code == 0
     report = json.loads((out / "report.json").read_text())
     assert report["validation"]["counts"]["error"] == 0, report["validation"]["issues"]
@@ -64,7 +65,6 @@ def test_the_fixture_on_auto_is_within_budget_of_the_truth(converted):
     # texels of the deepest crease, BC5 copies of states and base
     chosen = [fid[k] for k in ("wrinkle", "mask", "pd_scale", "state_format", "base_format")]
     assert chosen == [1024, 512, 0.875, "bc5", "bc5"]
-    fx = ff.build_fixture(MESH)
     a = fx.asset()
     poses = fd.expression_poses(a.region_names, a.region_state_matrix(), a.expressions)
     truth = fd.prepare(fx.base_normal, fx.wrinkle_slopes, fx.masks, poses, a.region_names)
@@ -108,7 +108,7 @@ def test_the_fixture_on_auto_is_within_budget_of_the_truth(converted):
 
 @needs_mesh
 def test_the_clipped_count_is_one_number(converted):
-    _, out, _ = converted
+    _, out, _, _ = converted
     report = json.loads((out / "report.json").read_text())
     clipped = report["pd_scale"]["clipped_texels"]
     assert sum(clipped.values()) > 0  # the chosen scale clips a few texels of the deepest crease

@@ -354,9 +354,18 @@ def write_fixture_source(
 ) -> Path:
     """Write the fixture's source files into ``folder``; return the manifest path."""
 
+    mesh_path = Path(mesh_path).resolve()
+    return write_fixture_files(folder, build_fixture(mesh_path, size), mesh_path, sides)
+
+
+def write_fixture_files(
+    folder: str | Path, fx: FaceFixture, mesh_path: str | Path, sides: bool = True
+) -> Path:
+    """Write the built fixture ``fx`` (on the mesh at ``mesh_path``) as source files into
+    ``folder``; return the manifest path. For a caller that also needs ``fx`` itself."""
+
     folder = Path(folder)
     mesh_path = Path(mesh_path).resolve()
-    fx = build_fixture(mesh_path, size)
     folder.mkdir(parents=True, exist_ok=True)
     write_image(folder / "base_normal.png", fx.base_normal * 0.5 + 0.5, bits=16)
     for k, name in enumerate(fx.state_names):
