@@ -57,6 +57,13 @@ def test_obj_errors(tmp_path):
     f.write_text("v 0 nan 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     with pytest.raises(InputError, match="NaN"):
         load_mesh(f)
+    # 1e39 is finite as a double but infinite as the float32 a mesh is stored as (3.4028e38)
+    f.write_text("v 0 0 0\nv 1 0 0\nv 0 1e39 0\nf 1 2 3\n")
+    with pytest.raises(InputError, match=r"position 3 has a value beyond float32's range"):
+        load_mesh(f)
+    f.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 inf\nvt 0 1\nf 1/1 2/2 3/3\n")
+    with pytest.raises(InputError, match="UV 2 is NaN or infinite"):
+        load_mesh(f)
     f.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n")
     m = load_mesh(f)  # the collinear triangle is skipped and counted; xatlas UVs noted
     assert m.triangle_count == 1

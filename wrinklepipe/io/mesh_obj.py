@@ -27,6 +27,28 @@ def _floats(rows: list[list[str]], width: int, file: str, what: str) -> np.ndarr
         raise input_error(file, f"a {what} line has a value that is not a number") from None
 
 
+#: The largest magnitude a mesh value may have: meshes are stored as float32 (glTF, USD).
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _check_float32(rows: np.ndarray, file: str, what: str, key: str) -> None:
+    """Every value finite and inside float32's range (a larger one would become infinite)."""
+    if not len(rows):
+        return
+    nonfinite = ~np.isfinite(rows).all(axis=1)
+    if nonfinite.any():
+        bad = int(np.flatnonzero(nonfinite)[0])
+        raise input_error(file, f"{what} {bad + 1} is NaN or infinite", key=f"{key} {bad + 1}")
+    huge = (np.abs(rows) > FLOAT32_MAX).any(axis=1)
+    if huge.any():
+        bad = int(np.flatnonzero(huge)[0])
+        raise input_error(
+            file,
+            f"{what} {bad + 1} has a value beyond float32's range (|x| > {FLOAT32_MAX:.4g})",
+            key=f"{key} {bad + 1}",
+        )
+
+
 def read_obj_meshes(path: str | Path) -> list[Mesh]:
     """One :class:`Mesh` per ``o``/``g`` part that has faces."""
     file = str(path)
@@ -60,9 +82,12 @@ def read_obj_meshes(path: str | Path) -> list[Mesh]:
     pos_all = _floats(v, 3, file, "v")
     uv_all = _floats(vt, 2, file, "vt")
     nrm_all = _floats(vn, 3, file, "vn")
-    if len(pos_all) and not np.isfinite(pos_all).all():
-        bad = int(np.flatnonzero(~np.isfinite(pos_all).all(axis=1))[0])
-        raise input_error(file, f"position {bad + 1} is NaN or infinite", key=f"v {bad + 1}")
+    for rows, what, key in (
+        (pos_all, "position", "v"),
+        (uv_all, "UV", "vt"),
+        (nrm_all, "normal", "vn"),
+    ):
+        _check_float32(rows, file, what, key)
     out = []
     for name, faces in parts:
         if not faces:
