@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from output_hashes import assert_unchanged
 
 from wrinklepipe import model
 from wrinklepipe.cli import main
@@ -141,6 +142,7 @@ def test_demo_command(tmp_path, monkeypatch, capsys):
     assert (out / "validation_files" / "render_anger.png").is_file()
     printed = capsys.readouterr().err
     assert "report.html" in printed and "valid" in printed
+    assert_unchanged("demo", out)  # every byte as recorded on main (tests/output_hashes.py)
 
 
 def test_demo_rerun_replaces_its_own_output_only(tmp_path, monkeypatch, capsys):

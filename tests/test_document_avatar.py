@@ -16,6 +16,7 @@ from pathlib import Path
 import gltf_reference as ref
 import numpy as np
 import pytest
+from output_hashes import assert_unchanged
 from passthrough import EXTENSION, WRINKLE_ATTRIBUTES, compare
 from PIL import Image
 from test_document_inspect import GLTF_TRANSFORM, gltf_transform_inspect
@@ -43,6 +44,11 @@ def converted(source, tmp_path_factory):
     res = convert(source, out, ConvertOptions(glb=True, render=False))
     assert res.exit_code == 0, res.report["validation"]
     return out, res.report
+
+
+def test_outputs_are_the_recorded_bytes(converted):
+    """Every file of the conversion as recorded on main (``tests/output_hashes.py``)."""
+    assert_unchanged("avatar", converted[0])
 
 
 def _world(nodes, i, parents) -> np.ndarray:

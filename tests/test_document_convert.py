@@ -15,6 +15,7 @@ from pathlib import Path
 import gltf_reference as ref
 import numpy as np
 import pytest
+from output_hashes import assert_unchanged
 from passthrough import EXTENSION, WRINKLE_ATTRIBUTES, compare
 from test_document_inspect import GLTF_TRANSFORM, gltf_transform_inspect
 from test_document_read import GLTFPACK
@@ -34,6 +35,12 @@ def robot(robot_converted):
     """RobotExpressive converted once (.gltf + .glb; validation without the render pass): the
     shared conftest fixture."""
     return robot_converted
+
+
+@needs_robot
+def test_robot_outputs_are_the_recorded_bytes(robot):
+    """Every file of the conversion as recorded on main (``tests/output_hashes.py``)."""
+    assert_unchanged("robot", robot[0])
 
 
 @needs_robot

@@ -17,14 +17,18 @@ from pathlib import Path
 import gltf_reference as ref
 import numpy as np
 import pytest
+from output_hashes import assert_unchanged
 from scipy.spatial import cKDTree
+from wrinkle_setups import write_tokyo_setup
 
 from wrinklepipe.document import read_document, write_document
 from wrinklepipe.document.repair import repair
 from wrinklepipe.document.scene import node_world_matrices, primitive_triangles, rest_positions
 from wrinklepipe.errors import InputError
 from wrinklepipe.io import khronos
+from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.paths import ROOT
+from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
 SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "data" / "gltf-samples"
 ROBOT = SAMPLES / "RobotExpressive" / "RobotExpressive.glb"
@@ -326,3 +330,21 @@ def test_littlest_tokyo_draco_decodes_inside_the_encoder_bounds(tmp_path):
     assert "KHR_draco_mesh_compression" not in json.loads(ref.load(out).to_json()).get(
         "extensionsUsed", []
     )
+
+
+@needs_data
+def test_littlest_tokyo_converts_to_the_recorded_bytes(tmp_path):
+    """LittlestTokyo's skinned body wrinkled (``wrinkle_setups.write_tokyo_setup``): every file
+    of the conversion as recorded on main (``tests/output_hashes.py``). Exit 1: the validator
+    finds the body's tangents off MikkTSpace (WP-MESH-002); the files are written all the same."""
+    with allowed_roots([TOKYO.parent]):
+        res = convert(
+            write_tokyo_setup(tmp_path / "src"),
+            tmp_path / "out",
+            ConvertOptions(glb=True, render=False),
+        )
+    assert res.exit_code == 1
+    assert [i["code"] for i in res.report["validation"]["issues"] if i["severity"] == "error"] == [
+        "WP-MESH-002"
+    ]
+    assert_unchanged("tokyo", tmp_path / "out")

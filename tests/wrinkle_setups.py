@@ -154,3 +154,21 @@ def avatar_variant(tmp_path: Path, change) -> Path:
     data = change(doc, data, folder) or data
     (folder / "avatar.glb").write_bytes(glb_bytes(doc, data))
     return folder / "manifest.toml"
+
+
+#: LittlestTokyo (CC-BY-4.0, Draco: 71 meshes, 15 materials, 1 skin) from ../shared/data.
+TOKYO = ROBOT.parents[1] / "LittlestTokyo" / "LittlestTokyo.glb"
+
+
+def write_tokyo_setup(folder: Path) -> Path:
+    """LittlestTokyo's wrinkle setup: ``material = "normal"`` (shared by 35 meshes) on its
+    skinned character's body, ``meshes = ["body_normal_0"]``, whose UVs take a small corner of
+    the atlas (u 0.53-0.56, v 0.07-0.12): the regions are boxes around it, masks at 64²."""
+    regions = {
+        "brow_L": ((0.545, 0.0, 0.6, 0.09), "left"),
+        "brow_R": ((0.5, 0.0, 0.545, 0.09), "right"),
+        "mouth": ((0.5, 0.09, 0.6, 0.2), "center"),
+    }
+    return write_setup(
+        folder, TOKYO, "tokyo", "normal", ["body_normal_0"], mask_size=64, regions=regions
+    )
