@@ -3,7 +3,8 @@
 Each subcommand lives in its own module under :mod:`wrinklepipe.commands` and exposes ``NAME``,
 ``HELP``, ``DESCRIPTION``, ``add_arguments(parser)`` and ``run(args) -> int``. Modules are found by
 name, so adding a command means adding a file. Exit codes: 0 success, 1 errors found (validation),
-2 could not run (bad arguments or input).
+2 could not run (bad arguments or input), 128 + the signal's number when a signal ended the run
+(130 Ctrl-C / SIGINT, 143 SIGTERM, 129 SIGHUP), as a shell reports a process killed by it.
 """
 
 from __future__ import annotations
@@ -108,6 +109,7 @@ class Interrupted(BaseException):
 
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
+        self.signum = signum
 
 
 @contextlib.contextmanager
@@ -159,8 +161,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             fail(str(problem))
         return 2
     except (KeyboardInterrupt, Interrupted) as exc:
-        name = str(exc) if isinstance(exc, Interrupted) else "SIGINT"
-        return fail(f"interrupted ({name}); outputs are complete or absent, never partial")
+        signum = exc.signum if isinstance(exc, Interrupted) else signal.SIGINT
+        fail(
+            f"interrupted ({signal.Signals(signum).name}); outputs are complete or absent, "
+            "never partial"
+        )
+        return 128 + int(signum)
     except OSError as exc:
         if debug:
             raise

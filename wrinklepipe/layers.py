@@ -106,12 +106,13 @@ LAYERS: tuple[Layer, ...] = (
     ),
     Layer(
         "cli",
-        "the command line (one thin module per command) and the benchmarks",
+        "the command line (one thin module per command), the benchmarks, the reference pages",
         (
             "wrinklepipe.cli",
             "wrinklepipe.__main__",
             "wrinklepipe.commands",
             "wrinklepipe.bench",
+            "wrinklepipe.reference",
         ),
     ),
 )
