@@ -5,6 +5,7 @@ Per texel (or per vertex; any spatial shape works) of a face::
     s_k     = sum_r M_r * w_{r,k}                 region activations (one matmul)
     a_k     = policy(s_k)                         how overlapping regions meet
     N       = combine(B, {W_k, a_k}, encoding)    the wrinkled normal
+    C       = C_B + sum_k a_k (C_k - C_B)         the wrinkled colour (linear light, optional)
 
 Conventions (DESIGN.md section 4): float32, unit tangent-space normals in the last axis
 (``[..., 3]``), OpenGL green (+Y). Masks are channels-first ``[R, *S]`` so the activation is a
@@ -29,6 +30,13 @@ Encodings (what a stored wrinkle state holds and how it is combined with the bas
     x and y add, z multiplies. With activations: ``xy = B_xy + sum_k a_k W_k,xy`` and
     ``z = B_z * prod_k (1 + a_k (W_k,z - 1))``, so ``a = 1`` gives ``(B_xy + W_xy, B_z W_z)``.
 
+Colour (appearance states, DESIGN.md section 1): a state may carry a colour map ``C_k`` beside
+(or instead of) its normal map: the face's albedo in that pose, as an artist paints it (sRGB).
+:func:`combine_color` blends in *linear light* (decode with :func:`srgb_to_linear` first) with
+the same activations as the normals, ``C = clip(C_B + sum_k a_k (C_k - C_B), 0, 1)``, the base
+colour bit for bit where no state is active. The same sum serves any other linear per-state map
+(roughness, cavity): it is a per-channel lerp-and-add, whatever the channels hold.
+
 Policies (how the summed region activation becomes a state activation):
 
 ``clamp01``      Jimenez et al.: ``a = clip(s, 0, 1)``; negative weights cancel positive ones.
@@ -49,6 +57,7 @@ from typing import Literal
 
 import numpy as np
 
+from wrinklepipe.codec.srgb import linear_to_srgb, srgb_to_linear
 from wrinklepipe.codec.vectors import composite as composite_detail
 from wrinklepipe.codec.vectors import normal_to_pd, normalize, pd_to_normal
 
@@ -59,16 +68,20 @@ __all__ = [
     "activations",
     "angular_error_deg",
     "blend",
+    "blend_color",
     "combine",
+    "combine_color",
     "composite_detail",
     "diff_to_delta",
     "height_slopes",
     "height_to_normal",
+    "linear_to_srgb",
     "normal_to_diff",
     "normal_to_pd",
     "normalize",
     "pd_to_normal",
     "region_sum",
+    "srgb_to_linear",
 ]
 
 Encoding = Literal["pd", "diff", "full", "composite"]
@@ -230,6 +243,50 @@ def blend(
 ) -> np.ndarray:
     """The whole model: ``combine(B, W, policy(sum_r M_r w_r), encoding)`` -> ``[*S, 3]``."""
     return combine(base, states, activations(masks, weights, policy), encoding)
+
+
+def combine_color(base: np.ndarray, states: np.ndarray, act: np.ndarray) -> np.ndarray:
+    """The colour model: ``C = clip(C_B + sum_k a_k (C_k - C_B), 0, 1)``, per channel.
+
+    base:   ``[*S, C]`` the base colour in linear light (or any linear map in [0, 1]).
+    states: ``[K, *S, C]`` the states' colours, linear.
+    act:    ``[K, *S]`` the activations of those K states (the same ``a_k`` the normals use).
+    Returns ``[*S, C]`` float32. The sum is clipped to [0, 1] (an albedo outside that is no
+    colour; the shaders clamp the same way); where no state is active the base comes back bit
+    for bit.
+    """
+    b = np.asarray(base, dtype=np.float32)
+    st = np.asarray(states, dtype=np.float32)
+    a = np.asarray(act, dtype=np.float32)
+    if st.shape[0] != a.shape[0]:
+        raise ValueError(f"{st.shape[0]} colour states but {a.shape[0]} activations")
+    if st.shape[1:] != b.shape:
+        raise ValueError(f"colour states {st.shape[1:]} and base colour {b.shape} differ")
+    out = b + np.einsum("k...,k...c->...c", a, st - b[None])
+    np.clip(out, 0.0, 1.0, out=out)
+    idle = ~np.any(a != 0, axis=0)
+    np.copyto(out, b, where=idle[..., None])
+    return out.astype(np.float32, copy=False)
+
+
+def blend_color(
+    base: np.ndarray,
+    states: np.ndarray,
+    masks: np.ndarray,
+    weights: np.ndarray,
+    policy: str = "clamp01",
+    color_states: tuple[int, ...] | None = None,
+) -> np.ndarray:
+    """The colour model whole: :func:`combine_color` under ``policy(sum_r M_r w_r)``.
+
+    ``weights`` are the asset's ``[R, K]`` (all K states: the activations are the normals');
+    ``color_states`` the indices of the states that carry a colour, in the order of ``states``
+    (None: every state does). Colours in linear light.
+    """
+    act = activations(masks, weights, policy)
+    if color_states is not None:
+        act = act[list(color_states)]
+    return combine_color(base, states, act)
 
 
 def angular_error_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:

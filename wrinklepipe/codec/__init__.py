@@ -8,7 +8,8 @@ Declarations
     :mod:`.encodings` (``pd``, ``diff``, ``full``, ``composite``: the stored quantity, its
     parameter, whether its value mapping is versioned), :mod:`.mapping` (v1 ``0.5 + 0.5 t``,
     v2 ``128 + 127 t`` / ``32768 + 32767 t``), :mod:`.layout` (``rgb``, ``rg``, ``ag``),
-    :mod:`.formats` (PNG 8/16, EXR, BC1, BC3nm, BC5, BC7, ``bc7xy``, UASTC).
+    :mod:`.formats` (PNG 8/16, EXR, BC1, BC3nm, BC5, BC7, ``bc7xy``, UASTC), :mod:`.srgb` (the
+    IEC 61966-2-1 transfer functions of colour maps).
 Functions
     :func:`encode` (quantity -> texels), :func:`decode` (texels -> quantity, exact for integer
     texels), :func:`decode_sampled` (sampled UNORM values -> quantity, the shaders' arithmetic),
