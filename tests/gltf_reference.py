@@ -1,5 +1,5 @@
 """An independent glTF reader for tests: pygltflib parses the file, this decodes accessors with
-plain struct/numpy (written apart from wrinklepipe.document, so tests compare two readers)."""
+plain struct/numpy (written apart from wrinklepipe.gltf, so tests compare two readers)."""
 
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ import pytest
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
-from wrinklepipe.document.package import read_wrinkled
+from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io import khronos
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.outputs import folder as output_folder

@@ -24,9 +24,9 @@ from wrinkle_setups import avatar_variant
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo import avatar
-from wrinklepipe.document.images import image_pixels
-from wrinklepipe.document.model import read_document
 from wrinklepipe.errors import InputError
+from wrinklepipe.gltf.document import read_document
+from wrinklepipe.gltf.images import image_pixels
 from wrinklepipe.io import khronos
 from wrinklepipe.io.gltf_limits import GltfReadOptions
 from wrinklepipe.pipeline.convert import ConvertOptions, convert

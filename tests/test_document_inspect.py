@@ -14,8 +14,9 @@ import gltf_reference as ref
 import pytest
 
 from wrinklepipe.cli import main
-from wrinklepipe.document import read_document, write_document
-from wrinklepipe.document.inspect import diff, image_size, summary
+from wrinklepipe.gltf.document import read_document
+from wrinklepipe.gltf.inspect import diff, image_size, summary
+from wrinklepipe.gltf.write import write_document
 from wrinklepipe.paths import ROOT
 
 SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "data" / "gltf-samples"

@@ -1,4 +1,4 @@
-"""wrinklepipe.document: read a glTF whole, write it back losing nothing.
+"""wrinklepipe.gltf: read a glTF whole, write it back losing nothing.
 
 Accessor decoding against hand-computed values; real files (RobotExpressive, DamagedHelmet,
 LittlestTokyo) read back by an independent reader (pygltflib + tests/gltf_reference.py); meshopt
@@ -21,10 +21,11 @@ from output_hashes import assert_unchanged
 from scipy.spatial import cKDTree
 from wrinkle_setups import write_tokyo_setup
 
-from wrinklepipe.document import read_document, write_document
-from wrinklepipe.document.repair import repair
-from wrinklepipe.document.scene import node_world_matrices, primitive_triangles, rest_positions
 from wrinklepipe.errors import InputError
+from wrinklepipe.gltf.document import read_document
+from wrinklepipe.gltf.repair import repair
+from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles, rest_positions
+from wrinklepipe.gltf.write import write_document
 from wrinklepipe.io import khronos
 from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.paths import ROOT

@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 from wrinkle_setups import ROBOT
 
-from wrinklepipe.document import read_document, write_document
-from wrinklepipe.document.repair import repair
-from wrinklepipe.document.wrinkled import (
+from wrinklepipe.errors import InputError
+from wrinklepipe.gltf.document import read_document
+from wrinklepipe.gltf.repair import repair
+from wrinklepipe.gltf.wrinkled import (
     VERTEX_ID_ATTRIBUTE,
     add_wrinkle_attributes,
     select_materials,
     wrinkled_primitives,
 )
-from wrinklepipe.errors import InputError
+from wrinklepipe.gltf.write import write_document
 from wrinklepipe.io import khronos
 
 needs_robot = pytest.mark.skipif(not ROBOT.is_file(), reason="../shared/data is absent")

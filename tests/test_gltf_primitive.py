@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 from test_mesh_io_gltf import QUAD_I, QUAD_P, QUAD_UV, SAMPLES, needs_data, quad_doc, write_gltf
 
-from wrinklepipe.document.model import read_document
-from wrinklepipe.document.render_mesh import OPTIONS, primitive_mesh
 from wrinklepipe.errors import InputError
+from wrinklepipe.gltf.document import read_document
+from wrinklepipe.gltf.render_mesh import OPTIONS, primitive_mesh
 from wrinklepipe.io.animation import read_channels, read_morph_tracks
 from wrinklepipe.io.gltf_primitive import (
     PrimitiveOptions,

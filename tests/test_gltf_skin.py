@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from wrinklepipe.demo.package import demo_package
-from wrinklepipe.document.package import read_wrinkled
+from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io import khronos
 from wrinklepipe.io.gltf_write import skin_weights_normalized, write_gltf
 from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes

@@ -15,10 +15,10 @@ import pytest
 
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.demo.package import demo_package
-from wrinklepipe.document.images import image_pixels, texture_normals
-from wrinklepipe.document.model import read_document
-from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.errors import InputError
+from wrinklepipe.gltf.document import read_document
+from wrinklepipe.gltf.images import image_pixels, texture_normals
+from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io import khronos
 from wrinklepipe.io.gltf_limits import GltfReadOptions
 from wrinklepipe.io.gltf_write import write_glb, write_gltf

@@ -16,10 +16,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wrinklepipe.cli import main
-from wrinklepipe.document.decompress import compressed
 from wrinklepipe.errors import InputError
 from wrinklepipe.geometry.dynamic import skinned_pose, triangle_weights
 from wrinklepipe.geometry.tangents import ensure_tangents, mikktspace_tangents_report
+from wrinklepipe.gltf.decompress import compressed
 from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
 from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
 from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, read_gltf_meshes

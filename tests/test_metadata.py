@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 from wrinklepipe import model
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.demo.package import demo_package
-from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.masks.layouts import LAYOUTS

@@ -20,8 +20,8 @@ from wrinkle_setups import ROBOT, avatar_variant, write_setup
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo import avatar
-from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.document.usd_inspect import usd_summary
+from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.pipeline.convert import ConvertOptions, convert

@@ -349,7 +349,7 @@ def test_threejs_viewer_renders_a_real_skinned_character(browser):
 def test_weights_animation_plays_the_curves(browser):
     """KHR_animation_pointer channels became tracks of the glTF animation's clip: the weights
     the mixer gives at t equal the stored curve, linearly interpolated (numpy)."""
-    from wrinklepipe.document.package import read_wrinkled
+    from wrinklepipe.gltf.package_read import read_wrinkled
 
     loads = [r for r in browser["results"] if r["fn"] == "load"]
     anim = loads[-1]["value"]["animations"]

@@ -10,10 +10,10 @@ from typing import Any
 from rich.table import Table
 
 from wrinklepipe.console import emit_json, out
-from wrinklepipe.document import read_document
-from wrinklepipe.document.inspect import diff, summary
 from wrinklepipe.document.usd_inspect import usd_summary
 from wrinklepipe.errors import input_error, plain_reason
+from wrinklepipe.gltf.document import read_document
+from wrinklepipe.gltf.inspect import diff, summary
 from wrinklepipe.suffixes import USD_SUFFIXES
 
 NAME = "inspect"

@@ -35,9 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.model import Document
 from wrinklepipe.document.usd_looks import gf_matrix
 from wrinklepipe.geometry.keyframes import sample_channel_at
+from wrinklepipe.gltf.document import Document
 from wrinklepipe.io.animation import Channel, read_channels
 from wrinklepipe.io.gltf_primitive import node_matrix, trs_matrices  # the one glTF TRS
 from wrinklepipe.names import unique_name

@@ -1,5 +1,5 @@
 """What a USD stage holds, as plain JSON-able data, comparable with
-:func:`wrinklepipe.document.inspect.diff`.
+:func:`wrinklepipe.gltf.inspect.diff`.
 
 :func:`usd_summary` opens the stage composed (sublayers, references, payloads, the selected
 variants; instance proxies included) and lists its layers and stage metadata, then every prim

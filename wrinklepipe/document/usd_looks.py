@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.images import image_pixels, texture_source
-from wrinklepipe.document.model import Document
-from wrinklepipe.document.write import mime_type
 from wrinklepipe.errors import InputError, plain_reason
+from wrinklepipe.gltf.document import Document
+from wrinklepipe.gltf.images import image_pixels, texture_source
+from wrinklepipe.gltf.write import mime_type
 from wrinklepipe.io.package import png_bytes
 from wrinklepipe.names import unique_name
 

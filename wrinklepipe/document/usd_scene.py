@@ -56,14 +56,14 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.model import Document, PrimitiveRef
-from wrinklepipe.document.scene import node_world_matrices, primitive_triangles
 from wrinklepipe.document.usd_animation import (
     SkeletonInfo,
     add_animations,
     xform_animated_nodes,
 )
 from wrinklepipe.document.usd_looks import Looks, Names, gf_matrix
+from wrinklepipe.gltf.document import Document, PrimitiveRef
+from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles
 from wrinklepipe.io.gltf_primitive import node_matrix, read_skin  # the one TRS, the one skin
 from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.io.usd_write import SCENE_MESH_NAME, SCENE_MESHES

@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.asset import Mesh, MeshPart
-from wrinklepipe.document.wrinkled import front_projection_uvs
 from wrinklepipe.errors import input_error
+from wrinklepipe.gltf.wrinkled import front_projection_uvs
 from wrinklepipe.io.mesh_merge import merge_meshes
 from wrinklepipe.io.mesh_usd import open_stage, read_usd_meshes, uv_primvar
 

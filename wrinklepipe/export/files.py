@@ -19,8 +19,6 @@ import numpy as np
 
 from wrinklepipe import codec
 from wrinklepipe.atomic import dumps_json
-from wrinklepipe.document.model import Document
-from wrinklepipe.document.package import wrinkled_materials
 from wrinklepipe.errors import input_error
 from wrinklepipe.export import importers, readme
 from wrinklepipe.export.gltf import plain_gltf
@@ -33,6 +31,8 @@ from wrinklepipe.export.textures import (
     to_8bit_states,
     to_directx,
 )
+from wrinklepipe.gltf.document import Document
+from wrinklepipe.gltf.package_read import wrinkled_materials
 from wrinklepipe.io.package import WrinklePackage, png_bytes, safe_name
 from wrinklepipe.normals.compress import Budget
 from wrinklepipe.outputs.curves import format_float32

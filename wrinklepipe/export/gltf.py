@@ -12,10 +12,10 @@ from __future__ import annotations
 from typing import Any
 
 from wrinklepipe.atomic import dumps_json
-from wrinklepipe.document.model import Document
-from wrinklepipe.document.package import wrinkled_materials
-from wrinklepipe.document.plain import normal_image, plain_document
-from wrinklepipe.document.write import document_files, mime_type
+from wrinklepipe.gltf.document import Document
+from wrinklepipe.gltf.package_read import wrinkled_materials
+from wrinklepipe.gltf.plain import normal_image, plain_document
+from wrinklepipe.gltf.write import document_files, mime_type
 from wrinklepipe.io.gltf_write import gltf_document
 from wrinklepipe.io.package import EXTENSION, WrinklePackage, png_bytes
 

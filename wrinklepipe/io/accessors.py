@@ -1,6 +1,6 @@
 """glTF accessors -> numpy arrays, per the glTF 2.0 spec (section 3.6).
 
-THE accessor reader: the glTF document model (:mod:`wrinklepipe.document`), the mesh reader
+THE accessor reader: the glTF document model (:mod:`wrinklepipe.gltf`), the mesh reader
 (:mod:`wrinklepipe.io.mesh_gltf` over :mod:`wrinklepipe.io.gltf_read`) and the glTF animations
 the drivers are given all decode accessors here, so every one of them reads any component type
 (little-endian), every element type (``MAT2``/``MAT3`` with byte-aligned columns as the spec
@@ -8,7 +8,7 @@ requires for 1- and 2-byte components), byte strides, sparse substitution, acces
 bufferView (zeros), ``normalized`` integers (unsigned ``c / MAX``, signed ``max(c / MAX, -1)``).
 The bytes of each bufferView come from a callable, so compressed views
 (``EXT_meshopt_compression``) and Draco primitives are decoded once, for the document and mesh
-ingest alike, by :func:`wrinklepipe.document.model.decode_geometry` and read here like any
+ingest alike, by :func:`wrinklepipe.gltf.document.decode_geometry` and read here like any
 other.
 """
 

@@ -4,7 +4,7 @@ readers sample.
 :func:`read_channels` reads the channels of one animation of any
 :class:`wrinklepipe.io.gltf_primitive.GltfSource` (a file opened by
 :class:`wrinklepipe.io.gltf_read.GltfFile`, or the pass-through
-:class:`wrinklepipe.document.model.Document`): node, path (``translation``, ``rotation``,
+:class:`wrinklepipe.gltf.document.Document`): node, path (``translation``, ``rotation``,
 ``scale``, ``weights``), key times and values (``[N, C]``; CUBICSPLINE ``[N, 3, C]``: in-tangent,
 value, out-tangent), interpolation. ``strict`` (the drivers' morph tracks, the skeleton
 reader): every channel must name a node and a sampler, its interpolation must be one of the

@@ -1,8 +1,8 @@
 """What a glTF reader may open: the size caps and the one URI confinement rule.
 
-Used by the container of the glTF document model (:mod:`wrinklepipe.document.container`,
+Used by the container of the glTF document model (:mod:`wrinklepipe.gltf.container`,
 which every glTF reader opens files through) and the document's images
-(:mod:`wrinklepipe.document.images`: ``max_pixels``): every URI must be relative and stay
+(:mod:`wrinklepipe.gltf.images`: ``max_pixels``): every URI must be relative and stay
 inside the asset's folder (no ``..``, no absolute paths, no schemes other than ``data:``), data
 URIs, external files and images are capped.
 """

@@ -3,8 +3,8 @@
 
 :func:`read_primitive` reads one primitive of any :class:`GltfSource`: a file opened by
 :class:`wrinklepipe.io.gltf_read.GltfFile` (mesh ingest, :func:`wrinklepipe.io.mesh_gltf.
-read_gltf_meshes`) or the pass-through :class:`wrinklepipe.document.model.Document` (the
-render mesh of a source or a package, :mod:`wrinklepipe.document.render_mesh`). What it reads:
+read_gltf_meshes`) or the pass-through :class:`wrinklepipe.gltf.document.Document` (the
+render mesh of a source or a package, :mod:`wrinklepipe.gltf.render_mesh`). What it reads:
 POSITION (VEC3, finite), NORMAL, TANGENT, TEXCOORD_0, a colour attribute (``COLOR_0``, VEC3
 given alpha 1; or a package's ``_WRINKLE_BIAS``: :class:`PrimitiveOptions`), JOINTS_0 /
 WEIGHTS_0 with the instancing node's skin (joint names: the nodes' names, ``node<i>`` when
@@ -50,7 +50,7 @@ class GltfSource(Protocol):
     """What :func:`read_primitive` reads a glTF through: the JSON tree, its accessors decoded
     as ``[count, components]`` (``normalize``: normalized integers as floats), and the error
     naming the file and JSON pointer. :class:`wrinklepipe.io.gltf_read.GltfFile` and
-    :class:`wrinklepipe.document.model.Document` are both one."""
+    :class:`wrinklepipe.gltf.document.Document` are both one."""
 
     gltf: dict[str, Any]
 

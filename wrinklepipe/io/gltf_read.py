@@ -2,22 +2,22 @@
 reader (:mod:`wrinklepipe.io.mesh_gltf`) and the morph-animation reader
 (:mod:`wrinklepipe.io.animation`) build on.
 
-The file is opened by the one container reader (:func:`wrinklepipe.document.container.
+The file is opened by the one container reader (:func:`wrinklepipe.gltf.container.
 open_container`), which is defensive because a glTF names other files: every URI must be
 relative and stay inside the asset's folder (no ``..``, no absolute paths, no schemes other than
 ``data:``); data URIs and external files are capped in size. bufferViews are bounds-checked here
 and accessors decoded by :func:`wrinklepipe.io.accessors.read_accessor`. A file with
 compressed geometry (``EXT_meshopt_compression`` / ``KHR_meshopt_compression`` views,
 ``KHR_draco_mesh_compression`` primitives) is decoded at open by the document model's own
-decoder (:func:`wrinklepipe.document.model.decode_geometry`): its tree and views are then the
+decoder (:func:`wrinklepipe.gltf.document.decode_geometry`): its tree and views are then the
 decoded document's, so mesh ingest and the document read the same numbers. Every problem is an
 :class:`~wrinklepipe.errors.InputError` naming the file and the JSON pointer.
 
 :class:`GltfFile` is a :class:`wrinklepipe.io.gltf_primitive.GltfSource` (``gltf``,
-``accessor``, ``err``), as the document model (:class:`wrinklepipe.document.model.Document`)
+``accessor``, ``err``), as the document model (:class:`wrinklepipe.gltf.document.Document`)
 is: the one per-primitive reader (:func:`wrinklepipe.io.gltf_primitive.read_primitive`) reads
 either.
-A written wrinkle package is read by :func:`wrinklepipe.document.package.read_wrinkled` (the one
+A written wrinkle package is read by :func:`wrinklepipe.gltf.package_read.read_wrinkled` (the one
 glTF package reader, on the document model).
 """
 
@@ -28,16 +28,16 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.container import open_container
-from wrinklepipe.document.decompress import compressed
-from wrinklepipe.document.model import Document, decode_geometry
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.gltf.container import open_container
+from wrinklepipe.gltf.decompress import compressed
+from wrinklepipe.gltf.document import Document, decode_geometry
 from wrinklepipe.io.accessors import read_accessor
 from wrinklepipe.io.gltf_limits import GltfReadOptions as GltfReadOptions  # re-exported
 
 
 class GltfFile:
-    """A glTF file opened by the one container reader (:func:`wrinklepipe.document.container.
+    """A glTF file opened by the one container reader (:func:`wrinklepipe.gltf.container.
     open_container`: GLB chunks, confined URIs, capped data URIs and files, buffers), with
     bufferViews and accessors on top; compressed geometry decoded by the document model's
     decoder (``decoded``: the extensions it decoded, in the order it met them)."""

@@ -21,7 +21,7 @@ world space when ``bake_transforms``. What ingest adds to the per-primitive read
 - A morph target of the wrong length, or a malformed ``_WRINKLE_VERTEX_ID``, is left out and
   noted (the per-primitive reader's non-strict mode): any file is ingested as far as it can be.
 
-Container, buffer and URI safety come from :mod:`wrinklepipe.document.container` (through
+Container, buffer and URI safety come from :mod:`wrinklepipe.gltf.container` (through
 :mod:`wrinklepipe.io.gltf_read`).
 """
 
@@ -35,9 +35,9 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.asset import Mesh
-from wrinklepipe.document.decompress import DRACO, MESHOPT
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.keyframes import sample_channel
+from wrinklepipe.gltf.decompress import DRACO, MESHOPT
 from wrinklepipe.io.animation import WIDTHS, morph_tracks, read_channels
 from wrinklepipe.io.gltf_primitive import (
     TRIANGLE_MODES,

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from wrinklepipe.asset import Mesh
-from wrinklepipe.document.package import read_wrinkled
 from wrinklepipe.errors import input_error
+from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io.mesh_gltf import GltfMeshOptions, read_gltf_meshes
 from wrinklepipe.io.mesh_obj import read_obj_meshes
 from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes

@@ -4,8 +4,8 @@
 :func:`write_folder` writes them (and the USD, through usd-core) into a staged folder.
 
 The glTF: for a glTF source, the source document with the wrinkle data added
-(:func:`wrinklepipe.document.wrinkle_maps.add_wrinkle_maps`, written by
-:func:`wrinklepipe.document.write.document_files`: every untouched element as it was, images
+(:func:`wrinklepipe.gltf.wrinkle_maps.add_wrinkle_maps`, written by
+:func:`wrinklepipe.gltf.write.document_files`: every untouched element as it was, images
 byte for byte); for other sources (OBJ, USD) a new document of the package
 (:func:`wrinklepipe.io.gltf_write.gltf_document`).
 """
@@ -20,7 +20,6 @@ from typing import Any
 
 from wrinklepipe import reuse
 from wrinklepipe.atomic import dumps_json, write_bytes
-from wrinklepipe.document.model import Document
 from wrinklepipe.document.usd_layer import (
     flattened_usdz,
     layer_bytes,
@@ -29,8 +28,9 @@ from wrinklepipe.document.usd_layer import (
 )
 from wrinklepipe.document.usd_scene import add_scene, wrinkled_prims
 from wrinklepipe.document.usd_source import UsdSource
-from wrinklepipe.document.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
-from wrinklepipe.document.write import document_files
+from wrinklepipe.gltf.document import Document
+from wrinklepipe.gltf.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
+from wrinklepipe.gltf.write import document_files
 from wrinklepipe.io.gltf_write import glb_bytes, gltf_document
 from wrinklepipe.io.package import WrinklePackage, png_bytes
 from wrinklepipe.io.usd_write import build_stage, write_usd

@@ -3,10 +3,10 @@
 Maps come back as float32 unit normals (+Y), wrinkle states as the whole wrinkled face, masks as
 ``[R, H, W]`` in [0, 1].
 
-The mesh: a glTF source is read as a whole document (:mod:`wrinklepipe.document`): the
+The mesh: a glTF source is read as a whole document (:mod:`wrinklepipe.gltf`): the
 manifest's ``material`` (and ``meshes``) select the wrinkled primitives, which get their
 tangents and vertex IDs in the document, and the render mesh is those primitives only
-(:func:`wrinklepipe.document.render_mesh.wrinkled_mesh`); convert then writes the document back
+(:func:`wrinklepipe.gltf.render_mesh.wrinkled_mesh`); convert then writes the document back
 with the wrinkle data added. Without ``base`` the wrinkled material's own ``normalTexture`` is
 the base map. A USD source likewise: the manifest's ``material``/``meshes`` select the wrinkled
 Mesh prims (:func:`wrinklepipe.document.usd_source.read_usd_source`), the render mesh is those
@@ -25,19 +25,19 @@ import numpy as np
 from wrinklepipe import masks as wm
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
-from wrinklepipe.document.images import texture_normals
-from wrinklepipe.document.model import Document, read_document
-from wrinklepipe.document.render_mesh import wrinkled_mesh
-from wrinklepipe.document.repair import repair
 from wrinklepipe.document.usd_source import UsdSource, read_usd_source
-from wrinklepipe.document.wrinkle_maps import WrinkleTarget
-from wrinklepipe.document.wrinkled import (
+from wrinklepipe.errors import input_error
+from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
+from wrinklepipe.gltf.document import Document, read_document
+from wrinklepipe.gltf.images import texture_normals
+from wrinklepipe.gltf.render_mesh import wrinkled_mesh
+from wrinklepipe.gltf.repair import repair
+from wrinklepipe.gltf.wrinkle_maps import WrinkleTarget
+from wrinklepipe.gltf.wrinkled import (
     add_wrinkle_attributes,
     material_normal_texture,
     select_wrinkled,
 )
-from wrinklepipe.errors import input_error
-from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.io.images import read_image
 from wrinklepipe.io.mesh import load_mesh
 from wrinklepipe.io.readers import format_of

@@ -6,7 +6,7 @@ PATH may be:
   used as the shipped base and state textures when present, as they are what ships);
 - a ``.gltf``/``.glb`` that carries the ``WRINKLEPIPE_wrinkle_maps`` extension, or a
   ``.usda``/``.usdc``/``.usdz`` with the ``WrinkleMapsAPI`` schema (read by
-  :mod:`wrinklepipe.document.package` / :mod:`wrinklepipe.io.usd_read`);
+  :mod:`wrinklepipe.gltf.package_read` / :mod:`wrinklepipe.io.usd_read`);
 - a source manifest (``.toml``) before conversion: ingested and run through the stages
   ``convert`` runs (resampling, PD scale), then packed as it would (8-bit), with the manifest's
   maps kept as the source: validate-asset and convert judge the same thing;
@@ -26,9 +26,9 @@ import numpy as np
 
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.demo import demo_asset
-from wrinklepipe.document.container import split_glb
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.fidelity.ship import edge_texels
+from wrinklepipe.gltf.container import split_glb
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import package_from_asset
 from wrinklepipe.io.readers import Format, format_of, read_package_file

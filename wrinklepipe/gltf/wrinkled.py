@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.model import ARRAY_BUFFER, Document, PrimitiveRef
-from wrinklepipe.document.scene import node_world_matrices, primitive_triangles, rest_positions
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents_report
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
+from wrinklepipe.gltf.document import ARRAY_BUFFER, Document, PrimitiveRef
+from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles, rest_positions
 from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE
 
 #: Largest integer a float32 holds exactly (vertex IDs are FLOAT accessors).

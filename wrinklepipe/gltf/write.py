@@ -1,4 +1,4 @@
-"""Write a :class:`~wrinklepipe.document.model.Document` back: one buffer, the tree as it is.
+"""Write a :class:`~wrinklepipe.gltf.document.Document` back: one buffer, the tree as it is.
 
 Every bufferView's bytes go, unchanged and 4-byte aligned, into one new buffer (accessors keep
 their byteOffsets, component types and values); images are copied byte for byte: embedded as
@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from wrinklepipe.atomic import dumps_json, write_bytes
-from wrinklepipe.document.model import Document
+from wrinklepipe.gltf.document import Document
 from wrinklepipe.io.gltf_write import glb_bytes
 
 _MAGIC_MIME = (

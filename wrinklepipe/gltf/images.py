@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.model import Document
-from wrinklepipe.document.write import mime_type
 from wrinklepipe.errors import InputError
+from wrinklepipe.gltf.document import Document
+from wrinklepipe.gltf.write import mime_type
 from wrinklepipe.io.images import read_image
 from wrinklepipe.io.package import png_pixels
 from wrinklepipe.normals.read import ReadOptions, read_normal_map

@@ -2,14 +2,14 @@
 
 The one reader of glTF packages (``read_package``, ``validate-asset``, ``export``, the tests and
 the output bench all read through :func:`read_wrinkled`), built on the document model: the file
-is opened by :func:`wrinklepipe.document.model.read_document` (the one container reader, its caps
-and URI confinement), images are decoded by :mod:`wrinklepipe.document.images` (held to
+is opened by :func:`wrinklepipe.gltf.document.read_document` (the one container reader, its caps
+and URI confinement), images are decoded by :mod:`wrinklepipe.gltf.images` (held to
 ``max_pixels`` first) and accessors by :mod:`wrinklepipe.io.accessors`.
 
 - The wrinkled material is the one carrying ``WRINKLEPIPE_wrinkle_maps`` (the first, when a list
   of materials was wrinkled: they carry the same block).
 - The render mesh is every triangle primitive using a material with the extension
-  (:func:`wrinklepipe.document.render_mesh.wrinkled_mesh`), so a character converted in place
+  (:func:`wrinklepipe.gltf.render_mesh.wrinkled_mesh`), so a character converted in place
   validates on its wrinkled primitives only; a single-mesh file (the demo, an OBJ source's
   output) is the same case with one primitive.
 - The package's **name is the file's stem** (``demo_head.gltf`` -> ``demo_head``), whatever the
@@ -30,11 +30,11 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.asset import Mesh
-from wrinklepipe.document.images import image_pixels, texture_source
-from wrinklepipe.document.model import Document, read_document
-from wrinklepipe.document.render_mesh import wrinkled_mesh
-from wrinklepipe.document.wrinkled import wrinkled_primitives
 from wrinklepipe.errors import input_error, plain_reason
+from wrinklepipe.gltf.document import Document, read_document
+from wrinklepipe.gltf.images import image_pixels, texture_source
+from wrinklepipe.gltf.render_mesh import wrinkled_mesh
+from wrinklepipe.gltf.wrinkled import wrinkled_primitives
 from wrinklepipe.io.gltf_limits import GltfReadOptions
 from wrinklepipe.io.package import EXTENSION, PackedTexture, WeightCurves, WrinklePackage, safe_name
 from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE, WrinkleMeta

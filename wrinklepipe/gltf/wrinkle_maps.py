@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wrinklepipe.document.model import Document, PrimitiveRef
-from wrinklepipe.document.package import morph_columns
+from wrinklepipe.gltf.document import Document, PrimitiveRef
+from wrinklepipe.gltf.package_read import morph_columns
 from wrinklepipe.io.gltf_write import (
     POINTER_EXTENSION,
     MorphChannel,

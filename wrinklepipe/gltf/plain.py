@@ -23,8 +23,8 @@ from __future__ import annotations
 import copy
 from typing import Any
 
-from wrinklepipe.document.model import Document, drop_views
-from wrinklepipe.document.package import wrinkled_materials
+from wrinklepipe.gltf.document import Document, drop_views
+from wrinklepipe.gltf.package_read import wrinkled_materials
 from wrinklepipe.io.gltf_write import POINTER_EXTENSION
 from wrinklepipe.io.package import EXTENSION
 

@@ -16,11 +16,11 @@ tree is rewritten except what ingest had to decode:
   dequantising node transforms stay), so the extension stays required. Maths on them reads
   floats through :meth:`Document.accessor`.
 - ``KHR_texture_basisu``, ``EXT_texture_webp`` and every other texture are passed through byte for
-  byte; they are decoded only when the pipeline must read one (:mod:`wrinklepipe.document.images`).
+  byte; they are decoded only when the pipeline must read one (:mod:`wrinklepipe.gltf.images`).
 
 The decoding is :func:`decode_geometry`, the one decoder of compressed glTF geometry: mesh
 ingest (:class:`wrinklepipe.io.gltf_read.GltfFile`) reads a compressed file through it too.
-:func:`wrinklepipe.document.write.pack` writes the document back (one buffer).
+:func:`wrinklepipe.gltf.write.pack` writes the document back (one buffer).
 """
 
 from __future__ import annotations
@@ -33,9 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document import decompress
-from wrinklepipe.document.container import Container, data_uri_bytes, open_container
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.gltf import decompress
+from wrinklepipe.gltf.container import Container, data_uri_bytes, open_container
 from wrinklepipe.io import accessors as acc
 from wrinklepipe.io import gltf_primitive
 from wrinklepipe.io.gltf_limits import GltfReadOptions

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wrinklepipe.document.model import Document, PrimitiveRef
+from wrinklepipe.gltf.document import Document, PrimitiveRef
 from wrinklepipe.io.gltf_primitive import primitive_triangles as gltf_triangles
 from wrinklepipe.io.gltf_primitive import read_skin, world_matrices
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.model import ARRAY_BUFFER, Document
+from wrinklepipe.gltf.document import ARRAY_BUFFER, Document
 
 #: Largest |sum - 1| left alone (float32 rounding of a normalised row stays far below).
 WEIGHT_SUM_TOLERANCE = 1e-6

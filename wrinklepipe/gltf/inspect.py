@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.model import Document
-from wrinklepipe.document.write import mime_type
+from wrinklepipe.gltf.document import Document
+from wrinklepipe.gltf.write import mime_type
 
 _COMPONENT = {5120: "i8", 5121: "u8", 5122: "i16", 5123: "u16", 5125: "u32", 5126: "f32"}
 _MODES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP", 4: "TRIANGLES"}

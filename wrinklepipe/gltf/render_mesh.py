@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.asset import Mesh, MeshPart
-from wrinklepipe.document.model import Document, PrimitiveRef
-from wrinklepipe.document.scene import node_world_matrices
+from wrinklepipe.gltf.document import Document, PrimitiveRef
+from wrinklepipe.gltf.scene import node_world_matrices
 from wrinklepipe.io.gltf_primitive import PrimitiveOptions, read_instance
 from wrinklepipe.io.mesh_merge import merge_meshes
 from wrinklepipe.metadata import BIAS_ATTRIBUTE

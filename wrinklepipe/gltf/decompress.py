@@ -29,7 +29,7 @@ DRACO = "KHR_draco_mesh_compression"
 
 def compressed(gltf: dict[str, Any]) -> bool:
     """Whether a glTF tree holds compressed geometry: a bufferView carrying a meshopt extension
-    or a primitive carrying a Draco one (what :func:`wrinklepipe.document.model.
+    or a primitive carrying a Draco one (what :func:`wrinklepipe.gltf.document.
     decode_geometry` decodes), whatever ``extensionsUsed`` says."""
 
     def ext(obj: Any) -> dict[str, Any]:
