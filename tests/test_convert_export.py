@@ -10,7 +10,7 @@ import pytest
 from wrinklepipe.cli import main
 from wrinklepipe.demo.package import demo_package
 from wrinklepipe.export.textures import to_directx
-from wrinklepipe.io.gltf_write import write_gltf
+from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io.usd_write import write_usd
 
 

@@ -27,8 +27,8 @@ from wrinklepipe.demo import avatar
 from wrinklepipe.errors import InputError
 from wrinklepipe.gltf.document import read_document
 from wrinklepipe.gltf.images import image_pixels
+from wrinklepipe.gltf.limits import GltfReadOptions
 from wrinklepipe.io import khronos
-from wrinklepipe.io.gltf_limits import GltfReadOptions
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
 from wrinklepipe.sources.validation import load_input
 

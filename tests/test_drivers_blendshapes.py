@@ -8,7 +8,7 @@ import pytest
 
 from wrinklepipe import drivers as wd
 from wrinklepipe.drivers.blendshapes import Row, evaluate_rows
-from wrinklepipe.io.animation import read_morph_tracks
+from wrinklepipe.gltf.animation import read_morph_tracks
 from wrinklepipe.presets import arkit, jimenez
 
 

@@ -158,8 +158,8 @@ _RIGGED = (
 @pytest.mark.skipif(not _RIGGED.is_file(), reason="../shared/data is absent")
 def test_bones_from_gltf_animation_reach_the_reference_frame():
     from wrinklepipe.drivers import DriverContext, evaluate
+    from wrinklepipe.gltf.meshes import gltf_animation_times
     from wrinklepipe.io.mesh import load_mesh
-    from wrinklepipe.io.mesh_gltf import gltf_animation_times
     from wrinklepipe.io.rig import GltfRig
 
     keys = gltf_animation_times(_RIGGED)

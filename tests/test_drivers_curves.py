@@ -11,7 +11,7 @@ from test_drivers_blendshapes import make_morph_gltf
 from wrinklepipe import drivers as wd
 from wrinklepipe.drivers.curves import sample
 from wrinklepipe.errors import InputError
-from wrinklepipe.io.animation import read_morph_tracks
+from wrinklepipe.gltf.animation import read_morph_tracks
 
 REGIONS = ("brow", "chin")
 STATES = ("stretch", "compress")

@@ -38,8 +38,8 @@ from wrinklepipe import codec, model
 from wrinklepipe.demo import avatar, demo_asset
 from wrinklepipe.errors import InputError
 from wrinklepipe.export.job import export
+from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io import khronos
-from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.package import PackOptions, package_from_asset, png_pixels
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.paths import ROOT

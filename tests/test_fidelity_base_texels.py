@@ -11,7 +11,7 @@ import numpy as np
 from PIL import Image
 
 from wrinklepipe.demo import avatar
-from wrinklepipe.io.gltf_write import glb_bytes
+from wrinklepipe.gltf.package_write import glb_bytes
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.pipeline.ingest import ingest_all
 from wrinklepipe.validate.rules_fidelity import check_source_texels

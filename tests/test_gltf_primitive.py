@@ -1,4 +1,4 @@
-"""The one per-primitive glTF reader (wrinklepipe.io.gltf_primitive) over its two sources: a
+"""The one per-primitive glTF reader (wrinklepipe.gltf.primitive) over its two sources: a
 file opened for mesh ingest (GltfFile) and the pass-through Document. Hand-built files with
 expectations from the glTF 2.0 spec (and scipy for the node transform), and the two readers
 held against each other on the Khronos samples (skipped when ../shared/data is absent)."""
@@ -16,17 +16,17 @@ from scipy.spatial.transform import Rotation
 from test_mesh_io_gltf import QUAD_I, QUAD_P, QUAD_UV, SAMPLES, needs_data, quad_doc, write_gltf
 
 from wrinklepipe.errors import InputError
+from wrinklepipe.gltf.animation import read_channels, read_morph_tracks
 from wrinklepipe.gltf.document import read_document
-from wrinklepipe.gltf.render_mesh import OPTIONS, primitive_mesh
-from wrinklepipe.io.animation import read_channels, read_morph_tracks
-from wrinklepipe.io.gltf_primitive import (
+from wrinklepipe.gltf.meshes import read_gltf_meshes
+from wrinklepipe.gltf.primitive import (
     PrimitiveOptions,
     read_instance,
     read_primitive,
     world_matrices,
 )
-from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
-from wrinklepipe.io.mesh_gltf import read_gltf_meshes
+from wrinklepipe.gltf.read import GltfFile, GltfReadOptions
+from wrinklepipe.gltf.render_mesh import OPTIONS, primitive_mesh
 
 JOINTS = np.array([[1, 0, 0, 0]] * 4, np.uint8)
 WEIGHTS = np.array([[1, 0, 0, 0]] * 4, np.float32)

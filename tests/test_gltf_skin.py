@@ -10,8 +10,8 @@ import pytest
 
 from wrinklepipe.demo.package import demo_package
 from wrinklepipe.gltf.package_read import read_wrinkled
+from wrinklepipe.gltf.package_write import skin_weights_normalized, write_gltf
 from wrinklepipe.io import khronos
-from wrinklepipe.io.gltf_write import skin_weights_normalized, write_gltf
 from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.io.usd_write import write_usd

@@ -18,10 +18,10 @@ from wrinklepipe.demo.package import demo_package
 from wrinklepipe.errors import InputError
 from wrinklepipe.gltf.document import read_document
 from wrinklepipe.gltf.images import image_pixels, texture_normals
+from wrinklepipe.gltf.limits import GltfReadOptions
 from wrinklepipe.gltf.package_read import read_wrinkled
+from wrinklepipe.gltf.package_write import write_glb, write_gltf
 from wrinklepipe.io import khronos
-from wrinklepipe.io.gltf_limits import GltfReadOptions
-from wrinklepipe.io.gltf_write import write_glb, write_gltf
 from wrinklepipe.io.images import write_image
 from wrinklepipe.io.package import EXTENSION, package_from_asset, png_bytes, png_pixels
 from wrinklepipe.paths import SCHEMAS_DIR

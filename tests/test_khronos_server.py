@@ -9,8 +9,8 @@ import subprocess
 import pytest
 
 from wrinklepipe.demo.package import demo_package
+from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io import khronos
-from wrinklepipe.io.gltf_write import write_gltf
 
 pytestmark = pytest.mark.skipif(not khronos.available(), reason="gltf-validator not installed")
 

@@ -20,9 +20,9 @@ from wrinklepipe.errors import InputError
 from wrinklepipe.geometry.dynamic import skinned_pose, triangle_weights
 from wrinklepipe.geometry.tangents import ensure_tangents, mikktspace_tangents_report
 from wrinklepipe.gltf.decompress import compressed
-from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
+from wrinklepipe.gltf.meshes import gltf_joint_world_matrices, read_gltf_meshes
+from wrinklepipe.gltf.read import GltfFile, GltfReadOptions
 from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
-from wrinklepipe.io.mesh_gltf import gltf_joint_world_matrices, read_gltf_meshes
 from wrinklepipe.paths import ROOT
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -402,7 +402,7 @@ def test_mutated_gltf_never_tracebacks(tmp_path_factory, picks):
 def test_morph_weight_animation_sampled_like_pygltflib():
     from pygltflib import GLTF2
 
-    from wrinklepipe.io.mesh_gltf import gltf_morph_weights
+    from wrinklepipe.gltf.meshes import gltf_morph_weights
 
     f = SAMPLES / "AnimatedMorphCube/glTF-Binary/AnimatedMorphCube.glb"
     g = GLTF2().load(str(f))

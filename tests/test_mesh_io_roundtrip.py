@@ -18,7 +18,7 @@ def package():
 
 @pytest.mark.parametrize("name", ["head.glb", "head.usda"])
 def test_written_asset_reads_back(package, tmp_path, name):
-    from wrinklepipe.io.gltf_write import write_glb
+    from wrinklepipe.gltf.package_write import write_glb
     from wrinklepipe.io.usd_write import write_usd
 
     path = tmp_path / name

@@ -15,7 +15,7 @@ from wrinklepipe.demo import demo_asset
 from wrinklepipe.demo.package import demo_package
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.gltf.package_read import read_wrinkled
-from wrinklepipe.io.gltf_write import write_gltf
+from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.masks.layouts import LAYOUTS
 from wrinklepipe.metadata import (

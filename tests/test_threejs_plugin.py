@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from wrinklepipe.demo import demo_asset
-from wrinklepipe.io.gltf_write import gltf_document
+from wrinklepipe.gltf.package_write import gltf_document
 from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.shading import template as tpl

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from wrinklepipe.demo.package import demo_package
 from wrinklepipe.errors import InputError
 from wrinklepipe.gltf.package_read import read_wrinkled
-from wrinklepipe.io.gltf_write import write_gltf
+from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.io.usd_write import API_NAME, register_schema, write_usd
 

@@ -148,7 +148,7 @@ def test_report_is_byte_identical_on_rerun(capsys, tmp_path):
 @needs_gl
 def test_converted_gltf_folder_loads(capsys, tmp_path):
     from wrinklepipe.demo.package import demo_package
-    from wrinklepipe.io.gltf_write import write_gltf
+    from wrinklepipe.gltf.package_write import write_gltf
 
     write_gltf(demo_package(64), tmp_path / "out", "demo")
     code, out, err = run(capsys, tmp_path / "out", "--render-size", "128", "--json")

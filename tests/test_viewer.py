@@ -29,8 +29,8 @@ from wrinkle_setups import ROBOT, write_robot_setup
 
 from wrinklepipe import model
 from wrinklepipe.demo import avatar, demo_asset
+from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io.confine import allowed_roots
-from wrinklepipe.io.gltf_write import write_gltf
 from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.paths import ROOT
 from wrinklepipe.pipeline.convert import ConvertOptions, convert

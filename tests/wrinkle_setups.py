@@ -11,7 +11,7 @@ import numpy as np
 from wrinklepipe import model
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.demo import avatar, demo_asset
-from wrinklepipe.io.gltf_write import glb_bytes
+from wrinklepipe.gltf.package_write import glb_bytes
 from wrinklepipe.io.images import write_image
 
 #: Regions as UV boxes (u0, v0, u1, v1) with their side; glTF characters face +Z, so their

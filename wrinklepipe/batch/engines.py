@@ -46,7 +46,7 @@ _PRELOAD = [
     "wrinklepipe.masks",
     "wrinklepipe.normals.compress",
     "wrinklepipe.batch.forkserver_warm",  # quicktex's encoder tables, built once
-    "wrinklepipe.io.gltf_write",
+    "wrinklepipe.gltf.package_write",
     "wrinklepipe.io.usd_write",
     "wrinklepipe.validate.render",
     "wrinklepipe.validate.report",

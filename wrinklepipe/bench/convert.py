@@ -33,7 +33,7 @@ import numpy as np
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark
 from wrinklepipe.console import stage_listener
 from wrinklepipe.demo.source import demo_source_dir
-from wrinklepipe.io.gltf_write import gltf_document
+from wrinklepipe.gltf.package_write import gltf_document
 from wrinklepipe.io.package import png_bytes
 from wrinklepipe.io.usd_write import write_usd
 from wrinklepipe.manifest import load_manifest

@@ -16,7 +16,7 @@ from pathlib import Path
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
 from wrinklepipe.demo.package import demo_package
 from wrinklepipe.gltf.package_read import read_wrinkled
-from wrinklepipe.io.gltf_write import glb_bytes, gltf_document, write_gltf
+from wrinklepipe.gltf.package_write import glb_bytes, gltf_document, write_gltf
 from wrinklepipe.io.images import write_image
 from wrinklepipe.io.package import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.io.usd_read import read_usd

@@ -37,9 +37,9 @@ import numpy as np
 
 from wrinklepipe.document.usd_looks import gf_matrix
 from wrinklepipe.geometry.keyframes import sample_channel_at
+from wrinklepipe.gltf.animation import Channel, read_channels
 from wrinklepipe.gltf.document import Document
-from wrinklepipe.io.animation import Channel, read_channels
-from wrinklepipe.io.gltf_primitive import node_matrix, trs_matrices  # the one glTF TRS
+from wrinklepipe.gltf.primitive import node_matrix, trs_matrices  # the one glTF TRS
 from wrinklepipe.names import unique_name
 
 #: The variant that plays convert's weight curve (morph weights) on the wrinkled meshes.
@@ -59,7 +59,7 @@ class SkeletonInfo:
 
 
 def _channels(doc: Document, a: int) -> list[Channel]:
-    """The node and weights channels of animation ``a`` (:func:`wrinklepipe.io.animation.
+    """The node and weights channels of animation ``a`` (:func:`wrinklepipe.gltf.animation.
     read_channels`, the one channel reader; a channel naming no node or sampler passed over)."""
     return read_channels(doc, a, strict=False)
 

@@ -63,8 +63,8 @@ from wrinklepipe.document.usd_animation import (
 )
 from wrinklepipe.document.usd_looks import Looks, Names, gf_matrix
 from wrinklepipe.gltf.document import Document, PrimitiveRef
+from wrinklepipe.gltf.primitive import node_matrix, read_skin  # the one TRS, the one skin
 from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles
-from wrinklepipe.io.gltf_primitive import node_matrix, read_skin  # the one TRS, the one skin
 from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.io.usd_write import SCENE_MESH_NAME, SCENE_MESHES
 from wrinklepipe.metadata import BIAS_ATTRIBUTE, VERTEX_ID_ATTRIBUTE

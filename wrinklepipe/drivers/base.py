@@ -41,7 +41,7 @@ class Rig(Protocol):
 @dataclass(frozen=True)
 class MorphTrack:
     """One animation channel of morph-target weights, as read from a glTF (the pipeline gives
-    a reader through :attr:`DriverContext.read_morph_tracks`; :func:`wrinklepipe.io.animation.
+    a reader through :attr:`DriverContext.read_morph_tracks`; :func:`wrinklepipe.gltf.animation.
     read_morph_tracks` reads glTF): the target ``names``, key ``times`` [N] (strictly
     increasing) and ``values`` [N, M] (CUBICSPLINE: [N, 3, M], in-tangent, value,
     out-tangent), ``interpolation`` LINEAR | STEP | CUBICSPLINE."""

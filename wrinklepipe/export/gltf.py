@@ -14,9 +14,9 @@ from typing import Any
 from wrinklepipe.atomic import dumps_json
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.package_read import wrinkled_materials
+from wrinklepipe.gltf.package_write import gltf_document
 from wrinklepipe.gltf.plain import normal_image, plain_document
 from wrinklepipe.gltf.write import document_files, mime_type
-from wrinklepipe.io.gltf_write import gltf_document
 from wrinklepipe.io.package import EXTENSION, WrinklePackage, png_bytes
 
 POINTER = "KHR_animation_pointer"

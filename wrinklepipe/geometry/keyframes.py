@@ -1,7 +1,7 @@
 """glTF 2.0 keyframe sampling (the spec's Appendix C): STEP, LINEAR (slerp for rotations) and
 CUBICSPLINE (Hermite with tangents scaled by the key interval), clamped outside the keys.
 
-The one sampler of glTF animation channels: node TRS poses (:mod:`wrinklepipe.io.mesh_gltf`),
+The one sampler of glTF animation channels: node TRS poses (:mod:`wrinklepipe.gltf.meshes`),
 morph-weight tracks (:func:`wrinklepipe.drivers.curves.sample_morph_tracks`) and the USD
 writer's time samples (:mod:`wrinklepipe.document.usd_animation`) all call it.
 """

@@ -1,8 +1,8 @@
 """The glTF container: a .glb or .gltf file -> its JSON tree and the bytes it names.
 
 Every glTF reader opens its file here. Every URI is relative and stays inside the asset's
-folder (:func:`~wrinklepipe.io.gltf_limits.safe_uri_path`), data URIs and external files are capped
-(:class:`~wrinklepipe.io.gltf_limits.GltfReadOptions`; :func:`data_uri_bytes` also for the
+folder (:func:`~wrinklepipe.gltf.limits.safe_uri_path`), data URIs and external files are capped
+(:class:`~wrinklepipe.gltf.limits.GltfReadOptions`; :func:`data_uri_bytes` also for the
 document's data-URI images), GLB chunk lengths are checked. Every problem
 is an :class:`~wrinklepipe.errors.InputError` naming the file and the JSON pointer.
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from wrinklepipe.errors import InputError, input_error
-from wrinklepipe.io.gltf_limits import GltfReadOptions, safe_uri_path
+from wrinklepipe.gltf.limits import GltfReadOptions, safe_uri_path
 from wrinklepipe.io.json_safe import loads_json
 
 GLB_MAGIC = 0x46546C67

@@ -21,7 +21,7 @@ import DracoPy
 import meshoptimizer
 import numpy as np
 
-from wrinklepipe.io.accessors import COMPONENTS, WIDTH, component_dtype
+from wrinklepipe.gltf.accessors import COMPONENTS, WIDTH, component_dtype
 
 MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
 DRACO = "KHR_draco_mesh_compression"

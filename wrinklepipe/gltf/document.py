@@ -4,7 +4,7 @@ glTF-Transform's shape (a Document in, transforms, a Document out), kept as simp
 faithful: the document *is* the source JSON tree (every scene, node, mesh, material, texture,
 sampler, image, skin, animation, camera, extra and unknown extension, as written) plus the bytes
 of every bufferView and of every external image. Accessors are decoded on demand
-(:mod:`wrinklepipe.io.accessors`). Additions (bufferViews, accessors, images, textures,
+(:mod:`wrinklepipe.gltf.accessors`). Additions (bufferViews, accessors, images, textures,
 samplers, animations, attributes, extensions) go through the methods below; nothing in the source
 tree is rewritten except what ingest had to decode:
 
@@ -19,7 +19,7 @@ tree is rewritten except what ingest had to decode:
   byte; they are decoded only when the pipeline must read one (:mod:`wrinklepipe.gltf.images`).
 
 The decoding is :func:`decode_geometry`, the one decoder of compressed glTF geometry: mesh
-ingest (:class:`wrinklepipe.io.gltf_read.GltfFile`) reads a compressed file through it too.
+ingest (:class:`wrinklepipe.gltf.read.GltfFile`) reads a compressed file through it too.
 :func:`wrinklepipe.gltf.write.pack` writes the document back (one buffer).
 """
 
@@ -34,11 +34,11 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.gltf import accessors as acc
 from wrinklepipe.gltf import decompress
+from wrinklepipe.gltf import primitive as gltf_primitive
 from wrinklepipe.gltf.container import Container, data_uri_bytes, open_container
-from wrinklepipe.io import accessors as acc
-from wrinklepipe.io import gltf_primitive
-from wrinklepipe.io.gltf_limits import GltfReadOptions
+from wrinklepipe.gltf.limits import GltfReadOptions
 
 ARRAY_BUFFER = 34962
 ELEMENT_ARRAY_BUFFER = 34963
@@ -257,7 +257,7 @@ def decode_geometry(c: Container) -> Document:
     every bufferView's bytes, meshopt views and Draco primitives decoded (see the module doc).
 
     The one decoder of compressed glTF geometry: :func:`read_document` adds the images, and
-    mesh ingest (:class:`wrinklepipe.io.gltf_read.GltfFile`) reads a compressed file through
+    mesh ingest (:class:`wrinklepipe.gltf.read.GltfFile`) reads a compressed file through
     it. Data that does not decode raises :class:`~wrinklepipe.errors.InputError` naming the
     file and the pointer of the extension."""
     gltf = copy.deepcopy(c.gltf)

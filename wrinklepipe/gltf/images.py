@@ -13,7 +13,7 @@ every image's bytes as they are either way.
 
 OpenImageIO reads files, so the bytes go through a private temporary folder that is removed
 afterwards (nothing is written beside the source). Every image is held to the document's
-``max_pixels`` (:class:`~wrinklepipe.io.gltf_limits.GltfReadOptions`) before a pixel is decoded:
+``max_pixels`` (:class:`~wrinklepipe.gltf.limits.GltfReadOptions`) before a pixel is decoded:
 PNG and KTX2 by their headers (a KTX2 before it is transcoded), JPEG and WebP by OpenImageIO's
 header. Problems name the glTF file and pointer.
 """

@@ -4,7 +4,7 @@ The one reader of glTF packages (``read_package``, ``validate-asset``, ``export`
 the output bench all read through :func:`read_wrinkled`), built on the document model: the file
 is opened by :func:`wrinklepipe.gltf.document.read_document` (the one container reader, its caps
 and URI confinement), images are decoded by :mod:`wrinklepipe.gltf.images` (held to
-``max_pixels`` first) and accessors by :mod:`wrinklepipe.io.accessors`.
+``max_pixels`` first) and accessors by :mod:`wrinklepipe.gltf.accessors`.
 
 - The wrinkled material is the one carrying ``WRINKLEPIPE_wrinkle_maps`` (the first, when a list
   of materials was wrinkled: they carry the same block).
@@ -33,9 +33,9 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error, plain_reason
 from wrinklepipe.gltf.document import Document, read_document
 from wrinklepipe.gltf.images import image_pixels, texture_source
+from wrinklepipe.gltf.limits import GltfReadOptions
 from wrinklepipe.gltf.render_mesh import wrinkled_mesh
 from wrinklepipe.gltf.wrinkled import wrinkled_primitives
-from wrinklepipe.io.gltf_limits import GltfReadOptions
 from wrinklepipe.io.package import EXTENSION, PackedTexture, WeightCurves, WrinklePackage, safe_name
 from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE, WrinkleMeta
 

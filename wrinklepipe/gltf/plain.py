@@ -25,7 +25,7 @@ from typing import Any
 
 from wrinklepipe.gltf.document import Document, drop_views
 from wrinklepipe.gltf.package_read import wrinkled_materials
-from wrinklepipe.io.gltf_write import POINTER_EXTENSION
+from wrinklepipe.gltf.package_write import POINTER_EXTENSION
 from wrinklepipe.io.package import EXTENSION
 
 #: Texture-source keys of the image extensions a texture may carry.

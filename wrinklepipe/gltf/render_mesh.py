@@ -1,7 +1,7 @@
 """The render mesh of a document's wrinkled primitives: what the wrinkle maths and validator see.
 
 :func:`wrinkled_mesh` reads the wrinkled primitives (and only them) into one
-:class:`~wrinklepipe.asset.Mesh`, with the convention of :mod:`wrinklepipe.io.mesh_gltf`:
+:class:`~wrinklepipe.asset.Mesh`, with the convention of :mod:`wrinklepipe.gltf.meshes`:
 non-skinned primitives are baked into world space by the first node that instances them;
 skinned ones stay in their bind space (the node transform of a skinned mesh is ignored by the
 spec; the skin's joints, weights and inverse bind matrices come along). Several primitives are
@@ -16,8 +16,8 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.gltf.document import Document, PrimitiveRef
+from wrinklepipe.gltf.primitive import PrimitiveOptions, read_instance
 from wrinklepipe.gltf.scene import node_world_matrices
-from wrinklepipe.io.gltf_primitive import PrimitiveOptions, read_instance
 from wrinklepipe.io.mesh_merge import merge_meshes
 from wrinklepipe.metadata import BIAS_ATTRIBUTE
 
@@ -30,7 +30,7 @@ def primitive_mesh(
     doc: Document, ref: PrimitiveRef, worlds: dict[int, np.ndarray] | None = None
 ) -> Mesh:
     """One primitive as a :class:`Mesh` (see the module doc), named ``mesh`` or ``mesh/i``:
-    :func:`wrinklepipe.io.gltf_primitive.read_instance`, the reader mesh ingest uses, as the first
+    :func:`wrinklepipe.gltf.primitive.read_instance`, the reader mesh ingest uses, as the first
     node that instances it."""
     worlds = worlds if worlds is not None else node_world_matrices(doc)
     nodes = doc.mesh_nodes(ref.mesh)

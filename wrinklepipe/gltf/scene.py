@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.gltf.document import Document, PrimitiveRef
-from wrinklepipe.io.gltf_primitive import primitive_triangles as gltf_triangles
-from wrinklepipe.io.gltf_primitive import read_skin, world_matrices
+from wrinklepipe.gltf.primitive import primitive_triangles as gltf_triangles
+from wrinklepipe.gltf.primitive import read_skin, world_matrices
 
 
 def node_world_matrices(doc: Document) -> dict[int, np.ndarray]:
@@ -97,5 +97,5 @@ def _skinned(
 
 def primitive_triangles(doc: Document, ref: PrimitiveRef) -> np.ndarray:
     """``[T, 3]`` int64 vertex indices of a triangle primitive (strips and fans unrolled):
-    :func:`wrinklepipe.io.gltf_primitive.primitive_triangles`, the one triangle reader."""
+    :func:`wrinklepipe.gltf.primitive.primitive_triangles`, the one triangle reader."""
     return gltf_triangles(doc, ref.mesh, ref.primitive)

@@ -6,9 +6,9 @@ What is added, and nothing else is changed:
   .glb), each with a texture and one shared sampler; the base map only when the manifest names
   one (then the wrinkled material's ``normalTexture`` points at it); when the base is the
   material's own ``normalTexture``, that texture is used as it is;
-- ``WRINKLEPIPE_wrinkle_maps`` on each wrinkled material (:func:`~wrinklepipe.io.gltf_write.
+- ``WRINKLEPIPE_wrinkle_maps`` on each wrinkled material (:func:`~wrinklepipe.gltf.package_write.
   extension_block`, textures by index);
-- one animation per weight curve (:func:`~wrinklepipe.io.gltf_write.curve_animations`): the
+- one animation per weight curve (:func:`~wrinklepipe.gltf.package_write.curve_animations`): the
   region weights through ``KHR_animation_pointer`` at each wrinkled material, and a blendshapes
   driver's morph weights on the nodes instancing the wrinkled meshes;
 - ``extensionsUsed`` entries for both extensions (never ``extensionsRequired``).
@@ -23,7 +23,7 @@ import numpy as np
 
 from wrinklepipe.gltf.document import Document, PrimitiveRef
 from wrinklepipe.gltf.package_read import morph_columns
-from wrinklepipe.io.gltf_write import (
+from wrinklepipe.gltf.package_write import (
     POINTER_EXTENSION,
     MorphChannel,
     curve_animations,

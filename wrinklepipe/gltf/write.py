@@ -14,7 +14,7 @@ from typing import Any
 
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.gltf.document import Document
-from wrinklepipe.io.gltf_write import glb_bytes
+from wrinklepipe.gltf.package_write import glb_bytes
 
 _MAGIC_MIME = (
     (b"\x89PNG\r\n\x1a\n", "image/png"),

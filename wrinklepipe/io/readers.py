@@ -17,8 +17,8 @@ from pathlib import Path
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
+from wrinklepipe.gltf.meshes import GltfMeshOptions, read_gltf_meshes
 from wrinklepipe.gltf.package_read import read_wrinkled
-from wrinklepipe.io.mesh_gltf import GltfMeshOptions, read_gltf_meshes
 from wrinklepipe.io.mesh_obj import read_obj_meshes
 from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
 from wrinklepipe.io.package import WrinklePackage

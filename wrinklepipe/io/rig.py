@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from wrinklepipe.gltf.meshes import gltf_animation_times, gltf_joint_world_matrices_at
 from wrinklepipe.io.mesh import load_mesh
-from wrinklepipe.io.mesh_gltf import gltf_animation_times, gltf_joint_world_matrices_at
 
 
 class GltfRig:

@@ -43,7 +43,7 @@ from wrinklepipe import codec
 from wrinklepipe.asset import Mesh
 from wrinklepipe.atomic import check_not_input, write_bytes
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.gltf_write import skin_weights_normalized
+from wrinklepipe.gltf.package_write import skin_weights_normalized
 from wrinklepipe.io.package import MAX_FLOAT_ID, WrinklePackage, png_bytes, safe_name
 from wrinklepipe.paths import SCHEMAS_DIR
 

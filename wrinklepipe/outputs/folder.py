@@ -7,7 +7,7 @@ The glTF: for a glTF source, the source document with the wrinkle data added
 (:func:`wrinklepipe.gltf.wrinkle_maps.add_wrinkle_maps`, written by
 :func:`wrinklepipe.gltf.write.document_files`: every untouched element as it was, images
 byte for byte); for other sources (OBJ, USD) a new document of the package
-(:func:`wrinklepipe.io.gltf_write.gltf_document`).
+(:func:`wrinklepipe.gltf.package_write.gltf_document`).
 """
 
 from __future__ import annotations
@@ -29,9 +29,9 @@ from wrinklepipe.document.usd_layer import (
 from wrinklepipe.document.usd_scene import add_scene, wrinkled_prims
 from wrinklepipe.document.usd_source import UsdSource
 from wrinklepipe.gltf.document import Document
+from wrinklepipe.gltf.package_write import glb_bytes, gltf_document
 from wrinklepipe.gltf.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
 from wrinklepipe.gltf.write import document_files
-from wrinklepipe.io.gltf_write import glb_bytes, gltf_document
 from wrinklepipe.io.package import WrinklePackage, png_bytes
 from wrinklepipe.io.usd_write import build_stage, write_usd
 from wrinklepipe.normals.copies import files as copy_files

@@ -19,7 +19,7 @@ from wrinklepipe.console import track
 from wrinklepipe.drivers.bake import blend_frames, changed_frames, encode_states, weights_csv
 from wrinklepipe.drivers.base import DriverContext, evaluate, frame_times
 from wrinklepipe.errors import InputError, input_error
-from wrinklepipe.io.animation import read_morph_tracks
+from wrinklepipe.gltf.animation import read_morph_tracks
 from wrinklepipe.io.images import write_image
 from wrinklepipe.io.mesh import load_mesh
 from wrinklepipe.io.package import resize_normals_pd

@@ -15,7 +15,7 @@ from wrinklepipe import drivers as wd
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.drivers.base import resolve
 from wrinklepipe.drivers.curves import load_keys, morph_animation, sample_keys
-from wrinklepipe.io.animation import read_morph_tracks
+from wrinklepipe.gltf.animation import read_morph_tracks
 from wrinklepipe.io.package import WeightCurves
 from wrinklepipe.io.rig import GltfRig
 from wrinklepipe.suffixes import is_gltf

@@ -1,21 +1,21 @@
 """A glTF file opened for reading its meshes and animations: the reader that the glTF mesh
-reader (:mod:`wrinklepipe.io.mesh_gltf`) and the morph-animation reader
-(:mod:`wrinklepipe.io.animation`) build on.
+reader (:mod:`wrinklepipe.gltf.meshes`) and the morph-animation reader
+(:mod:`wrinklepipe.gltf.animation`) build on.
 
 The file is opened by the one container reader (:func:`wrinklepipe.gltf.container.
 open_container`), which is defensive because a glTF names other files: every URI must be
 relative and stay inside the asset's folder (no ``..``, no absolute paths, no schemes other than
 ``data:``); data URIs and external files are capped in size. bufferViews are bounds-checked here
-and accessors decoded by :func:`wrinklepipe.io.accessors.read_accessor`. A file with
+and accessors decoded by :func:`wrinklepipe.gltf.accessors.read_accessor`. A file with
 compressed geometry (``EXT_meshopt_compression`` / ``KHR_meshopt_compression`` views,
 ``KHR_draco_mesh_compression`` primitives) is decoded at open by the document model's own
 decoder (:func:`wrinklepipe.gltf.document.decode_geometry`): its tree and views are then the
 decoded document's, so mesh ingest and the document read the same numbers. Every problem is an
 :class:`~wrinklepipe.errors.InputError` naming the file and the JSON pointer.
 
-:class:`GltfFile` is a :class:`wrinklepipe.io.gltf_primitive.GltfSource` (``gltf``,
+:class:`GltfFile` is a :class:`wrinklepipe.gltf.primitive.GltfSource` (``gltf``,
 ``accessor``, ``err``), as the document model (:class:`wrinklepipe.gltf.document.Document`)
-is: the one per-primitive reader (:func:`wrinklepipe.io.gltf_primitive.read_primitive`) reads
+is: the one per-primitive reader (:func:`wrinklepipe.gltf.primitive.read_primitive`) reads
 either.
 A written wrinkle package is read by :func:`wrinklepipe.gltf.package_read.read_wrinkled` (the one
 glTF package reader, on the document model).
@@ -29,11 +29,11 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.gltf.accessors import read_accessor
 from wrinklepipe.gltf.container import open_container
 from wrinklepipe.gltf.decompress import compressed
 from wrinklepipe.gltf.document import Document, decode_geometry
-from wrinklepipe.io.accessors import read_accessor
-from wrinklepipe.io.gltf_limits import GltfReadOptions as GltfReadOptions  # re-exported
+from wrinklepipe.gltf.limits import GltfReadOptions as GltfReadOptions  # re-exported
 
 
 class GltfFile:
@@ -78,6 +78,6 @@ class GltfFile:
         return data, stride if isinstance(stride, int) and not isinstance(stride, bool) else 0
 
     def accessor(self, i: Any, normalize: bool = True) -> np.ndarray:
-        """Accessor ``i`` as ``[count, components]`` through :func:`wrinklepipe.io.accessors.
+        """Accessor ``i`` as ``[count, components]`` through :func:`wrinklepipe.gltf.accessors.
         read_accessor` (the one accessor reader; ``normalize``: normalized integers as floats)."""
         return read_accessor(self.gltf, i, self.view, self.err, normalize)

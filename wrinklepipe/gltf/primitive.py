@@ -2,7 +2,7 @@
 :class:`wrinklepipe.asset.Mesh`, for both glTF mesh readers.
 
 :func:`read_primitive` reads one primitive of any :class:`GltfSource`: a file opened by
-:class:`wrinklepipe.io.gltf_read.GltfFile` (mesh ingest, :func:`wrinklepipe.io.mesh_gltf.
+:class:`wrinklepipe.gltf.read.GltfFile` (mesh ingest, :func:`wrinklepipe.gltf.meshes.
 read_gltf_meshes`) or the pass-through :class:`wrinklepipe.gltf.document.Document` (the
 render mesh of a source or a package, :mod:`wrinklepipe.gltf.render_mesh`). What it reads:
 POSITION (VEC3, finite), NORMAL, TANGENT, TEXCOORD_0, a colour attribute (``COLOR_0``, VEC3
@@ -15,7 +15,7 @@ node with a skin keeps the bind space (the spec ignores a skinned mesh's node tr
 other instance is baked into world space (positions, normals, tangents, morph deltas; a
 mirroring matrix flips the winding).
 
-- Accessors come through the source (:func:`wrinklepipe.io.accessors.read_accessor`, the one
+- Accessors come through the source (:func:`wrinklepipe.gltf.accessors.read_accessor`, the one
   accessor reader: component types, strides, sparse, ``normalized`` integers as floats);
   indices and JOINTS_0 are never normalized (the spec forbids it).
 - Modes TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN (strips and fans unrolled, noted); every
@@ -49,7 +49,7 @@ TRIANGLE_MODES = (4, 5, 6)
 class GltfSource(Protocol):
     """What :func:`read_primitive` reads a glTF through: the JSON tree, its accessors decoded
     as ``[count, components]`` (``normalize``: normalized integers as floats), and the error
-    naming the file and JSON pointer. :class:`wrinklepipe.io.gltf_read.GltfFile` and
+    naming the file and JSON pointer. :class:`wrinklepipe.gltf.read.GltfFile` and
     :class:`wrinklepipe.gltf.document.Document` are both one."""
 
     gltf: dict[str, Any]

@@ -2,8 +2,8 @@
 :class:`wrinklepipe.asset.Mesh`; and a node pose sampled from the file's animation (with the
 one keyframe sampler, :mod:`wrinklepipe.geometry.keyframes`).
 
-A file is opened by :class:`wrinklepipe.io.gltf_read.GltfFile` and every primitive read by
-:func:`wrinklepipe.io.gltf_primitive.read_instance` (the one per-primitive reader, which the
+A file is opened by :class:`wrinklepipe.gltf.read.GltfFile` and every primitive read by
+:func:`wrinklepipe.gltf.primitive.read_instance` (the one per-primitive reader, which the
 document model's render mesh uses too): one mesh per triangle primitive per node that
 instances it (meshes no node uses: once, in their own space), non-skinned instances baked into
 world space when ``bake_transforms``. What ingest adds to the per-primitive reader:
@@ -11,7 +11,7 @@ world space when ``bake_transforms``. What ingest adds to the per-primitive read
 - ``KHR_mesh_quantization``: decoded (quantised attributes are plain accessors; the
   dequantising node transform is applied by the bake), noted.
 - ``EXT_meshopt_compression`` / ``KHR_meshopt_compression`` / ``KHR_draco_mesh_compression``:
-  decoded (noted) by the document model's decoder, which :class:`~wrinklepipe.io.gltf_read.
+  decoded (noted) by the document model's decoder, which :class:`~wrinklepipe.gltf.read.
   GltfFile` reads a compressed file through; data that does not decode is a one-line error
   naming the file and the extension.
 - ``KHR_texture_basisu`` and other texture/material extensions: textures are not part of mesh
@@ -22,7 +22,7 @@ world space when ``bake_transforms``. What ingest adds to the per-primitive read
   noted (the per-primitive reader's non-strict mode): any file is ingested as far as it can be.
 
 Container, buffer and URI safety come from :mod:`wrinklepipe.gltf.container` (through
-:mod:`wrinklepipe.io.gltf_read`).
+:mod:`wrinklepipe.gltf.read`).
 """
 
 from __future__ import annotations
@@ -37,9 +37,9 @@ import numpy as np
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.keyframes import sample_channel
+from wrinklepipe.gltf.animation import WIDTHS, morph_tracks, read_channels
 from wrinklepipe.gltf.decompress import DRACO, MESHOPT
-from wrinklepipe.io.animation import WIDTHS, morph_tracks, read_channels
-from wrinklepipe.io.gltf_primitive import (
+from wrinklepipe.gltf.primitive import (
     TRIANGLE_MODES,
     GltfSource,
     json_type,
@@ -48,7 +48,7 @@ from wrinklepipe.io.gltf_primitive import (
     target_names,
     world_matrices,
 )
-from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
+from wrinklepipe.gltf.read import GltfFile, GltfReadOptions
 
 #: Required extensions that do not change geometry (textures/materials/lights): ignored.
 _HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_")
@@ -178,7 +178,7 @@ def gltf_joint_world_matrices_at(
     if any(t is not None for t in times) and not doc.get("animations"):
         raise r.err("the file has no animation to sample", "/animations")
     rest_nodes = [dict(n) for n in doc.get("nodes", [])]
-    channels = [  # the one channel reader (io/animation), the node paths of the first animation
+    channels = [  # the one channel reader (gltf/animation), the node paths of the first animation
         (c.node, c.path, c.times, c.values, c.interpolation)
         for c in (read_channels(r, 0, tuple(WIDTHS)) if doc.get("animations") else [])
     ]
@@ -224,7 +224,7 @@ def gltf_morph_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, f
         raise r.err("the file has no animation to sample", "/animations")
     nodes = doc.get("nodes", [])
     meshes = doc.get("meshes", [])
-    # the one reader of weights channels (io/animation, as the drivers are given them); a
+    # the one reader of weights channels (gltf/animation, as the drivers are given them); a
     # node's last channel wins
     channels = {t.node: t for t in morph_tracks(r, 0)}
     out: dict[str, float] = {}

@@ -1,7 +1,7 @@
 """glTF accessors -> numpy arrays, per the glTF 2.0 spec (section 3.6).
 
 THE accessor reader: the glTF document model (:mod:`wrinklepipe.gltf`), the mesh reader
-(:mod:`wrinklepipe.io.mesh_gltf` over :mod:`wrinklepipe.io.gltf_read`) and the glTF animations
+(:mod:`wrinklepipe.gltf.meshes` over :mod:`wrinklepipe.gltf.read`) and the glTF animations
 the drivers are given all decode accessors here, so every one of them reads any component type
 (little-endian), every element type (``MAT2``/``MAT3`` with byte-aligned columns as the spec
 requires for 1- and 2-byte components), byte strides, sparse substitution, accessors without a

@@ -2,8 +2,8 @@
 readers sample.
 
 :func:`read_channels` reads the channels of one animation of any
-:class:`wrinklepipe.io.gltf_primitive.GltfSource` (a file opened by
-:class:`wrinklepipe.io.gltf_read.GltfFile`, or the pass-through
+:class:`wrinklepipe.gltf.primitive.GltfSource` (a file opened by
+:class:`wrinklepipe.gltf.read.GltfFile`, or the pass-through
 :class:`wrinklepipe.gltf.document.Document`): node, path (``translation``, ``rotation``,
 ``scale``, ``weights``), key times and values (``[N, C]``; CUBICSPLINE ``[N, 3, C]``: in-tangent,
 value, out-tangent), interpolation. ``strict`` (the drivers' morph tracks, the skeleton
@@ -15,8 +15,8 @@ animations) a channel that names no node or sampler is passed over.
 The ``curves``, ``blendshapes`` and ``dynamic`` drivers read no files: the pipeline puts
 :func:`read_morph_tracks` in :attr:`wrinklepipe.drivers.base.DriverContext.read_morph_tracks`,
 and :func:`wrinklepipe.drivers.curves.sample_morph_tracks` samples what it returns. The file is
-opened by the safe glTF container reader (:mod:`wrinklepipe.io.gltf_read`: URIs confined to the
-file's folder, sizes capped) and accessors decoded by :mod:`wrinklepipe.io.accessors`.
+opened by the safe glTF container reader (:mod:`wrinklepipe.gltf.read`: URIs confined to the
+file's folder, sizes capped) and accessors decoded by :mod:`wrinklepipe.gltf.accessors`.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ import numpy as np
 
 from wrinklepipe.drivers.base import MorphTrack
 from wrinklepipe.errors import input_error, plain_reason
-from wrinklepipe.io.gltf_primitive import GltfSource, target_names
-from wrinklepipe.io.gltf_read import GltfFile, GltfReadOptions
+from wrinklepipe.gltf.primitive import GltfSource, target_names
+from wrinklepipe.gltf.read import GltfFile, GltfReadOptions
 
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 #: Values per key of the node paths.
@@ -109,7 +109,7 @@ def read_channels(
 def read_morph_tracks(path: str | Path, animation: int = 0) -> list[MorphTrack]:
     """Every channel of animation ``animation`` that drives a mesh's morph-target ``weights``,
     one :class:`MorphTrack` each (targets named by ``mesh.extras.targetNames``, else
-    ``target_<i>``, as the mesh readers name them: :func:`wrinklepipe.io.gltf_primitive.
+    ``target_<i>``, as the mesh readers name them: :func:`wrinklepipe.gltf.primitive.
     target_names`). An :class:`~wrinklepipe.errors.InputError` names the file and JSON
     pointer for anything malformed."""
     try:
