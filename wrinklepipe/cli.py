@@ -39,6 +39,7 @@ COMMAND_ORDER = (
     "vertex-ids",
     "dynamic",
     "bake",
+    "regions",
     "capture",
     "export",
     "view",

@@ -96,6 +96,7 @@ LAYERS: tuple[Layer, ...] = (
         (
             "wrinklepipe.pipeline.convert",
             "wrinklepipe.pipeline.bake",
+            "wrinklepipe.pipeline.regions",
             "wrinklepipe.pipeline.validation",
             "wrinklepipe.export.job",
             "wrinklepipe.capture.job",

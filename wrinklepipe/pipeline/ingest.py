@@ -28,20 +28,19 @@ from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.document.usd_source import UsdSource, read_usd_source
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
-from wrinklepipe.gltf.document import Document, read_document
+from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.images import texture_normals
 from wrinklepipe.gltf.render_mesh import wrinkled_mesh
-from wrinklepipe.gltf.repair import repair
 from wrinklepipe.gltf.wrinkle_maps import WrinkleTarget
 from wrinklepipe.gltf.wrinkled import (
     add_wrinkle_attributes,
     material_normal_texture,
-    select_wrinkled,
 )
 from wrinklepipe.io.images import read_image
 from wrinklepipe.io.mesh import load_mesh
 from wrinklepipe.io.readers import format_of
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
+from wrinklepipe.pipeline.character import open_wrinkled_document
 
 
 def _read_normals(
@@ -139,10 +138,7 @@ def read_source_document(manifest: Any) -> SourceDocument:
     materials cloned for a ``meshes`` restriction), tangents and vertex IDs added to them; the
     render mesh of those primitives; the material's normalTexture as the base when the manifest
     names none."""
-    doc = read_document(manifest.mesh)
-    notes = list(doc.notes) + repair(doc)
-    sel = select_wrinkled(doc, manifest.material, manifest.meshes, manifest.path, manifest.name)
-    notes += sel.notes
+    doc, sel, notes = open_wrinkled_document(manifest)
     base = None
     base_texture = None
     base_stats: dict[str, Any] | None = None

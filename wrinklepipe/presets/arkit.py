@@ -103,3 +103,43 @@ ROWS: tuple[Row, ...] = (
 REGIONS: tuple[str, ...] = tuple(dict.fromkeys(r[1] for r in ROWS))
 
 PRESETS = {"arkit52": ROWS, "arkit": ROWS}
+
+#: The face area each shape deforms (regions from blend shapes name their clusters after it):
+#: the Jimenez zones where they apply, ``crowsfeet`` / ``nasolabial`` as the rows above, and
+#: the usual anatomy elsewhere. ``tongueOut`` moves no skin (None).
+AREAS: dict[str, str | None] = {
+    **{f"eyeBlink{s}": "eyelid_upper" for s in ("Left", "Right")},
+    **{f"eyeLookDown{s}": "eyelid_lower" for s in ("Left", "Right")},
+    **{f"eyeLookIn{s}": "eyelid" for s in ("Left", "Right")},
+    **{f"eyeLookOut{s}": "eyelid" for s in ("Left", "Right")},
+    **{f"eyeLookUp{s}": "eyelid_upper" for s in ("Left", "Right")},
+    **{f"eyeSquint{s}": "crowsfeet" for s in ("Left", "Right")},
+    **{f"eyeWide{s}": "eyelid_upper" for s in ("Left", "Right")},
+    "jawForward": "jaw",
+    "jawLeft": "jaw",
+    "jawRight": "jaw",
+    "jawOpen": "jaw",
+    "mouthClose": "lips",
+    "mouthFunnel": "lips",
+    "mouthPucker": "lips",
+    "mouthLeft": "mouth_corner",
+    "mouthRight": "mouth_corner",
+    **{f"mouthSmile{s}": "nasolabial" for s in ("Left", "Right")},
+    **{f"mouthFrown{s}": "mouth_corner" for s in ("Left", "Right")},
+    **{f"mouthDimple{s}": "mouth_corner" for s in ("Left", "Right")},
+    **{f"mouthStretch{s}": "mouth_corner" for s in ("Left", "Right")},
+    "mouthRollLower": "lip_lower",
+    "mouthRollUpper": "lip_upper",
+    "mouthShrugLower": "chin",
+    "mouthShrugUpper": "lip_upper",
+    **{f"mouthPress{s}": "lips" for s in ("Left", "Right")},
+    **{f"mouthLowerDown{s}": "lip_lower" for s in ("Left", "Right")},
+    **{f"mouthUpperUp{s}": "lip_upper" for s in ("Left", "Right")},
+    **{f"browDown{s}": "glabella" for s in ("Left", "Right")},
+    "browInnerUp": "forehead_inner",
+    **{f"browOuterUp{s}": "forehead_outer" for s in ("Left", "Right")},
+    "cheekPuff": "cheek",
+    **{f"cheekSquint{s}": "crowsfeet" for s in ("Left", "Right")},
+    **{f"noseSneer{s}": "nose" for s in ("Left", "Right")},
+    "tongueOut": None,
+}
