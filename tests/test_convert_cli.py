@@ -14,9 +14,9 @@ from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io import khronos
-from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.outputs import folder as output_folder
 from wrinklepipe.presets import jimenez
+from wrinklepipe.usd.package_read import read_usd
 
 
 @pytest.fixture(scope="module")
@@ -128,7 +128,7 @@ def test_output_passes_khronos_validator(converted, name):
 def test_output_passes_usd_validation(converted):
     from pxr import Usd, UsdValidation
 
-    from wrinklepipe.io.usd_write import register_schema
+    from wrinklepipe.usd.package_write import register_schema
 
     register_schema()
     validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()

@@ -11,7 +11,7 @@ from wrinklepipe.cli import main
 from wrinklepipe.demo.package import demo_package
 from wrinklepipe.export.textures import to_directx
 from wrinklepipe.gltf.package_write import write_gltf
-from wrinklepipe.io.usd_write import write_usd
+from wrinklepipe.usd.package_write import write_usd
 
 
 @pytest.fixture(scope="module")

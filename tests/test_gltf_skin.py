@@ -12,9 +12,9 @@ from wrinklepipe.demo.package import demo_package
 from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.gltf.package_write import skin_weights_normalized, write_gltf
 from wrinklepipe.io import khronos
-from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
-from wrinklepipe.io.usd_read import read_usd
-from wrinklepipe.io.usd_write import write_usd
+from wrinklepipe.usd.meshes import UsdMeshOptions, read_usd_meshes
+from wrinklepipe.usd.package_read import read_usd
+from wrinklepipe.usd.package_write import write_usd
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +75,7 @@ def test_skin_round_trip_gltf_usd_gltf(skinned, tmp_path):
 def test_usd_skinning_at_rest_gives_the_rest_points(skinned, tmp_path):
     from pxr import Usd, UsdSkel, UsdValidation
 
-    from wrinklepipe.io.usd_write import register_schema
+    from wrinklepipe.usd.package_write import register_schema
 
     write_usd(skinned, tmp_path / "s.usda")
     register_schema()

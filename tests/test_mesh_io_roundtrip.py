@@ -19,7 +19,7 @@ def package():
 @pytest.mark.parametrize("name", ["head.glb", "head.usda"])
 def test_written_asset_reads_back(package, tmp_path, name):
     from wrinklepipe.gltf.package_write import write_glb
-    from wrinklepipe.io.usd_write import write_usd
+    from wrinklepipe.usd.package_write import write_usd
 
     path = tmp_path / name
     if name.endswith(".glb"):

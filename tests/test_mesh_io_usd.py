@@ -11,7 +11,7 @@ import pytest
 from wrinklepipe.errors import InputError
 from wrinklepipe.geometry.dynamic import DynamicWeights, morph_pose, skinned_pose
 from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
-from wrinklepipe.io.mesh_usd import usd_blend_shape_weights, usd_joint_world_matrices
+from wrinklepipe.usd.meshes import usd_blend_shape_weights, usd_joint_world_matrices
 
 pxr = pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom, UsdSkel, Vt  # noqa: E402
@@ -215,7 +215,7 @@ def test_points_only_time_sampled_without_a_range_use_the_earliest_sample(tmp_pa
 
 @needs_data
 def test_paths_option_reads_only_those_meshes():
-    from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
+    from wrinklepipe.usd.meshes import UsdMeshOptions, read_usd_meshes
 
     f = SKEL / "baseline/blendshapes.baked.usda"
     (only,) = read_usd_meshes(f, UsdMeshOptions(paths=("/TestPlane/Mesh",)))

@@ -23,12 +23,12 @@ from hypothesis import strategies as hs
 from wrinkle_setups import write_setup
 
 from wrinklepipe.cli import main
-from wrinklepipe.document.usd_layer import topology_values
 from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.io.images import write_image
-from wrinklepipe.io.mesh_usd import read_usd_meshes
-from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
+from wrinklepipe.usd.layer import topology_values
+from wrinklepipe.usd.meshes import read_usd_meshes
+from wrinklepipe.usd.package_read import read_usd
 
 pxr = pytest.importorskip("pxr")
 from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdSkel, UsdValidation  # noqa: E402

@@ -20,11 +20,11 @@ from wrinkle_setups import ROBOT, avatar_variant, write_setup
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo import avatar
-from wrinklepipe.document.usd_inspect import usd_summary
 from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io.confine import allowed_roots
-from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.pipeline.convert import ConvertOptions, convert
+from wrinklepipe.usd.inspect import usd_summary
+from wrinklepipe.usd.package_read import read_usd
 
 CESIUM = ROBOT.parents[1] / "CesiumMan" / "glTF-Binary" / "CesiumMan.glb"
 

@@ -13,8 +13,8 @@ from wrinklepipe.demo.package import demo_package
 from wrinklepipe.errors import InputError
 from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.gltf.package_write import write_gltf
-from wrinklepipe.io.usd_read import read_usd
-from wrinklepipe.io.usd_write import API_NAME, register_schema, write_usd
+from wrinklepipe.usd.package_read import read_usd
+from wrinklepipe.usd.package_write import API_NAME, register_schema, write_usd
 
 pxr = pytest.importorskip("pxr")
 from pxr import Sdf, Usd, UsdShade, UsdValidation  # noqa: E402
@@ -61,7 +61,7 @@ def test_usd_validation_detects_problems(tmp_path):
 
 _HAS_API_SCRIPT = """
 import sys
-from wrinklepipe.io.usd_write import API_ATTRIBUTES, API_NAME  # registers the plugin on import
+from wrinklepipe.usd.package_write import API_ATTRIBUTES, API_NAME  # registers the plugin on import
 from pxr import Usd
 stage = Usd.Stage.Open(sys.argv[1])
 mat = stage.GetPrimAtPath("/demo/Looks/skin")
@@ -88,7 +88,7 @@ def test_wrinkle_maps_api_is_applied_and_typed(usda):
 
 
 def test_api_attributes_match_generated_schema():
-    from wrinklepipe.io.usd_write import API_ATTRIBUTES, USD_SCHEMA_DIR
+    from wrinklepipe.usd.package_write import API_ATTRIBUTES, USD_SCHEMA_DIR
 
     layer = Sdf.Layer.FindOrOpen(str(USD_SCHEMA_DIR / "generatedSchema.usda"))
     spec = layer.GetPrimAtPath("/WrinkleMapsAPI")
@@ -115,8 +115,8 @@ import sys
 from pxr import Usd
 Usd.Stage.Open(sys.argv[1]).Traverse()  # USD builds its schema registry before the plugin
 assert not Usd.SchemaRegistry().FindAppliedAPIPrimDefinition("WrinkleMapsAPI")
-from wrinklepipe.io.usd_read import read_usd
-from wrinklepipe.io.usd_write import write_usd
+from wrinklepipe.usd.package_read import read_usd
+from wrinklepipe.usd.package_write import write_usd
 pkg = read_usd(sys.argv[1])
 write_usd(pkg, sys.argv[2], write_textures=False)
 print("ok")

@@ -68,7 +68,7 @@ LAYERS: tuple[Layer, ...] = (
         "io",
         "readers and writers of whole formats: meshes, glTF and USD packages, the glTF "
         "document, the source manifest",
-        ("wrinklepipe.io", "wrinklepipe.manifest", "wrinklepipe.document", "wrinklepipe.gltf"),
+        ("wrinklepipe.io", "wrinklepipe.manifest", "wrinklepipe.gltf", "wrinklepipe.usd"),
     ),
     Layer(
         "pipeline",

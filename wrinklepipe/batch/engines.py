@@ -47,7 +47,7 @@ _PRELOAD = [
     "wrinklepipe.normals.compress",
     "wrinklepipe.batch.forkserver_warm",  # quicktex's encoder tables, built once
     "wrinklepipe.gltf.package_write",
-    "wrinklepipe.io.usd_write",
+    "wrinklepipe.usd.package_write",
     "wrinklepipe.validate.render",
     "wrinklepipe.validate.report",
     "moderngl",

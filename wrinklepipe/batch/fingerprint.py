@@ -11,7 +11,7 @@
   ``.gltf`` names and the layers and assets a USD file pulls in, maps, masks, driver files),
   as (path relative to the manifest's folder, SHA-256 of the bytes);
 * for a USD source, the path the output layer names it by (relative to the output folder:
-  :func:`wrinklepipe.document.usd_layer.source_reference`).
+  :func:`wrinklepipe.usd.layer.source_reference`).
 
 Paths are relative, so a character checked out elsewhere (another CI runner, another farm node)
 hits the same entry. Reading the inputs to hash them is the only work a cached asset costs.
@@ -32,10 +32,10 @@ from urllib.parse import unquote
 
 from wrinklepipe import __version__
 from wrinklepipe.batch.options import AssetOptions
-from wrinklepipe.document.usd_layer import source_reference
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.paths import ROOT
 from wrinklepipe.suffixes import USD_SUFFIXES
+from wrinklepipe.usd.layer import source_reference
 
 KEY_SCHEMA = "wrinklepipe/batch-cache@1"
 #: Libraries whose version can change the bytes convert writes or the validation it records.

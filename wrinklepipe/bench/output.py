@@ -19,8 +19,8 @@ from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.gltf.package_write import glb_bytes, gltf_document, write_gltf
 from wrinklepipe.io.images import write_image
 from wrinklepipe.io.package import DEFAULT_PNG_LEVEL, png_bytes
-from wrinklepipe.io.usd_read import read_usd
-from wrinklepipe.io.usd_write import build_stage, write_usd
+from wrinklepipe.usd.package_read import read_usd
+from wrinklepipe.usd.package_write import build_stage, write_usd
 
 ZLIB_STEP = f"zlib level {DEFAULT_PNG_LEVEL} of raw texels"
 

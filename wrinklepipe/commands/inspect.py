@@ -10,11 +10,11 @@ from typing import Any
 from rich.table import Table
 
 from wrinklepipe.console import emit_json, out
-from wrinklepipe.document.usd_inspect import usd_summary
 from wrinklepipe.errors import input_error, plain_reason
 from wrinklepipe.gltf.document import read_document
 from wrinklepipe.gltf.inspect import diff, summary
 from wrinklepipe.suffixes import USD_SUFFIXES
+from wrinklepipe.usd.inspect import usd_summary
 
 NAME = "inspect"
 HELP = "list a glTF's or USD stage's meshes, materials, skins, animations; or diff two"

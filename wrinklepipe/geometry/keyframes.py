@@ -3,7 +3,7 @@ CUBICSPLINE (Hermite with tangents scaled by the key interval), clamped outside 
 
 The one sampler of glTF animation channels: node TRS poses (:mod:`wrinklepipe.gltf.meshes`),
 morph-weight tracks (:func:`wrinklepipe.drivers.curves.sample_morph_tracks`) and the USD
-writer's time samples (:mod:`wrinklepipe.document.usd_animation`) all call it.
+writer's time samples (:mod:`wrinklepipe.usd.animation`) all call it.
 """
 
 from __future__ import annotations

@@ -20,10 +20,10 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.gltf.meshes import GltfMeshOptions, read_gltf_meshes
 from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io.mesh_obj import read_obj_meshes
-from wrinklepipe.io.mesh_usd import UsdMeshOptions, read_usd_meshes
 from wrinklepipe.io.package import WrinklePackage
-from wrinklepipe.io.usd_read import read_usd
 from wrinklepipe.suffixes import GLTF_SUFFIXES, OBJ_SUFFIXES, USD_SUFFIXES
+from wrinklepipe.usd.meshes import UsdMeshOptions, read_usd_meshes
+from wrinklepipe.usd.package_read import read_usd
 
 
 @dataclass(frozen=True)

@@ -20,24 +20,24 @@ from typing import Any
 
 from wrinklepipe import reuse
 from wrinklepipe.atomic import dumps_json, write_bytes
-from wrinklepipe.document.usd_layer import (
-    flattened_usdz,
-    layer_bytes,
-    layer_stage,
-    source_reference,
-)
-from wrinklepipe.document.usd_scene import add_scene, wrinkled_prims
-from wrinklepipe.document.usd_source import UsdSource
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.package_write import glb_bytes, gltf_document
 from wrinklepipe.gltf.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
 from wrinklepipe.gltf.write import document_files
 from wrinklepipe.io.package import WrinklePackage, png_bytes
-from wrinklepipe.io.usd_write import build_stage, write_usd
 from wrinklepipe.normals.copies import files as copy_files
 from wrinklepipe.normals.copies import records as copy_records
 from wrinklepipe.outputs.compression import compressed_copies
 from wrinklepipe.outputs.curves import curve_files
+from wrinklepipe.usd.layer import (
+    flattened_usdz,
+    layer_bytes,
+    layer_stage,
+    source_reference,
+)
+from wrinklepipe.usd.package_write import build_stage, write_usd
+from wrinklepipe.usd.scene import add_scene, wrinkled_prims
+from wrinklepipe.usd.source import UsdSource
 
 #: The USD layers convert can add beside the always-written ``.usda``.
 USD_FORMATS: tuple[str, ...] = ("usda", "usdc", "usdz")
@@ -120,10 +120,10 @@ def write_folder(
     """Write ``files`` (sorted) under ``folder``, then ``NAME.usda`` and, when ``usd_format`` is
     ``usdc`` or ``usdz``, that layer too (textures are the PNGs already in ``files``).
     ``source``: a glTF source document, whose other parts the USD layers carry too
-    (:func:`wrinklepipe.document.usd_scene.add_scene`); returns notes on what USD cannot hold.
+    (:func:`wrinklepipe.usd.scene.add_scene`); returns notes on what USD cannot hold.
     ``usd_source``: a USD source: ``NAME.usda`` (+ ``.usdc``) is a layer over it naming it
     relative to ``final`` (the folder ``folder`` becomes), and ``NAME.usdz`` that layer
-    flattened (:mod:`wrinklepipe.document.usd_layer`)."""
+    flattened (:mod:`wrinklepipe.usd.layer`)."""
     if usd_source is not None:
         return _write_layered(folder, files, pkg, usd_format, usd_source, final or folder)
     stage = build_stage(pkg, with_mesh=source is None)

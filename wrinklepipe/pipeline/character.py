@@ -9,7 +9,7 @@ naming it with ``material`` (and ``meshes``):
   (:func:`~wrinklepipe.gltf.wrinkled.add_wrinkle_attributes`: MikkTSpace ``TANGENT`` where
   missing or invalid, front-projected UVs where there are none, vertex IDs), read as one render
   mesh (:func:`~wrinklepipe.gltf.render_mesh.wrinkled_mesh`);
-- USD: the meshes bound to the material (:func:`~wrinklepipe.document.usd_source.read_usd_source`);
+- USD: the meshes bound to the material (:func:`~wrinklepipe.usd.source.read_usd_source`);
 - OBJ: the whole file (:func:`~wrinklepipe.io.mesh.load_mesh`).
 
 Then :func:`~wrinklepipe.pipeline.prepare.prepare_mesh` (normals, tangents and vertex IDs
@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from wrinklepipe.asset import Mesh
-from wrinklepipe.document.usd_source import read_usd_source
 from wrinklepipe.errors import input_error
 from wrinklepipe.gltf.document import Document, read_document
 from wrinklepipe.gltf.render_mesh import wrinkled_mesh
@@ -31,6 +30,7 @@ from wrinklepipe.gltf.wrinkled import Selection, add_wrinkle_attributes, select_
 from wrinklepipe.io.mesh import load_mesh
 from wrinklepipe.io.readers import MESH_SUFFIXES, format_of
 from wrinklepipe.pipeline.prepare import prepare_mesh
+from wrinklepipe.usd.source import read_usd_source
 
 
 @dataclass(frozen=True)

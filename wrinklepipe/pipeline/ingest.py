@@ -9,7 +9,7 @@ tangents and vertex IDs in the document, and the render mesh is those primitives
 (:func:`wrinklepipe.gltf.render_mesh.wrinkled_mesh`); convert then writes the document back
 with the wrinkle data added. Without ``base`` the wrinkled material's own ``normalTexture`` is
 the base map. A USD source likewise: the manifest's ``material``/``meshes`` select the wrinkled
-Mesh prims (:func:`wrinklepipe.document.usd_source.read_usd_source`), the render mesh is those
+Mesh prims (:func:`wrinklepipe.usd.source.read_usd_source`), the render mesh is those
 meshes, and convert writes a layer over the source. OBJ comes through
 :func:`wrinklepipe.io.mesh.load_mesh`.
 """
@@ -25,7 +25,6 @@ import numpy as np
 from wrinklepipe import masks as wm
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
-from wrinklepipe.document.usd_source import UsdSource, read_usd_source
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.gltf.document import Document
@@ -41,6 +40,7 @@ from wrinklepipe.io.mesh import load_mesh
 from wrinklepipe.io.readers import format_of
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
 from wrinklepipe.pipeline.character import open_wrinkled_document
+from wrinklepipe.usd.source import UsdSource, read_usd_source
 
 
 def _read_normals(

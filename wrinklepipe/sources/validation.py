@@ -6,7 +6,7 @@ PATH may be:
   used as the shipped base and state textures when present, as they are what ships);
 - a ``.gltf``/``.glb`` that carries the ``WRINKLEPIPE_wrinkle_maps`` extension, or a
   ``.usda``/``.usdc``/``.usdz`` with the ``WrinkleMapsAPI`` schema (read by
-  :mod:`wrinklepipe.gltf.package_read` / :mod:`wrinklepipe.io.usd_read`);
+  :mod:`wrinklepipe.gltf.package_read` / :mod:`wrinklepipe.usd.package_read`);
 - a source manifest (``.toml``) before conversion: ingested and run through the stages
   ``convert`` runs (resampling, PD scale), then packed as it would (8-bit), with the manifest's
   maps kept as the source: validate-asset and convert judge the same thing;

@@ -21,7 +21,7 @@ as time samples when there is a weight curve (time code = seconds x ``timeCodesP
 That is the layout of a package on its own (an OBJ source, ``write_usd`` of a package). For a
 glTF source convert writes the material only (``build_stage(with_mesh=False)``) and the whole
 rigged scene beside it, the wrinkled primitives among its meshes
-(:mod:`wrinklepipe.document.usd_scene`; the material lists them in ``wrinkle:meshes``).
+(:mod:`wrinklepipe.usd.scene`; the material lists them in ``wrinkle:meshes``).
 """
 
 from __future__ import annotations
@@ -82,12 +82,12 @@ API_ATTRIBUTES: dict[str, str] = {
 
 
 #: Custom attribute on the wrinkled material of a layer over a USD source (the source's file
-#: name; :mod:`wrinklepipe.document.usd_layer`): its meshes keep the source's topology.
+#: name; :mod:`wrinklepipe.usd.layer`): its meshes keep the source's topology.
 LAYERED_OVER = "wrinkle:layeredOver"
 
 #: Custom attribute on the wrinkle material of a glTF source's USD: the paths of the wrinkled
 #: primitives' Mesh prims in its scene, in the package's order
-#: (:mod:`wrinklepipe.document.usd_scene`); they are read back through the mesh reader.
+#: (:mod:`wrinklepipe.usd.scene`); they are read back through the mesh reader.
 SCENE_MESHES = "wrinkle:meshes"
 #: ... and the name of the package mesh they make (the glTF path's name for it).
 SCENE_MESH_NAME = "wrinkle:meshName"
@@ -233,7 +233,7 @@ def build_stage(
     ``with_mesh=False``: the wrinkle material only (``/NAME`` an Xform, no ``MESH`` and no
     ``Skel``): a glTF source's wrinkled primitives are written into its scene instead, bound
     to that material and to the scene's skeleton
-    (:func:`wrinklepipe.document.usd_scene.add_scene`). Keep the returned stage referenced
+    (:func:`wrinklepipe.usd.scene.add_scene`). Keep the returned stage referenced
     while using its layers (they die with it).
     """
     from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdSkel  # deferred: usd-core, USD only
@@ -452,7 +452,7 @@ def write_usd(
     """Write ``.usda`` / ``.usdc`` (+ the PNGs beside it), or a self-contained ``.usdz``.
 
     ``stage``: the package's stage (:func:`build_stage`) with additions (a glTF source's other
-    parts, :func:`wrinklepipe.document.usd_scene.add_scene`); ``extra``: files it references
+    parts, :func:`wrinklepipe.usd.scene.add_scene`); ``extra``: files it references
     ``{path relative to the layer: bytes}``, written beside the layer or packed into the usdz."""
     opt = options or UsdOptions()
     path = Path(path)

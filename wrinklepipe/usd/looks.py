@@ -1,7 +1,7 @@
 """The glTF source's materials in its USD: a UsdPreviewSurface per glTF material.
 
 :class:`Looks` writes ``Looks/<material>`` below the scene (see
-:mod:`wrinklepipe.document.usd_scene`): base colour (factor, texture, alpha, cutoff), metallic /
+:mod:`wrinklepipe.usd.scene`): base colour (factor, texture, alpha, cutoff), metallic /
 roughness, normal (with its scale), occlusion, emissive (with
 ``KHR_materials_emissive_strength``), ``KHR_materials_clearcoat`` (clearcoat and its roughness,
 factors and textures) and ``KHR_materials_ior``; other material extensions are named in a

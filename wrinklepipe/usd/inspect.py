@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from wrinklepipe.io.mesh_usd import mesh_time, open_stage
+from wrinklepipe.usd.meshes import mesh_time, open_stage
 
 
 def _value_label(attr: Any) -> str:
@@ -60,7 +60,7 @@ def _prim(prim: Any) -> dict[str, Any]:
     if prim.IsInstance():
         row["instance"] = True
     vsets = prim.GetVariantSets()
-    for name in vsets.GetNames():  # e.g. a glTF source's clips (document.usd_animation)
+    for name in vsets.GetNames():  # e.g. a glTF source's clips (usd.animation)
         vs = vsets.GetVariantSet(name)
         row.setdefault("variantSets", {})[name] = {
             "variants": list(vs.GetVariantNames()),

@@ -35,12 +35,12 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.usd_looks import gf_matrix
 from wrinklepipe.geometry.keyframes import sample_channel_at
 from wrinklepipe.gltf.animation import Channel, read_channels
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.primitive import node_matrix, trs_matrices  # the one glTF TRS
 from wrinklepipe.names import unique_name
+from wrinklepipe.usd.looks import gf_matrix
 
 #: The variant that plays convert's weight curve (morph weights) on the wrinkled meshes.
 WRINKLE_VARIANT = "wrinkle"

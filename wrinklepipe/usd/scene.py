@@ -1,7 +1,7 @@
 """The whole glTF source scene in the USD output, rigged, its wrinkled primitives included.
 
 For a glTF source, the USD convert writes holds the wrinkle material (``/NAME/Looks/skin``
-with ``WrinkleMapsAPI``: :func:`wrinklepipe.io.usd_write.build_stage` with
+with ``WrinkleMapsAPI``: :func:`wrinklepipe.usd.package_write.build_stage` with
 ``with_mesh=False``) and, from :func:`add_scene`, the whole character below ``/NAME/Scene``::
 
     Scene                        Xform (SkelRoot when /NAME is none)
@@ -20,7 +20,7 @@ with ``WrinkleMapsAPI``: :func:`wrinklepipe.io.usd_write.build_stage` with
                                  targets under no joint: blend shapes play only when bound
       Animations/<clip>          SkelAnimation per glTF clip, and ``wrinkle`` (convert's first
                                  weight curve's morph weights), chosen by the variant set
-                                 ``animation`` on Scene (:mod:`wrinklepipe.document.usd_animation`)
+                                 ``animation`` on Scene (:mod:`wrinklepipe.usd.animation`)
         Camera                   UsdGeom.Camera of a node's glTF camera (perspective: yfov and
                                  aspectRatio as apertures; orthographic: xmag / ymag; clipping)
       Looks/<material>           UsdPreviewSurface per glTF material: base colour (factor,
@@ -39,13 +39,13 @@ others, in place, bound to the wrinkle material, with ``primvars:wrinkle:vertexI
 ``wrinkle:tangent`` (float4: the primitive's TANGENT, in its own space) and ``wrinkle:bias``
 (from ``_WRINKLE_BIAS`` where present), all ``vertex``: the glTF output's wrinkled primitives,
 one for one. The material lists their prim paths in ``wrinkle:meshes``;
-:func:`wrinklepipe.io.usd_read.read_usd` reads them back through the mesh reader, rigid ones at
+:func:`wrinklepipe.usd.package_read.read_usd` reads them back through the mesh reader, rigid ones at
 the skeleton's rest pose: what the glTF path measures. A wrinkled primitive no scene node
 instances goes below ``Scene/Unplaced`` in the space the render mesh reads it in (noted).
 
-Materials and their images: :mod:`wrinklepipe.document.usd_looks` (texture transforms as
+Materials and their images: :mod:`wrinklepipe.usd.looks` (texture transforms as
 ``UsdTransform2d``, KTX2 / WebP images transcoded to PNG); animations:
-:mod:`wrinklepipe.document.usd_animation`. The glTF output beside it keeps everything as it
+:mod:`wrinklepipe.usd.animation`. The glTF output beside it keeps everything as it
 was.
 """
 
@@ -56,18 +56,18 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.usd_animation import (
-    SkeletonInfo,
-    add_animations,
-    xform_animated_nodes,
-)
-from wrinklepipe.document.usd_looks import Looks, Names, gf_matrix
 from wrinklepipe.gltf.document import Document, PrimitiveRef
 from wrinklepipe.gltf.primitive import node_matrix, read_skin  # the one TRS, the one skin
 from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles
 from wrinklepipe.io.package import WrinklePackage
-from wrinklepipe.io.usd_write import SCENE_MESH_NAME, SCENE_MESHES
 from wrinklepipe.metadata import BIAS_ATTRIBUTE, VERTEX_ID_ATTRIBUTE
+from wrinklepipe.usd.animation import (
+    SkeletonInfo,
+    add_animations,
+    xform_animated_nodes,
+)
+from wrinklepipe.usd.looks import Looks, Names, gf_matrix
+from wrinklepipe.usd.package_write import SCENE_MESH_NAME, SCENE_MESHES
 
 
 @dataclass(frozen=True)

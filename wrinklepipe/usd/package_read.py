@@ -1,23 +1,23 @@
-"""Read a wrinklepipe USD (.usda/.usdc/.usdz written by :mod:`wrinklepipe.io.usd_write`).
+"""Read a wrinklepipe USD (.usda/.usdc/.usdz written by :mod:`wrinklepipe.usd.package_write`).
 
 Finds the Material with ``WrinkleMapsAPI`` and the Mesh bound to it, undoes the V flip
 (``uv = (s, 1 - t)``), reads the textures through Ar (so files inside a .usdz work) and returns the
 same :class:`~wrinklepipe.io.package.WrinklePackage` the glTF reader returns. Texture paths must be
 relative and stay inside the layer's folder or package.
 
-Its meshes are read by the one USD mesh reader, :func:`wrinklepipe.io.mesh_usd.read_usd_meshes`
+Its meshes are read by the one USD mesh reader, :func:`wrinklepipe.usd.meshes.read_usd_meshes`
 (render vertices through the corner map, wrinkle primvars vertex or faceVarying, UsdSkel blend
 shapes and skin, the glTF joint names and inverse binds a wrinklepipe Skeleton carries), and
 merged; the kind of stage only sets its options:
 
-- a stage :func:`~wrinklepipe.io.usd_write.build_stage` wrote (one Mesh): read ``exact`` (normals
-  and joint weights as stored, so glTF -> USD -> glTF is byte-identical), its one-joint
+- a stage :func:`~wrinklepipe.usd.package_write.build_stage` wrote (one Mesh): read ``exact``
+  (normals and joint weights as stored, so glTF -> USD -> glTF is byte-identical), its one-joint
   Skeleton of a mesh without skin read as no skin (``rigid_at_rest``), named as its prim;
-- the USD of a glTF source (:mod:`wrinklepipe.document.usd_scene`; its material lists the
+- the USD of a glTF source (:mod:`wrinklepipe.usd.scene`; its material lists the
   wrinkled prims in ``wrinkle:meshes``): in that order, meshes bound rigidly to a joint at the
   skeleton's rest pose (``UsdMeshOptions.rigid_at_rest``), skinned ones in bind space: the
   render mesh the glTF path reads from the glTF beside it;
-- a layer over a USD source (:mod:`wrinklepipe.document.usd_layer`; its material carries
+- a layer over a USD source (:mod:`wrinklepipe.usd.layer`; its material carries
   ``wrinkle:layeredOver``): the meshes bound to its wrinkled material(s), the source's
   topology, as ingest reads them.
 """
@@ -33,24 +33,15 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.asset import Mesh
-from wrinklepipe.document.usd_source import merge_parts
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.io.json_safe import loads_json
-from wrinklepipe.io.mesh_usd import UsdMeshOptions, open_stage, read_usd_meshes
 from wrinklepipe.io.package import (
     PackedTexture,
     WeightCurves,
     WrinklePackage,
     png_pixels,
     safe_name,
-)
-from wrinklepipe.io.usd_write import (
-    API_NAME,
-    LAYERED_OVER,
-    SCENE_MESH_NAME,
-    SCENE_MESHES,
-    register_schema,
 )
 from wrinklepipe.metadata import (
     CompressedCopy,
@@ -62,6 +53,15 @@ from wrinklepipe.metadata import (
     WrinkleMeta,
     sorted_expressions,
 )
+from wrinklepipe.usd.meshes import UsdMeshOptions, open_stage, read_usd_meshes
+from wrinklepipe.usd.package_write import (
+    API_NAME,
+    LAYERED_OVER,
+    SCENE_MESH_NAME,
+    SCENE_MESHES,
+    register_schema,
+)
+from wrinklepipe.usd.source import merge_parts
 
 
 @dataclass(frozen=True)
@@ -146,7 +146,7 @@ def _stem(asset: Any) -> str:
 
 def _wrinkled_mesh(path: Path, file: str, prims: list[str], options: UsdMeshOptions) -> Mesh:
     """The wrinkled meshes ``prims``, read by the mesh reader
-    (:func:`~wrinklepipe.io.mesh_usd.read_usd_meshes`: render vertices through the corner map,
+    (:func:`~wrinklepipe.usd.meshes.read_usd_meshes`: render vertices through the corner map,
     wrinkle primvars vertex or faceVarying, UsdSkel skin and blend shapes; only those prims) and
     merged."""
     parts = {m.name: m for m in read_usd_meshes(path, replace(options, paths=tuple(prims)))}
@@ -177,7 +177,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     if not path.is_file():
         raise input_error(file, "file not found")
     register_schema()
-    stage = open_stage(path)  # the one confined Stage.Open (io.mesh_usd)
+    stage = open_stage(path)  # the one confined Stage.Open (usd.meshes)
     mat_prim = None
     for prim in stage.Traverse():
         if prim.IsA(UsdShade.Material) and _has_api(prim):
@@ -201,7 +201,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     if not meshes:
         raise input_error(file, f"no Mesh bound to {mat_prim.GetPath()}")
     order = mat_prim.GetAttribute(SCENE_MESHES)
-    if order and order.HasAuthoredValue():  # a glTF source's scene (document.usd_scene)
+    if order and order.HasAuthoredValue():  # a glTF source's scene (usd.scene)
         listed = [str(p) for p in order.Get()]
         if sorted(listed) != sorted(str(m.GetPath()) for m in meshes):
             raise input_error(
@@ -217,7 +217,7 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
         prim = str(meshes[0].GetPath())
         exact = UsdMeshOptions(rigid_at_rest=True, exact=True)
         mesh = replace(_wrinkled_mesh(path, file, [prim], exact), name=meshes[0].GetName())
-    else:  # a layer over a source (wrinklepipe.document.usd_layer): the source's topology
+    else:  # a layer over a source (wrinklepipe.usd.layer): the source's topology
         mesh = _wrinkled_mesh(path, file, [str(m.GetPath()) for m in meshes], UsdMeshOptions())
 
     # -- textures ----------------------------------------------------------------------------

@@ -10,11 +10,11 @@ meshes outside the selection is then cloned in the output layer (an internal ref
 the glTF path clones a shared material. Bad selections are one
 :class:`~wrinklepipe.errors.InputError` each, listing what the stage has.
 
-The render mesh is the wrinkled meshes as :func:`wrinklepipe.io.mesh_usd.read_usd_meshes`
+The render mesh is the wrinkled meshes as :func:`wrinklepipe.usd.meshes.read_usd_meshes`
 reads them (world space, skins at their bind pose), merged in prim order; each
 :class:`~wrinklepipe.asset.MeshPart` keeps the prim path, its corner-to-vertex map and the
 transform the reader applied, so the output layer can write the wrinkle data back onto the
-prim's own topology (:mod:`wrinklepipe.document.usd_layer`). A mesh without texture coordinates
+prim's own topology (:mod:`wrinklepipe.usd.layer`). A mesh without texture coordinates
 gets front-projected UVs (as a glTF primitive does): they split no vertex, and the layer adds
 them as ``primvars:st``.
 """
@@ -31,7 +31,7 @@ from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.errors import input_error
 from wrinklepipe.gltf.wrinkled import front_projection_uvs
 from wrinklepipe.io.mesh_merge import merge_meshes
-from wrinklepipe.io.mesh_usd import open_stage, read_usd_meshes, uv_primvar
+from wrinklepipe.usd.meshes import open_stage, read_usd_meshes, uv_primvar
 
 
 @dataclass

@@ -43,11 +43,11 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.document.usd_source import UsdSource
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.mesh_usd import mesh_time
 from wrinklepipe.io.package import WrinklePackage, png_bytes
-from wrinklepipe.io.usd_write import LAYERED_OVER, UsdOptions, build_stage, usdz_bytes
+from wrinklepipe.usd.meshes import mesh_time
+from wrinklepipe.usd.package_write import LAYERED_OVER, UsdOptions, build_stage, usdz_bytes
+from wrinklepipe.usd.source import UsdSource
 
 #: Stage metadata copied from the source's root layer (only a stage's root layer sets them).
 STAGE_METADATA = (

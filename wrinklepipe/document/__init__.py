@@ -1,2 +1,0 @@
-"""USD source documents (moving to :mod:`wrinklepipe.usd`); the glTF document is
-:mod:`wrinklepipe.gltf`."""
