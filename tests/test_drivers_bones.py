@@ -159,8 +159,8 @@ _RIGGED = (
 def test_bones_from_gltf_animation_reach_the_reference_frame():
     from wrinklepipe.drivers import DriverContext, evaluate
     from wrinklepipe.gltf.meshes import gltf_animation_times
-    from wrinklepipe.io.mesh import load_mesh
-    from wrinklepipe.io.rig import GltfRig
+    from wrinklepipe.readers.meshes import load_mesh
+    from wrinklepipe.readers.rig import GltfRig
 
     keys = gltf_animation_times(_RIGGED)
     t_ref = float(keys[len(keys) // 2])

@@ -14,7 +14,7 @@ from test_mesh_io_gltf import SAMPLES, _node_tool, needs_data, needs_node_tools,
 from wrinklepipe.cli import main
 from wrinklepipe.geometry.dynamic import skinned_pose, triangle_areas
 from wrinklepipe.gltf.meshes import gltf_joint_world_matrices_at
-from wrinklepipe.io.mesh import LoadOptions, load_mesh
+from wrinklepipe.readers.meshes import LoadOptions, load_mesh
 
 CESIUM_MAN = SAMPLES / "CesiumMan" / "glTF-Binary" / "CesiumMan.glb"
 

@@ -13,8 +13,8 @@ from test_dynamic_skin_rest import WORLD, _dynamic, _translate
 from test_mesh_io_usd import DATA, RAW, needs_data
 
 from wrinklepipe.geometry.dynamic import triangle_areas
-from wrinklepipe.io.mesh import load_meshes, merge_meshes
 from wrinklepipe.pipeline.dynamic import DynamicJobOptions, rest_and_deformed
+from wrinklepipe.readers.meshes import load_meshes, merge_meshes
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom, UsdSkel, Vt  # noqa: E402

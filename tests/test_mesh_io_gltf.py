@@ -22,8 +22,8 @@ from wrinklepipe.geometry.tangents import ensure_tangents, mikktspace_tangents_r
 from wrinklepipe.gltf.decompress import compressed
 from wrinklepipe.gltf.meshes import gltf_joint_world_matrices, read_gltf_meshes
 from wrinklepipe.gltf.read import GltfFile, GltfReadOptions
-from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
 from wrinklepipe.paths import ROOT
+from wrinklepipe.readers.meshes import LoadOptions, load_mesh, load_meshes
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 SAMPLES = DATA / "gltf-samples"

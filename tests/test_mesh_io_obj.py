@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wrinklepipe.errors import InputError
-from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
+from wrinklepipe.readers.meshes import LoadOptions, load_mesh, load_meshes
 
 OBJ = """# two quads sharing an edge that is a UV seam
 o left

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wrinklepipe.io.mesh import load_mesh
+from wrinklepipe.readers.meshes import load_mesh
 
 
 @pytest.fixture(scope="module")

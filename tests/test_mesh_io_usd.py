@@ -10,7 +10,7 @@ import pytest
 
 from wrinklepipe.errors import InputError
 from wrinklepipe.geometry.dynamic import DynamicWeights, morph_pose, skinned_pose
-from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes
+from wrinklepipe.readers.meshes import LoadOptions, load_mesh, load_meshes
 from wrinklepipe.usd.meshes import usd_blend_shape_weights, usd_joint_world_matrices
 
 pxr = pytest.importorskip("pxr")

@@ -319,7 +319,7 @@ def test_exported_mikktspace_tangents_pass_and_rotated_ones_fail():
     from dataclasses import replace
 
     from wrinklepipe.asset import WrinkleAsset
-    from wrinklepipe.io.mesh import load_mesh
+    from wrinklepipe.readers.meshes import load_mesh
     from wrinklepipe.validate.context import Context
     from wrinklepipe.validate.inputs import ValidationInput
     from wrinklepipe.validate.rules_mesh import check_mesh

@@ -68,7 +68,13 @@ LAYERS: tuple[Layer, ...] = (
         "io",
         "readers and writers of whole formats: meshes, glTF and USD packages, the glTF "
         "document, the source manifest",
-        ("wrinklepipe.io", "wrinklepipe.manifest", "wrinklepipe.gltf", "wrinklepipe.usd"),
+        (
+            "wrinklepipe.io",
+            "wrinklepipe.manifest",
+            "wrinklepipe.gltf",
+            "wrinklepipe.usd",
+            "wrinklepipe.readers",
+        ),
     ),
     Layer(
         "pipeline",

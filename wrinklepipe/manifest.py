@@ -22,10 +22,10 @@ from wrinklepipe.errors import InputError as _IE
 from wrinklepipe.io.confine import confine
 from wrinklepipe.io.images import read_header
 from wrinklepipe.io.json_safe import loads_toml
-from wrinklepipe.io.readers import MESH_SUFFIXES
 from wrinklepipe.model import POLICY_WEIGHT_RANGE
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.presets import jimenez
+from wrinklepipe.readers.registry import MESH_SUFFIXES
 from wrinklepipe.suffixes import is_gltf, is_usd
 
 _CHANNELS = "rgba"

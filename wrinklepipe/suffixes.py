@@ -1,8 +1,9 @@
 """The file suffixes of the mesh and scene formats wrinklepipe reads: the one list.
 
-:mod:`wrinklepipe.io.readers` keys its reader table (:data:`~wrinklepipe.io.readers.FORMATS`)
-by them; layers below it (a driver asking whether a ``file`` is a glTF animation, the
-manifest's checks) ask here, so a format's suffixes are written once.
+:mod:`wrinklepipe.readers.registry` keys its reader table
+(:data:`~wrinklepipe.readers.registry.FORMATS`) by them; layers below it (a driver asking
+whether a ``file`` is a glTF animation, the manifest's checks) ask here, so a format's
+suffixes are written once.
 """
 
 from __future__ import annotations

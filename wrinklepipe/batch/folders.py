@@ -11,7 +11,7 @@ from typing import Any
 from wrinklepipe.batch.options import AssetOptions
 from wrinklepipe.batch.plan import BatchPlan, Job
 from wrinklepipe.batch.results import AssetResult, counts_of, status_for
-from wrinklepipe.io.readers import PACKAGE_SUFFIXES
+from wrinklepipe.readers.registry import PACKAGE_SUFFIXES
 
 
 def is_asset_folder(folder: Path) -> bool:

@@ -32,8 +32,8 @@ from wrinklepipe.capture.report import (
 from wrinklepipe.capture.synthetic import dome_height, make_scene, normal_of
 from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image, write_image
-from wrinklepipe.io.mesh import LoadOptions, load_mesh
 from wrinklepipe.model import normalize
+from wrinklepipe.readers.meshes import LoadOptions, load_mesh
 from wrinklepipe.validate.gl import GLUnavailable, create_context
 
 

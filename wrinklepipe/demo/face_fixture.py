@@ -37,7 +37,7 @@ from wrinklepipe.demo import fields as F
 from wrinklepipe.demo.source import cache_root
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.images import write_image
-from wrinklepipe.io.mesh import load_mesh
+from wrinklepipe.readers.meshes import load_mesh
 
 FIXTURE_VERSION = 2
 FIXTURE_SEED = 15

@@ -27,7 +27,7 @@ DEFAULT_FPS = 30.0
 
 class Rig(Protocol):
     """A skeleton with its animation, as the ``bones`` driver reads it (the pipeline gives one
-    through :attr:`DriverContext.read_rig`; :class:`wrinklepipe.io.rig.GltfRig` reads glTF)."""
+    through :attr:`DriverContext.read_rig`; :class:`wrinklepipe.readers.rig.GltfRig` reads glTF)."""
 
     joint_names: tuple[str, ...]
     joints: np.ndarray | None

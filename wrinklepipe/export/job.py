@@ -9,7 +9,7 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.export.files import export_files
 from wrinklepipe.export.presets import ENGINE_PRESETS
 from wrinklepipe.gltf.document import read_document
-from wrinklepipe.io.readers import format_of
+from wrinklepipe.readers.registry import format_of
 from wrinklepipe.sources.package import read_package, written_file
 
 

@@ -5,7 +5,7 @@
 non-skinned primitives are baked into world space by the first node that instances them;
 skinned ones stay in their bind space (the node transform of a skinned mesh is ignored by the
 spec; the skin's joints, weights and inverse bind matrices come along). Several primitives are
-merged by :func:`wrinklepipe.io.mesh_merge.merge_meshes` (morph targets unioned by name, skins by
+merged by :func:`wrinklepipe.geometry.merge.merge_meshes` (morph targets unioned by name, skins by
 joint name); ``Mesh.parts`` maps every vertex run back to its primitive, vertex order kept.
 Degenerate triangles are left out of the render mesh (counted); the document is not touched.
 """
@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.asset import Mesh, MeshPart
+from wrinklepipe.geometry.merge import merge_meshes
 from wrinklepipe.gltf.document import Document, PrimitiveRef
 from wrinklepipe.gltf.primitive import PrimitiveOptions, read_instance
 from wrinklepipe.gltf.scene import node_world_matrices
-from wrinklepipe.io.mesh_merge import merge_meshes
 from wrinklepipe.metadata import BIAS_ATTRIBUTE
 
 #: How the render mesh reads a primitive: the package's bias into ``Mesh.colors``; vertex IDs

@@ -21,12 +21,12 @@ from wrinklepipe.drivers.base import DriverContext, evaluate, frame_times
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.gltf.animation import read_morph_tracks
 from wrinklepipe.io.images import write_image
-from wrinklepipe.io.mesh import load_mesh
 from wrinklepipe.io.package import resize_normals_pd
-from wrinklepipe.io.rig import GltfRig
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.pipeline.ingest import read_maps
+from wrinklepipe.readers.meshes import load_mesh
+from wrinklepipe.readers.rig import GltfRig
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,8 @@ def load_maps(manifest: Any, size: int | None = None) -> tuple[np.ndarray, np.nd
 
 
 def load_mesh_for_drivers(path: Path | None) -> Mesh | None:
-    """The manifest's mesh (morph names, skin) through :func:`wrinklepipe.io.mesh.load_mesh`."""
+    """The manifest's mesh (morph names, skin) through
+    :func:`wrinklepipe.readers.meshes.load_mesh`."""
     if path is None:
         return None
     return load_mesh(path)

@@ -10,7 +10,7 @@ naming it with ``material`` (and ``meshes``):
   missing or invalid, front-projected UVs where there are none, vertex IDs), read as one render
   mesh (:func:`~wrinklepipe.gltf.render_mesh.wrinkled_mesh`);
 - USD: the meshes bound to the material (:func:`~wrinklepipe.usd.source.read_usd_source`);
-- OBJ: the whole file (:func:`~wrinklepipe.io.mesh.load_mesh`).
+- OBJ: the whole file (:func:`~wrinklepipe.readers.meshes.load_mesh`).
 
 Then :func:`~wrinklepipe.pipeline.prepare.prepare_mesh` (normals, tangents and vertex IDs
 where still missing), as convert's mesh stage does.
@@ -27,9 +27,9 @@ from wrinklepipe.gltf.document import Document, read_document
 from wrinklepipe.gltf.render_mesh import wrinkled_mesh
 from wrinklepipe.gltf.repair import repair
 from wrinklepipe.gltf.wrinkled import Selection, add_wrinkle_attributes, select_wrinkled
-from wrinklepipe.io.mesh import load_mesh
-from wrinklepipe.io.readers import MESH_SUFFIXES, format_of
 from wrinklepipe.pipeline.prepare import prepare_mesh
+from wrinklepipe.readers.meshes import load_mesh
+from wrinklepipe.readers.registry import MESH_SUFFIXES, format_of
 from wrinklepipe.usd.source import read_usd_source
 
 

@@ -27,8 +27,8 @@ from wrinklepipe.geometry.dynamic import (
 )
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.gltf.meshes import gltf_joint_world_matrices_at, gltf_morph_weights
-from wrinklepipe.io.mesh import LoadOptions, load_mesh, load_meshes, merge_meshes
-from wrinklepipe.io.readers import format_of
+from wrinklepipe.readers.meshes import LoadOptions, load_mesh, load_meshes, merge_meshes
+from wrinklepipe.readers.registry import format_of
 from wrinklepipe.usd.meshes import usd_blend_shape_weights, usd_joint_world_matrices
 
 

@@ -11,7 +11,7 @@ with the wrinkle data added. Without ``base`` the wrinkled material's own ``norm
 the base map. A USD source likewise: the manifest's ``material``/``meshes`` select the wrinkled
 Mesh prims (:func:`wrinklepipe.usd.source.read_usd_source`), the render mesh is those
 meshes, and convert writes a layer over the source. OBJ comes through
-:func:`wrinklepipe.io.mesh.load_mesh`.
+:func:`wrinklepipe.readers.meshes.load_mesh`.
 """
 
 from __future__ import annotations
@@ -36,10 +36,10 @@ from wrinklepipe.gltf.wrinkled import (
     material_normal_texture,
 )
 from wrinklepipe.io.images import read_image
-from wrinklepipe.io.mesh import load_mesh
-from wrinklepipe.io.readers import format_of
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
 from wrinklepipe.pipeline.character import open_wrinkled_document
+from wrinklepipe.readers.meshes import load_mesh
+from wrinklepipe.readers.registry import format_of
 from wrinklepipe.usd.source import UsdSource, read_usd_source
 
 
@@ -62,7 +62,7 @@ def _read_normals(
 
 
 def _load_mesh(path: Path) -> Mesh:
-    """The render mesh (:func:`wrinklepipe.io.mesh.load_mesh`: glTF, USD, OBJ)."""
+    """The render mesh (:func:`wrinklepipe.readers.meshes.load_mesh`: glTF, USD, OBJ)."""
     return load_mesh(path)
 
 

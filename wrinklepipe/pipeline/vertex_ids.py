@@ -14,7 +14,7 @@ import numpy as np
 
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.vertex_ids import VertexIdOptions, compute_vertex_ids
-from wrinklepipe.io.mesh import LoadOptions, load_mesh
+from wrinklepipe.readers.meshes import LoadOptions, load_mesh
 
 
 def mesh_vertex_ids(

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.package import WrinklePackage
-from wrinklepipe.io.readers import READERS, read_package_file
+from wrinklepipe.readers.registry import READERS, read_package_file
 
 #: The order a folder's written asset is looked for in (convert writes all three beside).
 FOLDER_ORDER = (".gltf", ".glb", ".usda", ".usdc", ".usdz", ".usd")
@@ -39,7 +39,7 @@ def written_file(path: str | Path) -> Path:
 
 def read_package(path: str | Path) -> WrinklePackage:
     """A written asset: a convert folder, a .gltf/.glb or a .usda/.usdc/.usdz file (the
-    package reader of its suffix in :data:`wrinklepipe.io.readers.READERS`)."""
+    package reader of its suffix in :data:`wrinklepipe.readers.registry.READERS`)."""
     path = written_file(path)
     fmt = READERS.get(path.suffix.lower())
     if fmt is None or fmt.package is None:

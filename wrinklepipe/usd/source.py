@@ -29,8 +29,8 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.errors import input_error
+from wrinklepipe.geometry.merge import merge_meshes
 from wrinklepipe.gltf.wrinkled import front_projection_uvs
-from wrinklepipe.io.mesh_merge import merge_meshes
 from wrinklepipe.usd.meshes import open_stage, read_usd_meshes, uv_primvar
 
 

@@ -21,14 +21,14 @@ import numpy as np
 import xatlas
 
 from wrinklepipe.asset import Mesh
-from wrinklepipe.io.mesh_merge import merge_meshes
-from wrinklepipe.io.readers import LoadOptions as LoadOptions  # re-exported: callers' options
-from wrinklepipe.io.readers import read_meshes
+from wrinklepipe.geometry.merge import merge_meshes
+from wrinklepipe.readers.registry import LoadOptions as LoadOptions  # re-exported: callers' options
+from wrinklepipe.readers.registry import read_meshes
 
 
 def load_meshes(path: str | Path, options: LoadOptions | None = None) -> list[Mesh]:
     """Every mesh part of ``path`` as its own triangulated :class:`Mesh` (the reader of its
-    suffix in :data:`wrinklepipe.io.readers.READERS`)."""
+    suffix in :data:`wrinklepipe.readers.registry.READERS`)."""
     opts = options or LoadOptions()
     meshes = read_meshes(path, opts)
     if opts.generate_uvs:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from wrinklepipe.gltf.meshes import gltf_animation_times, gltf_joint_world_matrices_at
-from wrinklepipe.io.mesh import load_mesh
+from wrinklepipe.readers.meshes import load_mesh
 
 
 class GltfRig:

@@ -3,7 +3,7 @@
 
 A :class:`Format` is a name, its suffixes, the reader of its meshes and, for a format
 ``convert`` writes, the reader of a wrinkle package. Mesh ingest
-(:func:`wrinklepipe.io.mesh.load_meshes`), the written-asset reader
+(:func:`wrinklepipe.readers.meshes.load_meshes`), the written-asset reader
 (:func:`wrinklepipe.sources.package.read_package`), ``validate-asset``'s loader, the manifest's
 mesh check and the batch folder scan all look a file up here (:func:`reader_for`); a new mesh or
 package format is one more entry in :data:`FORMATS`.
@@ -19,8 +19,8 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.gltf.meshes import GltfMeshOptions, read_gltf_meshes
 from wrinklepipe.gltf.package_read import read_wrinkled
-from wrinklepipe.io.mesh_obj import read_obj_meshes
 from wrinklepipe.io.package import WrinklePackage
+from wrinklepipe.readers.obj import read_obj_meshes
 from wrinklepipe.suffixes import GLTF_SUFFIXES, OBJ_SUFFIXES, USD_SUFFIXES
 from wrinklepipe.usd.meshes import UsdMeshOptions, read_usd_meshes
 from wrinklepipe.usd.package_read import read_usd
@@ -28,7 +28,7 @@ from wrinklepipe.usd.package_read import read_usd
 
 @dataclass(frozen=True)
 class LoadOptions:
-    """Options of mesh ingest (:func:`wrinklepipe.io.mesh.load_mesh` / ``load_meshes``).
+    """Options of mesh ingest (:func:`wrinklepipe.readers.meshes.load_mesh` / ``load_meshes``).
 
     generate_uvs: give meshes without UVs an xatlas layout (default True; noted).
     bake_transforms: glTF/USD: apply node / prim world transforms to non-skinned meshes.
@@ -102,7 +102,7 @@ def reader_for(path: str | Path, need: str = "mesh") -> Format:
 
 def read_meshes(path: str | Path, options: LoadOptions | None = None) -> list[Mesh]:
     """Every mesh part of ``path``, by the reader of its suffix (no UV generation: that is
-    :func:`wrinklepipe.io.mesh.load_meshes`)."""
+    :func:`wrinklepipe.readers.meshes.load_meshes`)."""
     p = Path(path)
     fmt = reader_for(p)
     if not p.is_file():
