@@ -45,11 +45,19 @@ def write_setup(
     mask_size: int = 16,
     regions: dict | None = None,
     drivers: str = "",
+    link_mesh: bool = False,
 ) -> Path:
     """Write maps, masks and ``manifest.toml`` into ``folder``; return the manifest path.
 
-    ``mesh`` may be absolute (the tests allow its folder with ``allowed_roots``)."""
+    ``mesh`` may be absolute (the tests allow its folder with ``allowed_roots``). With
+    ``link_mesh`` the manifest names a symbolic link beside it instead, so its bytes (and the
+    report's sha256 of it) do not depend on where the checkout and ``../shared`` are."""
     folder.mkdir(parents=True, exist_ok=True)
+    if link_mesh:
+        (folder / mesh.name).symlink_to(mesh)
+        mesh_line = mesh.name
+    else:
+        mesh_line = mesh.as_posix()
     regions = REGIONS if regions is None else regions
     flat = np.zeros((size, size, 3))
     flat[..., :] = (0.5, 0.5, 1.0)
@@ -64,7 +72,7 @@ def write_setup(
         write_image(folder / "masks" / f"{r}.png", m.astype(np.float64), 8)
     lines = [
         f'name = "{name}"',
-        f'mesh = "{mesh.as_posix()}"',
+        f'mesh = "{mesh_line}"',
         'convention = "opengl"',
         "pd_scale = 1",
     ]
@@ -125,7 +133,9 @@ Surprised = [[0, 0], [2, 0], [3, 1]]
 def write_robot_setup(folder: Path) -> Path:
     """RobotExpressive's wrinkle setup: ``material = "Main"`` on ``meshes = ["Head"]`` (Main
     is shared with the body, so it is cloned for the head), driven by :data:`ROBOT_DRIVERS`."""
-    return write_setup(folder, ROBOT, "robot", "Main", ["Head"], drivers=ROBOT_DRIVERS)
+    return write_setup(
+        folder, ROBOT, "robot", "Main", ["Head"], drivers=ROBOT_DRIVERS, link_mesh=True
+    )
 
 
 def overlapping_demo(encoding: str, policy: str) -> WrinkleAsset:
@@ -170,5 +180,12 @@ def write_tokyo_setup(folder: Path) -> Path:
         "mouth": ((0.5, 0.09, 0.6, 0.2), "center"),
     }
     return write_setup(
-        folder, TOKYO, "tokyo", "normal", ["body_normal_0"], mask_size=64, regions=regions
+        folder,
+        TOKYO,
+        "tokyo",
+        "normal",
+        ["body_normal_0"],
+        mask_size=64,
+        regions=regions,
+        link_mesh=True,
     )
