@@ -86,7 +86,7 @@ def robot_converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dic
     from wrinkle_setups import ROBOT, write_robot_setup
 
     from wrinklepipe.io.confine import allowed_roots
-    from wrinklepipe.pipeline.convert import ConvertOptions, convert
+    from wrinklepipe.jobs.convert import ConvertOptions, convert
 
     if not ROBOT.is_file():
         pytest.skip("../shared/data is absent")

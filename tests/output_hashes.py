@@ -73,7 +73,7 @@ def _convert_all(root: Path) -> dict[str, dict[str, str]]:
     from wrinklepipe.cli import main
     from wrinklepipe.demo import avatar
     from wrinklepipe.io.confine import allowed_roots
-    from wrinklepipe.pipeline.convert import ConvertOptions, convert
+    from wrinklepipe.jobs.convert import ConvertOptions, convert
 
     os.environ["WRINKLEPIPE_CACHE"] = str(root / "cache")
     assert main(["demo", "-o", str(root / "demo"), "--size", "64"]) == 0

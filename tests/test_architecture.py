@@ -206,7 +206,7 @@ def test_the_circle_finder_finds_circles():
 
 
 def test_layer_rules_by_hand():
-    assert layers.layer_of("wrinklepipe.pipeline.convert").name == "jobs"
+    assert layers.layer_of("wrinklepipe.jobs.convert").name == "jobs"
     assert layers.layer_of("wrinklepipe.pipeline.ingest").name == "pipeline"
     assert layers.layer_of("wrinklepipe").name == "core"
     assert layers.may_import("wrinklepipe.validate.ship", "wrinklepipe.pipeline.prepare")

@@ -13,8 +13,8 @@ import pytest
 
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.io.package import DEFAULT_PNG_LEVEL, png_bytes, png_compression, png_level
-from wrinklepipe.pipeline import validation as pv
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
+from wrinklepipe.jobs import validation as pv
+from wrinklepipe.jobs.convert import ConvertOptions, convert
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +91,7 @@ def test_reuse_changes_no_byte_of_the_folder(manifest, tmp_path, monkeypatch):
     import contextlib
 
     from wrinklepipe import reuse
-    from wrinklepipe.pipeline import convert as pc
+    from wrinklepipe.jobs import convert as pc
 
     monkeypatch.setattr(reuse, "MIN_INPUT_BYTES", 0)  # the 32^2 demo's maps are small
     memos = []

@@ -29,7 +29,7 @@ from wrinklepipe.gltf.document import read_document
 from wrinklepipe.gltf.images import image_pixels
 from wrinklepipe.gltf.limits import GltfReadOptions
 from wrinklepipe.io import khronos
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
+from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.sources.validation import load_input
 
 

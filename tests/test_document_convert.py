@@ -23,7 +23,7 @@ from wrinkle_setups import ROBOT, ROBOT_DRIVERS, write_setup
 
 from wrinklepipe.cli import main
 from wrinklepipe.io import khronos
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
+from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.sources.validation import load_input
 
 needs_robot = pytest.mark.skipif(not ROBOT.is_file(), reason="../shared/data is absent")

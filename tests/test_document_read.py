@@ -28,8 +28,8 @@ from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles, res
 from wrinklepipe.gltf.write import write_document
 from wrinklepipe.io import khronos
 from wrinklepipe.io.confine import allowed_roots
+from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.paths import ROOT
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
 SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "data" / "gltf-samples"
 ROBOT = SAMPLES / "RobotExpressive" / "RobotExpressive.glb"

@@ -37,13 +37,13 @@ from wrinkle_setups import ROBOT
 from wrinklepipe import codec, model
 from wrinklepipe.demo import avatar, demo_asset
 from wrinklepipe.errors import InputError
-from wrinklepipe.export.job import export
 from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io import khronos
 from wrinklepipe.io.package import PackOptions, package_from_asset, png_pixels
+from wrinklepipe.jobs.convert import ConvertOptions, convert
+from wrinklepipe.jobs.export import export
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.paths import ROOT
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
 from wrinklepipe.pipeline.drivers import expression_cycle
 from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.shading import hlsl

@@ -35,8 +35,8 @@ from engine_imports import (
 from test_export_engines import _exported_texture, _expressions, _input, _source
 
 from wrinklepipe.export import importers
-from wrinklepipe.export.job import export
 from wrinklepipe.io.package import png_pixels
+from wrinklepipe.jobs.export import export
 from wrinklepipe.shading import hlsl
 from wrinklepipe.validate.inputs import ChannelEntry, Texture
 from wrinklepipe.validate.render import shader_setup

@@ -15,7 +15,7 @@ import pytest
 
 from wrinklepipe.commands.convert import summary_lines
 from wrinklepipe.demo.studio import write_studio
-from wrinklepipe.pipeline.convert import ConvertOptions, ConvertResult, convert
+from wrinklepipe.jobs.convert import ConvertOptions, ConvertResult, convert
 
 SIZE = 128  # the smallest studio size at which the whole-map choice failed validation
 

@@ -25,7 +25,7 @@ from wrinkle_setups import write_setup
 from wrinklepipe.cli import main
 from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.io.images import write_image
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
+from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.usd.layer import topology_values
 from wrinklepipe.usd.meshes import read_usd_meshes
 from wrinklepipe.usd.package_read import read_usd

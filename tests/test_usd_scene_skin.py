@@ -22,7 +22,7 @@ from wrinklepipe.cli import main
 from wrinklepipe.demo import avatar
 from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.io.confine import allowed_roots
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
+from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.usd.inspect import usd_summary
 from wrinklepipe.usd.package_read import read_usd
 

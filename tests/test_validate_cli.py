@@ -194,7 +194,7 @@ def test_bench_validate_quick_smoke():
 @pytest.fixture(scope="module")
 def converted(tmp_path_factory):
     from wrinklepipe.demo.source import write_demo_source
-    from wrinklepipe.pipeline.convert import ConvertOptions, convert
+    from wrinklepipe.jobs.convert import ConvertOptions, convert
 
     root = tmp_path_factory.mktemp("conv")
     manifest = write_demo_source(root / "src", size=128)

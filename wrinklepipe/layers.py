@@ -1,8 +1,7 @@
 """The package's layers and which may import which: the one table the docs and the tests share.
 
 Each layer may import itself and the layers listed before it, never a later one; a module
-belongs to the layer of the longest prefix below that names it (``wrinklepipe.pipeline.convert``
-is a job, ``wrinklepipe.pipeline.ingest`` a pipeline stage). ``tests/test_architecture.py``
+belongs to the layer of the longest prefix below that names it. ``tests/test_architecture.py``
 parses every module's imports (module level and deferred alike) and checks them against this
 table, and that the module graph has no circle; ``docs/architecture.md`` shows the table,
 generated from it (``python -m wrinklepipe.layers``; a test keeps the page current).
@@ -100,13 +99,7 @@ LAYERS: tuple[Layer, ...] = (
         "jobs",
         "whole runs that read, run stages, validate and write a folder; the viewer's server",
         (
-            "wrinklepipe.pipeline.convert",
-            "wrinklepipe.pipeline.bake",
-            "wrinklepipe.pipeline.regions",
-            "wrinklepipe.pipeline.validation",
-            "wrinklepipe.export.job",
-            "wrinklepipe.capture.job",
-            "wrinklepipe.masks.job",
+            "wrinklepipe.jobs",
             "wrinklepipe.batch",
             "wrinklepipe.view",
         ),

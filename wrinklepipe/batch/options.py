@@ -9,8 +9,8 @@ from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 from wrinklepipe.io.package import DEFAULT_PNG_LEVEL
+from wrinklepipe.jobs.convert import ConvertOptions
 from wrinklepipe.masks.layouts import LAYOUTS
-from wrinklepipe.pipeline.convert import ConvertOptions
 from wrinklepipe.validate.catalogue import SEVERITIES
 
 USD_FORMATS = ("usda", "usdc", "usdz")

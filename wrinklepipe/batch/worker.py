@@ -22,7 +22,7 @@ from wrinklepipe.batch.plan import Job
 from wrinklepipe.batch.results import AssetResult, counts_of, status_for
 from wrinklepipe.console import stage_listener
 from wrinklepipe.errors import InputError
-from wrinklepipe.pipeline.convert import convert
+from wrinklepipe.jobs.convert import convert
 from wrinklepipe.reuse import THREADS_ENV
 from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import validate

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.drivers import KINDS
-from wrinklepipe.pipeline.bake import BakeOptions, bake_manifest
+from wrinklepipe.jobs.bake import BakeOptions, bake_manifest
 
 NAME = "bake"
 HELP = "evaluate a weight driver over time: weight curves (JSON, CSV) and pre-blended maps"

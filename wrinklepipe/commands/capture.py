@@ -6,10 +6,10 @@ import argparse
 from pathlib import Path
 
 from wrinklepipe.atomic import staged_folder
-from wrinklepipe.capture.job import CaptureInputs, CaptureJobOptions, example_session, run_capture
 from wrinklepipe.capture.orientation import METHODS
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
+from wrinklepipe.jobs.capture import CaptureInputs, CaptureJobOptions, example_session, run_capture
 
 NAME = "capture"
 HELP = "capture a wrinkle normal map from a neutral and an expression photo (ratio image)"

@@ -6,8 +6,8 @@ import argparse
 from typing import Any
 
 from wrinklepipe.console import emit_json, err
+from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.masks.layouts import LAYOUTS
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
 
 NAME = "convert"
 HELP = "convert a source manifest into glTF + USD + textures + weight curves + report"

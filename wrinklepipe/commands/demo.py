@@ -8,7 +8,7 @@ from pathlib import Path
 
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.demo.source import demo_source_dir
-from wrinklepipe.pipeline.convert import ConvertOptions, convert
+from wrinklepipe.jobs.convert import ConvertOptions, convert
 
 NAME = "demo"
 HELP = "convert and validate the built-in demo character; print where the outputs are"

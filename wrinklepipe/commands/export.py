@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from wrinklepipe.console import emit_json, err
-from wrinklepipe.export.job import export
 from wrinklepipe.export.presets import ENGINE_PRESETS
+from wrinklepipe.jobs.export import export
 
 NAME = "export"
 HELP = "export a converted asset for Unreal, Unity, Godot or Blender"

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.jobs.pack_masks import PackMasksOptions, pack_mask_files
 from wrinklepipe.masks import LAYOUTS
-from wrinklepipe.masks.job import PackMasksOptions, pack_mask_files
 
 NAME = "pack-masks"
 HELP = "pack region masks into RGBA textures, a texture array or the left/right split layout"

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 
 from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.jobs.regions import SNIPPET_FILE, RegionsJobOptions, regions_job
 from wrinklepipe.masks.layouts import LAYOUTS
 from wrinklepipe.masks.targets import TargetRegionsOptions
-from wrinklepipe.pipeline.regions import SNIPPET_FILE, RegionsJobOptions, regions_job
 
 NAME = "regions"
 HELP = "regions, masks and blend-shape driver rows from a mesh's morph targets (Oat's area change)"

@@ -1,7 +1,7 @@
 """Baking a driver, the pure parts: :func:`changed_frames` (which frames need a new map),
 :func:`weights_csv`, :func:`blend_frames` (the maps through :func:`wrinklepipe.model.blend`),
 :func:`encode_states` (full wrinkled normals -> what the encoding stores). Reading the manifest
-and writing the folder is the job :func:`wrinklepipe.pipeline.bake.bake_manifest`.
+and writing the folder is the job :func:`wrinklepipe.jobs.bake.bake_manifest`.
 """
 
 from __future__ import annotations

@@ -6,5 +6,5 @@
 - :mod:`~wrinklepipe.export.files`: a package -> the export's files (``export_files``), with the
   shaders of :mod:`wrinklepipe.shading` and the runtime code of ``wrinklepipe/data/engines``;
 - :mod:`~wrinklepipe.export.readme`: the folder's README (import steps);
-- :mod:`~wrinklepipe.export.job`: ``export(SOURCE, OUT, engine)``, read + files + staged write.
+- :mod:`~wrinklepipe.jobs.export`: ``export(SOURCE, OUT, engine)``, read + files + staged write.
 """

@@ -5,9 +5,9 @@
   MikkTSpace tangents, vertex IDs), the PD scale;
 - :mod:`~wrinklepipe.pipeline.drivers`: the manifest's drivers -> weight curves;
 - packaging (encode + pack) is :func:`wrinklepipe.io.package.package_from_asset`;
-- :mod:`~wrinklepipe.pipeline.convert`: ``convert(manifest, out, ConvertOptions())``, the whole
+- :mod:`~wrinklepipe.jobs.convert`: ``convert(manifest, out, ConvertOptions())``, the whole
   run into one folder (writing through :mod:`wrinklepipe.outputs`, then
-  :mod:`~wrinklepipe.pipeline.validation`).
+  :mod:`~wrinklepipe.jobs.validation`).
 
 The stage modules sit below the validator (it may use them); ``convert`` and ``validation``
 sit above it and the sources layer. This file imports nothing, so importing a stage never pulls

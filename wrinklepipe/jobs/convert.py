@@ -7,7 +7,7 @@ The composition, in order::
     drivers       weight curves [T, R]                       wrinklepipe.pipeline.drivers
     package       encode + pack                              wrinklepipe.io.package
     outputs       glTF (+GLB), PNG, DDS/KTX2, curves, USD    wrinklepipe.outputs.folder
-    validate      the validator on what was written          wrinklepipe.pipeline.validation
+    validate      the validator on what was written          wrinklepipe.jobs.validation
     report        report.json + report.html                  wrinklepipe.outputs.report
 
 Everything is written into a temporary sibling folder that is renamed into place only when
@@ -37,6 +37,7 @@ from wrinklepipe.io.package import (
     package_from_asset,
     png_compression,
 )
+from wrinklepipe.jobs.validation import validate_output
 from wrinklepipe.manifest import load_manifest
 from wrinklepipe.outputs.folder import USD_FORMATS, build_outputs, write_folder
 from wrinklepipe.outputs.report import (
@@ -50,7 +51,6 @@ from wrinklepipe.pipeline.auto import formats_by_fidelity
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
-from wrinklepipe.pipeline.validation import validate_output
 from wrinklepipe.reuse import reuse
 
 
