@@ -88,7 +88,7 @@ def test_end_to_end_outputs_report_and_determinism(session, base, tmp_path, caps
     snippet = (out / "manifest_snippet.toml").read_text()
     assert 'map = "capture.png"' in snippet and "states_include_base = false" in snippet
     # The snippet makes a valid manifest with a base map (the lead's loader and schema).
-    from wrinklepipe.manifest import load_manifest
+    from wrinklepipe.sources.manifest import load_manifest
 
     write_image(out / "base.png", np.broadcast_to([0.5, 0.5, 1.0], (128, 128, 3)), bits=16)
     text = 'name = "captured"\nbase = "base.png"\nstates_include_base = false\n\n' + snippet

@@ -17,10 +17,10 @@ from wrinklepipe.cli import main
 from wrinklepipe.demo import face_fixture as ff
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.io.images import read_image, write_image
-from wrinklepipe.manifest import load_manifest
 from wrinklepipe.normals import compress as nc
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.pipeline.ingest import ingest
+from wrinklepipe.sources.manifest import load_manifest
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 MESH = DATA / ff.MESH_RELPATH

@@ -12,8 +12,8 @@ from PIL import Image
 
 from wrinklepipe.demo import avatar
 from wrinklepipe.gltf.package_write import glb_bytes
-from wrinklepipe.manifest import load_manifest
 from wrinklepipe.pipeline.ingest import ingest_all
+from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.validate.rules_fidelity import check_source_texels
 
 

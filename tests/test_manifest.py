@@ -13,8 +13,8 @@ import pytest
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.errors import InputError
 from wrinklepipe.io.images import write_image
-from wrinklepipe.manifest import load_manifest, manifest_schema
 from wrinklepipe.paths import SCHEMAS_DIR
+from wrinklepipe.sources.manifest import load_manifest, manifest_schema
 
 
 @pytest.fixture(scope="module")

@@ -88,7 +88,7 @@ def test_unknown_expression_in_driver_keys_is_found_at_load(source, tmp_path, ca
         + '\n[[drivers]]\nkind = "expressions"\npreset = "jimenez"\n'
         + "[drivers.keys]\nangr = [[0.0, 0.0], [1.0, 1.0]]\n"
     )
-    from wrinklepipe.manifest import load_manifest
+    from wrinklepipe.sources.manifest import load_manifest
 
     with pytest.raises(Exception) as info:
         load_manifest(m)

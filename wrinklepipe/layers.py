@@ -65,11 +65,9 @@ LAYERS: tuple[Layer, ...] = (
     ),
     Layer(
         "io",
-        "readers and writers of whole formats: meshes, glTF and USD packages, the glTF "
-        "document, the source manifest",
+        "readers and writers of whole formats: meshes, glTF and USD packages, the glTF document",
         (
             "wrinklepipe.io",
-            "wrinklepipe.manifest",
             "wrinklepipe.gltf",
             "wrinklepipe.usd",
             "wrinklepipe.readers",
@@ -92,7 +90,8 @@ LAYERS: tuple[Layer, ...] = (
     ),
     Layer(
         "sources",
-        "a manifest, an output folder or a file -> pipeline or validation inputs",
+        "the source manifest; a manifest, an output folder or a file -> pipeline or "
+        "validation inputs",
         ("wrinklepipe.sources",),
     ),
     Layer(

@@ -32,8 +32,8 @@ from urllib.parse import unquote
 
 from wrinklepipe import __version__
 from wrinklepipe.batch.options import AssetOptions
-from wrinklepipe.manifest import load_manifest
 from wrinklepipe.paths import ROOT
+from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.suffixes import USD_SUFFIXES
 from wrinklepipe.usd.layer import source_reference
 

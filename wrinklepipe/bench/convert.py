@@ -36,11 +36,11 @@ from wrinklepipe.demo.source import demo_source_dir
 from wrinklepipe.gltf.package_write import gltf_document
 from wrinklepipe.io.package import png_bytes
 from wrinklepipe.jobs.convert import convert
-from wrinklepipe.manifest import load_manifest
 from wrinklepipe.normals.bc4 import encode_bc5_many
 from wrinklepipe.normals.compress import decode_bc, encode_bc, pack_rgba, pad_to_blocks
 from wrinklepipe.normals.dds import mip_dims, read_dds
 from wrinklepipe.pipeline.ingest import ingest
+from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.sources.package import read_package
 from wrinklepipe.usd.package_write import write_usd
 

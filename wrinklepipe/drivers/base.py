@@ -130,7 +130,8 @@ class DriverContext:
         read_rig: Callable[[Path], Rig] | None = None,
         read_morph_tracks: Callable[[Path], list[MorphTrack]] | None = None,
     ) -> DriverContext:
-        """From a :class:`wrinklepipe.manifest.Manifest` (the mesh is loaded by the caller)."""
+        """From a :class:`wrinklepipe.sources.manifest.Manifest` (the mesh is loaded by the
+        caller)."""
         states = tuple(s.name for s in manifest.states)
         rs = np.zeros((len(manifest.regions), len(states)), np.float32)
         for i, r in enumerate(manifest.regions):

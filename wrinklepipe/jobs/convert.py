@@ -38,7 +38,6 @@ from wrinklepipe.io.package import (
     png_compression,
 )
 from wrinklepipe.jobs.validation import validate_output
-from wrinklepipe.manifest import load_manifest
 from wrinklepipe.outputs.folder import USD_FORMATS, build_outputs, write_folder
 from wrinklepipe.outputs.report import (
     convert_report,
@@ -52,6 +51,7 @@ from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.reuse import reuse
+from wrinklepipe.sources.manifest import load_manifest
 
 
 @dataclass(frozen=True)

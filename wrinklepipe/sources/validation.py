@@ -31,7 +31,6 @@ from wrinklepipe.fidelity.ship import edge_texels
 from wrinklepipe.gltf.container import split_glb
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.io.package import package_from_asset
-from wrinklepipe.manifest import load_manifest
 from wrinklepipe.model import ENCODINGS
 from wrinklepipe.normals import uastc
 from wrinklepipe.normals.dds import read_dds
@@ -39,6 +38,7 @@ from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.readers.registry import Format, format_of, read_package_file
+from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.sources.package import asset_file
 from wrinklepipe.validate.inputs import FORMATS, Texture, ValidationInput
 from wrinklepipe.validate.loader import (
