@@ -55,7 +55,7 @@ MODULES = _modules()
 
 
 def _owner(name: str) -> str:
-    """The module a dotted name lives in (``wrinklepipe.io.package.png_bytes`` -> its module)."""
+    """The module a dotted name lives in (``wrinklepipe.io.png.png_bytes`` -> its module)."""
     while name and name not in MODULES:
         name = name.rpartition(".")[0]
     return name

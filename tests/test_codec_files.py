@@ -1,7 +1,7 @@
 """Issue 14's law: for every encoding x storage format x bit depth, encode -> write the file ->
 read it with an independent reader -> decode stays within that format's error bound.
 
-Writers are the project's (``io.package.png_bytes``, ``io.images.write_image`` for EXR,
+Writers are the project's (``io.png.png_bytes``, ``io.images.write_image`` for EXR,
 ``normals.compress`` + ``normals.dds`` for BCn, ``normals.uastc`` for UASTC KTX2); readers are
 not: OpenImageIO reads the PNG, EXR and DDS files, texture2ddecoder the BC blocks a second time,
 alktx2's transcoder the UASTC KTX2. The maps are smooth random fields (hypothesis draws a tilt,
@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 from wrinklepipe import codec
 from wrinklepipe.io.images import write_image
-from wrinklepipe.io.package import png_bytes
+from wrinklepipe.io.png import png_bytes
 from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import uastc
 from wrinklepipe.normals.dds import dds_bytes

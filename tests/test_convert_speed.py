@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from wrinklepipe.demo.source import write_demo_source
-from wrinklepipe.io.package import DEFAULT_PNG_LEVEL, png_bytes, png_compression, png_level
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes, png_compression, png_level
 from wrinklepipe.jobs import validation as pv
 from wrinklepipe.jobs.convert import ConvertOptions, convert
 
@@ -69,7 +69,7 @@ def test_validation_reuses_the_ingested_source_and_judges_the_written_folder(
 
 
 def test_png_level_changes_bytes_not_pixels_and_reruns_are_identical(manifest, tmp_path):
-    from wrinklepipe.io.package import png_pixels
+    from wrinklepipe.io.png import png_pixels
 
     a, b, c = (tmp_path / n for n in "abc")
     convert(manifest, a, ConvertOptions(validate=False, compressed=False))
@@ -110,7 +110,7 @@ def test_reuse_changes_no_byte_of_the_folder(manifest, tmp_path, monkeypatch):
     (memo,) = memos
     # the glTF document and the textures folder hold the same PNGs; the search's block
     # roundtrip of the chosen format is the copy's encoding
-    assert memo.hits["wrinklepipe.io.package._png"] >= 4
+    assert memo.hits["wrinklepipe.io.png._png"] >= 4
     assert memo.hits["wrinklepipe.normals.compress.encode_bc"] >= 1
     # the validator's MikkTSpace reference of the mesh read back is the tangents convert made
     assert memo.hits["wrinklepipe.geometry.tangents._mikktspace"] >= 1

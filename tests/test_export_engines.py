@@ -39,12 +39,13 @@ from wrinklepipe.demo import avatar, demo_asset
 from wrinklepipe.errors import InputError
 from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io import khronos
-from wrinklepipe.io.package import PackOptions, package_from_asset, png_pixels
+from wrinklepipe.io.png import png_pixels
 from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.jobs.export import export
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.paths import ROOT
 from wrinklepipe.pipeline.drivers import expression_cycle
+from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.shading import hlsl
 from wrinklepipe.sources.validation import load_input

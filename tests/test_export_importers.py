@@ -35,7 +35,7 @@ from engine_imports import (
 from test_export_engines import _exported_texture, _expressions, _input, _source
 
 from wrinklepipe.export import importers
-from wrinklepipe.io.package import png_pixels
+from wrinklepipe.io.png import png_pixels
 from wrinklepipe.jobs.export import export
 from wrinklepipe.shading import hlsl
 from wrinklepipe.validate.inputs import ChannelEntry, Texture

@@ -90,10 +90,10 @@ def test_the_choice_made_before_fidelity_fails_and_run_stages_now_passes(fixture
     are flat, and the 99.9th-percentile power-of-two scale) give a tiny state map; inside the
     active regions the result is far from the truth. ``run_stages`` now chooses by fidelity and
     is within the budget."""
-    from wrinklepipe.io.package import encode_state, resize_normals_pd
     from wrinklepipe.normals.compress import Budget as WholeMapBudget
     from wrinklepipe.normals.encode import auto_pd_scale, decode_pd_slopes
     from wrinklepipe.normals.resample import auto_size
+    from wrinklepipe.pipeline.package import encode_state, resize_normals_pd
     from wrinklepipe.pipeline.prepare import run_stages
 
     asset = fixture.asset()

@@ -212,7 +212,7 @@ def test_the_pictures_are_at_the_fastest_zlib_level_whatever_the_runs_png_level(
     import struct
     import zlib
 
-    from wrinklepipe.io.package import png_compression
+    from wrinklepipe.io.png import png_compression
 
     ref, fid, base, shipped, masks = tiny()
     images = {**fp.pose_pictures(ref, fid, base, shipped, masks)}

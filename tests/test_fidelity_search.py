@@ -12,8 +12,8 @@ from wrinklepipe import fidelity as fd
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.fidelity import pyramid, ship
 from wrinklepipe.fidelity import search as fs
-from wrinklepipe.io.package import encode_base, encode_state
 from wrinklepipe.masks import resample_masks
+from wrinklepipe.pipeline.package import encode_base, encode_state
 
 
 def test_halving_is_a_lanczos3_filter_that_keeps_linear_ramps():

@@ -10,14 +10,13 @@ from hypothesis.extra.numpy import arrays
 
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
-from wrinklepipe.io.package import (
+from wrinklepipe.io.png import png_bytes, png_pixels
+from wrinklepipe.pipeline.package import (
     PackOptions,
     asset_from_package,
     decode_state,
     encode_state,
     package_from_asset,
-    png_bytes,
-    png_pixels,
 )
 
 finite = st.floats(-1.0, 1.0, width=32, allow_nan=False)

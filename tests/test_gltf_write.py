@@ -23,8 +23,10 @@ from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.gltf.package_write import write_glb, write_gltf
 from wrinklepipe.io import khronos
 from wrinklepipe.io.images import write_image
-from wrinklepipe.io.package import EXTENSION, package_from_asset, png_bytes, png_pixels
+from wrinklepipe.io.png import png_bytes, png_pixels
+from wrinklepipe.metadata import EXTENSION
 from wrinklepipe.paths import SCHEMAS_DIR
+from wrinklepipe.pipeline.package import package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh
 
 SCHEMA = SCHEMAS_DIR / EXTENSION / "schema" / f"material.{EXTENSION}.schema.json"
@@ -307,8 +309,8 @@ def test_vertex_ids_beyond_float_precision_refused(pkg, tmp_path):
 
 
 def test_names_from_inputs_never_leave_the_folder(tmp_path):
-    from wrinklepipe.io.package import WeightCurves, safe_name
     from wrinklepipe.outputs.curves import curve_files
+    from wrinklepipe.package import WeightCurves, safe_name
 
     asset = _tiny_asset()
     asset = replace(asset, state_names=("../../evil",))
@@ -328,7 +330,7 @@ def test_names_from_inputs_never_leave_the_folder(tmp_path):
 
 @pytest.mark.parametrize("layout", ["rgba", "array", "lr-split", "jimenez8"])
 def test_every_mask_layout_matches_the_schema_and_round_trips(layout, tmp_path):
-    from wrinklepipe.io.package import PackOptions, asset_from_package
+    from wrinklepipe.pipeline.package import PackOptions, asset_from_package
 
     names = [
         "forehead_outer_l",

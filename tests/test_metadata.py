@@ -16,7 +16,6 @@ from wrinklepipe.demo.package import demo_package
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.gltf.package_write import write_gltf
-from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.masks.layouts import LAYOUTS
 from wrinklepipe.metadata import (
     EXTENSION,
@@ -31,6 +30,7 @@ from wrinklepipe.metadata import (
     schema_problems,
     sorted_expressions,
 )
+from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 
 MASK_LAYOUTS = ("rgba", "array", "lr-split", "jimenez8")
 

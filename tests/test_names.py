@@ -3,8 +3,8 @@
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wrinklepipe.io.package import safe_name
 from wrinklepipe.names import unique_name
+from wrinklepipe.package import safe_name
 from wrinklepipe.shading.hlsl import identifier
 
 

@@ -18,9 +18,9 @@ import texture2ddecoder as t2d
 
 from wrinklepipe import codec
 from wrinklepipe.demo import demo_asset
-from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.normals import compress, copies, dds, ktx2
 from wrinklepipe.normals.compress import angle_deg, angular_error_stats
+from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 
 
 @pytest.fixture(scope="module")

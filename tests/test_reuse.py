@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from wrinklepipe import reuse
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.geometry.tangents import mikktspace_tangents_report
-from wrinklepipe.io.package import png_bytes
+from wrinklepipe.io.png import png_bytes
 from wrinklepipe.normals.resample import axis_weights, oiio_resize, resize
 
 # ------------------------------------------------------------------------------------------------
@@ -138,14 +138,14 @@ def test_png_bytes_are_the_same_from_the_memo():
     with reuse.reuse() as memo:
         assert png_bytes(px) == plain and png_bytes(px.copy()) == plain
         assert png_bytes(px, level=1) != plain  # the level is part of the key
-    assert memo.hits["wrinklepipe.io.package._png"] == 1
+    assert memo.hits["wrinklepipe.io.png._png"] == 1
     with reuse.reuse() as memo:
         assert png_bytes(px, shared=False) == plain  # a picture: the same bytes, not keyed
         assert png_bytes(px, shared=False) == plain and not memo.hits and not memo.misses
 
 
 def test_map_threads_keeps_order_and_the_callers_png_level():
-    from wrinklepipe.io.package import png_compression
+    from wrinklepipe.io.png import png_compression
 
     imgs = [
         (np.arange(128 * 128 * 3) % (7 + k)).astype(np.uint8).reshape(128, 128, 3) for k in range(5)

@@ -173,7 +173,7 @@ def _unity_scale_asset(n_states: int = 15, n_regions: int = 135):
 @pytest.mark.gpu
 @pytest.mark.parametrize("layout", ["rgba", "array"])
 def test_unity_digital_human_scale_renders_like_the_model(layout):
-    from wrinklepipe.io.package import PackOptions, package_from_asset
+    from wrinklepipe.pipeline.package import PackOptions, package_from_asset
     from wrinklepipe.pipeline.prepare import prepare_mesh
     from wrinklepipe.validate import ValidateOptions, validate
     from wrinklepipe.validate import gl as glw

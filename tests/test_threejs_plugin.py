@@ -17,7 +17,7 @@ import pytest
 
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.gltf.package_write import gltf_document
-from wrinklepipe.io.package import PackOptions, package_from_asset
+from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.shading import template as tpl
 from wrinklepipe.shading import threejs

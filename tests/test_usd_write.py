@@ -270,7 +270,7 @@ def test_bias_and_metadata_round_trip(pkg, tmp_path):
 def test_several_weight_curves_keep_names_and_order(pkg, tmp_path):
     from dataclasses import replace
 
-    from wrinklepipe.io.package import WeightCurves
+    from wrinklepipe.package import WeightCurves
 
     c0 = pkg.curves[0]
     c1 = WeightCurves("z blink/test", np.array([0.0, 0.5], np.float32), c0.values[:2][::-1])

@@ -135,7 +135,7 @@ def test_ortho_front_maps_the_bounding_box_into_clip_space():
 
 @pytest.mark.parametrize("policy", ["clamp01", "renormalize"])
 def test_lr_split_layout_renders_like_the_model(policy):
-    from wrinklepipe.io.package import PackOptions, package_from_asset
+    from wrinklepipe.pipeline.package import PackOptions, package_from_asset
     from wrinklepipe.pipeline.prepare import prepare_mesh
     from wrinklepipe.validate.loader import input_from_package
 
@@ -220,8 +220,8 @@ def test_uploaded_bytes_sample_like_the_numpy_decoder(fmt, tol):
 
 def test_diff_gain_is_undone_like_the_package_decoder():
     """A diff map stored with gain 2 (0.5 + 0.5 * 2 (W - B)) decodes to the same face."""
-    from wrinklepipe.io.package import PackOptions, package_from_asset
-    from wrinklepipe.io.package import decode_state as package_decode
+    from wrinklepipe.pipeline.package import PackOptions, package_from_asset
+    from wrinklepipe.pipeline.package import decode_state as package_decode
     from wrinklepipe.pipeline.prepare import prepare_mesh
     from wrinklepipe.validate.loader import input_from_package
 

@@ -31,10 +31,10 @@ from wrinklepipe import model
 from wrinklepipe.demo import avatar, demo_asset
 from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io.confine import allowed_roots
-from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.paths import ROOT
 from wrinklepipe.pipeline.drivers import expression_cycle
+from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.sources.validation import load_input
 from wrinklepipe.view.server import Site, ViewServer, find_asset

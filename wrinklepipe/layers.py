@@ -41,13 +41,14 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.console",
             "wrinklepipe.layers",
             "wrinklepipe.reuse",
+            "wrinklepipe.package",
         ),
     ),
     Layer(
         "files",
-        "small file helpers the stages read with: pixels (OpenImageIO), guarded JSON, "
-        "confined paths",
-        ("wrinklepipe.io.images", "wrinklepipe.io.json_safe", "wrinklepipe.io.confine"),
+        "plain file helpers: pixels (OpenImageIO), PNG bytes, guarded JSON, confined paths, "
+        "the Khronos validator",
+        ("wrinklepipe.io",),
     ),
     Layer(
         "stages",
@@ -64,10 +65,10 @@ LAYERS: tuple[Layer, ...] = (
         ),
     ),
     Layer(
-        "io",
-        "readers and writers of whole formats: meshes, glTF and USD packages, the glTF document",
+        "formats",
+        "readers and writers of whole formats: the glTF document and packages, USD stages "
+        "and packages, the reader table and mesh ingest (OBJ)",
         (
-            "wrinklepipe.io",
             "wrinklepipe.gltf",
             "wrinklepipe.usd",
             "wrinklepipe.readers",

@@ -1,9 +1,9 @@
 """The wrinkle description of a package, typed: what ``WRINKLEPIPE_wrinkle_maps`` says.
 
-:class:`WrinkleMeta` is the format-neutral description a :class:`~wrinklepipe.io.package.
+:class:`WrinkleMeta` is the format-neutral description a :class:`~wrinklepipe.package.
 WrinklePackage` carries beside its mesh and stored textures (``pkg.meta``): the encoding, the
 states, the region masks and their channel table, the regions, expressions, drivers, weights and
-the block-compressed copies. Textures are named (a :class:`~wrinklepipe.io.package.
+the block-compressed copies. Textures are named (a :class:`~wrinklepipe.package.
 PackedTexture`'s ``name``), not indexed, so one description serves the glTF and the USD writer.
 
 Two JSON forms, one shape:

@@ -1,6 +1,6 @@
 """Unique names: the one ``stem, stem_2, stem_3 ...`` rule.
 
-File stems (:func:`wrinklepipe.io.package.safe_name`), USD prim and variant names and HLSL
+File stems (:func:`wrinklepipe.package.safe_name`), USD prim and variant names and HLSL
 identifiers (:func:`wrinklepipe.shading.hlsl.identifier`) are all kept apart with it, so two
 regions, textures or prims whose names clash get the same suffixes wherever they are written.
 """

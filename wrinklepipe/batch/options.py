@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
-from wrinklepipe.io.package import DEFAULT_PNG_LEVEL
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL
 from wrinklepipe.jobs.convert import ConvertOptions
 from wrinklepipe.masks.layouts import LAYOUTS
 from wrinklepipe.validate.catalogue import SEVERITIES

@@ -34,7 +34,7 @@ from wrinklepipe.bench import BenchResult, BenchRow, benchmark
 from wrinklepipe.console import stage_listener
 from wrinklepipe.demo.source import demo_source_dir
 from wrinklepipe.gltf.package_write import gltf_document
-from wrinklepipe.io.package import png_bytes
+from wrinklepipe.io.png import png_bytes
 from wrinklepipe.jobs.convert import convert
 from wrinklepipe.normals.bc4 import encode_bc5_many
 from wrinklepipe.normals.compress import decode_bc, encode_bc, pack_rgba, pad_to_blocks

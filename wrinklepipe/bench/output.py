@@ -18,7 +18,7 @@ from wrinklepipe.demo.package import demo_package
 from wrinklepipe.gltf.package_read import read_wrinkled
 from wrinklepipe.gltf.package_write import glb_bytes, gltf_document, write_gltf
 from wrinklepipe.io.images import write_image
-from wrinklepipe.io.package import DEFAULT_PNG_LEVEL, png_bytes
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.usd.package_read import read_usd
 from wrinklepipe.usd.package_write import build_stage, write_usd
 

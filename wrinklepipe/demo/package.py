@@ -5,8 +5,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 from wrinklepipe.demo import demo_asset
-from wrinklepipe.io.package import WrinklePackage, package_from_asset
+from wrinklepipe.package import WrinklePackage
 from wrinklepipe.pipeline.drivers import expression_cycle
+from wrinklepipe.pipeline.package import package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh
 
 

@@ -72,7 +72,7 @@ def driver_poses(
     curve's per-region peak frames (see the module doc).
 
     ``curves``: objects with ``name``, ``times`` ``[T]``, ``values`` ``[T, R]`` and optionally
-    ``morph_weights`` ``[T, M]`` (:class:`wrinklepipe.io.package.WeightCurves`);
+    ``morph_weights`` ``[T, M]`` (:class:`wrinklepipe.package.WeightCurves`);
     ``morph_names``: the names of those morph columns (default: the asset mesh's)."""
     regions = asset.region_names
     poses = [DriverPose("neutral", _shape(asset, np.zeros(len(regions), np.float32)))]

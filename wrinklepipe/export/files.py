@@ -33,9 +33,10 @@ from wrinklepipe.export.textures import (
 )
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.package_read import wrinkled_materials
-from wrinklepipe.io.package import WrinklePackage, png_bytes, safe_name
+from wrinklepipe.io.png import png_bytes
 from wrinklepipe.normals.compress import Budget
 from wrinklepipe.outputs.curves import format_float32
+from wrinklepipe.package import WrinklePackage, safe_name
 from wrinklepipe.shading import godot, hlsl
 from wrinklepipe.shading.setup import ShaderSetup, from_meta
 

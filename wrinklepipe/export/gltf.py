@@ -17,7 +17,9 @@ from wrinklepipe.gltf.package_read import wrinkled_materials
 from wrinklepipe.gltf.package_write import gltf_document
 from wrinklepipe.gltf.plain import normal_image, plain_document
 from wrinklepipe.gltf.write import document_files, mime_type
-from wrinklepipe.io.package import EXTENSION, WrinklePackage, png_bytes
+from wrinklepipe.io.png import png_bytes
+from wrinklepipe.metadata import EXTENSION
+from wrinklepipe.package import WrinklePackage
 
 POINTER = "KHR_animation_pointer"
 

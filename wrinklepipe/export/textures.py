@@ -19,11 +19,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from wrinklepipe import codec
-from wrinklepipe.io.package import PackedTexture, WrinklePackage, png_bytes
+from wrinklepipe.io.png import png_bytes
 from wrinklepipe.metadata import MaskChannel, MaskMeta
 from wrinklepipe.normals import compress as nc
 from wrinklepipe.normals import mips
 from wrinklepipe.normals.dds import dds_bytes
+from wrinklepipe.package import PackedTexture, WrinklePackage
 
 
 def mapping_version(pkg: WrinklePackage) -> int:

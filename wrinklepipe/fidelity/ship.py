@@ -1,6 +1,6 @@
 """What convert writes, decoded: the stored texels of each candidate the searches try.
 
-The value mappings are :mod:`wrinklepipe.codec`'s (the version ``io.package`` writes:
+The value mappings are :mod:`wrinklepipe.codec`'s (the version ``pipeline.package`` writes:
 :data:`MAPPING_VERSION`); block formats are encoded with :mod:`wrinklepipe.normals.compress`
 and decoded by its independent decoder (texture2ddecoder), exactly as the compressed copies are.
 """
@@ -18,7 +18,7 @@ from wrinklepipe.normals import compress as nc
 
 _F = np.float32
 
-#: The value mapping io.package writes PD states with.
+#: The value mapping pipeline.package writes PD states with.
 MAPPING_VERSION = codec.CURRENT_VERSION
 #: Block formats the searches may pick, smallest blocks first (BC1: 8 bytes per 4x4 block).
 BLOCK_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")

@@ -31,7 +31,7 @@ from wrinklepipe.errors import InputError
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.write import mime_type
 from wrinklepipe.io.images import read_image
-from wrinklepipe.io.package import png_pixels
+from wrinklepipe.io.png import png_pixels
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
 
 BASISU = "KHR_texture_basisu"
@@ -124,7 +124,7 @@ def image_values(doc: Document, image: int) -> tuple[np.ndarray, int]:
 
 def image_pixels(doc: Document, image: int) -> np.ndarray:
     """Image ``image`` as stored integers ``[H, W, C]`` (uint8, or uint16 for 16-bit PNGs):
-    PNG (and KTX2, transcoded to PNG) through :func:`wrinklepipe.io.package.png_pixels`, the
+    PNG (and KTX2, transcoded to PNG) through :func:`wrinklepipe.io.png.png_pixels`, the
     texels exactly as stored; other formats through :func:`image_values`."""
     data, suffix = _decodable(doc, image)
     if suffix == ".png":

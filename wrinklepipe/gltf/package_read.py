@@ -1,4 +1,4 @@
-"""The glTF package reader: a written .gltf/.glb -> :class:`~wrinklepipe.io.package.WrinklePackage`.
+"""The glTF package reader: a written .gltf/.glb -> :class:`~wrinklepipe.package.WrinklePackage`.
 
 The one reader of glTF packages (``read_package``, ``validate-asset``, ``export``, the tests and
 the output bench all read through :func:`read_wrinkled`), built on the document model: the file
@@ -36,8 +36,8 @@ from wrinklepipe.gltf.images import image_pixels, texture_source
 from wrinklepipe.gltf.limits import GltfReadOptions
 from wrinklepipe.gltf.render_mesh import wrinkled_mesh
 from wrinklepipe.gltf.wrinkled import wrinkled_primitives
-from wrinklepipe.io.package import EXTENSION, PackedTexture, WeightCurves, WrinklePackage, safe_name
-from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE, WrinkleMeta
+from wrinklepipe.metadata import EXTENSION, VERTEX_ID_ATTRIBUTE, WrinkleMeta
+from wrinklepipe.package import PackedTexture, WeightCurves, WrinklePackage, safe_name
 
 
 def wrinkled_materials(doc: Document) -> list[int]:

@@ -1,4 +1,4 @@
-"""glTF 2.0 / GLB writer for a :class:`~wrinklepipe.io.package.WrinklePackage`.
+"""glTF 2.0 / GLB writer for a :class:`~wrinklepipe.package.WrinklePackage`.
 
 What is written (DESIGN.md section 4):
 
@@ -30,14 +30,9 @@ import numpy as np
 
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.package import (
-    EXTENSION,
-    MAX_FLOAT_ID,
-    WrinklePackage,
-    png_bytes,
-    safe_name,
-)
-from wrinklepipe.metadata import BIAS_ATTRIBUTE, VERTEX_ID_ATTRIBUTE, WrinkleMeta
+from wrinklepipe.io.png import png_bytes
+from wrinklepipe.metadata import BIAS_ATTRIBUTE, EXTENSION, VERTEX_ID_ATTRIBUTE, WrinkleMeta
+from wrinklepipe.package import MAX_FLOAT_ID, WrinklePackage, safe_name
 
 POINTER_EXTENSION = "KHR_animation_pointer"
 WEIGHTS_POINTER = f"/materials/0/extensions/{EXTENSION}/weights"

@@ -26,7 +26,7 @@ from typing import Any
 from wrinklepipe.gltf.document import Document, drop_views
 from wrinklepipe.gltf.package_read import wrinkled_materials
 from wrinklepipe.gltf.package_write import POINTER_EXTENSION
-from wrinklepipe.io.package import EXTENSION
+from wrinklepipe.metadata import EXTENSION
 
 #: Texture-source keys of the image extensions a texture may carry.
 _IMAGE_EXTENSIONS = (

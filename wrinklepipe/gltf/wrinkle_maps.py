@@ -30,7 +30,9 @@ from wrinklepipe.gltf.package_write import (
     extension_block,
     weights_pointer,
 )
-from wrinklepipe.io.package import EXTENSION, WrinklePackage, png_bytes, safe_name
+from wrinklepipe.io.png import png_bytes
+from wrinklepipe.metadata import EXTENSION
+from wrinklepipe.package import WrinklePackage, safe_name
 
 #: The sampler of the added textures (bilinear, trilinear mips, clamped: masks end at the UVs).
 SAMPLER = {"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}

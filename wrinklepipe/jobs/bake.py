@@ -21,9 +21,9 @@ from wrinklepipe.drivers.base import DriverContext, evaluate, frame_times
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.gltf.animation import read_morph_tracks
 from wrinklepipe.io.images import write_image
-from wrinklepipe.io.package import resize_normals_pd
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.pipeline.ingest import read_maps
+from wrinklepipe.pipeline.package import resize_normals_pd
 from wrinklepipe.readers.meshes import load_mesh
 from wrinklepipe.readers.rig import GltfRig
 from wrinklepipe.sources.manifest import load_manifest

@@ -5,7 +5,7 @@ The composition, in order::
     ingest        manifest + files -> WrinkleAsset           wrinklepipe.pipeline.ingest
     prepare       resample, mesh (tangents, vertex IDs), PD  wrinklepipe.pipeline.prepare
     drivers       weight curves [T, R]                       wrinklepipe.pipeline.drivers
-    package       encode + pack                              wrinklepipe.io.package
+    package       encode + pack                              wrinklepipe.pipeline.package
     outputs       glTF (+GLB), PNG, DDS/KTX2, curves, USD    wrinklepipe.outputs.folder
     validate      the validator on what was written          wrinklepipe.jobs.validation
     report        report.json + report.html                  wrinklepipe.outputs.report
@@ -30,13 +30,7 @@ from wrinklepipe.atomic import staged_folder
 from wrinklepipe.drivers.poses import driver_poses
 from wrinklepipe.errors import input_error
 from wrinklepipe.fidelity.ship import edge_texels
-from wrinklepipe.io.package import (
-    DEFAULT_PNG_LEVEL,
-    PackOptions,
-    WeightCurves,
-    package_from_asset,
-    png_compression,
-)
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_compression
 from wrinklepipe.jobs.validation import validate_output
 from wrinklepipe.outputs.folder import USD_FORMATS, build_outputs, write_folder
 from wrinklepipe.outputs.report import (
@@ -46,9 +40,11 @@ from wrinklepipe.outputs.report import (
     output_rows,
     write_report,
 )
+from wrinklepipe.package import WeightCurves
 from wrinklepipe.pipeline.auto import formats_by_fidelity
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
+from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.reuse import reuse
 from wrinklepipe.sources.manifest import load_manifest

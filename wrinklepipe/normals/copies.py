@@ -183,7 +183,7 @@ def compressed_copies(
     with_mips: bool = True,
 ) -> tuple[list[Copy], list[str], dict[str, Any]]:
     """Compressed copies of the base and the states of a
-    :class:`~wrinklepipe.io.package.WrinklePackage`.
+    :class:`~wrinklepipe.package.WrinklePackage`.
 
     ``formats``: ``{"base": ..., "wrinkle": ...}`` from the manifest (``auto`` by default, or a
     format of :data:`REQUESTABLE`). Returns the copies, notes and the per-group choices for the

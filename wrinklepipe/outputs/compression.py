@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.normals import copies as nc
+from wrinklepipe.package import WrinklePackage
 
 #: Block formats ``auto`` tries (smallest blocks first; ``bc7xy`` only when asked for).
 AUTO_FORMATS: tuple[str, ...] = nc.AUTO_FORMATS

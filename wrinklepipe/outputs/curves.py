@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.atomic import dumps_json
-from wrinklepipe.io.package import WeightCurves, safe_name
+from wrinklepipe.package import WeightCurves, safe_name
 
 
 def format_float32(x: float) -> str:

@@ -24,11 +24,12 @@ from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.package_write import glb_bytes, gltf_document
 from wrinklepipe.gltf.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
 from wrinklepipe.gltf.write import document_files
-from wrinklepipe.io.package import WrinklePackage, png_bytes
+from wrinklepipe.io.png import png_bytes
 from wrinklepipe.normals.copies import files as copy_files
 from wrinklepipe.normals.copies import records as copy_records
 from wrinklepipe.outputs.compression import compressed_copies
 from wrinklepipe.outputs.curves import curve_files
+from wrinklepipe.package import WrinklePackage
 from wrinklepipe.usd.layer import (
     flattened_usdz,
     layer_bytes,

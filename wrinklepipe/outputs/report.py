@@ -13,7 +13,8 @@ import numpy as np
 from wrinklepipe import __version__, model
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.atomic import dumps_json, write_bytes
-from wrinklepipe.io.package import WrinklePackage, asset_from_package
+from wrinklepipe.package import WrinklePackage
+from wrinklepipe.pipeline.package import asset_from_package
 
 #: The validator's own page, written beside report.html (with ``validation_files/``).
 VALIDATION_HTML = "validation.html"

@@ -4,7 +4,7 @@
 - :mod:`~wrinklepipe.pipeline.prepare`: resampling (``auto`` sizes), the mesh stage (normals,
   MikkTSpace tangents, vertex IDs), the PD scale;
 - :mod:`~wrinklepipe.pipeline.drivers`: the manifest's drivers -> weight curves;
-- packaging (encode + pack) is :func:`wrinklepipe.io.package.package_from_asset`;
+- packaging (encode + pack) is :func:`wrinklepipe.pipeline.package.package_from_asset`;
 - :mod:`~wrinklepipe.jobs.convert`: ``convert(manifest, out, ConvertOptions())``, the whole
   run into one folder (writing through :mod:`wrinklepipe.outputs`, then
   :mod:`~wrinklepipe.jobs.validation`).

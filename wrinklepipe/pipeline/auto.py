@@ -23,7 +23,8 @@ from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.fidelity import formats as ff
 from wrinklepipe.fidelity import search as fs
 from wrinklepipe.fidelity import ship
-from wrinklepipe.io.package import WrinklePackage, resize_normals_pd
+from wrinklepipe.package import WrinklePackage
+from wrinklepipe.pipeline.package import resize_normals_pd
 
 #: Manifest format names that mean "no block-compressed copy".
 _NOT_BLOCK = ("png8", "png16", "exr")

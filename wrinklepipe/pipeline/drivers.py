@@ -16,7 +16,7 @@ from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.drivers.base import resolve
 from wrinklepipe.drivers.curves import load_keys, morph_animation, sample_keys
 from wrinklepipe.gltf.animation import read_morph_tracks
-from wrinklepipe.io.package import WeightCurves
+from wrinklepipe.package import WeightCurves
 from wrinklepipe.readers.rig import GltfRig
 from wrinklepipe.suffixes import is_gltf
 

@@ -22,9 +22,9 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
-from wrinklepipe.io.package import resize_normals_pd
 from wrinklepipe.normals.encode import auto_pd_scale as _auto_pd_scale
 from wrinklepipe.pipeline import auto
+from wrinklepipe.pipeline.package import resize_normals_pd
 
 # ------------------------------------------------------------------------------------------------
 # mesh stage

@@ -19,7 +19,7 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.gltf.meshes import GltfMeshOptions, read_gltf_meshes
 from wrinklepipe.gltf.package_read import read_wrinkled
-from wrinklepipe.io.package import WrinklePackage
+from wrinklepipe.package import WrinklePackage
 from wrinklepipe.readers.obj import read_obj_meshes
 from wrinklepipe.suffixes import GLTF_SUFFIXES, OBJ_SUFFIXES, USD_SUFFIXES
 from wrinklepipe.usd.meshes import UsdMeshOptions, read_usd_meshes

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.package import WrinklePackage
+from wrinklepipe.package import WrinklePackage
 from wrinklepipe.readers.registry import READERS, read_package_file
 
 #: The order a folder's written asset is looked for in (convert writes all three beside).

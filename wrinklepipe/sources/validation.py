@@ -30,12 +30,12 @@ from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.fidelity.ship import edge_texels
 from wrinklepipe.gltf.container import split_glb
 from wrinklepipe.io.json_safe import loads_json
-from wrinklepipe.io.package import package_from_asset
 from wrinklepipe.model import ENCODINGS
 from wrinklepipe.normals import uastc
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest
+from wrinklepipe.pipeline.package import package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.readers.registry import Format, format_of, read_package_file
 from wrinklepipe.sources.manifest import load_manifest

@@ -44,7 +44,8 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.package import WrinklePackage, png_bytes
+from wrinklepipe.io.png import png_bytes
+from wrinklepipe.package import WrinklePackage
 from wrinklepipe.usd.meshes import mesh_time
 from wrinklepipe.usd.package_write import LAYERED_OVER, UsdOptions, build_stage, usdz_bytes
 from wrinklepipe.usd.source import UsdSource

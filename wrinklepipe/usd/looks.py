@@ -22,7 +22,7 @@ from wrinklepipe.errors import InputError, plain_reason
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.images import image_pixels, texture_source
 from wrinklepipe.gltf.write import mime_type
-from wrinklepipe.io.package import png_bytes
+from wrinklepipe.io.png import png_bytes
 from wrinklepipe.names import unique_name
 
 _EXT = {"image/png": "png", "image/jpeg": "jpg"}

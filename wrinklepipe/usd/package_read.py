@@ -2,7 +2,7 @@
 
 Finds the Material with ``WrinkleMapsAPI`` and the Mesh bound to it, undoes the V flip
 (``uv = (s, 1 - t)``), reads the textures through Ar (so files inside a .usdz work) and returns the
-same :class:`~wrinklepipe.io.package.WrinklePackage` the glTF reader returns. Texture paths must be
+same :class:`~wrinklepipe.package.WrinklePackage` the glTF reader returns. Texture paths must be
 relative and stay inside the layer's folder or package.
 
 Its meshes are read by the one USD mesh reader, :func:`wrinklepipe.usd.meshes.read_usd_meshes`
@@ -36,13 +36,7 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.io.json_safe import loads_json
-from wrinklepipe.io.package import (
-    PackedTexture,
-    WeightCurves,
-    WrinklePackage,
-    png_pixels,
-    safe_name,
-)
+from wrinklepipe.io.png import png_pixels
 from wrinklepipe.metadata import (
     CompressedCopy,
     MaskChannel,
@@ -53,6 +47,7 @@ from wrinklepipe.metadata import (
     WrinkleMeta,
     sorted_expressions,
 )
+from wrinklepipe.package import PackedTexture, WeightCurves, WrinklePackage, safe_name
 from wrinklepipe.usd.meshes import UsdMeshOptions, open_stage, read_usd_meshes
 from wrinklepipe.usd.package_write import (
     API_NAME,

@@ -1,4 +1,4 @@
-"""USD writer for a :class:`~wrinklepipe.io.package.WrinklePackage` (usd-core).
+"""USD writer for a :class:`~wrinklepipe.package.WrinklePackage` (usd-core).
 
 Layout of the stage (``defaultPrim`` = the asset name, Y up, metres)::
 
@@ -44,7 +44,8 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.atomic import check_not_input, write_bytes
 from wrinklepipe.errors import input_error
 from wrinklepipe.gltf.package_write import skin_weights_normalized
-from wrinklepipe.io.package import MAX_FLOAT_ID, WrinklePackage, png_bytes, safe_name
+from wrinklepipe.io.png import png_bytes
+from wrinklepipe.package import MAX_FLOAT_ID, WrinklePackage, safe_name
 from wrinklepipe.paths import SCHEMAS_DIR
 
 API_NAME = "WrinkleMapsAPI"

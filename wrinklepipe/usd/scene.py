@@ -59,8 +59,8 @@ import numpy as np
 from wrinklepipe.gltf.document import Document, PrimitiveRef
 from wrinklepipe.gltf.primitive import node_matrix, read_skin  # the one TRS, the one skin
 from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles
-from wrinklepipe.io.package import WrinklePackage
 from wrinklepipe.metadata import BIAS_ATTRIBUTE, VERTEX_ID_ATTRIBUTE
+from wrinklepipe.package import WrinklePackage
 from wrinklepipe.usd.animation import (
     SkeletonInfo,
     add_animations,

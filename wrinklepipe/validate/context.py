@@ -10,8 +10,8 @@ import numpy as np
 from wrinklepipe import model
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.fidelity.metric import source_states
-from wrinklepipe.io.package import resize_normals_pd
 from wrinklepipe.masks import resample_masks
+from wrinklepipe.pipeline.package import resize_normals_pd
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.inputs import Texture, ValidationInput
 

@@ -20,7 +20,7 @@ from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.atomic import write_output
 from wrinklepipe.errors import InputError, input_error, plain_reason
 from wrinklepipe.io.json_safe import loads_json
-from wrinklepipe.io.package import asset_from_package, mapping_version
+from wrinklepipe.pipeline.package import asset_from_package, mapping_version
 from wrinklepipe.validate.inputs import CHANNELS, ChannelEntry, Texture, ValidationInput
 
 EXTENSION = "WRINKLEPIPE_wrinkle_maps"
@@ -66,7 +66,7 @@ def _fmt_for(pixels: np.ndarray) -> str:
 def input_from_package(
     pkg: Any, path: str, kind: str, file_of: dict[str, str] | None = None
 ) -> ValidationInput:
-    """A :class:`ValidationInput` from a :class:`wrinklepipe.io.package.WrinklePackage`."""
+    """A :class:`ValidationInput` from a :class:`wrinklepipe.package.WrinklePackage`."""
     asset = guard_reader(lambda: asset_from_package(pkg), Path(path), "the wrinkle data")
     meta = pkg.meta
     version = guard_reader(lambda: mapping_version(meta), Path(path), "the mapping version")

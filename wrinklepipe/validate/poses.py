@@ -12,7 +12,7 @@ import numpy as np
 
 from wrinklepipe import fidelity as fd
 from wrinklepipe.drivers.poses import DriverPose, driver_poses
-from wrinklepipe.io.package import WeightCurves
+from wrinklepipe.package import WeightCurves
 from wrinklepipe.validate.inputs import ValidationInput
 
 

@@ -16,7 +16,7 @@ from rich.table import Table
 from wrinklepipe import __version__
 from wrinklepipe.atomic import dumps_json, output_files, staged_folder, write_bytes
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.package import png_bytes
+from wrinklepipe.io.png import png_bytes
 from wrinklepipe.reuse import map_threads
 from wrinklepipe.validate.catalogue import RULES_BY_CODE
 from wrinklepipe.validate.run import Report

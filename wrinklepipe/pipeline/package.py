@@ -1,37 +1,22 @@
-"""The packaged (encoded) form of a wrinkle asset: what the glTF/USD writers write, readers read.
-
-A :class:`WrinklePackage` holds the mesh, the textures *as stored* (integer pixels, row 0 at the
-top of the image, i.e. glTF's v = 0) and a format-neutral description of the wrinkle setup
-(``meta``, a :class:`~wrinklepipe.metadata.WrinkleMeta`) in which textures are named, not
-indexed. Both writers serialise the same package, so a
-glTF -> USD -> glTF round trip compares packages field by field and pixel by pixel.
+"""Packaging, the stage after the drivers: an asset's float maps and masks -> stored textures.
 
 :func:`package_from_asset` encodes an in-memory :class:`~wrinklepipe.asset.WrinkleAsset` (float
-unit normals, float masks); :func:`asset_from_package` decodes a package back into one (what the
-validator works on). The per-texel encodings are those of :mod:`wrinklepipe.model`.
+unit normals, float masks) into a :class:`~wrinklepipe.package.WrinklePackage`;
+:func:`asset_from_package` decodes a package back into one (what the validator works on). The
+per-texel encodings are those of :mod:`wrinklepipe.model`, through :mod:`wrinklepipe.codec`.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
-import re
-import struct
-import tempfile
-import zlib
-from collections.abc import Iterator
-from contextvars import ContextVar
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import OpenImageIO as oiio
 
 from wrinklepipe import codec, model
 from wrinklepipe import masks as wm
-from wrinklepipe.asset import Mesh, Region, WrinkleAsset
+from wrinklepipe.asset import Region, WrinkleAsset
 from wrinklepipe.errors import input_error
-from wrinklepipe.metadata import EXTENSION as EXTENSION  # re-exported for the readers/writers
 from wrinklepipe.metadata import (
     MaskMeta,
     RegionMeta,
@@ -39,64 +24,8 @@ from wrinklepipe.metadata import (
     WrinkleMeta,
     table_from_json,
 )
-from wrinklepipe.names import unique_name
 from wrinklepipe.normals.resample import resize_normals
-from wrinklepipe.reuse import reused
-
-CHANNELS = "rgba"
-#: Largest integer a float32 holds exactly: vertex IDs are stored as FLOAT accessors.
-MAX_FLOAT_ID = 1 << 24
-
-
-def safe_name(name: str, taken: set[str] | None = None) -> str:
-    """A file stem made from ``name``: letters, digits, ``_ . -`` only, no leading dot, unique
-    within ``taken`` (which it updates). Texture and curve files are named with it, so names
-    from a manifest or a foreign glTF can never point outside the output folder."""
-
-    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)).lstrip(".") or "unnamed"
-    return stem if taken is None else unique_name(stem, taken)
-
-
-@dataclass
-class PackedTexture:
-    """One stored texture: integer pixels ``[H, W, C]`` (uint8/uint16), row 0 = top (glTF v=0)."""
-
-    name: str  # stable identifier and file stem: "base_normal", "wrinkle_stretch", "mask_0"
-    pixels: np.ndarray
-    role: str  # "base_normal" | "state" | "mask"
-
-    @property
-    def bits(self) -> int:
-        return 16 if self.pixels.dtype == np.uint16 else 8
-
-
-@dataclass
-class WeightCurves:
-    """Region weights keyed over time: ``times`` [T] seconds, ``values`` [T, R] (float32), and
-    optionally the morph-target weights ``morph_weights`` [T, M] that drive them (a blendshapes
-    driver's inputs), played together."""
-
-    name: str
-    times: np.ndarray
-    values: np.ndarray
-    morph_weights: np.ndarray | None = None
-
-
-@dataclass
-class WrinklePackage:
-    """Mesh + stored textures + wrinkle description (``meta``, texture references by name)."""
-
-    name: str
-    mesh: Mesh
-    textures: list[PackedTexture]
-    meta: WrinkleMeta
-    curves: list[WeightCurves] = field(default_factory=list)
-
-    def texture(self, name: str) -> PackedTexture:
-        for t in self.textures:
-            if t.name == name:
-                return t
-        raise KeyError(name)
+from wrinklepipe.package import PackedTexture, WeightCurves, WrinklePackage, safe_name
 
 
 @dataclass(frozen=True)
@@ -111,10 +40,6 @@ class PackOptions:
 
     bits: int = 8
     mask_layout: str = "rgba"
-
-
-# ------------------------------------------------------------------------------------------------
-# encoding: one call into wrinklepipe.codec per map (docs/normals.md, "The codec")
 
 
 def _plain_format(bits: int) -> str:
@@ -323,95 +248,3 @@ def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
         mesh=pkg.mesh,
         drivers=[dict(d) for d in meta.drivers],
     )
-
-
-# ------------------------------------------------------------------------------------------------
-# deterministic PNG (no gAMA/eXIf/time chunks: the Khronos validator flags colour-space chunks)
-
-
-#: zlib level of the PNGs wrinklepipe writes: 6, zlib's and libpng's default. Level 9 makes the
-#: demo's textures and validation pictures 1-6 % smaller for 2-11x the time (measured on the 64
-#: and 512 demos: 0.75 s against 0.07 s for one 512^2 render); 1 is fastest (files ~25 % larger).
-#: The validation page's pictures are always at level 1 (validate.report.PICTURE_PNG_LEVEL).
-DEFAULT_PNG_LEVEL = 6
-_PNG_LEVEL: ContextVar[int] = ContextVar("wrinklepipe_png_level", default=DEFAULT_PNG_LEVEL)
-
-
-@contextlib.contextmanager
-def png_compression(level: int) -> Iterator[None]:
-    """Write every PNG inside the block at zlib ``level`` (0-9; same level -> same bytes)."""
-    if not 0 <= int(level) <= 9:
-        raise ValueError(f"PNG compression level must be 0..9, got {level}")
-    token = _PNG_LEVEL.set(int(level))
-    try:
-        yield
-    finally:
-        _PNG_LEVEL.reset(token)
-
-
-def png_level() -> int:
-    """The zlib level :func:`png_bytes` uses here (see :func:`png_compression`)."""
-    return _PNG_LEVEL.get()
-
-
-def png_bytes(pixels: np.ndarray, level: int | None = None, shared: bool = True) -> bytes:
-    """Encode ``[H, W, C]`` uint8/uint16 (C = 1..4) as a minimal PNG: IHDR, IDAT, IEND only.
-
-    Rows use the Up filter (vectorised); zlib at ``level`` (default: :func:`png_level`, set by
-    :func:`png_compression`, else :data:`DEFAULT_PNG_LEVEL`). Same pixels and level -> same bytes.
-    ``shared=False``: not through the run's memo (an image nothing else encodes, e.g. a
-    report's picture: keying it would only cost a hash of its pixels).
-    """
-    level = _PNG_LEVEL.get() if level is None else int(level)
-    encode = _png if shared else _png.__wrapped__  # type: ignore[attr-defined]
-    return encode(np.asarray(pixels), level)
-
-
-@reused  # a texture the glTF document and the folder (or the GLB) both hold is encoded once
-def _png(px: np.ndarray, level: int) -> bytes:
-    if px.ndim == 2:
-        px = px[..., None]
-    h, w, c = px.shape
-    color_type = {1: 0, 2: 4, 3: 2, 4: 6}[c]
-    depth = 16 if px.dtype == np.uint16 else 8
-    raw = px.astype(">u2").view(np.uint8) if depth == 16 else px.astype(np.uint8)
-    rows = raw.reshape(h, -1)
-    up = rows.copy()
-    up[1:] = rows[1:] - rows[:-1]  # uint8 wraps mod 256 as PNG requires
-    body = np.concatenate([np.full((h, 1), 2, np.uint8), up], axis=1)
-    data = zlib.compress(body.tobytes(), level)
-
-    def chunk(tag: bytes, payload: bytes) -> bytes:
-        crc = zlib.crc32(tag + payload) & 0xFFFFFFFF
-        return struct.pack(">I", len(payload)) + tag + payload + struct.pack(">I", crc)
-
-    ihdr = struct.pack(">IIBBBBB", w, h, depth, color_type, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b"")
-
-
-def png_pixels(data: bytes, file: str = "") -> np.ndarray:
-    """Decode a PNG's pixels as stored (uint8/uint16 ``[H, W, C]``) via OpenImageIO."""
-
-    fd, tmp = tempfile.mkstemp(suffix=".png")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        config = oiio.ImageSpec()
-        config.attribute("oiio:UnassociatedAlpha", 1)
-        inp = oiio.ImageInput.open(tmp, config)
-        if inp is None:
-            raise input_error(file, f"cannot decode image: {oiio.geterror().strip()}")
-        try:
-            spec = inp.spec()
-            fmt = oiio.UINT16 if spec.format == oiio.UINT16 else oiio.UINT8
-            arr = inp.read_image(0, 0, 0, spec.nchannels, fmt)
-        finally:
-            inp.close()
-    finally:
-        os.unlink(tmp)
-    if arr is None:
-        raise input_error(file, "cannot decode image pixels (truncated or corrupt?)")
-    arr = np.asarray(arr)
-    if arr.ndim == 2:
-        arr = arr[..., None]
-    return np.ascontiguousarray(arr.reshape(spec.height, spec.width, spec.nchannels))

@@ -1,0 +1,78 @@
+"""The packaged (encoded) form of a wrinkle asset: what the glTF/USD writers write, readers read.
+
+A :class:`WrinklePackage` holds the mesh, the textures *as stored* (integer pixels, row 0 at the
+top of the image, i.e. glTF's v = 0) and a format-neutral description of the wrinkle setup
+(``meta``, a :class:`~wrinklepipe.metadata.WrinkleMeta`) in which textures are named, not
+indexed. Both writers serialise the same package, so a
+glTF -> USD -> glTF round trip compares packages field by field and pixel by pixel.
+
+Plain data types (core): the package is made from an asset by
+:func:`wrinklepipe.pipeline.package.package_from_asset` and decoded back by
+:func:`~wrinklepipe.pipeline.package.asset_from_package`.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wrinklepipe.asset import Mesh
+from wrinklepipe.metadata import WrinkleMeta
+from wrinklepipe.names import unique_name
+
+CHANNELS = "rgba"
+#: Largest integer a float32 holds exactly: vertex IDs are stored as FLOAT accessors.
+MAX_FLOAT_ID = 1 << 24
+
+
+def safe_name(name: str, taken: set[str] | None = None) -> str:
+    """A file stem made from ``name``: letters, digits, ``_ . -`` only, no leading dot, unique
+    within ``taken`` (which it updates). Texture and curve files are named with it, so names
+    from a manifest or a foreign glTF can never point outside the output folder."""
+
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)).lstrip(".") or "unnamed"
+    return stem if taken is None else unique_name(stem, taken)
+
+
+@dataclass
+class PackedTexture:
+    """One stored texture: integer pixels ``[H, W, C]`` (uint8/uint16), row 0 = top (glTF v=0)."""
+
+    name: str  # stable identifier and file stem: "base_normal", "wrinkle_stretch", "mask_0"
+    pixels: np.ndarray
+    role: str  # "base_normal" | "state" | "mask"
+
+    @property
+    def bits(self) -> int:
+        return 16 if self.pixels.dtype == np.uint16 else 8
+
+
+@dataclass
+class WeightCurves:
+    """Region weights keyed over time: ``times`` [T] seconds, ``values`` [T, R] (float32), and
+    optionally the morph-target weights ``morph_weights`` [T, M] that drive them (a blendshapes
+    driver's inputs), played together."""
+
+    name: str
+    times: np.ndarray
+    values: np.ndarray
+    morph_weights: np.ndarray | None = None
+
+
+@dataclass
+class WrinklePackage:
+    """Mesh + stored textures + wrinkle description (``meta``, texture references by name)."""
+
+    name: str
+    mesh: Mesh
+    textures: list[PackedTexture]
+    meta: WrinkleMeta
+    curves: list[WeightCurves] = field(default_factory=list)
+
+    def texture(self, name: str) -> PackedTexture:
+        for t in self.textures:
+            if t.name == name:
+                return t
+        raise KeyError(name)
