@@ -40,6 +40,7 @@ COMMAND_ORDER = (
     "dynamic",
     "bake",
     "regions",
+    "bake-states",
     "capture",
     "export",
     "view",

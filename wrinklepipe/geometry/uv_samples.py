@@ -53,8 +53,8 @@ class UvSamples:
     size: int
     supersample: int
     texel: np.ndarray  # [S] int64: flat texel index (row * size + column)
-    triangle: np.ndarray  # [S] int64: index into the mesh's triangles
-    bary: np.ndarray  # [S, 3] float64: barycentric coordinates in that triangle (sum 1)
+    triangle: np.ndarray  # [S] int32: index into the mesh's triangles
+    bary: np.ndarray  # [S, 3] float32: barycentric coordinates in that triangle (sum 1)
 
     @property
     def count(self) -> int:
@@ -87,29 +87,45 @@ def uv_samples(
     ids = rasterise_triangle_ids(uvs, idx[perm], n)
     # sample (row r, column c) of the fine grid -> texel (r // s, c // s); list texel by texel
     fine = ids.reshape(size, s, size, s).transpose(0, 2, 1, 3).reshape(-1)
+    del ids
     hit = np.flatnonzero(fine >= 0)
-    texel = hit // (s * s)
-    k = hit % (s * s)
-    row = (texel // size) * s + k // s
-    col = (texel % size) * s + k % s
     tri = perm[fine[hit]]
-    px = (col + 0.5) / n
-    py = (row + 0.5) / n
-    bary = barycentric(np.asarray(uvs, np.float64)[idx[tri]], np.stack([px, py], axis=-1))
-    return UvSamples(size, s, texel.astype(np.int64), tri.astype(np.int64), bary)
+    del fine
+    texel = hit // (s * s)
+    k = hit - texel * (s * s)
+    del hit
+    px = ((texel % size) * s + k % s + 0.5) / n
+    py = ((texel // size) * s + k // s + 0.5) / n
+    del k
+    bary = barycentric_in(np.asarray(uvs, np.float64), idx, tri, px, py)
+    return UvSamples(size, s, texel, tri.astype(np.int32), bary)
 
 
-def barycentric(tri: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates ``[N, 3]`` of ``points`` ``[N, 2]`` in triangles ``[N, 3, 2]``
-    (clipped to [0, 1] and renormalised: samples on an edge stay on it)."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    v0, v1, v2 = b - a, c - a, points - a
-    den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
-    den = np.where(den == 0, 1.0, den)
-    wb = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
-    wc = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
-    out = np.clip(np.stack([1.0 - wb - wc, wb, wc], axis=-1), 0.0, 1.0)
-    out /= np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
+def barycentric_in(
+    uvs: np.ndarray, indices: np.ndarray, tri: np.ndarray, px: np.ndarray, py: np.ndarray
+) -> np.ndarray:
+    """Barycentric coordinates ``[N, 3]`` float32 of the points ``(px, py)`` in the UV
+    triangles ``tri`` (clipped to [0, 1] and renormalised: samples on an edge stay on it),
+    through each triangle's inverse edge matrix (computed once per triangle, float64)."""
+    corner = uvs[indices]  # [T, 3, 2]
+    a = corner[:, 0]
+    e = np.stack([corner[:, 1] - a, corner[:, 2] - a], axis=-1)  # [T, 2, 2]: columns edges
+    det = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
+    inv_det = np.where(det != 0, 1.0 / np.where(det != 0, det, 1.0), 0.0)
+    # rows of the inverse: (wb, wc) = inv @ (p - a)
+    m = np.stack(
+        [e[:, 1, 1] * inv_det, -e[:, 0, 1] * inv_det, -e[:, 1, 0] * inv_det, e[:, 0, 0] * inv_det],
+        axis=-1,
+    )
+    dx = px - a[tri, 0]
+    dy = py - a[tri, 1]
+    mt = m[tri]
+    out = np.empty((len(tri), 3), np.float32)
+    out[:, 1] = mt[:, 0] * dx + mt[:, 1] * dy
+    out[:, 2] = mt[:, 2] * dx + mt[:, 3] * dy
+    out[:, 0] = 1.0 - out[:, 1] - out[:, 2]
+    np.clip(out, 0.0, 1.0, out=out)
+    out /= np.maximum(out.sum(axis=1, keepdims=True), np.float32(1e-30))
     return out
 
 
@@ -117,15 +133,18 @@ def interpolate(
     samples: UvSamples, indices: np.ndarray, values: np.ndarray, part: slice | None = None
 ) -> np.ndarray:
     """Per-vertex ``values`` ``[V, C]`` (or ``[V]``) at the samples ``part`` (all by default):
-    ``[S, C]`` float64, barycentric interpolation."""
+    ``[S, C]``, barycentric interpolation; float32 values stay float32, others are float64."""
     sel = part if part is not None else slice(None)
     idx = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
-    vals = np.asarray(values, dtype=np.float64)
+    vals = np.asarray(values)
+    vals = vals if vals.dtype == np.float32 else vals.astype(np.float64)
     flat = vals.ndim == 1
     vals = vals[:, None] if flat else vals
     corners = idx[samples.triangle[sel]]  # [S, 3]
-    w = samples.bary[sel]
-    out = np.einsum("sk,skc->sc", w, vals[corners])
+    w = samples.bary[sel].astype(vals.dtype, copy=False)
+    out = vals[corners[:, 0]] * w[:, 0:1]
+    out += vals[corners[:, 1]] * w[:, 1:2]
+    out += vals[corners[:, 2]] * w[:, 2:3]
     return out[:, 0] if flat else out
 
 
