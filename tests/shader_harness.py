@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe import model
+from wrinklepipe.metrics import angle_deg
 from wrinklepipe.validate import ValidateOptions
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate.context import Context
@@ -177,7 +178,7 @@ def blend(inp: ValidationInput, s: Any, expr: str | None) -> np.ndarray:
 def compare(image: np.ndarray, ref: np.ndarray) -> dict[str, float]:
     n = image.reshape(-1, 4)[:, :3].astype(np.float64)
     n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
-    err = model.angular_error_deg(n, ref)
+    err = angle_deg(n, ref)
     return {
         "mean": float(err.mean()),
         "p99": float(np.percentile(err, 99)),

@@ -10,7 +10,8 @@ import pytest
 
 from wrinklepipe.cli import main
 from wrinklepipe.io.images import read_header, read_image, write_image
-from wrinklepipe.model import angular_error_deg, normalize
+from wrinklepipe.metrics import angle_deg
+from wrinklepipe.model import normalize
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +60,7 @@ def test_end_to_end_outputs_report_and_determinism(session, base, tmp_path, caps
     n = normalize(2.0 * read_image(out / "capture.png")[0] - 1.0)
     t = normalize(2.0 * read_image(session / "truth_texture.png")[0] - 1.0)
     roi = read_image(out / "capture_roi.png")[0][..., 0] > 0.5
-    err = angular_error_deg(n, t)[roi].mean()
+    err = angle_deg(n, t)[roi].mean()
     flat = np.degrees(np.arccos(np.clip(t[..., 2], -1, 1)))[roi].mean()
     assert err < 0.5 * flat
     # Report: residuals after each warp, clipped fractions, every method side by side.
@@ -336,14 +337,14 @@ def test_a_side_lit_photo_makes_the_sign_observable(side_session, tmp_path):
     n = normalize(2.0 * read_image(out / "capture.png")[0] - 1.0)
     t = normalize(2.0 * read_image(d / "truth.png")[0] - 1.0)
     roi = read_image(out / "capture_roi.png")[0][..., 0] > 0.5
-    tilt = angular_error_deg(t, np.array([0.0, 0.0, 1.0]))
+    tilt = angle_deg(t, np.array([0.0, 0.0, 1.0]))
     flat = tilt[roi].mean()
     crease = roi & (tilt > 3.0)
     right = np.einsum("...c,...c->...", n[..., :2], t[..., :2])[crease] > 0
     # the targets (measured in texture space 0.14x, 0.11x, 100 %; without the side
     # photo the prior's 0.89x / 0.41x / 58 %, the sign flagged not observable)
-    assert angular_error_deg(n, t)[roi].mean() < 0.3 * flat
-    tilt_n = angular_error_deg(n, np.array([0.0, 0.0, 1.0]))
+    assert angle_deg(n, t)[roi].mean() < 0.3 * flat
+    tilt_n = angle_deg(n, np.array([0.0, 0.0, 1.0]))
     assert np.abs(tilt_n - tilt)[roi].mean() < 0.2 * flat
     assert right.mean() > 0.95
 

@@ -14,7 +14,8 @@ import pytest
 from wrinklepipe.capture import capture
 from wrinklepipe.capture.evaluate import errors
 from wrinklepipe.capture.sessions import FOREHEAD, MIXED, Fold, SessionOptions, make_session
-from wrinklepipe.model import angular_error_deg, height_to_normal
+from wrinklepipe.metrics import angle_deg
+from wrinklepipe.model import height_to_normal
 
 
 @pytest.fixture(scope="module")
@@ -53,12 +54,12 @@ def test_truth_is_the_expression_normal_seen_from_the_neutral(curved):
     t = curved.truth_photo.astype(np.float64)
     # a rotation keeps angles: the wrinkle's tilt is the angle between n1 and n0
     tilt = np.degrees(np.arccos(np.clip(t[..., 2], -1, 1)))
-    assert np.abs(tilt - angular_error_deg(n1, n0)).max() < 0.02  # float32 storage
+    assert np.abs(tilt - angle_deg(n1, n0)).max() < 0.02  # float32 storage
     # the turn is the neutral's own tilt, no more: near the apex the truth is n1 itself
     tilt0 = np.degrees(np.arccos(np.clip(n0[..., 2], -1, 1)))
-    assert np.all(angular_error_deg(t, n1) <= tilt0 + 0.02)
+    assert np.all(angle_deg(t, n1) <= tilt0 + 0.02)
     apex = tilt0 < 0.5
-    assert apex.any() and angular_error_deg(t[apex], n1[apex]).max() < 0.52
+    assert apex.any() and angle_deg(t[apex], n1[apex]).max() < 0.52
 
 
 def test_flat_neutral_truth_matches_finite_differences():
@@ -67,7 +68,7 @@ def test_flat_neutral_truth_matches_finite_differences():
     idx = np.arange(128) + 0.5
     xx, yy = np.meshgrid(idx, idx)
     n = height_to_normal(s.crease(xx, yy))
-    assert np.median(angular_error_deg(n, s.truth_photo)) < 0.1
+    assert np.median(angle_deg(n, s.truth_photo)) < 0.1
     c = s.crease(xx, yy)
     assert c.max() > 0.8 * -c.min() > 0  # ridges as high as the furrows are deep
 

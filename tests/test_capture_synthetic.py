@@ -17,7 +17,8 @@ from wrinklepipe.capture import OrientationOptions, capture
 from wrinklepipe.capture import warp as W
 from wrinklepipe.capture.evaluate import errors
 from wrinklepipe.capture.synthetic import DEFAULT_CREASES, SceneOptions, crease_height, make_scene
-from wrinklepipe.model import angular_error_deg, height_to_normal
+from wrinklepipe.metrics import angle_deg
+from wrinklepipe.model import height_to_normal
 
 
 def _run(shoulder: float):
@@ -50,7 +51,7 @@ def test_truth_agrees_with_the_model_height_to_normal():
     idx = np.arange(192) + 0.5
     yy, xx = np.meshgrid(idx, idx, indexing="ij")
     n = height_to_normal(crease_height(xx, yy, 192.0, DEFAULT_CREASES))
-    err = angular_error_deg(n, sc.truth_photo)
+    err = angle_deg(n, sc.truth_photo)
     assert np.median(err) < 0.1 and err.mean() < 1.0
 
 

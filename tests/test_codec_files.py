@@ -27,6 +27,7 @@ from hypothesis import strategies as st
 from wrinklepipe import codec
 from wrinklepipe.io.images import write_image
 from wrinklepipe.io.png import png_bytes
+from wrinklepipe.metrics import angle_deg
 from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import uastc
 from wrinklepipe.normals.dds import dds_bytes
@@ -176,7 +177,7 @@ def test_encode_write_read_decode_within_the_format_bound(
     elif e.name == "diff":
         assert np.all(np.abs(got - x) <= per / param * 1.01 + 1e-6)
     else:
-        err = cmp.angle_deg(got, x)
+        err = angle_deg(got, x)
         # a unit vector off by ``per`` in each stored component, renormalised; z rebuilt from
         # x, y amplifies their error by 1 / z
         amp = 1.0 if lay.stores_z else 1.0 / float(x[..., 2].min())

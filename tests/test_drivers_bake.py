@@ -13,7 +13,7 @@ from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.drivers.bake import changed_frames
 from wrinklepipe.io.images import read_image
 from wrinklepipe.masks import read_mask, resample_masks
-from wrinklepipe.model import angular_error_deg
+from wrinklepipe.metrics import angle_deg
 
 SIZE = 64
 
@@ -78,11 +78,11 @@ def test_bake_curves_with_maps(demo, tmp_path, capsys):
     expected = slopes_to_normal(slopes)
     got = read_image(out / "maps" / "frame_00002.png")[0] * 2 - 1
     assert float(a.max()) > 0.2
-    err_deg = angular_error_deg(got, expected)
+    err_deg = angle_deg(got, expected)
     assert float(err_deg.max()) < 0.01  # 16-bit quantisation only (measured 0.002 deg)
     # at zero weight, the base
     base = read_image(out / "maps" / "frame_00000.png")[0] * 2 - 1
-    assert float(angular_error_deg(base, c.base_normal).max()) < 0.2
+    assert float(angle_deg(base, c.base_normal).max()) < 0.2
     # byte-identical rerun
     out2 = tmp_path / "out2"
     assert main(["bake", str(m), "--maps", "-o", str(out2)]) == 0
@@ -197,4 +197,4 @@ def test_bake_maps_other_encodings(demo, tmp_path, encoding):
     n = b + a[..., None] * sum(c.wrinkled_normal(k) - b for k in range(2))
     expected = n / np.linalg.norm(n, axis=-1, keepdims=True)
     got = read_image(out / "maps" / "frame_00000.png")[0] * 2 - 1
-    assert float(angular_error_deg(got, expected).max()) < 0.01
+    assert float(angle_deg(got, expected).max()) < 0.01

@@ -11,6 +11,7 @@ from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.demo import face_fixture as ff
 from wrinklepipe.demo import fields as F
+from wrinklepipe.metrics import Budget
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 MESH = DATA / ff.MESH_RELPATH
@@ -90,7 +91,6 @@ def test_the_choice_made_before_fidelity_fails_and_run_stages_now_passes(fixture
     are flat, and the 99.9th-percentile power-of-two scale) give a tiny state map; inside the
     active regions the result is far from the truth. ``run_stages`` now chooses by fidelity and
     is within the budget."""
-    from wrinklepipe.normals.compress import Budget as WholeMapBudget
     from wrinklepipe.normals.encode import auto_pd_scale, decode_pd_slopes
     from wrinklepipe.normals.resample import auto_size
     from wrinklepipe.pipeline.package import encode_state, resize_normals_pd
@@ -100,7 +100,7 @@ def test_the_choice_made_before_fidelity_fails_and_run_stages_now_passes(fixture
     slopes = model.normal_to_pd(asset.states) - model.normal_to_pd(asset.base)[None]
     weights = [asset.expression_weights({e: 1.0}) for e in sorted(asset.expressions)]
     before, _ = auto_size(
-        asset.base, slopes, asset.masks, weights, WholeMapBudget(0.5, 1.0), policy="clamp01"
+        asset.base, slopes, asset.masks, weights, Budget(0.5, 1.0), policy="clamp01"
     )
     assert before <= 128
     states_before = np.stack([resize_normals_pd(s, before, before) for s in asset.states])
@@ -111,7 +111,7 @@ def test_the_choice_made_before_fidelity_fails_and_run_stages_now_passes(fixture
     truth = fd.prepare(
         fixture.base_normal, fixture.wrinkle_slopes, fixture.masks, poses, asset.region_names
     )
-    budget = fd.Budget.from_dict(ff.BUDGET)
+    budget = Budget.from_dict(ff.BUDGET)
 
     def shipped(states, masks, scale):
         n = states.shape[1]
@@ -144,7 +144,7 @@ def test_the_automatic_choices_keep_the_fixture_within_budget_of_the_truth(fixtu
     slopes = model.normal_to_pd(asset.states) - model.normal_to_pd(asset.base)[None]
     fp = fd.footprint(asset.mesh.uvs, asset.mesh.indices, (1024, 1024))
     src = fs.Source(asset.base, slopes, asset.masks, poses, asset.region_names, footprint=fp)
-    png_budget, bc_budget = fd.Budget(0.5, 1.0), fd.Budget(1.0, 2.5)
+    png_budget, bc_budget = Budget(0.5, 1.0), Budget(1.0, 2.5)
     choice = fs.search(src, png_budget, bc_budget)
     assert choice.png.meets(png_budget)
     assert choice.state_format != "png" and choice.compressed.meets(bc_budget)

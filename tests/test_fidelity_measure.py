@@ -7,6 +7,7 @@ import pytest
 
 from wrinklepipe import fidelity as fd
 from wrinklepipe import model
+from wrinklepipe.metrics import Budget
 
 
 def flat(h, w):
@@ -139,7 +140,7 @@ def test_smaller_shipped_maps_are_magnified_and_per_region_stats_split():
 def test_describe_lists_every_pose_worst_first():
     ref, states, masks = one_region()
     f = fd.measure(ref, flat(8, 8), states, masks)
-    lines = fd.describe(f, fd.Budget(p99=1.0))
+    lines = fd.describe(f, Budget(p99=1.0))
     assert lines[1].startswith("on") and "over budget" not in lines[1]
     assert lines[-1].startswith("base (face)")
 

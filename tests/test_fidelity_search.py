@@ -13,6 +13,7 @@ from wrinklepipe.demo import demo_asset
 from wrinklepipe.fidelity import pyramid, ship
 from wrinklepipe.fidelity import search as fs
 from wrinklepipe.masks import resample_masks
+from wrinklepipe.metrics import Budget, angle_deg
 from wrinklepipe.pipeline.package import encode_base, encode_state
 
 
@@ -97,9 +98,9 @@ def scene(size=64, width=6.0, amp=0.3, seed=4):
 
 
 def test_smooth_wrinkles_ship_small_and_fine_ones_ship_at_full_size():
-    smooth = fs.search(scene(width=16.0), fd.Budget(mean=0.5, p99=1.0))
-    assert smooth.wrinkle_size < 64 and smooth.png.meets(fd.Budget(mean=0.5, p99=1.0))
-    fine = fs.search(scene(width=2.0), fd.Budget(mean=0.5, p99=1.0))
+    smooth = fs.search(scene(width=16.0), Budget(mean=0.5, p99=1.0))
+    assert smooth.wrinkle_size < 64 and smooth.png.meets(Budget(mean=0.5, p99=1.0))
+    fine = fs.search(scene(width=2.0), Budget(mean=0.5, p99=1.0))
     assert fine.wrinkle_size == 64
     # the choice is the smallest: half its size is over the budget
     tried = {t.value: t for t in smooth.tried if t.step == "wrinkle"}
@@ -108,7 +109,7 @@ def test_smooth_wrinkles_ship_small_and_fine_ones_ship_at_full_size():
 
 def test_the_scale_is_the_one_with_the_least_error_and_clipping_counts():
     src = scene(width=8.0, amp=0.9)
-    choice = fs.search(src, fd.Budget(mean=1.0, p99=2.0), fixed=fs.Fixed(wrinkle=64, mask=64))
+    choice = fs.search(src, Budget(mean=1.0, p99=2.0), fixed=fs.Fixed(wrinkle=64, mask=64))
     scales = [t for t in choice.tried if t.step == "pd_scale (full size)"]
     best = min(scales, key=lambda t: (t.p99, t.mean))
     assert choice.pd_scale == best.value
@@ -118,8 +119,8 @@ def test_the_scale_is_the_one_with_the_least_error_and_clipping_counts():
 
 
 def test_a_fixed_choice_is_measured_not_searched():
-    choice = fs.search(scene(width=2.0), fd.Budget(p99=1.0), fixed=fs.Fixed(wrinkle=16))
-    assert choice.wrinkle_size == 16 and not choice.png.meets(fd.Budget(p99=1.0))
+    choice = fs.search(scene(width=2.0), Budget(p99=1.0), fixed=fs.Fixed(wrinkle=16))
+    assert choice.wrinkle_size == 16 and not choice.png.meets(Budget(p99=1.0))
     assert not [t for t in choice.tried if t.step == "wrinkle"]
 
 
@@ -174,7 +175,7 @@ def test_the_measure_equals_the_plain_formula_on_the_demo():
         a_got = model.activations(masks, p.weights, a.policy)
         w = np.maximum(np.abs(a_src).sum(0), np.abs(a_got).sum(0))
         on = w > 0
-        err = model.angular_error_deg(
+        err = angle_deg(
             model.combine(base, states, a_got)[on], model.combine(src_base, slopes, a_src)[on]
         )
         order = np.argsort(err)
@@ -214,7 +215,7 @@ def test_compressed_copies_are_judged_at_the_sizes_the_confirmation_raised_to():
     their fidelity is that of the chosen formats' whole-map round trips with the masks
     shipped, and differs from what the screened (smaller) masks give."""
     src = scene(width=8.0)
-    c = fs.search(src, fd.Budget(mean=0.3, p99=1.0), options=fs.SearchOptions(screen_texels=64))
+    c = fs.search(src, Budget(mean=0.3, p99=1.0), options=fs.SearchOptions(screen_texels=64))
     steps = [t.step for t in c.tried]
     assert (
         steps.index("confirmed (png)") < steps.index("raised (png)") < steps.index("state format")

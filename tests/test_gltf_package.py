@@ -11,6 +11,7 @@ from hypothesis.extra.numpy import arrays
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.io.png import png_bytes, png_pixels
+from wrinklepipe.metrics import angle_deg
 from wrinklepipe.pipeline.package import (
     PackOptions,
     asset_from_package,
@@ -145,5 +146,5 @@ def test_demo_decode_error_small(encoding):
     truth = demo_asset(64, encoding=encoding)
     back = asset_from_package(pkg)
     for k in range(len(truth.state_names)):
-        err = model.angular_error_deg(truth.states[k], back.states[k])
+        err = angle_deg(truth.states[k], back.states[k])
         assert err.mean() < 0.5, (encoding, k, err.mean())

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from wrinklepipe import model
+from wrinklepipe.metrics import angle_deg
 
 # ---------------------------------------------------------------------------------------------
 # pd: exactly the normal of base height + sum of weight x wrinkle height
@@ -258,7 +259,7 @@ def test_surprise_plus_anger_leaves_inner_forehead_smooth():
     core = inner > 0.99
     assert core.sum() > 20
     # surprise alone wrinkles the inner forehead; with anger it is the base exactly.
-    assert model.angular_error_deg(surprise[core], asset.base[core]).max() > 5.0
+    assert angle_deg(surprise[core], asset.base[core]).max() > 5.0
     assert np.array_equal(both[core], asset.base[core])
 
 

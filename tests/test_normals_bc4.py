@@ -14,8 +14,8 @@ from hypothesis.extra import numpy as hnp
 
 from wrinklepipe import codec
 from wrinklepipe.demo import character
+from wrinklepipe.metrics import angle_deg
 from wrinklepipe.normals import bc4
-from wrinklepipe.normals.compress import angle_deg
 
 SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "data" / "gltf-samples"
 

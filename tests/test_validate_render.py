@@ -14,6 +14,7 @@ from wrinkle_setups import overlapping_demo
 
 from wrinklepipe import model
 from wrinklepipe.demo import demo_asset
+from wrinklepipe.metrics import angle_deg
 from wrinklepipe.sources.validation import load_input
 from wrinklepipe.validate import ValidateOptions, validate
 from wrinklepipe.validate import gl as glw
@@ -78,10 +79,10 @@ def test_neutral_is_the_base_and_split_draw_is_identical():
     cov = full.covered
     assert cov.sum() > 5000
     # the split draw (plain shader where no weighted mask reaches) renders the same normals
-    err = model.angular_error_deg(split.normal[cov][:, :3], full.normal[cov][:, :3])
+    err = angle_deg(split.normal[cov][:, :3], full.normal[cov][:, :3])
     assert err.max() < 1e-3
     # with every weight 0 the wrinkle shader returns the base map: same as the plain shader
-    err0 = model.angular_error_deg(neutral.normal[cov][:, :3], plain.normal[cov][:, :3])
+    err0 = angle_deg(neutral.normal[cov][:, :3], plain.normal[cov][:, :3])
     assert err0.max() < 1e-3
     # anger changes pixels; the UV buffer holds the activation sum in z
     assert (full.uv[cov][:, 2] > 0).sum() > 100
@@ -248,7 +249,7 @@ def test_diff_gain_is_undone_like_the_package_decoder():
     )
     ours = model.normalize(base + model.diff_to_delta(decode_state(v, "diff", "rgb", 2.0)))
     theirs = package_decode(base, v.astype(np.float32), "diff", 2.0)
-    assert model.angular_error_deg(ours, theirs).max() < 1e-3
+    assert angle_deg(ours, theirs).max() < 1e-3
 
 
 @pytest.mark.parametrize("policy", ["clamp01", "additive"])

@@ -24,8 +24,8 @@ class Layer:
 LAYERS: tuple[Layer, ...] = (
     Layer(
         "core",
-        "the wrinkle model and codec (numpy only), plain data types, errors, staged writes, "
-        "terminal output, presets",
+        "the wrinkle model, codec and measure (numpy only), plain data types, errors, staged "
+        "writes, terminal output, presets",
         (
             "wrinklepipe",
             "wrinklepipe.paths",
@@ -36,6 +36,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.metadata",
             "wrinklepipe.model",
             "wrinklepipe.codec",
+            "wrinklepipe.metrics",
             "wrinklepipe.presets",
             "wrinklepipe.atomic",
             "wrinklepipe.console",

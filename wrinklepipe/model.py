@@ -66,7 +66,6 @@ __all__ = [
     "POLICIES",
     "POLICY_WEIGHT_RANGE",
     "activations",
-    "angular_error_deg",
     "blend",
     "blend_color",
     "combine",
@@ -288,18 +287,3 @@ def blend_color(
         act = act[list(color_states)]
     return combine_color(base, states, act)
 
-
-def angular_error_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle in degrees between unit vectors along the last axis (robust near 0 via atan2)."""
-    a = np.asarray(a, np.float64)
-    b = np.asarray(b, np.float64)
-    if a.shape[-1:] != (3,) or b.shape[-1:] != (3,):
-        raise ValueError(f"angles between 3-vectors, got shapes {a.shape} and {b.shape}")
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    # |a x b| spelled out: np.cross's products and differences, then the squares summed in
-    # np.linalg.norm's order (the same float64 values, ~1.5x faster than the two calls)
-    c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-    cross = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-    dot = np.einsum("...c,...c->...", a, b)
-    return np.degrees(np.arctan2(cross, dot))

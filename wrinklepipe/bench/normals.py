@@ -40,6 +40,7 @@ from wrinklepipe import codec
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark
 from wrinklepipe.demo import character
 from wrinklepipe.io.images import write_image
+from wrinklepipe.metrics import DECIMALS, angle_deg, weighted_stats
 from wrinklepipe.model import height_to_normal
 from wrinklepipe.normals import bc4
 from wrinklepipe.normals import compress as cmp
@@ -106,11 +107,8 @@ def _busiest(texels: np.ndarray, size: int) -> np.ndarray:
 
 
 def _stats(n: np.ndarray, ref: np.ndarray) -> dict[str, float]:
-    a = cmp.angle_deg(n.astype(np.float32), ref.astype(np.float32)).astype(np.float64).ravel()
-    return {
-        "mean_deg": round(float(a.mean()), 4),
-        "p99_deg": round(float(np.percentile(a, 99, method="inverted_cdf")), 4),
-    }
+    s = weighted_stats(angle_deg(n, ref))
+    return {"mean_deg": round(s.mean, DECIMALS), "p99_deg": round(s.p99, DECIMALS)}
 
 
 def _rgba(q: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wrinklepipe.model import angular_error_deg
+from wrinklepipe.metrics import angle_deg, weighted_quantile, weighted_stats
 
 
 def _tilt_deg(n: np.ndarray) -> np.ndarray:
@@ -22,11 +22,13 @@ def _tilt_deg(n: np.ndarray) -> np.ndarray:
 def _stats(values: np.ndarray) -> dict[str, float]:
     if values.size == 0:
         return {"mean": 0.0, "median": 0.0, "p95": 0.0, "max": 0.0}
+    s = weighted_stats(values)  # the one measure's mean and max; quantiles by nearest rank
+    ones = np.ones(values.size, np.float32)
     return {
-        "mean": float(values.mean()),
-        "median": float(np.median(values)),
-        "p95": float(np.percentile(values, 95)),
-        "max": float(values.max()),
+        "mean": s.mean,
+        "median": weighted_quantile(values, ones, 0.5),
+        "p95": weighted_quantile(values, ones, 0.95),
+        "max": s.max,
     }
 
 
@@ -43,7 +45,7 @@ def errors(
     t = np.asarray(truth, np.float64)[sel]
     true_tilt = _tilt_deg(t)
     tilt_err = np.abs(_tilt_deg(c) - true_tilt)
-    ang = angular_error_deg(c, t)
+    ang = angle_deg(c, t)
     crease = true_tilt > min_tilt_deg
     oriented = crease & (_tilt_deg(c) > 0.5)  # where the capture leans at all
     dots = np.einsum("ic,ic->i", c[oriented, :2], t[oriented, :2])

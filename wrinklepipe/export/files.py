@@ -34,7 +34,7 @@ from wrinklepipe.export.textures import (
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.package_read import wrinkled_materials
 from wrinklepipe.io.png import png_bytes
-from wrinklepipe.normals.compress import Budget
+from wrinklepipe.metrics import Budget
 from wrinklepipe.outputs.curves import format_float32
 from wrinklepipe.package import WrinklePackage, safe_name
 from wrinklepipe.shading import godot, hlsl
@@ -44,7 +44,7 @@ RUNTIME_DIR = Path(__file__).resolve().parent.parent / "data" / "engines"
 #: Unreal material-editor clipboard text of the two Custom nodes.
 UNREAL_CLIPBOARD = "WP_CustomNodes.t3d"
 #: Error budget for block-compressed copies (the manifest's default budget).
-BUDGET = Budget(max_mean_deg=0.5, max_p99_deg=2.0)
+BUDGET = Budget(mean=0.5, p99=2.0)
 
 
 @dataclass
@@ -187,8 +187,8 @@ def _unreal(ex: Export) -> None:
         base_layout = _layout(base.pixels.shape[-1])
         ex.notes.append(
             f"base: BC5 is over the error budget (mean {res.mean_deg:.2f}, p99 "
-            f"{res.p99_deg:.2f} deg against the stored map; budget {BUDGET.max_mean_deg} / "
-            f"{BUDGET.max_p99_deg}): shipped as PNG"
+            f"{res.p99_deg:.2f} deg against the stored map; budget {BUDGET.mean} / "
+            f"{BUDGET.p99}): shipped as PNG"
         )
     states = [pkg.texture(n) for n in meta.state_textures]
     results = []

@@ -21,6 +21,7 @@ import numpy as np
 from wrinklepipe import codec
 from wrinklepipe.io.png import png_bytes
 from wrinklepipe.metadata import MaskChannel, MaskMeta
+from wrinklepipe.metrics import Budget
 from wrinklepipe.normals import compress as nc
 from wrinklepipe.normals import mips
 from wrinklepipe.normals.dds import dds_bytes
@@ -74,7 +75,7 @@ def _quantity(pkg: WrinklePackage, t: PackedTexture) -> tuple[str, np.ndarray, f
     return enc, x, param
 
 
-def block_dds(pkg: WrinklePackage, t: PackedTexture, fmt: str, budget: nc.Budget) -> BlockResult:
+def block_dds(pkg: WrinklePackage, t: PackedTexture, fmt: str, budget: Budget) -> BlockResult:
     """``t`` as a ``fmt`` DDS with a full mip chain, if level 0 meets ``budget``."""
     enc, x, param = _quantity(pkg, t)
     version = mapping_version(pkg) if _versioned(pkg, t) else 1
@@ -86,10 +87,10 @@ def block_dds(pkg: WrinklePackage, t: PackedTexture, fmt: str, budget: nc.Budget
     check = nc.compress_and_check(stored, reference, fmt, decode, budget, keep_decoded=False)
     h, w = t.pixels.shape[:2]
     if check.verdict != "pass":
-        return BlockResult(None, fmt, check.error.mean_deg, check.error.p99_deg, 0)
+        return BlockResult(None, fmt, check.error.mean, check.error.p99, 0)
     levels = [check.data, *mips.block_levels(enc, x, fmt, param, version)]
     return BlockResult(
-        dds_bytes(fmt, w, h, levels), fmt, check.error.mean_deg, check.error.p99_deg, len(levels)
+        dds_bytes(fmt, w, h, levels), fmt, check.error.mean, check.error.p99, len(levels)
     )
 
 

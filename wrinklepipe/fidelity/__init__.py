@@ -2,7 +2,7 @@
 
 One measure (DESIGN.md section 8), used by every automatic choice and every check that judges a
 loss: :mod:`.metric` (per pose and region, activation-weighted, the base over the face),
-:mod:`.stats` (exact weighted percentiles, budgets).
+its statistics and budgets are :mod:`wrinklepipe.metrics`'s.
 """
 
 from __future__ import annotations
@@ -26,16 +26,13 @@ from wrinklepipe.fidelity.metric import (
     sample_masks_at,
     source_states,
 )
-from wrinklepipe.fidelity.stats import Budget, Stats, weighted_quantile, weighted_stats
 
 __all__ = [
-    "Budget",
     "Fidelity",
     "Pose",
     "PoseFidelity",
     "Reference",
     "Samples",
-    "Stats",
     "base_fidelity",
     "describe",
     "evaluate",
@@ -48,6 +45,4 @@ __all__ = [
     "sample_at",
     "sample_masks_at",
     "source_states",
-    "weighted_quantile",
-    "weighted_stats",
 ]

@@ -25,7 +25,7 @@ from wrinklepipe import codec
 from wrinklepipe.fidelity import metric as fm
 from wrinklepipe.fidelity import ship
 from wrinklepipe.fidelity.search import Candidate, Judge, Tried, pick_format
-from wrinklepipe.fidelity.stats import Budget
+from wrinklepipe.metrics import Budget
 from wrinklepipe.normals import compress as nc
 
 
@@ -176,7 +176,7 @@ def choose_formats(
                 "confirmed (compressed)",
                 [state_fmt, base_fmt],
                 *compressed.score(),
-                compressed.meets(budget),
+                compressed.inside(budget),
             )
         )
         # over the budget on every active texel: an automatic base, then automatic states
@@ -184,7 +184,7 @@ def choose_formats(
         over = [
             g for g, f in (("base", base_fmt), ("states", state_fmt)) if f != "png" and automatic[g]
         ]
-        if compressed.meets(budget) or not over:
+        if compressed.inside(budget) or not over:
             break
         what = over[0]
         notes.append(

@@ -31,15 +31,15 @@ from threadpoolctl import ThreadpoolController
 
 from wrinklepipe import model
 from wrinklepipe.codec.vectors import EPS
-from wrinklepipe.fidelity.stats import (
+from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
+from wrinklepipe.metrics import (
     Budget,
     Stats,
-    unit_stats,
+    angle_deg,
+    angle_deg_planes,
     weighted_stats,
     weighted_stats_many,
 )
-from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
-from wrinklepipe.normals.compress import angle_deg, angle_deg_planes
 from wrinklepipe.reuse import reused
 
 _F = np.float32
@@ -456,13 +456,16 @@ def _blend_at(
     sel: np.ndarray,
     act: np.ndarray,
     encoding: str,
+    unit: bool = True,
 ) -> np.ndarray:
     """:func:`wrinklepipe.model.combine` at positions ``sel`` under ``act`` ``[K, n]``, of
     normal planes ``base`` ``[3, N]`` and state planes ``states`` ``[K, C, N]`` -> normal planes
     ``[3, n]``. PD: the base's slope planes ``base_pd`` ``[2, N]`` (computed once for every
     pose) plus the activated slopes, summed in combine's order and decoded with
     :func:`~wrinklepipe.model.pd_to_normal`'s operations (the same float32 values); the base
-    itself where no state is active."""
+    itself where no state is active. ``unit=False`` (PD only): the directions ``(x, y, 1)``
+    left unnormalised, for the angle (:func:`wrinklepipe.metrics.angle_deg_planes` measures
+    directions, whatever their length)."""
     if encoding != "pd" or base_pd is None:
         st = np.moveaxis(states[:, :, sel], 1, -1)
         return planes(model.combine(base[:, sel].T, st, act, encoding))
@@ -482,14 +485,17 @@ def _blend_at(
             acc += term
         xy.append(np.add(base_pd[c][sel], acc, out=acc))
     x, y = xy
-    inv = x * x
-    inv += y * y
-    inv += _F(1.0)
-    np.sqrt(inv, out=inv)
-    np.reciprocal(inv, out=inv)
-    np.multiply(x, inv, out=out[0])
-    np.multiply(y, inv, out=out[1])
-    out[2] = inv
+    if unit:
+        inv = x * x
+        inv += y * y
+        inv += _F(1.0)
+        np.sqrt(inv, out=inv)
+        np.reciprocal(inv, out=inv)
+        np.multiply(x, inv, out=out[0])
+        np.multiply(y, inv, out=out[1])
+        out[2] = inv
+    else:
+        out[0], out[1], out[2] = x, y, _F(1.0)
     idle = np.flatnonzero(~np.any(act != 0, axis=0))
     if idle.size:
         at = sel[idle]
@@ -712,11 +718,17 @@ class Fidelity:
         return max((p.overall.mean for p in self.poses), default=0.0)
 
     def over(self, budget: Budget) -> list[PoseFidelity]:
-        """The poses whose overall stats break ``budget``."""
+        """The poses whose overall stats break ``budget`` (the verdict: :meth:`Budget.ok`)."""
         return [p for p in self.poses if not budget.ok(p.overall)]
 
     def meets(self, budget: Budget) -> bool:
+        """Every pose within ``budget`` by the verdict (:meth:`Budget.ok`, the validator's)."""
         return not self.over(budget)
+
+    def inside(self, budget: Budget) -> bool:
+        """Every pose inside ``budget`` unrounded (:meth:`Budget.inside`: what the automatic
+        choices require, half a printed unit inside the verdict)."""
+        return all(budget.inside(p.overall) for p in self.poses)
 
     def score(self) -> tuple[float, float]:
         """What a search minimises: worst p99, then worst mean."""
@@ -836,7 +848,7 @@ def evaluate(
     acts = ref.activations(s.masks) if s.masks is not None else None
     for pi, pr in enumerate(ref.poses):
         act, act_w = acts[pi] if acts is not None else (pr.act, None)
-        got = _blend_at(base_u, base_pd, states, pr.sel, act, ref.encoding)
+        got = _blend_at(base_u, base_pd, states, pr.sel, act, ref.encoding, unit=False)
         err = angle_deg_planes(got, planes(pr.normal))
         w = np.maximum(pr.weight, act_w if act_w is not None else _activation_weight(act))
         errs, ws = [err], [w]
@@ -904,7 +916,7 @@ def base_fidelity(
         got = planes(model.normalize(sample_at(base, ref.shape, f, reader)))
         err[at : at + f.size] = angle_deg_planes(got, _gather_planes(src, f))
         at += f.size
-    return unit_stats(err, overwrite=True)
+    return weighted_stats(err, overwrite=True)
 
 
 def measure(

@@ -17,6 +17,13 @@ smallest state size that meets the budget, the PD scale at that size (the one wi
 error, clipping included: the tool never fails its own choice), the smallest mask size that
 meets the budget, then the block formats (smallest blocks first) against the budget of the
 compressed copies. A choice fixed in the manifest is measured, not searched.
+
+Every candidate is judged inside the budget by :meth:`wrinklepipe.metrics.Budget.inside` (the
+unrounded statistics), which the validator's verdict (:meth:`~wrinklepipe.metrics.Budget.ok`,
+at the printed decimals) always accepts: a pick is half a printed unit inside what the
+validator can reject. A block format whose screen passed but whose confirmation on every
+active texel does not is not shipped: the next one is tried (the states' format first, then
+the base's), down to no compressed copy.
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ import numpy as np
 from wrinklepipe import reuse
 from wrinklepipe.fidelity import metric as fm
 from wrinklepipe.fidelity import pyramid, ship
-from wrinklepipe.fidelity.stats import Budget
+from wrinklepipe.metrics import Budget
 
 _F = np.float32
 
@@ -133,21 +140,13 @@ class Choice:
             "base_format": self.base_format,
             "state_format": self.state_format,
             "clipped_texels": self.clipped_texels,
-            "budget": _budget_json(self.budget),
-            "compressed_budget": _budget_json(self.compressed_budget),
+            "budget": self.budget.to_json(),
+            "compressed_budget": self.compressed_budget.to_json(),
             "png": self.png.to_json(),
             "compressed": None if self.compressed is None else self.compressed.to_json(),
             "tried": [t.to_json() for t in self.tried],
             "notes": self.notes,
         }
-
-
-def _budget_json(b: Budget) -> dict[str, float]:
-    return {
-        k: v
-        for k, v in (("max_mean_deg", b.mean), ("max_p99_deg", b.p99), ("max_max_deg", b.max))
-        if v is not None
-    }
 
 
 # ------------------------------------------------------------------------------------------------
@@ -236,8 +235,8 @@ class Judge:
         self, budget: Budget, tried: list[Tried], step: str, value: Any, make: Candidate
     ) -> bool:
         f = self.run(False, make)
-        tried.append(Tried(step, value, *f.score(), f.meets(budget), self.screens))
-        return f.meets(budget)
+        tried.append(Tried(step, value, *f.score(), f.inside(budget), self.screens))
+        return f.inside(budget)
 
 
 Candidate = Callable[[fm.Reference], dict[str, Any]]
@@ -381,7 +380,7 @@ def search(
                 tried.append(Tried(f"{label} (clips, WP-MAP-004)", s, 0.0, 0.0, False))
                 continue
             f = judge.run(False, states(size, s))
-            tried.append(Tried(label, s, *f.score(), f.meets(budget), judge.screens))
+            tried.append(Tried(label, s, *f.score(), f.inside(budget), judge.screens))
             if best is None or f.score() < best[0]:
                 best = (f.score(), s)
         return best[1]
@@ -414,6 +413,8 @@ def search(
         )
     judge.set("masks", masks(mask_size))
     face = ref.face_texels(o.screen_texels)
+    # formats a screen passed but the confirmation on every active texel did not: not shipped
+    refused: dict[str, set[str]] = {"state": set(), "base": set()}
 
     def formats(size: int, scale: float) -> _Formats:
         """6. block formats for the compressed copies (states first, then the base), screened
@@ -469,7 +470,7 @@ def search(
         state_fmt = pick_format(
             judge,
             fx.state_format,
-            o.formats,
+            [f for f in o.formats if f not in refused["state"]],
             cbudget,
             found,
             "state format",
@@ -481,7 +482,7 @@ def search(
         base_fmt = pick_format(
             judge,
             fx.base_format,
-            o.formats,
+            [f for f in o.formats if f not in refused["base"]],
             cbudget,
             found,
             "base format",
@@ -525,9 +526,9 @@ def search(
             lambda: judge.run(True, parts=kept),
         ],
     )
-    tried.append(Tried("confirmed (png)", [size, mask_size], *png.score(), png.meets(budget)))
+    tried.append(Tried("confirmed (png)", [size, mask_size], *png.score(), png.inside(budget)))
     raised = False
-    while not png.meets(budget) and (
+    while not png.inside(budget) and (
         (fx.mask is None and mask_size < m0) or (fx.wrinkle is None and size < H)
     ):
         raised = True
@@ -540,8 +541,8 @@ def search(
                 scale = best_scale(size, "pd_scale")
             judge.set("states", states(size, scale))
         png = judge.run(True)
-        tried.append(Tried("raised (png)", [size, mask_size], *png.score(), png.meets(budget)))
-    if not png.meets(budget):
+        tried.append(Tried("raised (png)", [size, mask_size], *png.score(), png.inside(budget)))
+    if not png.inside(budget):
         notes.append(
             f"over the budget ({budget.describe()} degrees inside the active regions) even at "
             f"{size}^2 states and {mask_size}^2 masks: worst {png.worst.pose} p99 "
@@ -551,23 +552,40 @@ def search(
     if raised:
         fmts = formats(size, scale)
         compressed = confirm_compressed(fmts)
-    tried.extend(fmts.tried)
-    state_fmt, base_fmt = fmts.state, fmts.base
-    if compressed is not None:
+    while True:
+        tried.extend(fmts.tried)
+        if compressed is None:
+            break
+        inside = compressed.inside(cbudget)
         tried.append(
-            Tried(
-                "confirmed (compressed)",
-                [state_fmt, base_fmt],
-                *compressed.score(),
-                compressed.meets(cbudget),
-            )
+            Tried("confirmed (compressed)", [fmts.state, fmts.base], *compressed.score(), inside)
         )
-        if not compressed.meets(cbudget):
+        if inside:
+            break
+        # the screen passed, every active texel does not: that format is not shipped (the
+        # states' first, then the base's), unless the manifest fixes it
+        part = next(
+            (
+                (name, f)
+                for name, f, fixed_f in (
+                    ("state", fmts.state, fx.state_format),
+                    ("base", fmts.base, fx.base_format),
+                )
+                if f != "png" and fixed_f in (None, "auto")
+            ),
+            None,
+        )
+        if part is None:
             notes.append(
                 f"compressed copies over their budget ({cbudget.describe()} degrees) on every "
                 f"active texel: worst {compressed.worst.pose} p99 "
                 f"{compressed.worst.overall.p99:.2f}"
             )
+            break
+        refused[part[0]].add(part[1])
+        fmts = formats(size, scale)
+        compressed = confirm_compressed(fmts)
+    state_fmt, base_fmt = fmts.state, fmts.base
     return Choice(
         wrinkle_size=size,
         mask_size=mask_size,
@@ -687,7 +705,7 @@ def pick_format(
         ok = judge.screen(budget, tried, step, f, make)
         if ok and alone is not None:
             a = alone(make)
-            ok = budget.ok(a)
+            ok = budget.inside(a)
             if not ok:
                 tried.append(Tried(step + " (base alone)", f, a.p99, a.mean, False))
         if ok and not chosen and keeps is not None:

@@ -20,9 +20,8 @@ Stored texels are integers under the codec's value mapping; :func:`decoder_for` 
 exactly (or sampled 8-bit values in [0, 1] with the shaders' arithmetic).
 
 Error metrics: the angle between the decoded and the reference unit normals (mean, p99, max,
-degrees), PSNR per stored channel against the uncompressed 8-bit texels. The p99 is exact
-(nearest rank: the value at rank ``ceil(0.99 n)``), found through a histogram then a partial
-sort of one bin, so large maps need no full sort.
+degrees) by the one measure (:mod:`wrinklepipe.metrics`: its angle, its nearest-rank p99, its
+budget verdict), PSNR per stored channel against the uncompressed 8-bit texels.
 """
 
 from __future__ import annotations
@@ -42,9 +41,10 @@ import quicktex.s3tc.bc3 as quicktex_bc3
 import texture2ddecoder
 
 from wrinklepipe import codec
-from wrinklepipe.normals import _chunks, bc4
+from wrinklepipe.metrics import Budget, Stats, angle_deg, angle_deg_planes, weighted_stats
+from wrinklepipe.normals import bc4
 from wrinklepipe.normals import encode as enc
-from wrinklepipe.normals._chunks import map_rows, pool, threads
+from wrinklepipe.normals._chunks import map_rows
 from wrinklepipe.normals.blocks import encode_distinct
 from wrinklepipe.reuse import reused
 
@@ -276,131 +276,17 @@ def unpack_u8(
 # error metrics
 
 
-@dataclass(frozen=True)
-class ErrorStats:
-    """Angular error in degrees over ``texels`` texels: mean, p99 (nearest rank) and max."""
-
-    mean_deg: float
-    p99_deg: float
-    max_deg: float
-    texels: int
-
-    def to_json(self) -> dict[str, float | int]:
-        return {
-            "mean_deg": round(self.mean_deg, 6),
-            "p99_deg": round(self.p99_deg, 6),
-            "max_deg": round(self.max_deg, 6),
-            "texels": self.texels,
-        }
-
-    def within(self, max_mean_deg: float | None = None, max_p99_deg: float | None = None) -> bool:
-        ok = True
-        if max_mean_deg is not None:
-            ok &= self.mean_deg <= max_mean_deg
-        if max_p99_deg is not None:
-            ok &= self.p99_deg <= max_p99_deg
-        return bool(ok)
-
-
-_DEG = _F(360.0 / math.pi)  # 2 * degrees(asin(c / 2)) = (360 / pi) * asin(c / 2)
-
-
-def angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle (degrees, float32) between unit vectors ``[..., 3]``: ``2 asin(|a - b| / 2)``.
-
-    Well conditioned near 0 (unlike ``acos`` of the dot product in float32); exact for unit
-    inputs, which is what every caller passes.
-    """
-    a = np.asarray(a, dtype=_F)
-    b = np.asarray(b, dtype=_F)
-    return angle_deg_planes(np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0))
-
-
-def angle_deg_planes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`angle_deg` of float32 vectors stored as component planes ``[3, ...]`` (the
-    fidelity measure's layout); the same float32 operations in the same order."""
-    d = a[0] - b[0]
-    c2 = d * d
-    for c in (1, 2):
-        np.subtract(a[c], b[c], out=d)
-        d *= d
-        c2 += d
-    np.sqrt(c2, out=c2)
-    c2 *= _F(0.5)
-    np.minimum(c2, _F(1.0), out=c2)
-    np.arcsin(c2, out=c2)
-    c2 *= _DEG
-    return c2
-
-
-def _flat_parts(n: int) -> list[slice]:
-    step = max(1, _chunks.CHUNK_TEXELS)
-    return [slice(i, min(i + step, n)) for i in range(0, n, step)]
-
-
-def _pmap(fn: Callable[[slice], Any], parts: list[slice]) -> list[Any]:
-    if len(parts) > 1 and threads() > 1:
-        return list(pool().map(fn, parts))
-    return [fn(s) for s in parts]
-
-
-def _sum(a: np.ndarray) -> float:
-    return float(sum(_pmap(lambda s: float(a[s].sum(dtype=np.float64)), _flat_parts(a.size))))
-
-
-def _p99_max(a: np.ndarray) -> tuple[float, float]:
-    """Exact nearest-rank p99 and max of a flat float32 array without a full sort.
-
-    A sample of 65 536 values gives ``lo`` safely below the p99 (98th percentile of the
-    sample: ten standard errors below); only the values >= lo (about 2 %) are collected and
-    partially sorted. If the guess was too high, all values are used.
-    """
-    n = int(a.size)
-    k = max(0, math.ceil(0.99 * n) - 1)
-    lo = -np.inf
-    if n > 1 << 16:
-        # a fixed pseudo-random sample (a stride could alias with image columns)
-        idx = np.random.default_rng(0x5EED).integers(0, n, 1 << 16)
-        lo = _F(np.percentile(a[idx], 98.0))
-    parts = _flat_parts(n)
-    cand = np.concatenate(_pmap(lambda s: a[s][a[s] >= lo], parts))
-    below = n - int(cand.size)
-    if below > k:  # the sample misled us: use everything
-        cand, below = a, 0
-    r = k - below
-    return float(np.partition(cand, r)[r]), float(cand.max())
-
-
-def error_stats(
-    angles: np.ndarray,
-    mask: np.ndarray | None = None,
-    unit: float = 1.0,
-    total: float | None = None,
-) -> ErrorStats:
-    """Mean / p99 (nearest rank, exact) / max of per-texel angles, in degrees.
-
-    ``unit`` converts the input to degrees (e.g. ``360 / pi`` for half-angles in radians);
-    ``total`` is the sum of the angles when the caller already has it (chunked kernels).
-    NaN angles are counted as 180 degrees (a texel that decodes to nothing is wrong).
-    """
+def error_stats(angles: np.ndarray, mask: np.ndarray | None = None) -> Stats:
+    """Mean / p99 / max of per-texel angles in degrees (every texel weighs 1; ``mask``: only
+    those texels), by :func:`wrinklepipe.metrics.weighted_stats`."""
     a = np.asarray(angles, dtype=_F)
     if mask is not None:
         a = a[np.asarray(mask, dtype=bool)]
-    a = a.ravel()
-    n = int(a.size)
-    if n == 0:
-        return ErrorStats(0.0, 0.0, 0.0, 0)
-    if total is None or mask is not None:
-        total = _sum(a)
-    if not math.isfinite(total):
-        a = np.where(np.isnan(a), _F(180.0 / unit), a)
-        total = _sum(a)
-    p99, mx = _p99_max(a)
-    return ErrorStats(mean_deg=total / n * unit, p99_deg=p99 * unit, max_deg=mx * unit, texels=n)
+    return weighted_stats(a)
 
 
-def angular_error_stats(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None) -> ErrorStats:
-    """:class:`ErrorStats` of the angle between unit normals ``a`` and ``b`` ``[..., 3]``."""
+def angular_error_stats(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None) -> Stats:
+    """:func:`error_stats` of the angle between normals ``a`` and ``b`` ``[..., 3]``."""
     return error_stats(angle_deg(a, b), mask)
 
 
@@ -428,10 +314,10 @@ class FormatCheck:
     width: int
     height: int
     bytes: int
-    error: ErrorStats  # decoded normals vs the reference (float) normals
-    compression_error: ErrorStats  # decoded vs the uncompressed 8-bit map (the codec's share)
+    error: Stats  # decoded normals vs the reference (float) normals
+    compression_error: Stats  # decoded vs the uncompressed 8-bit map (the codec's share)
     psnr_db: list[float]
-    blended: dict[str, ErrorStats] = field(default_factory=dict)  # weight -> error of the blend
+    blended: dict[str, Stats] = field(default_factory=dict)  # weight -> error of the blend
     verdict: str = "pass"
     padded: bool = False
     data: bytes = b""  # level-0 block data (what a DDS/KTX2 writer stores)
@@ -450,17 +336,6 @@ class FormatCheck:
             "verdict": self.verdict,
             "padded": self.padded,
         }
-
-
-@dataclass(frozen=True)
-class Budget:
-    """Error budget in degrees (``None``: no limit)."""
-
-    max_mean_deg: float | None = None
-    max_p99_deg: float | None = 2.0
-
-    def ok(self, e: ErrorStats) -> bool:
-        return e.within(self.max_mean_deg, self.max_p99_deg)
 
 
 #: Representative activations at which the blended result is checked.
@@ -572,16 +447,16 @@ def compress_and_check(
             check.blended[f"{wgt:g}"] = angular_error_stats(got, want)
     if budget is not None:
         worst = [check.error] + list(check.blended.values())
-        check.verdict = "pass" if all(budget.ok(e) for e in worst) else "fail"
+        check.verdict = "pass" if all(budget.inside(e) for e in worst) else "fail"
     return check
 
 
 def choose_format(checks: Sequence[FormatCheck], budget: Budget) -> FormatCheck | None:
     """The check with the fewest bytes that meets the budget (ties: lower mean error)."""
-    ok = [c for c in checks if all(budget.ok(e) for e in [c.error, *c.blended.values()])]
+    ok = [c for c in checks if all(budget.inside(e) for e in [c.error, *c.blended.values()])]
     if not ok:
         return None
-    return min(ok, key=lambda c: (c.bytes, c.error.mean_deg, FORMATS.index(c.format)))
+    return min(ok, key=lambda c: (c.bytes, c.error.mean, FORMATS.index(c.format)))
 
 
 # ------------------------------------------------------------------------------------------
@@ -698,44 +573,34 @@ def _pd_pack_chunk(
 def _pd_measure_chunk(
     raw: np.ndarray, p: np.ndarray, s: float, fmt: str, out: np.ndarray, version: int
 ) -> np.ndarray:
-    """Half-angles ``asin(|n - ref| / 2)`` of decoded PD texels (BGRA) against normal planes.
+    """Angles in degrees (:func:`wrinklepipe.metrics.angle_deg_planes`, into ``out``) between
+    decoded PD texels (BGRA) and normal planes ``p``.
 
     With ``u = q - c`` (texel units; v2 clamps at -h like the codec) the decoded slope is
     ``u t`` (``t = s / h``), so ``n = (u_x, u_y, 1 / t) / sqrt(u_x^2 + u_y^2 + 1 / t^2)``.
     """
     c, half = codec.mapping(version).centre(8)
-    rx, ry, rz = p
-    shape = rx.shape
+    shape = p.shape[1:]
     ix, iy = _BGRA_XY[fmt]
     kk = _F((half / s) ** 2)  # 1 / t^2
     kz = _F(half / s)  # 1 / t
     v = raw.view(np.uint32).reshape(shape)
-    dx = _byte_plane(v, ix, _ws("f0", shape), c)
-    dy = _byte_plane(v, iy, _ws("f1", shape), c)
+    n = _ws("n", (3,) + shape)
+    dx = _byte_plane(v, ix, n[0], c)
+    dy = _byte_plane(v, iy, n[1], c)
     if version >= 2:
         np.maximum(dx, _F(-half), out=dx)
         np.maximum(dy, _F(-half), out=dy)
-    inv = np.multiply(dx, dx, out=_ws("f2", shape))
+    inv = np.multiply(dx, dx, out=n[2])
     a = np.multiply(dy, dy, out=_ws("f3", shape))
     inv += a
     inv += kk
     np.sqrt(inv, out=inv)
     np.divide(_F(1.0), inv, out=inv)
     dx *= inv  # nx
-    dx -= rx
-    dx *= dx
     dy *= inv  # ny
-    dy -= ry
-    dy *= dy
-    dx += dy
     inv *= kz  # nz
-    inv -= rz
-    inv *= inv
-    dx += inv
-    dx *= _F(0.25)
-    np.sqrt(dx, out=dx)
-    # |a - b| / 2 <= 1 for unit vectors; a NaN here (non-unit input) counts as 180 degrees
-    return np.arcsin(dx, out=out)
+    return angle_deg_planes(n, p, out=out)
 
 
 def pd_pack(
@@ -760,18 +625,19 @@ def pd_decode_error(
     scale: float,
     fmt: str = "bc5",
     version: int = codec.CURRENT_VERSION,
-) -> ErrorStats:
+) -> Stats:
     """Angular error of decoded PD texels (texture2ddecoder's BGRA) against unit normals."""
     n = np.asarray(normals, dtype=_F)
     h, w = n.shape[:2]
     raw = np.ascontiguousarray(bgra[:h, :w])
-    half = np.empty((h, w), dtype=_F)
+    angles = np.empty((h, w), dtype=_F)
 
     def work(rows: slice) -> None:
-        _pd_measure_chunk(raw[rows], _half_planes(n[rows]), float(scale), fmt, half[rows], version)
+        p = _half_planes(n[rows])
+        _pd_measure_chunk(raw[rows], p, float(scale), fmt, angles[rows], version)
 
     map_rows(work, h, w)
-    return error_stats(half, unit=360.0 / math.pi)
+    return error_stats(angles)
 
 
 @dataclass
@@ -784,7 +650,7 @@ class PDCheck:
     scale: float
     clipped: int
     data: bytes
-    error: ErrorStats  # decoded (texture2ddecoder) vs the source normals
+    error: Stats  # decoded (texture2ddecoder) vs the source normals
     padded: bool = False
 
 
@@ -818,7 +684,7 @@ def pd_compress_check(
     if padded:
         n, _ = pad_to_blocks(n)
     hp, wp = n.shape[:2]
-    half = np.empty((hp, wp), dtype=_F)
+    angles = np.empty((hp, wp), dtype=_F)
 
     rgba = np.empty((hp, wp, 4), dtype=np.uint8)
     targets = np.empty((hp, wp, 2), dtype=_F)
@@ -833,17 +699,14 @@ def pd_compress_check(
     data = encode_bc(rgba, fmt, targets)  # one call: the encoder's choices see the whole map
     bgra = decode_bc_bgra(data, wp, hp, fmt)
 
-    def measure(rows: slice) -> float:
-        ang = _pd_measure_chunk(bgra[rows], _half_planes(n[rows]), s, fmt, half[rows], version)
-        return float(ang.sum())  # float32 pairwise sum, while in cache
+    def measure(rows: slice) -> None:
+        _pd_measure_chunk(bgra[rows], _half_planes(n[rows]), s, fmt, angles[rows], version)
 
-    total: float | None = sum(map_rows(measure, hp, wp))
+    map_rows(measure, hp, wp)
     if padded:
         clipped = enc.pd_clipped_count(src, s)
-        half = np.ascontiguousarray(half[:h, :w])
-        total = None
-    unit = 360.0 / math.pi
-    err = error_stats(half, unit=unit, total=total)
+        angles = np.ascontiguousarray(angles[:h, :w])
+    err = error_stats(angles)
     if angles_out is not None:
-        np.multiply(half, _F(unit), out=angles_out)
+        np.copyto(angles_out, angles)
     return PDCheck(fmt, w, h, s, int(clipped), data, err, padded)

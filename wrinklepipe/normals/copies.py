@@ -26,6 +26,7 @@ import numpy as np
 
 from wrinklepipe import codec
 from wrinklepipe.metadata import CompressedCopy
+from wrinklepipe.metrics import Budget
 from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import mips, uastc
 from wrinklepipe.normals.dds import dds_bytes
@@ -100,7 +101,7 @@ def _decoder(m: _Map, base: np.ndarray | None):  # noqa: ANN202 - compress.decod
 
 
 def _check(
-    m: _Map, fmt: str, budget: cmp.Budget, base: np.ndarray | None, with_mips: bool = True
+    m: _Map, fmt: str, budget: Budget, base: np.ndarray | None, with_mips: bool = True
 ) -> cmp.FormatCheck:
     q = _components(m, fmt)
     decode = _decoder(m, base)
@@ -190,7 +191,7 @@ def compressed_copies(
     report (requested, chosen, layout, levels and every check tried).
     """
     budget = budget or {}
-    limits = cmp.Budget(budget.get("max_mean_deg"), budget.get("max_p99_deg", 2.0))
+    limits = Budget(budget.get("max_mean_deg"), budget.get("max_p99_deg", 2.0))
     formats = formats or {}
     meta = pkg.meta
     enc = meta.encoding
@@ -258,11 +259,11 @@ def compressed_copies(
             pick = passing[0]
         else:
             pick = None
-            best = min(checks, key=lambda f: max(c.error.mean_deg for c in checks[f]))
-            worst = max(checks[best], key=lambda c: c.error.mean_deg)
+            best = min(checks, key=lambda f: max(c.error.mean for c in checks[f]))
+            worst = max(checks[best], key=lambda c: c.error.mean)
             notes.append(
                 f"{group}: no block format meets the budget (best {best}: mean "
-                f"{worst.error.mean_deg:.2f}, p99 {worst.error.p99_deg:.2f} deg); PNG only"
+                f"{worst.error.mean:.2f}, p99 {worst.error.p99:.2f} deg); PNG only"
             )
         made = (
             []

@@ -17,6 +17,7 @@ import numpy as np
 from wrinklepipe import codec
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, write_image
+from wrinklepipe.metrics import Budget, Stats
 from wrinklepipe.model import normal_to_pd, normalize, pd_to_normal
 from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import dds as dds_mod
@@ -182,7 +183,7 @@ def encode_normals(
             f"base is {b_n.shape[1]} x {b_n.shape[0]}, the map {w_n.shape[1]} x {w_n.shape[0]}",
         )
     notes: list[str] = list(nm.notes)
-    budget = cmp.Budget(o.max_mean_deg, o.max_p99_deg)
+    budget = Budget(o.max_mean_deg, o.max_p99_deg)
     h0, w0 = w_n.shape[:2]
 
     # --- resize (in PD space for pd, renormalised otherwise)
@@ -226,7 +227,7 @@ def encode_normals(
     if fmt in ("png8", "png16", "exr"):
         data, err = _plain(x, fmt, container, o.encoding, params, b_n, truth)
         report["format"] = {"name": fmt, "error": err.to_json(), "bytes": len(data)}
-        ok = budget.ok(err)
+        ok = budget.inside(err)
         report["verdict"] = "pass" if ok else "fail"
         report["footprint"] = fp.footprint(
             [(out.name, "rgb16" if fmt != "png8" else "rgb8", w, h, False)]
@@ -279,7 +280,7 @@ def encode_normals(
         )
     chosen = cmp.choose_format(checks, budget) if fmt == "auto" else checks[0]
     if chosen is None:
-        chosen = min(checks, key=lambda c: c.error.p99_deg)
+        chosen = min(checks, key=lambda c: c.error.p99)
         notes.append(f"no format meets the budget; wrote the best one ({chosen.format})")
     levels = [chosen.data]
     if o.mips:
@@ -332,7 +333,7 @@ def _plain(
     params: dict[str, Any],
     base: np.ndarray | None,
     truth: np.ndarray,
-) -> tuple[bytes, cmp.ErrorStats]:
+) -> tuple[bytes, Stats]:
     """Bytes of a PNG/TIFF/EXR file of the map (RGB: pd keeps B = 0) and the error of its
     stored texels."""
 
@@ -357,12 +358,12 @@ def _plain(
 
 
 def _auto_size(
-    w_n: np.ndarray, b_n: np.ndarray | None, encoding: str, budget: cmp.Budget
-) -> tuple[int, dict[int, cmp.ErrorStats]]:
+    w_n: np.ndarray, b_n: np.ndarray | None, encoding: str, budget: Budget
+) -> tuple[int, dict[int, Stats]]:
     """Smallest power-of-two side whose reduce-then-magnify error fits the budget."""
     h, w = w_n.shape[:2]
     full = max(h, w)
-    tried: dict[int, cmp.ErrorStats] = {}
+    tried: dict[int, Stats] = {}
     s = 16
     while s < full:
         th, tw = (s, max(1, round(w * s / h))) if h >= w else (max(1, round(h * s / w)), s)
@@ -371,7 +372,7 @@ def _auto_size(
         back = resample.resize_normals(small, (h, w), space=space, filter="triangle")
         e = cmp.angular_error_stats(back, w_n)
         tried[s] = e
-        if budget.ok(e):
+        if budget.inside(e):
             return s, tried
         s *= 2
     return full, tried

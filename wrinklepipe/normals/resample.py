@@ -27,8 +27,9 @@ import numpy as np
 import OpenImageIO as oiio
 from scipy import sparse
 
+from wrinklepipe.metrics import Budget, Stats
 from wrinklepipe.model import blend, normal_to_pd, normalize, pd_to_normal
-from wrinklepipe.normals.compress import Budget, ErrorStats, angular_error_stats
+from wrinklepipe.normals.compress import angular_error_stats
 from wrinklepipe.reuse import reused
 
 _F = np.float32
@@ -196,13 +197,13 @@ def reduction_error(
     size: int,
     policy: str = "clamp01",
     filter: str = DEFAULT_FILTER,
-) -> ErrorStats:
+) -> Stats:
     """Angular error of the blended face when the PD states are stored at ``size`` x ``size``.
 
     base [H, W, 3] unit normals, states_pd [K, H, W, 2] PD slopes, masks [R, H, W], weights a
     list of [R, K] matrices (representative expressions). The states are reduced with
     ``filter`` and magnified back with a bilinear (triangle) filter; the worst texels over all
-    weights are pooled into one :class:`ErrorStats`.
+    weights are pooled into one :class:`Stats`.
     """
 
     st = np.asarray(states_pd, dtype=_F)
@@ -226,13 +227,13 @@ def auto_size(
     budget: Budget,
     min_size: int = 16,
     policy: str = "clamp01",
-) -> tuple[int, dict[int, ErrorStats]]:
+) -> tuple[int, dict[int, Stats]]:
     """The smallest power-of-two size (>= ``min_size``) whose reduction error meets ``budget``.
 
-    Returns ``(size, {size: ErrorStats})`` for every size tried (full size always fits).
+    Returns ``(size, {size: Stats})`` for every size tried (full size always fits).
     """
     full = int(np.asarray(states_pd).shape[1])
-    tried: dict[int, ErrorStats] = {}
+    tried: dict[int, Stats] = {}
     sizes = []
     s = full
     while s >= min_size:
@@ -242,7 +243,7 @@ def auto_size(
     for s in sorted(sizes):  # smallest first; stop at the first that fits
         e = reduction_error(base, states_pd, masks, weights, s, policy)
         tried[s] = e
-        if budget.ok(e):
+        if budget.inside(e):
             best = s
             break
     return best, tried

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import OpenImageIO as oiio
 
+from wrinklepipe.metrics import Budget
 from wrinklepipe.normals import compress as cmp
 
 
@@ -96,7 +97,7 @@ def uastc_check(
     stored_u8: np.ndarray,
     reference: np.ndarray,
     decode: Any,
-    budget: cmp.Budget | None = None,
+    budget: Budget | None = None,
     mips: bool = True,
     ktx2: bytes | None = None,
 ) -> tuple[cmp.FormatCheck, bytes]:
@@ -124,5 +125,5 @@ def uastc_check(
         decoded=np.ascontiguousarray(dec),
     )
     if budget is not None:
-        check.verdict = "pass" if budget.ok(check.error) else "fail"
+        check.verdict = "pass" if budget.inside(check.error) else "fail"
     return check, ktx

@@ -8,11 +8,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from wrinklepipe import __version__, model
+from wrinklepipe import __version__
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.atomic import dumps_json, write_bytes
+from wrinklepipe.metrics import angle_deg, weighted_stats
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.pipeline.package import asset_from_package
 
@@ -51,12 +50,8 @@ def decode_errors(asset: WrinkleAsset, pkg: WrinklePackage) -> dict[str, dict[st
     back = asset_from_package(pkg)
     out = {}
     for k, name in enumerate(asset.state_names):
-        e = model.angular_error_deg(asset.states[k], back.states[k]).ravel()
-        out[name] = {
-            "mean_deg": round(float(e.mean()), 6),
-            "p99_deg": round(float(np.percentile(e, 99)), 6),
-            "max_deg": round(float(e.max()), 6),
-        }
+        st = weighted_stats(angle_deg(asset.states[k], back.states[k]))
+        out[name] = {k: v for k, v in st.to_json().items() if k.endswith("_deg")}
     return out
 
 

@@ -23,6 +23,7 @@ from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.fidelity import formats as ff
 from wrinklepipe.fidelity import search as fs
 from wrinklepipe.fidelity import ship
+from wrinklepipe.metrics import Budget
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.pipeline.package import resize_normals_pd
 
@@ -64,13 +65,13 @@ def can_measure(asset: WrinkleAsset, poses: Sequence[fd.Pose] | None = None) -> 
     return ""
 
 
-def budgets(budget: dict[str, float]) -> tuple[fd.Budget, fd.Budget]:
+def budgets(budget: dict[str, float]) -> tuple[Budget, Budget]:
     """The PNG budget and the compressed copies' (``compressed_max_*``, else the same)."""
-    png = fd.Budget.from_dict(budget)
-    if png.mean is None and png.p99 is None and png.max is None:
-        png = fd.Budget(0.5, 2.0)
-    comp = fd.Budget.from_dict(budget, "compressed_")
-    if comp.mean is None and comp.p99 is None and comp.max is None:
+    png = Budget.from_dict(budget)
+    if png.empty:
+        png = Budget(0.5, 2.0)
+    comp = Budget.from_dict(budget, "compressed_")
+    if comp.empty:
         comp = png
     return png, comp
 

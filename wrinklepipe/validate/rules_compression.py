@@ -6,6 +6,7 @@ import numpy as np
 
 from wrinklepipe import fidelity as fd
 from wrinklepipe import model
+from wrinklepipe.metrics import DECIMALS, Budget, Stats, angle_deg, weighted_stats
 from wrinklepipe.validate import rules_fidelity
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
@@ -39,21 +40,16 @@ def check_formats(ctx: Context) -> list[Issue]:
     return out
 
 
-def _budget(ctx: Context) -> tuple[float, float]:
+def _budget(ctx: Context) -> Budget:
     b = ctx.asset.budget or {}
     mean, p99 = ctx.options.default_budget
-    return float(b.get("max_mean_deg", mean)), float(b.get("max_p99_deg", p99))
-
-
-def _stats(err: np.ndarray) -> tuple[float, float, float]:
-    e = err.reshape(-1)
-    return float(e.mean()), float(np.percentile(e, 99)), float(e.max())
+    return Budget(float(b.get("max_mean_deg", mean)), float(b.get("max_p99_deg", p99)))
 
 
 def shipping_errors(
     ctx: Context, shipped: tuple[np.ndarray, np.ndarray, np.ndarray]
-) -> dict[str, tuple[float, float, float, np.ndarray]]:
-    """Per expression: (mean, p99, max, error map) of shipped vs source on the grid."""
+) -> dict[str, tuple[Stats, np.ndarray]]:
+    """Per expression: the statistics and the error map of shipped vs source on the grid."""
     a = ctx.asset
     src = ctx.source_on_grid
     out = {}
@@ -61,8 +57,8 @@ def shipping_errors(
         w = ctx.weights(expr)
         n_src = model.blend(src[0], src[1], src[2], w, a.encoding, a.policy)
         n_ship = model.blend(shipped[0], shipped[1], shipped[2], w, a.encoding, a.policy)
-        err = model.angular_error_deg(n_ship, n_src).astype(np.float32)
-        out[expr or "neutral"] = (*_stats(err), err)
+        err = angle_deg(n_ship, n_src)
+        out[expr or "neutral"] = (weighted_stats(err), err)
     return out
 
 
@@ -78,31 +74,30 @@ def check_compression(ctx: Context) -> list[Issue]:
         or not a.state_names
     ):
         return out
-    mean_b, p99_b = _budget(ctx)
+    budget = _budget(ctx)
     errs = shipping_errors(ctx, ctx.shipped_on_grid)
     ctx.metrics["shipping_error_deg"] = {
-        e: {"mean": round(m, 4), "p99": round(p, 4), "max": round(x, 4)}
-        for e, (m, p, x, _) in errs.items()
+        e: {k: round(v, DECIMALS) for k, v in (("mean", s.mean), ("p99", s.p99), ("max", s.max))}
+        for e, (s, _) in errs.items()
     }
-    ctx.metrics["shipping_error_maps"] = {e: v[3] for e, v in errs.items()}
-    over = [(e, m, p) for e, (m, p, _, _) in errs.items() if m > mean_b or p > p99_b]
+    ctx.metrics["shipping_error_maps"] = {e: v[1] for e, v in errs.items()}
+    over = [(e, s) for e, (s, _) in errs.items() if not budget.ok(s)]
     if over:
-        worst = max(over, key=lambda x: x[2])
+        worst = max(over, key=lambda x: x[1].p99)
         out.append(
             make_issue(
                 "WP-TEX-005",
-                f"{len(over)} of {len(errs)} poses over the budget (mean {mean_b:g}, p99 "
-                f"{p99_b:g} degrees); worst {worst[0]}: mean {worst[1]:.2f}, p99 "
-                f"{worst[2]:.2f}",
+                f"{len(over)} of {len(errs)} poses over the budget ({budget.describe()} "
+                f"degrees); worst {worst[0]}: mean {worst[1].mean:.2f}, p99 {worst[1].p99:.2f}",
                 inp.pointer("textures"),
             )
         )
     elif ctx.options.half_res_check:
-        out += _half_resolution(ctx, mean_b, p99_b)
+        out += _half_resolution(ctx, budget)
     return out
 
 
-def _half_resolution(ctx: Context, mean_b: float, p99_b: float) -> list[Issue]:
+def _half_resolution(ctx: Context, budget_grid: Budget) -> list[Issue]:
     """Would the states at half size still meet the budget? Then the extra bytes are wasted."""
     a = ctx.asset
     texs = ctx.inp.state_textures()
@@ -128,8 +123,8 @@ def _half_resolution(ctx: Context, mean_b: float, p99_b: float) -> list[Issue]:
                 g = model.normalize(g)
             half.append(g)
         errs = shipping_errors(ctx, (base, np.stack(half).astype(np.float32), masks))
-        ok = all(m <= mean_b and p <= p99_b for m, p, _, _ in errs.values())
-        worst = max(p for _, p, _, _ in errs.values())
+        ok = all(budget_grid.ok(s) for s, _ in errs.values())
+        worst = max(s.p99 for s, _ in errs.values())
     if ok:
         wasted = sum(len(t.data) for t in texs) * 3 // 4
         return [

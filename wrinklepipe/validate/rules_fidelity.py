@@ -22,7 +22,7 @@ import numpy as np
 from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.masks import infer_side
-from wrinklepipe.normals.compress import angle_deg
+from wrinklepipe.metrics import Budget, Stats, angle_deg, weighted_stats
 from wrinklepipe.validate import fidelity_pictures as fp
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
@@ -49,19 +49,19 @@ def poses(ctx: Context) -> list[fd.Pose]:
     return c["poses"]
 
 
-def budgets(ctx: Context) -> tuple[fd.Budget, str]:
+def budgets(ctx: Context) -> tuple[Budget, str]:
     """The budget that applies and which one: the compressed copies' when a base or state
     texture is block-compressed (``compressed_max_*``, else the same), else the budget."""
     b = ctx.asset.budget or {}
     mean, p99 = ctx.options.default_budget
-    png = fd.Budget(
+    png = Budget(
         float(b.get("max_mean_deg", mean)), float(b.get("max_p99_deg", p99)), b.get("max_max_deg")
     )
     block = any(t.is_block for t in ctx.inp.textures if t.role in ("base", "state"))
     if not block:
         return png, "budget"
-    comp = fd.Budget.from_dict(b, "compressed_")
-    if comp.mean is None and comp.p99 is None and comp.max is None:
+    comp = Budget.from_dict(b, "compressed_")
+    if comp.empty:
         return png, "budget"
     return comp, "compressed budget"
 
@@ -165,7 +165,7 @@ def check_fidelity(ctx: Context) -> list[Issue]:
         return []
     budget, which = budgets(ctx)
     where = ctx.inp.pointer("textures")
-    ctx.metrics["fidelity"] = {**fid.to_json(), "budget": _budget_json(budget), "applies": which}
+    ctx.metrics["fidelity"] = {**fid.to_json(), "budget": budget.to_json(), "applies": which}
     ref = reference(ctx)
     base, states = ctx.shipped_base, ctx.shipped_states
     if ref is not None and base is not None and states is not None and masks is not None:
@@ -180,14 +180,14 @@ def check_fidelity(ctx: Context) -> list[Issue]:
                 "WP-FID-001",
                 f"pose {p.pose!r}: p99 {o.p99:.2f}, mean {o.mean:.2f}, max {o.max:.2f} degrees "
                 f"from the full-resolution source inside its active region ({o.texels} texels), "
-                f"over the {which} ({budget.describe()}){worst}",
+                f"over the {which} ({budget.excess(o)}){worst}",
                 where,
                 pose=p.pose,
                 p99_deg=round(o.p99, 4),
                 mean_deg=round(o.mean, 4),
             )
         )
-    regions: dict[str, tuple[str, fd.Stats]] = {}
+    regions: dict[str, tuple[str, Stats]] = {}
     for p in fid.poses:
         for r, st in p.regions.items():
             if r not in regions or st.p99 > regions[r][1].p99:
@@ -199,7 +199,7 @@ def check_fidelity(ctx: Context) -> list[Issue]:
                     "WP-FID-002",
                     f"region {r!r}: p99 {st.p99:.2f}, mean {st.mean:.2f} degrees from the "
                     f"full-resolution source in pose {pose!r} ({st.texels} texels), over the "
-                    f"{which} ({budget.describe()})",
+                    f"{which} ({budget.excess(st)})",
                     ctx.inp.pointer("masks"),
                     region=r,
                     pose=pose,
@@ -213,20 +213,12 @@ def check_fidelity(ctx: Context) -> list[Issue]:
                 "WP-FID-003",
                 f"the shipped base differs from the source base over the face by p99 "
                 f"{b.p99:.2f}, mean {b.mean:.2f} degrees ({b.texels} texels), over the {which} "
-                f"({budget.describe()})",
+                f"({budget.excess(b)})",
                 ctx.base_tex.where if ctx.base_tex is not None else where,
                 p99_deg=round(b.p99, 4),
             )
         )
     return out
-
-
-def _budget_json(b: fd.Budget) -> dict[str, float]:
-    return {
-        k: v
-        for k, v in (("max_mean_deg", b.mean), ("max_p99_deg", b.p99), ("max_max_deg", b.max))
-        if v is not None
-    }
 
 
 # ------------------------------------------------------------------------------------------------
@@ -437,12 +429,12 @@ def render_fidelity(
     texture_budget, which = budgets(ctx)
     o = ctx.options
     # the GPU's own filtering error (WP-RND-001 bounds it) is allowed on top of the budget
-    budget = fd.Budget(
+    budget = Budget(
         None if texture_budget.mean is None else texture_budget.mean + o.gpu_max_mean_deg,
         None if texture_budget.p99 is None else texture_budget.p99 + o.gpu_max_p99_deg,
         texture_budget.max,
     )
-    stats: dict[str, fd.Stats] = {}
+    stats: dict[str, Stats] = {}
     errs: dict[str, np.ndarray] = {}
     normals: dict[str, np.ndarray] = {}  # the source's render: its blended normal per pixel
     for p in poses(ctx):
@@ -457,7 +449,7 @@ def render_fidelity(
             continue  # the pose's active region is not in view
         errs[p.name] = np.where(w > 0, err, 0.0).astype(np.float32)
         normals[p.name] = src
-        stats[p.name] = fd.weighted_stats(err, w)
+        stats[p.name] = weighted_stats(err, w)
     ctx.metrics["fidelity_render_deg"] = {
         k: {
             "mean": round(s.mean, 4),

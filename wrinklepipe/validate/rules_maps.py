@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe import codec, model
+from wrinklepipe.metrics import angle_deg, weighted_stats
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context, resize_normals
@@ -246,7 +247,7 @@ def _encoding_match(ctx: Context) -> list[Issue]:
         src = ref["states"][k]
         # judge on the texels that carry a wrinkle (elsewhere every encoding decodes to B)
         src_base = ref["base_at_states"]
-        relief = model.angular_error_deg(src, src_base) > 2.0
+        relief = angle_deg(src, src_base) > 2.0
         if relief.sum() < 16:
             continue
         # decoding is per texel: decode the wrinkled texels only, as a [1, n] image
@@ -256,7 +257,7 @@ def _encoding_match(ctx: Context) -> list[Issue]:
             if enc == "diff" and v.shape[-1] < 3:
                 continue
             full = _as_full(enc, base_r, v_r, t, a.pd_scale)[0]
-            errs[enc] = float(np.mean(model.angular_error_deg(full, src_r)))
+            errs[enc] = weighted_stats(angle_deg(full, src_r)).mean
         ctx.metrics.setdefault("encoding_fit_mean_deg", {})[t.name] = {
             e: round(x, 3) for e, x in errs.items()
         }

@@ -1,4 +1,5 @@
-"""Weighted statistics: exact weighted quantiles against a brute-force sort."""
+"""The one measure (wrinklepipe.metrics): the angle against float64 references, weighted
+statistics against a brute-force sort, the budget verdict and the choices' margin."""
 
 from __future__ import annotations
 
@@ -7,8 +8,16 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from wrinklepipe.fidelity import Budget, Stats, weighted_quantile, weighted_stats
-from wrinklepipe.fidelity.stats import unit_stats, weighted_stats_many
+from wrinklepipe.metrics import (
+    DECIMALS,
+    Budget,
+    Stats,
+    angle_deg,
+    angle_deg_planes,
+    weighted_quantile,
+    weighted_stats,
+    weighted_stats_many,
+)
 
 
 def brute_quantile(v, w, q):
@@ -138,11 +147,11 @@ def test_many_rows_read_on_their_own_texels_equal_the_whole_sorted_rows(n, g, de
     st.booleans(),
 )
 @example([0.0, 4.792440747990874e-43], False)  # a range of denormals: the bin scale overflowed
-def test_unit_stats_are_the_nearest_rank_stats_of_unit_weights(values, overwrite):
+def test_unit_weights_are_the_nearest_rank_stats(values, overwrite):
     # every weight 1: the p99 is the ceil(0.99 n)-th smallest value (a brute-force sort), the
     # mean the plain mean; and weighted_stats with unit weights says the same
     e = np.asarray(values, np.float32)
-    got = unit_stats(e.copy(), overwrite=overwrite)
+    got = weighted_stats(e.copy(), overwrite=overwrite)
     want_p99 = brute_quantile(e, np.ones(e.size), 0.99)
     assert got.p99 == want_p99
     assert got.max == float(e.max())
@@ -151,4 +160,103 @@ def test_unit_stats_are_the_nearest_rank_stats_of_unit_weights(values, overwrite
     ws = weighted_stats(e, np.ones(e.size, np.float32))
     assert (ws.p99, ws.max, ws.texels, ws.weight) == (got.p99, got.max, got.texels, got.weight)
     assert ws.mean == pytest.approx(got.mean, rel=1e-12, abs=1e-12)
-    assert unit_stats(np.zeros(0, np.float32)).texels == 0
+    assert weighted_stats(np.zeros(0, np.float32)).texels == 0
+
+
+# ------------------------------------------------------------------------------------------------
+# the angle
+
+
+def reference_angle(a, b):
+    """float64 angle between directions: acos of the normalised dot, by the half-angle form
+    ``2 atan2(|a' - b'|, |a' + b'|)`` of unit vectors (independent of the code's formula)."""
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
+    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
+    b = b / np.linalg.norm(b, axis=-1, keepdims=True)
+    return np.degrees(
+        2 * np.arctan2(np.linalg.norm(a - b, axis=-1), np.linalg.norm(a + b, axis=-1))
+    )
+
+
+def test_hand_computed_angles():
+    z = np.array([0.0, 0.0, 1.0])
+    got = angle_deg(
+        np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, -2.0], [0.0, 0.0, 5.0]]), z
+    )
+    assert got.dtype == np.float32
+    np.testing.assert_allclose(got, [90.0, 45.0, 180.0, 0.0], atol=1e-5)
+    # a length is not a direction: a vector 1 % long is at 0 degrees
+    assert angle_deg(np.array([0.0, 0.0, 1.01]), z) == 0.0
+    tiny = np.radians(1e-3)  # a thousandth of a degree is resolved
+    v = np.array([np.sin(tiny), 0.0, np.cos(tiny)])
+    assert abs(float(angle_deg(v, z)) - 1e-3) < 2e-5
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 200), st.floats(1e-6, 3.0), st.integers(0, 2**31))
+def test_angles_match_a_float64_reference(n, spread, seed):
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(n, 3))
+    b = a + spread * rng.normal(size=(n, 3))
+    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    b /= np.linalg.norm(b, axis=-1, keepdims=True)
+    a32, b32 = a.astype(np.float32), b.astype(np.float32)
+    want = reference_angle(a32, b32)
+    got = angle_deg(a32, b32)
+    np.testing.assert_allclose(got, want, atol=2e-5)
+    # the planes layout is the same float32 operations
+    planes = angle_deg_planes(np.moveaxis(a32, -1, 0), np.moveaxis(b32, -1, 0))
+    np.testing.assert_array_equal(planes, got)
+
+
+def test_nan_errors_count_as_180_degrees():
+    e = np.array([1.0, np.nan, 1.0, 1.0], np.float32)
+    s = weighted_stats(e)
+    assert s.max == 180.0 and s.mean == pytest.approx((3 + 180) / 4)
+    assert weighted_stats(e, np.ones(4)).max == 180.0
+    assert weighted_stats_many(e, np.ones((1, 4)))[0].max == 180.0
+
+
+def test_a_large_unit_array_finds_its_p99_among_the_sampled_tail():
+    # above 65 536 errors the p99 is selected among those at or above a sampled threshold:
+    # the same order statistic as a full sort, including for a tail the sample misses
+    rng = np.random.default_rng(5)
+    for e in (
+        rng.exponential(1.0, 300_001).astype(np.float32),
+        np.concatenate([np.zeros(297_000), rng.uniform(5, 6, 3_001)]).astype(np.float32),
+    ):
+        k = int(np.ceil(0.99 * e.size))
+        assert weighted_stats(e).p99 == float(np.sort(e)[k - 1])
+        assert weighted_stats(e).p99 == float(np.percentile(e, 99, method="inverted_cdf"))
+
+
+# ------------------------------------------------------------------------------------------------
+# the verdict and the choices' margin
+
+
+def test_the_verdict_compares_at_the_printed_decimals():
+    b = Budget(mean=0.5, p99=2.0)
+    at = Stats(0.50004, 2.0, 9.0, 10, 10.0)  # prints as 0.5000: within
+    assert b.ok(at) and not b.inside(at)
+    over = Stats(0.50005, 1.0, 9.0, 10, 10.0)  # prints as 0.5001 (half up): over
+    assert not b.ok(over) and b.over(over) == ["mean"]
+    assert Budget().ok(Stats(99.0, 99.0, 99.0, 1, 1.0)) and Budget().empty
+    assert b.to_json() == {"max_mean_deg": 0.5, "max_p99_deg": 2.0}
+    assert b.describe() == "mean 0.5, p99 2"
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.floats(0.0, 10.0),
+    st.floats(0.0, 10.0),
+    st.floats(-4.9e-5, 4.9e-5),
+)
+def test_inside_is_ok_with_a_margin_the_rounding_cannot_cross(limit, value, noise):
+    # what the choices accept (unrounded) the verdict accepts, even after the value moves by
+    # less than half a printed unit (another read of the same bytes, another order of sums)
+    b = Budget(p99=round(limit, DECIMALS))
+    s = Stats(0.0, value, value, 1, 1.0)
+    if b.inside(s):
+        assert b.ok(s)
+        assert b.ok(Stats(0.0, max(value + noise, 0.0), value, 1, 1.0))
