@@ -8,6 +8,7 @@ from typing import Any
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.masks.layouts import LAYOUTS
+from wrinklepipe.metrics import Budget, Stats
 
 NAME = "convert"
 HELP = "convert a source manifest into glTF + USD + textures + weight curves + report"
@@ -126,12 +127,10 @@ def fidelity_table(fid: dict[str, Any], which: str) -> list[str]:
     width = max([16, *(len(r["pose"]) + 2 for r in rows)])
     out = [f"fidelity ({which}, degrees inside each pose's active region; budget {limit}):"]
     out.append(f"  {'pose':<{width}}{'mean':>7}{'p99':>7}{'max':>8}")
-    p99 = budget.get("max_p99_deg")
-    mean = budget.get("max_mean_deg")
+    verdict = Budget.from_dict(budget)
     for r in rows:
-        over = (p99 is not None and r["p99_deg"] > p99) or (
-            mean is not None and r["mean_deg"] > mean
-        )
+        st = Stats(r["mean_deg"], r["p99_deg"], r["max_deg"], r.get("texels", 0), 0.0)
+        over = not verdict.ok(st)
         out.append(
             f"  {r['pose']:<{width}}{r['mean_deg']:7.2f}{r['p99_deg']:7.2f}{r['max_deg']:8.2f}"
             + ("  over budget" if over else "")
