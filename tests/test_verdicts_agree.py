@@ -18,15 +18,15 @@ from pathlib import Path
 import numpy as np
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
-from wrinklepipe.manifest import load_manifest
-from wrinklepipe.pipeline.convert import ConvertOptions, convert, judged_poses
 
 from wrinklepipe.io.images import write_image
+from wrinklepipe.jobs.convert import ConvertOptions, convert, judged_poses
 from wrinklepipe.metrics import DECIMALS
 from wrinklepipe.pipeline.auto import auto_choices
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
 from wrinklepipe.pipeline.prepare import prepare_mesh
+from wrinklepipe.sources.manifest import load_manifest
 
 SIZE = 64
 MASK = 32

@@ -286,4 +286,3 @@ def blend_color(
     if color_states is not None:
         act = act[list(color_states)]
     return combine_color(base, states, act)
-
