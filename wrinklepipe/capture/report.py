@@ -14,7 +14,6 @@ import numpy as np
 
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.capture.pipeline import AUTO_MAX_AMBIGUOUS, CaptureResult
-from wrinklepipe.io.images import write_image
 
 
 def _r(x: float | None, nd: int = 4) -> float | None:
@@ -144,21 +143,6 @@ UNOBSERVABLE = (
 
 def _grey(v: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return np.clip((np.asarray(v, np.float64) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
-
-
-def write_pictures(
-    folder: Path,
-    result: CaptureResult,
-    neutral: np.ndarray,
-    expression: np.ndarray,
-    roi: np.ndarray,
-) -> dict[str, str]:
-    """8-bit PNG pictures for the sheet; returns caption -> relative path."""
-    out = {}
-    for caption, (rel, img) in picture_images(result, neutral, expression, roi).items():
-        write_image(folder / rel, img, bits=8)
-        out[caption] = rel
-    return out
 
 
 def picture_images(

@@ -755,14 +755,6 @@ def _multigrid(a: sparse.csr_matrix) -> spla.LinearOperator:
     return ml.aspreconditioner(cycle="V")
 
 
-def ratio_of_height(c: np.ndarray, n0: np.ndarray) -> np.ndarray:
-    """The Lambertian ratio image ``N1_z / N0_z`` of the crease height ``c`` on the neutral."""
-    d_row, d_col = np.gradient(np.asarray(c, np.float64))
-    p = neutral_slopes(n0) + np.stack([d_col, d_row], axis=-1)
-    n1z = 1.0 / np.sqrt(1.0 + np.sum(p * p, axis=-1))
-    return n1z / np.maximum(np.asarray(n0, np.float64)[..., 2], 1e-3)
-
-
 def normals_from_slopes(
     p: np.ndarray, n0: np.ndarray, n1z: np.ndarray | None = None, min_slope: float = 1e-3
 ) -> np.ndarray:

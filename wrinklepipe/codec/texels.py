@@ -12,7 +12,7 @@ import numpy as np
 from wrinklepipe.codec import layouts as lay
 from wrinklepipe.codec.encodings import Encoding, encoding
 from wrinklepipe.codec.formats import StorageFormat, storage_format
-from wrinklepipe.codec.mappings import CURRENT_VERSION, quantization_bound, texel_bits
+from wrinklepipe.codec.mappings import CURRENT_VERSION, texel_bits
 
 _F = np.float32
 
@@ -100,9 +100,3 @@ def decode_sampled(
 def to_normal(enc: str | Encoding, x: np.ndarray, base: np.ndarray | None = None) -> np.ndarray:
     """Unit normals of a decoded quantity (see :meth:`Encoding.to_normal`)."""
     return _enc(enc).to_normal(x, base)
-
-
-def error_bound_t(bits: int, version: int = CURRENT_VERSION) -> float:
-    """Largest change of a signed value that storing at ``bits`` can cause (half a step)."""
-
-    return quantization_bound(bits, version)

@@ -402,12 +402,6 @@ def _activation_weight(act: np.ndarray) -> np.ndarray:
     return np.abs(act).sum(axis=0).astype(_F)
 
 
-def _region_share(masks_at: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    w = np.asarray(weights, _F)
-    per_region = np.abs(w) if w.ndim == 1 else np.abs(w).max(axis=1)
-    return masks_at * per_region[:, None]
-
-
 def _weighted(weights: np.ndarray, policy: str) -> np.ndarray:
     """The regions whose masks can change this pose's activations: those it weights (every
     region under ``renormalize``, whose total counts all masks)."""

@@ -103,17 +103,6 @@ def near_edge_texels(texels: np.ndarray) -> np.ndarray:
     return np.flatnonzero(near)
 
 
-def block_edge_texels(texels: np.ndarray, fmt: str) -> int:
-    """:func:`edge_texels` of an 8-bit PD map after a roundtrip through block format ``fmt``
-    (what the validator's WP-MAP-004 counts on the compressed copy). Only the blocks holding a
-    texel within :data:`NEAR_EDGE_LEVELS` of the end are encoded (blocks are independent; an
-    encoder error of 16 levels is far beyond BC1's)."""
-    idx = near_edge_texels(texels)
-    if idx.size == 0:
-        return 0
-    return edge_texels(block_roundtrip_at(texels, fmt, idx))
-
-
 def block_roundtrip(xy: np.ndarray, fmt: str) -> np.ndarray:
     """Two-channel 8-bit texels ``[H, W, 2]`` through block format ``fmt`` and back (sizes not a
     multiple of 4 are padded by edge replication, as the compressed copies are)."""

@@ -619,27 +619,6 @@ def pd_pack(
     return rgba, int(sum(map_rows(work, h, w)))
 
 
-def pd_decode_error(
-    bgra: np.ndarray,
-    normals: np.ndarray,
-    scale: float,
-    fmt: str = "bc5",
-    version: int = codec.CURRENT_VERSION,
-) -> Stats:
-    """Angular error of decoded PD texels (texture2ddecoder's BGRA) against unit normals."""
-    n = np.asarray(normals, dtype=_F)
-    h, w = n.shape[:2]
-    raw = np.ascontiguousarray(bgra[:h, :w])
-    angles = np.empty((h, w), dtype=_F)
-
-    def work(rows: slice) -> None:
-        p = _half_planes(n[rows])
-        _pd_measure_chunk(raw[rows], p, float(scale), fmt, angles[rows], version)
-
-    map_rows(work, h, w)
-    return error_stats(angles)
-
-
 @dataclass
 class PDCheck:
     """Result of :func:`pd_compress_check`: the block data and what it costs in degrees."""

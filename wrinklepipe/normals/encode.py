@@ -46,10 +46,6 @@ class PDResult:
     cone_deg: float  # half-angle of the cone the scale represents, atan(s) in degrees
     version: int = codec.CURRENT_VERSION
 
-    @property
-    def texels_count(self) -> int:
-        return int(self.texels.shape[0] * self.texels.shape[1])
-
 
 @dataclass(frozen=True)
 class DiffResult:
