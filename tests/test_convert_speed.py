@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from wrinklepipe.demo.source import write_demo_source
-from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes, png_compression, png_level
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.jobs import validation as pv
 from wrinklepipe.jobs.convert import ConvertOptions, convert
 
@@ -28,21 +28,18 @@ def _idat(png: bytes) -> bytes:
     return png[i + 4 : i + 4 + n]
 
 
-def test_png_level_context_and_default():
+def test_png_level_is_an_argument_with_a_default():
     px = (np.arange(64 * 64 * 3, dtype=np.uint32) % 251).astype(np.uint8).reshape(64, 64, 3)
-    assert png_level() == DEFAULT_PNG_LEVEL == 6
-    with png_compression(1):
-        assert png_level() == 1
-        fast = png_bytes(px)
-    assert png_level() == 6
+    assert DEFAULT_PNG_LEVEL == 6
+    assert png_bytes(px) == png_bytes(px, 6)
+    fast = png_bytes(px, 1)
     # the IDAT stream is zlib at the level asked for: the same bytes as zlib itself makes
     rows = np.concatenate([np.full((64, 1), 2, np.uint8), px.reshape(64, -1)], axis=1)
     rows[1:, 1:] = px.reshape(64, -1)[1:] - px.reshape(64, -1)[:-1]
     assert _idat(fast) == zlib.compress(rows.tobytes(), 1)
     assert _idat(png_bytes(px, level=9)) == zlib.compress(rows.tobytes(), 9)
     with pytest.raises(ValueError):
-        with png_compression(10):
-            pass
+        png_bytes(px, 10)
 
 
 def test_validation_reuses_the_ingested_source_and_judges_the_written_folder(

@@ -289,8 +289,8 @@ def _workers(workers: int | None) -> int:
 def map_threads(fn: Callable[[T], R], items: Iterable[T], workers: int | None = None) -> list[R]:
     """``[fn(x) for x in items]`` on ``workers`` threads (default: 2, or 1 when
     :func:`thread_budget` is 1), each
-    call in a copy of the caller's context, so the PNG level (:func:`png_compression`) and this
-    run's memo apply as they do in the caller. For work that releases the GIL (zlib, the block
+    call in a copy of the caller's context, so this run's memo applies as it does in the
+    caller. For work that releases the GIL (zlib, the block
     encoders); results in order; the first exception is raised."""
     todo = list(items)
     n = _workers(workers)

@@ -30,7 +30,7 @@ import numpy as np
 
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.png import png_bytes
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.metadata import BIAS_ATTRIBUTE, EXTENSION, VERTEX_ID_ATTRIBUTE, WrinkleMeta
 from wrinklepipe.package import MAX_FLOAT_ID, WrinklePackage, safe_name
 
@@ -55,6 +55,7 @@ class GltfOptions:
 
     texture_dir: str = "textures"
     generator: str = "wrinklepipe"
+    png_level: int = DEFAULT_PNG_LEVEL
 
 
 class _Buffer:
@@ -292,7 +293,7 @@ def gltf_document(
     for t in pkg.textures:
         if safe_name(t.name) != t.name:
             raise input_error(pkg.name, f"texture name {t.name!r} is not a safe file name")
-        data = png_bytes(t.pixels)
+        data = png_bytes(t.pixels, opt.png_level)
         img: dict[str, Any] = {"name": t.name}
         if embed_images:
             img["bufferView"] = buf.view(data)

@@ -30,7 +30,7 @@ from wrinklepipe.gltf.package_write import (
     extension_block,
     weights_pointer,
 )
-from wrinklepipe.io.png import png_bytes
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.metadata import EXTENSION
 from wrinklepipe.package import WrinklePackage, safe_name
 
@@ -58,9 +58,11 @@ def _free_uri(doc: Document, stem: str) -> str:
     return uri
 
 
-def add_wrinkle_maps(doc: Document, target: WrinkleTarget, pkg: WrinklePackage) -> list[str]:
-    """Add ``pkg``'s textures, extension and weight animations to ``doc`` (see the module doc);
-    return notes on what changed in the wrinkled materials."""
+def add_wrinkle_maps(
+    doc: Document, target: WrinkleTarget, pkg: WrinklePackage, png_level: int = DEFAULT_PNG_LEVEL
+) -> list[str]:
+    """Add ``pkg``'s textures (PNGs at zlib ``png_level``), extension and weight animations to
+    ``doc`` (see the module doc); return notes on what changed in the wrinkled materials."""
     notes: list[str] = []
     sampler = doc.add_sampler(dict(SAMPLER))
     tex_index: dict[str, int] = {}
@@ -69,7 +71,9 @@ def add_wrinkle_maps(doc: Document, target: WrinkleTarget, pkg: WrinklePackage) 
             tex_index[t.name] = target.base_texture
             continue
         stem = safe_name(t.name)
-        image = doc.add_image(png_bytes(t.pixels), "image/png", t.name, _free_uri(doc, stem))
+        image = doc.add_image(
+            png_bytes(t.pixels, png_level), "image/png", t.name, _free_uri(doc, stem)
+        )
         tex_index[t.name] = doc.add_texture(image, sampler, t.name)
     ext = extension_block(pkg.meta, tex_index)
     first = len(doc.array("animations"))

@@ -6,13 +6,10 @@ flags colour-space chunks), so the same pixels and zlib level give the same byte
 
 from __future__ import annotations
 
-import contextlib
 import os
 import struct
 import tempfile
 import zlib
-from collections.abc import Iterator
-from contextvars import ContextVar
 
 import numpy as np
 import OpenImageIO as oiio
@@ -25,37 +22,20 @@ from wrinklepipe.reuse import reused
 #: and 512 demos: 0.75 s against 0.07 s for one 512^2 render); 1 is fastest (files ~25 % larger).
 #: The validation page's pictures are always at level 1 (validate.report.PICTURE_PNG_LEVEL).
 DEFAULT_PNG_LEVEL = 6
-_PNG_LEVEL: ContextVar[int] = ContextVar("wrinklepipe_png_level", default=DEFAULT_PNG_LEVEL)
 
 
-@contextlib.contextmanager
-def png_compression(level: int) -> Iterator[None]:
-    """Write every PNG inside the block at zlib ``level`` (0-9; same level -> same bytes)."""
-    if not 0 <= int(level) <= 9:
-        raise ValueError(f"PNG compression level must be 0..9, got {level}")
-    token = _PNG_LEVEL.set(int(level))
-    try:
-        yield
-    finally:
-        _PNG_LEVEL.reset(token)
-
-
-def png_level() -> int:
-    """The zlib level :func:`png_bytes` uses here (see :func:`png_compression`)."""
-    return _PNG_LEVEL.get()
-
-
-def png_bytes(pixels: np.ndarray, level: int | None = None, shared: bool = True) -> bytes:
+def png_bytes(pixels: np.ndarray, level: int = DEFAULT_PNG_LEVEL, shared: bool = True) -> bytes:
     """Encode ``[H, W, C]`` uint8/uint16 (C = 1..4) as a minimal PNG: IHDR, IDAT, IEND only.
 
-    Rows use the Up filter (vectorised); zlib at ``level`` (default: :func:`png_level`, set by
-    :func:`png_compression`, else :data:`DEFAULT_PNG_LEVEL`). Same pixels and level -> same bytes.
+    Rows use the Up filter (vectorised); zlib at ``level`` (0-9; a run passes its own, e.g.
+    ``ConvertOptions.png_level``). Same pixels and level -> same bytes.
     ``shared=False``: not through the run's memo (an image nothing else encodes, e.g. a
     report's picture: keying it would only cost a hash of its pixels).
     """
-    level = _PNG_LEVEL.get() if level is None else int(level)
+    if not 0 <= int(level) <= 9:
+        raise ValueError(f"PNG compression level must be 0..9, got {level}")
     encode = _png if shared else _png.__wrapped__  # type: ignore[attr-defined]
-    return encode(np.asarray(pixels), level)
+    return encode(np.asarray(pixels), int(level))
 
 
 @reused  # a texture the glTF document and the folder (or the GLB) both hold is encoded once

@@ -30,7 +30,7 @@ from wrinklepipe.atomic import staged_folder
 from wrinklepipe.drivers.poses import driver_poses
 from wrinklepipe.errors import input_error
 from wrinklepipe.fidelity.ship import edge_texels
-from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_compression
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL
 from wrinklepipe.jobs.validation import validate_output
 from wrinklepipe.outputs.folder import USD_FORMATS, build_outputs, write_folder
 from wrinklepipe.outputs.report import (
@@ -117,7 +117,6 @@ def convert(
         # The output checks (not an input, empty or --force) run first, before any work.
         with (
             staged_folder(output, force=opt.force, inputs=inputs) as tmp,
-            png_compression(opt.png_level),
             reuse(),  # a resample, PNG or block encoding asked twice is computed once
         ):
             with console.status("reading inputs"):
@@ -153,11 +152,13 @@ def convert(
             with console.status("encoding, packing, compressing"):
                 formats = {**manifest.formats, **stage_rep.formats}
                 files, n, choices = build_outputs(
-                    pkg, opt.glb, opt.compressed, asset.budget, formats, document
+                    pkg, opt.glb, opt.compressed, asset.budget, formats, document, opt.png_level
                 )
             notes += n
             read = input_rows(manifest.root, manifest.input_files)
-            notes += write_folder(tmp, files, pkg, opt.usd_format, document, got.usd, output)
+            notes += write_folder(
+                tmp, files, pkg, opt.usd_format, document, got.usd, output, opt.png_level
+            )
             with console.status("validating"):
                 validation = (
                     validate_output(tmp, manifest.path, opt.render, html_page=True, source=source)

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.png import png_bytes
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.usd.meshes import mesh_time
 from wrinklepipe.usd.package_write import LAYERED_OVER, UsdOptions, build_stage, usdz_bytes
@@ -438,11 +438,14 @@ def _retype_varnames(layer: Any) -> list[str]:
     ]
 
 
-def flattened_usdz(stage: Any, pkg: WrinklePackage, name: str) -> tuple[bytes, list[str]]:
+def flattened_usdz(
+    stage: Any, pkg: WrinklePackage, name: str, png_level: int = DEFAULT_PNG_LEVEL
+) -> tuple[bytes, list[str]]:
     """The composed stage flattened into one usdc, packed with every texture it uses: the
-    package's under ``textures/``, the source's (found through USD's resolver, inside usdz
-    packages too) byte for byte under ``textures/source/``. An asset path naming one of the
-    stage's own layers (``assetInfo`` identifiers) names the flattened layer instead."""
+    package's under ``textures/`` (PNGs at zlib ``png_level``), the source's (found through
+    USD's resolver, inside usdz packages too) byte for byte under ``textures/source/``. An
+    asset path naming one of the stage's own layers (``assetInfo`` identifiers) names the
+    flattened layer instead."""
     from pxr import Ar, UsdUtils  # deferred: usd-core, USD only
 
     flat = stage.Flatten()
@@ -450,7 +453,9 @@ def flattened_usdz(stage: Any, pkg: WrinklePackage, name: str) -> tuple[bytes, l
         os.path.realpath(x.realPath) for x in stage.GetUsedLayers() if x.realPath
     }  # the layers the flattened one replaces
     ours = {f"./textures/{t.name}.png": f"textures/{t.name}.png" for t in pkg.textures}
-    files: dict[str, bytes] = {ours[k]: png_bytes(t.pixels) for k, t in zip(ours, pkg.textures)}
+    files: dict[str, bytes] = {
+        ours[k]: png_bytes(t.pixels, png_level) for k, t in zip(ours, pkg.textures)
+    }
     by_source: dict[str, str] = {}
     notes: list[str] = []
 

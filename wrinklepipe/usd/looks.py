@@ -22,7 +22,7 @@ from wrinklepipe.errors import InputError, plain_reason
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.images import image_pixels, texture_source
 from wrinklepipe.gltf.write import mime_type
-from wrinklepipe.io.png import png_bytes
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.names import unique_name
 
 _EXT = {"image/png": "png", "image/jpeg": "jpg"}
@@ -74,8 +74,17 @@ class Looks:
     (``files``: ``{path relative to the layer: bytes}``; ``notes``: what was transcoded or left
     out)."""
 
-    def __init__(self, stage: Any, root: Any, doc: Document, texture_dir: str, names: Names):
+    def __init__(
+        self,
+        stage: Any,
+        root: Any,
+        doc: Document,
+        texture_dir: str,
+        names: Names,
+        png_level: int = DEFAULT_PNG_LEVEL,
+    ):
         self.stage, self.root, self.doc = stage, root, doc
+        self.png_level = png_level
         self.names = names
         self.tdir = texture_dir
         self.files: dict[str, bytes] = {}
@@ -105,7 +114,7 @@ class Looks:
             ext = _EXT.get(mime)
             if ext is None:
                 try:
-                    data, ext = png_bytes(image_pixels(doc, src)), "png"
+                    data, ext = png_bytes(image_pixels(doc, src), self.png_level), "png"
                 except InputError as exc:
                     self.notes.append(
                         f"USD: image {src} ({img.get('name', '')!r}, {mime}) does not decode "

@@ -44,7 +44,7 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.atomic import check_not_input, write_bytes
 from wrinklepipe.errors import input_error
 from wrinklepipe.gltf.package_write import skin_weights_normalized
-from wrinklepipe.io.png import png_bytes
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.package import MAX_FLOAT_ID, WrinklePackage, safe_name
 from wrinklepipe.paths import SCHEMAS_DIR
 
@@ -115,6 +115,7 @@ class UsdOptions:
 
     texture_dir: str = "textures"
     fps: float = 24.0
+    png_level: int = DEFAULT_PNG_LEVEL
 
 
 def _ident(name: str) -> str:
@@ -472,7 +473,7 @@ def write_usd(
     if suffix != ".usdz" and write_textures:
         tdir = path.parent / opt.texture_dir if opt.texture_dir else path.parent
         for t in pkg.textures:
-            written.append(write_bytes(tdir / f"{t.name}.png", png_bytes(t.pixels)))
+            written.append(write_bytes(tdir / f"{t.name}.png", png_bytes(t.pixels, opt.png_level)))
     if suffix != ".usdz":
         for rel, data in sorted(extra.items()):
             written.append(write_bytes(path.parent / rel, data))
@@ -531,6 +532,6 @@ def _write_usdz(
         entries = [(layer_path.name, layer_path.read_bytes())]
     for t in pkg.textures:
         rel = f"{opt.texture_dir}/{t.name}.png" if opt.texture_dir else f"{t.name}.png"
-        entries.append((rel, png_bytes(t.pixels)))
+        entries.append((rel, png_bytes(t.pixels, opt.png_level)))
     entries += sorted(extra.items())
     return write_bytes(path, usdz_bytes(entries))

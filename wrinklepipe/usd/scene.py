@@ -59,6 +59,7 @@ import numpy as np
 from wrinklepipe.gltf.document import Document, PrimitiveRef
 from wrinklepipe.gltf.primitive import node_matrix, read_skin  # the one TRS, the one skin
 from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles
+from wrinklepipe.io.png import DEFAULT_PNG_LEVEL
 from wrinklepipe.metadata import BIAS_ATTRIBUTE, VERTEX_ID_ATTRIBUTE
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.usd.animation import (
@@ -87,11 +88,17 @@ class WrinkledPrims:
 
 class _Scene:
     def __init__(
-        self, stage: Any, root: Any, doc: Document, texture_dir: str, wrinkled: WrinkledPrims
+        self,
+        stage: Any,
+        root: Any,
+        doc: Document,
+        texture_dir: str,
+        wrinkled: WrinkledPrims,
+        png_level: int,
     ) -> None:
         self.stage, self.root, self.doc = stage, root, doc
         self.names = Names()
-        self.looks = Looks(stage, root, doc, texture_dir, self.names)
+        self.looks = Looks(stage, root, doc, texture_dir, self.names, png_level)
         self.material = self.looks.material
         self.notes: list[str] = []
         self.skeletons: dict[int, Any] = {}
@@ -483,11 +490,17 @@ def wrinkled_prims(
 
 
 def add_scene(
-    stage: Any, root: Any, doc: Document, wrinkled: WrinkledPrims, texture_dir: str
+    stage: Any,
+    root: Any,
+    doc: Document,
+    wrinkled: WrinkledPrims,
+    texture_dir: str,
+    png_level: int = DEFAULT_PNG_LEVEL,
 ) -> tuple[dict[str, bytes], list[str]]:
     """Add ``doc``'s scene below ``root/Scene``, its wrinkled primitives bound to the wrinkle
     material (which lists their paths in ``wrinkle:meshes``, the package's order); return the
-    image files it references ``{relative path: bytes}`` and notes (see the module doc)."""
+    image files it references ``{relative path: bytes}`` (a transcoded image: a PNG at zlib
+    ``png_level``) and notes (see the module doc)."""
     from pxr import Sdf, UsdGeom, UsdSkel, Vt  # deferred: usd-core, USD only
 
     scene_path = root.AppendChild("Scene")
@@ -495,7 +508,7 @@ def add_scene(
         UsdGeom.Xform.Define(stage, scene_path)
     else:
         UsdSkel.Root.Define(stage, scene_path)
-    s = _Scene(stage, scene_path, doc, texture_dir, wrinkled)
+    s = _Scene(stage, scene_path, doc, texture_dir, wrinkled, png_level)
     scenes = doc.array("scenes")
     which = doc.gltf.get("scene", 0)
     if scenes and isinstance(which, int) and 0 <= which < len(scenes):
