@@ -244,3 +244,18 @@ def test_bake_bench_quick_runs():
     assert {r.step for r in res.rows} == {"rays alone (Embree)", "bake 1 state"}
     assert res.extra["missed_samples"] == 0 and res.extra["samples"] > 0
     assert all(r.median_s > 0 for r in res.rows)
+
+
+def test_tiles_bake_what_the_whole_map_bakes(monkeypatch):
+    import wrinklepipe.geometry.bake as bake_module
+
+    low = _low_sphere()
+    hi = trimesh.creation.icosphere(subdivisions=4)
+    high = [HighMesh(hi.vertices * 1.01, hi.faces)]
+    opts = BakeOptions(size=48, max_distance=0.05)
+    whole = bake_normal_maps(low, high, opts)
+    monkeypatch.setattr(bake_module, "TILE", 20)  # 3 x 3 tiles, the last ones partial
+    tiled = bake_normal_maps(low, high, opts)
+    assert tiled.samples == whole.samples
+    np.testing.assert_allclose(tiled.maps[0], whole.maps[0], atol=1e-6)
+    assert (tiled.covered == whole.covered).all()

@@ -13,8 +13,8 @@ ships:
 - **Rays.** From the cage point ``P + d N`` towards ``-N`` over ``2 d``: the first surface of
   the high mesh within ``d`` of the low surface, outside or inside (``d``: ``max_distance``;
   ``None`` measures it: twice the 99.9th percentile of the distance from the low surface to
-  the high one along ``+-N`` on up to 65 536 samples, at least 1e-4 of the low mesh's size).
-  Ray casting is Embree's (``embreex``), single precision.
+  the high one along ``+-N``, on the samples of a 256 x 256 map, at least 1e-4 of the low
+  mesh's size). Ray casting is Embree's (``embreex``), single precision.
 - **The sculpt's normal** at the hit: its vertex normals interpolated with the hit's
   barycentrics and normalised (the file's normals; a mesh without them gets area-weighted
   vertex normals, as sculpting tools export smooth shading). In the frame:
@@ -25,9 +25,10 @@ ships:
   normal (:func:`~wrinklepipe.geometry.uv_samples.pad_islands`); farther texels are flat.
 
 Every high mesh is baked with the same samples, frames and rays (one sampling, one frame): a
-high mesh identical to another bakes to identical bytes. Samples are processed in chunks of
-:data:`~wrinklepipe.geometry.uv_samples.CHUNK_SAMPLES`, so the working set is a few hundred MB
-at any size beyond the sample list itself.
+high mesh identical to another bakes to identical bytes. The map is baked in tiles of
+:data:`TILE` x :data:`TILE` texels and each tile's samples in chunks of
+:data:`~wrinklepipe.geometry.uv_samples.CHUNK_SAMPLES`, so the working set is bounded whatever
+the map's size; the maps themselves are float32 ``[size, size, 3]``.
 """
 
 from __future__ import annotations
@@ -42,11 +43,12 @@ from embreex.mesh_construction import TriangleMesh
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
-from wrinklepipe.geometry.uv_samples import UvSamples, interpolate, pad_islands, uv_samples
+from wrinklepipe.geometry.uv_samples import UvSamples, interpolate, pad_islands, tiles, uv_samples
 
 NAME = "bake"
-#: Samples the automatic ray distance is measured on, at most.
-DISTANCE_SAMPLES = 65536
+#: Texels per side of the tiles the map is baked in: the working set is a tile's samples
+#: (``TILE^2 supersample^2``), whatever the map's size.
+TILE = 1024
 
 
 @dataclass(frozen=True)
@@ -173,21 +175,11 @@ def _high_normals(h: HighMesh) -> tuple[np.ndarray, list[str]]:
     return n.astype(np.float64), [f"{h.name}: computed area-weighted vertex normals"]
 
 
-def auto_distance(
-    low: Mesh, samples: UvSamples, scenes: Sequence[RayScene], size_of_mesh: float
-) -> float:
+def auto_distance(low: Mesh, scenes: Sequence[RayScene], size_of_mesh: float) -> float:
     """Twice the 99.9th percentile of the low-to-high distance along ``+-N`` (see the module
-    doc), over every high mesh."""
-    step = max(1, samples.count // DISTANCE_SAMPLES)
-    pick = np.arange(0, samples.count, step)
-    sub = UvSamples(
-        samples.size,
-        samples.supersample,
-        samples.texel[pick],
-        samples.triangle[pick],
-        samples.bary[pick],
-    )
-    p, _, _, n = sample_frames(low, sub, slice(None))
+    doc), over every high mesh, on the samples of a 256 x 256 map (at most 65 536)."""
+    samples = uv_samples(low.uvs, low.indices, 256, 1)
+    p, _, _, n = sample_frames(low, samples, slice(None))
     far = 0.1 * size_of_mesh
     found = []
     for scene in scenes:
@@ -215,10 +207,6 @@ def bake_normal_maps(
         raise input_error("<arguments>", f"size must be >= 4, got {o.size}", "--size")
     if o.max_distance is not None and not (np.isfinite(o.max_distance) and o.max_distance > 0):
         raise input_error("<arguments>", "the ray distance must be a positive number")
-    idx = np.asarray(low.indices, np.int64)
-    samples = uv_samples(low.uvs, idx, o.size, o.supersample)
-    if samples.count == 0:
-        raise input_error(src, f"the UV layout covers no texel at {o.size}^2")
     notes: list[str] = []
     scenes = []
     normals = []
@@ -232,56 +220,66 @@ def bake_normal_maps(
     hi_idx = [np.asarray(h.indices, np.int32).reshape(-1, 3) for h in highs]
     p = np.asarray(low.positions, np.float64)
     size_of_mesh = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
-    d = o.max_distance or auto_distance(low, samples, scenes, size_of_mesh)
-    n_tex = o.size * o.size
-    sums = [np.zeros((n_tex, 3)) for _ in highs]
-    hits = [np.zeros(n_tex) for _ in highs]
+    d = o.max_distance or auto_distance(low, scenes, size_of_mesh)
+    size = o.size
+    flat = np.array([0.0, 0.0, 1.0], np.float32)
+    maps = [np.empty((size, size, 3), np.float32) for _ in highs]
+    got = [np.zeros((size, size), bool) for _ in highs]
+    covered = np.zeros((size, size), bool)
     missed = [0 for _ in highs]
+    total = 0
     per_vertex = vertex_frames(low)
-    for part in samples.chunks():
-        pp, t, b, n = sample_frames(low, samples, part, per_vertex)
-        origins = pp + np.float32(d) * n
-        back = -n
-        texel = samples.texel[part]
-        for k, (scene, hn) in enumerate(zip(scenes, normals)):
-            tri, u, v, _ = scene.first_hit(origins, back, 2.0 * d)
-            ok = tri >= 0
-            every = bool(ok.all())
-            missed[k] += int(len(ok) - ok.sum())
-            if not ok.any():
-                continue
-            sel = slice(None) if every else ok
-            hi_tri = hi_idx[k][tri[sel]]
-            uo = u[sel, None].astype(np.float32)
-            vo = v[sel, None].astype(np.float32)
-            nh = hn[hi_tri[:, 0]] * (1.0 - uo - vo)
-            nh += hn[hi_tri[:, 1]] * uo
-            nh += hn[hi_tri[:, 2]] * vo
-            nh, _ = _unit(nh)
-            # samples come texel by texel: add into the chunk's texel range only
-            tx = texel[sel]
-            t0 = int(tx[0])
-            span = int(tx[-1]) - t0 + 1
-            local = tx - t0
-            for c, axis in enumerate((t, b, n)):
-                comp = (nh * axis[sel]).sum(axis=1)
-                sums[k][t0 : t0 + span, c] += np.bincount(local, comp, minlength=span)
-            hits[k][t0 : t0 + span] += np.bincount(local, minlength=span)
-    counts = np.bincount(samples.texel, minlength=n_tex).reshape(o.size, o.size)
-    covered = counts > 0
-    maps = []
+    for r0, r1, c0, c1 in tiles(size, TILE):
+        samples = uv_samples(low.uvs, low.indices, size, o.supersample, window=(r0, r1, c0, c1))
+        th, tw = r1 - r0, c1 - c0
+        total += samples.count
+        local = (samples.texel // size - r0) * tw + (samples.texel % size - c0)
+        covered[r0:r1, c0:c1] = np.bincount(local, minlength=th * tw).reshape(th, tw) > 0
+        sums = [np.zeros((th * tw, 3)) for _ in highs]
+        hits = [np.zeros(th * tw) for _ in highs]
+        for part in samples.chunks():
+            pp, t, b, n = sample_frames(low, samples, part, per_vertex)
+            origins = pp + np.float32(d) * n
+            back = -n
+            lt = local[part]
+            for k, (scene, hn) in enumerate(zip(scenes, normals)):
+                tri, u, v, _ = scene.first_hit(origins, back, 2.0 * d)
+                ok = tri >= 0
+                missed[k] += int(len(ok) - ok.sum())
+                if not ok.any():
+                    continue
+                sel = slice(None) if ok.all() else ok
+                hi_tri = hi_idx[k][tri[sel]]
+                uo = u[sel, None].astype(np.float32)
+                vo = v[sel, None].astype(np.float32)
+                nh = hn[hi_tri[:, 0]] * (1.0 - uo - vo)
+                nh += hn[hi_tri[:, 1]] * uo
+                nh += hn[hi_tri[:, 2]] * vo
+                nh, _ = _unit(nh)
+                # samples come texel by texel: add into the chunk's texel range only
+                tx = lt[sel]
+                t0 = int(tx[0])
+                span = int(tx[-1]) - t0 + 1
+                rel = tx - t0
+                for c, axis in enumerate((t, b, n)):
+                    comp = (nh * axis[sel]).sum(axis=1)
+                    sums[k][t0 : t0 + span, c] += np.bincount(rel, comp, minlength=span)
+                hits[k][t0 : t0 + span] += np.bincount(rel, minlength=span)
+        for k in range(len(highs)):
+            img, ok = _unit(sums[k] / np.maximum(hits[k], 1.0)[:, None])
+            has = (hits[k] > 0) & ok
+            img[~has] = flat
+            maps[k][r0:r1, c0:c1] = img.reshape(th, tw, 3)
+            got[k][r0:r1, c0:c1] = has.reshape(th, tw)
+    if total == 0:
+        raise input_error(src, f"the UV layout covers no texel at {size}^2")
     missed_tex = []
-    flat = np.array([0.0, 0.0, 1.0])
     for k, h in enumerate(highs):
-        got = hits[k].reshape(o.size, o.size) > 0
-        img = (sums[k] / np.maximum(hits[k], 1.0)[:, None]).reshape(o.size, o.size, 3)
-        img, ok = _unit(img)
-        img[~(got & ok)] = flat
-        missed_tex.append(int((covered & ~got).sum()))
-        inward = float(np.median(img[got][:, 2])) if got.any() else 1.0
+        missed_tex.append(int((covered & ~got[k]).sum()))
+        inward = float(np.median(maps[k][got[k]][:, 2])) if got[k].any() else 1.0
         if inward < 0:
             notes.append(
                 f"{h.name}: the sculpt's normals point into the surface (reversed winding?)"
             )
-        maps.append(pad_islands(img, covered, o.padding_px, fill=flat).astype(np.float32))
-    return BakeResult(maps, covered, samples.count, missed, missed_tex, float(d), notes)
+        maps[k] = pad_islands(maps[k], covered, o.padding_px, fill=flat)
+    return BakeResult(maps, covered, total, missed, missed_tex, float(d), notes)

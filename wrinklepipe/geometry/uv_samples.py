@@ -66,39 +66,66 @@ class UvSamples:
             yield slice(s, min(s + n, self.count))
 
 
+def tiles(size: int, tile: int) -> Iterator[tuple[int, int, int, int]]:
+    """Texel windows ``(r0, r1, c0, c1)`` (half-open) of at most ``tile`` x ``tile`` covering a
+    ``size`` x ``size`` map, row by row."""
+    for r0 in range(0, size, tile):
+        for c0 in range(0, size, tile):
+            yield r0, min(r0 + tile, size), c0, min(c0 + tile, size)
+
+
 def uv_samples(
     uvs: np.ndarray,
     indices: np.ndarray,
     size: int,
     supersample: int = 2,
     order: np.ndarray | None = None,
+    window: tuple[int, int, int, int] | None = None,
 ) -> UvSamples:
-    """The covered samples of a ``size`` x ``size`` map (see the module doc).
+    """The covered samples of a ``size`` x ``size`` map (see the module doc), or of the texel
+    ``window`` ``(r0, r1, c0, c1)`` of it (the same samples the whole map has there; texel
+    indices stay those of the whole map).
 
     ``uvs`` ``[V, 2]`` (glTF convention), ``indices`` ``[T, 3]``. ``order`` ``[T]`` (a
     permutation of the triangles) sets who owns a sample where UV triangles overlap: the one
-    that comes last. Samples are listed texel row by texel row."""
+    that comes last. Samples are listed texel by texel, row by row."""
     if size <= 0 or supersample <= 0:
         raise ValueError(f"size and supersample must be positive, got {size}, {supersample}")
     s = int(supersample)
     n = size * s
+    r0, r1, c0, c1 = window or (0, size, 0, size)
+    th, tw = r1 - r0, c1 - c0
+    uv = np.asarray(uvs, np.float64)
     idx = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
     perm = np.arange(len(idx)) if order is None else np.asarray(order, dtype=np.int64)
-    ids = rasterise_triangle_ids(uvs, idx[perm], n)
+    if (th, tw) != (size, size):
+        # a window: the triangles that reach it (fine-grid bounding boxes, a sample of margin)
+        corner = uv[idx[perm]] * n - 0.5
+        lo, hi = corner.min(axis=1), corner.max(axis=1)
+        near = (hi[:, 0] >= c0 * s - 1) & (lo[:, 0] <= c1 * s) & (hi[:, 1] >= r0 * s - 1)
+        near &= lo[:, 1] <= r1 * s
+        perm = perm[near]
+    side = max(th, tw) * s
+    # the window's fine grid as a square raster of its own: x' = uv n - c0 s (exact shift)
+    whole = (th, tw) == (size, size)
+    shifted = uv if whole else (uv * n - np.array([c0 * s, r0 * s], np.float64)) / side
+    ids = rasterise_triangle_ids(shifted, idx[perm], side)[: th * s, : tw * s]
     # sample (row r, column c) of the fine grid -> texel (r // s, c // s); list texel by texel
-    fine = ids.reshape(size, s, size, s).transpose(0, 2, 1, 3).reshape(-1)
+    fine = ids.reshape(th, s, tw, s).transpose(0, 2, 1, 3).reshape(-1)
     del ids
     hit = np.flatnonzero(fine >= 0)
     tri = perm[fine[hit]]
     del fine
-    texel = hit // (s * s)
-    k = hit - texel * (s * s)
+    local = hit // (s * s)
+    k = hit - local * (s * s)
     del hit
-    px = ((texel % size) * s + k % s + 0.5) / n
-    py = ((texel // size) * s + k // s + 0.5) / n
+    row = r0 + local // tw
+    col = c0 + local % tw
+    px = (col * s + k % s + 0.5) / n
+    py = (row * s + k // s + 0.5) / n
     del k
-    bary = barycentric_in(np.asarray(uvs, np.float64), idx, tri, px, py)
-    return UvSamples(size, s, texel, tri.astype(np.int32), bary)
+    bary = barycentric_in(uv, idx, tri, px, py)
+    return UvSamples(size, s, row * size + col, tri.astype(np.int32), bary)
 
 
 def barycentric_in(
