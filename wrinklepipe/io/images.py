@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from wrinklepipe.atomic import check_not_input, temp_path
+from wrinklepipe.atomic import check_not_input, temp_path, write_bytes
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.png import png_bytes
 
 #: Default cap on width x height for any image read (64 Mpx, e.g. 8192 x 8192).
 DEFAULT_MAX_PIXELS = 8192 * 8192
@@ -147,9 +148,10 @@ def write_image(
     """Write ``[H, W]`` or ``[H, W, C]`` values in [0, 1] (or floats for EXR) atomically.
 
     ``bits`` is 8 or 16 (quantised with round-to-nearest), ``"half"`` or 32 (float, EXR/TIFF).
-    Colour space is tagged linear (normals and masks are data, never sRGB); alpha is written
-    unassociated (OpenImageIO would otherwise premultiply PNG alpha). Deterministic bytes: no
-    timestamps or software tags.
+    Colour space is tagged linear (normals and masks are data, never sRGB). A PNG is made by the
+    one PNG encoder, :func:`wrinklepipe.io.png.png_bytes` (``linear``: a gAMA 1.0 chunk; alpha
+    unassociated, as stored); other formats by OpenImageIO (alpha written unassociated).
+    Deterministic bytes: no timestamps or software tags.
     """
     path = Path(path)
     check_not_input(path, inputs)
@@ -161,6 +163,8 @@ def write_image(
         pixels = quantize(arr, int(bits))
     else:
         pixels = np.asarray(arr, dtype=np.float32)
+    if path.suffix.lower() == ".png" and bits in (8, 16):
+        return write_bytes(path, png_bytes(pixels, shared=False, linear=True))
     spec = oiio.ImageSpec(w, h, c, _BITS_TO_TYPE[bits])
     spec.attribute("oiio:ColorSpace", "Linear")
     spec.attribute("oiio:UnassociatedAlpha", 1)

@@ -24,22 +24,29 @@ from wrinklepipe.reuse import reused
 DEFAULT_PNG_LEVEL = 6
 
 
-def png_bytes(pixels: np.ndarray, level: int = DEFAULT_PNG_LEVEL, shared: bool = True) -> bytes:
-    """Encode ``[H, W, C]`` uint8/uint16 (C = 1..4) as a minimal PNG: IHDR, IDAT, IEND only.
+def png_bytes(
+    pixels: np.ndarray, level: int = DEFAULT_PNG_LEVEL, shared: bool = True, linear: bool = False
+) -> bytes:
+    """Encode ``[H, W, C]`` uint8/uint16 (C = 1..4) as a minimal PNG: IHDR, IDAT, IEND only
+    (with ``linear``, a gAMA chunk of gamma 1.0 too).
 
     Rows use the Up filter (vectorised); zlib at ``level`` (0-9; a run passes its own, e.g.
     ``ConvertOptions.png_level``). Same pixels and level -> same bytes.
     ``shared=False``: not through the run's memo (an image nothing else encodes, e.g. a
     report's picture: keying it would only cost a hash of its pixels).
+    ``linear``: tag the values linear (gAMA 1.0; OpenImageIO reads the file as
+    ``lin_rec709``): the files :func:`wrinklepipe.io.images.write_image` makes (maps, masks and
+    pictures other tools read). Textures inside glTF carry no colour-space chunk (the Khronos
+    validator flags them).
     """
     if not 0 <= int(level) <= 9:
         raise ValueError(f"PNG compression level must be 0..9, got {level}")
     encode = _png if shared else _png.__wrapped__  # type: ignore[attr-defined]
-    return encode(np.asarray(pixels), int(level))
+    return encode(np.asarray(pixels), int(level), bool(linear))
 
 
 @reused  # a texture the glTF document and the folder (or the GLB) both hold is encoded once
-def _png(px: np.ndarray, level: int) -> bytes:
+def _png(px: np.ndarray, level: int, linear: bool = False) -> bytes:
     if px.ndim == 2:
         px = px[..., None]
     h, w, c = px.shape
@@ -57,7 +64,14 @@ def _png(px: np.ndarray, level: int) -> bytes:
         return struct.pack(">I", len(payload)) + tag + payload + struct.pack(">I", crc)
 
     ihdr = struct.pack(">IIBBBBB", w, h, depth, color_type, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b"")
+    gama = chunk(b"gAMA", struct.pack(">I", 100000)) if linear else b""  # gamma 1.0 (x 1e5)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", ihdr)
+        + gama
+        + chunk(b"IDAT", data)
+        + chunk(b"IEND", b"")
+    )
 
 
 def png_pixels(data: bytes, file: str = "") -> np.ndarray:
