@@ -70,14 +70,23 @@ def read_wrinkled(path: str | Path, options: GltfReadOptions | None = None) -> W
     Raises :class:`~wrinklepipe.errors.InputError` naming the file (and JSON pointer) for
     anything malformed."""
     try:
-        return _read_wrinkled(path, options)
+        doc = read_document(path, options)
     except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
         # Safety net for structures the specific checks did not foresee: still one clear line.
         raise input_error(path, f"malformed glTF: {plain_reason(exc)}") from None
+    return wrinkled_package(doc, Path(path).stem)
 
 
-def _read_wrinkled(path: str | Path, options: GltfReadOptions | None) -> WrinklePackage:
-    doc = read_document(path, options)
+def wrinkled_package(doc: Document, name: str) -> WrinklePackage:
+    """The package of a document already read (:func:`read_wrinkled` without the read: a
+    caller that needs the document too opens the file once), named ``name``."""
+    try:
+        return _wrinkled_package(doc, name)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
+        raise input_error(doc.file, f"malformed glTF: {plain_reason(exc)}") from None
+
+
+def _wrinkled_package(doc: Document, name: str) -> WrinklePackage:
     materials = wrinkled_materials(doc)
     if not materials:
         raise doc.err(f"no material carries {EXTENSION}: not a wrinklepipe asset", "/materials")
@@ -91,7 +100,7 @@ def _read_wrinkled(path: str | Path, options: GltfReadOptions | None) -> Wrinkle
                 raise doc.err(f"wrinkled primitive has no {need} attribute", r.pointer)
     mesh = wrinkled_mesh(doc, refs)
     morph_nodes = morph_columns(doc, refs, mesh.morph_names)
-    return package_from_document(doc, materials[0], mesh, Path(path).stem, morph_nodes)
+    return package_from_document(doc, materials[0], mesh, name, morph_nodes)
 
 
 def _scalar(doc: Document, i: int) -> np.ndarray:

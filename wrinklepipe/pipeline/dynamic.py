@@ -29,7 +29,7 @@ from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.gltf.meshes import gltf_joint_world_matrices_at, gltf_morph_weights
 from wrinklepipe.readers.meshes import LoadOptions, load_mesh, load_meshes, merge_meshes
 from wrinklepipe.readers.registry import format_of
-from wrinklepipe.usd.meshes import usd_blend_shape_weights, usd_joint_world_matrices
+from wrinklepipe.usd.meshes import open_stage, usd_blend_shape_weights, usd_joint_world_matrices
 
 
 @dataclass(frozen=True)
@@ -85,7 +85,8 @@ def rest_and_deformed(
     fmt = format_of(source)
     kind = fmt.name if fmt is not None else None
     if kind == "usd":
-        posed = [_usd_part_pose(source, part, opt.time) for part in parts]
+        stage = open_stage(Path(source))  # once: every part is posed on it
+        posed = [_usd_part_pose(source, stage, part, opt.time) for part in parts]
         return np.concatenate([r for r, _ in posed]), np.concatenate([q for _, q in posed])
     if kind == "gltf":
         p = rest
@@ -108,7 +109,7 @@ def rest_and_deformed(
 
 
 def _usd_part_pose(
-    source: str | Path, part: Mesh, time: float | None
+    source: str | Path, stage: Any, part: Mesh, time: float | None
 ) -> tuple[np.ndarray, np.ndarray]:
     """One prim's rest and posed positions: a skinned prim's rest is its points skinned with
     the skeleton's ``restTransforms`` (no animation, no blend shapes), in the posed shape's
@@ -116,14 +117,13 @@ def _usd_part_pose(
     transforms equal the bind transforms."""
     rest = p = part.positions.astype(np.float64)
     if part.morph_names:
-        w = usd_blend_shape_weights(source, part, time)
+        w = usd_blend_shape_weights(source, part, time, stage)
         w = {k: v for k, v in w.items() if k in part.morph_names}
         p = morph_pose(part, w, source=str(source))
     if part.joints is not None:
-        rest = skinned_pose(
-            part, usd_joint_world_matrices(source, part, time, at_rest=True), source=str(source)
-        )
-        jm = usd_joint_world_matrices(source, part, time)
+        at_rest = usd_joint_world_matrices(source, part, time, at_rest=True, stage=stage)
+        rest = skinned_pose(part, at_rest, source=str(source))
+        jm = usd_joint_world_matrices(source, part, time, stage=stage)
         bind = part.positions
         part.positions = p.astype(np.float32)
         try:

@@ -26,10 +26,11 @@ import numpy as np
 
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.demo import demo_asset
-from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.errors import input_error
 from wrinklepipe.fidelity.ship import edge_texels
-from wrinklepipe.gltf.container import split_glb
-from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.gltf.container import open_container
+from wrinklepipe.gltf.document import read_document
+from wrinklepipe.gltf.package_read import wrinkled_package
 from wrinklepipe.model import ENCODINGS
 from wrinklepipe.normals import uastc
 from wrinklepipe.normals.dds import read_dds
@@ -101,32 +102,20 @@ def load_input(path: str | Path, options: LoadOptions | None = None) -> Validati
 # glTF / GLB: does it claim wrinkle data?
 
 
-def _gltf_json(path: Path, max_bytes: int) -> dict[str, Any]:
+def _check_size(path: Path, max_bytes: int) -> None:
+    """Refuse an empty file, or one over ``max_bytes``, before it is read."""
     size = path.stat().st_size
     if size == 0:
         raise input_error(path, "file is empty")
     if size > max_bytes:
         raise input_error(path, f"file is {size} bytes, over the cap of {max_bytes}")
-    raw = path.read_bytes()
-    if raw[:4] == b"glTF":
-        raw, _ = split_glb(raw, str(path))  # the one GLB container parser
-    elif path.suffix.lower() == ".glb":
-        raise input_error(path, "not a GLB file (bad magic)")
-    doc = loads_json(raw, path, "glTF JSON")
-    if not isinstance(doc, dict):
-        raise input_error(path, "glTF JSON must be an object")
-    return doc
 
 
-def check_gltf_claims_wrinkles(path: Path, max_bytes: int = 512 * 1024 * 1024) -> None:
-    """Refuse a glTF/GLB that does not carry the ``WRINKLEPIPE_wrinkle_maps`` extension."""
-    doc = _gltf_json(path, max_bytes)
-    asset = doc.get("asset")
-    if not isinstance(asset, dict) or not isinstance(asset.get("version"), str):
-        raise input_error(path, "not a glTF 2.0 document: missing asset.version", "/asset")
-    used = doc.get("extensionsUsed", [])
+def claims_wrinkles(gltf: dict[str, Any], path: Path) -> None:
+    """Refuse a glTF JSON tree that does not carry the ``WRINKLEPIPE_wrinkle_maps`` extension."""
+    used = gltf.get("extensionsUsed", [])
     claims = isinstance(used, list) and EXTENSION in used
-    mats = doc.get("materials", [])
+    mats = gltf.get("materials", [])
     if isinstance(mats, list):
         for m in mats:
             if isinstance(m, dict) and isinstance(m.get("extensions"), dict):
@@ -140,13 +129,28 @@ def check_gltf_claims_wrinkles(path: Path, max_bytes: int = 512 * 1024 * 1024) -
         )
 
 
+def check_gltf_claims_wrinkles(path: Path, max_bytes: int = 512 * 1024 * 1024) -> None:
+    """Refuse a glTF/GLB that does not carry the ``WRINKLEPIPE_wrinkle_maps`` extension (its
+    container parsed alone, geometry left undecoded)."""
+    _check_size(path, max_bytes)
+    claims_wrinkles(open_container(path).gltf, path)
+
+
 def _from_written(p: Path, fmt: Format, o: LoadOptions) -> ValidationInput:
-    """A written .gltf/.glb or USD file through the package reader of its format."""
+    """A written .gltf/.glb or USD file through the package reader of its format; a glTF is
+    read once (:func:`~wrinklepipe.gltf.document.read_document`): its claim, its package and
+    the pointers come from that one document."""
     kind = fmt.name
-    if kind == "gltf":
-        check_gltf_claims_wrinkles(p, o.max_gltf_bytes)
     what = "the glTF" if kind == "gltf" else "the USD stage"
-    pkg = guard_reader(lambda: read_package_file(p), p, what)
+    gltf: dict[str, Any] = {}
+    if kind == "gltf":
+        _check_size(p, o.max_gltf_bytes)
+        doc = guard_reader(lambda: read_document(p), p, what)
+        claims_wrinkles(doc.gltf, p)
+        gltf = doc.gltf
+        pkg = guard_reader(lambda: wrinkled_package(doc, p.stem), p, what)
+    else:
+        pkg = guard_reader(lambda: read_package_file(p), p, what)
     folder = p.parent
     files = {t.name: str(folder / "textures" / f"{t.name}.png") for t in pkg.textures}
     files = {k: v for k, v in files.items() if Path(v).exists()}
@@ -154,18 +158,14 @@ def _from_written(p: Path, fmt: Format, o: LoadOptions) -> ValidationInput:
     if kind == "usd":
         _usd_pointers(inp, p)
     else:
-        _gltf_pointers(inp, p)
+        _gltf_pointers(inp, p, gltf)
     return inp
 
 
-def _gltf_pointers(inp: ValidationInput, p: Path) -> None:
+def _gltf_pointers(inp: ValidationInput, p: Path, gltf: dict[str, Any]) -> None:
     """JSON pointers to where the extension actually sits (a material's, or the document's)."""
-    try:
-        doc = _gltf_json(p, 1 << 30)
-    except InputError:  # pragma: no cover - the reader already parsed it
-        return
     ext = f"/extensions/{EXTENSION}"
-    for i, m in enumerate(doc.get("materials", []) or []):
+    for i, m in enumerate(gltf.get("materials", []) or []):
         if isinstance(m, dict) and EXTENSION in (m.get("extensions") or {}):
             ext = f"/materials/{i}/extensions/{EXTENSION}"
             break

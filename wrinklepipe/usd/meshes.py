@@ -548,17 +548,22 @@ def _authored_joints(file: str, skel: Any, n: int) -> tuple[list[str], np.ndarra
 
 
 def usd_joint_world_matrices(
-    path: str | Path, mesh: Mesh, time: float | None = None, at_rest: bool = False
+    path: str | Path,
+    mesh: Mesh,
+    time: float | None = None,
+    at_rest: bool = False,
+    stage: Any = None,
 ) -> np.ndarray:
     """World matrices ``[J, 4, 4]`` (column vectors) of ``mesh``'s joints at ``time``, from the
     skeleton bound to the mesh prim ``mesh.name`` and its animation source; ``at_rest``: the
     skeleton's ``restTransforms`` instead (no animation; UsdSkel's own ``atRest``; a skeleton
     without them: its ``bindTransforms``), placed by the skeleton's world transform at
-    ``time``."""
+    ``time``. ``stage``: ``path`` already opened (:func:`open_stage`), for a caller that asks
+    about several prims."""
     from pxr import Usd, UsdGeom, UsdSkel  # deferred: usd-core, USD only
 
     p = Path(path)
-    stage = open_stage(p)
+    stage = stage or open_stage(p)
     prim = stage.GetPrimAtPath(mesh.name)
     if not prim:
         raise input_error(p, f"no prim {mesh.name}")
@@ -587,12 +592,15 @@ def usd_joint_world_matrices(
     return world[[names.index(j) for j in mesh.joint_names]]
 
 
-def usd_blend_shape_weights(path: str | Path, mesh: Mesh, time: float) -> dict[str, float]:
-    """The SkelAnimation blend-shape weights bound to ``mesh.name`` at ``time``."""
+def usd_blend_shape_weights(
+    path: str | Path, mesh: Mesh, time: float, stage: Any = None
+) -> dict[str, float]:
+    """The SkelAnimation blend-shape weights bound to ``mesh.name`` at ``time`` (``stage``:
+    ``path`` already opened)."""
     from pxr import Usd, UsdSkel  # deferred: usd-core, USD only
 
     p = Path(path)
-    stage = open_stage(p)
+    stage = stage or open_stage(p)
     prim = stage.GetPrimAtPath(mesh.name)
     skel = UsdSkel.BindingAPI(prim).GetInheritedSkeleton() if prim else None
     if not skel:
