@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from wrinklepipe.codec import srgb
+
 
 @dataclass(frozen=True)
 class MeshPart:
@@ -74,6 +76,41 @@ class Region:
 
 
 @dataclass
+class ColorMaps:
+    """The colour half of the appearance states: sRGB texels as stored, and which states carry
+    one (the model blends them in linear light: :func:`wrinklepipe.model.combine_color`).
+
+    ``base`` is the base colour's texels ``[H, W, C]`` (uint8 / uint16, C = 3 or 4: an alpha
+    channel passes through untouched), ``states`` the colour maps ``[Kc, Hs, Ws, 3]`` of the
+    states ``state_index`` (indices into the asset's ``state_names``), ``factor`` the linear
+    multiplier of the base colour (a glTF material's ``baseColorFactor``), ``from_material``
+    whether the base is the wrinkled material's own ``baseColorTexture`` (it then ships as it
+    is). States are at the base's size as read; the automatic size choice may make them smaller.
+    """
+
+    base: np.ndarray
+    states: np.ndarray
+    state_index: tuple[int, ...]
+    factor: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    from_material: bool = False
+
+    @property
+    def bits(self) -> int:
+        return 16 if self.base.dtype == np.uint16 else 8
+
+    def base_linear(self) -> np.ndarray:
+        """``C_B``: the base colour in linear light, ``factor`` applied (``[H, W, 3]``)."""
+        lin = srgb.decode_texels(self.base[..., :3])
+        if self.factor != (1.0, 1.0, 1.0):
+            lin = (lin * np.asarray(self.factor, np.float32)).astype(np.float32)
+        return lin
+
+    def states_linear(self) -> np.ndarray:
+        """``C_k``: the states' colours in linear light (``[Kc, Hs, Ws, 3]``)."""
+        return srgb.decode_texels(self.states[..., :3])
+
+
+@dataclass
 class WrinkleAsset:
     """Everything one character's wrinkle setup holds.
 
@@ -97,6 +134,10 @@ class WrinkleAsset:
     budget: dict[str, float] = field(default_factory=dict)
     resolution: dict[str, int] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
+    #: the states' colour maps and the base colour (None: no state carries a colour)
+    color: ColorMaps | None = None
+    #: the states that carry no normal map (a colour-only state: its normal is the base)
+    color_only: tuple[int, ...] = ()
 
     @property
     def region_names(self) -> tuple[str, ...]:

@@ -53,11 +53,12 @@ LAYERS: tuple[Layer, ...] = (
     ),
     Layer(
         "stages",
-        "array-in, array-out stages: geometry, normal maps, masks, weight drivers, shader "
-        "generation, fidelity, capture",
+        "array-in, array-out stages: geometry, normal maps, colour maps, masks, weight drivers, "
+        "shader generation, fidelity, capture",
         (
             "wrinklepipe.geometry",
             "wrinklepipe.normals",
+            "wrinklepipe.color",
             "wrinklepipe.masks",
             "wrinklepipe.drivers",
             "wrinklepipe.shading",

@@ -70,13 +70,33 @@ def schema_problems(ext: Any) -> list[tuple[str, str]]:
 
 @dataclass(frozen=True)
 class StateMeta:
-    """A wrinkle state: its name and the stored texture holding it."""
+    """A wrinkle state: its name, the stored texture holding its normal map, and its colour
+    map's (``color``; None: the state does not change the colour). ``normal`` False: a
+    colour-only state, whose stored normal map is the base's (it adds no relief; every
+    consumer reads it as any other state)."""
 
     name: str
     texture: str
+    color: str | None = None
+    normal: bool = True
 
     def to_json(self) -> dict[str, Any]:
-        return {"name": self.name, "texture": self.texture}
+        d: dict[str, Any] = {"name": self.name, "texture": self.texture}
+        if self.color is not None:
+            d["color"] = self.color
+        if not self.normal:
+            d["normal"] = False
+        return d
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> StateMeta:
+        color = d.get("color")
+        return cls(
+            str(d["name"]),
+            str(d.get("texture", "")),
+            None if color is None else str(color),
+            bool(d.get("normal", True)),
+        )
 
 
 @dataclass(frozen=True)
@@ -182,9 +202,11 @@ class CompressedCopy:
     levels: int
     ktx2: str
     dds: str
+    #: "srgb": a colour map's copy in an sRGB block format (mips made in linear light)
+    color_space: str = "linear"
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        d: dict[str, Any] = {
             "texture": self.texture,
             "format": self.format,
             "layout": self.layout,
@@ -193,6 +215,9 @@ class CompressedCopy:
             "ktx2": self.ktx2,
             "dds": self.dds,
         }
+        if self.color_space != "linear":
+            d["color_space"] = self.color_space
+        return d
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> CompressedCopy:
@@ -204,6 +229,7 @@ class CompressedCopy:
             int(d["levels"]),
             str(d["ktx2"]),
             str(d["dds"]),
+            str(d.get("color_space", "linear")),
         )
 
 
@@ -232,6 +258,10 @@ class WrinkleMeta:
     #: one static weight per region
     weights: tuple[float, ...] = ()
     compressed: tuple[CompressedCopy, ...] = ()
+    #: the base colour's stored texture when states carry colour (glTF: the wrinkled
+    #: material's baseColorTexture), and the linear factor it is multiplied by
+    base_color: str | None = None
+    color_factor: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
     # -- views --------------------------------------------------------------------------------
     @property
@@ -245,6 +275,16 @@ class WrinkleMeta:
     @property
     def region_names(self) -> list[str]:
         return [r.name for r in self.regions]
+
+    @property
+    def color_states(self) -> list[int]:
+        """Indices of the states that carry a colour map."""
+        return [k for k, s in enumerate(self.states) if s.color is not None]
+
+    @property
+    def color_textures(self) -> list[str]:
+        """The colour maps' stored textures, in state order."""
+        return [s.color for s in self.states if s.color is not None]
 
     @property
     def texture_copies(self) -> list[str]:
@@ -273,6 +313,9 @@ class WrinkleMeta:
         }
         if self.compressed:
             d["compressed"] = [c.to_json() for c in self.compressed]
+        if self.base_color is not None:
+            d["base_color"] = self.base_color
+            d["color_factor"] = list(self.color_factor)
         return d
 
     @classmethod
@@ -282,7 +325,7 @@ class WrinkleMeta:
         return cls(
             encoding=str(d["encoding"]),
             policy=str(d["policy"]),
-            states=tuple(StateMeta(str(s["name"]), str(s.get("texture", ""))) for s in d["states"]),
+            states=tuple(StateMeta.from_json(s) for s in d["states"]),
             masks=MaskMeta.from_json(d["masks"]),
             regions=regions,
             scale=float(d.get("scale", 1.0)),
@@ -291,6 +334,8 @@ class WrinkleMeta:
             drivers=tuple(dict(x) for x in d.get("drivers", ())),
             weights=tuple(float(w) for w in d.get("weights", [0.0] * len(regions))),
             compressed=tuple(CompressedCopy.from_json(c) for c in d.get("compressed", ())),
+            base_color=None if d.get("base_color") is None else str(d["base_color"]),
+            color_factor=_factor(d.get("color_factor")),
         )
 
     # -- the glTF extension block ---------------------------------------------------------------
@@ -304,9 +349,7 @@ class WrinkleMeta:
             "scale": float(self.scale),
             "mapping": int(self.mapping),
             "policy": self.policy,
-            "states": [
-                {"name": s.name, "texture": {"index": tex_index[s.texture]}} for s in self.states
-            ],
+            "states": [_state_entry(s, tex_index) for s in self.states],
             "masks": {
                 "layout": self.masks.layout,
                 "textures": [{"index": tex_index[n]} for n in self.masks.textures],
@@ -322,17 +365,7 @@ class WrinkleMeta:
             "vertexIdAttribute": vertex_id_attribute,
         }
         if self.compressed:
-            ext["compressed"] = [
-                {
-                    "texture": {"index": tex_index[c.texture]},
-                    "format": c.format,
-                    "layout": c.layout,
-                    "mapping": int(c.mapping),
-                    "levels": int(c.levels),
-                    "uris": [u for u in (c.ktx2, c.dds) if u],  # uastc: a KTX2 only
-                }
-                for c in self.compressed
-            ]
+            ext["compressed"] = [_copy_entry(c, tex_index) for c in self.compressed]
         return ext
 
     @classmethod
@@ -349,7 +382,14 @@ class WrinkleMeta:
             where, message = problems[0]
             raise err(f"extension block does not match its schema: {message}", pointer + where)
         states = tuple(
-            StateMeta(s["name"], texture(s["texture"], f"{pointer}/states/{i}", "state"))
+            StateMeta(
+                s["name"],
+                texture(s["texture"], f"{pointer}/states/{i}", "state"),
+                None
+                if "colorTexture" not in s
+                else texture(s["colorTexture"], f"{pointer}/states/{i}/colorTexture", "color"),
+                bool(s.get("normal", True)),
+            )
             for i, s in enumerate(ext["states"])
         )
         masks = ext["masks"]
@@ -388,6 +428,7 @@ class WrinkleMeta:
                     int(c["levels"]),
                     ktx2,
                     dds,
+                    str(c.get("colorSpace", "linear")),
                 )
             )
         return cls(
@@ -407,12 +448,52 @@ class WrinkleMeta:
     def check(self, err: ErrorFactory, pointer: str = "") -> WrinkleMeta:
         """This description, if its extension form passes the schema (what a USD reader
         calls on what it read); else the first problem through ``err``."""
-        names = sorted({*self.state_textures, *self.masks.textures, *self.texture_copies})
+        names = sorted(
+            {
+                *self.state_textures,
+                *self.color_textures,
+                *self.masks.textures,
+                *self.texture_copies,
+                *([self.base_color] if self.base_color is not None else []),
+            }
+        )
         problems = schema_problems(self.to_extension({n: i for i, n in enumerate(names)}))
         if problems:
             where, message = problems[0]
             raise err(f"wrinkle description does not match the schema: {message}", pointer)
         return self
+
+
+def _state_entry(s: StateMeta, tex_index: Mapping[str, int]) -> dict[str, Any]:
+    """A state's extension entry: its normal map's textureInfo, its colour map's (sRGB) and,
+    for a colour-only state, ``normal: false``."""
+    d: dict[str, Any] = {"name": s.name, "texture": {"index": tex_index[s.texture]}}
+    if s.color is not None:
+        d["colorTexture"] = {"index": tex_index[s.color]}
+    if not s.normal:
+        d["normal"] = False
+    return d
+
+
+def _copy_entry(c: CompressedCopy, tex_index: Mapping[str, int]) -> dict[str, Any]:
+    d: dict[str, Any] = {
+        "texture": {"index": tex_index[c.texture]},
+        "format": c.format,
+        "layout": c.layout,
+        "mapping": int(c.mapping),
+        "levels": int(c.levels),
+        "uris": [u for u in (c.ktx2, c.dds) if u],  # uastc: a KTX2 only
+    }
+    if c.color_space != "linear":
+        d["colorSpace"] = c.color_space
+    return d
+
+
+def _factor(value: Any) -> tuple[float, float, float]:
+    if value is None:
+        return (1.0, 1.0, 1.0)
+    r, g, b = (float(x) for x in list(value)[:3])
+    return (r, g, b)
 
 
 def sorted_expressions(rows: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, float]]:

@@ -42,7 +42,7 @@ class PackedTexture:
 
     name: str  # stable identifier and file stem: "base_normal", "wrinkle_stretch", "mask_0"
     pixels: np.ndarray
-    role: str  # "base_normal" | "state" | "mask"
+    role: str  # "base_normal" | "state" | "mask" | "base_color" | "state_color"
 
     @property
     def bits(self) -> int:

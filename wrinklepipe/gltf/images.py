@@ -135,6 +135,11 @@ def image_pixels(doc: Document, image: int) -> np.ndarray:
     return np.clip(np.rint(values.astype(np.float64) * top), 0, top).astype(dtype)
 
 
+def texture_texels(doc: Document, texture: int) -> np.ndarray:
+    """Texture ``texture``'s image as stored integers ``[H, W, C]`` (:func:`image_pixels`)."""
+    return image_pixels(doc, texture_source(doc, texture))
+
+
 def texture_normals(
     doc: Document, texture: int, key: str, stats: dict[str, Any] | None = None
 ) -> tuple[np.ndarray, list[str]]:

@@ -24,6 +24,7 @@ and URI confinement), images are decoded by :mod:`wrinklepipe.gltf.images` (held
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -142,14 +143,11 @@ def package_from_document(
     if "normalTexture" not in mat:
         raise doc.err("material has no normalTexture (the base normal map)", mkey)
     base_name = tex(mat["normalTexture"], f"{mkey}/normalTexture", "base_normal")
-    if base_name != "base_normal":
-        if "base_normal" in taken:
-            raise doc.err("an image other than the base normal map is named 'base_normal'")
-        textures[-1].name = "base_normal"
-        taken.add("base_normal")
-        by_image = {k: ("base_normal" if v == base_name else v) for k, v in by_image.items()}
+    _rename(textures, by_image, taken, base_name, "base_normal", doc)
 
     def named(info: Any, key: str, role: str) -> str:
+        if role == "color":
+            return tex(info, key, "state_color")
         if role != "copy":
             return tex(info, key, role)
         src = source(info, key)
@@ -157,16 +155,58 @@ def package_from_document(
             raise doc.err("a compressed copy of a texture the extension does not use", key)
         return by_image[src]
 
+    colored = isinstance(ext, dict) and any(
+        isinstance(st, dict) and "colorTexture" in st for st in ext.get("states") or []
+    )
+    if colored:  # the colour states blend over the material's base colour: read it first
+        pbr = mat.get("pbrMetallicRoughness") or {}
+        if not isinstance(pbr, dict) or "baseColorTexture" not in pbr:
+            raise doc.err(
+                "states have a colorTexture but the material has no baseColorTexture (the base "
+                "colour they blend over)",
+                mkey,
+            )
+        key = f"{mkey}/pbrMetallicRoughness/baseColorTexture"
+        _rename(textures, by_image, taken, tex(pbr["baseColorTexture"], key, "base_color"),
+                "base_color", doc)  # fmt: skip
     try:
         meta = WrinkleMeta.from_extension(ext, named, doc.err, pkey)
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
         raise doc.err(f"malformed extension block: {plain_reason(exc)}", pkey) from None
+    if colored:
+        factor = (mat.get("pbrMetallicRoughness") or {}).get("baseColorFactor", [1.0] * 4)
+        meta = replace(
+            meta, base_color="base_color", color_factor=tuple(float(x) for x in factor[:3])
+        )
     try:
         json.dumps(meta.to_json(), allow_nan=False)
     except ValueError:
         raise doc.err("the extension block holds a NaN or infinite number", pkey) from None
     curves = _weight_curves(doc, ext, pkey, len(meta.regions), len(mesh.morph_names), morph_nodes)
     return WrinklePackage(name, mesh, textures, meta, curves)
+
+
+def _rename(
+    textures: list[PackedTexture],
+    by_image: dict[int, str],
+    taken: set[str],
+    name: str,
+    to: str,
+    doc: Document,
+) -> None:
+    """Name the texture ``name`` as ``to`` (``base_normal``, ``base_color``): the name the
+    package gives that role, whatever the image is called."""
+    if name == to:
+        return
+    if to in taken:
+        raise doc.err(f"an image other than the material's {to} is named {to!r}")
+    for t in textures:
+        if t.name == name:
+            t.name = to
+    taken.add(to)
+    for k, v in list(by_image.items()):
+        if v == name:
+            by_image[k] = to
 
 
 def _weight_curves(

@@ -318,14 +318,18 @@ def gltf_document(
     if animations:
         ext["weightCurves"] = [{"name": c.name, "animation": i} for i, c in enumerate(pkg.curves)]
 
+    pbr: dict[str, Any] = {
+        "baseColorFactor": [0.8, 0.62, 0.52, 1.0],
+        "metallicFactor": 0.0,
+        "roughnessFactor": 0.55,
+    }
+    if pkg.meta.base_color is not None:  # the colour states blend over the base colour
+        pbr["baseColorTexture"] = {"index": tex_index[pkg.meta.base_color]}
+        pbr["baseColorFactor"] = [*(float(x) for x in pkg.meta.color_factor), 1.0]
     material = {
         "name": f"{pkg.name}_skin",
         "normalTexture": {"index": tex_index["base_normal"]},
-        "pbrMetallicRoughness": {
-            "baseColorFactor": [0.8, 0.62, 0.52, 1.0],
-            "metallicFactor": 0.0,
-            "roughnessFactor": 0.55,
-        },
+        "pbrMetallicRoughness": pbr,
         "extensions": {EXTENSION: ext},
     }
     used = [EXTENSION] + ([POINTER_EXTENSION] if animations else [])

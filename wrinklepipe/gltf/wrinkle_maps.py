@@ -40,12 +40,14 @@ SAMPLER = {"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}
 
 @dataclass(frozen=True)
 class WrinkleTarget:
-    """Where the wrinkle data goes: the wrinkled materials and primitives, and the texture that
-    is the base when the manifest names none (the material's own normalTexture)."""
+    """Where the wrinkle data goes: the wrinkled materials and primitives, the texture that
+    is the base when the manifest names none (the material's own normalTexture), and likewise
+    the base colour's (the material's own baseColorTexture) when states carry colour."""
 
     materials: tuple[int, ...]
     refs: tuple[PrimitiveRef, ...]
     base_texture: int | None = None
+    base_color_texture: int | None = None
 
 
 def _free_uri(doc: Document, stem: str) -> str:
@@ -69,6 +71,9 @@ def add_wrinkle_maps(
     for t in pkg.textures:
         if t.role == "base_normal" and target.base_texture is not None:
             tex_index[t.name] = target.base_texture
+            continue
+        if t.role == "base_color" and target.base_color_texture is not None:
+            tex_index[t.name] = target.base_color_texture
             continue
         stem = safe_name(t.name)
         image = doc.add_image(
@@ -109,8 +114,32 @@ def add_wrinkle_maps(
                     f"{mat['normalTexture'].get('index')}) replaced by the manifest's base"
                 )
             mat["normalTexture"] = {"index": tex_index["base_normal"]}
+        if pkg.meta.base_color is not None and target.base_color_texture is None:
+            notes += _set_base_color(mat, m, tex_index[pkg.meta.base_color])
         mat.setdefault("extensions", {})[EXTENSION] = copy.deepcopy(ext)
     doc.use_extension(EXTENSION)
     if animations:
         doc.use_extension(POINTER_EXTENSION)
+    return notes
+
+
+def _set_base_color(mat: dict, index: int, texture: int) -> list[str]:
+    """Make the manifest's base colour the material's ``baseColorTexture`` (the colour states
+    blend over it), its factor's RGB 1 (the base colour is the map as painted)."""
+    notes = []
+    name = mat.get("name", index)
+    pbr = mat.setdefault("pbrMetallicRoughness", {})
+    if "baseColorTexture" in pbr:
+        notes.append(
+            f"material {name!r}: baseColorTexture (texture {pbr['baseColorTexture'].get('index')})"
+            " replaced by the manifest's base_color"
+        )
+    pbr["baseColorTexture"] = {"index": texture}
+    factor = pbr.get("baseColorFactor")
+    if factor is not None and list(factor[:3]) != [1.0, 1.0, 1.0]:
+        notes.append(
+            f"material {name!r}: baseColorFactor RGB {list(factor[:3])} set to 1 (the manifest's "
+            "base_color is the base colour as painted)"
+        )
+        pbr["baseColorFactor"] = [1.0, 1.0, 1.0, float(factor[3]) if len(factor) > 3 else 1.0]
     return notes

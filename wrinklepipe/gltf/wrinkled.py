@@ -379,3 +379,62 @@ def material_normal_texture(
             "base",
         )
     return infos[0]
+
+
+def material_base_color(
+    doc: Document, materials: list[int], manifest: str | Path = ""
+) -> tuple[dict[str, Any], tuple[float, float, float]]:
+    """The ``baseColorTexture`` the wrinkled materials share and their ``baseColorFactor``'s RGB,
+    when they are the base colour of colour states (no ``base_color`` in the manifest).
+
+    Refused, each with one message: a material without one, materials with different ones
+    (texture or factor), a ``KHR_texture_transform`` on it or a ``texCoord`` other than 0 (the
+    states' colour maps are looked up on TEXCOORD_0 without a transform)."""
+    file = str(manifest or doc.file)
+    found = []
+    for m in materials:
+        mat = doc.array("materials")[m]
+        pbr = mat.get("pbrMetallicRoughness") if isinstance(mat, dict) else None
+        pbr = pbr if isinstance(pbr, dict) else {}
+        info = pbr.get("baseColorTexture")
+        name = doc.material_name(m)
+        if not isinstance(info, dict) or not isinstance(info.get("index"), int):
+            raise input_error(
+                file,
+                f"the states have colour maps but the wrinkled material {name!r} of "
+                f"{doc.path.name} has no baseColorTexture to blend them over; name the base "
+                'colour map with base_color = "FILE"',
+                "base_color",
+            )
+        where = f"{doc.path.name} /materials/{m}/pbrMetallicRoughness/baseColorTexture"
+        if TEXTURE_TRANSFORM in (info.get("extensions") or {}):
+            raise input_error(
+                file,
+                f"{where} (the base colour) has {TEXTURE_TRANSFORM}; the states' colour maps are "
+                "looked up on untransformed TEXCOORD_0: bake the transform into the UVs or give "
+                'base_color = "FILE"',
+                "base_color",
+            )
+        if info.get("texCoord", 0) != 0:
+            raise input_error(
+                file,
+                f"{where} (the base colour) uses TEXCOORD_{info['texCoord']}; the states' colour "
+                "maps use TEXCOORD_0",
+                "base_color",
+            )
+        factor = pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0])
+        rgb = tuple(float(x) for x in factor[:3])
+        found.append((m, info, rgb))
+    first = found[0]
+    if any(i["index"] != first[1]["index"] or f != first[2] for _, i, f in found):
+        raise input_error(
+            file,
+            "the wrinkled materials have different base colours ("
+            + ", ".join(
+                f"{doc.material_name(m)!r}: texture {i['index']}, factor {list(f)}"
+                for m, i, f in found
+            )
+            + '); name the base colour map with base_color = "FILE"',
+            "base_color",
+        )
+    return first[1], first[2]  # type: ignore[return-value]

@@ -25,6 +25,7 @@ import numpy as np
 from wrinklepipe import masks as wm
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
+from wrinklepipe.color.read import color_image_evidence
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.gltf.document import Document
@@ -38,6 +39,7 @@ from wrinklepipe.gltf.wrinkled import (
 from wrinklepipe.io.images import read_image
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
 from wrinklepipe.pipeline.character import open_wrinkled_document
+from wrinklepipe.pipeline.ingest_color import MaterialColor, material_color, read_colors
 from wrinklepipe.readers.meshes import load_mesh
 from wrinklepipe.readers.registry import format_of
 from wrinklepipe.usd.source import UsdSource, read_usd_source
@@ -50,6 +52,10 @@ def _read_normals(
     the reader's counts of problem texels go into ``stats[role]``."""
     o = ReadOptions(convention=convention)
     nm = read_normal_map(path, o)
+    why = color_image_evidence(nm.stats.non_unit, nm.stats.texels)
+    if why is not None:
+        hint = "; a state's colour map goes in color = FILE" if role.startswith("state") else ""
+        raise input_error(path, f"given as a normal map ({role or 'map'}), but {why}{hint}")
     notes = [f"{path.name}: {nm.source_format}, convention {nm.convention}"]
     notes += [f"{path.name}: {n}" for n in nm.notes if "convention" not in n]
     if stats is not None:
@@ -80,6 +86,9 @@ def read_maps(
         notes += n
     states = []
     for s in manifest.states:
+        if s.map is None:  # a colour-only state: its normal is the base (it adds nothing)
+            states.append(base)
+            continue
         st, n = _read_normals(s.map, manifest.convention, stats, f"state {s.name}")
         notes += n
         if st.shape != base.shape:
@@ -131,6 +140,8 @@ class SourceDocument:
     notes: list[str]
     #: the reader's problem-texel counts of the material's normalTexture (when it is the base)
     base_stats: dict[str, Any] | None = None
+    #: the material's baseColorTexture, when it is the base colour of colour states
+    color: MaterialColor | None = None
 
 
 def read_source_document(manifest: Any) -> SourceDocument:
@@ -152,12 +163,20 @@ def read_source_document(manifest: Any) -> SourceDocument:
     for part in add_wrinkle_attributes(doc, sel.refs):
         where = f"{doc.mesh_name(part.ref.mesh)}/{part.ref.primitive}"
         notes += [f"{where}: {n}" for n in part.notes]
+    color = None
+    if manifest.has_color and manifest.base_color is None:
+        color = material_color(doc, sel.materials, manifest)
     mesh = wrinkled_mesh(doc, sel.refs)
     listing = ", ".join(f"{p.name} ({p.count} vertices)" for p in mesh.parts)
     mats = ", ".join(repr(doc.material_name(m)) for m in sel.materials)
     notes.append(f"wrinkled material(s) {mats}: primitives {listing}")
-    target = WrinkleTarget(tuple(sel.materials), tuple(sel.refs), base_texture)
-    return SourceDocument(doc, target, mesh, base, notes, base_stats)
+    target = WrinkleTarget(
+        tuple(sel.materials),
+        tuple(sel.refs),
+        base_texture,
+        color.texture if color is not None else None,
+    )
+    return SourceDocument(doc, target, mesh, base, notes, base_stats, color)
 
 
 def check_masks_on_mesh(masks: np.ndarray, mesh: Mesh, manifest: Any) -> None:
@@ -224,6 +243,9 @@ def ingest_all(manifest: Any) -> Ingested:
             f"{b['z_negative']} with z < 0 (renormalised to be blended and stored)"
         )
     asset = _asset(manifest, base, states, mask_arr, mesh, regions)
+    asset.color, color_notes = read_colors(manifest, source.color if source is not None else None)
+    notes += color_notes
+    asset.color_only = tuple(k for k, s in enumerate(manifest.states) if s.map is None)
     asset.provenance["maps"] = stats
     asset.provenance["warnings"] = warnings
     if source is not None and source.target.base_texture is not None:

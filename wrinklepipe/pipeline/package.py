@@ -8,14 +8,15 @@ per-texel encodings are those of :mod:`wrinklepipe.model`, through :mod:`wrinkle
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from wrinklepipe import codec, model
 from wrinklepipe import masks as wm
-from wrinklepipe.asset import Region, WrinkleAsset
+from wrinklepipe.asset import ColorMaps, Region, WrinkleAsset
+from wrinklepipe.color.resample import resize_texels
 from wrinklepipe.errors import input_error
 from wrinklepipe.metadata import (
     MaskMeta,
@@ -196,6 +197,12 @@ def package_from_asset(
     for i, t in enumerate(mask_tex):
         mask_names.append(safe_name(f"mask_{i}", taken))
         textures.append(PackedTexture(mask_names[-1], _q(t, 8), "mask"))
+    base_color = None
+    if asset.color is not None:
+        base_color, states_meta = _pack_colors(asset.color, asset.state_names, states_meta, taken)
+        textures += base_color
+    for k in asset.color_only:
+        states_meta[k] = replace(states_meta[k], normal=False)
     meta = WrinkleMeta(
         encoding=asset.encoding,
         policy=asset.policy,
@@ -210,8 +217,27 @@ def package_from_asset(
         },
         drivers=tuple(dict(d) for d in asset.drivers),
         weights=(0.0,) * len(names),  # float32 values (they are animated as FLOAT)
+        base_color=base_color[0].name if base_color else None,
+        color_factor=asset.color.factor if asset.color is not None else (1.0, 1.0, 1.0),
     )
     return WrinklePackage(asset.name, asset.mesh, textures, meta, list(curves or []))
+
+
+def _pack_colors(
+    color: ColorMaps, state_names: tuple[str, ...], states_meta: list[StateMeta], taken: set[str]
+) -> tuple[list[PackedTexture], list[StateMeta]]:
+    """The base colour and the states' colour maps as stored textures (sRGB texels as they are:
+    a map that ships at its own size keeps its bytes), and the states' descriptions naming
+    them."""
+    out = [PackedTexture(safe_name("base_color", taken), np.asarray(color.base), "base_color")]
+    states_meta = list(states_meta)
+    for j, k in enumerate(color.state_index):
+        tex = PackedTexture(
+            safe_name(f"color_{state_names[k]}", taken), np.asarray(color.states[j]), "state_color"
+        )
+        out.append(tex)
+        states_meta[k] = replace(states_meta[k], color=tex.name)
+    return out, states_meta
 
 
 def mapping_version(meta: WrinkleMeta) -> int:
@@ -234,6 +260,7 @@ def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
         states.append(decode_state(b, stored, enc, scale, version))
     mask_tex = [_dq(pkg.texture(n).pixels) for n in meta.masks.textures]
     masks = unpack_masks(mask_tex, meta.masks.table_json())
+    color_only = tuple(k for k, s in enumerate(meta.states) if not s.normal)
     return WrinkleAsset(
         name=pkg.name,
         base=base,
@@ -247,4 +274,29 @@ def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
         pd_scale=scale,
         mesh=pkg.mesh,
         drivers=[dict(d) for d in meta.drivers],
+        color=colors_from_package(pkg),
+        color_only=color_only,
     )
+
+
+def colors_from_package(pkg: WrinklePackage) -> ColorMaps | None:
+    """The package's colour maps as stored (None without colour states). States stored at
+    different sizes are brought to the largest of them (in linear light), as one array."""
+    meta = pkg.meta
+    index = tuple(meta.color_states)
+    if meta.base_color is None or not index:
+        return None
+    base = pkg.texture(meta.base_color).pixels
+    states = [pkg.texture(meta.states[k].color).pixels[..., :3] for k in index]
+    size = max((s.shape[:2] for s in states), key=lambda hw: hw[0] * hw[1])
+    same = [resize_texels(s, size) for s in states]
+    dtype = base.dtype
+    same = [s if s.dtype == dtype else _as_depth(s, dtype) for s in same]
+    return ColorMaps(base, np.stack(same), index, meta.color_factor, False)
+
+
+def _as_depth(texels: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    from_bits = 16 if texels.dtype == np.uint16 else 8
+    to_bits = 16 if dtype == np.uint16 else 8
+    q = texels.astype(np.float64) * ((1 << to_bits) - 1) / ((1 << from_bits) - 1)
+    return np.rint(q).astype(dtype)

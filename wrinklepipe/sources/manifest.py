@@ -33,8 +33,11 @@ _CHANNELS = "rgba"
 
 @dataclass(frozen=True)
 class StateSpec:
+    """A wrinkle state: its normal map and/or its colour map (at least one of the two)."""
+
     name: str
-    map: Path
+    map: Path | None
+    color: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,13 @@ class Manifest:
     formats: dict[str, str] = field(default_factory=dict)
     budget: dict[str, float] = field(default_factory=dict)
     raw: dict[str, Any] = field(default_factory=dict)
+    #: the base colour map (None: the wrinkled glTF material's own baseColorTexture)
+    base_color: Path | None = None
+
+    @property
+    def has_color(self) -> bool:
+        """Whether some state carries a colour map."""
+        return any(s.color is not None for s in self.states)
 
     @property
     def root(self) -> Path:
@@ -80,7 +90,9 @@ class Manifest:
         files = [
             self.path,
             *([self.base] if self.base is not None else []),
-            *(s.map for s in self.states),
+            *([self.base_color] if self.base_color is not None else []),
+            *(s.map for s in self.states if s.map is not None),
+            *(s.color for s in self.states if s.color is not None),
             *(r.mask for r in self.regions),
         ]
         if self.mesh is not None:
@@ -222,6 +234,13 @@ def _schema_problems(data: dict[str, Any], file: str, problems: ProblemList) -> 
                     f"{key}.{name}" if key else name,
                 )
             continue
+        if error.validator == "anyOf" and all(
+            set(alt) == {"required"} for alt in error.schema["anyOf"]
+        ):
+            keys = " or ".join(k for alt in error.schema["anyOf"] for k in alt["required"])
+            problems.add(file, f"missing required key ({keys}, or both)", key)
+            typed = False
+            continue
         if error.validator == "required":
             missing = error.message.split("'")[1] if "'" in error.message else error.message
             problems.add(file, "missing required key", f"{key}.{missing}" if key else missing)
@@ -264,7 +283,14 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
         path=path.resolve(),
         name=data["name"],
         base=(root / data["base"]) if "base" in data else None,
-        states=[StateSpec(s["name"], root / s["map"]) for s in data["states"]],
+        states=[
+            StateSpec(
+                s["name"],
+                root / s["map"] if "map" in s else None,
+                root / s["color"] if "color" in s else None,
+            )
+            for s in data["states"]
+        ],
         regions=[
             RegionSpec(
                 r["name"],
@@ -289,6 +315,7 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
         formats=dict(data.get("formats", {})),
         budget={k: float(v) for k, v in data.get("budget", {}).items()},
         raw=data,
+        base_color=(root / data["base_color"]) if "base_color" in data else None,
     )
     _semantic_problems(m, file, problems, check_files)
     problems.raise_if_any()
@@ -298,8 +325,14 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
 def _path_fields(data: dict[str, Any]) -> list[tuple[str, str]]:
     """(key, path) of every file the manifest names, wherever the value is a string (so this
     works on a manifest that also has schema errors)."""
-    out = [(k, data[k]) for k in ("mesh", "base") if isinstance(data.get(k), str)]
-    for table, field_name in (("states", "map"), ("regions", "mask"), ("drivers", "file")):
+    out = [(k, data[k]) for k in ("mesh", "base", "base_color") if isinstance(data.get(k), str)]
+    fields = (
+        ("states", "map"),
+        ("states", "color"),
+        ("regions", "mask"),
+        ("drivers", "file"),
+    )
+    for table, field_name in fields:
         rows = data.get(table)
         for i, row in enumerate(rows if isinstance(rows, list) else []):
             if isinstance(row, dict) and isinstance(row.get(field_name), str):
@@ -389,6 +422,25 @@ def _document_problems(m: Manifest, file: str, problems: ProblemList) -> None:
             f"mesh, whose wrinkled material's normalTexture is then the base; here: {what})",
             "base",
         )
+    if m.has_color and m.base_color is None and not gltf:
+        problems.add(
+            file,
+            f"missing required key (the base colour map may be omitted only with a .gltf/.glb "
+            f"mesh, whose wrinkled material's baseColorTexture is then the base; here: {what})",
+            "base_color",
+        )
+    if m.base_color is not None and not m.has_color:
+        problems.add(
+            file,
+            "a base colour map but no state has a colour map (add color = FILE to the states "
+            "whose colour changes)",
+            "base_color",
+        )
+    for i, st in enumerate(m.states):
+        if st.map is not None and st.map == st.color:
+            problems.add(
+                file, "the same file is the state's normal map and its colour map", f"states[{i}]"
+            )
     usd = m.mesh is not None and is_usd(m.mesh)
     for key, value in (("material", m.material), ("meshes", m.meshes)):
         if value and not (gltf or usd):
@@ -454,3 +506,47 @@ def _file_problems(m: Manifest, file: str, problems: ProblemList) -> None:
     if len(sizes) > 1:
         listing = ", ".join(f"{w}x{h} ({k})" for (w, h), k in sizes.items())
         problems.add(file, f"masks have different sizes: {listing}", "regions")
+    _color_file_problems(m, file, problems)
+
+
+#: Image formats of colour maps (sRGB integer texels); float images hold linear data.
+_COLOR_FORMATS = ("uint8", "uint16")
+
+
+def _color_file_problems(m: Manifest, file: str, problems: ProblemList) -> None:
+    """Colour maps are 8- or 16-bit RGB(A) images of one size (the base colour's)."""
+    files = [("base_color", m.base_color)] if m.base_color is not None else []
+    files += [(f"states[{i}].color", s.color) for i, s in enumerate(m.states)]
+    sizes: dict[tuple[int, int], str] = {}
+    for key, path in files:
+        if path is None or not path.is_file():
+            continue
+        try:
+            info = read_header(path)
+        except _IE as exc:
+            for p in exc.problems:
+                problems.add(file, f"{_rel(path, m.root)}: {p.message}", key)
+            continue
+        rel = _rel(path, m.root)
+        if info.channels < 3:
+            problems.add(
+                file, f"{rel}: a colour map needs RGB or RGBA channels, it has {info.channels}", key
+            )
+            continue
+        if info.format not in _COLOR_FORMATS:
+            problems.add(
+                file,
+                f"{rel}: a colour map holds 8- or 16-bit sRGB texels, this one is {info.format} "
+                "(linear data): save it as an sRGB PNG",
+                key,
+            )
+            continue
+        sizes.setdefault((info.width, info.height), key)
+    if len(sizes) > 1:
+        listing = ", ".join(f"{w}x{h} ({k})" for (w, h), k in sizes.items())
+        problems.add(
+            file,
+            f"colour maps have different sizes: {listing}; every state's colour map is painted "
+            "on the base colour's UV layout, at its size",
+            "states",
+        )

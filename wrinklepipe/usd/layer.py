@@ -15,6 +15,8 @@ what convert adds, as opinions over the source's prims::
         def Shader StReader, base_normal,     texture shaders reading them (textures/*.png beside
             wrinkle_<state>, mask_<i>         the layer)
         over "<its UsdPreviewSurface>"        inputs:normal.connect = base_normal.outputs:rgb
+                                              (and inputs:diffuseColor.connect =
+                                              base_color.outputs:rgb with colour states)
 
 Per-vertex data is written ``vertex`` where every point of the prim has one value, else
 ``faceVarying`` (one value per ``faceVertexIndices`` corner, through the reader's corner map):
@@ -241,7 +243,7 @@ def _materials(
             dest = source_mat
             Sdf.CreatePrimInLayer(root, dest)  # an over
         _wrinkle_inputs(stage, built.GetRootLayer(), built_path, dest, src.path)
-        _connect_base(stage, dest, notes)
+        _connect_base(stage, dest, notes, pkg.meta.base_color is not None)
         out.append(dest)
     return out
 
@@ -289,8 +291,9 @@ def _wrinkle_inputs(stage: Any, built: Any, built_path: Any, dest: Any, source: 
             Sdf.CopySpec(scratch, child.path, root, child.path)
 
 
-def _connect_base(stage: Any, dest: Any, notes: list[str]) -> None:
-    """The material's UsdPreviewSurface reads the normal from the shipped base map."""
+def _connect_base(stage: Any, dest: Any, notes: list[str], color: bool = False) -> None:
+    """The material's UsdPreviewSurface reads the normal from the shipped base map (and, with
+    colour states, its diffuseColor from the base colour they blend over)."""
     from pxr import Sdf, UsdShade  # deferred: usd-core, USD only
 
     mat = UsdShade.Material(stage.GetPrimAtPath(dest))
@@ -310,6 +313,16 @@ def _connect_base(stage: Any, dest: Any, notes: list[str]) -> None:
         )
     normal = normal or shader.CreateInput("normal", Sdf.ValueTypeNames.Normal3f)
     normal.GetAttr().SetConnections([dest.AppendChild("base_normal").AppendProperty("outputs:rgb")])
+    if not color:
+        return
+    diffuse = shader.GetInput("diffuseColor")
+    if diffuse and diffuse.HasConnectedSource():
+        notes.append(
+            f"material {dest}: {shader.GetPath()}.inputs:diffuseColor now reads the manifest's "
+            "base colour (base_color) instead of its source connection"
+        )
+    diffuse = diffuse or shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f)
+    diffuse.GetAttr().SetConnections([dest.AppendChild("base_color").AppendProperty("outputs:rgb")])
 
 
 def _bind(stage: Any, material: Any, meshes: list[str]) -> None:

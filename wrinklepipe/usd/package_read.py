@@ -105,17 +105,19 @@ def _compressed(prim: Any, mapping: int) -> tuple[CompressedCopy, ...]:
 
     names = [str(n) for n in get("compressedTextures")]
     fmts, lays, levels = get("compressedFormats"), get("compressedLayouts"), get("compressedLevels")
+    spaces = [str(c) for c in get("compressedColorSpaces")] or ["linear"] * len(names)
     return tuple(
         CompressedCopy(
             texture=n,
             format=str(f),
             layout=str(lay),
-            mapping=1 if n == "base_normal" else mapping,
+            mapping=1 if n == "base_normal" or space == "srgb" else mapping,
             levels=int(lv),
             ktx2=f"compressed/{n}.ktx2",
             dds="" if str(f) == "uastc" else f"compressed/{n}.dds",  # UASTC: KTX2 only
+            color_space=space,
         )
-        for n, f, lay, lv in zip(names, fmts, lays, levels)
+        for n, f, lay, lv, space in zip(names, fmts, lays, levels, spaces)
     )
 
 
@@ -262,6 +264,7 @@ def _meta(mat_prim: Any, add_texture: Callable[[Any, str, str], str], file: str)
         states.append(
             StateMeta(s, add_texture(inp.Get(), inp.GetAttr().GetPath().pathString, "state"))
         )
+    states, base_color, factor = _colors(mat_prim, states, add_texture, file)
     mask_names = []
     for n in api("maskNames"):
         inp = mat.GetInput(f"wrinkle:mask:{n}")
@@ -324,8 +327,52 @@ def _meta(mat_prim: Any, add_texture: Callable[[Any, str, str], str], file: str)
         drivers=tuple(drivers),
         weights=tuple(float(w) for w in (default if default is not None else [0.0] * r)),
         compressed=_compressed(mat_prim, mapping),
+        base_color=base_color,
+        color_factor=factor,
     ).check(lambda message, key: input_error(file, message, key), where)
     return meta
+
+
+def _colors(
+    mat_prim: Any, states: list[StateMeta], add_texture: Callable[..., str], file: str
+) -> tuple[list[StateMeta], str | None, tuple[float, float, float]]:
+    """The colour half (``wrinkle:colorStates``, the ``base_color`` shader and each state's
+    ``inputs:wrinkle:color:<state>``), when authored: the states with their colour maps, the
+    base colour's texture and its factor (the shader's ``inputs:scale``)."""
+    from pxr import Tf, UsdShade  # deferred: usd-core, USD only
+
+    where = str(mat_prim.GetPath())
+
+    def tokens(name: str) -> list[str]:
+        a = mat_prim.GetAttribute(f"wrinkle:{name}")
+        return [str(x) for x in a.Get()] if a and a.HasAuthoredValue() else []
+
+    colored, only = tokens("colorStates"), set(tokens("colorOnlyStates"))
+    names = [s.name for s in states]
+    for n in [*colored, *only]:
+        if n not in names:
+            raise input_error(file, f"wrinkle colour attributes name an unknown state {n!r}", where)
+    out = [replace(s, normal=s.name not in only) for s in states]
+    if not colored:
+        return out, None, (1.0, 1.0, 1.0)
+    mat = UsdShade.Material(mat_prim)
+    shader = UsdShade.Shader(mat_prim.GetChild("base_color"))
+    if not shader:
+        raise input_error(file, "colour states but no base_color texture shader", where)
+    base_file = shader.GetInput("file").Get()
+    base = add_texture(base_file, f"{shader.GetPath()}.inputs:file", "base_color", "base_color")
+    scale = shader.GetInput("scale")
+    sc = scale.Get() if scale else None
+    factor = (float(sc[0]), float(sc[1]), float(sc[2])) if sc is not None else (1.0, 1.0, 1.0)
+    for k, s in enumerate(out):
+        if s.name not in colored:
+            continue
+        inp = mat.GetInput(f"wrinkle:color:{Tf.MakeValidIdentifier(s.name)}")
+        if not inp:
+            raise input_error(file, f"inputs:wrinkle:color:{s.name} missing", where)
+        key = inp.GetAttr().GetPath().pathString
+        out[k] = replace(s, color=add_texture(inp.Get(), key, "state_color"))
+    return out, base, factor
 
 
 def _curves(stage: Any, mat_prim: Any, r: int, n_morphs: int, file: str) -> list[WeightCurves]:

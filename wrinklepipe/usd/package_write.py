@@ -13,6 +13,9 @@ Layout of the stage (``defaultPrim`` = the asset name, Y up, metres)::
         base_normal          UsdUVTexture
         wrinkle_<state>      UsdUVTexture, inputs:file <- Material inputs:wrinkle:state:<state>
         mask_<i>             UsdUVTexture, inputs:file <- Material inputs:wrinkle:mask:mask_<i>
+        base_color           UsdUVTexture (sourceColorSpace sRGB, scale = the colour factor);
+                             Surface diffuseColor <- its rgb (with colour states only)
+        color_<state>        UsdUVTexture (sRGB), inputs:file <- inputs:wrinkle:color:<state>
 
 V flip: glTF's ``uv`` has v = 0 at the top of the image; USD's ``st`` has t = 0 at the bottom,
 so ``st = (u, 1 - v)`` over the very same image files. Region weights go to ``wrinkle:weights``,
@@ -33,6 +36,7 @@ import os
 import struct
 import tempfile
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -79,6 +83,15 @@ API_ATTRIBUTES: dict[str, str] = {
     "wrinkle:compressedFormats": "token[]",
     "wrinkle:compressedLayouts": "token[]",
     "wrinkle:compressedLevels": "int[]",
+}
+
+
+#: The colour attributes of ``WrinkleMapsAPI``, authored only on a material whose states carry
+#: colour (so an asset without colour is written as before).
+COLOR_ATTRIBUTES: dict[str, str] = {
+    "wrinkle:colorStates": "token[]",
+    "wrinkle:colorOnlyStates": "token[]",
+    "wrinkle:compressedColorSpaces": "token[]",
 }
 
 
@@ -330,13 +343,13 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
     reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
     tdir = f"./{opt.texture_dir}/" if opt.texture_dir else "./"
 
-    def texture(name: str, scale: tuple, bias: tuple) -> Any:
+    def texture(name: str, scale: tuple, bias: tuple, space: str = "raw") -> Any:
         tex = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild(_ident(name)))
         tex.CreateIdAttr("UsdUVTexture")
         tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
             reader.ConnectableAPI(), "result"
         )
-        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(space)
         tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("clamp")
         tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("clamp")
         tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*scale))
@@ -365,16 +378,20 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
             return (mul / scale,) * 3 + (1,), (add / scale,) * 3 + (0,)
         return (mul, mul, mul, 1), (add, add, add, 0)
 
-    def interface_texture(kind: str, key: str, name: str, sc: tuple, bi: tuple) -> None:
+    def interface_texture(
+        kind: str, key: str, name: str, sc: tuple, bi: tuple, space: str = "raw"
+    ) -> None:
         inp = mat.CreateInput(f"wrinkle:{kind}:{key}", Sdf.ValueTypeNames.Asset)
         inp.Set(Sdf.AssetPath(f"{tdir}{name}.png"))
-        tex = texture(name, sc, bi)
+        tex = texture(name, sc, bi, space)
         tex.CreateInput("file", Sdf.ValueTypeNames.Asset).ConnectToSource(inp)
 
     for s in meta.states:
         interface_texture("state", _ident(s.name), s.texture, *state_scale_bias(s.texture))
     for name in meta.masks.textures:
         interface_texture("mask", _ident(name), name, (1, 1, 1, 1), (0, 0, 0, 0))
+    if meta.base_color is not None:
+        _color_textures(surf, meta, texture, interface_texture, tdir)
 
     prim = mat.GetPrim()
     prim.AddAppliedSchema(API_NAME)  # metadata only: works whether or not the schema is loaded
@@ -418,6 +435,10 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
         values["wrinkle:compressedLevels"] = Vt.IntArray([c.levels for c in comp])
     for attr_name, value in values.items():
         attrs[attr_name].Set(value)
+    for attr_name, value in _color_values(meta).items():
+        a = prim.CreateAttribute(attr_name, Sdf.ValueTypeNames.Find(COLOR_ATTRIBUTES[attr_name]))
+        a.SetCustom(False)
+        a.Set(Vt.TokenArray(value))
     if [e.region for e in table] != names:
         raise input_error(pkg.name, "channel table must list the regions in region order")
     weights = attrs["wrinkle:weights"]
@@ -441,6 +462,39 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
                 a.Set(Vt.FloatArray.FromNumpy(row), Usd.TimeCode(float(t) * opt.fps))
         _morph_curves(stage, root_path, prim, pkg, opt.fps)
     return mat
+
+
+def _color_textures(
+    surf: Any, meta: Any, texture: Callable[..., Any], interface: Callable[..., Any], tdir: str
+) -> None:
+    """The base colour (sRGB, its factor as the texture's scale) into the surface's
+    ``diffuseColor``, and each colour state's map as an sRGB texture on an interface input
+    ``wrinkle:color:<state>``."""
+    from pxr import Sdf  # deferred: usd-core, USD only
+
+    r, g, b = (float(x) for x in meta.color_factor)
+    base = texture(meta.base_color, (r, g, b, 1.0), (0, 0, 0, 0), "sRGB")
+    base.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(
+        Sdf.AssetPath(f"{tdir}{meta.base_color}.png")
+    )
+    surf.GetInput("diffuseColor").ConnectToSource(base.ConnectableAPI(), "rgb")
+    for s in meta.states:
+        if s.color is not None:
+            interface("color", _ident(s.name), s.color, (1, 1, 1, 1), (0, 0, 0, 0), "sRGB")
+
+
+def _color_values(meta: Any) -> dict[str, list[str]]:
+    """The colour attributes' values (empty without colour states; each only when it has
+    entries)."""
+    if meta.base_color is None:
+        return {}
+    out = {"wrinkle:colorStates": [s.name for s in meta.states if s.color is not None]}
+    only = [s.name for s in meta.states if not s.normal]
+    if only:
+        out["wrinkle:colorOnlyStates"] = only
+    if any(c.color_space != "linear" for c in meta.compressed):
+        out["wrinkle:compressedColorSpaces"] = [c.color_space for c in meta.compressed]
+    return out
 
 
 def write_usd(
