@@ -64,9 +64,8 @@ def test_states_name_their_colour_textures_and_the_base_is_the_materials_own(sou
         assert state["name"] == name
         image = doc["images"][doc["textures"][state["colorTexture"]["index"]]["source"]]
         # full size: the colour map ships as painted, byte for byte
-        assert (out / image["uri"]).read_bytes() == (
-            source.parent / f"color_{name}.png"
-        ).read_bytes()
+        want = (source.parent / f"color_{name}.png").read_bytes()
+        assert (out / image["uri"]).read_bytes() == want
         assert "normal" not in state
 
 
