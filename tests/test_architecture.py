@@ -28,6 +28,8 @@ DEFERRED = {
     "alktx2": "optional (Basis Universal UASTC only), may be absent",
     "moderngl": "imported where a GL context is made, inside the guard for 'no GL here'",
     "distributed": "Dask: about a second to import, only the Dask batch engine needs it",
+    "colour": "colour-science: ~0.6 s to import (its whole library loads); only the colour "
+    "states' CIEDE2000 measure needs it",
     "scipy.interpolate": "~0.4 s of import time with the scipy.optimize it imports (0.1-0.2 s "
     "of a command's start-up); only cubic curve keys need it on the convert path",
 }
