@@ -9,7 +9,6 @@ from pathlib import Path
 import color_setups as cs
 import numpy as np
 import pytest
-from wrinklepipe.manifest import load_manifest
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo import avatar, colors
@@ -19,6 +18,7 @@ from wrinklepipe.io.images import write_image
 from wrinklepipe.io.png import png_bytes, png_pixels
 from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.pipeline.package import asset_from_package
+from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.usd.package_read import read_usd
 
 EXT = "WRINKLEPIPE_wrinkle_maps"
