@@ -13,7 +13,7 @@ from wrinklepipe.asset import ColorMaps, Region, WrinkleAsset
 from wrinklepipe.codec import srgb
 from wrinklepipe.fidelity import Pose
 from wrinklepipe.fidelity import color as fc
-from wrinklepipe.fidelity.stats import Budget
+from wrinklepipe.metrics import Budget
 from wrinklepipe.pipeline import color as pc
 
 os.environ.setdefault("COLOUR_SCIENCE__FILTER_USAGE_WARNINGS", "True")

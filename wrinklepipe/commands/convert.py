@@ -143,6 +143,30 @@ def fidelity_table(fid: dict[str, Any], which: str) -> list[str]:
     return out
 
 
+def color_table(color: dict[str, Any] | None) -> list[str]:
+    """The colour states' size and the per-pose colour fidelity table (CIEDE2000, worst
+    first) of report.json's ``color`` record; nothing without colour states."""
+    if not color:
+        return []
+    b = color["budget"]
+    verdict = Budget(b["max_mean_delta_e"], b["max_p99_delta_e"])
+    h, w = color["size"]
+    rows = sorted(color["fidelity"]["poses"], key=lambda p: -p["p99_delta_e"])
+    width = max([16, *(len(r["pose"]) + 2 for r in rows)])
+    out = [
+        f"colour states {w}x{h} ({color['how']}); colour fidelity (CIEDE2000 inside each pose's "
+        f"active region; budget mean {b['max_mean_delta_e']:g}, p99 {b['max_p99_delta_e']:g}):",
+        f"  {'pose':<{width}}{'mean':>7}{'p99':>7}{'max':>8}",
+    ]
+    for r in rows:
+        st = Stats(r["mean_delta_e"], r["p99_delta_e"], r["max_delta_e"], r["texels"], 0.0)
+        out.append(
+            f"  {r['pose']:<{width}}{r['mean_delta_e']:7.2f}{r['p99_delta_e']:7.2f}"
+            f"{r['max_delta_e']:8.2f}" + ("" if verdict.ok(st) else "  over budget")
+        )
+    return out
+
+
 def summary_lines(rep: dict[str, Any], exit_code: int, where: str = "") -> list[str]:
     """What convert tells the terminal: what it wrote, the choices and their fidelity, every
     warning and validation error or warning, and why the exit code is 1."""
@@ -170,6 +194,7 @@ def summary_lines(rep: dict[str, Any], exit_code: int, where: str = "") -> list[
         )
         out += fidelity_table(fid, "png") + fidelity_table(fid, "compressed")
         out += [f"note: {n}" for n in fid.get("notes", [])]
+    out += color_table(rep.get("color"))
     clipped = rep.get("pd_scale", {}).get("clipped_texels") or {}
     if any(clipped.values()):
         out.append(

@@ -11,7 +11,8 @@ same poses the normal fidelity judges) it compares
 
 on the texels of the base colour's grid where the pose activates a colour state, weighted by
 that activation (``sum_k |a_k|`` over the colour states). Per pose and per region it reports
-the weighted mean, p99 and max of ΔE00 (:mod:`wrinklepipe.fidelity.delta_e`). The base colour
+the weighted mean, p99 and max of ΔE00 (:mod:`wrinklepipe.metrics`: its CIEDE2000 and its
+statistics and verdict, as the normals' degrees). The base colour
 can be measured on its own over the face (unweighted), as the normal base is.
 
 :func:`prepare_color` does the full-resolution work once (active texels, activations, the
@@ -29,12 +30,13 @@ import numpy as np
 
 from wrinklepipe import model
 from wrinklepipe.codec import srgb
-from wrinklepipe.fidelity.delta_e import delta_e_lab, linear_to_lab
 from wrinklepipe.fidelity.metric import Pose, Reader, sample_at, sample_masks_at
-from wrinklepipe.fidelity.stats import (
+from wrinklepipe.metrics import (
+    DECIMALS,
     Budget,
     Stats,
-    unit_stats,
+    delta_e_lab,
+    linear_to_lab,
     weighted_stats,
     weighted_stats_many,
 )
@@ -62,9 +64,9 @@ def color_budget(budget: dict[str, float] | None = None) -> Budget:
 def stats_json(s: Stats) -> dict[str, float | int]:
     """A :class:`Stats` of ΔE00 values as JSON."""
     return {
-        "mean_delta_e": round(s.mean, 4),
-        "p99_delta_e": round(s.p99, 4),
-        "max_delta_e": round(s.max, 4),
+        "mean_delta_e": round(s.mean, DECIMALS),
+        "p99_delta_e": round(s.p99, DECIMALS),
+        "max_delta_e": round(s.max, DECIMALS),
         "texels": s.texels,
         "weight": round(s.weight, 3),
     }
@@ -257,10 +259,18 @@ class ColorFidelity:
         return max((p.overall.mean for p in self.poses), default=0.0)
 
     def over(self, budget: Budget) -> list[ColorPoseFidelity]:
+        """The poses whose overall stats break ``budget`` (the verdict: :meth:`Budget.ok`)."""
         return [p for p in self.poses if not budget.ok(p.overall)]
 
     def meets(self, budget: Budget) -> bool:
+        """Every pose (and the base, when measured) within ``budget`` by the verdict."""
         return not self.over(budget) and (self.base is None or budget.ok(self.base))
+
+    def inside(self, budget: Budget) -> bool:
+        """Every pose (and the base) inside ``budget`` unrounded (:meth:`Budget.inside`: what
+        the automatic choices require)."""
+        stats = [p.overall for p in self.poses] + ([self.base] if self.base is not None else [])
+        return all(budget.inside(s) for s in stats)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -341,7 +351,8 @@ def base_color_fidelity(
     flat = ref.face_texels()
     got = sample_at(base, ref.shape, flat, srgb_reader(factor))
     want = ref.base.reshape(-1, 3)[flat]
-    return unit_stats(delta_e_lab(linear_to_lab(got), linear_to_lab(want)).astype(_F))
+    err = delta_e_lab(linear_to_lab(got), linear_to_lab(want)).astype(_F)
+    return weighted_stats(err, overwrite=True)
 
 
 def describe_color(fid: ColorFidelity, budget: Budget | None = None) -> list[str]:

@@ -42,6 +42,7 @@ from wrinklepipe.outputs.report import (
 )
 from wrinklepipe.package import WeightCurves
 from wrinklepipe.pipeline.auto import formats_by_fidelity
+from wrinklepipe.pipeline.color import choose_color_size
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
 from wrinklepipe.pipeline.package import PackOptions, package_from_asset
@@ -140,6 +141,11 @@ def convert(
                     poses=poses,
                 )
             notes += stage_rep.notes + drivers_notes
+            color_choice = None
+            if asset.color is not None:
+                with console.status("choosing the colour states' size by CIEDE2000"):
+                    asset, color_choice = choose_color_size(source, asset, poses)
+                notes.append(color_choice.describe())
             layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
             pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
             if opt.compressed and not stage_rep.formats:  # not pd: the searches did not run
@@ -181,6 +187,7 @@ def convert(
                 notes=notes,
                 outputs=output_rows(tmp),
                 validation=validation,
+                color=None if color_choice is None else color_choice.to_json(),
             )
             write_report(tmp, report)
     except OSError as exc:

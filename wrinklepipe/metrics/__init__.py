@@ -18,12 +18,16 @@ for the validator too:
   prints), :meth:`Budget.inside` the automatic choices' stricter test (unrounded: at least half
   a printed unit inside what :meth:`Budget.ok` accepts).
 
-numpy only (the core layer).
+- :func:`delta_e` / :func:`delta_e_lab` / :func:`linear_to_lab`: CIEDE2000 between linear
+  sRGB colours (colour-science, loaded on first use), the colour states' error.
+
+numpy only (the core layer), but for the CIEDE2000 functions' deferred colour-science.
 """
 
 from __future__ import annotations
 
 from wrinklepipe.metrics.angles import angle_deg, angle_deg_planes
+from wrinklepipe.metrics.delta_e import delta_e, delta_e_lab, linear_to_lab
 from wrinklepipe.metrics.stats import (
     DECIMALS,
     EMPTY,
@@ -45,6 +49,9 @@ __all__ = [
     "Stats",
     "angle_deg",
     "angle_deg_planes",
+    "delta_e",
+    "delta_e_lab",
+    "linear_to_lab",
     "weighted_quantile",
     "weighted_stats",
     "weighted_stats_many",

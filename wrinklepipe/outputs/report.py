@@ -102,10 +102,12 @@ def convert_report(
     validation: dict[str, Any],
     fidelity: dict[str, Any] | None = None,
     warnings: list[str] | None = None,
+    color: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """report.json: tool and version, what was read, the asset, what the stages did and chose,
-    what was written (hashes) and what validation found."""
-    return {
+    what was written (hashes) and what validation found; ``color``: the colour states' choice
+    and its CIEDE2000 fidelity (only with colour states)."""
+    out = {
         "tool": "wrinklepipe",
         "version": __version__,
         "name": pkg.name,
@@ -121,6 +123,9 @@ def convert_report(
         "outputs": outputs,
         "validation": validation,
     }
+    if color is not None:
+        out["color"] = color
+    return out
 
 
 def _validation_html(validation: dict[str, Any], table: Any) -> str:
@@ -164,6 +169,26 @@ def _regions_html(report: dict[str, Any], table: Any) -> str:
     return f"<table><thead>{head}</tr></thead><tbody>{rows}</tbody></table>"
 
 
+def _color_html(color: dict[str, Any] | None, table: Any) -> str:
+    """The colour fidelity table (CIEDE2000 per pose inside its active region), with colour
+    states only."""
+    if not color:
+        return ""
+    b = color["budget"]
+    h, w = color["size"]
+    rows = [
+        [p["pose"], p["mean_delta_e"], p["p99_delta_e"], p["max_delta_e"], p["texels"]]
+        for p in sorted(color["fidelity"]["poses"], key=lambda p: -p["p99_delta_e"])
+    ]
+    return (
+        f"<h2>Colour fidelity</h2><p>colour states {w} x {h} ({html.escape(color['how'])}); "
+        f"CIEDE2000 between the shipped and the full-resolution source colour blend inside each "
+        f"pose's active region, weighted by activation; budget mean {b['max_mean_delta_e']:g}, "
+        f"p99 {b['max_p99_delta_e']:g}</p>"
+        + table(rows, ["pose", "mean ΔE00", "p99 ΔE00", "max ΔE00", "texels"])
+    )
+
+
 def report_html(report: dict[str, Any]) -> str:
     """A static, self-contained HTML summary of report.json (textures linked, not embedded)."""
     esc = html.escape
@@ -205,6 +230,7 @@ def report_html(report: dict[str, Any]) -> str:
             ],
             ["state", "mean deg", "p99 deg", "max deg"],
         ),
+        _color_html(report.get("color"), table),
         "<h2>Stages</h2><ul>",
         "".join(f"<li>{esc(n)}</li>" for n in report["notes"]),
         "</ul><h2>Block compression</h2>",

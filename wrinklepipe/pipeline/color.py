@@ -25,7 +25,7 @@ from wrinklepipe.fidelity import color as fc
 from wrinklepipe.fidelity import footprint
 from wrinklepipe.fidelity.metric import Pose
 from wrinklepipe.fidelity.ship import mask_values
-from wrinklepipe.fidelity.stats import Budget
+from wrinklepipe.metrics import Budget
 
 #: The smallest side the automatic size goes down to.
 MIN_SIZE = 16
@@ -119,7 +119,7 @@ def _row(size: tuple[int, int], fid: fc.ColorFidelity, budget: Budget) -> dict[s
         "size": list(size),
         "worst_mean_delta_e": round(fid.worst_mean(), 4),
         "worst_p99_delta_e": round(fid.worst_p99(), 4),
-        "within": fid.meets(budget),
+        "within": fid.inside(budget),
     }
 
 
@@ -146,13 +146,15 @@ def choose_color_size(
 
     auto = "color" in set(source.provenance.get("auto_resolution", ()))
     tried: list[dict[str, Any]] = []
-    if auto:
+    if auto and not ref.union.size:  # no pose shows a colour state: nothing to judge by
+        size, how = (H, W), "source (no pose activates a colour state: nothing to judge by)"
+    elif auto:
         screen = ref.coarse(SCREEN_TEXELS)
         size, how = (H, W), "auto"
         for cand in sizes_below(H, W):
             fid = measure(resized(c, cand), screen, False)
             tried.append(_row(cand, fid, budget))
-            if not fid.meets(budget):
+            if not fid.inside(budget):
                 break
             size = cand
     elif "color" in source.resolution:

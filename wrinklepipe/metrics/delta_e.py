@@ -1,4 +1,6 @@
-"""CIEDE2000 colour differences of linear sRGB colours, by colour-science.
+"""CIEDE2000 colour differences of linear sRGB colours, by colour-science: the colour half of
+the one measure (the colour states' automatic choices, the validator's colour rules, the
+reports and the render comparisons all call it; its statistics are :mod:`.stats`').
 
 A colour error is judged where people see it: in CIELAB, by CIEDE2000 (Sharma, Wu and Dalal's
 formulation, ``colour.difference.delta_E_CIE2000``). Linear sRGB (the wrinkle model's colours)
