@@ -60,7 +60,8 @@ _TOOL = "wrinklepipe"
 
 
 def check_not_input(target: str | Path, inputs: Iterable[str | Path] = ()) -> None:
-    """Refuse a target that is, or (for folders) contains or lies inside of, one of the inputs."""
+    """Refuse a target that is one of the inputs or (for folders) contains one; a new file
+    inside an input folder is allowed."""
     t = Path(target).resolve()
     for raw in inputs:
         p = Path(raw).resolve()

@@ -18,7 +18,9 @@ NAME = "batch"
 HELP = "convert many manifests (folders, globs, a batch file): cache, workers, Dask, CI reports"
 DESCRIPTION = """\
 Convert and validate every manifest of SOURCE... into OUT, one folder per asset: the manifest's
-path relative to the batch root (chars/ada/manifest.toml -> OUT/chars/ada). SOURCE is a
+path relative to the batch root, without .toml. The root is --root, else the folder given, the
+batch file's root or the working folder: `batch chars/ -o OUT` writes chars/ada/manifest.toml
+to OUT/ada/manifest, `batch 'chars/**/manifest.toml' -o OUT` to OUT/chars/ada/manifest. SOURCE is a
 manifest, a folder (searched for .toml files declaring schema = "wrinklepipe/manifest@1"), a
 glob ('chars/**/manifest.toml') or one batch file (TOML, schema "wrinklepipe/batch@1",
 schemas/batch.schema.json) listing manifests with per-asset options.

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 from pathlib import Path
 
+from wrinklepipe.atomic import staged_folder
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.demo.source import demo_source_dir
 from wrinklepipe.jobs.convert import ConvertOptions, convert
@@ -22,9 +24,13 @@ where the outputs and the report are.
 The output folder (default ./demo-out) is replaced when it holds a previous demo; any other
 non-empty folder needs --force.
 
+--write-source DIR writes the demo's source files (manifest.toml, head.glb, the maps, masks/)
+into DIR instead, and stops: a template to start your own character from.
+
 examples:
   wrinklepipe demo
   wrinklepipe demo -o /tmp/demo --size 512 --glb
+  wrinklepipe demo --size 256 --write-source robot
 """
 
 DEFAULT_OUTPUT = "demo-out"
@@ -42,6 +48,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--glb", action="store_true", help="also write a self-contained GLB")
     p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
     p.add_argument("--json", action="store_true", help="print the conversion report as JSON")
+    p.add_argument(
+        "--write-source",
+        metavar="DIR",
+        help="write the demo's source files (manifest, mesh, maps, masks) into DIR and stop",
+    )
 
 
 def _previous_demo(folder: Path) -> bool:
@@ -54,10 +65,20 @@ def _previous_demo(folder: Path) -> bool:
     return isinstance(data, dict) and data.get("name") == "demo_head"
 
 
+def _write_source(manifest: Path, folder: str, force: bool) -> int:
+    """Copy the cached demo source into ``folder`` (staged: complete or absent)."""
+    with staged_folder(folder, force=force) as tmp:
+        shutil.copytree(manifest.parent, tmp, dirs_exist_ok=True)
+    err.print(f"[bold]demo source[/]  {folder}  (edit {Path(folder) / 'manifest.toml'})")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     with status(f"generating the demo character ({args.size}²)"):
         manifest = demo_source_dir(args.size)
+    if args.write_source:
+        return _write_source(manifest, args.write_source, args.force)
     err.print(f"[bold]demo source[/]  {manifest.parent}")
     force = args.force or _previous_demo(out)
     with status("converting and validating"):

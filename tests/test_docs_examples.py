@@ -1,0 +1,222 @@
+"""Every shell example of the README and the documentation pages runs, and ends with the exit
+code it documents (``tests/docs_examples.py`` says how a page marks its examples).
+
+Each page runs in a sandbox of its own, its blocks in order (a later example may use what an
+earlier one wrote), from a folder that holds the files the examples name: two demo characters
+at 64² as ``chars/ada`` and ``chars/ben``, the demo's mesh, maps and masks at the top (``head.glb``,
+``base.png``, ``stretch.png``, ``compress.png``, ``unreal_normal.png``, ``masks/``), a batch file
+(``studio-batch.toml``), ``RobotExpressive.glb``, ``RiggedFigure.glb`` and ``blendshapes.usda``
+(links into ``../shared/data`` when it is there), with ``../shared`` beside it as beside a checkout.
+``wrinklepipe`` runs the CLI's ``main`` in a process forked for it from a server that imported
+the CLI once (``tests/docs_cli_server.py``); a server example (``view``) runs the real console
+script.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+from docs_examples import SHELL, Block, apply_edit, blocks, hidden_examples
+
+from wrinklepipe.demo.source import demo_source_dir
+from wrinklepipe.io.images import read_image, write_image
+
+REPO = Path(__file__).resolve().parent.parent
+SHARED = REPO.parent / "shared"
+HAVE_SHARED = (SHARED / "data" / "gltf-samples" / "RobotExpressive").is_dir()
+PAGES = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
+VENV_BIN = Path(sys.executable).parent
+
+#: Files of ../shared/data the examples name, linked into the sandbox by their file names.
+SHARED_FILES = (
+    "gltf-samples/RobotExpressive/RobotExpressive.glb",
+    "gltf-samples/RiggedFigure/glTF-Binary/RiggedFigure.glb",
+    "usd/openusd/usd/usdSkel/testenv/testUsdSkelBakeSkinning/blendshapes.usda",
+)
+
+BATCH_FILE = """\
+schema = "wrinklepipe/batch@1"
+include = ["chars/**/manifest.toml"]
+output = "build/studio"
+
+[defaults]
+fail_on = "error"
+"""
+
+
+def _demo_character(folder: Path, name: str) -> None:
+    shutil.copytree(demo_source_dir(64).parent, folder)
+    manifest = folder / "manifest.toml"
+    text = manifest.read_text(encoding="utf-8").replace('name = "demo_head"', f'name = "{name}"')
+    manifest.write_text(text, encoding="utf-8")
+
+
+@pytest.fixture(scope="module")
+def base_sandbox(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The files the examples name (see the module doc); copied for each page."""
+    root = tmp_path_factory.mktemp("docs-sandbox") / "repo"
+    _demo_character(root / "chars" / "ada", "ada")
+    _demo_character(root / "chars" / "ben", "ben")
+    demo = demo_source_dir(64).parent
+    shutil.copy(demo / "head.glb", root / "head.glb")
+    shutil.copy(demo / "base_normal.png", root / "base.png")
+    shutil.copy(demo / "wrinkle_stretch.png", root / "stretch.png")
+    shutil.copy(demo / "wrinkle_compress.png", root / "compress.png")
+    shutil.copytree(demo / "masks", root / "masks")
+    base, _ = read_image(demo / "base_normal.png")
+    flipped = np.array(base, dtype=np.float64)
+    flipped[..., 1] = 1.0 - flipped[..., 1]  # the same face in DirectX (-Y) green
+    write_image(root / "unreal_normal.png", flipped, 16)
+    (root / "studio-batch.toml").write_text(BATCH_FILE, encoding="utf-8")
+    (root / ".venv" / "bin").mkdir(parents=True)
+    (root / ".venv" / "bin" / "activate").write_text(
+        f'export PATH="{VENV_BIN}:$PATH"\n', encoding="utf-8"
+    )
+    if HAVE_SHARED:
+        for rel in SHARED_FILES:
+            if (SHARED / "data" / rel).is_file():
+                (root / Path(rel).name).symlink_to(SHARED / "data" / rel)
+    return root
+
+
+@pytest.fixture(scope="module")
+def cli_server(tmp_path_factory: pytest.TempPathFactory):
+    """The fork server's socket (started once for the module)."""
+    sock = tmp_path_factory.mktemp("docs-server") / "cli.sock"
+    proc = subprocess.Popen(
+        [sys.executable, str(Path(__file__).with_name("docs_cli_server.py")), str(sock)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout.readline().strip() == "ready"
+    yield sock
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+def _page_id(page: Path) -> str:
+    return page.relative_to(REPO).as_posix()
+
+
+def _environment(sandbox: Path, sock: Path) -> dict[str, str]:
+    shim = sandbox.parent / "bin"
+    shim.mkdir(exist_ok=True)
+    script = shim / "wrinklepipe"
+    script.write_text(
+        f'#!/bin/sh\nexec "{sys.executable}" -I -S '
+        f'"{Path(__file__).with_name("docs_cli_server.py")}" --client "$@"\n',
+        encoding="utf-8",
+    )
+    script.chmod(0o755)
+    node_bin = REPO / "tools" / "node" / "node_modules" / ".bin"
+    env = dict(os.environ)
+    env["PATH"] = os.pathsep.join([str(shim), str(VENV_BIN), str(node_bin), env["PATH"]])
+    env["WRINKLEPIPE_DOCS_SERVER"] = str(sock)
+    env["REPO"] = str(REPO)
+    env.pop("COLUMNS", None)
+    return env
+
+
+def _run_server(block: Block, cwd: Path, env: dict[str, str]) -> None:
+    """Start the server example with the real console script, fetch the address it prints."""
+    (command, _), *_ = block.commands()
+    env = {**env, "PATH": env["PATH"].split(os.pathsep, 1)[1]}  # the real script, no shim
+    proc = subprocess.Popen(
+        ["bash", "-c", "exec " + command],
+        cwd=cwd,
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        seen = ""
+        while time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            seen += line
+            if m := re.search(r"http://127\.0\.0\.1:\d+/\S*", line):
+                with urllib.request.urlopen(m.group(0), timeout=60) as page:
+                    assert page.status == 200
+                    assert b"<html" in page.read(4096).lower()
+                return
+        pytest.fail(f"{block.where}: `{command}` printed no address:\n{seen}")
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _run_block(block: Block, cwd: Path, env: dict[str, str]) -> None:
+    for command, expected in block.commands():
+        start = time.monotonic()
+        proc = subprocess.run(
+            ["bash", "-c", command],
+            cwd=cwd,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        print(f"{time.monotonic() - start:6.1f} s  {block.where}  {command[:90]}")
+        if proc.returncode != expected:
+            out = (proc.stdout + proc.stderr)[-4000:]
+            pytest.fail(
+                f"{block.where}: `{command}` exited {proc.returncode}, the page says "
+                f"{expected}:\n{out}"
+            )
+
+
+@pytest.mark.parametrize("page", PAGES, ids=_page_id)
+def test_page_examples_run(page: Path, base_sandbox: Path, cli_server: Path, tmp_path: Path):
+    found = [b for b in blocks(page) if b.lang in SHELL or b.edit]
+    if not found:
+        pytest.skip("no shell examples")
+    cwd = tmp_path / "repo"
+    shutil.copytree(base_sandbox, cwd, symlinks=True)
+    if SHARED.is_dir():
+        (tmp_path / "shared").symlink_to(SHARED)
+    env = _environment(cwd, cli_server)
+    skipped = []
+    for block in found:
+        if block.skip is not None:
+            skipped.append(f"{block.where}: {block.skip}")
+        elif block.needs_shared and not HAVE_SHARED:
+            skipped.append(f"{block.where}: ../shared/data is absent")
+        elif block.edit:
+            apply_edit(block, cwd / block.edit)
+        elif block.server:
+            _run_server(block, cwd, env)
+        else:
+            _run_block(block, cwd, env)
+    if skipped:
+        print("not run:", *skipped, sep="\n  ")
+
+
+def test_examples_are_marked_as_shell() -> None:
+    """A command a reader would copy sits in an ``sh`` block (so the test above runs it); a
+    synopsis (``wrinklepipe convert MANIFEST -o OUT [--glb]``) may sit in a plain block."""
+    hidden = [
+        f"{b.where}: {line}" for page in PAGES for b in blocks(page) for line in hidden_examples(b)
+    ]
+    assert not hidden, "examples outside sh blocks (mark them ```sh):\n" + "\n".join(hidden)
+
+
+def test_skips_say_why() -> None:
+    skips = [b for page in PAGES for b in blocks(page) if b.skip is not None]
+    assert all(b.skip.strip() for b in skips)
+    assert len(skips) <= 3, [b.where for b in skips]  # running is the rule
