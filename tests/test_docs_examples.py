@@ -3,8 +3,8 @@ code it documents (``tests/docs_examples.py`` says how a page marks its examples
 
 Each page runs in a sandbox of its own, its blocks in order (a later example may use what an
 earlier one wrote), from a folder that holds the files the examples name: two demo characters
-at 64² as ``chars/ada`` and ``chars/ben``, the demo's mesh, maps and masks at the top (``head.glb``,
-``base.png``, ``stretch.png``, ``compress.png``, ``unreal_normal.png``, ``masks/``), a batch file
+at 64² as ``chars/ada`` and ``chars/ben``, the demo's mesh (with its material named ``Skin``),
+maps and masks at the top (``head.glb``, ``base.png``, ``stretch.png``, ``compress.png``, ``unreal_normal.png``, ``masks/``; ``maps/`` as ``bake-states`` writes it), a batch file
 (``studio-batch.toml``), ``RobotExpressive.glb``, ``RiggedFigure.glb`` and ``blendshapes.usda``
 (links into ``../shared/data`` when it is there), with ``../shared`` beside it as beside a checkout.
 ``wrinklepipe`` runs the CLI's ``main`` in a process forked for it from a server that imported
@@ -25,6 +25,7 @@ import urllib.request
 from pathlib import Path
 
 import numpy as np
+import pygltflib
 import pytest
 from docs_examples import SHELL, Block, apply_edit, blocks, hidden_examples
 
@@ -61,6 +62,16 @@ def _demo_character(folder: Path, name: str) -> None:
     manifest.write_text(text, encoding="utf-8")
 
 
+def _head_with_skin(source: Path, target: Path) -> None:
+    """The demo head (8 named morph targets) with its primitive's material named ``Skin``."""
+    gltf = pygltflib.GLTF2.load_binary(str(source))
+    gltf.materials = [pygltflib.Material(name="Skin")]
+    for mesh in gltf.meshes:
+        for prim in mesh.primitives:
+            prim.material = 0
+    gltf.save_binary(str(target))
+
+
 @pytest.fixture(scope="module")
 def base_sandbox(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The files the examples name (see the module doc); copied for each page."""
@@ -68,7 +79,11 @@ def base_sandbox(tmp_path_factory: pytest.TempPathFactory) -> Path:
     _demo_character(root / "chars" / "ada", "ada")
     _demo_character(root / "chars" / "ben", "ben")
     demo = demo_source_dir(64).parent
-    shutil.copy(demo / "head.glb", root / "head.glb")
+    _head_with_skin(demo / "head.glb", root / "head.glb")
+    (root / "maps").mkdir()  # as `bake-states` writes them
+    shutil.copy(demo / "base_normal.png", root / "maps" / "base_normal.png")
+    for state in ("stretch", "compress"):
+        shutil.copy(demo / f"wrinkle_{state}.png", root / "maps" / f"wrinkle_{state}.png")
     shutil.copy(demo / "base_normal.png", root / "base.png")
     shutil.copy(demo / "wrinkle_stretch.png", root / "stretch.png")
     shutil.copy(demo / "wrinkle_compress.png", root / "compress.png")
