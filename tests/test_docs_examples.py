@@ -3,10 +3,11 @@ code it documents (``tests/docs_examples.py`` says how a page marks its examples
 
 Each page runs in a sandbox of its own, its blocks in order (a later example may use what an
 earlier one wrote), from a folder that holds the files the examples name: two demo characters
-at 64² as ``chars/ada`` and ``chars/ben``, the demo's mesh (with its material named ``Skin``),
-maps and masks at the top (``head.glb``, ``base.png``, ``stretch.png``, ``compress.png``, ``unreal_normal.png``, ``masks/``; ``maps/`` as ``bake-states`` writes it), a batch file
-(``studio-batch.toml``), ``RobotExpressive.glb``, ``RiggedFigure.glb`` and ``blendshapes.usda``
-(links into ``../shared/data`` when it is there), with ``../shared`` beside it as beside a checkout.
+at 64² as ``chars/ada`` and ``chars/ben``; the demo's mesh (its material named ``Skin``), maps
+and masks at the top (``head.glb``, ``base.png``, ``stretch.png``, ``compress.png``,
+``unreal_normal.png``, ``masks/``); ``maps/`` as ``bake-states`` writes it; a batch file
+(``studio-batch.toml``); ``RobotExpressive.glb``, ``RiggedFigure.glb`` and ``blendshapes.usda``
+(links into ``../shared/data`` when it is there); ``../shared`` beside it as beside a checkout.
 ``wrinklepipe`` runs the CLI's ``main`` in a process forked for it from a server that imported
 the CLI once (``tests/docs_cli_server.py``); a server example (``view``) runs the real console
 script.
