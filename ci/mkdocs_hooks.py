@@ -20,6 +20,8 @@ ROOT = Path(__file__).resolve().parent.parent
 def on_files(files: Files, config: MkDocsConfig) -> Files:
     for uri, page in PAGES.items():
         files.append(File.generated(config, uri, content=page()))
-    changelog = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
+    # the changelog links pages as docs/PAGE.md (from the repository's root): on the site they
+    # sit beside it
+    changelog = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8").replace("](docs/", "](")
     files.append(File.generated(config, "changelog.md", content=changelog))
     return files
