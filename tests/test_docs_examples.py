@@ -5,9 +5,11 @@ Each page runs in a sandbox of its own, its blocks in order (a later example may
 earlier one wrote), from a folder that holds the files the examples name: two demo characters
 at 64² as ``chars/ada`` and ``chars/ben``; the demo's mesh (its material named ``Skin``), maps
 and masks at the top (``head.glb``, ``base.png``, ``stretch.png``, ``compress.png``,
-``unreal_normal.png``, ``masks/``); ``maps/`` as ``bake-states`` writes it; a batch file
-(``studio-batch.toml``); ``RobotExpressive.glb``, ``RiggedFigure.glb`` and ``blendshapes.usda``
-(links into ``../shared/data`` when it is there); ``../shared`` beside it as beside a checkout.
+``unreal_normal.png``, ``masks/``); ``maps/`` as ``bake-states`` writes it; OBJ sculpts of
+the head (``neutral.obj``, ``frown.obj``, ``surprise.obj`` and ``sculpts/``: its morph
+targets); a batch file (``studio-batch.toml``); ``RobotExpressive.glb``, ``RiggedFigure.glb``
+and ``blendshapes.usda`` (links into ``../shared/data`` when it is there); ``../shared``
+beside it as beside a checkout.
 ``wrinklepipe`` runs the CLI's ``main`` in a process forked for it from a server that imported
 the CLI once (``tests/docs_cli_server.py``); a server example (``view``) runs the real console
 script.
@@ -63,6 +65,34 @@ def _demo_character(folder: Path, name: str) -> None:
     manifest.write_text(text, encoding="utf-8")
 
 
+def _sculpts(head: Path, folder: Path, names: dict[str, str]) -> None:
+    """OBJ sculpts of the demo head: ``{file stem: morph target}`` (``""``: the neutral)."""
+    gltf = pygltflib.GLTF2.load_binary(str(head))
+    blob = gltf.binary_blob()
+
+    def accessor(i: int) -> np.ndarray:
+        a = gltf.accessors[i]
+        view = gltf.bufferViews[a.bufferView]
+        dtype = np.uint32 if a.componentType == pygltflib.UNSIGNED_INT else np.float32
+        width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[a.type]
+        start = (view.byteOffset or 0) + (a.byteOffset or 0)
+        return np.frombuffer(blob, dtype, a.count * width, start).reshape(a.count, width)
+
+    mesh = gltf.meshes[0]
+    prim = mesh.primitives[0]
+    positions = accessor(prim.attributes.POSITION).astype(np.float64)
+    faces = accessor(prim.indices).reshape(-1, 3) + 1
+    targets = mesh.extras["targetNames"]
+    folder.mkdir(parents=True, exist_ok=True)
+    for stem, target in names.items():
+        p = positions
+        if target:
+            p = p + accessor(prim.targets[targets.index(target)]["POSITION"])
+        lines = [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in p]
+        lines += [f"f {a} {b} {c}" for a, b, c in faces]
+        (folder / f"{stem}.obj").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
 def _head_with_skin(source: Path, target: Path) -> None:
     """The demo head (8 named morph targets) with its primitive's material named ``Skin``."""
     gltf = pygltflib.GLTF2.load_binary(str(source))
@@ -81,6 +111,14 @@ def base_sandbox(tmp_path_factory: pytest.TempPathFactory) -> Path:
     _demo_character(root / "chars" / "ben", "ben")
     demo = demo_source_dir(64).parent
     _head_with_skin(demo / "head.glb", root / "head.glb")
+    _sculpts(
+        root / "head.glb", root, {"neutral": "", "frown": "brow_furrow", "surprise": "brow_raise"}
+    )
+    _sculpts(
+        root / "head.glb",
+        root / "sculpts",
+        {"neutral": "", "frown": "brow_furrow", "brows_up": "brow_raise"},
+    )
     (root / "maps").mkdir()  # as `bake-states` writes them
     shutil.copy(demo / "base_normal.png", root / "maps" / "base_normal.png")
     for state in ("stretch", "compress"):
