@@ -15,6 +15,7 @@ from wrinkle_setups import overlapping_demo
 from wrinklepipe import model
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.metrics import angle_deg
+from wrinklepipe.options import BudgetOptions
 from wrinklepipe.sources.validation import load_input
 from wrinklepipe.validate import ValidateOptions, validate
 from wrinklepipe.validate import gl as glw
@@ -229,7 +230,9 @@ def test_diff_gain_is_undone_like_the_package_decoder():
     a = demo_asset(128, encoding="diff")
     a = replace(a, pd_scale=2.0, mesh=prepare_mesh(a.mesh))
     inp = input_from_package(package_from_asset(a, PackOptions()), "x.gltf", "gltf")
-    inp.asset = replace(inp.asset, base=a.base, states=a.states, masks=a.masks, budget={})
+    inp.asset = replace(
+        inp.asset, base=a.base, states=a.states, masks=a.masks, budget=BudgetOptions()
+    )
     inp.has_source = True
     report = validate(inp, ValidateOptions(render_size=128))
     assert "WP-TEX-005" not in [i.code for i in report.issues]

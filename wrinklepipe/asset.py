@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.codec import srgb
+from wrinklepipe.options import BudgetOptions
 
 
 @dataclass(frozen=True)
@@ -131,7 +132,7 @@ class WrinkleAsset:
     pd_scale: float = 1.0
     mesh: Mesh | None = None
     drivers: list[dict[str, Any]] = field(default_factory=list)
-    budget: dict[str, float] = field(default_factory=dict)
+    budget: BudgetOptions = field(default_factory=BudgetOptions)
     resolution: dict[str, int] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
     #: the states' colour maps and the base colour (None: no state carries a colour)

@@ -43,6 +43,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.layers",
             "wrinklepipe.reuse",
             "wrinklepipe.package",
+            "wrinklepipe.options",
         ),
     ),
     Layer(

@@ -26,6 +26,7 @@ sys.path.insert(0, str(HERE.parents[1]))
 
 from wrinklepipe.asset import WrinkleAsset  # noqa: E402
 from wrinklepipe.atomic import dumps_json, write_bytes  # noqa: E402
+from wrinklepipe.options import BudgetOptions  # noqa: E402
 from wrinklepipe.validate import ValidationInput, load_config, validate  # noqa: E402
 from wrinklepipe.validate.loader import bundle_arrays, bundle_bytes, read_bundle  # noqa: E402
 from wrinklepipe.validate.report import normalized, report_json  # noqa: E402
@@ -43,7 +44,7 @@ def demo(encoding: str = "pd", policy: str = "clamp01") -> WrinkleAsset:
 
     return replace(
         demo_asset(SIZE, encoding, policy, mesh_resolution=(48, 32)),
-        budget={"max_mean_deg": 0.5, "max_p99_deg": 1.0},
+        budget=BudgetOptions(max_mean_deg=0.5, max_p99_deg=1.0),
         resolution={},
         provenance={"generator": "tests/corpus/generate.py", "size": SIZE},
     )
@@ -342,7 +343,7 @@ def c_wasted() -> ValidationInput:
     d = model.normal_to_pd(a.states) - model.normal_to_pd(a.base)[None]
     smooth = np.stack([resize(resize(x, SIZE // 2), SIZE, "triangle") for x in d])
     states = model.pd_to_normal(model.normal_to_pd(a.base)[None] + smooth)
-    return ship(replace(a, states=states, budget={"max_mean_deg": 2.0, "max_p99_deg": 8.0}))
+    return ship(replace(a, states=states, budget=BudgetOptions(max_mean_deg=2.0, max_p99_deg=8.0)))
 
 
 def c_base_flipped_v() -> ValidationInput:

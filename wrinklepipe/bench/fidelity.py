@@ -23,7 +23,6 @@ from wrinklepipe import model
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.fidelity import search as fs
-from wrinklepipe.metrics import Budget
 
 CPU_BLEND = "full-resolution blend of every pose, CPU"
 CPU_SEARCH = "automatic searches, CPU"
@@ -44,7 +43,7 @@ def bench_fidelity(quick: bool = False) -> BenchResult:
     slopes = model.normal_to_pd(a.states) - model.normal_to_pd(a.base)[None]
     fp = fd.footprint(a.mesh.uvs, a.mesh.indices, (size, size))
     src = fs.Source(a.base, slopes, a.masks, poses, a.region_names, footprint=fp)
-    budget = Budget.from_dict(a.budget)
+    budget = a.budget.maps()
     repeat = 1 if quick else 3
 
     def blend_all() -> None:

@@ -6,6 +6,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.demo.character import DemoCharacter, generate
+from wrinklepipe.options import BudgetOptions
 
 __all__ = ["DemoCharacter", "generate", "demo_asset", "demo_mesh"]
 
@@ -51,7 +52,7 @@ def demo_asset(
         policy=policy,
         pd_scale=1.0,
         mesh=demo_mesh(c),
-        budget={"max_mean_deg": 0.5, "max_p99_deg": 2.0},
+        budget=BudgetOptions(max_mean_deg=0.5, max_p99_deg=2.0),
         resolution={"base": size, "wrinkle": max(size // 4, 4), "mask": max(size // 16, 4)},
         provenance={"generator": "wrinklepipe.demo", "seed": c.seed, "size": size},
     )

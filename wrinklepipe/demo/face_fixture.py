@@ -37,6 +37,7 @@ from wrinklepipe.demo import fields as F
 from wrinklepipe.demo.source import cache_root
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.images import write_image
+from wrinklepipe.options import BudgetOptions
 from wrinklepipe.readers.meshes import load_mesh
 
 FIXTURE_VERSION = 2
@@ -117,7 +118,7 @@ class FaceFixture:
             regions=self.regions,
             expressions=self.expressions,
             mesh=self.mesh,
-            budget=dict(BUDGET),
+            budget=BudgetOptions.from_json(BUDGET),
             provenance={"generator": "wrinklepipe.demo.face_fixture", "seed": FIXTURE_SEED},
         )
 

@@ -34,7 +34,7 @@ from wrinklepipe.export.textures import (
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.package_read import wrinkled_materials
 from wrinklepipe.io.png import png_bytes
-from wrinklepipe.metrics import Budget
+from wrinklepipe.options import BudgetOptions
 from wrinklepipe.outputs.curves import format_float32
 from wrinklepipe.package import WrinklePackage, safe_name
 from wrinklepipe.shading import godot, hlsl
@@ -44,7 +44,7 @@ RUNTIME_DIR = Path(__file__).resolve().parent.parent / "data" / "engines"
 #: Unreal material-editor clipboard text of the two Custom nodes.
 UNREAL_CLIPBOARD = "WP_CustomNodes.t3d"
 #: Error budget for block-compressed copies (the manifest's default budget).
-BUDGET = Budget(mean=0.5, p99=2.0)
+BUDGET = BudgetOptions().copies()
 
 
 @dataclass

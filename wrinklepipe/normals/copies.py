@@ -31,6 +31,7 @@ from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import mips, uastc
 from wrinklepipe.normals.dds import dds_bytes
 from wrinklepipe.normals.ktx2 import ktx2_bytes
+from wrinklepipe.options import BudgetOptions
 
 #: Formats ``auto`` tries, smallest blocks first (BC1: 8 bytes; then BC5, BC3nm, BC7: 16).
 AUTO_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")
@@ -179,7 +180,7 @@ def _copy(m: _Map, fmt: str, check: cmp.FormatCheck, with_mips: bool) -> Copy:
 
 def compressed_copies(
     pkg: Any,
-    budget: dict[str, float] | None = None,
+    budget: BudgetOptions | None = None,
     formats: dict[str, str] | None = None,
     with_mips: bool = True,
 ) -> tuple[list[Copy], list[str], dict[str, Any]]:
@@ -190,8 +191,7 @@ def compressed_copies(
     format of :data:`REQUESTABLE`). Returns the copies, notes and the per-group choices for the
     report (requested, chosen, layout, levels and every check tried).
     """
-    budget = budget or {}
-    limits = Budget(budget.get("max_mean_deg"), budget.get("max_p99_deg", 2.0))
+    limits = (budget or BudgetOptions()).copies()
     formats = formats or {}
     meta = pkg.meta
     enc = meta.encoding

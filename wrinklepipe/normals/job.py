@@ -26,6 +26,7 @@ from wrinklepipe.normals import footprint as fp
 from wrinklepipe.normals import ktx2 as ktx2_mod
 from wrinklepipe.normals import mips, resample, uastc
 from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
+from wrinklepipe.options import DEFAULT_MAX_P99_DEG
 
 _F = np.float32
 
@@ -49,7 +50,8 @@ class EncodeOptions:
     pad: pad BC inputs whose size is not a multiple of 4 (edge texels repeated) instead of
         refusing them.
     dx10: DDS header choice (None: DX10 for bc5/bc7, FourCC for bc1/bc3).
-    max_p99_deg / max_mean_deg: the error budget (None: no limit).
+    max_p99_deg / max_mean_deg: the error budget (None: no limit; the p99 default is the
+    manifest's, :data:`wrinklepipe.options.DEFAULT_MAX_P99_DEG`).
     """
 
     encoding: str = "pd"
@@ -63,8 +65,8 @@ class EncodeOptions:
     mips: bool = True
     pad: bool = True
     dx10: bool | None = None
-    max_p99_deg: float | None = 2.0
-    max_mean_deg: float | None = None
+    max_p99_deg: float | None = DEFAULT_MAX_P99_DEG
+    max_mean_deg: float | None = None  # a whole map, not a manifest's regions: p99 only
 
 
 @dataclass

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from wrinklepipe.normals import copies as nc
+from wrinklepipe.options import BudgetOptions
 from wrinklepipe.package import WrinklePackage
 
 #: Block formats ``auto`` tries (smallest blocks first; ``bc7xy`` only when asked for).
@@ -17,7 +18,7 @@ AUTO_FORMATS: tuple[str, ...] = nc.AUTO_FORMATS
 
 def compressed_copies(
     pkg: WrinklePackage,
-    budget: dict[str, float] | None = None,
+    budget: BudgetOptions | None = None,
     formats: dict[str, str] | None = None,
 ) -> tuple[list[nc.Copy], list[str], dict[str, Any]]:
     """The copies of the base and every state (:func:`wrinklepipe.normals.copies.compressed_copies`:
@@ -29,7 +30,7 @@ def compressed_copies(
 
 def compressed_files(
     pkg: WrinklePackage,
-    budget: dict[str, float] | None = None,
+    budget: BudgetOptions | None = None,
     formats: dict[str, str] | None = None,
 ) -> tuple[dict[str, bytes], list[str], dict[str, Any]]:
     """Like :func:`compressed_copies`, as ``{relative path: bytes}`` (``compressed/NAME.dds``

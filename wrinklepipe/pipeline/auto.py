@@ -24,6 +24,7 @@ from wrinklepipe.fidelity import formats as ff
 from wrinklepipe.fidelity import search as fs
 from wrinklepipe.fidelity import ship
 from wrinklepipe.metrics import Budget
+from wrinklepipe.options import BudgetOptions
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.pipeline.package import resize_normals_pd
 
@@ -65,15 +66,10 @@ def can_measure(asset: WrinkleAsset, poses: Sequence[fd.Pose] | None = None) -> 
     return ""
 
 
-def budgets(budget: dict[str, float]) -> tuple[Budget, Budget]:
-    """The PNG budget and the compressed copies' (``compressed_max_*``, else the same)."""
-    png = Budget.from_dict(budget)
-    if png.empty:
-        png = Budget(0.5, 2.0)
-    comp = Budget.from_dict(budget, "compressed_")
-    if comp.empty:
-        comp = png
-    return png, comp
+def budgets(budget: BudgetOptions) -> tuple[Budget, Budget]:
+    """The PNG budget and the compressed copies' (:meth:`BudgetOptions.maps`,
+    :meth:`BudgetOptions.copies`)."""
+    return budget.maps(), budget.copies()
 
 
 #: Formats the searches do not encode: the copy's own check measures them (UASTC: basisu).

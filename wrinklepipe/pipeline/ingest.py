@@ -282,7 +282,7 @@ def _asset(
         pd_scale=1.0 if manifest.pd_scale == "auto" else float(manifest.pd_scale),
         mesh=mesh,
         drivers=[dict(d) for d in manifest.drivers],
-        budget=dict(manifest.budget),
+        budget=manifest.budget,
         resolution={k: v for k, v in manifest.resolution.items() if isinstance(v, int)},
         provenance={
             "manifest": manifest.path.name,

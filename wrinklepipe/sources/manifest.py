@@ -23,6 +23,7 @@ from wrinklepipe.io.confine import confine
 from wrinklepipe.io.images import read_header
 from wrinklepipe.io.json_safe import loads_toml
 from wrinklepipe.model import POLICY_WEIGHT_RANGE
+from wrinklepipe.options import BudgetOptions
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.presets import jimenez
 from wrinklepipe.readers.registry import MESH_SUFFIXES
@@ -70,7 +71,7 @@ class Manifest:
     drivers: list[dict[str, Any]] = field(default_factory=list)
     resolution: dict[str, int | str] = field(default_factory=dict)
     formats: dict[str, str] = field(default_factory=dict)
-    budget: dict[str, float] = field(default_factory=dict)
+    budget: BudgetOptions = field(default_factory=BudgetOptions)
     raw: dict[str, Any] = field(default_factory=dict)
     #: the base colour map (None: the wrinkled glTF material's own baseColorTexture)
     base_color: Path | None = None
@@ -313,7 +314,7 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
         drivers=list(data.get("drivers", [])),
         resolution=dict(data.get("resolution", {})),
         formats=dict(data.get("formats", {})),
-        budget={k: float(v) for k, v in data.get("budget", {}).items()},
+        budget=BudgetOptions.from_json(data.get("budget")),
         raw=data,
         base_color=(root / data["base_color"]) if "base_color" in data else None,
     )

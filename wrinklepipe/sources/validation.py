@@ -361,7 +361,7 @@ def attach_source(inp: ValidationInput, src: WrinkleAsset, manifest: Path) -> Va
         base=src.base,
         states=src.states,
         masks=masks,
-        budget=src.budget or a.budget,
+        budget=src.budget if src.budget.given else a.budget,
         provenance={**a.provenance, "maps": src.provenance.get("maps", {})},
     )
     inp.has_source = True

@@ -51,7 +51,6 @@ class ValidateOptions:
     wrinkle_deg: float = 1.0
     leak_fraction: float = 0.002
     grid: int = 512
-    default_budget: tuple[float, float] = (1.0, 4.0)  # mean, p99 degrees when the asset has none
     half_res_check: bool = True
     dynamic_targets: int = 16  # morph targets whose dynamic weights are checked across seams
 

@@ -20,6 +20,7 @@ from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.atomic import write_output
 from wrinklepipe.errors import InputError, input_error, plain_reason
 from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.options import BudgetOptions
 from wrinklepipe.pipeline.package import asset_from_package, mapping_version
 from wrinklepipe.validate.inputs import CHANNELS, ChannelEntry, Texture, ValidationInput
 
@@ -225,7 +226,7 @@ def _bundle_parts(inp: ValidationInput) -> tuple[dict[str, Any], dict[str, np.nd
             "policy": a.policy,
             "pd_scale": float(a.pd_scale),
             "drivers": a.drivers,
-            "budget": a.budget,
+            "budget": a.budget.to_json(),
             "resolution": a.resolution,
             "provenance": a.provenance,
         },
@@ -323,7 +324,7 @@ def read_bundle(path: str | Path) -> ValidationInput:
         pd_scale=am["pd_scale"],
         mesh=mesh,
         drivers=am["drivers"],
-        budget=am["budget"],
+        budget=BudgetOptions.from_json(am["budget"]),
         resolution=am["resolution"],
         provenance=am["provenance"],
     )

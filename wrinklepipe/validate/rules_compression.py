@@ -41,9 +41,7 @@ def check_formats(ctx: Context) -> list[Issue]:
 
 
 def _budget(ctx: Context) -> Budget:
-    b = ctx.asset.budget or {}
-    mean, p99 = ctx.options.default_budget
-    return Budget(float(b.get("max_mean_deg", mean)), float(b.get("max_p99_deg", p99)))
+    return ctx.asset.budget.maps()
 
 
 def shipping_errors(

@@ -52,18 +52,11 @@ def poses(ctx: Context) -> list[fd.Pose]:
 def budgets(ctx: Context) -> tuple[Budget, str]:
     """The budget that applies and which one: the compressed copies' when a base or state
     texture is block-compressed (``compressed_max_*``, else the same), else the budget."""
-    b = ctx.asset.budget or {}
-    mean, p99 = ctx.options.default_budget
-    png = Budget(
-        float(b.get("max_mean_deg", mean)), float(b.get("max_p99_deg", p99)), b.get("max_max_deg")
-    )
+    b = ctx.asset.budget
     block = any(t.is_block for t in ctx.inp.textures if t.role in ("base", "state"))
-    if not block:
-        return png, "budget"
-    comp = Budget.from_dict(b, "compressed_")
-    if comp.empty:
-        return png, "budget"
-    return comp, "compressed budget"
+    if not block or not b.compressed_given:
+        return b.maps(), "budget"
+    return b.copies(), "compressed budget"
 
 
 # ------------------------------------------------------------------------------------------------
