@@ -9,9 +9,10 @@ shipped in PNG) and :meth:`BudgetOptions.copies` (of the block-compressed copies
 chosen inside the budget is judged by the same budget wherever it is checked.
 
 A budget key the manifest leaves out takes the schema's default (``max_mean_deg`` 0.5,
-``max_p99_deg`` 2.0, ``max_max_deg`` none); the ``compressed_`` keys default to the maps'
-budget. A new statistic (a colour ΔE, say) is one more key in the schema with its ``default``
-and one more field here.
+``max_p99_deg`` 2.0, ``max_max_deg`` none; the colour states' ``max_mean_delta_e`` 1.0 and
+``max_p99_delta_e`` 2.3, :meth:`BudgetOptions.color`); the ``compressed_`` keys default to the
+maps' budget. A new statistic is one more key in the schema with its ``default`` and one more
+field here.
 """
 
 from __future__ import annotations
@@ -38,6 +39,9 @@ def _default(key: str) -> float | None:
 DEFAULT_MAX_MEAN_DEG = _default("max_mean_deg")
 DEFAULT_MAX_P99_DEG = _default("max_p99_deg")
 DEFAULT_MAX_MAX_DEG = _default("max_max_deg")
+#: The colour budget's (CIEDE2000 inside each pose's active region, colour states only).
+DEFAULT_MAX_MEAN_DELTA_E = _default("max_mean_delta_e")
+DEFAULT_MAX_P99_DELTA_E = _default("max_p99_delta_e")
 
 
 @dataclass(frozen=True)
@@ -52,6 +56,8 @@ class BudgetOptions:
     compressed_max_mean_deg: float | None = None
     compressed_max_p99_deg: float | None = None
     compressed_max_max_deg: float | None = None
+    max_mean_delta_e: float | None = None
+    max_p99_delta_e: float | None = None
 
     @classmethod
     def from_json(cls, table: dict[str, Any] | None) -> BudgetOptions:
@@ -94,6 +100,15 @@ class BudgetOptions:
             DEFAULT_MAX_MEAN_DEG if self.max_mean_deg is None else self.max_mean_deg,
             DEFAULT_MAX_P99_DEG if self.max_p99_deg is None else self.max_p99_deg,
             DEFAULT_MAX_MAX_DEG if self.max_max_deg is None else self.max_max_deg,
+        )
+
+    def color(self) -> Budget:
+        """The colour budget (ΔE00) of the colour states: each statistic the manifest's, else
+        the schema's default."""
+        return Budget(
+            DEFAULT_MAX_MEAN_DELTA_E if self.max_mean_delta_e is None else self.max_mean_delta_e,
+            DEFAULT_MAX_P99_DELTA_E if self.max_p99_delta_e is None else self.max_p99_delta_e,
+            None,
         )
 
     def copies(self) -> Budget:

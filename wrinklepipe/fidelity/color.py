@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe import model
+from wrinklepipe import model, options
 from wrinklepipe.codec import srgb
 from wrinklepipe.fidelity.metric import Pose, Reader, sample_at, sample_masks_at
 from wrinklepipe.metrics import (
@@ -43,22 +43,20 @@ from wrinklepipe.metrics import (
 
 _F = np.float32
 
-#: The colour budget's defaults (``[budget]`` ``max_mean_delta_e`` / ``max_p99_delta_e``):
-#: inside each pose's active region, the activation-weighted mean CIEDE2000 at most 1 (on
-#: average nobody sees it side by side) and its 99th percentile at most 2.3 (the one
-#: just-noticeable difference usually quoted).
-DEFAULT_MAX_MEAN_DELTA_E = 1.0
-DEFAULT_MAX_P99_DELTA_E = 2.3
+#: The colour budget's defaults (``[budget]`` ``max_mean_delta_e`` / ``max_p99_delta_e``, the
+#: manifest schema's, :mod:`wrinklepipe.options`): inside each pose's active region, the
+#: activation-weighted mean CIEDE2000 at most 1 (on average nobody sees it side by side) and
+#: its 99th percentile at most 2.3 (the one just-noticeable difference usually quoted).
+DEFAULT_MAX_MEAN_DELTA_E = options.DEFAULT_MAX_MEAN_DELTA_E
+DEFAULT_MAX_P99_DELTA_E = options.DEFAULT_MAX_P99_DELTA_E
 
 
-def color_budget(budget: dict[str, float] | None = None) -> Budget:
-    """The colour budget of a manifest's ``[budget]`` (ΔE00; the defaults where unset)."""
-    b = budget or {}
-    return Budget(
-        float(b.get("max_mean_delta_e", DEFAULT_MAX_MEAN_DELTA_E)),
-        float(b.get("max_p99_delta_e", DEFAULT_MAX_P99_DELTA_E)),
-        b.get("max_max_delta_e"),
-    )
+def color_budget(budget: options.BudgetOptions | dict[str, float] | None = None) -> Budget:
+    """The colour budget of a manifest's ``[budget]`` (ΔE00; the defaults where unset):
+    :meth:`wrinklepipe.options.BudgetOptions.color`."""
+    if not isinstance(budget, options.BudgetOptions):
+        budget = options.BudgetOptions.from_json(budget)
+    return budget.color()
 
 
 def stats_json(s: Stats) -> dict[str, float | int]:
