@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from wrinklepipe import atomic
+from wrinklepipe import staging
 from wrinklepipe.batch import engines
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
@@ -110,7 +110,7 @@ def _staged(parent: Path, name: str = "") -> bool:
     ``listdir``, as the ten killer threads poll this every few milliseconds."""
     prefix = f".{name}." if name else "."
     return any(
-        n.startswith(prefix) and n.endswith(atomic.STAGING_SUFFIX) for n in os.listdir(parent)
+        n.startswith(prefix) and n.endswith(staging.STAGING_SUFFIX) for n in os.listdir(parent)
     )
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from wrinklepipe import atomic
+from wrinklepipe import staging
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.paths import ROOT
@@ -31,7 +31,7 @@ def _convert(source: Path, out: Path, *extra: str) -> int:
 
 
 def _staging(folder: Path) -> list[Path]:
-    return sorted(folder.glob(f".*{atomic.STAGING_SUFFIX}"))
+    return sorted(folder.glob(f".*{staging.STAGING_SUFFIX}"))
 
 
 def _kill_once_staging_appears(cmd: list[str], folder: Path) -> None:
@@ -51,18 +51,18 @@ def test_later_run_removes_what_a_killed_run_left(source, tmp_path):
     _kill_once_staging_appears([*cmd, "--no-validate"], tmp_path)
     left = _staging(tmp_path)
     assert left and not out.exists()  # the kill left its staging folder, never a partial output
-    marker = json.loads((left[0] / atomic.STAGING_MARKER).read_text())
+    marker = json.loads((left[0] / staging.STAGING_MARKER).read_text())
     assert marker["tool"] == "wrinklepipe" and marker["host"] == socket.gethostname()
     assert _convert(source, out) == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
 def _fake_staging(folder: Path, name: str, owner: dict | None) -> Path:
-    d = folder / f".{name}.x{atomic.STAGING_SUFFIX}"
+    d = folder / f".{name}.x{staging.STAGING_SUFFIX}"
     d.mkdir()
     (d / "data.bin").write_bytes(b"keep")
     if owner is not None:
-        (d / atomic.STAGING_MARKER).write_text(json.dumps(owner))
+        (d / staging.STAGING_MARKER).write_text(json.dumps(owner))
     return d
 
 
@@ -145,7 +145,7 @@ def test_mount_point_output_is_refused_before_any_work(source, tmp_path, monkeyp
 _KILLED_WHILE_STAGING = """
 import os, signal, sys
 from pathlib import Path
-from wrinklepipe import atomic
+from wrinklepipe import staging
 
 target, step = Path(sys.argv[1]), sys.argv[2]
 real_open, real_rename = os.open, os.rename
@@ -154,18 +154,18 @@ def die():
     os.kill(os.getpid(), signal.SIGKILL)
 
 def open_(path, *a, **k):
-    if step == "mkdir" and str(path).endswith(atomic.STAGING_MARKER):
+    if step == "mkdir" and str(path).endswith(staging.STAGING_MARKER):
         die()  # the -new folder exists, its marker not yet
     return real_open(path, *a, **k)
 
 def rename(src, dst, *a, **k):
-    if step == "rename" and str(src).endswith(atomic.STAGING_NEW_SUFFIX):
+    if step == "rename" and str(src).endswith(staging.STAGING_NEW_SUFFIX):
         die()  # the marker is complete, the folder not yet renamed
     return real_rename(src, dst, *a, **k)
 
 os.open, os.rename = open_, rename
-with atomic.output_lock(target):
-    atomic._Staging(target.parent, target.name)
+with staging.output_lock(target):
+    staging._Staging(target.parent, target.name)
     if step == "renamed":
         die()
 """
@@ -186,9 +186,9 @@ def test_a_kill_while_the_staging_folder_is_made(tmp_path, step):
     target = tmp_path / "out"
     pid = _run_killed(_KILLED_WHILE_STAGING, str(target), step)
     left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".out."))
-    want = atomic.STAGING_SUFFIX if step == "renamed" else atomic.STAGING_NEW_SUFFIX
+    want = staging.STAGING_SUFFIX if step == "renamed" else staging.STAGING_NEW_SUFFIX
     assert len(left) == 2 and left[0].endswith(want) and left[1] == ".out.wrinklepipe-lock"
-    marker = tmp_path / left[0] / atomic.STAGING_MARKER
+    marker = tmp_path / left[0] / staging.STAGING_MARKER
     if step == "mkdir":
         assert not marker.exists()
     else:  # the marker names the killed run
@@ -196,7 +196,7 @@ def test_a_kill_while_the_staging_folder_is_made(tmp_path, step):
         assert owner["tool"] == "wrinklepipe" and owner["pid"] == pid
         assert owner["host"] == socket.gethostname()
     assert _staging(tmp_path) == ([tmp_path / left[0]] if step == "renamed" else [])
-    with atomic.output_lock(target):
+    with staging.output_lock(target):
         assert sorted(p.name for p in tmp_path.iterdir()) == [".out.wrinklepipe-lock"]
     assert list(tmp_path.iterdir()) == []
 
@@ -210,7 +210,7 @@ def test_a_run_on_another_output_removes_a_killed_runs_staging_with_its_lock(tmp
     target = tmp_path / "out"
     _run_killed(_KILLED_WHILE_STAGING, str(target), step)
     assert len([p for p in tmp_path.iterdir() if p.name.startswith(".out.")]) == 2
-    with atomic.output_lock(tmp_path / "other"):
+    with staging.output_lock(tmp_path / "other"):
         assert sorted(p.name for p in tmp_path.iterdir()) == [".other.wrinklepipe-lock"]
     assert list(tmp_path.iterdir()) == []
 
@@ -220,12 +220,12 @@ def test_a_run_killed_while_removing_a_dead_runs_staging_leaves_it_recorded(tmp_
     it removes them: killed in between, the run after it still finds them in the record."""
     target = tmp_path / "out"
     _run_killed(_KILLED_WHILE_STAGING, str(target), "mkdir")
-    [new] = [p for p in tmp_path.iterdir() if p.name.endswith(atomic.STAGING_NEW_SUFFIX)]
+    [new] = [p for p in tmp_path.iterdir() if p.name.endswith(staging.STAGING_NEW_SUFFIX)]
     second = _run_killed(_KILLED_WHILE_REMOVING, str(target))
     assert new.is_dir()  # the second run died before removing it
     record = json.loads((tmp_path / ".out.wrinklepipe-lock").read_text())
     assert record["pid"] == second and new.name in record["staging"]
-    with atomic.output_lock(target):
+    with staging.output_lock(target):
         assert sorted(p.name for p in tmp_path.iterdir()) == [".out.wrinklepipe-lock"]
     assert list(tmp_path.iterdir()) == []
 
@@ -233,12 +233,12 @@ def test_a_run_killed_while_removing_a_dead_runs_staging_leaves_it_recorded(tmp_
 _KILLED_WHILE_REMOVING = """
 import os, signal, sys
 from pathlib import Path
-from wrinklepipe import atomic
+from wrinklepipe import staging
 
 def die(*a, **k):
     os.kill(os.getpid(), signal.SIGKILL)
 
-atomic._remove_recorded = die  # the lock is taken and written, the dead run's folder not removed
-with atomic.output_lock(Path(sys.argv[1])):
+staging._remove_recorded = die  # the lock is taken and written, the dead run's folder not removed
+with staging.output_lock(Path(sys.argv[1])):
     pass
 """

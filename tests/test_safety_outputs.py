@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from wrinklepipe import atomic
+from wrinklepipe import atomic, staging
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.paths import ROOT
@@ -36,7 +36,7 @@ def _tree(folder: Path) -> dict[str, bytes]:
 def _during_run(monkeypatch, action) -> None:
     """Run ``action`` once in the middle of the next command: right after it has created its
     staging folder (its work and the final rename are still ahead)."""
-    real = atomic._Staging.__init__
+    real = staging._Staging.__init__
     done = []
 
     def init(self, parent, name):
@@ -45,7 +45,7 @@ def _during_run(monkeypatch, action) -> None:
             done.append(name)
             action()
 
-    monkeypatch.setattr(atomic._Staging, "__init__", init)
+    monkeypatch.setattr(staging._Staging, "__init__", init)
 
 
 def _convert(source: Path, out: Path, *extra: str) -> int:
@@ -125,7 +125,7 @@ def test_sibling_named_like_the_old_backup_is_untouched(source, tmp_path, force)
 
 _HOLD = """
 import sys
-from wrinklepipe.atomic import output_lock
+from wrinklepipe.staging import output_lock
 with output_lock(sys.argv[1]):
     print("held", flush=True)
     sys.stdin.read()
@@ -168,7 +168,7 @@ def test_stale_lock_of_a_killed_run_is_taken_over_and_removed(source, tmp_path):
     with _lock_held_elsewhere(out) as holder:
         holder.send_signal(signal.SIGKILL)
         holder.wait()
-        assert atomic.lock_path(out).exists()
+        assert staging.lock_path(out).exists()
     assert _convert(source, out) == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
@@ -293,8 +293,8 @@ def test_a_file_written_inside_a_staged_folder_is_replaced_in_place(tmp_path):
             tmp.write_bytes(b"partial")
             raise RuntimeError("writer failed")
         assert _entries(new) == {"a", "a/one.bin"}
-        [staging] = [p for p in tmp_path.iterdir() if p.name.endswith(atomic.STAGING_SUFFIX)]
-        assert new.parent == staging
+        [aside] = [p for p in tmp_path.iterdir() if p.name.endswith(staging.STAGING_SUFFIX)]
+        assert new.parent == aside
     assert _entries(target) == {"a", "a/one.bin"}
     assert {p.name for p in tmp_path.iterdir()} == {"out"}  # staging folder and lock gone
     assert oct((target / "a" / "one.bin").stat().st_mode & 0o777) == oct(atomic.default_mode())
@@ -304,9 +304,9 @@ def test_a_file_beside_a_staged_folder_still_gets_its_own_staging(tmp_path):
     """A name that only starts like an open staging folder's is outside it."""
     target = tmp_path / "out"
     with atomic.staged_folder(target) as new:
-        staging = new.parent
-        outside = staging.with_name(staging.name + "x") / "f.txt"
+        aside = new.parent
+        outside = aside.with_name(aside.name + "x") / "f.txt"
         with atomic.temp_path(outside) as tmp:
-            assert tmp.name == "f.txt" and tmp.parent.name.endswith(atomic.STAGING_SUFFIX)
+            assert tmp.name == "f.txt" and tmp.parent.name.endswith(staging.STAGING_SUFFIX)
             tmp.write_bytes(b"x")
         assert outside.read_bytes() == b"x"

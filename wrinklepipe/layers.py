@@ -39,6 +39,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.metrics",
             "wrinklepipe.presets",
             "wrinklepipe.atomic",
+            "wrinklepipe.staging",
             "wrinklepipe.console",
             "wrinklepipe.layers",
             "wrinklepipe.reuse",

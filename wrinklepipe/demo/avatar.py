@@ -33,10 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.atomic import output_lock, write_files
+from wrinklepipe.atomic import write_files
 from wrinklepipe.demo.source import cache_root
 from wrinklepipe.gltf.package_write import glb_bytes
 from wrinklepipe.io.png import png_bytes
+from wrinklepipe.staging import output_lock
 
 AVATAR_VERSION = 1
 MAP_SIZE = 64

@@ -21,9 +21,10 @@ from pathlib import Path
 import numpy as np
 import pygltflib
 
-from wrinklepipe.atomic import output_lock, staged_folder, write_bytes
+from wrinklepipe.atomic import staged_folder, write_bytes
 from wrinklepipe.demo.character import DEMO_VERSION, DemoCharacter, generate
 from wrinklepipe.io.images import write_image
+from wrinklepipe.staging import output_lock
 
 
 def cache_root() -> Path:
