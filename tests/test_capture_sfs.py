@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wrinklepipe.capture import grid, heights, slopes
 from wrinklepipe.capture import sfs as S
 from wrinklepipe.metrics import angle_deg
 
@@ -22,8 +23,8 @@ def _scene(sign: float, tilt: float, n: int = 64):
     dc_col = np.gradient(c, axis=1)
     g0 = np.stack([np.zeros_like(c), np.full_like(c, tilt)], -1)
     p = g0 + np.stack([dc_col, dc_row], -1)
-    n0 = S.slopes_to_normals(g0)
-    n1 = S.slopes_to_normals(p)
+    n0 = slopes.slopes_to_normals(g0)
+    n1 = slopes.slopes_to_normals(p)
     ratio = n1[..., 2] / n0[..., 2]
     roi = (((xx - n / 2) / (0.45 * n)) ** 2 + ((yy - n / 2) / (0.45 * n)) ** 2 <= 1).astype(float)
     return ratio, n0, n1, roi
@@ -37,19 +38,19 @@ def _angle64(a, b):
 
 def test_relative_to_and_back():
     rng = np.random.default_rng(1)
-    n0 = S.slopes_to_normals(rng.normal(0, 0.5, (50, 2)))
-    n1 = S.slopes_to_normals(rng.normal(0, 0.5, (50, 2)))
-    m = S.relative_to(n1, n0)
-    assert np.allclose(S.relative_to(n0, n0), [0, 0, 1], atol=1e-12)
+    n0 = slopes.slopes_to_normals(rng.normal(0, 0.5, (50, 2)))
+    n1 = slopes.slopes_to_normals(rng.normal(0, 0.5, (50, 2)))
+    m = slopes.relative_to(n1, n0)
+    assert np.allclose(slopes.relative_to(n0, n0), [0, 0, 1], atol=1e-12)
     assert np.abs(_angle64(m, np.array([0, 0, 1.0])) - _angle64(n1, n0)).max() < 1e-9
-    assert np.abs(S.expression_normals(m, n0) - n1).max() < 1e-9
+    assert np.abs(slopes.expression_normals(m, n0) - n1).max() < 1e-9
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0], ids=["ridge", "valley"])
 def test_ridge_and_valley_told_apart_on_a_tilted_neutral(sign):
     ratio, n0, n1, roi = _scene(sign, tilt=0.25)
     res = S.solve_crease(ratio, n0, roi)
-    est = S.slopes_to_normals(res.slopes)
+    est = slopes.slopes_to_normals(res.slopes)
     crease = (angle_deg(n1, n0) > 3.0) & (roi > 0.5)
     lean_t = (n1 - n0)[..., :2]
     lean_e = (est - n0)[..., :2]
@@ -69,7 +70,7 @@ def test_flat_neutral_cannot_tell_concave_from_convex():
 
 def test_ratio_residual_ranks_the_true_map_first():
     ratio, n0, n1, roi = _scene(1.0, tilt=0.25)
-    truth = S.relative_to(n1, n0)
+    truth = slopes.relative_to(n1, n0)
     mirrored = truth * [-1.0, -1.0, 1.0]  # every lean the wrong way, tilt kept
     good = S.ratio_residual(truth, n0, ratio, roi)
     bad = S.ratio_residual(mirrored, n0, ratio, roi)
@@ -96,15 +97,15 @@ def test_eikonal_height_is_the_distance_cone():
     r = np.hypot(xx, yy)
     mask = r <= 25.0
     ring = mask & ~(np.hypot(xx, yy) <= 24.0)
-    up = S.eikonal_height(np.ones((n, n)), mask, np.zeros((n, n)), upward=True)
-    down = S.eikonal_height(np.ones((n, n)), mask, np.zeros((n, n)), upward=False)
+    up = heights.eikonal_height(np.ones((n, n)), mask, np.zeros((n, n)), upward=True)
+    down = heights.eikonal_height(np.ones((n, n)), mask, np.zeros((n, n)), upward=False)
     dist = 25.0 - r  # analytic, from the disc's edge; the ring pixels are the border
     inner = mask & ~ring
     assert np.abs(up - dist)[inner].mean() < 1.0  # upwind first order: within a pixel
     assert up[30, 30] == pytest.approx(25.0, abs=1.5)
     assert np.allclose(down, -up)
     # a slope twice as steep: twice as high
-    up2 = S.eikonal_height(np.full((n, n), 2.0), mask, np.zeros((n, n)))
+    up2 = heights.eikonal_height(np.full((n, n), 2.0), mask, np.zeros((n, n)))
     assert np.allclose(up2[inner], 2.0 * up[inner], rtol=1e-6)
 
 
@@ -118,7 +119,7 @@ def test_neutral_height_from_slopes():
     g = np.stack([0.02 * (xx - 20) + 0.3, -0.008 * (yy - 30)], -1)
     mask = ((xx - 24) ** 2 + (yy - 24) ** 2 < 400) & ~((xx > 30) & (yy < 20))
     g = np.where(mask[..., None], g, 99.0)  # outside the mask: ignored
-    est = S.neutral_height(mask, g)
+    est = heights.neutral_height(mask, g)
     ref = h - h[mask].mean()
     assert np.abs(est - ref)[mask].max() < 5e-3  # of a 15 px range (a tiny shrink term)
 
@@ -127,7 +128,7 @@ def test_ratio_residual_on_a_downsampled_grid():
     # Photos wider than max_side are judged on a coarser grid: slopes are the same there (a
     # height in coarse pixels over a coarse pixel), so the true map still explains R.
     ratio, n0, n1, roi = _scene(1.0, tilt=0.25, n=96)
-    truth = S.relative_to(n1, n0)
+    truth = slopes.relative_to(n1, n0)
     full = S.ratio_residual(truth, n0, ratio, roi)
     half = S.ratio_residual(truth, n0, ratio, roi, max_side=48)
     assert full < 2e-3 and half < 4e-3
@@ -140,10 +141,12 @@ def test_sign_ambiguity_is_reported_where_the_photos_do_not_fix_it():
     # wrong sign cannot explain R, so nothing is ambiguous.
     for tilt, lo, hi in ((0.0, 0.9, 1.0), (0.25, 0.0, 0.05)):
         ratio, n0, n1, roi = _scene(1.0, tilt=tilt)
-        q = (S.neutral_slopes(n1) - S.neutral_slopes(n0)) * (roi > 0.5)[..., None]
+        q = (slopes.neutral_slopes(n1) - slopes.neutral_slopes(n0)) * (roi > 0.5)[..., None]
         res = S.solve_crease(ratio, n0, roi, starts={"truth": q, "mirror": -q})
         assert lo <= res.ambiguous_fraction <= hi, tilt
-        crease = np.hypot(*np.moveaxis(res.slopes - S.neutral_slopes(n0), -1, 0)) > S.CREASE_SLOPE
+        crease = (
+            np.hypot(*np.moveaxis(res.slopes - slopes.neutral_slopes(n0), -1, 0)) > S.CREASE_SLOPE
+        )
         assert res.ambiguous.shape == ratio.shape
         assert not (res.ambiguous & ~crease).any()  # only crease pixels are flagged
 
@@ -159,11 +162,11 @@ def test_a_blurred_ratio_is_fitted_with_the_blur_in_the_model():
     err = {}
     for b in (0.0, 1.5):
         res = S.solve_crease(blurred, n0, roi, blur=b)
-        err[b] = angle_deg(S.slopes_to_normals(res.slopes), n1)[crease].mean()
+        err[b] = angle_deg(slopes.slopes_to_normals(res.slopes), n1)[crease].mean()
     assert err[1.5] < 0.6 * err[0.0], err
     # the blur operator is symmetric (its own adjoint, as the Gauss-Newton steps assume)
     mask = roi > 0.5
-    op = S._Blur(mask.shape, np.flatnonzero(mask.ravel()), 1.3)
+    op = grid._Blur(mask.shape, np.flatnonzero(mask.ravel()), 1.3)
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(2, mask.sum()))
     assert a @ op(b) == pytest.approx(b @ op(a), rel=1e-12)
@@ -182,12 +185,12 @@ def test_a_side_lit_photo_tells_ridge_from_valley_on_a_flat_neutral(sign):
     lean_t = (n1 - n0)[..., :2]
     for starts in ({}, None):  # no prior, and the default starts (zero, the eikonal ones)
         res = S.solve_crease(ratio, n0, roi, starts=starts, side=(side, light))
-        lean_e = (S.slopes_to_normals(res.slopes) - n0)[..., :2]
+        lean_e = (slopes.slopes_to_normals(res.slopes) - n0)[..., :2]
         right = np.einsum("...c,...c->...", lean_t, lean_e)[crease] > 0
         assert right.mean() > 0.95, (sign, right.mean())
         assert res.ambiguous_fraction < 0.05
     # the mirrored crease cannot explain the side-lit photo
-    q = S.neutral_slopes(n1)
+    q = slopes.neutral_slopes(n1)
     mirror = S.solve_crease(
         ratio,
         n0,
@@ -217,9 +220,9 @@ def test_a_free_border_lets_a_crease_run_through_the_roi_edge():
     w = 3.0
     c = -0.3 * w * np.sqrt(np.e) * np.exp(-0.5 * ((yy - n / 2) / w) ** 2)
     g0 = np.stack([np.zeros_like(c), np.full_like(c, 0.25)], -1)
-    n0 = S.slopes_to_normals(g0)
+    n0 = slopes.slopes_to_normals(g0)
     q = np.stack([np.gradient(c, axis=1), np.gradient(c, axis=0)], -1)
-    n1 = S.slopes_to_normals(g0 + q)
+    n1 = slopes.slopes_to_normals(g0 + q)
     ratio = n1[..., 2] / n0[..., 2]
     r = np.hypot(xx - n / 2, yy - n / 2)
     roi = (r <= 0.4 * n).astype(float)

@@ -14,7 +14,14 @@ import numpy as np
 from scipy import ndimage
 
 from wrinklepipe.bench import BenchResult, BenchRow, benchmark, median_time
-from wrinklepipe.capture import CaptureOptions, CaptureResult, OrientationOptions, capture
+from wrinklepipe.capture import (
+    CaptureOptions,
+    CaptureResult,
+    OrientationOptions,
+    capture,
+    heights,
+    slopes,
+)
 from wrinklepipe.capture import sfs as S
 from wrinklepipe.capture import warp as W
 from wrinklepipe.capture.evaluate import errors
@@ -113,12 +120,12 @@ def bench_capture(quick: bool) -> BenchResult:
     fpix = fs.neutral.size / 1e6
     in_roi = fs.roi > 0.5
     n1z = np.clip(cur.ratio.plain * n0[..., 2], 1e-3, 1.0)
-    h0 = S.neutral_height(in_roi, S.neutral_slopes(n0))
+    h0 = heights.neutral_height(in_roi, slopes.neutral_slopes(n0))
     slope = np.sqrt(1.0 / (n1z * n1z) - 1.0)
     for step, fn, note in (
         (
             "sfs eikonal start, curved forehead",
-            lambda: S.eikonal_height(slope, in_roi, h0),
+            lambda: heights.eikonal_height(slope, in_roi, h0),
             f"{fs.neutral.shape[0]}^2, one of the two viscosity solutions at the photo's size "
             "(the solve runs both on its grid of at most 320 px)",
         ),

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wrinklepipe.capture import sfs as S
+from wrinklepipe.capture import slopes
 from wrinklepipe.capture import warp as W
 from wrinklepipe.capture.orientation import (
     METHODS,
@@ -162,7 +163,7 @@ def side_ratio(
     ok = np.asarray(valid, bool) & (ie > 1e-6)
     raw = np.where(ok, np.asarray(side_warped, np.float64) / np.where(ok, ie, 1.0), 1.0)
     s_img = masked_blur(raw, ok.astype(np.float64), blur)
-    g0 = S.neutral_slopes(n0)
+    g0 = slopes.neutral_slopes(n0)
     base = l_vec[2] - l_vec[0] * g0[..., 0] + l_vec[1] * g0[..., 1]
     ref = ok & (np.asarray(roi, np.float64) > 0.5)
     # the median over the ROI: a crease adds l . q, of both signs across it (its two flanks)
@@ -371,7 +372,7 @@ def capture(
         # the tilt: R's own (the data's detail), or with a side-lit photo the solve's slopes
         # (fitted to both photos: measured on mixed N_z 0.995, tilt 0.33x -> 0.12x)
         n1z = None if side is not None else np.clip(r_model * n0[..., 2] / sfs_res.exposure, 0, 1)
-        n_sfs = S.normals_from_slopes(sfs_res.slopes, n0, n1z)
+        n_sfs = slopes.normals_from_slopes(sfs_res.slopes, n0, n1z)
         if side is None and o.flat_level > 0:  # flat skin stays flat (CaptureOptions.flat_level)
             noise = blurred_noise(pixel_noise(rr.raw, rr.valid), r_blur)
             flat = flat_skin(

@@ -30,13 +30,27 @@ is reported: a residual near the noise means the height explains the photos.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
-import pyamg
 from scipy import ndimage, sparse
 from scipy.sparse import linalg as spla
 from threadpoolctl import threadpool_limits
+
+from wrinklepipe.capture.grid import (
+    _Blur,
+    _blur_on_grid,
+    _downsample,
+    _extend,
+    _Grid,
+    _grid,
+    _integrate,
+    _multigrid,
+    _to_full,
+    _up_nearest,
+)
+from wrinklepipe.capture.heights import eikonal_height, neutral_height
+from wrinklepipe.capture.slopes import expression_normals, neutral_slopes
 
 
 @dataclass(frozen=True)
@@ -137,134 +151,10 @@ class SfsResult:
     ambiguous_fraction: float = 0.0
 
 
-def neutral_slopes(n0: np.ndarray) -> np.ndarray:
-    """Pixel-frame slopes ``(dh/dcol, dh/drow)`` of a surface with camera-frame normals ``n0``
-    (+Y up, so ``dh/drow = +n_y / n_z``)."""
-    n = np.asarray(n0, np.float64)
-    z = np.maximum(n[..., 2], 1e-3)
-    return np.stack([-n[..., 0] / z, n[..., 1] / z], axis=-1)
-
-
-def slopes_to_normals(p: np.ndarray) -> np.ndarray:
-    """Camera-frame unit normals (+Y up) of pixel-frame slopes ``p`` ``[..., 2]``."""
-    p = np.asarray(p, np.float64)
-    n = np.stack([-p[..., 0], p[..., 1], np.ones(p.shape[:-1])], axis=-1)
-    return n / np.linalg.norm(n, axis=-1, keepdims=True)
-
-
-def relative_to(n1: np.ndarray, n0: np.ndarray) -> np.ndarray:
-    """``n1`` turned by the smallest rotation taking ``n0`` to +Z: the wrinkle alone, in the
-    neutral surface's frame (Rodrigues' formula), ``[..., 3]``."""
-    n1 = np.asarray(n1, np.float64)
-    n0 = np.asarray(n0, np.float64)
-    v = np.stack([n0[..., 1], -n0[..., 0], np.zeros(n0.shape[:-1])], axis=-1)  # n0 x z
-    vx = np.cross(v, n1)
-    out = n1 + vx + np.cross(v, vx) / np.maximum(1.0 + n0[..., 2], 1e-6)[..., None]
-    return out / np.linalg.norm(out, axis=-1, keepdims=True)
-
-
 # --- the grid operators ------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class _Grid:
-    """Unknowns (ROI pixels), data rows, and the difference operators restricted to them."""
-
-    shape: tuple[int, int]
-    unknown: np.ndarray  # flat indices of the unknown pixels
-    dx: sparse.csr_matrix  # central d/dcol at the unknown pixels, [U, U] (0 outside)
-    dy: sparse.csr_matrix  # central d/drow
-    reg: sparse.csr_matrix  # forward differences (both axes, stacked), [E, U]
-    #: the integration system's preconditioner, set up once per grid (it depends on the grid only)
-    cache: dict = field(default_factory=dict, compare=False, repr=False)
-    free: bool = False  # the border is free (not tied to c = 0 outside)
-
-
-def _grid(mask: np.ndarray, free: bool = False) -> _Grid:
-    """The operators on the unknown pixels of ``mask``. ``free``: the height is not tied to 0
-    outside the mask (one-sided differences at its border, no smoothness edge across it)."""
-    h, w = mask.shape
-    flat = np.flatnonzero(mask.ravel())
-    col_of = np.full(h * w, -1, np.int64)
-    col_of[flat] = np.arange(len(flat))
-    r, c = np.divmod(flat, w)
-
-    def neighbour(dr: int, dc: int) -> np.ndarray:
-        rr, cc = r + dr, c + dc
-        ok = (rr >= 0) & (rr < h) & (cc >= 0) & (cc < w)
-        out = np.full(len(flat), -1, np.int64)
-        out[ok] = col_of[rr[ok] * w + cc[ok]]
-        return out  # -1: outside the unknowns (c = 0 there)
-
-    rows = np.arange(len(flat))
-    n = len(flat)
-
-    def central(plus: np.ndarray, minus: np.ndarray) -> sparse.csr_matrix:
-        ip, im = plus >= 0, minus >= 0
-        if not free:  # c = 0 outside: central differences with zeros there
-            data = np.concatenate([np.full(ip.sum(), 0.5), np.full(im.sum(), -0.5)])
-            rr = np.concatenate([rows[ip], rows[im]])
-            cc = np.concatenate([plus[ip], minus[im]])
-            return sparse.csr_matrix((data, (rr, cc)), shape=(n, n))
-        # free border: central inside, one-sided where one neighbour is outside, 0 where both
-        both, only_p, only_m = ip & im, ip & ~im, im & ~ip
-        half = np.where(both, 0.5, 1.0)
-        use_p, use_m = ip & (both | only_p), im & (both | only_m)
-        data = np.concatenate(
-            [half[use_p], -half[use_m], -np.ones(only_p.sum()), np.ones(only_m.sum())]
-        )
-        rr = np.concatenate([rows[use_p], rows[use_m], rows[only_p], rows[only_m]])
-        cc = np.concatenate([plus[use_p], minus[use_m], rows[only_p], rows[only_m]])
-        return sparse.csr_matrix((data, (rr, cc)), shape=(n, n))
-
-    dx = central(neighbour(0, 1), neighbour(0, -1))
-    dy = central(neighbour(1, 0), neighbour(-1, 0))
-    regs = []
-    for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0)):
-        nb = neighbour(dr, dc)
-        # every edge from an unknown to its neighbour; edges to the outside (c = 0) count once
-        # each way, edges between two unknowns only in the +col / +row direction
-        keep = (nb < 0) | ((dr, dc) in ((0, 1), (1, 0)))
-        if free:  # no edge to the outside
-            keep &= nb >= 0
-        k = np.flatnonzero(keep)
-        m = len(k)
-        inside = nb[k] >= 0
-        data = np.concatenate([np.full(m, -1.0), np.ones(inside.sum())])
-        rr = np.concatenate([np.arange(m), np.arange(m)[inside]])
-        cc = np.concatenate([k, nb[k][inside]])
-        regs.append(sparse.csr_matrix((data, (rr, cc)), shape=(m, n)))
-    return _Grid((h, w), flat, dx, dy, sparse.vstack(regs).tocsr(), free=free)
-
-
 # --- the solve ---------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class _Blur:
-    """The Gaussian blur R was measured with, as an operator on values at the unknown pixels
-    (0 elsewhere; symmetric, so it is its own adjoint)."""
-
-    shape: tuple[int, int]
-    unknown: np.ndarray
-    sigma: float
-
-    def __call__(self, v: np.ndarray) -> np.ndarray:
-        img = np.zeros(self.shape[0] * self.shape[1])
-        img[self.unknown] = v
-        out = ndimage.gaussian_filter(img.reshape(self.shape), self.sigma, mode="constant")
-        return out.ravel()[self.unknown]
-
-    def ratio(self, rho: np.ndarray) -> np.ndarray:
-        """The blurred model ratio: outside the unknowns the crease is 0 and the ratio 1."""
-        return 1.0 + self(rho - 1.0)
-
-
-def _blur_on_grid(sigma: float, k: int, grid: _Grid) -> _Blur | None:
-    """R's blur (``sigma`` photo pixels) on the grid downsampled by ``k``, with the box filter
-    of the downsampling itself (variance (1 - 1/k^2) / 12 grid pixels^2)."""
-    var = (sigma / k) ** 2 + (1.0 - 1.0 / (k * k)) / 12.0
-    return _Blur(grid.shape, grid.unknown, float(np.sqrt(var))) if var > 1e-4 else None
 
 
 def _model(p_x: np.ndarray, p_y: np.ndarray, inv_nz0: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -400,86 +290,6 @@ def _solve(
     if fs is not None:
         sq += side.weight * float(weight @ (fs * fs))  # type: ignore[union-attr]
     return c, e, float(np.sqrt(sq / wsum))
-
-
-def neutral_height(mask: np.ndarray, g0: np.ndarray) -> np.ndarray:
-    """The neutral's height (pixels, up to a constant) over ``mask`` from its slopes ``g0``
-    ``[H, W, 2]`` (pixel frame): least squares over the forward differences between pixels of
-    the mask (the slopes outside it are not used); 0 outside."""
-    h, w = mask.shape
-    flat = np.flatnonzero(mask.ravel())
-    col_of = np.full(h * w, -1, np.int64)
-    col_of[flat] = np.arange(len(flat))
-    r, c = np.divmod(flat, w)
-    rows, cols, data, rhs = [], [], [], []
-    e = 0
-    for dr, dc, axis in ((0, 1, 0), (1, 0, 1)):  # the two forward differences
-        rr, cc = r + dr, c + dc
-        ok = (rr < h) & (cc < w)
-        nb = np.full(len(flat), -1, np.int64)
-        nb[ok] = col_of[rr[ok] * w + cc[ok]]
-        k = np.flatnonzero(nb >= 0)
-        m = len(k)
-        idx = np.arange(e, e + m)
-        rows += [idx, idx]
-        cols += [k, nb[k]]
-        data += [np.full(m, -1.0), np.ones(m)]
-        gv = g0[..., axis].ravel()
-        rhs.append(0.5 * (gv[flat[k]] + gv[flat[nb[k]]]))  # the slope midway
-        e += m
-    d = sparse.csr_matrix(
-        (np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=(e, len(flat))
-    )
-    a = (d.T @ d + 1e-6 * sparse.identity(len(flat))).tocsr()
-    with threadpool_limits(1):
-        x, _ = spla.cg(a, d.T @ np.concatenate(rhs), rtol=1e-8, maxiter=500, M=_multigrid(a))
-    out = np.zeros(h * w)
-    out[flat] = x - x.mean()
-    return out.reshape(h, w)
-
-
-def eikonal_height(
-    slope: np.ndarray, mask: np.ndarray, border: np.ndarray, upward: bool = True
-) -> np.ndarray:
-    """The viscosity solution of ``|grad u| = slope`` over ``mask`` with ``u = border`` on the
-    mask's border pixels (Rouy-Tourin upwind scheme, Jacobi sweeps to convergence).
-
-    ``upward``: the largest solution (every critical point inside is a maximum: the surface
-    climbs from the border wherever the slopes allow), else the smallest (minima). Where the
-    true surface has no critical point of the other kind, its slope magnitudes and border values
-    determine it: on a neutral turned from the camera this is where the expression's surface
-    (neutral + crease) keeps climbing or falling through the crease, i.e. where the sign of the
-    crease's slope is in the photos.
-    """
-    big = 1e30
-    sgn = 1.0 if upward else -1.0
-    f = np.where(mask, np.maximum(np.asarray(slope, np.float64), 0.0), 0.0)
-    fixed = ~mask | (mask & ~ndimage.binary_erosion(mask))  # outside and the border ring
-    u = np.where(fixed & mask, sgn * np.asarray(border, np.float64), big)
-    u = np.where(mask, u, big)
-    h, w = mask.shape
-    for it in range(4 * (h + w)):  # upwind sweeps until nothing changes (about the diameter)
-        p = np.pad(u, 1, constant_values=big)
-        a = np.minimum(p[1:-1, :-2], p[1:-1, 2:])
-        b = np.minimum(p[:-2, 1:-1], p[2:, 1:-1])
-        d = np.abs(a - b)
-        two = 0.5 * (a + b + np.sqrt(np.maximum(2.0 * f * f - d * d, 0.0)))
-        new = np.where(d >= f, np.minimum(a, b) + f, two)
-        new = np.where(fixed, u, np.minimum(u, new))
-        if it % 8 == 7 and float(np.max(np.abs(np.where(mask, new - u, 0.0)))) < 1e-9:
-            u = new
-            break
-        u = new
-    return np.where(mask & (u < 0.5 * big), sgn * u, 0.0)
-
-
-def _downsample(img: np.ndarray, k: int) -> np.ndarray:
-    if k == 1:
-        return img
-    h, w = img.shape[:2]
-    hh, ww = h // k, w // k
-    x = img[: hh * k, : ww * k]
-    return x.reshape((hh, k, ww, k) + img.shape[2:]).mean(axis=(1, 3))
 
 
 def solve_crease(
@@ -651,52 +461,6 @@ def _ambiguity(
     return amb, float(amb.sum() / max(int(crease.sum()), 1))
 
 
-def _extend(c: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """``c`` outside ``mask`` replaced by its nearest value inside (so that differences at the
-    mask's border are one-sided, as the free border's operators are)."""
-    if mask.all() or not mask.any():
-        return c
-    _, (ri, ci) = ndimage.distance_transform_edt(~mask, return_indices=True)
-    return c[ri, ci]
-
-
-def _up_nearest(img: np.ndarray, k: int, shape: tuple[int, int]) -> np.ndarray:
-    """A solve grid's image at full resolution (nearest; edge rows repeated)."""
-    if k == 1:
-        return img
-    rows = np.minimum(np.arange(shape[0]) // k, img.shape[0] - 1)
-    cols = np.minimum(np.arange(shape[1]) // k, img.shape[1] - 1)
-    return img[np.ix_(rows, cols)]
-
-
-def _to_full(
-    c_small: np.ndarray,
-    unknown: np.ndarray,
-    small: tuple[int, int],
-    k: int,
-    shape: tuple[int, int],
-    in_roi: np.ndarray,
-    free: bool = False,
-) -> np.ndarray:
-    """A solve grid's unknown heights back at full resolution: heights scale with the pixel
-    size, bilinear in between, 0 outside the ROI (``free``: the border's heights extended
-    outwards before the interpolation)."""
-    c = np.zeros(small)
-    c.ravel()[unknown] = c_small
-    if k == 1:
-        return c
-    if free:
-        inside = np.zeros(small, bool)
-        inside.ravel()[unknown] = True
-        c = _extend(c, inside)
-    h, w = shape
-    rows = (np.arange(h) + 0.5) / k - 0.5
-    cols = (np.arange(w) + 0.5) / k - 0.5
-    yy, xx = np.meshgrid(rows, cols, indexing="ij")
-    c = ndimage.map_coordinates(c, [yy, xx], order=1, mode="nearest") * k
-    return np.where(in_roi, c, 0.0)
-
-
 def _fuse(
     grid: _Grid,
     solutions: dict[str, np.ndarray],
@@ -726,55 +490,6 @@ def _fuse(
     qx = np.choose(pick, [q[0] for q in slopes])
     qy = np.choose(pick, [q[1] for q in slopes])
     return _integrate(grid, qx, qy)
-
-
-def _integrate(grid: _Grid, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
-    """Least-squares height with central-difference slopes ``q`` and ``c = 0`` outside."""
-    if "integrate" not in grid.cache:
-        a = grid.dx.T @ grid.dx + grid.dy.T @ grid.dy + 1e-3 * (grid.reg.T @ grid.reg)
-        if grid.free:  # the height's constant is free: a tiny shrink fixes it
-            a = a + 1e-6 * sparse.identity(a.shape[0])
-        a = a.tocsr()
-        grid.cache["integrate"] = (a, _multigrid(a))
-    a, precond = grid.cache["integrate"]
-    b = grid.dx.T @ qx + grid.dy.T @ qy
-    x, _ = spla.cg(a, b, rtol=1e-6, maxiter=300, M=precond)
-    return x
-
-
-def _multigrid(a: sparse.csr_matrix) -> spla.LinearOperator:
-    """A smoothed-aggregation V-cycle preconditioner, set up deterministically: pyamg estimates
-    spectral radii from a random start drawn from numpy's global generator, which is seeded
-    for the setup and restored after (byte-identical outputs on a rerun)."""
-    state = np.random.get_state()
-    try:
-        np.random.seed(0x5F5)
-        ml = pyamg.smoothed_aggregation_solver(a, symmetry="hermitian", max_coarse=200)
-    finally:
-        np.random.set_state(state)
-    return ml.aspreconditioner(cycle="V")
-
-
-def normals_from_slopes(
-    p: np.ndarray, n0: np.ndarray, n1z: np.ndarray | None = None, min_slope: float = 1e-3
-) -> np.ndarray:
-    """The wrinkle normals (relative to ``n0``) of expression slopes ``p``; with ``n1z`` the
-    tilt from the camera is set to the measured ``N1_z`` along ``p``'s direction."""
-    p = np.asarray(p, np.float64)
-    if n1z is not None:
-        z = np.clip(np.asarray(n1z, np.float64), 1e-3, 1.0)
-        t = np.sqrt(1.0 / (z * z) - 1.0)
-        mag = np.hypot(p[..., 0], p[..., 1])
-        use = mag > min_slope
-        p = np.where(use[..., None], p * (t / np.maximum(mag, 1e-12))[..., None], p)
-    return relative_to(slopes_to_normals(p), n0)
-
-
-def expression_normals(m: np.ndarray, n0: np.ndarray) -> np.ndarray:
-    """The inverse of :func:`relative_to`: a wrinkle normal ``m`` (neutral frame) back in the
-    camera frame (the smallest rotation taking +Z to ``n0``)."""
-    n0 = np.asarray(n0, np.float64)
-    return relative_to(m, np.stack([-n0[..., 0], -n0[..., 1], n0[..., 2]], axis=-1))
 
 
 def ratio_residual(
