@@ -61,6 +61,8 @@ def test_every_error_rule_has_a_corpus_case():
         ("sRGB-tagged normal map", "tex_srgb_normal", "WP-TEX-001"),
         ("sRGB-tagged normal map seen by the GPU", "tex_srgb_normal", "WP-RND-001"),
         ("diff map declared as pd", "map_diff_declared_pd", "WP-MAP-006"),
+        ("a base of another face", "fid_other_face", "WP-FID-007"),
+        ("a base mirrored vertically", "map_base_flipped_v", "WP-FID-006"),
     ],
 )
 def test_injected_defects_are_caught(defect, case, code):
@@ -69,3 +71,18 @@ def test_injected_defects_are_caught(defect, case, code):
     # and the clean asset does not give it
     clean = next(c for c in CASES if c["name"] == "clean")["expect"]
     assert code not in clean
+
+
+def test_states_with_relief_everywhere_are_not_misaligned():
+    """The WP-FID-007 false alarm: states that keep the base's detail and add wrinkle relief
+    over the whole face are of one face (the clean demo's codes only)."""
+    expect = next(c for c in CASES if c["name"] == "fid_detail_everywhere")["expect"]
+    clean = next(c for c in CASES if c["name"] == "clean")["expect"]
+    assert expect == clean
+
+
+def test_a_mirrored_base_is_said_once():
+    """A base flipped vertically also fails the curl test; the report names the mirror
+    (WP-FID-006) and not also a green flip (WP-MAP-003)."""
+    expect = next(c for c in CASES if c["name"] == "map_base_flipped_v")["expect"]
+    assert "WP-FID-006" in expect and "WP-MAP-003" not in expect

@@ -25,6 +25,10 @@ CONVENTIONS: tuple[str, ...] = ("opengl", "directx")
 #: (DamagedHelmet: 0.19 towards DirectX although it is an OpenGL map), so those are left to the
 #: manifest rather than guessed.
 MIN_CONFIDENCE = 0.3
+#: At or above this confidence the detection is beyond doubt: a map declared in the other
+#: convention is refused before anything is written (synthetic, sculpted and wrinkle maps score
+#: 0.93 to 1.0; the Khronos NormalTangentTest map 0.83; baked hard-surface maps ~0.2).
+BEYOND_DOUBT = 0.9
 #: Below this mean absolute mixed derivative the map is considered flat (no evidence).
 MIN_SIGNAL = 1e-4
 

@@ -14,6 +14,8 @@ Integer texels map ``[0, 1] -> [-1, 1]``; float (EXR) texels are taken as signed
 is negative, else as ``[0, 1]``-encoded. Texel problems are counted: NaN, zero length (shorter
 than :data:`MIN_LENGTH`: too short to carry a direction, e.g. a flat mid-grey (128, 128, 128)
 image, which is no normal map), non-unit (``| |n| - 1 | > unit_tolerance``) and ``z < 0``.
+An image that is no tangent-space normal map (a colour or grey image, vectors that lean far
+from the surface: :mod:`wrinklepipe.normals.identify`) is refused with what it looks like.
 NaN and zero-length texels stop the read unless ``repair`` (they become (0, 0, 1)); with
 ``repair``, ``z < 0`` is mirrored to ``|z|``. Non-unit texels are always renormalised (that is
 what decoding a normal map means); the count says how many needed it beyond quantisation.
@@ -30,6 +32,7 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image
 from wrinklepipe.normals import compress, dds
 from wrinklepipe.normals.convention import ConventionReport, detect_convention, flip_green
+from wrinklepipe.normals.identify import looks_like
 
 _F = np.float32
 LAYOUTS: tuple[str, ...] = ("auto", "rgb", "rg", "ag")
@@ -297,6 +300,12 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
         layout = "rg"
     notes: list[str] = []
     too_short = stats.short > MAX_SHORT_FRACTION * stats.texels
+    # integer texels only: a float image holds signed or encoded vectors, which its values
+    # alone cannot always tell (the reader's rule above), so their lengths say nothing sure
+    what = looks_like(values, layout) if bits else ""
+    if what and not (too_short and stats.short == stats.texels):
+        # a colour or grey image, or no tangent-space map: refused, whatever repair says
+        raise input_error(path, f"is not a tangent-space normal map: it looks like {what}")
     if stats.nan or stats.zero or too_short:
         if not o.repair:
             where = []

@@ -37,7 +37,9 @@ from wrinklepipe.gltf.wrinkled import (
     material_normal_texture,
 )
 from wrinklepipe.io.images import read_image
-from wrinklepipe.normals.read import ReadOptions, read_normal_map
+from wrinklepipe.normals import alignment as al
+from wrinklepipe.normals.convention import BEYOND_DOUBT, CONVENTIONS
+from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
 from wrinklepipe.pipeline.character import open_wrinkled_document
 from wrinklepipe.pipeline.ingest_color import MaterialColor, material_color, read_colors
 from wrinklepipe.readers.meshes import load_mesh
@@ -45,8 +47,73 @@ from wrinklepipe.readers.registry import format_of
 from wrinklepipe.usd.source import UsdSource, read_usd_source
 
 
+def _flipped(nm: NormalMap, convention: str) -> bool:
+    """True when the map's curl test says, beyond doubt, the other convention than declared."""
+    d = nm.detection
+    return (
+        convention in CONVENTIONS
+        and d is not None
+        and d.convention not in ("undetermined", convention)
+        and d.confidence >= BEYOND_DOUBT
+    )
+
+
+def check_conventions(
+    maps: dict[Path, NormalMap], convention: str, base: Path | None, include_base: bool
+) -> None:
+    """Refuse, before anything is written, a manifest whose declared green convention is
+    wrong beyond doubt (the validator's flip rule, WP-MAP-003): every map's curl test says the
+    other convention (the manifest's ``convention`` is wrong), or one map's does while the
+    others agree with the declaration and its detail matches theirs only with its green
+    channel flipped (a map mirrored vertically also fails the curl test, but does not match
+    with green flipped: that is left to the validator, which names the mirror)."""
+    flipped = [p for p, nm in maps.items() if _flipped(nm, convention)]
+    if not flipped:
+        return
+    other = "directx" if convention == "opengl" else "opengl"
+    up = "+Y up" if convention == "opengl" else "-Y up"
+    if len(flipped) == len(maps):
+        raise input_error(
+            flipped[0],
+            f"declared {convention} ({up}) in the manifest, but every normal map's slopes are "
+            f"integrable only as {other} (curl test, {len(maps)} maps): green is flipped "
+            f'(WP-MAP-003); set convention = "{other}"',
+        )
+    if base is None or not include_base or base not in maps:
+        return
+    b = maps[base].normals
+    rows, cols = al.lattice(np.ones(b.shape[:2], bool))
+    green = al.TRANSFORMS["the base's green channel flipped"]
+    for p in flipped:
+        pairs = [(maps[p].normals, maps[q].normals) for q in maps if q != p and q not in flipped]
+        if not pairs:
+            continue
+        ok = [
+            x.shape == y.shape
+            and not _kept(al.kept(y, x, rows, cols))
+            and _kept(al.kept(y, x, rows, cols, green))
+            for x, y in pairs
+        ]
+        if all(ok):
+            raise input_error(
+                p,
+                f"declared {convention} ({up}) but its slopes are integrable only as {other} "
+                f"(curl test confidence {maps[p].detection.confidence:.2f}) and its detail "  # type: ignore[union-attr]
+                f"matches the other maps' only with green flipped: green is flipped "
+                f"(WP-MAP-003); flip its green channel",
+            )
+
+
+def _kept(k: float | None) -> bool:
+    return k is not None and k >= al.KEPT
+
+
 def _read_normals(
-    path: Path, convention: str, stats: dict[str, Any] | None = None, role: str = ""
+    path: Path,
+    convention: str,
+    stats: dict[str, Any] | None = None,
+    role: str = "",
+    read: dict[Path, NormalMap] | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes (wrinklepipe.normals.read);
     the reader's counts of problem texels go into ``stats[role]``."""
@@ -64,6 +131,8 @@ def _read_normals(
             "stats": nm.stats.to_json(),
             "tolerance": o.unit_tolerance,
         }
+    if read is not None:
+        read[path] = nm
     return np.asarray(nm.normals, np.float32), notes
 
 
@@ -81,15 +150,16 @@ def read_maps(
     manifest's ``base`` file (a glTF material's own normalTexture). ``stats``: the reader's
     problem-texel counts per map file."""
     notes: list[str] = []
+    read: dict[Path, NormalMap] = {}
     if base is None:
-        base, n = _read_normals(manifest.base, manifest.convention, stats, "base")
+        base, n = _read_normals(manifest.base, manifest.convention, stats, "base", read)
         notes += n
     states = []
     for s in manifest.states:
         if s.map is None:  # a colour-only state: its normal is the base (it adds nothing)
             states.append(base)
             continue
-        st, n = _read_normals(s.map, manifest.convention, stats, f"state {s.name}")
+        st, n = _read_normals(s.map, manifest.convention, stats, f"state {s.name}", read)
         notes += n
         if st.shape != base.shape:
             raise input_error(
@@ -101,6 +171,7 @@ def read_maps(
         if not manifest.states_include_base:  # wrinkle-only normals: add the base in PD space
             st = model.pd_to_normal(model.normal_to_pd(base) + model.normal_to_pd(st))
         states.append(st)
+    check_conventions(read, manifest.convention, manifest.base, manifest.states_include_base)
     channels = [r.channel for r in manifest.regions]
     if any(c is not None for c in channels):
         masks = []

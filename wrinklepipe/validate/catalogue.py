@@ -389,19 +389,26 @@ RULES: tuple[Rule, ...] = (
         "WP-FID-006",
         "error",
         "Base and states are not of one face (flipped or offset)",
-        "Where every mask is zero a wrinkle state should equal the base; here it differs on a "
-        "large part of the face, as when the base (or the states) is flipped or shifted "
-        "relative to the other.",
+        "Where every mask is zero a wrinkle state keeps the base's detail (it may add wrinkle "
+        "relief there: the masks pick where it shows); here it keeps little of it, and does "
+        "once the base is mirrored (V or U), its green channel flipped, or shifted by whole "
+        "texels: the measured share of the base's detail is named both ways. A green flip the "
+        "convention rule (WP-MAP-003) already reported is not said twice, and a mirror replaces "
+        "that rule's report on the base.",
         "Flip or realign the map the message names and convert again.",
     ),
     Rule(
         "WP-FID-007",
         "warning",
-        "States differ from the base where every mask is zero",
-        "Outside every mask a wrinkle state differs from the base on a large part of the face, "
-        "and no flip or offset of the base explains it: detail that no mask ever shows, or maps "
-        "of another face.",
-        "Check that base and states are of one bake; clear the states outside the wrinkle regions.",
+        "States are of another face or bake",
+        "Where every mask is zero the states keep little of the base's detail (the share of "
+        "it they hold, by regression of their slopes on the base's) while differing from the "
+        "base on a large part of the face, and no mirror, green flip or offset explains it: "
+        "maps of another face or another bake. States that carry the base's detail and add "
+        "relief everywhere are fine, and a base without detail gives no evidence: both are "
+        "silent.",
+        "Check that base and states are of one bake (the same face, UV layout and tangent "
+        "frame).",
     ),
 )
 

@@ -23,6 +23,7 @@ from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.masks import infer_side
 from wrinklepipe.metrics import Budget, Stats, angle_deg, weighted_stats
+from wrinklepipe.normals import alignment as al
 from wrinklepipe.validate import fidelity_pictures as fp
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
@@ -264,8 +265,12 @@ def estimate_shift(a: np.ndarray, b: np.ndarray) -> tuple[int, int, float]:
 
 
 def check_alignment(ctx: Context) -> list[Issue]:
-    """The wrinkled-minus-base difference where every mask is zero: near 0 when base and states
-    are of one face; spread over the face when one is flipped or offset."""
+    """Base and states of one face (:mod:`wrinklepipe.normals.alignment`): where every mask is
+    zero a state keeps the base's detail (it may add wrinkle relief everywhere: the masks pick
+    where it shows). A state that keeps none of it while differing from the base on a large
+    part of the face is of another face or bake (WP-FID-007), or flipped or offset when that
+    undone it keeps it (WP-FID-006; a green flip the convention rule WP-MAP-003 already named
+    is not said twice). A base without detail gives no evidence: nothing is said."""
     a = ctx.asset
     if ctx.inp.has_source and len(a.states) and a.encoding in model.ENCODINGS:
         H, W = a.states.shape[1:3]
@@ -289,55 +294,71 @@ def check_alignment(ctx: Context) -> list[Issue]:
     fp = footprint(ctx, (H, W))
     outside = _outside(masks, (H, W), fp)
     spread = _spread(base, states, outside)
+    rows, cols = al.lattice(outside)
+    kept = [al.kept(base, s, rows, cols) for s in states]
     ctx.metrics["base_state_spread"] = round(spread, 5)
-    if spread <= MISALIGNED_FRACTION:
-        return []
-    hint = _misalignment(base, states, outside, spread)
-    if hint:
-        return [
-            make_issue(
-                "WP-FID-006",
-                f"the {what} states differ from the base by more than {MISALIGNED_DEG:g} degree "
-                f"on {100 * spread:.1f}% of the face where every mask is zero (a wrinkle map of "
-                f"the same face differs only under its masks); {hint}",
-                ctx.inp.pointer("textures"),
-                spread=round(spread, 4),
-            )
-        ]
+    ctx.metrics["base_detail_kept"] = [None if k is None else round(k, 4) for k in kept]
+    lost = [k for k, v in enumerate(kept) if v is not None and v < al.KEPT]
+    if spread <= MISALIGNED_FRACTION or not lost:
+        return []  # of one face: the same, or the base's detail kept under any relief
+    names = [a.state_names[k] if k < len(a.state_names) else f"state {k}" for k in lost]
+    share = min(kept[k] for k in lost)  # type: ignore[type-var]
+    said = (
+        f"the {what} state(s) {', '.join(repr(n) for n in names)} keep {100 * max(share, 0.0):.0f}% of "
+        f"the base's detail where every mask is zero (a state of the same face and bake keeps "
+        f"all of it) and differ from the base by more than {MISALIGNED_DEG:g} degree on "
+        f"{100 * spread:.1f}% of the face there"
+    )
+    data: dict[str, Any] = {"spread": round(spread, 4), "detail_kept": round(share, 4)}
+    for label, tf in al.TRANSFORMS.items():
+        if all(_keeps(al.kept(base, states[k], rows, cols, tf)) for k in lost):
+            if "green" in label and _convention_said(ctx):
+                return []  # WP-MAP-003 named the flipped green channel
+            if "green" not in label and ctx.base_tex is not None:
+                # a mirrored map also fails the curl test: WP-MAP-003's "green is flipped"
+                # on the base is this mirror, said once here (validate drops it)
+                data["explains"] = ctx.base_tex.where
+            return [
+                make_issue(
+                    "WP-FID-006",
+                    f"{said}; with {label} they keep it: one of them is flipped",
+                    ctx.inp.pointer("textures"),
+                    **data,
+                )
+            ]
+    p = model.normal_to_pd
+    dy, dx, peak = estimate_shift(p(base)[..., 0], p(states[lost[0]])[..., 0])
+    if (dy, dx) != (0, 0) and peak > 0.05:
+        # the base's texel (r + dy, c + dx) is the states' (r, c)
+        if all(_keeps(al.kept(base, states[k], rows, cols, shift=(dy, dx))) for k in lost):
+            return [
+                make_issue(
+                    "WP-FID-006",
+                    f"{said}; the base is offset by ({dx}, {dy}) texels (x right, y down) from "
+                    "the states and keeps it moved back: an offset",
+                    ctx.inp.pointer("textures"),
+                    **data,
+                )
+            ]
     return [
         make_issue(
             "WP-FID-007",
-            f"the {what} states differ from the base by more than {MISALIGNED_DEG:g} degree on "
-            f"{100 * spread:.1f}% of the face where every mask is zero: detail no mask ever shows "
-            "(or maps of another face); no flip or offset explains it",
+            f"{said}: maps of another face or another bake; no flip or offset explains it",
             ctx.inp.pointer("textures"),
-            spread=round(spread, 4),
+            **data,
         )
     ]
 
 
-def _misalignment(base: np.ndarray, states: np.ndarray, outside: np.ndarray, spread: float) -> str:
-    """What explains a spread difference: a flip of the base (the spread at least halves with
-    it) or an integer offset (phase correlation), else ''."""
-    tries = {
-        "the base flipped vertically (V)": base[::-1],
-        "the base flipped horizontally (U)": base[:, ::-1],
-    }
-    fits = {k: _spread(b, states, outside) for k, b in tries.items()}
-    best = min(fits, key=lambda k: fits[k])
-    if fits[best] < 0.5 * spread:
-        return f"with {best} it would be {100 * fits[best]:.1f}%: one of them is flipped"
-    p = model.normal_to_pd
-    dy, dx, peak = estimate_shift(p(base)[..., 0], p(states[0])[..., 0])
-    if (dy, dx) != (0, 0) and peak > 0.05:
-        shifted = np.roll(base, (-dy, -dx), axis=(0, 1))
-        moved = _spread(shifted, states, outside)
-        if moved < 0.5 * spread:
-            return (
-                f"the base is offset by ({dx}, {dy}) texels (x right, y down) from the states "
-                f"(moved back, {100 * moved:.1f}%): an offset"
-            )
-    return ""
+def _keeps(k: float | None) -> bool:
+    return k is not None and k >= al.KEPT
+
+
+def _convention_said(ctx: Context) -> bool:
+    """True when the convention rule found the base's green channel flipped (WP-MAP-003)."""
+    scores = ctx.metrics.get("convention_score", {})
+    t = ctx.base_tex
+    return t is not None and float(scores.get(t.name, 0.0)) < -0.25
 
 
 # ------------------------------------------------------------------------------------------------
