@@ -625,7 +625,8 @@ CASES: list[Case] = [
             "WP-TEX-005",
             "WP-TEX-007",
         ],
-        "the base map flipped vertically relative to the wrinkle states (said once: not also as a green flip)",
+        "the base map flipped vertically relative to the wrinkle states (said once: not also "
+        "as a green flip)",
         c_base_flipped_v,
     ),
     Case(

@@ -407,8 +407,7 @@ RULES: tuple[Rule, ...] = (
         "maps of another face or another bake. States that carry the base's detail and add "
         "relief everywhere are fine, and a base without detail gives no evidence: both are "
         "silent.",
-        "Check that base and states are of one bake (the same face, UV layout and tangent "
-        "frame).",
+        "Check that base and states are of one bake (the same face, UV layout and tangent frame).",
     ),
 )
 

@@ -303,8 +303,9 @@ def check_alignment(ctx: Context) -> list[Issue]:
         return []  # of one face: the same, or the base's detail kept under any relief
     names = [a.state_names[k] if k < len(a.state_names) else f"state {k}" for k in lost]
     share = min(kept[k] for k in lost)  # type: ignore[type-var]
+    pct = 100 * max(share, 0.0)
     said = (
-        f"the {what} state(s) {', '.join(repr(n) for n in names)} keep {100 * max(share, 0.0):.0f}% of "
+        f"the {what} state(s) {', '.join(repr(n) for n in names)} keep {pct:.0f}% of "
         f"the base's detail where every mask is zero (a state of the same face and bake keeps "
         f"all of it) and differ from the base by more than {MISALIGNED_DEG:g} degree on "
         f"{100 * spread:.1f}% of the face there"
