@@ -168,7 +168,7 @@ def test_a_colour_image_given_as_a_normal_map_is_refused(tmp_path, capsys):
     text = m.read_text().replace('map = "wrinkle_stretch.png"', 'map = "color_stretch.png"', 1)
     text = text.replace('color = "color_stretch.png"\n', "", 1)
     m.write_text(text)
-    _refused(capsys, m, tmp_path, "color_stretch.png", "not unit length", "color = FILE")
+    _refused(capsys, m, tmp_path, "color_stretch.png", "looks like a colour image", "color = FILE")
 
 
 def test_a_state_needs_a_normal_map_or_a_colour_map(tmp_path, capsys):

@@ -4,13 +4,11 @@ Colour maps are 8- or 16-bit sRGB images (PNG, JPEG, TGA, TIFF ...): their texel
 stored (:func:`read_color_texels`), never converted, so a map that ships at its own size keeps
 its bytes. A float image (EXR) holds linear data and is refused with a message saying so.
 
-Two mistakes are caught by what the texels hold, each with one message:
-
-- a tangent-space normal map given as a colour map (:func:`normal_map_evidence`): decoded as
-  ``2 v - 1`` nearly every texel is a unit vector pointing out of the surface, the blue channel
-  the brightest (a colour map of skin decodes to vectors of length 0.4-0.9);
-- a colour image given as a normal map (:func:`color_image_evidence`, on the normal reader's
-  counts): most texels decode to vectors far from unit length.
+A tangent-space normal map given as a colour map is caught by what the texels hold
+(:func:`normal_map_evidence`): decoded as ``2 v - 1`` nearly every texel is a unit vector
+pointing out of the surface, the blue channel the brightest (a colour map of skin decodes to
+vectors of length 0.4-0.9). The other mistake, a colour image given as a normal map, is the
+normal reader's to refuse (:mod:`wrinklepipe.normals.identify`, one check for every verb).
 """
 
 from __future__ import annotations
@@ -26,9 +24,6 @@ from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image
 UNIT_TOLERANCE = 0.1
 #: The share of unit texels above which an image is taken for a normal map.
 NORMAL_SHARE = 0.9
-#: The share of non-unit texels above which an image given as a normal map is refused (a
-#: baked normal map has a few at most; an averaged, unnormalised one far fewer than this).
-NON_UNIT_SHARE = 0.2
 
 
 def read_color_texels(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> np.ndarray:
@@ -78,17 +73,6 @@ def normal_map_evidence(texels: np.ndarray) -> str | None:
     return (
         f"it looks like a tangent-space normal map ({share:.0%} of its texels decode to unit "
         f"normals, mean RGB ({mean[0]:.2f}, {mean[1]:.2f}, {mean[2]:.2f}))"
-    )
-
-
-def color_image_evidence(non_unit: int, texels: int) -> str | None:
-    """Why a map given as a normal map looks like a colour image, from the normal reader's
-    count of texels off unit length (None: it does not)."""
-    if texels <= 0 or non_unit <= NON_UNIT_SHARE * texels:
-        return None
-    return (
-        f"it does not hold normals: {non_unit / texels:.0%} of its texels decode to vectors that "
-        "are not unit length (a colour image?)"
     )
 
 

@@ -49,6 +49,8 @@ class ReadOptions:
     unit_tolerance: how far from 1 a decoded length may be before it counts as non-unit
         (8-bit rounding stays below ~0.01).
     detect: run the convention detector even when the convention is given (to warn).
+    refusal_hint: what to do instead, added to the message refusing an image that is no
+        normal map (e.g. where a colour map goes).
     """
 
     convention: str = "auto"
@@ -57,6 +59,7 @@ class ReadOptions:
     max_pixels: int = DEFAULT_MAX_PIXELS
     unit_tolerance: float = 0.05
     detect: bool = True
+    refusal_hint: str = ""
 
 
 #: A decoded texel shorter than this has no reliable direction (8-bit (128, 128, 128) decodes
@@ -305,7 +308,8 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
     what = looks_like(values, layout) if bits else ""
     if what and not (too_short and stats.short == stats.texels):
         # a colour or grey image, or no tangent-space map: refused, whatever repair says
-        raise input_error(path, f"is not a tangent-space normal map: it looks like {what}")
+        hint = f"; {o.refusal_hint}" if o.refusal_hint else ""
+        raise input_error(path, f"is not a tangent-space normal map: it looks like {what}{hint}")
     if stats.nan or stats.zero or too_short:
         if not o.repair:
             where = []

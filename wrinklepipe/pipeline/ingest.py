@@ -25,7 +25,6 @@ import numpy as np
 from wrinklepipe import masks as wm
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
-from wrinklepipe.color.read import color_image_evidence
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.gltf.document import Document
@@ -117,12 +116,9 @@ def _read_normals(
 ) -> tuple[np.ndarray, list[str]]:
     """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes (wrinklepipe.normals.read);
     the reader's counts of problem texels go into ``stats[role]``."""
-    o = ReadOptions(convention=convention)
+    hint = "a state's colour map goes in color = FILE" if role.startswith("state") else ""
+    o = ReadOptions(convention=convention, refusal_hint=hint)
     nm = read_normal_map(path, o)
-    why = color_image_evidence(nm.stats.non_unit, nm.stats.texels)
-    if why is not None:
-        hint = "; a state's colour map goes in color = FILE" if role.startswith("state") else ""
-        raise input_error(path, f"given as a normal map ({role or 'map'}), but {why}{hint}")
     notes = [f"{path.name}: {nm.source_format}, convention {nm.convention}"]
     notes += [f"{path.name}: {n}" for n in nm.notes if "convention" not in n]
     if stats is not None:
