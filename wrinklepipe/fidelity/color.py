@@ -30,7 +30,8 @@ import numpy as np
 
 from wrinklepipe import model, options
 from wrinklepipe.codec import srgb
-from wrinklepipe.fidelity.metric import Pose, Reader, sample_at, sample_masks_at
+from wrinklepipe.fidelity.reference import Pose
+from wrinklepipe.fidelity.sampling import Reader, sample_at, sample_masks_at
 from wrinklepipe.metrics import (
     DECIMALS,
     Budget,

@@ -23,6 +23,8 @@ import numpy as np
 
 from wrinklepipe import codec
 from wrinklepipe.fidelity import metric as fm
+from wrinklepipe.fidelity import reference as fre
+from wrinklepipe.fidelity import sampling as fsa
 from wrinklepipe.fidelity import ship
 from wrinklepipe.fidelity.search import Candidate, Judge, Tried, pick_format
 from wrinklepipe.metrics import Budget
@@ -91,9 +93,9 @@ def decode_stored(q: np.ndarray, encoding: str, param: float, version: int) -> n
     return e.combine_input(codec.decode(e, q, where, param=param, version=version))
 
 
-@fm.one_blas_thread
+@fsa.one_blas_thread
 def choose_formats(
-    ref: fm.Reference,
+    ref: fre.Reference,
     base_texels: np.ndarray,
     state_texels: Sequence[np.ndarray],
     masks: np.ndarray,

@@ -4,12 +4,12 @@ Every candidate is what convert would write (:mod:`.ship`), decoded, and judged 
 measure (:mod:`.metric`) against the full-resolution source, inside each pose's active
 region. The searches share their work:
 
-- the source is prepared once (:func:`~wrinklepipe.fidelity.metric.prepare`: the one
+- the source is prepared once (:func:`~wrinklepipe.fidelity.reference.prepare`: the one
   full-resolution pass over the masks and the poses);
 - every state size comes from one Lanczos-3 pyramid (:mod:`.pyramid`), which is also what
   convert ships;
 - candidates are screened on a coarse subset of the active texels
-  (:meth:`~wrinklepipe.fidelity.metric.Reference.coarse`) and only the one that passes is
+  (:meth:`~wrinklepipe.fidelity.reference.Reference.coarse`) and only the one that passes is
   confirmed on all of them; samples of what a step does not change are kept.
 
 Order (each step with the choices made so far): a provisional PD scale at full size, the
@@ -38,6 +38,8 @@ import numpy as np
 from wrinklepipe import reuse
 from wrinklepipe.fidelity import metric as fm
 from wrinklepipe.fidelity import pyramid, ship
+from wrinklepipe.fidelity import reference as fre
+from wrinklepipe.fidelity import sampling as fsa
 from wrinklepipe.metrics import Budget
 
 _F = np.float32
@@ -74,7 +76,7 @@ class Source:
     base: np.ndarray
     slopes: np.ndarray
     masks: np.ndarray
-    poses: Sequence[fm.Pose]
+    poses: Sequence[fre.Pose]
     region_names: Sequence[str]
     policy: str = "clamp01"
     footprint: np.ndarray | None = None
@@ -181,7 +183,7 @@ class Judge:
     kept, then confirmed: the same samples); the search's factories hand out one candidate
     object per choice (:func:`_once`)."""
 
-    def __init__(self, ref: fm.Reference, screen_texels: int) -> None:
+    def __init__(self, ref: fre.Reference, screen_texels: int) -> None:
         self.fine = ref
         self.coarse = ref.coarse(screen_texels)
         self.parts: dict[str, Candidate] = {}
@@ -239,15 +241,15 @@ class Judge:
         return f.inside(budget)
 
 
-Candidate = Callable[[fm.Reference], dict[str, Any]]
+Candidate = Callable[[fre.Reference], dict[str, Any]]
 
 
 def _once(make: Candidate) -> Candidate:
     """``make`` computed once per reference (a block-format candidate encodes its blocks once,
     whether it is screened, measured alone or kept)."""
-    memo: dict[int, tuple[fm.Reference, dict[str, Any]]] = {}
+    memo: dict[int, tuple[fre.Reference, dict[str, Any]]] = {}
 
-    def cached(ref: fm.Reference) -> dict[str, Any]:
+    def cached(ref: fre.Reference) -> dict[str, Any]:
         hit = memo.get(id(ref))
         if hit is None:
             hit = memo[id(ref)] = (ref, make(ref))
@@ -287,7 +289,7 @@ def _smallest_passing(values: Sequence[Any], passes: Callable[[Any], bool]) -> A
     return values[lo]
 
 
-@fm.one_blas_thread
+@fsa.one_blas_thread
 def search(
     src: Source,
     budget: Budget,
@@ -308,8 +310,8 @@ def search(
         raise ValueError("the source base must be given on the state grid (source_base)")
     smallest = min(fx.wrinkle or o.min_size, H)
 
-    def reference() -> fm.Reference:
-        return fm.prepare(
+    def reference() -> fre.Reference:
+        return fre.prepare(
             np.asarray(grid_base, _F),
             slopes,
             src.masks,
@@ -352,7 +354,7 @@ def search(
     def best_scale(size: int, label: str) -> float:
         u = judge.coarse.union
         top = max(
-            float(np.abs(fm.sample_at(x, ref.shape, u)).max(initial=0.0)) for x in levels[size]
+            float(np.abs(fsa.sample_at(x, ref.shape, u)).max(initial=0.0)) for x in levels[size]
         )
         # the validator's clipping rule (WP-MAP-004) counts every texel of the map, active or
         # not: a scale that clips more than it allows is never chosen, and the candidates
@@ -431,15 +433,15 @@ def search(
         )
         state_names = [f"state {k}" for k in range(len(state_q))]
 
-        def reads(r: fm.Reference) -> np.ndarray:
+        def reads(r: fre.Reference) -> np.ndarray:
             part = judge.sampled(kept["masks"], r is judge.fine)
             leaks = [lk[0] for lk in (part.leaks or []) if lk is not None]
             return np.concatenate([r.union, *leaks])
 
         @_factory
         def state_format(f: str) -> Candidate:
-            def make(r: fm.Reference) -> dict[str, Any]:
-                need = fm.taps(state_q.shape[1:3], ref.shape, reads(r))
+            def make(r: fre.Reference) -> dict[str, Any]:
+                need = fsa.taps(state_q.shape[1:3], ref.shape, reads(r))
                 got = trips.get(f, dict.fromkeys(state_names, need))
                 texels = np.stack([got[n] for n in state_names])
                 return {"states": texels, "states_reader": ship.pd_reader(scale, quantise=False)}
@@ -448,8 +450,8 @@ def search(
 
         @_factory
         def base_format(f: str) -> Candidate:
-            def make(r: fm.Reference) -> dict[str, Any]:
-                need = fm.taps(base_texels.shape[:2], ref.shape, np.concatenate([reads(r), face]))
+            def make(r: fre.Reference) -> dict[str, Any]:
+                need = fsa.taps(base_texels.shape[:2], ref.shape, np.concatenate([reads(r), face]))
                 xy = trips.get(f, {"base": need})["base"]
                 return {"base": xy, "base_reader": ship.base_reader("rg")}
 
@@ -606,13 +608,13 @@ def search(
 def _tails(level: np.ndarray, smallest: float) -> list[np.ndarray]:
     """Per state of ``level`` ``[K, s, s, 2]``: its texels ``[n, 1, 2]`` (in map order) whose
     larger |component| is at least 0.99 of scale ``smallest`` (the only ones that can clip at
-    a scale of at least that). In chunks of rows (:func:`~wrinklepipe.fidelity.metric.chunks`:
+    a scale of at least that). In chunks of rows (:func:`~wrinklepipe.fidelity.sampling.chunks`:
     the same texels, small temporaries) and two planes per chunk (a reduction over a last axis
     of 2 is ten times slower than one elementwise maximum; the same values)."""
     out = []
     for x in level:
         parts = []
-        for sl in fm.chunks(x.shape[0], max(1, fm.CHUNK_TEXELS // max(x.shape[1], 1))):
+        for sl in fsa.chunks(x.shape[0], max(1, fsa.CHUNK_TEXELS // max(x.shape[1], 1))):
             c = x[sl]
             amax = np.maximum(np.abs(c[..., 0]), np.abs(c[..., 1]))
             parts.append(c[amax >= 0.99 * smallest])
@@ -679,7 +681,7 @@ class _RoundTrips:
         return {n: have.get(n, self.maps[n]) for n in need}
 
 
-def _base_alone(ref: fm.Reference, arrays: dict[str, Any], face: np.ndarray) -> Any:
+def _base_alone(ref: fre.Reference, arrays: dict[str, Any], face: np.ndarray) -> Any:
     return fm.base_fidelity(ref, arrays["base"], face, arrays.get("base_reader"))
 
 

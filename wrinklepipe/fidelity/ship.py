@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from wrinklepipe import codec, reuse
-from wrinklepipe.fidelity.metric import CHUNK_TEXELS, Reader, chunks
+from wrinklepipe.fidelity.sampling import CHUNK_TEXELS, Reader, chunks
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.normals import compress as nc
 
@@ -26,7 +26,7 @@ BLOCK_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")
 
 def base_texels(base: np.ndarray) -> np.ndarray:
     """8-bit RGB texels of the base normal map (``0.5 + 0.5 n``), encoded in chunks of rows
-    (:data:`~wrinklepipe.fidelity.metric.CHUNK_TEXELS`: every step is per texel, so the bytes
+    (:data:`~wrinklepipe.fidelity.sampling.CHUNK_TEXELS`: every step is per texel, so the bytes
     are those of one pass; the temporaries stay small and are reused)."""
     b = np.asarray(base, _F)
     if b.ndim != 3 or b.shape[0] * b.shape[1] <= CHUNK_TEXELS:

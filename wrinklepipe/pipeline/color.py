@@ -23,7 +23,7 @@ from wrinklepipe.asset import ColorMaps, WrinkleAsset
 from wrinklepipe.color.resample import resize_texels
 from wrinklepipe.fidelity import color as fc
 from wrinklepipe.fidelity import footprint
-from wrinklepipe.fidelity.metric import Pose
+from wrinklepipe.fidelity.reference import Pose
 from wrinklepipe.fidelity.ship import mask_values
 from wrinklepipe.metrics import Budget
 

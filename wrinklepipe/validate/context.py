@@ -9,7 +9,7 @@ import numpy as np
 
 from wrinklepipe import model
 from wrinklepipe.asset import WrinkleAsset
-from wrinklepipe.fidelity.metric import source_states
+from wrinklepipe.fidelity.reference import source_states
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.pipeline.package import resize_normals_pd
 from wrinklepipe.validate import textures as tx
@@ -94,7 +94,7 @@ def resize_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:
 
 def encode_source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.ndarray:
     """Source (float) states in the representation :func:`wrinklepipe.model.combine` takes
-    (:func:`wrinklepipe.fidelity.metric.source_states`, what the automatic choices measure)."""
+    (:func:`wrinklepipe.fidelity.reference.source_states`, what the automatic choices measure)."""
     return source_states(base, states, encoding)
 
 
