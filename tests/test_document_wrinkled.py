@@ -97,3 +97,23 @@ def test_only_the_wrinkled_primitives_change(tmp_path):
     assert np.allclose(np.linalg.norm(t[:, :3], axis=1), 1, atol=1e-5)
     assert np.abs(np.einsum("ij,ij->i", t[:, :3], n)).max() < 1e-3
     assert parts[0].notes[0].startswith("no UVs: added TEXCOORD_0")
+
+
+@needs_robot
+def test_custom_attributes_of_another_shape_are_kept_and_noted():
+    """A source's own custom attribute that is not SCALAR FLOAT (a VEC3 here) stays as it is
+    beside the added SCALAR vertex IDs, and the part's notes say Blender's importer will fail
+    on (or drop) it; a SCALAR FLOAT one gives no note."""
+    for kind, noted in (("VEC3", True), ("SCALAR", False)):
+        doc = read_document(ROBOT)
+        repair(doc)
+        refs = wrinkled_primitives(doc, select_materials(doc, "Black"))
+        attrs = doc.primitive(refs[0])["attributes"]
+        n = doc.gltf["accessors"][attrs["POSITION"]]["count"]
+        attrs["_PAINT"] = doc.add_accessor(np.zeros((n, 3 if kind == "VEC3" else 1), np.float32))
+        parts = add_wrinkle_attributes(doc, refs)
+        note = [x for x in parts[0].notes if "_PAINT" in x]
+        assert doc.gltf["accessors"][attrs["_PAINT"]]["type"] == kind
+        assert len(note) == int(noted), parts[0].notes
+        if noted:
+            assert "not SCALAR FLOAT" in note[0] and "Blender 5's glTF importer" in note[0]

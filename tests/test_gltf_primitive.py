@@ -157,6 +157,25 @@ def test_colors_come_from_the_attribute_the_options_name(tmp_path):
         np.testing.assert_array_equal(read_primitive(src, 0, 0, OPTIONS).colors, bias)
 
 
+def test_the_bias_reads_from_its_four_channel_attributes(tmp_path):
+    """The bias as wrinklepipe writes it (one SCALAR FLOAT attribute per channel), and a
+    partial set of channels as one clear error naming the missing ones."""
+    doc = quad_doc()
+    attrs = doc["meshes"][0]["primitives"][0]["attributes"]
+    attrs.update(_WRINKLE_BIAS_R=3, _WRINKLE_BIAS_G=4, _WRINKLE_BIAS_B=5, _WRINKLE_BIAS_A=6)
+    bias = np.arange(16, dtype=np.float32).reshape(4, 4) / 16
+    arrays = [(QUAD_P, {}), (QUAD_I, {}), (QUAD_UV, {})] + [(bias[:, c], {}) for c in range(4)]
+    f = write_gltf(tmp_path / "c.gltf", arrays, doc)
+    for src in _sources(f):
+        np.testing.assert_array_equal(read_primitive(src, 0, 0, OPTIONS).colors, bias)
+        assert read_primitive(src, 0, 0).colors is None  # COLOR_0 is not the bias
+    del attrs["_WRINKLE_BIAS_B"]
+    f = write_gltf(tmp_path / "d.gltf", arrays, doc)
+    with pytest.raises(InputError, match="the bias lacks _WRINKLE_BIAS_B") as exc:
+        read_primitive(next(iter(_sources(f))), 0, 0, OPTIONS)
+    assert exc.value.problems[0].key == "/meshes/0/primitives/0/attributes"
+
+
 FIELDS = ("positions", "indices", "uvs", "normals", "tangents", "morph_deltas", "joints")
 FIELDS += ("skin_weights", "inverse_bind", "vertex_ids")
 

@@ -39,8 +39,13 @@ SCHEMA_FILE = SCHEMAS_DIR / EXTENSION / "schema" / f"material.{EXTENSION}.schema
 LEGACY_MAPPING = 1
 #: The vertex attribute holding the spatial-hash vertex IDs, unless the extension names another.
 VERTEX_ID_ATTRIBUTE = "_WRINKLE_VERTEX_ID"
-#: The vertex attribute holding the rest-pose wrinkle bias (``Mesh.colors``).
+#: The rest-pose wrinkle bias (``Mesh.colors``, RGBA): read as one VEC3/VEC4 attribute of this
+#: name (what wrinklepipe wrote before 0.2), written as BIAS_CHANNEL_ATTRIBUTES.
 BIAS_ATTRIBUTE = "_WRINKLE_BIAS"
+#: The bias as one SCALAR FLOAT attribute per channel, so every custom attribute of a wrinkled
+#: primitive has one shape (SCALAR, as ``_WRINKLE_VERTEX_ID``): Blender 5's glTF importer fails
+#: on a primitive whose custom attributes mix shapes, for most PYTHONHASHSEED values.
+BIAS_CHANNEL_ATTRIBUTES = tuple(f"{BIAS_ATTRIBUTE}_{c}" for c in "RGBA")
 #: Longest schema message quoted in an error (a message quotes the offending value).
 _MAX_MESSAGE = 240
 

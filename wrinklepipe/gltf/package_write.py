@@ -3,9 +3,10 @@
 What is written (DESIGN.md section 4):
 
 - one mesh primitive with POSITION, NORMAL, explicit TANGENT (always), TEXCOORD_0, and
-  application-specific per-vertex data as FLOAT accessors: ``_WRINKLE_VERTEX_ID`` (spatial-hash
-  vertex IDs, exact in float32 below 2^24) and ``_WRINKLE_BIAS`` (rest-pose bias, from
-  ``mesh.colors``) when present; morph targets (POSITION deltas) named in
+  application-specific per-vertex data as SCALAR FLOAT accessors (one shape, which Blender's
+  importer needs): ``_WRINKLE_VERTEX_ID`` (spatial-hash vertex IDs, exact in float32 below
+  2^24) and ``_WRINKLE_BIAS_R``/``_G``/``_B``/``_A`` (rest-pose bias, from ``mesh.colors``)
+  when present; morph targets (POSITION deltas) named in
   ``mesh.extras.targetNames``;
 - a material whose core ``normalTexture`` is the base normal map (so plain viewers render the
   neutral face), carrying the vendor extension ``WRINKLEPIPE_wrinkle_maps`` (listed in
@@ -31,7 +32,12 @@ import numpy as np
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
-from wrinklepipe.metadata import BIAS_ATTRIBUTE, EXTENSION, VERTEX_ID_ATTRIBUTE, WrinkleMeta
+from wrinklepipe.metadata import (
+    BIAS_CHANNEL_ATTRIBUTES,
+    EXTENSION,
+    VERTEX_ID_ATTRIBUTE,
+    WrinkleMeta,
+)
 from wrinklepipe.package import MAX_FLOAT_ID, WrinklePackage, safe_name
 
 POINTER_EXTENSION = "KHR_animation_pointer"
@@ -269,7 +275,8 @@ def gltf_document(
         VERTEX_ID_ATTRIBUTE: buf.accessor(m.vertex_ids.astype(np.float32), _ARRAY_BUFFER),
     }
     if m.colors is not None:
-        attrs[BIAS_ATTRIBUTE] = buf.accessor(m.colors.astype(np.float32), _ARRAY_BUFFER)
+        for c, name in enumerate(BIAS_CHANNEL_ATTRIBUTES):
+            attrs[name] = buf.accessor(m.colors[:, c].astype(np.float32), _ARRAY_BUFFER)
     skin = _skin(m, buf, attrs)
     idx = m.indices.reshape(-1)
     idx_arr = idx.astype(np.uint16 if m.vertex_count < 65535 else np.uint32)

@@ -40,7 +40,7 @@ import numpy as np
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import InputError
 from wrinklepipe.geometry.polygons import drop_degenerate
-from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE
+from wrinklepipe.metadata import BIAS_ATTRIBUTE, BIAS_CHANNEL_ATTRIBUTES, VERTEX_ID_ATTRIBUTE
 
 #: Modes read as triangles: TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN.
 TRIANGLE_MODES = (4, 5, 6)
@@ -64,7 +64,8 @@ class PrimitiveOptions:
     """Options of :func:`read_primitive`.
 
     colors: the attribute read into ``Mesh.colors`` (``COLOR_0``, VEC3 gets alpha 1; a
-        wrinkle package's render mesh reads its ``_WRINKLE_BIAS``).
+        wrinkle package's render mesh reads its ``_WRINKLE_BIAS``: the four SCALAR channels
+        ``_WRINKLE_BIAS_R``..``_A`` it writes, or one VEC3/VEC4 attribute as written before).
     strict: a malformed optional part (``_WRINKLE_VERTEX_ID``, a morph target of the wrong
         length or with non-finite deltas) is an error; otherwise (mesh ingest of any file) it
         is left out and noted.
@@ -300,6 +301,8 @@ def read_primitive(
     tangents = attr("TANGENT", (4,))
     uvs = attr("TEXCOORD_0", (2,))
     colors = attr(opts.colors, (3, 4))
+    if colors is None and opts.colors == BIAS_ATTRIBUTE:
+        colors = bias_channels(attrs, lambda name: attr(name, (1,)), src.err, key)
     if colors is not None and colors.shape[1] == 3:
         colors = np.concatenate([colors, np.ones((nv, 1), colors.dtype)], axis=1)
     joints = attr("JOINTS_0", (4,), normalize=False)  # joint indices, never normalized
@@ -362,6 +365,24 @@ def _vertex_ids(
         )
     notes.append(f"ignored {VERTEX_ID_ATTRIBUTE} (not one non-negative integer per vertex)")
     return None
+
+
+def bias_channels(
+    attrs: dict[str, Any],
+    read: Any,
+    err: Any,
+    key: str,
+) -> np.ndarray | None:
+    """The bias ``[V, 4]`` from its per-channel attributes (``_WRINKLE_BIAS_R``..``_A``, each
+    read by ``read(name)`` as ``[V, 1]``), or None when the primitive has none of them; some
+    but not all of them is an error (``err(message, pointer)``)."""
+    have = [n for n in BIAS_CHANNEL_ATTRIBUTES if n in attrs]
+    if not have:
+        return None
+    if len(have) != len(BIAS_CHANNEL_ATTRIBUTES):
+        missing = ", ".join(n for n in BIAS_CHANNEL_ATTRIBUTES if n not in attrs)
+        raise err(f"the bias lacks {missing} (it is written as four channels)", key + "/attributes")
+    return np.concatenate([read(n) for n in BIAS_CHANNEL_ATTRIBUTES], axis=1)
 
 
 def _morph_targets(

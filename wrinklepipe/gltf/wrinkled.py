@@ -317,8 +317,31 @@ def add_wrinkle_attributes(doc: Document, refs: list[PrimitiveRef]) -> list[Wrin
             )
         attrs[VERTEX_ID_ATTRIBUTE] = doc.add_accessor(vid.astype(np.float32), ARRAY_BUFFER)
         notes.append(f"added {VERTEX_ID_ATTRIBUTE} (shared across the wrinkled primitives)")
+        notes += _custom_attribute_notes(doc, attrs)
         parts.append(WrinkledPart(r, wp, tri, uvs, vid, notes))
     return parts
+
+
+def _custom_attribute_notes(doc: Document, attrs: dict[str, Any]) -> list[str]:
+    """A note when the primitive's custom (``_``) attributes, the source's beside the added
+    SCALAR FLOAT vertex IDs, are not all SCALAR FLOAT: Blender 5's glTF importer drops
+    non-FLOAT custom attributes and fails on a primitive whose custom attributes mix shapes."""
+    accessors = doc.gltf.get("accessors", [])
+    other = {
+        k: (accessors[i].get("type"), accessors[i].get("componentType"))
+        for k, i in attrs.items()
+        if k.startswith("_")
+        and k != VERTEX_ID_ATTRIBUTE
+        and isinstance(i, int)
+        and 0 <= i < len(accessors)
+    }
+    odd = sorted(k for k, (t, c) in other.items() if (t, c) != ("SCALAR", 5126))
+    if not odd:
+        return []
+    return [
+        f"the source's custom attributes {', '.join(odd)} are not SCALAR FLOAT like "
+        f"{VERTEX_ID_ATTRIBUTE}: Blender 5's glTF importer fails on (or drops) them"
+    ]
 
 
 TEXTURE_TRANSFORM = "KHR_texture_transform"

@@ -57,7 +57,11 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.gltf.document import Document, PrimitiveRef
-from wrinklepipe.gltf.primitive import node_matrix, read_skin  # the one TRS, the one skin
+from wrinklepipe.gltf.primitive import (  # the one TRS, the one skin, the one bias
+    bias_channels,
+    node_matrix,
+    read_skin,
+)
 from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL
 from wrinklepipe.metadata import BIAS_ATTRIBUTE, VERTEX_ID_ATTRIBUTE
@@ -221,9 +225,13 @@ class _Scene:
         pv.CreatePrimvar("wrinkle:vertexId", Sdf.ValueTypeNames.IntArray, "vertex").Set(
             Vt.IntArray.FromNumpy(np.ascontiguousarray(vid))
         )
-        for attr, name in (("TANGENT", "tangent"), (BIAS_ATTRIBUTE, "bias")):
-            if attr in attrs:
-                a = np.ascontiguousarray(doc.accessor(attrs[attr]), np.float32)
+        bias = doc.accessor(attrs[BIAS_ATTRIBUTE]) if BIAS_ATTRIBUTE in attrs else None
+        if bias is None:
+            bias = bias_channels(attrs, lambda n: doc.accessor(attrs[n]), doc.err, ref.pointer)
+        tangent = doc.accessor(attrs["TANGENT"]) if "TANGENT" in attrs else None
+        for a, name in ((tangent, "tangent"), (bias, "bias")):
+            if a is not None:
+                a = np.ascontiguousarray(a, np.float32)
                 pv.CreatePrimvar(f"wrinkle:{name}", Sdf.ValueTypeNames.Float4Array, "vertex").Set(
                     Vt.Vec4fArray.FromNumpy(a)
                 )
