@@ -15,10 +15,7 @@ log() { printf '\033[1m[wrinklepipe setup]\033[0m %s\n' "$*" >&2; }
 # 1. Debian packages for headless OpenGL (EGL + Mesa llvmpipe), the HLSL -> SPIR-V -> GLSL
 #    compilers the shader tests use (glslang-tools, spirv-cross), chromium (the browser the
 #    three.js viewer's tests drive, headless) and Node.js for the npm tools.
-#    WRINKLEPIPE_BLENDER=1 also installs Debian's blender (the Blender export script's test) and
-#    python3-numpy (its glTF importer needs it).
 APT_PKGS="libegl1 libgl1 libgl1-mesa-dri glslang-tools spirv-cross chromium"
-if [ "${WRINKLEPIPE_BLENDER:-0}" = 1 ]; then APT_PKGS="$APT_PKGS blender python3-numpy"; fi
 command -v npm >/dev/null 2>&1 || APT_PKGS="$APT_PKGS nodejs npm"
 if ! command -v python3 >/dev/null 2>&1; then
   APT_PKGS="$APT_PKGS python3 python3-venv"
@@ -72,6 +69,21 @@ if [ -n "$npm_missing" ]; then
   PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 \
     npm install --silent --no-audit --no-fund --prefix tools/node $npm_missing >/dev/null
 fi
+# 4. Blender 5 as a Python module (PyPI bpy) in its own venv, .venv-blender: the tests import,
+#    play and render every Blender export in it (tests/blender5.py). Not in .venv: bpy pins
+#    numpy<2. bpy 5.0 is built for CPython 3.11 only: python3.11 when there is one, else python3
+#    (3.11 on the CI image). Reinstalled only when BPY_SPEC changes.
+BPY_SPEC="bpy>=5,<6"
+BPY_PY=$(command -v python3.11 || command -v "$PY")
+bstamp=.venv-blender/.wrinklepipe-installed
+if [ ! -f "$bstamp" ] || [ "$(cat "$bstamp")" != "$BPY_SPEC" ]; then
+  log "installing Blender 5 ($BPY_SPEC) into .venv-blender"
+  [ -x .venv-blender/bin/python ] || "$BPY_PY" -m venv .venv-blender
+  .venv-blender/bin/python -m pip install -q --upgrade pip >/dev/null
+  .venv-blender/bin/python -m pip install -q "$BPY_SPEC"
+  echo "$BPY_SPEC" > "$bstamp"
+fi
+
 export PATH="$ROOT/.venv/bin:$ROOT/tools/node/node_modules/.bin:$PATH"
 
 case "$mode" in

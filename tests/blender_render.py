@@ -1,6 +1,7 @@
-"""Test harness, run inside ``blender -b``: render the exported node group's Normal output.
+"""Test harness, run by Blender 5's Python (``bpy``): render the exported node group's Normal
+output.
 
-    blender -b --factory-startup --python-exit-code 1 --python tests/blender_render.py -- \
+    .venv-blender/bin/python tests/blender_render.py -- \
         OUT_DIR SIZE WEIGHTS.json EXPORT/wrinkle_setup.json [EXPORT2/wrinkle_setup.json ...]
 
 Builds the group with the export's own ``build_wrinkles.py`` (imported from the export folder),
@@ -44,8 +45,7 @@ def _scene(size: int) -> tuple:
         uv.data[loop.index].uv = mesh.vertices[loop.vertex_index].co.xy
     obj = bpy.data.objects.new("plane", mesh)
     scene.collection.objects.link(obj)
-    mat = bpy.data.materials.new("probe")
-    mat.use_nodes = True
+    mat = bpy.data.materials.new("probe")  # Blender 5: a material always has its node tree
     nt = mat.node_tree
     nt.nodes.clear()
     uvn = nt.nodes.new("ShaderNodeUVMap")

@@ -1,6 +1,6 @@
-"""Test harness, run inside ``blender -b``: several scripts in one Blender session.
+"""Test harness, run by Blender 5's Python (``bpy``): several scripts in one Blender session.
 
-    blender -b --factory-startup --python tests/blender_session.py -- JOBS.json
+    .venv-blender/bin/python tests/blender_session.py -- JOBS.json
 
 JOBS.json is a list of ``{"name", "script", "args", "stdout", "stderr"}``. Each script starts
 from Blender's factory settings (``wm.read_factory_settings``: the state ``--factory-startup``
@@ -8,7 +8,7 @@ gives a fresh process), runs as ``__main__`` with ``sys.argv`` ending in ``-- AR
 command line, and writes its output (Python's and Blender's own, file descriptors 1 and 2) to
 its ``stdout`` / ``stderr`` files. ``JOBS.json.results.json`` gets ``{name: {"exit_code",
 "traceback"}}``: 0 when the script returned, 1 when it raised (``--python-exit-code 1``), a
-``sys.exit`` code as given. One Blender start (~1.1 s CPU) instead of one per script.
+``sys.exit`` code as given. One Blender start instead of one per script.
 """
 
 from __future__ import annotations

@@ -103,6 +103,8 @@ LONGEST_FIRST = [  # share of the summed test durations in those runs
     "test_batch_run.py",  # 9 % (the isolation test: converts, a LocalCluster)
     "test_safety_faults.py",  # 7.9 % (22 killed CLI runs and their reruns)
     "test_viewer.py",  # 5.6 % (one browser page in one piece)
+    "test_blender.py",  # ~30 s alone (issue 46, not in those runs): one Blender 5 process
+    "test_materialx.py",  # ~20 s alone (issue 46): MaterialX GLSL renders, RobotExpressive
     "test_capture_cli.py",  # 5.4 %
     "test_batch_ci.py",  # 5.1 % (the CI script: three batch runs in their own processes)
     "test_convert_fidelity.py",  # 4.3 % (one CesiumMan convert at 1024)

@@ -20,6 +20,7 @@ import sys
 from typing import Any
 
 import bpy
+from bpy_extras import anim_utils
 
 Val = Any  # a node socket or a constant
 CH = "rgba"
@@ -41,7 +42,7 @@ def _args() -> tuple[str, str | None]:
 
 
 # ------------------------------------------------------------------------------------------------
-# small node helpers (Blender 3.x and 4.x)
+# small node helpers (Blender 3.x, 4.x and 5.x; tested with Blender 5.0)
 
 
 class Graph:
@@ -263,7 +264,7 @@ def build_group(setup: dict[str, Any], folder: str) -> Any:
 
 
 def _uses_image(mat: Any, base_name: str) -> bool:
-    if mat is None or not mat.use_nodes:
+    if mat is None or mat.node_tree is None:
         return False
     return any(
         n.type == "TEX_IMAGE" and n.image and os.path.basename(n.image.filepath) == base_name
@@ -342,11 +343,24 @@ def key_curves(obj: Any, setup: dict[str, Any], folder: str) -> int:
                 obj.keyframe_insert(data_path=f'["{prop}"]', frame=1 + t * fps, group="wrinklepipe")
                 keys += 1
         break  # the first curve; others are in the JSON for your own actions
-    if obj.animation_data and obj.animation_data.action:
-        for fc in obj.animation_data.action.fcurves:
+    for fc in _fcurves(obj):
+        if fc.group is not None and fc.group.name == "wrinklepipe":
             for kp in fc.keyframe_points:
                 kp.interpolation = "LINEAR"
     return keys
+
+
+def _fcurves(obj: Any) -> list[Any]:
+    """The F-curves of ``obj``'s action: its slot's channelbag (Blender 4.4+ slotted actions;
+    Blender 5 has no ``Action.fcurves``), else the action's own list (Blender 3.x, 4.0-4.3)."""
+    ad = obj.animation_data
+    action = ad.action if ad is not None else None
+    if action is None:
+        return []
+    if hasattr(action, "layers"):
+        bag = anim_utils.action_get_channelbag_for_slot(action, ad.action_slot)
+        return list(bag.fcurves) if bag is not None else []
+    return list(action.fcurves)
 
 
 def _numpy_bool_shim() -> None:
