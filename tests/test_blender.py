@@ -42,10 +42,10 @@ from wrinklepipe.demo.package import demo_package
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io import khronos
-from wrinklepipe.io.package import PackOptions, package_from_asset
 from wrinklepipe.jobs.export import export
 from wrinklepipe.paths import ROOT
 from wrinklepipe.pipeline.drivers import expression_cycle
+from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.sources.validation import load_input
 from wrinklepipe.usd.package_write import write_usd

@@ -16,6 +16,7 @@ from pathlib import Path
 import gltf_reference as ref
 import numpy as np
 import pytest
+import usd_checks
 from output_hashes import assert_unchanged
 from passthrough import EXTENSION, WRINKLE_ATTRIBUTES, compare
 from PIL import Image
@@ -365,14 +366,8 @@ def test_engine_export_of_the_avatar_passes_the_khronos_validator(exported, engi
 
 
 def _usd_errors(stage) -> list[str]:
-    from pxr import UsdValidation
 
-    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
-    return [
-        e.GetMessage()
-        for e in UsdValidation.ValidationContext(validators).Validate(stage)
-        if e.GetType() == UsdValidation.ValidationErrorType.Error
-    ]
+    return [e.GetMessage() for e in usd_checks.validation_errors(stage)]
 
 
 def test_usd_output_carries_the_whole_avatar(source, converted):

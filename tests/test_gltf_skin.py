@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import usd_checks
 
 from wrinklepipe.demo.package import demo_package
 from wrinklepipe.gltf.package_read import read_wrinkled
@@ -73,19 +74,14 @@ def test_skin_round_trip_gltf_usd_gltf(skinned, tmp_path):
 
 
 def test_usd_skinning_at_rest_gives_the_rest_points(skinned, tmp_path):
-    from pxr import Usd, UsdSkel, UsdValidation
+    from pxr import Usd, UsdSkel
 
     from wrinklepipe.usd.package_write import register_schema
 
     write_usd(skinned, tmp_path / "s.usda")
     register_schema()
     stage = Usd.Stage.Open(str(tmp_path / "s.usda"))
-    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
-    errors = [
-        e
-        for e in UsdValidation.ValidationContext(validators).Validate(stage)
-        if e.GetType() == UsdValidation.ValidationErrorType.Error
-    ]
+    errors = usd_checks.validation_errors(stage)
     assert errors == [], [(e.GetName(), e.GetMessage()) for e in errors]
     cache = UsdSkel.Cache()
     root = UsdSkel.Root(stage.GetPrimAtPath("/demo"))

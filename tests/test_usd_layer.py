@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import usd_checks
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 from wrinkle_setups import write_setup
@@ -31,7 +32,7 @@ from wrinklepipe.usd.meshes import read_usd_meshes
 from wrinklepipe.usd.package_read import read_usd
 
 pxr = pytest.importorskip("pxr")
-from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdSkel, UsdValidation  # noqa: E402
+from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdSkel  # noqa: E402
 
 USDZ = Path(__file__).resolve().parents[2] / "shared" / "data" / "usd" / "usd-wg" / "test_assets"
 RIGGED = USDZ / "USDZ" / "RiggedFigure" / "RiggedFigure.usdz"
@@ -220,12 +221,7 @@ def avatar(tmp_path_factory):
 
 
 def _errors(stage) -> list[str]:
-    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
-    return sorted(
-        e.GetMessage()
-        for e in UsdValidation.ValidationContext(validators).Validate(stage)
-        if e.GetType() == UsdValidation.ValidationErrorType.Error
-    )
+    return sorted(e.GetMessage() for e in usd_checks.validation_errors(stage))
 
 
 def _resolved(asset) -> str:

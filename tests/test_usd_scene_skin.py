@@ -16,6 +16,7 @@ from pathlib import Path
 import gltf_reference as ref
 import numpy as np
 import pytest
+import usd_checks
 from wrinkle_setups import ROBOT, avatar_variant, write_setup
 
 from wrinklepipe.cli import main
@@ -270,14 +271,9 @@ def test_usd_reads_the_wrinkled_mesh_the_gltf_path_measures(characters, name):
 
 
 def _usd_errors(path: Path) -> list[str]:
-    from pxr import Usd, UsdValidation
+    from pxr import Usd
 
-    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
-    return [
-        e.GetMessage()
-        for e in UsdValidation.ValidationContext(validators).Validate(Usd.Stage.Open(str(path)))
-        if e.GetType() == UsdValidation.ValidationErrorType.Error
-    ]
+    return [e.GetMessage() for e in usd_checks.validation_errors(Usd.Stage.Open(str(path)))]
 
 
 @pytest.mark.parametrize("name", ["avatar", "robot", "cesium"])

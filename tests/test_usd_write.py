@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+import usd_checks
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -38,7 +39,7 @@ def _validate(path):
     validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
     assert len(validators) > 20
     errors = UsdValidation.ValidationContext(validators).Validate(stage)
-    return [e for e in errors if e.GetType() == UsdValidation.ValidationErrorType.Error], errors
+    return usd_checks.validation_errors(stage), errors
 
 
 @pytest.mark.parametrize("suffix", [".usda", ".usdc", ".usdz"])
@@ -260,6 +261,16 @@ def test_bias_and_metadata_round_trip(pkg, tmp_path):
     )
     p2 = replace(pkg, mesh=replace(pkg.mesh, colors=colors), meta=meta)
     write_gltf(p2, tmp_path / "g", "x")
+    # every custom attribute SCALAR FLOAT (Blender 5's importer needs one shape): the bias
+    # as four channels beside the vertex IDs
+    doc = json.loads((tmp_path / "g" / "x.gltf").read_text())
+    attrs = doc["meshes"][0]["primitives"][0]["attributes"]
+    custom = {k: doc["accessors"][i] for k, i in attrs.items() if k.startswith("_")}
+    assert sorted(custom) == ["_WRINKLE_BIAS_A", "_WRINKLE_BIAS_B", "_WRINKLE_BIAS_G"] + [
+        "_WRINKLE_BIAS_R",
+        "_WRINKLE_VERTEX_ID",
+    ]
+    assert {(a["type"], a["componentType"]) for a in custom.values()} == {("SCALAR", 5126)}
     g = read_wrinkled(tmp_path / "g" / "x.gltf")
     write_usd(g, tmp_path / "u.usda")
     u = read_usd(tmp_path / "u.usda")

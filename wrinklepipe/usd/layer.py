@@ -48,6 +48,7 @@ import numpy as np
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.package import WrinklePackage
+from wrinklepipe.usd.materialx import drop_materialx_file
 from wrinklepipe.usd.meshes import mesh_time
 from wrinklepipe.usd.package_write import LAYERED_OVER, UsdOptions, build_stage, usdz_bytes
 from wrinklepipe.usd.source import UsdSource
@@ -462,6 +463,7 @@ def flattened_usdz(
     from pxr import Ar, UsdUtils  # deferred: usd-core, USD only
 
     flat = stage.Flatten()
+    drop_materialx_file(flat)  # a usdz holds no .mtlx; the network is in the layer
     layers = {
         os.path.realpath(x.realPath) for x in stage.GetUsedLayers() if x.realPath
     }  # the layers the flattened one replaces

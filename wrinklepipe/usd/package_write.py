@@ -7,8 +7,12 @@ Layout of the stage (``defaultPrim`` = the asset name, Y up, metres)::
       MESH                   Mesh: points, triangles, normals, primvars:st (v up),
                              primvars:wrinkle:vertexId (int), primvars:wrinkle:tangent (float4),
                              primvars:wrinkle:bias; SkelBindingAPI with one BlendShape per morph
-      Looks/skin             Material + WrinkleMapsAPI (schemas/usd, codeless)
+      Looks/skin             Material + WrinkleMapsAPI (schemas/usd, codeless); outputs:surface
+                             <- Surface, outputs:mtlx:surface <- SR_wrinkle
         Surface              UsdPreviewSurface; normal <- base_normal (raw, scale 2, bias -1)
+        NG_wrinkle           the whole model as MaterialX nodes (wrinklepipe.usd.materialx;
+                             the same document is NAME.mtlx beside the layer)
+        SR_wrinkle           ND_standard_surface_surfaceshader; normal <- NG_wrinkle
         StReader             UsdPrimvarReader_float2 "st"
         base_normal          UsdUVTexture
         wrinkle_<state>      UsdUVTexture, inputs:file <- Material inputs:wrinkle:state:<state>
@@ -51,6 +55,9 @@ from wrinklepipe.gltf.package_write import skin_weights_normalized
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.package import MAX_FLOAT_ID, WrinklePackage, safe_name
 from wrinklepipe.paths import SCHEMAS_DIR
+from wrinklepipe.shading import materialx
+from wrinklepipe.shading.setup import from_meta
+from wrinklepipe.usd.materialx import add_materialx, drop_materialx_file
 
 API_NAME = "WrinkleMapsAPI"
 USD_SCHEMA_DIR = SCHEMAS_DIR / "usd"
@@ -324,6 +331,35 @@ def _mesh(stage: Any, root_path: Any, m: Mesh) -> Any:
     return mesh
 
 
+def materialx_file(pkg: WrinklePackage) -> str:
+    """The name of the MaterialX document written beside the package's USD layer."""
+    return f"{pkg.name}.mtlx"
+
+
+def materialx_document(pkg: WrinklePackage, opt: UsdOptions | None = None) -> Any:
+    """The package's wrinkle material as a MaterialX document
+    (:func:`wrinklepipe.shading.materialx.wrinkle_document`; maps as the USD layer names them),
+    or None for an asset beyond what every shader target takes (the USD keeps its
+    UsdPreviewSurface and WrinkleMapsAPI only)."""
+    opt = opt or UsdOptions()
+    meta = pkg.meta
+    tdir = f"{opt.texture_dir}/" if opt.texture_dir else ""
+    channels = [
+        1 if pkg.texture(n).pixels.ndim == 2 else pkg.texture(n).pixels.shape[-1]
+        for n in meta.masks.textures
+    ]
+    bits = pkg.texture(meta.states[0].texture).bits if meta.states else 8
+    setup = from_meta(meta, channels, state_bits=bits)
+    if setup.problems():
+        return None
+    files = materialx.MapFiles(
+        f"{tdir}base_normal.png",
+        tuple(f"{tdir}{s.texture}.png" for s in meta.states),
+        tuple(f"{tdir}{n}.png" for n in meta.masks.textures),
+    )
+    return materialx.wrinkle_document(setup, files, [float(w) for w in meta.weights])
+
+
 def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) -> Any:
     """``/NAME/Looks/skin``: the wrinkle material (``WrinkleMapsAPI``, its textures, the weight
     curves as time samples)."""
@@ -461,6 +497,11 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
             ):
                 a.Set(Vt.FloatArray.FromNumpy(row), Usd.TimeCode(float(t) * opt.fps))
         _morph_curves(stage, root_path, prim, pkg, opt.fps)
+    c = pkg.curves[0] if pkg.curves else None
+    doc = materialx_document(pkg, opt)
+    if doc is not None:
+        curve = None if c is None else (np.asarray(c.times, np.float64) * opt.fps, c.values)
+        add_materialx(stage, mat, doc, "./", materialx_file(pkg), curve)
     return mat
 
 
@@ -528,8 +569,10 @@ def write_usd(
         tdir = path.parent / opt.texture_dir if opt.texture_dir else path.parent
         for t in pkg.textures:
             written.append(write_bytes(tdir / f"{t.name}.png", png_bytes(t.pixels, opt.png_level)))
+    doc = materialx_document(pkg, opt)
+    mtlx = {materialx_file(pkg): materialx.to_xml(doc)} if doc is not None else {}
     if suffix != ".usdz":
-        for rel, data in sorted(extra.items()):
+        for rel, data in sorted({**extra, **mtlx}.items()):
             written.append(write_bytes(path.parent / rel, data))
     if suffix == ".usdz":
         written.append(_write_usdz(stage, pkg, path, opt, extra))
@@ -579,9 +622,14 @@ def _write_usdz(
     stage: Any, pkg: WrinklePackage, path: Path, opt: UsdOptions, extra: dict[str, bytes]
 ) -> Path:
     """A usdz holding a usdc root layer and the PNGs it references."""
+    from pxr import Sdf  # deferred: usd-core, USD only
+
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    layer.TransferContent(stage.GetRootLayer())
+    drop_materialx_file(layer)
     with tempfile.TemporaryDirectory(prefix="wrinklepipe-usdz-") as work:
         layer_path = Path(work) / f"{path.stem}.usdc"
-        if not stage.GetRootLayer().Export(str(layer_path)):
+        if not layer.Export(str(layer_path)):
             raise OSError(f"{path}: USD export failed")
         entries = [(layer_path.name, layer_path.read_bytes())]
     for t in pkg.textures:
