@@ -43,6 +43,7 @@ from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.gltf.package_write import write_gltf
 from wrinklepipe.io import khronos
 from wrinklepipe.jobs.export import export
+from wrinklepipe.metrics import angle_deg
 from wrinklepipe.paths import ROOT
 from wrinklepipe.pipeline.drivers import expression_cycle
 from wrinklepipe.pipeline.package import PackOptions, package_from_asset
@@ -339,12 +340,12 @@ def test_cycles_renders_the_wrinkled_poses_as_the_model(blender, name):
         n = img.reshape(-1, 4)[cov, :3] * 2.0 - 1.0
         n /= np.linalg.norm(n, axis=-1, keepdims=True)
         ref = model.blend(s.base, s.states, s.masks, ww, a.encoding, a.policy)
-        err = model.angular_error_deg(n, ref)
+        err = angle_deg(n, ref)
         stats.append((k, float(err.mean()), float(np.percentile(err, 99))))
         assert err.mean() <= 1.0 and np.percentile(err, 99) <= 3.0, (name, stats)
         if w.max() > 0.5:
             neutral = model.blend(s.base, s.states, s.masks, ww * 0, a.encoding, a.policy)
-            assert np.percentile(model.angular_error_deg(n, neutral), 99) > 3.0, (name, k)
+            assert np.percentile(angle_deg(n, neutral), 99) > 3.0, (name, k)
 
 
 @pytest.mark.parametrize("name", ["demo", "robot"])
@@ -379,7 +380,7 @@ def test_blenders_tangents_are_the_shipped_ones(blender, name):
     vi = corners["vertex"]
     keep = wrinkled[vi]
     want = tangent[vi[keep], :3] @ to_blender.T
-    err = model.angular_error_deg(corners["tangent"][keep], want)
+    err = angle_deg(corners["tangent"][keep], want)
     assert np.percentile(err, 99) < 0.5 and err.mean() < 0.05, (err.mean(), err.max())
     np.testing.assert_array_equal(corners["sign"][keep], tangent[vi[keep], 3])
 
