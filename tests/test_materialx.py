@@ -31,8 +31,8 @@ from wrinklepipe import model
 from wrinklepipe.demo.package import demo_package
 from wrinklepipe.shading import materialx as wmx
 from wrinklepipe.sources.validation import load_input
-from wrinklepipe.usd.materialx import MATERIALX_ATTRIBUTE
-from wrinklepipe.usd.package_write import materialx_document, write_usd
+from wrinklepipe.usd.materialx import MATERIALX_ATTRIBUTE, materialx_document
+from wrinklepipe.usd.package_write import write_usd
 from wrinklepipe.validate.gl import GLUnavailable
 from wrinklepipe.validate.render import shader_setup
 

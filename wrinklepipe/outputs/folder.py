@@ -30,20 +30,14 @@ from wrinklepipe.normals.copies import records as copy_records
 from wrinklepipe.outputs.compression import compressed_copies
 from wrinklepipe.outputs.curves import curve_files
 from wrinklepipe.package import WrinklePackage
-from wrinklepipe.shading import materialx
 from wrinklepipe.usd.layer import (
     flattened_usdz,
     layer_bytes,
     layer_stage,
     source_reference,
 )
-from wrinklepipe.usd.package_write import (
-    UsdOptions,
-    build_stage,
-    materialx_document,
-    materialx_file,
-    write_usd,
-)
+from wrinklepipe.usd.materialx import package_files
+from wrinklepipe.usd.package_write import UsdOptions, build_stage, write_usd
 from wrinklepipe.usd.scene import add_scene, wrinkled_prims
 from wrinklepipe.usd.source import UsdSource
 
@@ -186,9 +180,7 @@ def _write_layered(
     if usd_format == "usdc":
         out[f"{pkg.name}.usdc"] = layer_bytes(stage, ref, ".usdc")
     out[f"{pkg.name}.usdz"], n = flattened_usdz(stage, pkg, pkg.name, png_level)
-    doc = materialx_document(pkg)
-    if doc is not None:  # the MaterialX document the layer's wrinkle material names
-        out[materialx_file(pkg)] = materialx.to_xml(doc)
+    out.update(package_files(pkg))  # the MaterialX document the layer's material names
     for rel, data in sorted(out.items()):
         write_bytes(folder / rel, data)
     return notes + n

@@ -25,7 +25,9 @@ from typing import Any
 import MaterialX as mx
 import numpy as np
 
+from wrinklepipe.package import WrinklePackage
 from wrinklepipe.shading import materialx as wmx
+from wrinklepipe.shading.setup import from_meta
 
 #: MaterialX type -> Sdf value type name (as UsdMtlx maps them).
 SDF_TYPES = {
@@ -165,3 +167,60 @@ def drop_materialx_file(layer: Any) -> None:
     for path in found:
         owner = layer.GetPrimAtPath(path.GetPrimPath())
         owner.RemoveProperty(owner.properties[path.name])
+
+
+def materialx_file(pkg: WrinklePackage) -> str:
+    """The name of the MaterialX document written beside the package's USD layer."""
+    return f"{pkg.name}.mtlx"
+
+
+def materialx_document(pkg: WrinklePackage, texture_dir: str = "textures") -> mx.Document | None:
+    """The package's wrinkle material as a MaterialX document
+    (:func:`wrinklepipe.shading.materialx.wrinkle_document`; maps as the USD layer names them,
+    under ``texture_dir``), or None for an asset beyond what every shader target takes (the USD
+    keeps its UsdPreviewSurface and WrinkleMapsAPI only)."""
+    meta = pkg.meta
+    tdir = f"{texture_dir}/" if texture_dir else ""
+    channels = [
+        1 if pkg.texture(n).pixels.ndim == 2 else pkg.texture(n).pixels.shape[-1]
+        for n in meta.masks.textures
+    ]
+    bits = pkg.texture(meta.states[0].texture).bits if meta.states else 8
+    setup = from_meta(meta, channels, state_bits=bits)
+    if setup.problems():
+        return None
+    files = wmx.MapFiles(
+        f"{tdir}base_normal.png",
+        tuple(f"{tdir}{s.texture}.png" for s in meta.states),
+        tuple(f"{tdir}{n}.png" for n in meta.masks.textures),
+    )
+    return wmx.wrinkle_document(setup, files, [float(w) for w in meta.weights])
+
+
+def add_package_materialx(
+    stage: Any, material: Any, pkg: WrinklePackage, texture_dir: str, fps: float
+) -> None:
+    """:func:`add_materialx` of the package's document (when it has one) on ``material``, its
+    first weight curve as the weight inputs' time samples (time codes: seconds x ``fps``)."""
+    doc = materialx_document(pkg, texture_dir)
+    if doc is None:
+        return
+    c = pkg.curves[0] if pkg.curves else None
+    curve = None if c is None else (np.asarray(c.times, np.float64) * fps, c.values)
+    add_materialx(stage, material, doc, "./", materialx_file(pkg), curve)
+
+
+def package_files(pkg: WrinklePackage, texture_dir: str = "textures") -> dict[str, bytes]:
+    """``{NAME.mtlx: the document's XML}`` to write beside the layer (empty without one)."""
+    doc = materialx_document(pkg, texture_dir)
+    return {materialx_file(pkg): wmx.to_xml(doc)} if doc is not None else {}
+
+
+def without_materialx_file(layer: Any) -> Any:
+    """An anonymous copy of ``layer`` without ``wrinkle:materialx`` (for a ``.usdz``)."""
+    from pxr import Sdf  # deferred: usd-core, USD only
+
+    copy = Sdf.Layer.CreateAnonymous(".usda")
+    copy.TransferContent(layer)
+    drop_materialx_file(copy)
+    return copy

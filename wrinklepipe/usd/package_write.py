@@ -55,9 +55,7 @@ from wrinklepipe.gltf.package_write import skin_weights_normalized
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.package import MAX_FLOAT_ID, WrinklePackage, safe_name
 from wrinklepipe.paths import SCHEMAS_DIR
-from wrinklepipe.shading import materialx
-from wrinklepipe.shading.setup import from_meta
-from wrinklepipe.usd.materialx import add_materialx, drop_materialx_file
+from wrinklepipe.usd import materialx as mtlx
 
 API_NAME = "WrinkleMapsAPI"
 USD_SCHEMA_DIR = SCHEMAS_DIR / "usd"
@@ -331,35 +329,6 @@ def _mesh(stage: Any, root_path: Any, m: Mesh) -> Any:
     return mesh
 
 
-def materialx_file(pkg: WrinklePackage) -> str:
-    """The name of the MaterialX document written beside the package's USD layer."""
-    return f"{pkg.name}.mtlx"
-
-
-def materialx_document(pkg: WrinklePackage, opt: UsdOptions | None = None) -> Any:
-    """The package's wrinkle material as a MaterialX document
-    (:func:`wrinklepipe.shading.materialx.wrinkle_document`; maps as the USD layer names them),
-    or None for an asset beyond what every shader target takes (the USD keeps its
-    UsdPreviewSurface and WrinkleMapsAPI only)."""
-    opt = opt or UsdOptions()
-    meta = pkg.meta
-    tdir = f"{opt.texture_dir}/" if opt.texture_dir else ""
-    channels = [
-        1 if pkg.texture(n).pixels.ndim == 2 else pkg.texture(n).pixels.shape[-1]
-        for n in meta.masks.textures
-    ]
-    bits = pkg.texture(meta.states[0].texture).bits if meta.states else 8
-    setup = from_meta(meta, channels, state_bits=bits)
-    if setup.problems():
-        return None
-    files = materialx.MapFiles(
-        f"{tdir}base_normal.png",
-        tuple(f"{tdir}{s.texture}.png" for s in meta.states),
-        tuple(f"{tdir}{n}.png" for n in meta.masks.textures),
-    )
-    return materialx.wrinkle_document(setup, files, [float(w) for w in meta.weights])
-
-
 def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) -> Any:
     """``/NAME/Looks/skin``: the wrinkle material (``WrinkleMapsAPI``, its textures, the weight
     curves as time samples)."""
@@ -497,11 +466,7 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
             ):
                 a.Set(Vt.FloatArray.FromNumpy(row), Usd.TimeCode(float(t) * opt.fps))
         _morph_curves(stage, root_path, prim, pkg, opt.fps)
-    c = pkg.curves[0] if pkg.curves else None
-    doc = materialx_document(pkg, opt)
-    if doc is not None:
-        curve = None if c is None else (np.asarray(c.times, np.float64) * opt.fps, c.values)
-        add_materialx(stage, mat, doc, "./", materialx_file(pkg), curve)
+    mtlx.add_package_materialx(stage, mat, pkg, opt.texture_dir, opt.fps)
     return mat
 
 
@@ -569,10 +534,8 @@ def write_usd(
         tdir = path.parent / opt.texture_dir if opt.texture_dir else path.parent
         for t in pkg.textures:
             written.append(write_bytes(tdir / f"{t.name}.png", png_bytes(t.pixels, opt.png_level)))
-    doc = materialx_document(pkg, opt)
-    mtlx = {materialx_file(pkg): materialx.to_xml(doc)} if doc is not None else {}
     if suffix != ".usdz":
-        for rel, data in sorted({**extra, **mtlx}.items()):
+        for rel, data in sorted({**extra, **mtlx.package_files(pkg, opt.texture_dir)}.items()):
             written.append(write_bytes(path.parent / rel, data))
     if suffix == ".usdz":
         written.append(_write_usdz(stage, pkg, path, opt, extra))
@@ -622,11 +585,7 @@ def _write_usdz(
     stage: Any, pkg: WrinklePackage, path: Path, opt: UsdOptions, extra: dict[str, bytes]
 ) -> Path:
     """A usdz holding a usdc root layer and the PNGs it references."""
-    from pxr import Sdf  # deferred: usd-core, USD only
-
-    layer = Sdf.Layer.CreateAnonymous(".usda")
-    layer.TransferContent(stage.GetRootLayer())
-    drop_materialx_file(layer)
+    layer = mtlx.without_materialx_file(stage.GetRootLayer())  # a usdz holds no .mtlx
     with tempfile.TemporaryDirectory(prefix="wrinklepipe-usdz-") as work:
         layer_path = Path(work) / f"{path.stem}.usdc"
         if not layer.Export(str(layer_path)):
