@@ -18,7 +18,7 @@ from quicktex.s3tc.bc3 import BC3Encoder
 from wrinklepipe.demo import character
 from wrinklepipe.metrics import Budget, angle_deg
 from wrinklepipe.normals import compress as cmp
-from wrinklepipe.normals import dds
+from wrinklepipe.normals import dds, pd_fused
 from wrinklepipe.normals import encode as enc
 
 
@@ -108,7 +108,7 @@ def test_fused_pd_path_equals_plain_calls(demo, fmt):
     targets = (128 + 127 * t).astype(np.float32)
     data = cmp.encode_bc(cmp.pack_rgba(q, fmt), fmt, targets)
     angles = np.empty(n.shape[:2], np.float32)
-    r = cmp.pd_compress_check(n, s, fmt, angles_out=angles)
+    r = pd_fused.pd_compress_check(n, s, fmt, angles_out=angles)
     assert r.data == data  # chunked packing == one call
     assert r.clipped == clipped == enc.pd_clipped_count(n, s)
     dec = enc.decode_pd(cmp.unpack_u8(cmp.decode_bc(data, 200, 256, fmt), fmt), s)
@@ -122,10 +122,10 @@ def test_fused_pd_path_equals_plain_calls(demo, fmt):
 def test_padding_and_refusal():
     n = np.zeros((6, 10, 3), np.float32)
     n[..., 2] = 1
-    r = cmp.pd_compress_check(n, 1.0, "bc5")
+    r = pd_fused.pd_compress_check(n, 1.0, "bc5")
     assert r.padded and len(r.data) == 2 * 3 * 16  # 8 x 12 padded -> 2 x 3 blocks
     with pytest.raises(ValueError, match="multiples of 4"):
-        cmp.pd_compress_check(n, 1.0, "bc5", pad=False)
+        pd_fused.pd_compress_check(n, 1.0, "bc5", pad=False)
     with pytest.raises(ValueError, match="multiples of 4"):
         cmp.encode_bc(np.zeros((6, 10, 4), np.uint8), "bc5")
 

@@ -12,7 +12,7 @@ time is its median encode time and its note the mean / p99. BC1, BC3nm and BC7 n
 (z in B where the format has it) are compared per library the same way on the demo crop;
 ``extra["formats"]`` holds every number, ``extra["choice"]`` the encoder each format uses.
 
-Speed: the fused path (:func:`wrinklepipe.normals.compress.pd_compress_check`) on a 4096^2 PD
+Speed: the fused path (:func:`wrinklepipe.normals.pd_fused.pd_compress_check`) on a 4096^2 PD
 map as a ratio to the bare BC5 encoder on the same packed texels (the baseline). Repeats are
 interleaved so load from other processes hits all rows alike; medians are reported.
 """
@@ -42,7 +42,7 @@ from wrinklepipe.demo import character
 from wrinklepipe.io.images import write_image
 from wrinklepipe.metrics import DECIMALS, angle_deg, weighted_stats
 from wrinklepipe.model import height_to_normal
-from wrinklepipe.normals import bc4
+from wrinklepipe.normals import bc4, pd_fused
 from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import encode as enc
 from wrinklepipe.normals._chunks import threads as _threads
@@ -288,13 +288,13 @@ def bench_normals(quick: bool) -> BenchResult:
         opts = ReadOptions(convention="opengl", detect=False)
         normals = read_normal_map(src, opts).normals
         scale = enc.auto_pd_scale(normals)
-        rgba, _ = cmp.pd_pack(normals, scale, "bc5")
+        rgba, _ = pd_fused.pd_pack(normals, scale, "bc5")
         t = np.clip(normals[..., :2] / normals[..., 2:3] / np.float32(scale), -1, 1)
         targets = (np.float32(128) + np.float32(127) * t).astype(np.float32)
         base_name = "bare BC5 encoder (normals.bc4.encode_bc5)"
         steps = {
             base_name: lambda: bc4.encode_bc5(targets[..., 0], targets[..., 1]),
-            "whole (fused, no read)": lambda: cmp.pd_compress_check(normals, scale, "bc5"),
+            "whole (fused, no read)": lambda: pd_fused.pd_compress_check(normals, scale, "bc5"),
             BEFORE: lambda: bc4.encode_bc5(targets[..., 0], targets[..., 1], hard_step=1),
         }
         times: dict[str, list[float]] = {k: [] for k in steps}
@@ -304,7 +304,7 @@ def bench_normals(quick: bool) -> BenchResult:
                 t0 = time.perf_counter()
                 last[name] = fn()
                 times[name].append(time.perf_counter() - t0)
-        check: cmp.PDCheck = last["whole (fused, no read)"]  # deterministic: the timed run's
+        check: pd_fused.PDCheck = last["whole (fused, no read)"]  # deterministic: the timed run's
         etc_t0 = time.perf_counter()
         etcpak.compress_bc5(rgba, size, size)
         etc_s = time.perf_counter() - etc_t0
