@@ -271,7 +271,6 @@ ALLOWED_LONG: dict[str, str] = {}
 TO_SPLIT = {
     "wrinklepipe/fidelity/search.py",
     "wrinklepipe/jobs/capture.py",
-    "wrinklepipe/usd/meshes.py",
     "wrinklepipe/validate/render.py",
     "wrinklepipe/batch/plan.py:plan_batch",
     "wrinklepipe/bench/capture.py:bench_capture",

@@ -11,7 +11,7 @@ import pytest
 from wrinklepipe.errors import InputError
 from wrinklepipe.geometry.dynamic import DynamicWeights, morph_pose, skinned_pose
 from wrinklepipe.readers.meshes import LoadOptions, load_mesh, load_meshes
-from wrinklepipe.usd.meshes import usd_blend_shape_weights, usd_joint_world_matrices
+from wrinklepipe.usd.poses import usd_blend_shape_weights, usd_joint_world_matrices
 
 pxr = pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom, UsdSkel, Vt  # noqa: E402

@@ -29,7 +29,8 @@ from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.gltf.meshes import gltf_joint_world_matrices_at, gltf_morph_weights
 from wrinklepipe.readers.meshes import LoadOptions, load_mesh, load_meshes, merge_meshes
 from wrinklepipe.readers.registry import format_of
-from wrinklepipe.usd.meshes import open_stage, usd_blend_shape_weights, usd_joint_world_matrices
+from wrinklepipe.usd.meshes import open_stage
+from wrinklepipe.usd.poses import usd_blend_shape_weights, usd_joint_world_matrices
 
 
 @dataclass(frozen=True)
