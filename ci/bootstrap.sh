@@ -53,6 +53,10 @@ fi
 # convert --help` 1.27 -> 1.11 s). Up-to-date files are skipped; Python checks each .pyc
 # against its source's mtime, so a stale one is never used.
 .venv/bin/python -m compileall -q -j 0 wrinklepipe tests >/dev/null
+# The BC4 encoder's numba kernels, compiled once into numba's cache beside the module (~12 s of
+# CPU after a change to them, ~1 s otherwise): test workers and runs then load them instead of
+# each compiling them.
+.venv/bin/python -c "import numpy; from wrinklepipe.normals import bc4; bc4.encode_bc4(numpy.zeros((4, 4), numpy.uint8))"
 
 # 3. npm tools in a project-local folder: the Khronos glTF-Validator, glTF-Transform's CLI
 #    (an independent reader for `inspect`) and gltfpack (the real meshopt/quantization encoder

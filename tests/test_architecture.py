@@ -27,6 +27,7 @@ DEFERRED = {
     "trimesh": "~1.7 s to import, only the geometry benchmark's baseline uses it",
     "alktx2": "optional (Basis Universal UASTC only), may be absent",
     "moderngl": "imported where a GL context is made, inside the guard for 'no GL here'",
+    "numba": "~0.5 s to import; only the BC4 encoder's compiled search needs it",
     "distributed": "Dask: about a second to import, only the Dask batch engine needs it",
     "colour": "colour-science: ~0.6 s to import (its whole library loads); only the colour "
     "states' CIEDE2000 measure needs it",

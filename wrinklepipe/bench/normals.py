@@ -11,10 +11,12 @@ map's source is 8-bit; z rebuilt from its x, y). Encoders: ours
 time is its median encode time and its note the mean / p99. BC1, BC3nm and BC7 normal maps
 (z in B where the format has it) are compared per library the same way on the demo crop;
 ``extra["formats"]`` holds every number, ``extra["choice"]`` the encoder each format uses.
+NormalTangentTest's busiest window is a quality row too (with ``../shared``).
 
 Speed: the fused path (:func:`wrinklepipe.normals.pd_fused.pd_compress_check`) on a 4096^2 PD
-map as a ratio to the bare BC5 encoder on the same packed texels (the baseline). Repeats are
-interleaved so load from other processes hits all rows alike; medians are reported.
+map as a ratio to the bare BC5 encoder on the same packed texels (the baseline), and the bare
+encoder's Mpix per CPU second (all threads' CPU time: what one core does, whatever the load).
+Repeats are interleaved so load from other processes hits all rows alike; medians are reported.
 """
 
 from __future__ import annotations
@@ -54,7 +56,11 @@ SIZE = 4096
 #: The BC5 encoder before its coarse-to-fine hard-block search (a row, not a limit).
 BEFORE = "BC5 encoder before (whole hard window; same blocks otherwise)"
 QUICK_SIZE = 256  # quick: a smoke run (the test suite's); fixed costs dominate
-HELMET = ROOT.parent / "shared" / "data" / "gltf-samples" / "DamagedHelmet"
+SAMPLES = ROOT.parent / "shared" / "data" / "gltf-samples"
+#: The real normal maps of the quality rows (glTF samples; skipped when ../shared is absent).
+REAL_MAPS = ("DamagedHelmet", "NormalTangentTest")
+#: The one-core throughput row (CPU seconds of the whole process: every thread's work).
+ONE_CORE = "bare BC5 encoder, Mpix per CPU second (one core)"
 #: The encoder each block format uses (what :func:`compress.encode_bc` calls), and why.
 CHOICE = {
     "bc5": "wrinklepipe.normals.bc4 (lowest mean and p99 after the exhaustive search)",
@@ -80,9 +86,10 @@ def bench_map(size: int) -> np.ndarray:
     return height_to_normal(h).astype(np.float32)
 
 
-def _helmet_texels(tmp: Path) -> np.ndarray | None:
-    """DamagedHelmet's normal texture (8-bit RGB), or None without ../shared."""
-    glb = HELMET / "glTF-Binary" / "DamagedHelmet.glb"
+def _helmet_texels(tmp: Path, name: str = "DamagedHelmet") -> np.ndarray | None:
+    """A glTF sample's normal texture (8-bit RGB; DamagedHelmet's unless ``name`` says which),
+    or None without ../shared."""
+    glb = SAMPLES / name / "glTF-Binary" / f"{name}.glb"
     if not glb.exists():
         return None
     g = pygltflib.GLTF2().load(str(glb))
@@ -90,7 +97,7 @@ def _helmet_texels(tmp: Path) -> np.ndarray | None:
     img = g.images[g.textures[mat.normalTexture.index].source]
     bv = g.bufferViews[img.bufferView]
     start = bv.byteOffset or 0
-    path = tmp / ("helmet_normal.jpg" if "jpeg" in (img.mimeType or "") else "helmet_normal.png")
+    path = tmp / (f"{name}_normal.jpg" if "jpeg" in (img.mimeType or "") else f"{name}_normal.png")
     path.write_bytes(g.binary_blob()[start : start + bv.byteLength])
     return np.asarray(oiio.ImageBuf(str(path)).get_pixels(oiio.UINT8))[..., :3]
 
@@ -274,10 +281,11 @@ def bench_normals(quick: bool) -> BenchResult:
         y0 = 96 if quick else 384
         n = demo[y0 : y0 + crop, y0 : y0 + crop]
         crops = {"demo base": ((np.float32(127.5) + np.float32(127.5) * n[..., :2]), n)}
-        helmet = _helmet_texels(Path(tmp))
-        if helmet is not None:
-            q = _busiest(helmet, crop)
-            crops["DamagedHelmet"] = (q[..., :2].astype(np.float32), codec.decode("full", q, "rg"))
+        for name in REAL_MAPS:
+            texels = _helmet_texels(Path(tmp), name)
+            if texels is not None:
+                q = _busiest(texels, crop)
+                crops[name] = (q[..., :2].astype(np.float32), codec.decode("full", q, "rg"))
         _bc5_quality(res, crops, repeat)
         q8, _ = codec.encode("full", n, "png8", channels=3)
         _format_quality(res, q8, n)
@@ -298,12 +306,15 @@ def bench_normals(quick: bool) -> BenchResult:
             BEFORE: lambda: bc4.encode_bc5(targets[..., 0], targets[..., 1], hard_step=1),
         }
         times: dict[str, list[float]] = {k: [] for k in steps}
+        cpu: list[float] = []
         last: dict[str, Any] = {}
         for _ in range(repeat):
             for name, fn in steps.items():
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 last[name] = fn()
                 times[name].append(time.perf_counter() - t0)
+                if name == base_name:
+                    cpu.append(time.process_time() - c0)
         check: pd_fused.PDCheck = last["whole (fused, no read)"]  # deterministic: the timed run's
         etc_t0 = time.perf_counter()
         etcpak.compress_bc5(rgba, size, size)
@@ -313,6 +324,15 @@ def bench_normals(quick: bool) -> BenchResult:
         res.rows.append(
             BenchRow(step=name, median_s=med, mpix_per_s=mp / med, note=f"best {min(ts):.3f} s")
         )
+    cpu_med = float(np.median(cpu))
+    res.rows.append(
+        BenchRow(
+            step=ONE_CORE,
+            median_s=cpu_med,
+            mpix_per_s=mp / cpu_med,
+            note="CPU seconds of all threads: the work one core does",
+        )
+    )
     res.extra.update(
         {
             "threads": _threads(),
@@ -322,6 +342,7 @@ def bench_normals(quick: bool) -> BenchResult:
             "error": check.error.to_json(),
             "bytes": len(check.data),
             "etcpak_bc5_seconds": round(etc_s, 4),
+            "one_core_mpix_per_s": round(mp / cpu_med, 3),
             # the hard-block search made coarse-to-fine: the encoder before / now, same run
             "bc5_before_over_now": round(
                 float(np.median(times[BEFORE]) / np.median(times[base_name])), 3

@@ -6,6 +6,7 @@ enough that a kernel's temporaries stay in the CPU cache.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -16,6 +17,7 @@ from wrinklepipe.reuse import thread_budget
 CHUNK_TEXELS = 1 << 17
 
 _POOL: ThreadPoolExecutor | None = None
+_PREFIX = "wp-normals"
 
 
 def threads() -> int:
@@ -28,8 +30,14 @@ def pool() -> ThreadPoolExecutor:
     """The shared worker pool (created on first use)."""
     global _POOL
     if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="wp-normals")
+        _POOL = ThreadPoolExecutor(max_workers=threads(), thread_name_prefix=_PREFIX)
     return _POOL
+
+
+def on_pool() -> bool:
+    """Whether the calling thread is one of the pool's workers (work it would hand to the pool
+    runs in place instead: a worker waiting on its own pool can wait forever)."""
+    return threading.current_thread().name.startswith(_PREFIX)
 
 
 def row_chunks(height: int, width: int, texels: int | None = None) -> list[slice]:
