@@ -46,7 +46,7 @@ import numpy as np
 
 from wrinklepipe.normals import bc4_search
 from wrinklepipe.normals._chunks import on_pool, pool, threads
-from wrinklepipe.normals.bc4_search import (
+from wrinklepipe.normals.bc4_jit import (
     HARD_INSIDE,
     HARD_OUTSIDE,
     HARD_PENALTY,

@@ -1,267 +1,46 @@
-"""The BC4 endpoint search of :mod:`wrinklepipe.normals.bc4`, per block, compiled by numba.
+"""The BC4 endpoint search of :mod:`wrinklepipe.normals.bc4` (steps 1-4), 16 blocks side by side.
 
-The functions here are plain Python until :func:`compiled` is first called: it imports numba
-(about half a second, which every command that never encodes a BC4 block is spared), compiles
-each function marked ``@_kernel`` and puts the compiled function in its place in this module,
-so that the kernels call each other compiled. numba caches the machine code beside the module
-(``cache=True``): a later process loads it instead of compiling (about 12 s of CPU).
-
-Arithmetic is float32 throughout, operation by operation as the numpy encoder this replaced
-did it (no fused multiply-adds: numba does not contract without fastmath); constants are
-module-level float32 values, which numba types as float32 (a Python float literal would turn
-an expression into float64). Sums over a block's texels run in texel order.
+Compiled by numba on first use (:mod:`wrinklepipe.normals.bc4_jit`); :func:`compiled` returns
+the block encoder. The one-block kernels (exact scores, step 5, packing, the reference's
+window) are :mod:`wrinklepipe.normals.bc4_block`.
 """
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
-#: The kernels and their numba options, in definition order (see :func:`compiled`).
-_KERNELS: list[tuple[str, dict[str, Any]]] = []
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
-_COMPILED = False
-_LOCK = threading.Lock()
-
-
-def _kernel(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """Mark a function to be compiled by :func:`compiled` (with numba ``options``)."""
-
-    def mark(fn: Callable[..., Any]) -> Callable[..., Any]:
-        _KERNELS.append((fn.__name__, {**_JIT, **options}))
-        return fn
-
-    return mark
+from wrinklepipe.normals import bc4_block
+from wrinklepipe.normals.bc4_jit import (
+    _DET_MIN,
+    _EXTENDED,
+    _F,
+    _INF,
+    _INSIDE,
+    _LAM,
+    _RANGE_MIN,
+    _RECIP7,
+    _SEVENTH,
+    _TAIL,
+    _TAU,
+    _TOP,
+    _TRUNC,
+    HARD_OUTSIDE,
+    LANES,
+    _0,
+    _1,
+    _7,
+    _255,
+    compile_kernels,
+    kernel,
+)
 
 
 def compiled() -> Callable[..., None]:
-    """The compiled block encoder :func:`_encode` (each kernel compiled on first use)."""
-    global _COMPILED
-    with _LOCK:
-        if not _COMPILED:
-            import numba  # deferred: ~0.5 s to import, needed only when BC4 blocks are encoded
-
-            module = globals()
-            for name, options in _KERNELS:
-                module[name] = numba.njit(**options)(module[name])
-            _COMPILED = True
+    """The compiled block encoder :func:`_encode` (every kernel compiled on first use)."""
+    compile_kernels()
     return _encode
-
-
-_F = np.float32
-#: Mean truncation of the 8-value palette's interpolants (floor of j r / 7), in levels.
-_TRUNC = _F(0.43)
-#: Step 4: a block is hard when a texel misses by 2 levels or more (squared error 4); its
-#: pairs are then scored with every texel's excess over that times ``HARD_PENALTY``; levels
-#: searched outside / inside its range: every ``HARD_STEP``-th pair of that window, then the
-#: pairs one level around the best; the blocks still missing by 3 levels or more (squared error
-#: ``HARD_TAIL``: the tail the p99 is made of) get every pair of the window.
-HARD_TEXEL_ERROR = 4.0
-HARD_PENALTY = 1.0
-HARD_OUTSIDE = 16
-HARD_INSIDE = 8.0
-HARD_STEP = 4
-HARD_TAIL = 9.0
-# float32 constants: numba types a module-level numpy float32 as float32, so arithmetic with
-# them stays in float32 (a Python float literal would promote an expression to float64)
-_0, _1, _2, _5, _7 = _F(0), _F(1), _F(2), _F(5), _F(7)
-_255 = _F(255)
-_SEVENTH = _F(1.0 / 7.0)
-_DET_MIN = _F(1e-3)
-_RANGE_MIN = _F(1e-6)
-_INF = _F(np.inf)
-_TAU = _F(HARD_TEXEL_ERROR)
-_LAM = _F(HARD_PENALTY)
-_INSIDE = _F(HARD_INSIDE)
-_TAIL = _F(HARD_TAIL)
-#: Step 2: (palette position of the block's minimum, of its maximum) for the extended fits.
-_EXTENDED = np.array([(0, 6), (1, 7), (1, 6), (0, 5), (2, 7), (2, 6), (1, 5)], np.int64)
-#: A palette entry ``floor(j r / n)`` (j <= n, r <= 255 integers; n = 7 or 5) is exactly
-#: ``floor(j * fl(r * fl(1 / n)))`` (fl(1/7) and fl(1/5) round up; a test checks every j, r):
-#: a multiply per texel instead of a multiply and a divide, and the same value.
-_RECIP7 = _1 / _7
-_RECIP5 = _1 / _5
-#: Blocks searched side by side, one per SIMD lane (16 float32: one AVX-512 register).
-LANES = 16
-#: The window's widest reach inside a block's range (``ceil(HARD_INSIDE)``).
-_TOP = int(np.ceil(HARD_INSIDE))
-
-
-# --- one block, exactly scored (the final indices, the confirmations, the reference) ---------
-
-
-@_kernel()
-def _clamp(v: float, lo: float, hi: float) -> float:
-    v = v if v > lo else lo
-    return v if v < hi else hi
-
-
-@_kernel(inline="always")
-def _nearest(u: float, fn: float, rr: float, step: float, rn: float):
-    """Squared error and palette position j (0..n) of the entry ``floor(j r / n)`` nearest to
-    ``u`` (first of equals): j0 = floor(n u / r) and the next two (the usual answer), then
-    ``up - 1`` and ``up`` (``up`` the first j whose entry exceeds u:
-    ``ceil((floor(u) + 1) n / r)``). The last two alone are exact; they matter when r is
-    small, where truncation puts several positions on one value (r = 1: j = 0..n-1 all give 0).
-    ``fn = n``, ``rr = max(r, 1)``, ``step = n / rr``, ``rn = r fl(1 / n)`` (the entry
-    ``floor(j r / n)`` is ``floor(j rn)``: see ``_RECIP7``)."""
-    j0 = np.floor(u * step)
-    j0 = j0 if j0 > _0 else _0
-    j0 = j0 if j0 < fn else fn
-    up = np.ceil((np.floor(u) + _1) * fn / rr)
-    up = up if up > _0 else _0
-    up = up if up < fn else fn
-    bj = j0
-    d = u - np.floor(j0 * rn)
-    best = d * d
-    j = j0 + _1
-    j = j if j < fn else fn
-    d = u - np.floor(j * rn)
-    e = d * d
-    bj = j if e < best else bj
-    best = e if e < best else best
-    j = j0 + _2
-    j = j if j < fn else fn
-    d = u - np.floor(j * rn)
-    e = d * d
-    bj = j if e < best else bj
-    best = e if e < best else best
-    j = up - _1
-    j = j if j > _0 else _0
-    d = u - np.floor(j * rn)
-    e = d * d
-    bj = j if e < best else bj
-    best = e if e < best else best
-    d = u - np.floor(up * rn)
-    e = d * d
-    bj = up if e < best else bj
-    best = e if e < best else best
-    return best, bj
-
-
-@_kernel()
-def _exact8(x: np.ndarray, lo: float, r: float, j: np.ndarray, e: np.ndarray) -> float:
-    """Exact squared error of the 8-value palette (lo, r) for the block ``x`` [16]; ``j``
-    [16] receives each texel's nearest palette position (0 = lo .. 7 = hi), ``e`` [16] its
-    squared error."""
-    rr = r if r > _1 else _1
-    step = _7 / rr
-    for i in range(16):
-        e[i], j[i] = _nearest(x[i] - lo, _7, rr, step, r * _RECIP7)
-    s = _0
-    for i in range(16):
-        s += e[i]
-    return s
-
-
-@_kernel()
-def _window_exact(x: np.ndarray, st: np.ndarray, outside: int, inside: float) -> None:
-    """The exhaustive reference's window for one block: every pair with ``lo`` in
-    ``[min - outside, min + inside]`` and ``hi`` in ``[max - inside, max + outside]``, exactly
-    scored; keeps the first best in ``st`` = [score, lo, hi] (``lo`` offsets outer)."""
-    e = np.empty(16, np.float32)
-    j = np.empty(16, np.float32)
-    st[0] = _exact8(x, st[1], st[2] - st[1], j, e)
-    xmin = x[0]
-    xmax = x[0]
-    for i in range(1, 16):
-        xmin = min(xmin, x[i])
-        xmax = max(xmax, x[i])
-    fmn, cmx = np.floor(xmin), np.ceil(xmax)
-    top = int(np.ceil(inside))
-    lo_max = xmin + inside
-    lim = xmax - inside
-    for dl in range(-outside, top + 1):
-        lo = _clamp(fmn + _F(dl), _0, _255)
-        if not lo <= lo_max:
-            continue
-        for dh in range(-top, outside + 1):
-            hi = _clamp(cmx + _F(dh), _0, _255)
-            if hi >= lo and hi >= lim:
-                s = _exact8(x, lo, hi - lo, j, e)
-                if s < st[0]:
-                    st[0] = s
-                    st[1] = lo
-                    st[2] = hi
-
-
-@_kernel()
-def _exact6(x: np.ndarray, lo: float, r: float, codes: np.ndarray) -> float:
-    """Exact squared error of the 6-value palette (lo, 4 interpolants, hi, 0, 255); ``codes``
-    [16] receives each texel's BC4 code."""
-    rr = r if r > _1 else _1
-    step = _5 / rr
-    s = _0
-    for i in range(16):
-        e, j = _nearest(x[i] - lo, _5, rr, step, r * _RECIP5)
-        c = _0 if j == _0 else (_1 if j == _5 else j + _1)
-        e0 = x[i] * x[i]
-        if e0 < e:
-            e, c = e0, _F(6)
-        d = x[i] - _255
-        e1 = d * d
-        if e1 < e:
-            e, c = e1, _7
-        codes[i] = c
-        s += e
-    return s
-
-
-@_kernel()
-def _pack(e0: float, e1: float, codes: np.ndarray, out: np.ndarray) -> None:
-    out[0] = np.uint8(e0)
-    out[1] = np.uint8(e1)
-    bits = np.uint64(0)
-    for k in range(16):
-        bits |= np.uint64(codes[k]) << np.uint64(3 * k)
-    for b in range(6):
-        out[2 + b] = np.uint8((bits >> np.uint64(8 * b)) & np.uint64(0xFF))
-
-
-@_kernel()
-def _finish(x: np.ndarray, lo: float, hi: float, sse8: float, j: np.ndarray, out: np.ndarray):
-    """Step 5 and packing of one block: its pair (lo, hi) with exact nearest positions ``j``
-    [16] (as codes: overwritten) and squared error ``sse8``; the six-value mode where it wins
-    (blocks that reach below 8 or above 247)."""
-    r = hi - lo
-    for i in range(16):
-        if r == _0:  # lo == hi: six-value mode, every texel e0
-            j[i] = _0
-        elif j[i] == _7:
-            j[i] = _0
-        elif j[i] == _0:
-            j[i] = _1
-        else:
-            j[i] = _F(8) - j[i]
-    e0, e1 = hi, lo
-    xmin = x[0]
-    xmax = x[0]
-    for i in range(1, 16):
-        xmin = min(xmin, x[i])
-        xmax = max(xmax, x[i])
-    if xmin < _F(8) or xmax > _F(247):
-        lo6 = _255
-        hi6 = _0
-        any_inner = False
-        for i in range(16):
-            if x[i] > _F(4) and x[i] < _F(251):
-                lo6 = min(lo6, x[i])
-                hi6 = max(hi6, x[i])
-                any_inner = True
-        if any_inner:
-            lo6, hi6 = np.floor(lo6), np.ceil(hi6)
-        else:
-            lo6, hi6 = _0, _0
-        hi6 = max(hi6, lo6)
-        c6 = np.empty(16, np.float32)
-        if _exact6(x, lo6, hi6 - lo6, c6) < sse8:
-            e0, e1 = lo6, hi6
-            for i in range(16):
-                j[i] = c6[i]
-    _pack(e0, e1, j, out)
 
 
 # --- LANES blocks side by side: the search (steps 1-4) ---------------------------------------
@@ -272,7 +51,7 @@ def _finish(x: np.ndarray, lo: float, hi: float, sse8: float, j: np.ndarray, out
 # block's texels in order, as the numpy encoder did per block.
 
 
-@_kernel(inline="always")
+@kernel(inline="always")
 def _texel(xi: float, lo: float, r7: float, q: float) -> float:
     """Squared error of one texel ``xi`` on the 8-value palette (lo, r) under the rounded
     index guess (``q = 7 / max(r, 1)``, offset by the interpolants' mean truncation);
@@ -285,7 +64,7 @@ def _texel(xi: float, lo: float, r7: float, q: float) -> float:
     return d * d
 
 
-@_kernel(inline="always")
+@kernel(inline="always")
 def _add4(X: np.ndarray, i: int, b: int, lo: float, r7: float, q: float, acc: float) -> float:
     """``acc`` plus the squared errors of texels i .. i+3 of lane ``b``, added in order."""
     acc += _texel(X[i, b], lo, r7, q)
@@ -294,13 +73,13 @@ def _add4(X: np.ndarray, i: int, b: int, lo: float, r7: float, q: float, acc: fl
     return acc + _texel(X[i + 3, b], lo, r7, q)
 
 
-@_kernel(inline="always")
+@kernel(inline="always")
 def _excess(e: float) -> float:
     t = e - _TAU
     return t if t > _0 else _0
 
 
-@_kernel(inline="always")
+@kernel(inline="always")
 def _add4_tail(
     X: np.ndarray, i: int, b: int, lo: float, r7: float, q: float, acc: float, ex: float
 ):
@@ -318,7 +97,7 @@ def _add4_tail(
     return acc + e, ex + _excess(e)
 
 
-@_kernel(inline="always")
+@kernel(inline="always")
 def _sse(X: np.ndarray, b: int, lo: float, r: float) -> float:
     """Approximate squared error of (lo, r) for lane ``b``: one rounded index guess per texel."""
     q = _7 / (r if r > _1 else _1)
@@ -329,7 +108,7 @@ def _sse(X: np.ndarray, b: int, lo: float, r: float) -> float:
     return _add4(X, 12, b, lo, r7, q, acc)
 
 
-@_kernel(inline="always")
+@kernel(inline="always")
 def _tail(X: np.ndarray, b: int, lo: float, r: float) -> float:
     """:func:`_sse` plus ``HARD_PENALTY`` times each texel's excess over
     ``HARD_TEXEL_ERROR`` (the tail score of step 4)."""
@@ -342,7 +121,7 @@ def _tail(X: np.ndarray, b: int, lo: float, r: float) -> float:
     return acc + _LAM * ex
 
 
-@_kernel(inline="always")
+@kernel(inline="always")
 def _consider(
     X: np.ndarray,
     B: np.ndarray,
@@ -361,17 +140,17 @@ def _consider(
     indices, not views: a view costs reference counting on every call."""
     if tail:
         for b in range(LANES):
-            lo = _clamp(B[il, b] + dl, _0, _255)
-            hi = _clamp(B[ih, b] + dh, _0, _255)
+            lo = bc4_block.clamp(B[il, b] + dl, _0, _255)
+            hi = bc4_block.clamp(B[ih, b] + dh, _0, _255)
             C[0, b] = _tail(X, b, lo, hi - lo)
     else:
         for b in range(LANES):
-            lo = _clamp(B[il, b] + dl, _0, _255)
-            hi = _clamp(B[ih, b] + dh, _0, _255)
+            lo = bc4_block.clamp(B[il, b] + dl, _0, _255)
+            hi = bc4_block.clamp(B[ih, b] + dh, _0, _255)
             C[0, b] = _sse(X, b, lo, hi - lo)
     for b in range(LANES):
-        lo = _clamp(B[il, b] + dl, _0, _255)
-        hi = _clamp(B[ih, b] + dh, _0, _255)
+        lo = bc4_block.clamp(B[il, b] + dl, _0, _255)
+        hi = bc4_block.clamp(B[ih, b] + dh, _0, _255)
         s = C[0, b]
         keep = (hi >= lo) & (s < S[0, b])
         S[0, b] = s if keep else S[0, b]
@@ -379,7 +158,7 @@ def _consider(
         S[2, b] = hi if keep else S[2, b]
 
 
-@_kernel()
+@kernel()
 def _range(X: np.ndarray, R: np.ndarray) -> None:
     """Each lane's texel minimum and maximum into ``R[0]``, ``R[1]``."""
     for b in range(LANES):
@@ -392,7 +171,7 @@ def _range(X: np.ndarray, R: np.ndarray) -> None:
             R[1, b] = v if v > R[1, b] else R[1, b]
 
 
-@_kernel()
+@kernel()
 def _exact_lanes(X: np.ndarray, S: np.ndarray, J: np.ndarray, E: np.ndarray, W: np.ndarray):
     """Exact nearest positions ``J`` [16, LANES] and squared errors ``E`` of each lane's pair
     ``S[1:3]``; ``W[0]`` their sum (texel order), ``W[1]`` the largest, ``W[2]`` the sum plus
@@ -402,7 +181,7 @@ def _exact_lanes(X: np.ndarray, S: np.ndarray, J: np.ndarray, E: np.ndarray, W: 
             lo = S[1, b]
             r = S[2, b] - lo
             rr = r if r > _1 else _1
-            E[i, b], J[i, b] = _nearest(X[i, b] - lo, _7, rr, _7 / rr, r * _RECIP7)
+            E[i, b], J[i, b] = bc4_block.nearest(X[i, b] - lo, _7, rr, _7 / rr, r * _RECIP7)
     for b in range(LANES):
         W[0, b] = _0
         W[1, b] = _0
@@ -419,7 +198,7 @@ def _exact_lanes(X: np.ndarray, S: np.ndarray, J: np.ndarray, E: np.ndarray, W: 
         W[2, b] = W[0, b] + _LAM * W[3, b]
 
 
-@_kernel()
+@kernel()
 def _fit(X: np.ndarray, J: np.ndarray, S: np.ndarray, C: np.ndarray, A: np.ndarray) -> None:
     """Least-squares endpoints for palette positions ``J`` [16, LANES], rounded four ways and
     considered in turn; a degenerate fit (every texel on one position) falls back to the best
@@ -455,7 +234,7 @@ def _fit(X: np.ndarray, J: np.ndarray, S: np.ndarray, C: np.ndarray, A: np.ndarr
         _consider(X, A, k // 2, 2 + k % 2, _0, _0, S, C, False)
 
 
-@_kernel()
+@kernel()
 def _around(X: np.ndarray, S: np.ndarray, C: np.ndarray, A: np.ndarray, tail: bool) -> None:
     """The eight pairs one level around each lane's best (either endpoint moved by -1, 0, 1)."""
     for b in range(LANES):
@@ -467,7 +246,7 @@ def _around(X: np.ndarray, S: np.ndarray, C: np.ndarray, A: np.ndarray, tail: bo
                 _consider(X, A, 0, 1, _F(dl), _F(dh), S, C, tail)
 
 
-@_kernel()
+@kernel()
 def _search(X, S, R, J, E, W, C, A) -> None:  # noqa: ANN001 (numba kernels: arrays)
     """Steps 1-3 for a group: each lane's 8-value endpoints into ``S``. ``R`` [8, LANES],
     ``J``, ``E`` [16, LANES], ``W`` [4, LANES], ``C`` [3, LANES], ``A`` [5, LANES] are
@@ -501,7 +280,7 @@ def _search(X, S, R, J, E, W, C, A) -> None:  # noqa: ANN001 (numba kernels: arr
         _around(X, S, C, A, False)
 
 
-@_kernel()
+@kernel()
 def _window(X, S, R, step: int, C) -> None:  # noqa: ANN001 (numba kernels: arrays)
     """Step 4's window for a group, scored by the tail score: every pair with ``lo`` in
     ``[min - HARD_OUTSIDE, min + inside]`` and ``hi`` in ``[max - inside, max + HARD_OUTSIDE]``
@@ -525,13 +304,13 @@ def _window(X, S, R, step: int, C) -> None:  # noqa: ANN001 (numba kernels: arra
             _consider_window(X, R, _F(dl), _F(dh), S, C)
 
 
-@_kernel(inline="always")
+@kernel(inline="always")
 def _valid(R: np.ndarray, b: int, dl: float, dh: float) -> bool:
     """Whether the window's pair ``(floor(min) + dl, ceil(max) + dh)`` is in lane ``b``'s own
     window: ``dl`` up to its reach ``R[6]``, ``dh`` from minus it, ``lo <= min + inside``,
     ``hi >= max - inside``, ``hi >= lo`` (clamped to 0..255)."""
-    lo = _clamp(R[2, b] + dl, _0, _255)
-    hi = _clamp(R[3, b] + dh, _0, _255)
+    lo = bc4_block.clamp(R[2, b] + dl, _0, _255)
+    hi = bc4_block.clamp(R[3, b] + dh, _0, _255)
     inside = R[5, b]
     return (
         (dl <= R[6, b])
@@ -542,17 +321,17 @@ def _valid(R: np.ndarray, b: int, dl: float, dh: float) -> bool:
     )
 
 
-@_kernel(inline="always")
+@kernel(inline="always")
 def _consider_window(X, R, dl: float, dh: float, S, C) -> None:  # noqa: ANN001 (arrays)
     """The window's pair ``(floor(min) + dl, ceil(max) + dh)`` per lane (clamped), tail-scored
     and kept where valid for the lane (:func:`_valid`) and strictly below its best."""
     for b in range(LANES):
-        lo = _clamp(R[2, b] + dl, _0, _255)
-        hi = _clamp(R[3, b] + dh, _0, _255)
+        lo = bc4_block.clamp(R[2, b] + dl, _0, _255)
+        hi = bc4_block.clamp(R[3, b] + dh, _0, _255)
         C[0, b] = _tail(X, b, lo, hi - lo)
     for b in range(LANES):
-        lo = _clamp(R[2, b] + dl, _0, _255)
-        hi = _clamp(R[3, b] + dh, _0, _255)
+        lo = bc4_block.clamp(R[2, b] + dl, _0, _255)
+        hi = bc4_block.clamp(R[3, b] + dh, _0, _255)
         s = C[0, b]
         keep = _valid(R, b, dl, dh) & (s < S[0, b])
         S[0, b] = s if keep else S[0, b]
@@ -560,7 +339,7 @@ def _consider_window(X, R, dl: float, dh: float, S, C) -> None:  # noqa: ANN001 
         S[2, b] = hi if keep else S[2, b]
 
 
-@_kernel()
+@kernel()
 def _gather(x: np.ndarray, ids: np.ndarray, g: int, X: np.ndarray) -> int:
     """The blocks ``ids[g : g + LANES]`` into the lanes of ``X`` (the last repeated in lanes
     past the end); returns how many are real."""
@@ -572,7 +351,7 @@ def _gather(x: np.ndarray, ids: np.ndarray, g: int, X: np.ndarray) -> int:
     return n
 
 
-@_kernel()
+@kernel()
 def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
     """BC4 blocks ``out`` [N, 8] of target blocks ``x`` [N, 16]; ``reference`` > 0: the
     exhaustive search with that many levels outside each block's range after the search."""
@@ -653,8 +432,8 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
             xb = x[k]
             st[1] = lo[k]
             st[2] = hi[k]
-            sse = _exact8(xb, lo[k], hi[k] - lo[k], j, e)
-            _window_exact(xb, st, reference, np.sqrt(sse))
+            sse = bc4_block.exact8(xb, lo[k], hi[k] - lo[k], j, e)
+            bc4_block.window_exact(xb, st, reference, np.sqrt(sse))
             lo[k] = st[1]
             hi[k] = st[2]
     # step 5 and packing: exact indices of each block's pair
@@ -669,4 +448,4 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
         for b in range(m):
             for i in range(16):
                 codes[i] = J[i, b]
-            _finish(x[g + b], S[1, b], S[2, b], W[0, b], codes, out[g + b])
+            bc4_block.finish(x[g + b], S[1, b], S[2, b], W[0, b], codes, out[g + b])
