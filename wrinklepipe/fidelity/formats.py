@@ -26,7 +26,7 @@ from wrinklepipe.fidelity import metric as fm
 from wrinklepipe.fidelity import reference as fre
 from wrinklepipe.fidelity import sampling as fsa
 from wrinklepipe.fidelity import ship
-from wrinklepipe.fidelity.search import Candidate, Judge, Tried, pick_format
+from wrinklepipe.fidelity.judge import Candidate, Judge, Tried, pick_format
 from wrinklepipe.metrics import Budget
 from wrinklepipe.normals import compress as nc
 
