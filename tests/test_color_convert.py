@@ -18,6 +18,7 @@ from wrinklepipe.io import khronos
 from wrinklepipe.io.images import write_image
 from wrinklepipe.io.png import png_bytes, png_pixels
 from wrinklepipe.jobs.convert import ConvertOptions, convert
+from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.pipeline.package import asset_from_package
 from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.usd.package_read import read_usd
@@ -251,3 +252,29 @@ def test_a_colour_only_state_ships_a_normal_map_that_adds_nothing(own_base):
     assert np.all(stored[..., :2] == 128)
     u = read_usd(out / "avatar.usda")
     assert [s.normal for s in u.meta.states] == [False, True]
+
+
+def test_colour_copies_are_srgb_blocks_chosen_by_ciede2000(converted):
+    out, result = converted
+    choice = result.report["compression"]["color"]
+    assert choice["chosen"] in ("bc1", "bc7") and choice["tried"][-1]["within"]
+    fid = choice["fidelity"]
+    assert max(p["p99_delta_e"] for p in fid["poses"]) <= 2.3
+    ext = _gltf(out)["materials"][0]["extensions"][EXT]
+    doc = _gltf(out)
+    copies = {
+        doc["images"][doc["textures"][c["texture"]["index"]]["source"]].get("name"): c
+        for c in ext["compressed"]
+    }
+    for name in ("color_stretch", "color_compress"):
+        c = copies[name]
+        assert c["colorSpace"] == "srgb" and c["format"] == choice["chosen"]
+        assert c["uris"] == [f"compressed/{name}.ktx2", f"compressed/{name}.dds"]
+        assert read_dds(out / c["uris"][1]).srgb
+    # the base colour (the material's own texture) has its copy too
+    base_index = doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+    assert any(c["texture"]["index"] == base_index for c in ext["compressed"])
+    # USD records the same copies with their colour spaces
+    u = read_usd(out / "avatar.usda")
+    spaces = {c.texture: c.color_space for c in u.meta.compressed}
+    assert spaces["color_stretch"] == "srgb" and spaces["wrinkle_stretch"] == "linear"

@@ -6,6 +6,7 @@ import numpy as np
 
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.demo.character import DemoCharacter, generate
+from wrinklepipe.demo.colors import demo_colors
 from wrinklepipe.options import BudgetOptions
 
 __all__ = ["DemoCharacter", "generate", "demo_asset", "demo_mesh"]
@@ -30,11 +31,14 @@ def demo_asset(
     encoding: str = "pd",
     policy: str = "clamp01",
     mesh_resolution: tuple[int, int] = (96, 64),
+    color: bool = False,
 ) -> WrinkleAsset:
     """The demo as an in-memory asset at full resolution (maps and masks ``size`` x ``size``).
 
     ``states`` hold the wrinkled face (base + wrinkle height) at full activation, so every encoding
-    can be derived from them; the paper's reduced sizes are in ``resolution``.
+    can be derived from them; the paper's reduced sizes are in ``resolution``. ``color``: with
+    colour states (:func:`wrinklepipe.demo.colors.demo_colors`: pale where the skin stretches,
+    flushed where it compresses).
     """
 
     c = generate(size, mesh_resolution=mesh_resolution)
@@ -55,4 +59,5 @@ def demo_asset(
         budget=BudgetOptions(max_mean_deg=0.5, max_p99_deg=2.0),
         resolution={"base": size, "wrinkle": max(size // 4, 4), "mask": max(size // 16, 4)},
         provenance={"generator": "wrinklepipe.demo", "seed": c.seed, "size": size},
+        color=demo_colors(c.base_height, c.state_names) if color else None,
     )

@@ -42,7 +42,11 @@ from wrinklepipe.outputs.report import (
 )
 from wrinklepipe.package import WeightCurves
 from wrinklepipe.pipeline.auto import formats_by_fidelity
-from wrinklepipe.pipeline.color import choose_color_size
+from wrinklepipe.pipeline.color import (
+    choose_color_format,
+    choose_color_size,
+    color_reference,
+)
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
 from wrinklepipe.pipeline.package import PackOptions, package_from_asset
@@ -141,10 +145,11 @@ def convert(
                     poses=poses,
                 )
             notes += stage_rep.notes + drivers_notes
-            color_choice = None
+            color_choice = color_format = color_ref = None
             if asset.color is not None:
                 with console.status("choosing the colour states' size by CIEDE2000"):
-                    asset, color_choice = choose_color_size(source, asset, poses)
+                    color_ref = color_reference(source, poses)
+                    asset, color_choice = choose_color_size(source, asset, poses, color_ref)
                 notes.append(color_choice.describe())
             layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
             pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
@@ -157,9 +162,17 @@ def convert(
                 notes += n
             with console.status("encoding, packing, compressing"):
                 formats = {**manifest.formats, **stage_rep.formats}
+                if opt.compressed and color_ref is not None:
+                    color_format = choose_color_format(
+                        source, asset, poses, pkg, manifest.formats.get("color", "auto"), color_ref
+                    )
+                    notes += color_format.notes
                 files, n, choices = build_outputs(
-                    pkg, opt.glb, opt.compressed, asset.budget, formats, document, opt.png_level
-                )
+                    pkg, opt.glb, opt.compressed, asset.budget, formats, document, opt.png_level,
+                    color_format.copies if color_format is not None else None,
+                )  # fmt: skip
+                if color_format is not None:
+                    choices["color"] = color_format.to_json()
             notes += n
             read = input_rows(manifest.root, manifest.input_files)
             notes += write_folder(

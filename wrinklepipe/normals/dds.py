@@ -39,6 +39,8 @@ D3D10_RESOURCE_DIMENSION_TEXTURE2D = 3
 
 BLOCK_BYTES = {"bc1": 8, "bc3": 16, "bc5": 16, "bc7": 16}
 DXGI = {"bc1": 71, "bc3": 77, "bc5": 83, "bc7": 98}
+#: The sRGB formats of colour maps (always with the DX10 header: DXT1 has no sRGB FourCC).
+DXGI_SRGB = {"bc1": 72, "bc7": 99}
 _DXGI_READ = {71: "bc1", 72: "bc1", 77: "bc3", 78: "bc3", 83: "bc5", 98: "bc7", 99: "bc7"}
 _DXGI_UNSUPPORTED = {80: "BC4_UNORM", 81: "BC4_SNORM", 84: "BC5_SNORM", 95: "BC6H_UF16"}
 _FOURCC_WRITE = {"bc1": b"DXT1", "bc3": b"DXT5", "bc5": b"ATI2"}
@@ -55,6 +57,7 @@ class DDSImage:
     levels: list[bytes] = field(default_factory=list)
     dx10: bool = False
     fourcc: str = ""
+    srgb: bool = False  # BC1_UNORM_SRGB / BC7_UNORM_SRGB: a colour map's texels
 
 
 def level_size(fmt: str, width: int, height: int) -> int:
@@ -89,12 +92,19 @@ def alpha_mode(fmt: str) -> int:
 
 
 def dds_bytes(
-    fmt: str, width: int, height: int, levels: list[bytes], dx10: bool | None = None
+    fmt: str,
+    width: int,
+    height: int,
+    levels: list[bytes],
+    dx10: bool | None = None,
+    srgb: bool = False,
 ) -> bytes:
     """A complete DDS file holding ``levels`` (level 0 first) of block data.
 
     ``dx10=None`` picks the engine-friendly default (DX10 header for bc5/bc7, FourCC for
-    bc1/bc3). Level sizes are checked against the format.
+    bc1/bc3). ``srgb``: a colour map's sRGB texels, ``DXGI_FORMAT_BC1_UNORM_SRGB`` (72) or
+    ``BC7_UNORM_SRGB`` (99), always in the DX10 header. Level sizes are checked against the
+    format.
     """
     mode = alpha_mode(fmt)
     fmt = container_format(fmt)
@@ -104,7 +114,9 @@ def dds_bytes(
         raise ValueError(f"invalid size {width} x {height}")
     if not levels:
         raise ValueError("no levels to write")
-    use_dx10 = fmt in ("bc5", "bc7") if dx10 is None else bool(dx10)
+    if srgb and fmt not in DXGI_SRGB:
+        raise ValueError(f"{fmt} has no sRGB format; colour maps are bc1 or bc7")
+    use_dx10 = srgb or (fmt in ("bc5", "bc7") if dx10 is None else bool(dx10))
     if fmt == "bc7" and not use_dx10:
         raise ValueError("BC7 has no legacy FourCC; it needs the DX10 header")
     for i, ((w, h), data) in enumerate(zip(mip_dims(width, height, len(levels)), levels)):
@@ -137,7 +149,8 @@ def dds_bytes(
     )
     parts = [MAGIC, header]
     if use_dx10:
-        parts.append(struct.pack("<5I", DXGI[fmt], D3D10_RESOURCE_DIMENSION_TEXTURE2D, 0, 1, mode))
+        dxgi = DXGI_SRGB[fmt] if srgb else DXGI[fmt]
+        parts.append(struct.pack("<5I", dxgi, D3D10_RESOURCE_DIMENSION_TEXTURE2D, 0, 1, mode))
     parts.extend(levels)
     return b"".join(parts)
 
@@ -180,7 +193,8 @@ def read_dds(
             raise input_error(where, f"truncated: mip level {i} ({w} x {h}) is incomplete")
         levels.append(raw[pos : pos + need])
         pos += need
-    return DDSImage(fmt, width, height, levels, dx10, fourcc)
+    srgb = dx10 and struct.unpack_from("<I", raw, 4 + _HEADER_SIZE)[0] in DXGI_SRGB.values()
+    return DDSImage(fmt, width, height, levels, dx10, fourcc, bool(srgb))
 
 
 def _check_header(

@@ -31,12 +31,15 @@ from wrinklepipe.normals.dds import BLOCK_BYTES, container_format, level_size, m
 
 IDENTIFIER = bytes([0xAB, 0x4B, 0x54, 0x58, 0x20, 0x32, 0x30, 0xBB, 0x0D, 0x0A, 0x1A, 0x0A])
 VK_FORMAT = {"bc1": 131, "bc3": 137, "bc5": 141, "bc7": 145}
+#: The sRGB formats of colour maps: BC1_RGB_SRGB_BLOCK, BC7_SRGB_BLOCK.
+VK_FORMAT_SRGB = {"bc1": 132, "bc7": 146}
 _VK_READ = {v: k for k, v in VK_FORMAT.items()} | {132: "bc1", 138: "bc3", 146: "bc7"}
 
 # Khronos Data Format: colour models and channel ids of the BC formats
 _KHR_DF_MODEL = {"bc1": 128, "bc3": 130, "bc5": 132, "bc7": 134}
 _KHR_DF_PRIMARIES_BT709 = 1
 _KHR_DF_TRANSFER_LINEAR = 1
+_KHR_DF_TRANSFER_SRGB = 2
 # (bitOffset, bitLength, channelId) per sample
 _SAMPLES = {
     "bc1": [(0, 64, 0)],  # BC1A_COLOR
@@ -59,9 +62,15 @@ class KTX2Image:
     key_values: dict[str, bytes] = field(default_factory=dict)
     dfd: bytes = b""
 
+    @property
+    def srgb(self) -> bool:
+        """An sRGB format (a colour map's texels)."""
+        return self.vk_format in VK_FORMAT_SRGB.values()
 
-def data_format_descriptor(fmt: str) -> bytes:
-    """The DFD block (including its leading ``dfdTotalSize``) for a BC format."""
+
+def data_format_descriptor(fmt: str, srgb: bool = False) -> bytes:
+    """The DFD block (including its leading ``dfdTotalSize``) for a BC format (``srgb``: the
+    sRGB transfer function of a colour map, else linear)."""
     fmt = container_format(fmt)
     samples = _SAMPLES[fmt]
     block_size = 24 + 16 * len(samples)
@@ -70,7 +79,7 @@ def data_format_descriptor(fmt: str) -> bytes:
         2 | (block_size << 16),  # versionNumber 2 | descriptorBlockSize
         _KHR_DF_MODEL[fmt]
         | (_KHR_DF_PRIMARIES_BT709 << 8)
-        | (_KHR_DF_TRANSFER_LINEAR << 16)
+        | ((_KHR_DF_TRANSFER_SRGB if srgb else _KHR_DF_TRANSFER_LINEAR) << 16)
         | (0 << 24),  # flags: alpha straight
         3 | (3 << 8),  # texelBlockDimension 4 x 4 x 1 x 1 (stored minus one)
         BLOCK_BYTES[fmt],  # bytesPlane0
@@ -96,23 +105,32 @@ def _align(n: int, a: int) -> int:
 
 
 def ktx2_bytes(
-    fmt: str, width: int, height: int, levels: list[bytes], layout: str | None = None
+    fmt: str,
+    width: int,
+    height: int,
+    levels: list[bytes],
+    layout: str | None = None,
+    srgb: bool = False,
 ) -> bytes:
     """A complete KTX2 file with ``levels`` (level 0 first) of BC block data.
 
     ``layout`` (a codec layout: ``rgb``, ``rg``, ``ag``) writes the ``KTXswizzle`` key that
-    says where the logical R, G, B, A come from (``rgb1``, ``rg01``, ``ag01``)."""
+    says where the logical R, G, B, A come from (``rgb1``, ``rg01``, ``ag01``). ``srgb``: a
+    colour map, ``VK_FORMAT_BC1_RGB_SRGB_BLOCK`` (132) / ``BC7_SRGB_BLOCK`` (146) and the sRGB
+    transfer in the data format descriptor."""
     fmt = container_format(fmt)
     if fmt not in VK_FORMAT:
         raise ValueError(f"KTX2 writer supports bc1, bc3, bc5, bc7; got {fmt!r}")
     if not levels:
         raise ValueError("no levels to write")
+    if srgb and fmt not in VK_FORMAT_SRGB:
+        raise ValueError(f"{fmt} has no sRGB format; colour maps are bc1 or bc7")
     for i, ((w, h), data) in enumerate(zip(mip_dims(width, height, len(levels)), levels)):
         need = level_size(fmt, w, h)
         if len(data) != need:
             raise ValueError(f"level {i} ({w} x {h}) must hold {need} bytes, got {len(data)}")
     n = len(levels)
-    dfd = data_format_descriptor(fmt)
+    dfd = data_format_descriptor(fmt, srgb)
     pairs = {"KTXorientation": "rd", "KTXwriter": WRITER}
     if layout is not None:
         pairs["KTXswizzle"] = codec.layout(layout).swizzle
@@ -128,7 +146,8 @@ def ktx2_bytes(
         pos = _align(pos, align)
         offsets[i] = pos
         pos += len(levels[i])
-    header = IDENTIFIER + struct.pack("<9I", VK_FORMAT[fmt], 1, width, height, 0, 0, 1, n, 0)
+    vk = VK_FORMAT_SRGB[fmt] if srgb else VK_FORMAT[fmt]
+    header = IDENTIFIER + struct.pack("<9I", vk, 1, width, height, 0, 0, 1, n, 0)
     index = struct.pack("<4I2Q", dfd_off, len(dfd), kvd_off, len(kvd), 0, 0)
     level_index = b"".join(
         struct.pack("<3Q", offsets[i], len(levels[i]), len(levels[i])) for i in range(n)

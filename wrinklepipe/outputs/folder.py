@@ -20,6 +20,7 @@ from typing import Any
 
 from wrinklepipe import reuse
 from wrinklepipe.atomic import dumps_json, write_bytes
+from wrinklepipe.color.copies import ColorCopy
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.package_write import GltfOptions, glb_bytes, gltf_document
 from wrinklepipe.gltf.wrinkle_maps import WrinkleTarget, add_wrinkle_maps
@@ -73,13 +74,16 @@ def build_outputs(
     formats: dict[str, str] | None = None,
     source: tuple[Document, WrinkleTarget] | None = None,
     png_level: int = DEFAULT_PNG_LEVEL,
+    color_copies: list[ColorCopy] | None = None,
 ) -> tuple[dict[str, bytes], list[str], dict[str, Any]]:
     """Every output file as ``{relative path: bytes}`` (except USD, written by usd-core), notes,
     and the block-format choices. ``glb``: also a self-contained ``NAME.glb``; ``compressed``:
     DDS + KTX2 copies (:func:`wrinklepipe.outputs.compression.compressed_copies`), recorded in
-    ``pkg.meta.compressed`` (``pkg.meta`` is replaced) before the glTF is written; ``source``:
-    the glTF source document and where its wrinkle data goes (see the module doc); every PNG
-    at zlib ``png_level``."""
+    ``pkg.meta.compressed`` (``pkg.meta`` is replaced) before the glTF is written, with the
+    colour maps' sRGB copies ``color_copies`` (made in the format chosen by CIEDE2000,
+    :func:`wrinklepipe.pipeline.color.choose_color_format`); ``source``: the glTF source
+    document and where its wrinkle data goes (see the module doc); every PNG at zlib
+    ``png_level``."""
     name = pkg.name
     files: dict[str, bytes] = {}
     notes: list[str] = []
@@ -93,8 +97,15 @@ def build_outputs(
         made, n, choices = compressed_copies(pkg, budget, formats)
         files.update(copy_files(made))
         notes += n
+        records = copy_records(made)
+        for c in color_copies or []:
+            files.update(c.files())
+        if color_copies:
+            records = tuple(
+                sorted([*records, *(c.record() for c in color_copies)], key=lambda r: r.texture)
+            )
         # the USD layers written next read the records from the same package
-        pkg.meta = replace(pkg.meta, compressed=copy_records(made))
+        pkg.meta = replace(pkg.meta, compressed=records)
     pngs_ready()
     if source is not None:
         got, n = document_outputs(source[0], source[1], pkg, glb, png_level)

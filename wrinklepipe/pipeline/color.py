@@ -1,4 +1,5 @@
-"""The colour states' automatic choices, by CIEDE2000 inside each pose's active region.
+"""The colour states' automatic choices, by CIEDE2000 inside each pose's active region: their
+size, and the block format of the colour copies.
 
 ``choose_color_size`` is convert's colour stage, after the normals' choices (it measures with
 the masks as they will ship): the colour states' size (``resolution.color``: a number, the
@@ -6,6 +7,10 @@ larger side; ``"auto"``, the smallest halving of the base colour's size whose co
 (:mod:`wrinklepipe.fidelity.color`) meets the colour budget; absent, the size they were painted
 at). Smaller states are resampled in linear light (:func:`wrinklepipe.color.resample.
 resize_texels`). The base colour always ships as it is.
+
+``choose_color_format`` picks the colour copies' format after packaging (``formats.color``:
+``auto``, the smaller of BC1 and BC7 within the colour budget; ``bc1``, ``bc7``; ``png8``: no
+copies), measured on the blocks as decoded, the base colour over the face included.
 
 Candidates are screened on every k-th active texel (about :data:`SCREEN_TEXELS` of them); the
 size kept is then measured on every active texel, and that measure is what the report shows.
@@ -20,12 +25,15 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.asset import ColorMaps, WrinkleAsset
+from wrinklepipe.color.copies import FORMATS as COLOR_FORMATS
+from wrinklepipe.color.copies import ColorCopy, color_copy
 from wrinklepipe.color.resample import resize_texels
 from wrinklepipe.fidelity import color as fc
 from wrinklepipe.fidelity import footprint
 from wrinklepipe.fidelity.reference import Pose
 from wrinklepipe.fidelity.ship import mask_values
 from wrinklepipe.metrics import Budget
+from wrinklepipe.package import WrinklePackage
 
 #: The smallest side the automatic size goes down to.
 MIN_SIZE = 16
@@ -165,3 +173,94 @@ def choose_color_size(
     fid = measure(chosen, ref, True)
     choice = ColorChoice(size, (H, W), how, budget, fid, tried)
     return replace(shipped, color=chosen), choice
+
+
+# ------------------------------------------------------------------------------------------------
+# the block format of the colour copies
+
+
+@dataclass
+class ColorFormatChoice:
+    """The block format of the colour maps' copies (None: PNG only), the copies made in it,
+    their fidelity and every format tried."""
+
+    format: str | None
+    requested: str
+    budget: Budget
+    copies: list[ColorCopy] = field(default_factory=list)
+    fidelity: fc.ColorFidelity | None = None
+    tried: list[dict[str, Any]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "requested": self.requested,
+            "chosen": self.format or "png",
+            "tried": self.tried,
+            "fidelity": None if self.fidelity is None else self.fidelity.to_json(),
+        }
+
+
+def _color_textures(pkg: WrinklePackage) -> list[tuple[str, np.ndarray]]:
+    """(name, sRGB texels) of the base colour and the colour states, in that order."""
+    meta = pkg.meta
+    names = [meta.base_color, *meta.color_textures] if meta.base_color else []
+    return [(n, pkg.texture(n).pixels) for n in names]
+
+
+def choose_color_format(
+    source: WrinkleAsset,
+    shipped: WrinkleAsset,
+    poses: Sequence[Pose],
+    pkg: WrinklePackage,
+    want: str = "auto",
+    ref: fc.ColorReference | None = None,
+) -> ColorFormatChoice:
+    """The colour copies' format: ``auto`` the smaller of BC1 and BC7 whose copies keep every
+    pose inside the colour budget (CIEDE2000 inside its active region, the base colour over the
+    face too); a named one as asked (a note when over the budget); ``png8`` none."""
+    budget = fc.color_budget(source.budget)
+    choice = ColorFormatChoice(None, want, budget)
+    maps = _color_textures(pkg)
+    if not maps or want == "png8":
+        return choice
+    if any(t.dtype != np.uint8 for _, t in maps):
+        choice.notes.append("colour: 16-bit colour maps ship as PNG only (block formats are 8-bit)")
+        return choice
+    ref = ref or color_reference(source, poses)
+    masks = mask_values(shipped.masks)
+    factor = pkg.meta.color_factor
+    candidates = list(COLOR_FORMATS) if want == "auto" else [want]
+    best = None
+    for fmt in candidates:
+        copies = [color_copy(n, t, fmt, with_mips=False) for n, t in maps]
+        fid = fc.measure_color(
+            ref, copies[0].decoded, [c.decoded for c in copies[1:]], masks, factor,
+            base_over_face=True,
+        )  # fmt: skip
+        inside = fid.inside(budget)
+        choice.tried.append(
+            {
+                "format": fmt,
+                "worst_mean_delta_e": round(fid.worst_mean(), 4),
+                "worst_p99_delta_e": round(fid.worst_p99(), 4),
+                "base_p99_delta_e": round(fid.base.p99, 4) if fid.base else None,
+                "within": inside,
+            }
+        )
+        if inside or want != "auto":
+            best = (fmt, fid)
+            break
+    if best is None:
+        choice.notes.append(
+            "colour: no block format keeps the colour inside the budget ("
+            + ", ".join(f"{t['format']} p99 {t['worst_p99_delta_e']:.2f}" for t in choice.tried)
+            + f"; budget {budget.describe()}): the colour maps ship as PNG only"
+        )
+        return choice
+    fmt, fid = best
+    if not fid.inside(budget):
+        choice.notes.append(f"colour: {fmt} as requested, over the colour budget")
+    choice.format, choice.fidelity = fmt, fid
+    choice.copies = [color_copy(n, t, fmt) for n, t in maps]
+    return choice

@@ -278,7 +278,7 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
         if uastc_copy:
             out.append(_uastc_texture(t, ktx2, _copy_layout(rec, "rgba8", t.layout)))
             continue
-        if t.role in ("base", "state") and dds.exists():
+        if t.role in ("base", "state", "base_color", "state_color") and dds.exists():
             img = guard_reader(lambda dds=dds: read_dds(dds), dds, "the DDS file")
             fmt = str(img.format).lower()
             if fmt not in FORMATS:
@@ -292,6 +292,7 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
                 file=str(dds),
                 pointer="",
                 layout=_copy_layout(recorded.get(t.name), fmt, t.layout),
+                srgb=bool(img.srgb),
             )
         out.append(t)
     inp.textures = out

@@ -60,6 +60,7 @@ AREAS = {
     "TEX": "Texture formats, compression and footprint",
     "RND": "Render pass (GPU vs numpy reference)",
     "FID": "Fidelity: the shipped asset against the full-resolution source",
+    "COL": "Colour states: colour maps against their base colour",
 }
 
 RULES: tuple[Rule, ...] = (
@@ -408,6 +409,57 @@ RULES: tuple[Rule, ...] = (
         "relief everywhere are fine, and a base without detail gives no evidence: both are "
         "silent.",
         "Check that base and states are of one bake (the same face, UV layout and tangent frame).",
+    ),
+    Rule(
+        "WP-FID-008",
+        "error",
+        "A pose's colour is over the colour budget against the full-resolution source",
+        "For one pose, the colour blend of the shipped colour maps (sRGB texels decoded to "
+        "linear light before filtering, the shipped masks) differs from the blend of the source "
+        "colour maps at full resolution by more than the colour budget: activation-weighted "
+        "mean / p99 CIEDE2000 inside the pose's active region (budget keys max_mean_delta_e, "
+        "default 1, and max_p99_delta_e, default 2.3).",
+        'Ship the colour states larger (resolution.color = "auto" picks the size within the '
+        "budget) or in BC7 rather than BC1.",
+    ),
+    # --- COL
+    Rule(
+        "WP-COL-001",
+        "error",
+        "A colour map's size disagrees with the base colour",
+        "A state's colour map is painted on the base colour's UV layout: its texture has the "
+        "base colour's aspect (it may ship smaller). Another aspect is another UV layout.",
+        "Paint the colour map on the base colour's layout, at its size.",
+    ),
+    Rule(
+        "WP-COL-002",
+        "error",
+        "A colour map is flipped against the base colour",
+        "Where every mask is zero a colour state should equal the base colour; here it differs "
+        "by more than one just-noticeable difference on a large part of the face, and the base "
+        "colour flipped in U or V explains most of it: the colour lands on the wrong part of "
+        "the face.",
+        "Flip the colour map (or the base colour) the message names and convert again.",
+    ),
+    Rule(
+        "WP-COL-003",
+        "warning",
+        "A colour map differs from the base colour where every mask is zero",
+        "Outside every mask a colour state differs from the base colour by more than one "
+        "just-noticeable difference on a large part of the face, and no flip explains it: "
+        "colour no mask ever shows, or a map painted on another UV layout.",
+        "Paint the state's colour over the base colour, changed only where the regions that "
+        "drive it show.",
+    ),
+    Rule(
+        "WP-COL-004",
+        "warning",
+        "A colour state never changes the colour",
+        "Under the masks of the regions that drive it, the state's colour map is within 0.5 "
+        "CIEDE2000 of the base colour everywhere: it costs a texture and changes nothing "
+        "visible (the base colour given as the state's colour map?).",
+        "Give the state its own colour map (paler where the skin stretches, flushed where it "
+        "compresses), or drop its color key.",
     ),
 )
 

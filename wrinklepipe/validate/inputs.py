@@ -57,7 +57,7 @@ class Texture:
     """
 
     name: str
-    role: str  # "base" | "state" | "mask"
+    role: str  # "base" | "state" | "mask" | "base_color" | "state_color"
     fmt: str
     width: int
     height: int
@@ -65,7 +65,7 @@ class Texture:
     srgb: bool = False
     file: str = ""
     pointer: str = ""
-    state: str = ""  # state name when role == "state"
+    state: str = ""  # state name when role == "state" or "state_color"
     convention: str = "opengl"  # declared green convention of a normal map
     layout: str | None = None
     mapping: int = 1

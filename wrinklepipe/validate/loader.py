@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.asset import Mesh, Region, WrinkleAsset
+from wrinklepipe.asset import ColorMaps, Mesh, Region, WrinkleAsset
 from wrinklepipe.atomic import write_output
 from wrinklepipe.errors import InputError, input_error, plain_reason
 from wrinklepipe.io.json_safe import loads_json
@@ -72,6 +72,7 @@ def input_from_package(
     meta = pkg.meta
     version = guard_reader(lambda: mapping_version(meta), Path(path), "the mapping version")
     state_of = {s.texture: s.name for s in meta.states}
+    state_of.update({s.color: s.name for s in meta.states if s.color is not None})
     mask_names = list(meta.masks.textures)
     textures = []
     file_of = file_of or {}
@@ -96,6 +97,7 @@ def input_from_package(
                 state=state_of.get(t.name, ""),
                 layout=layout if px.shape[-1] >= 3 else "rg",
                 mapping=version if role == "state" else 1,
+                srgb=role in ("base_color", "state_color"),
             )
         )
     table = []
@@ -122,7 +124,10 @@ def input_from_package(
         has_source=False,
         path=path,
         kind=kind,
-        extra={"compressed": [c.to_json() for c in meta.compressed]},
+        extra={
+            "compressed": [c.to_json() for c in meta.compressed],
+            **({"color_factor": list(meta.color_factor)} if meta.base_color is not None else {}),
+        },
         pointers={
             "meta": f"{path}#/extensions/{EXTENSION}" if kind == "gltf" else path,
             "mesh": f"{path}#/meshes/0" if kind == "gltf" else path,
@@ -213,6 +218,9 @@ def _bundle_parts(inp: ValidationInput) -> tuple[dict[str, Any], dict[str, np.nd
         arrays[f"vertex_weights/{name}"] = np.asarray(v, np.float32)
     for name, v in inp.weight_curves.items():
         arrays[f"weight_curves/{name}"] = np.asarray(v, np.float32)
+    if a.color is not None:
+        arrays["color/base"] = np.asarray(a.color.base)
+        arrays["color/states"] = np.asarray(a.color.states)
     meta = {
         "version": BUNDLE_VERSION,
         "asset": {
@@ -229,6 +237,7 @@ def _bundle_parts(inp: ValidationInput) -> tuple[dict[str, Any], dict[str, np.nd
             "budget": a.budget.to_json(),
             "resolution": a.resolution,
             "provenance": a.provenance,
+            **_color_meta(a),
         },
         "mesh": mesh_meta,
         "textures": [
@@ -262,6 +271,21 @@ def _bundle_parts(inp: ValidationInput) -> tuple[dict[str, Any], dict[str, np.nd
         "extra": inp.extra,
     }
     return meta, arrays
+
+
+def _color_meta(a: WrinkleAsset) -> dict[str, Any]:
+    """The asset's colour description in a bundle's meta (nothing without colour states:
+    bundles of other assets are as before)."""
+    if a.color is None and not a.color_only:
+        return {}
+    out: dict[str, Any] = {"color_only": list(a.color_only)}
+    if a.color is not None:
+        out["color"] = {
+            "state_index": list(a.color.state_index),
+            "factor": list(a.color.factor),
+            "from_material": a.color.from_material,
+        }
+    return out
 
 
 def write_bundle(inp: ValidationInput, path: str | Path) -> Path:
@@ -327,7 +351,17 @@ def read_bundle(path: str | Path) -> ValidationInput:
         budget=BudgetOptions.from_json(am["budget"]),
         resolution=am["resolution"],
         provenance=am["provenance"],
+        color_only=tuple(int(k) for k in am.get("color_only", ())),
     )
+    if am.get("color") is not None:
+        c = am["color"]
+        asset.color = ColorMaps(
+            arrays["color/base"],
+            arrays["color/states"],
+            tuple(int(k) for k in c["state_index"]),
+            tuple(float(x) for x in c["factor"]),  # type: ignore[arg-type]
+            bool(c.get("from_material", False)),
+        )
     textures = [
         Texture(data=arrays[f"texture/{i}"].tobytes(), **t) for i, t in enumerate(meta["textures"])
     ]

@@ -9,6 +9,7 @@ from typing import Any
 
 from wrinklepipe.validate import (
     render,
+    rules_color,
     rules_compression,
     rules_fidelity,
     rules_maps,
@@ -34,6 +35,7 @@ CHECKS: tuple[tuple[str, Callable[[Context], list[Issue]]], ...] = (
     ("source texels", rules_fidelity.check_source_texels),
     ("alignment", rules_fidelity.check_alignment),
     ("fidelity", rules_fidelity.check_fidelity),
+    ("colour", rules_color.check_color),
     ("compression", rules_compression.check_compression),
     ("footprint", rules_compression.check_footprint),
 )

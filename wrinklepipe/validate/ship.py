@@ -139,6 +139,10 @@ def ship_asset(
         textures.append(encode_texture(f"mask_{t}", "mask", rgba, o.mask_format))
         for c in range(chunk.shape[0]):
             table.append(ChannelEntry(asset.regions[4 * t + c].name, f"mask_{t}", c))
+    extra = {}
+    if asset.color is not None:
+        textures += color_textures(asset, o.compress)
+        extra["color_factor"] = list(asset.color.factor)
     if asset.mesh is not None and asset.mesh.tangents is None:
         asset = replace(asset, mesh=prepare_mesh(asset.mesh))
     return ValidationInput(
@@ -149,4 +153,36 @@ def ship_asset(
         path=asset.name,
         kind="memory",
         pointers={"meta": asset.name, "mesh": f"{asset.name}#mesh"},
+        extra=extra,
     )
+
+
+def color_textures(asset: WrinkleAsset, compress: bool = False) -> list[Texture]:
+    """The base colour and the colour states as shipped sRGB textures: the texels as they are
+    (8-bit RGB), or BC7 sRGB blocks of them (the converter's encoder)."""
+    c = asset.color
+    if c is None:
+        return []
+    out = []
+    named = [("base_color", "base_color", c.base, "")] + [
+        (f"color_{asset.state_names[k]}", "state_color", c.states[j], asset.state_names[k])
+        for j, k in enumerate(c.state_index)
+    ]
+    for name, role, texels, state in named:
+        if texels.dtype != np.uint8:
+            raise ValueError("shipped colour textures are 8-bit")
+        rgb = np.ascontiguousarray(texels[..., :3])
+        if compress:
+            t = _texture(name, role, _rgba_u8(rgb), "bc7", state)
+        else:
+            h, w = rgb.shape[:2]
+            t = Texture(name, role, "rgb8", w, h, rgb.tobytes(), state=state, file=name)
+        t.srgb = True
+        out.append(t)
+    return out
+
+
+def _rgba_u8(rgb: np.ndarray) -> np.ndarray:
+    out = np.full(rgb.shape[:2] + (4,), 255, np.uint8)
+    out[..., :3] = rgb
+    return out
