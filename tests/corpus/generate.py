@@ -50,6 +50,24 @@ def demo(encoding: str = "pd", policy: str = "clamp01") -> WrinkleAsset:
     )
 
 
+def demo_color() -> WrinkleAsset:
+    """The corpus demo with colour states (pale where the skin stretches, flushed where it
+    compresses)."""
+    from wrinklepipe.demo.colors import demo_colors
+
+    a = demo()
+    from wrinklepipe.demo import generate
+
+    c = generate(SIZE, mesh_resolution=(48, 32))
+    return replace(a, color=demo_colors(c.base_height, c.state_names))
+
+
+def with_color_state(a: WrinkleAsset, j: int, texels: np.ndarray) -> WrinkleAsset:
+    states = a.color.states.copy()
+    states[j] = texels
+    return replace(a, color=replace(a.color, states=states))
+
+
 def ship(asset: WrinkleAsset, compress: bool = False) -> ValidationInput:
     inp = ship_asset(asset, ShipOptions(compress=compress))
     inp.path = "asset.wpv"
@@ -408,6 +426,52 @@ def c_no_wrinkle() -> ValidationInput:
     return inp
 
 
+def c_color_clean() -> ValidationInput:
+    return ship(demo_color())
+
+
+def c_color_aspect() -> ValidationInput:
+    inp = ship(demo_color())
+    t = next(t for t in inp.by_role("state_color") if t.state == "compress")
+    px = np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, -1)
+    half = np.ascontiguousarray(px[: t.height // 2])  # 128 x 64: another UV layout
+    t.data, t.height = half.tobytes(), half.shape[0]
+    return inp
+
+
+def c_color_flipped() -> ValidationInput:
+    a = demo_color()
+    return ship(with_color_state(a, 1, a.color.states[1][::-1]))
+
+
+def c_color_layout() -> ValidationInput:
+    a = demo_color()
+    rng = np.random.default_rng(3)
+    noise = rng.integers(40, 220, a.color.states[0].shape).astype(np.uint8)
+    return ship(with_color_state(a, 0, noise))
+
+
+def c_color_unchanged() -> ValidationInput:
+    a = demo_color()
+    return ship(with_color_state(a, 0, a.color.base[..., :3]))
+
+
+def c_color_over_budget() -> ValidationInput:
+    inp = ship(demo_color())
+    t = next(t for t in inp.by_role("state_color") if t.state == "compress")
+    px = np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, -1).astype(np.int64)
+    px[..., 1] += 40  # the flush shipped much less red than painted
+    t.data = np.clip(px, 0, 255).astype(np.uint8).tobytes()
+    return inp
+
+
+def c_color_linear_tag() -> ValidationInput:
+    inp = ship(demo_color())
+    for t in inp.by_role("state_color"):
+        t.srgb = False  # colour maps uploaded as linear data: the GPU blends the wrong light
+    return inp
+
+
 CASES: list[Case] = [
     Case("clean", ["WP-TEX-007"], "the demo, 8-bit, nothing wrong", c_clean),
     Case(
@@ -660,6 +724,50 @@ CASES: list[Case] = [
         ["WP-FID-001", "WP-FID-002", "WP-FID-004", "WP-RND-003", "WP-TEX-005", "WP-TEX-007"],
         "wrinkle maps exported flat",
         c_no_wrinkle,
+    ),
+]
+
+
+CASES += [
+    Case(
+        "color_clean", ["WP-TEX-007"], "the demo with colour states, nothing wrong", c_color_clean
+    ),
+    Case(
+        "color_aspect",
+        ["WP-COL-001", "WP-FID-008", "WP-TEX-007"],
+        "the flushed colour map shipped 128 x 64 (another aspect: another UV layout; half the "
+        "face's flush is lost)",
+        c_color_aspect,
+    ),
+    Case(
+        "color_flipped",
+        ["WP-COL-002", "WP-TEX-007"],
+        "the flushed colour map painted upside down",
+        c_color_flipped,
+    ),
+    Case(
+        "color_layout",
+        ["WP-COL-003", "WP-TEX-007"],
+        "the pale colour map is noise: it follows no texel of the base colour",
+        c_color_layout,
+    ),
+    Case(
+        "color_unchanged",
+        ["WP-COL-004", "WP-TEX-007"],
+        "the base colour given as the pale state's colour map",
+        c_color_unchanged,
+    ),
+    Case(
+        "color_over_budget",
+        ["WP-FID-008", "WP-TEX-007"],
+        "the flushed colour map shipped with 40 more green than painted",
+        c_color_over_budget,
+    ),
+    Case(
+        "color_linear_tag",
+        ["WP-RND-005", "WP-TEX-007"],
+        "the colour maps tagged as linear data: the GPU blends encoded values",
+        c_color_linear_tag,
     ),
 ]
 

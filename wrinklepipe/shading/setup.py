@@ -78,6 +78,9 @@ class ShaderSetup:
     base_convention: str = "opengl"
     state_convention: str = "opengl"
     output: str = "opengl"
+    #: the states that carry a colour map, in the order of the colour textures (empty: the
+    #: shaders are the normal ones, byte for byte)
+    color_states: tuple[int, ...] = ()
 
     # ------------------------------------------------------------------ derived sizes
     @property
@@ -87,6 +90,11 @@ class ShaderSetup:
     @property
     def n_regions(self) -> int:
         return len(self.region_names)
+
+    @property
+    def has_color(self) -> bool:
+        """Whether the shaders blend colour (some state carries a colour map)."""
+        return bool(self.color_states)
 
     @property
     def n_layers(self) -> int:
@@ -210,6 +218,10 @@ class ShaderSetup:
             out.append(f"{self.n_states} wrinkle states; shaders take at most {MAX_STATES}")
         if self.policy == "signed" and self.n_states != 2:
             out.append(f"policy 'signed' needs exactly two states, the asset has {self.n_states}")
+        if any(not 0 <= k < self.n_states for k in self.color_states) or len(
+            set(self.color_states)
+        ) != len(self.color_states):
+            out.append(f"colour states {list(self.color_states)} are not distinct states")
         if not self.region_names:
             out.append("no regions")
         if self.n_layers > MAX_MASK_LAYERS:
@@ -254,6 +266,7 @@ class ShaderSetup:
             "output": self.output,
             "baseLayout": self.base_layout,
             "stateLayout": self.state_layout,
+            **({"colorStates": list(self.color_states)} if self.color_states else {}),
         }
 
 
@@ -330,4 +343,5 @@ def from_meta(
         base_convention=convention,
         state_convention=convention,
         output=output or convention,
+        color_states=tuple(meta.color_states),
     )

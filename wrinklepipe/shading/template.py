@@ -12,12 +12,19 @@ permutations) and reads everything through hooks the target defines:
 ``WP_W(i)``        weight vector ``i`` of the flat weight array (:mod:`wrinklepipe.shading.setup`)
 ``WP_USED(g)``     lanes of mask group ``g`` that hold a region (``renormalize`` only)
 ``WP_REGION_COLOR(i)``  optional: the colour of group lane ``i`` (a region overlay, ``wp_regions``)
+``WP_COLOR_BASE()``  with colour states: the base colour in linear light (vec3; an sRGB sampler
+                   decodes, the target applies its factor)
+``WP_COLOR(c)``    with colour states: colour map ``c`` in linear light (vec3), only fetched where
+                   its state is active; ``WP_COLOR_STATE(c)`` (a define) is its state
 ``WP_DECODE_*``    texel decoding: the codec's generated functions
                    (:func:`wrinklepipe.codec.shaders.decode_source`: ``wp_normal``, ``wp_pd``,
                    ``wp_diff_rgb``), so a layout or value mapping cannot differ from the writer's
 
 It leaves ``wp_n`` (the unit tangent-space normal, in the output's green convention) and
-``wp_activity`` (``sum_k |a_k|``) in scope. The maths is :mod:`wrinklepipe.model`'s, line for line:
+``wp_activity`` (``sum_k |a_k|``) in scope, and with colour states (``core(color=True)``)
+``wp_color``: ``clamp(C_B + sum_k a_k (C_k - C_B), 0, 1)`` in linear light, the base colour
+itself where no colour state is active (:func:`wrinklepipe.model.combine_color`). The maths is
+:mod:`wrinklepipe.model`'s, line for line:
 
 ``s_k = sum_r M_r w_{r,k}``, ``a_k = policy(s_k)``, ``N = combine(B, {W_k, a_k}, encoding)``,
 with the base returned unchanged where no state is active.
@@ -182,6 +189,22 @@ vec3 wp_regions = vec3(0.0, 0.0, 0.0);  // sum_r M_r colour_r where WP_REGION_CO
 }
 """
 
+#: The colour block (inserted at the end of the core's scope, where the activations are): the
+#: colour model of :func:`wrinklepipe.model.combine_color`, line for line.
+COLOR_BLOCK = """\
+    // colour: C = clamp(C_B + sum_k a_k (C_k - C_B), 0, 1) in linear light, same activations
+    vec3 wp_cb = WP_COLOR_BASE();
+    vec3 wp_cacc = wp_cb;
+    WP_LOOP for (int wp_c = 0; wp_c < WP_NUM_COLORS; ++wp_c) {
+        int wp_ck = WP_COLOR_STATE(wp_c);
+        float wp_ca = wp_a[wp_ck / 4][wp_ck - 4 * (wp_ck / 4)];
+        if (wp_ca != 0.0) {
+            wp_cacc += wp_ca * (WP_COLOR(wp_c) - wp_cb);
+        }
+    }
+    wp_color = clamp(wp_cacc, 0.0, 1.0);
+"""
+
 _HLSL_WORDS = {
     "vec2": "float2",
     "vec3": "float3",
@@ -233,17 +256,33 @@ def defines(setup: ShaderSetup) -> dict[str, str]:
         "WP_MAPPING": str(setup.mapping),
         "WP_FLIP_BASE": str(int(setup.base_convention != setup.output)),
         "WP_FLIP_STATES": str(int(setup.state_convention != setup.output)),
+        **_color_defines(setup),
     }
+
+
+def _color_defines(setup: ShaderSetup) -> dict[str, str]:
+    """``WP_NUM_COLORS`` and ``WP_COLOR_STATE(c)``, the state of colour map ``c`` (a chain of
+    conditionals, constant-folded once loops unroll); nothing without colour states."""
+    if not setup.has_color:
+        return {}
+    ks = list(setup.color_states)
+    chain = "".join(f"(c) == {c} ? {k} : " for c, k in enumerate(ks[:-1])) + str(ks[-1])
+    return {"WP_NUM_COLORS": str(len(ks)), "WP_COLOR_STATE(c)": f"({chain})"}
 
 
 def define_block(values: dict[str, str]) -> str:
     return "".join(f"#define {k} {v}\n" for k, v in values.items())
 
 
-def core(lang: str, loop: str = "") -> str:
+def core(lang: str, loop: str = "", color: bool = False) -> str:
     """The core statement block in ``lang`` (``loop``: an attribute put before every loop, such
-    as HLSL's ``[unroll]``)."""
-    text = CORE.replace("WP_LOOP ", f"{loop} " if loop else "")
+    as HLSL's ``[unroll]``); ``color``: with the colour block (``wp_color``)."""
+    text = CORE
+    if color:
+        text = text.replace("float wp_activity;\n", "float wp_activity;\nvec3 wp_color;\n", 1)
+        assert text.endswith("}\n")
+        text = text[: -len("}\n")] + COLOR_BLOCK + "}\n"
+    text = text.replace("WP_LOOP ", f"{loop} " if loop else "")
     return emit(text, lang)
 
 

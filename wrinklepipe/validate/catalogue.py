@@ -349,6 +349,17 @@ RULES: tuple[Rule, ...] = (
         "The render pass could not run (no OpenGL 3.3 context, no mesh, or unsupported layout).",
         "Install Mesa's EGL (llvmpipe) or run on a machine with a GPU.",
     ),
+    Rule(
+        "WP-RND-005",
+        "error",
+        "GPU colour vs the numpy colour model",
+        "With colour states, the GPU's blended albedo or its lit colour differs from the numpy "
+        "colour model of the same shipped texels (decoded from sRGB, sampled bilinearly, lit "
+        "with the same light on the GPU's normal) by a p99 over 1 CIEDE2000 (the option "
+        "gpu_max_p99_delta_e).",
+        "A colour texture shipped or tagged as linear data (it must be sRGB), or a shader that "
+        "blends colour in sRGB instead of linear light.",
+    ),
     # --- FID
     Rule(
         "WP-FID-001",

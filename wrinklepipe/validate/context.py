@@ -32,6 +32,8 @@ class ValidateOptions:
     None (the default) follows the maps: the base map's largest side, clamped to
     :data:`RENDER_SIZE_MIN`..:data:`RENDER_SIZE_MAX` (:meth:`Context.render_size`).
     ``gpu_max_mean_deg`` / ``gpu_max_p99_deg``: GPU normal buffer vs numpy reference.
+    ``gpu_max_p99_delta_e``: with colour states, the GPU's albedo and lit colour vs the numpy
+    colour model of the same shipped bytes (CIEDE2000, p99).
     ``unit_tolerance``: allowed | |n| - 1 | of stored three-channel normals.
     ``max_bad_fraction``: fraction of texels allowed to break a per-texel rule (NaN, z < 0).
     ``max_clipped_fraction``: fraction of pd texels allowed at the edge of the cone.
@@ -45,6 +47,7 @@ class ValidateOptions:
     render_size: int | None = None
     gpu_max_mean_deg: float = 0.5
     gpu_max_p99_deg: float = 2.0
+    gpu_max_p99_delta_e: float = 1.0
     unit_tolerance: float = 0.05
     max_bad_fraction: float = 0.001
     max_clipped_fraction: float = 0.001

@@ -13,6 +13,14 @@ reference (:func:`wrinklepipe.model.blend`) is evaluated at the rasterised UVs o
 shipped texels (bilinear, clamp to edge, no mipmaps, like the GPU), so the two must agree to
 within the GPU's filtering precision; a wrong colour-space tag or an unsupported format shows as
 a disagreement. Wrinkles must change the render only where the source masks x weights are non-zero.
+
+With colour states the shaders also blend colour (:mod:`wrinklepipe.shading.glsl`): the base
+colour and the colour maps are uploaded as sRGB textures (the GPU decodes each texel before it
+filters), the shaded image is lit with the blended albedo, and two more targets hold the albedo
+and the object-space normal. The numpy colour model (:func:`wrinklepipe.model.combine_color`)
+of the same shipped texels (decoded, then sampled bilinearly) gives the albedo, and lit with the
+same light on the GPU's normal (:func:`shade_albedo`) the lit colour; both are compared in
+CIEDE2000 (WP-RND-005).
 """
 
 from __future__ import annotations
@@ -27,9 +35,10 @@ from scipy import ndimage
 
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh
+from wrinklepipe.codec import srgb
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents
-from wrinklepipe.metrics import DECIMALS, Budget, angle_deg, weighted_stats
+from wrinklepipe.metrics import DECIMALS, Budget, angle_deg, delta_e, weighted_stats
 from wrinklepipe.shading import glsl
 from wrinklepipe.shading.setup import MaskEntry, ShaderSetup
 from wrinklepipe.validate import fidelity_pictures as fp
@@ -62,6 +71,7 @@ def shader_setup(inp: ValidationInput) -> ShaderSetup:
             split = (index[e.split[0]], int(e.split[1]))
     base = inp.by_role("base")[0]
     states = inp.state_textures()
+    colors = color_textures(inp)
 
     return ShaderSetup(
         encoding=a.encoding,
@@ -81,6 +91,41 @@ def shader_setup(inp: ValidationInput) -> ShaderSetup:
         base_convention=base.convention,
         state_convention=states[0].convention,
         output="opengl",
+        color_states=tuple(k for k, _ in colors[1]) if colors is not None else (),
+    )
+
+
+def color_textures(inp: ValidationInput) -> tuple[Texture, list[tuple[int, Texture]]] | None:
+    """The base colour and the colour maps ``(state index, texture)`` in state order, when the
+    render pass can draw them (one size and format for the colour maps); None otherwise (the
+    render then draws the normals alone, the colour rules say what is wrong)."""
+    base = inp.by_role("base_color")
+    found = {t.state: t for t in inp.by_role("state_color")}
+    states = [(k, found[s]) for k, s in enumerate(inp.asset.state_names) if s in found]
+    if not base or not states:
+        return None
+    if len({(t.fmt, t.width, t.height) for _, t in states}) > 1:
+        return None
+    for t in [base[0], *(t for _, t in states)]:
+        if t.is_block and (t.width % 4 or t.height % 4):
+            return None
+        if len(t.data) < t.expected_size():
+            return None
+    return base[0], states
+
+
+def shade_albedo(n_obj: np.ndarray, albedo: np.ndarray) -> np.ndarray:
+    """``shaders/color.glsl``'s lighting in numpy: the key light, ambient and Blinn specular on
+    ``albedo`` (linear), for object-space normals ``n_obj`` ``[N, 3]`` (float32 arithmetic)."""
+    f = np.float32
+    light = np.array([-0.3713907, 0.5570860, 0.7427813], f)
+    half = light + np.array([0.0, 0.0, 1.0], f)
+    half /= np.sqrt(np.dot(half, half))
+    n = np.asarray(n_obj, f)
+    diffuse = np.maximum(n @ light, f(0.0))
+    spec = np.maximum(n @ half, f(0.0)) ** f(48.0) * f(0.25)
+    return (np.asarray(albedo, f) * (f(0.12) + f(0.88) * diffuse)[:, None] + spec[:, None]).astype(
+        f
     )
 
 
@@ -110,6 +155,8 @@ class Frame:
     color: np.ndarray | None
     normal: np.ndarray
     uv: np.ndarray | None
+    albedo: np.ndarray | None = None  # with colour states: the blended albedo (linear)
+    object_normal: np.ndarray | None = None  # ... and the object-space normal it was lit with
 
     @property
     def covered(self) -> np.ndarray:
@@ -190,9 +237,7 @@ class Renderer:
         self.mvp = ortho_front(np.asarray(mesh.positions, np.float64))
         s = self.size
         self.targets = [
-            ctx.renderbuffer((s, s), 4, dtype="f4"),
-            ctx.renderbuffer((s, s), 4, dtype="f4"),
-            ctx.renderbuffer((s, s), 4, dtype="f4"),
+            ctx.renderbuffer((s, s), 4, dtype="f4") for _ in range(5 if self.setup.has_color else 3)
         ]
         self.depth = ctx.depth_renderbuffer((s, s))
         self.fbo = ctx.framebuffer(self.targets, self.depth)
@@ -207,9 +252,22 @@ class Renderer:
         self.names.append(self.state_name)
         self.mask_name = glw.upload(self.gl, self.mask_layers, array=True)
         self.names.append(self.mask_name)
+        self.color_names: tuple[int, int] | None = None
+        colors = color_textures(inp) if self.setup.has_color else None
+        if colors is not None:
+            cbase = glw.upload(self.gl, [colors[0]], array=False)
+            self.names.append(cbase)
+            cstates = glw.upload(self.gl, [t for _, t in colors[1]], array=True)
+            self.names.append(cstates)
+            self.color_names = (cbase, cstates)
+            factor = tuple(float(x) for x in inp.extra.get("color_factor", (1.0, 1.0, 1.0)))
         for prog in (self.prog, self.plain):
             self._set(prog, "u_mvp", self.mvp.tobytes())
             self._set(prog, "u_base", 0)
+            if colors is not None:
+                self._set(prog, "u_color_base", 3)
+                self._set(prog, "u_colors", 4)
+                self._set(prog, "u_color_factor", factor)
         p = self.prog
         self._set(p, "u_states", 1)
         self._set(p, "u_masks", 2)
@@ -272,6 +330,9 @@ class Renderer:
         self.base_tex.use(0)
         glw.bind(self.gl, 1, self.state_name, array=True)
         glw.bind(self.gl, 2, self.mask_name, array=True)
+        if self.color_names is not None:
+            glw.bind(self.gl, 3, self.color_names[0], array=False)
+            glw.bind(self.gl, 4, self.color_names[1], array=True)
         if plain:
             self.vao_plain.render(moderngl.TRIANGLES)
         else:
@@ -290,7 +351,8 @@ class Renderer:
         if not read:
             ctx.finish()
             return None
-        imgs = [self._read(i) if wanted else None for i, wanted in enumerate((color, True, uv))]
+        wanted = (color, True, uv) + ((not plain, not plain) if self.setup.has_color else ())
+        imgs = [self._read(i) if w else None for i, w in enumerate(wanted)]
         if self.covered_box is None:
             self.covered_box = alpha_box(imgs[1])
         return Frame(*imgs)
@@ -429,6 +491,72 @@ def sample_reference(ctx: Context, uv: np.ndarray) -> Samples:
             rel.append(angle_deg(w, b))
         src_relief = np.stack(rel) if rel else None
     return Samples(base, np.stack(states), np.stack(masks), src_masks, src_relief)
+
+
+def _compare_colors(
+    ctx: Context,
+    setup: ShaderSetup,
+    uv: np.ndarray,
+    cov: np.ndarray,
+    frames: dict[str, Frame],
+    by_name: dict[str, Any],
+    samples: Samples,
+    info: dict[str, Any],
+    where: str,
+) -> list[Issue]:
+    """The GPU's albedo and lit colour against the numpy colour model of the same shipped
+    texels, in CIEDE2000 (WP-RND-005)."""
+    colors = color_textures(ctx.inp)
+    if colors is None:
+        return []
+    factor = np.asarray(ctx.inp.extra.get("color_factor", (1.0, 1.0, 1.0)), np.float32)
+
+    def linear(t: Texture) -> np.ndarray | None:
+        q = ctx.texels(t)
+        return None if q is None else srgb.decode_texels(q[..., :3])
+
+    base_lin = linear(colors[0])
+    states_lin = [linear(t) for _, t in colors[1]]
+    if base_lin is None or any(s is None for s in states_lin):
+        return []
+    # decode each texel, then filter (an sRGB sampler); the factor after (it is linear)
+    cb = tx.bilinear(base_lin, uv) * factor
+    cs = np.stack([tx.bilinear(s, uv) for s in states_lin])
+    a = ctx.asset
+    per_pose: dict[str, Any] = {}
+    worst: tuple[str, float] | None = None
+    limit = ctx.options.gpu_max_p99_delta_e
+    for label, fr in frames.items():
+        if fr.albedo is None or fr.object_normal is None:
+            continue
+        act = model.activations(samples.masks, by_name[label].weights, a.policy)
+        albedo = model.combine_color(cb, cs, act[list(setup.color_states)])
+        gpu_albedo = fr.albedo[cov][:, :3]
+        n_obj = fr.object_normal[cov][:, :3]
+        lit = np.clip(shade_albedo(n_obj, albedo), 0.0, 1.0)
+        gpu_lit = np.clip(fr.color[cov][:, :3], 0.0, 1.0)
+        st = {
+            "albedo": _stats(delta_e(gpu_albedo, albedo).astype(np.float32)),
+            "lit": _stats(delta_e(gpu_lit, lit).astype(np.float32)),
+        }
+        per_pose[label] = st
+        p99 = max(st["albedo"]["p99"], st["lit"]["p99"])
+        if p99 > limit and (worst is None or p99 > worst[1]):
+            worst = (label, p99)
+    info["color_vs_reference_delta_e"] = per_pose
+    ctx.metrics["gpu_vs_reference_delta_e"] = per_pose
+    if worst is None:
+        return []
+    bad = [k for k, v in per_pose.items() if max(v["albedo"]["p99"], v["lit"]["p99"]) > limit]
+    return [
+        make_issue(
+            "WP-RND-005",
+            f"{len(bad)} of {len(per_pose)} poses: the GPU's colour (albedo or lit) differs from "
+            f"the numpy colour model of the same bytes by p99 over {limit:g} CIEDE2000; worst "
+            f"{worst[0]}: p99 {worst[1]:.2f}",
+            where,
+        )
+    ]
 
 
 def _stats(e: np.ndarray) -> dict[str, float]:
@@ -574,6 +702,8 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
             cmap[cov] = change
             images[f"change/{label}"] = cmap
         per_pose[label] = entry
+    if r.setup.has_color:
+        issues += _compare_colors(ctx, r.setup, uv, cov, frames, by_name, samples, info, where)
     plain_err = angle_deg(plain.normal[cov][:, :3], samples.base)
     info["plain_vs_reference_deg"] = _stats(plain_err)
     info["covered_pixels"] = int(cov.sum())
