@@ -60,3 +60,30 @@ def write_avatar_color_source(
     manifest = folder / "manifest.toml"
     manifest.write_text(with_colors(avatar.manifest_text(), names, extra), encoding="utf-8")
     return manifest
+
+
+def cesium_skin_texels(mesh: Path) -> np.ndarray:
+    """CesiumMan's baseColorTexture texels (its JPEG, decoded as the pipeline reads it)."""
+    from wrinklepipe.gltf.document import read_document
+    from wrinklepipe.gltf.images import texture_texels
+
+    doc = read_document(mesh)
+    index = doc.array("materials")[0]["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+    return texture_texels(doc, index)[..., :3]
+
+
+def write_cesium_color_source(folder: Path, mesh: Path, size: int = 256) -> Path:
+    """The fidelity fixture on CesiumMan (``wrinklepipe.demo.face_fixture``) at ``size`` with
+    colour states over the character's own skin texture: ``stretch`` pale, ``compress``
+    flushed (painted on the texture's 1024^2 layout), the colour size and format on auto."""
+    from wrinklepipe.demo import face_fixture as ff
+
+    m = ff.write_fixture_source(folder, mesh, size)
+    skin = cesium_skin_texels(mesh)
+    (folder / "color_stretch.png").write_bytes(png_bytes(colors.pale(skin)))
+    (folder / "color_compress.png").write_bytes(png_bytes(colors.flushed(skin)))
+    text = m.read_text(encoding="utf-8")
+    text = with_colors(text, {"stretch": "color_stretch.png", "compress": "color_compress.png"})
+    text = text.replace('mask = "auto"\n', 'mask = "auto"\ncolor = "auto"\n', 1)
+    m.write_text(text, encoding="utf-8")
+    return m

@@ -181,12 +181,15 @@ def choose_color_size(
 
 @dataclass
 class ColorFormatChoice:
-    """The block format of the colour maps' copies (None: PNG only), the copies made in it,
-    their fidelity and every format tried."""
+    """The block formats of the colour maps' copies, chosen per group as the normals' are: the
+    colour states' (``format``, judged per pose in its active region) and the base colour's
+    (``base_format``, judged over the face); None: PNG only. The copies made, the states'
+    fidelity and every format tried."""
 
     format: str | None
     requested: str
     budget: Budget
+    base_format: str | None = None
     copies: list[ColorCopy] = field(default_factory=list)
     fidelity: fc.ColorFidelity | None = None
     tried: list[dict[str, Any]] = field(default_factory=list)
@@ -196,6 +199,7 @@ class ColorFormatChoice:
         return {
             "requested": self.requested,
             "chosen": self.format or "png",
+            "base": self.base_format or "png",
             "tried": self.tried,
             "fidelity": None if self.fidelity is None else self.fidelity.to_json(),
         }
@@ -216,9 +220,11 @@ def choose_color_format(
     want: str = "auto",
     ref: fc.ColorReference | None = None,
 ) -> ColorFormatChoice:
-    """The colour copies' format: ``auto`` the smaller of BC1 and BC7 whose copies keep every
-    pose inside the colour budget (CIEDE2000 inside its active region, the base colour over the
-    face too); a named one as asked (a note when over the budget); ``png8`` none."""
+    """The colour copies' formats. ``auto``: for the base colour the smaller of BC1 and BC7
+    whose copy stays inside the colour budget over the face; for the colour states the smaller
+    whose copies keep every pose inside it (CIEDE2000 inside its active region, with the base
+    colour as it ships: its copy when it has one). A named format is used as asked (a note
+    when over the budget); ``png8`` makes none."""
     budget = fc.color_budget(source.budget)
     choice = ColorFormatChoice(None, want, budget)
     maps = _color_textures(pkg)
@@ -230,37 +236,54 @@ def choose_color_format(
     ref = ref or color_reference(source, poses)
     masks = mask_values(shipped.masks)
     factor = pkg.meta.color_factor
+    (base_name, base_texels), states = maps[0], maps[1:]
     candidates = list(COLOR_FORMATS) if want == "auto" else [want]
+    # the base colour over the face
+    base_copies = {f: color_copy(base_name, base_texels, f, with_mips=False) for f in candidates}
+    base_stats = {f: fc.base_color_fidelity(ref, c.decoded, factor) for f, c in base_copies.items()}
+    base_fmt = next((f for f in candidates if budget.inside(base_stats[f])), None)
+    if want != "auto":
+        base_fmt = want
+    shipped_base = base_copies[base_fmt].decoded if base_fmt is not None else base_texels
+    # the colour states, with the base colour as it ships
     best = None
     for fmt in candidates:
-        copies = [color_copy(n, t, fmt, with_mips=False) for n, t in maps]
-        fid = fc.measure_color(
-            ref, copies[0].decoded, [c.decoded for c in copies[1:]], masks, factor,
-            base_over_face=True,
-        )  # fmt: skip
+        copies = [color_copy(n, t, fmt, with_mips=False) for n, t in states]
+        fid = fc.measure_color(ref, shipped_base, [c.decoded for c in copies], masks, factor)
         inside = fid.inside(budget)
         choice.tried.append(
             {
                 "format": fmt,
                 "worst_mean_delta_e": round(fid.worst_mean(), 4),
                 "worst_p99_delta_e": round(fid.worst_p99(), 4),
-                "base_p99_delta_e": round(fid.base.p99, 4) if fid.base else None,
+                "base_p99_delta_e": round(base_stats[fmt].p99, 4),
+                "base_within": budget.inside(base_stats[fmt]),
                 "within": inside,
             }
         )
         if inside or want != "auto":
             best = (fmt, fid)
             break
+    if base_fmt is None:
+        choice.notes.append(
+            "colour: the base colour ships as PNG only (no block format keeps it inside the "
+            "colour budget over the face: "
+            + ", ".join(f"{f} p99 {base_stats[f].p99:.2f}" for f in candidates)
+            + ")"
+        )
     if best is None:
         choice.notes.append(
-            "colour: no block format keeps the colour inside the budget ("
+            "colour: no block format keeps the colour states inside the budget ("
             + ", ".join(f"{t['format']} p99 {t['worst_p99_delta_e']:.2f}" for t in choice.tried)
-            + f"; budget {budget.describe()}): the colour maps ship as PNG only"
+            + f"; budget {budget.describe()}): they ship as PNG only"
         )
-        return choice
-    fmt, fid = best
-    if not fid.inside(budget):
-        choice.notes.append(f"colour: {fmt} as requested, over the colour budget")
-    choice.format, choice.fidelity = fmt, fid
-    choice.copies = [color_copy(n, t, fmt) for n, t in maps]
+    else:
+        fmt, fid = best
+        if not fid.inside(budget):
+            choice.notes.append(f"colour: {fmt} as requested, over the colour budget")
+        choice.format, choice.fidelity = fmt, fid
+        choice.copies = [color_copy(n, t, fmt) for n, t in states]
+    if base_fmt is not None:
+        choice.base_format = base_fmt
+        choice.copies.insert(0, color_copy(base_name, base_texels, base_fmt))
     return choice
