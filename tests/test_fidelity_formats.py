@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from wrinklepipe.commands.convert import summary_lines
+from wrinklepipe.commands._summary import summary_lines
 from wrinklepipe.demo.studio import write_studio
 from wrinklepipe.jobs.convert import ConvertOptions, ConvertResult, convert
 

@@ -14,6 +14,7 @@ import contextlib
 import importlib
 import os
 import pkgutil
+import shlex
 import signal
 import sys
 import threading
@@ -22,8 +23,8 @@ from collections.abc import Iterator, Sequence
 from rich.markup import escape
 
 import wrinklepipe.commands as pkg
-from wrinklepipe import __version__
-from wrinklepipe.console import err
+from wrinklepipe import __version__, console
+from wrinklepipe.commands._options import HelpFormatter
 from wrinklepipe.errors import InputError
 from wrinklepipe.io.confine import allowed_roots
 
@@ -90,7 +91,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
             mod.NAME,
             help=mod.HELP,
             description=getattr(mod, "DESCRIPTION", mod.HELP),
-            formatter_class=argparse.RawDescriptionHelpFormatter,
+            formatter_class=HelpFormatter,
         )
         mod.add_arguments(p)
         p.add_argument(
@@ -100,6 +101,19 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
             metavar="DIR",
             help="also read files under DIR when an input names them (repeatable; by default "
             "only files inside the folder of the file that names them are read)",
+        )
+        noise = p.add_mutually_exclusive_group()
+        noise.add_argument(
+            "-q",
+            "--quiet",
+            action="store_true",
+            help="print only warnings and errors: no progress, no summary",
+        )
+        noise.add_argument(
+            "-v",
+            "--verbose",
+            action="store_true",
+            help="also print details: every note, and each step's time on a terminal",
         )
         p.set_defaults(_run=mod.run)
     return parser
@@ -144,16 +158,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     unexpected error is reported as an internal error (``WRINKLEPIPE_DEBUG=1`` re-raises it)."""
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(_named_command(argv))
+    command = _named_command(argv)
+    # Before the command's own modules load (a second or more): a log sees the run start at once.
+    console.configure(quiet=bool({"-q", "--quiet"} & set(argv)), verbose=False)
+    if command and not {"-h", "--help"} & set(argv):
+        console.started("wrinklepipe " + shlex.join(argv))
+    parser = build_parser(command)
     args = parser.parse_args(argv)
     if not getattr(args, "_run", None):
         parser.print_help(sys.stderr)
         return 2
 
     def fail(message: str) -> int:
-        err.print(f"[bold red]error:[/] {escape(message)}", soft_wrap=True)
+        console.problem(f"[bold red]error:[/] {escape(message)}", markup=True)
         return 2
 
+    console.configure(quiet=args.quiet, verbose=args.verbose)
     debug = bool(os.environ.get("WRINKLEPIPE_DEBUG"))
     try:
         with _signals_raise(), allowed_roots(args.allow_root):

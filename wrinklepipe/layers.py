@@ -45,6 +45,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.reuse",
             "wrinklepipe.package",
             "wrinklepipe.options",
+            "wrinklepipe.palette",
         ),
     ),
     Layer(

@@ -1,4 +1,5 @@
-"""Unique names: the one ``stem, stem_2, stem_3 ...`` rule.
+"""Names: the one ``stem, stem_2, stem_3 ...`` rule for unique names, and the "did you mean"
+hint of every message about a name that is not there.
 
 File stems (:func:`wrinklepipe.package.safe_name`), USD prim and variant names and HLSL
 identifiers (:func:`wrinklepipe.shading.hlsl.identifier`) are all kept apart with it, so two
@@ -6,6 +7,9 @@ regions, textures or prims whose names clash get the same suffixes wherever they
 """
 
 from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
 
 
 def unique_name(stem: str, taken: set[str]) -> str:
@@ -16,3 +20,32 @@ def unique_name(stem: str, taken: set[str]) -> str:
         out = f"{stem}_{i}"
     taken.add(out)
     return out
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """``" (did you mean 'Main'?)"`` when a known name is close to ``name`` (the same but for
+    case, else the closest by :func:`difflib.get_close_matches`), else ``""``: the hint every
+    "unknown material / region / blend shape / clip" message carries."""
+    names = [k for k in dict.fromkeys(str(k) for k in known) if k != name]
+    folded = [k for k in names if k.casefold() == name.casefold()]
+    close = folded or difflib.get_close_matches(name, names, n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def listing(known: Iterable[str], limit: int = 12) -> str:
+    """``'a', 'b', 'c'`` (the first ``limit``, then ``... and N more``), or ``none``."""
+    names = [repr(str(k)) for k in dict.fromkeys(known)]
+    if not names:
+        return "none"
+    more = f" ... and {len(names) - limit} more" if len(names) > limit else ""
+    return ", ".join(names[:limit]) + more
+
+
+def unknown_names(what: str, unknown: Iterable[str], known: Iterable[str], where: str = "") -> str:
+    """``unknown region 'brw_l' (did you mean 'brow_l'?); the regions: 'brow_l', 'chin'`` for
+    one name or several (``what`` in the singular; ``where``: ``" of head.glb"``)."""
+    known = list(known)
+    names = list(unknown)
+    parts = ", ".join(f"{n!r}{did_you_mean(n, known)}" for n in names)
+    noun = what if len(names) == 1 else f"{what}s"
+    return f"unknown {noun} {parts}; the {what}s{where}: {listing(known)}"

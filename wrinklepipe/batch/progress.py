@@ -11,6 +11,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from wrinklepipe.batch.results import AssetResult
+from wrinklepipe.console import detail, elapsed, problem, verbosity
 
 _STYLE = {"passed": "green", "failed": "yellow", "error": "bold red"}
 _HOW = {"converted": "converted", "cache": "from cache", "validated": "validated", "none": ""}
@@ -61,6 +62,7 @@ class BatchProgress:
 
     def stage(self, job_id: str, stage: str) -> None:
         if not self.live:
+            detail(f"{elapsed():7.1f} s  {job_id}: {stage}")  # --verbose: every asset's steps
             return
         with self._lock:
             text = f"  {escape(job_id)}: [dim]{escape(stage)}[/]"
@@ -76,4 +78,8 @@ class BatchProgress:
             if task is not None:
                 self.progress.remove_task(task)
             self.progress.advance(self.overall)
-            self.progress.console.print(result_line(result), soft_wrap=True, highlight=False)
+            line = result_line(result)
+            if result.status != "passed" and (not self.live or verbosity() < 0):
+                problem(line, markup=True)  # a failure: shown with --quiet too
+            else:
+                self.progress.console.print(line, soft_wrap=True, highlight=False)

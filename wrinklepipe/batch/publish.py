@@ -15,6 +15,7 @@ from wrinklepipe.batch.engines import DaskEngine, LocalEngine
 from wrinklepipe.batch.plan import BatchPlan
 from wrinklepipe.batch.progress import BatchProgress
 from wrinklepipe.batch.run import BatchRun, run_plan
+from wrinklepipe.console import info, plural, problem
 
 
 def run_and_publish(
@@ -30,7 +31,7 @@ def run_and_publish(
 ) -> tuple[BatchRun, dict[str, Any]]:
     """Run ``plan`` on ``engine`` (through ``cache``) with a progress display titled by
     ``command``, then :func:`publish` it; returns the run and the JSON summary."""
-    title = f"wrinklepipe {command}: {len(plan.jobs)} assets"
+    title = f"wrinklepipe {command}: {plural(len(plan.jobs), 'asset')}"
     with BatchProgress(console, len(plan.jobs), title) as progress:
         run = run_plan(plan, engine, cache, progress.stage, progress.done)
     doc = publish(
@@ -80,7 +81,7 @@ def publish(
         log = reports.sarif_log(run.results, root=plan.root, output=plan.output, command=command)
         write_output(sarif_path, dumps_json(log).encode("utf-8"), inputs)
     c = doc["counts"]
-    parts = [f"{c['assets']} assets", f"[green]{c['passed']} passed[/]"]
+    parts = [plural(c["assets"], "asset"), f"[green]{c['passed']} passed[/]"]
     if c["failed"]:
         parts.append(f"[yellow]{c['failed']} failed validation[/]")
     if c["error"]:
@@ -94,5 +95,6 @@ def publish(
         if c[source]:
             how.append(f"{c[source]} {label}")
     tail = f" ({', '.join(how)})" if how else ""
-    console.print(f"{', '.join(parts)}{tail} in {run.seconds:.1f} s on {engine}", highlight=False)
+    line = f"{', '.join(parts)}{tail} in {run.seconds:.1f} s on {engine}"
+    (problem if c["failed"] or c["error"] else info)(line, markup=True)
     return doc

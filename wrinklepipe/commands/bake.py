@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from wrinklepipe.commands._options import add_force, add_json, add_output
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.drivers import KINDS
 from wrinklepipe.jobs.bake import BakeOptions, bake_manifest
@@ -26,34 +27,48 @@ Weights are linear (what the shader receives); the manifest's policy acts per te
 blended. Per-vertex drivers (bones, dynamic) write weights[frame][vertex][state] and no maps.
 
 examples:
-  wrinklepipe bake character/manifest.toml -o baked/
-  wrinklepipe bake character/manifest.toml --driver blendshapes --maps -o baked/ --fps 30
+  wrinklepipe bake chars/ada/manifest.toml -o baked/
+  wrinklepipe bake chars/ada/manifest.toml --driver expressions --maps -o baked-maps/ --fps 30
 """
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     d = BakeOptions()  # the defaults: one place
-    p.add_argument("manifest", metavar="MANIFEST", help="source manifest (TOML)")
+    p.add_argument("manifest", metavar="MANIFEST", help="source manifest (manifest.toml)")
     p.add_argument(
-        "--driver", choices=KINDS, default=d.driver, help="which driver (default: first)"
+        "--driver",
+        choices=KINDS,
+        default=d.driver,
+        metavar="KIND",
+        help="the driver to evaluate: " + ", ".join(KINDS) + " (default: the manifest's first)",
     )
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
+    add_output(p, "output folder")
     p.add_argument("--maps", action="store_true", help="also write a blended normal map per frame")
-    p.add_argument("--fps", type=float, default=d.fps, help="sampling rate (default: the driver's)")
-    p.add_argument("--start", type=float, default=d.start, help="first time in seconds")
-    p.add_argument("--end", type=float, default=d.end, help="last time in seconds")
+    p.add_argument(
+        "--fps",
+        type=float,
+        default=d.fps,
+        metavar="FPS",
+        help="frames per second (default: the driver's)",
+    )
+    p.add_argument("--start", type=float, default=d.start, metavar="S", help="first time (s)")
+    p.add_argument("--end", type=float, default=d.end, metavar="S", help="last time (s)")
     p.add_argument(
         "--tolerance",
         type=float,
         default=d.tolerance,
-        help="weights within this of the last rendered frame count as unchanged "
-        f"(default {d.tolerance:g})",
+        metavar="W",
+        help="weights within W of the last rendered frame count as unchanged",
     )
     p.add_argument(
-        "--size", type=int, default=d.size, help="size of the blended maps (default: base)"
+        "--size",
+        type=int,
+        default=d.size,
+        metavar="N",
+        help="side of the blended maps (default: the base map's)",
     )
-    p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
-    p.add_argument("--json", action="store_true", help="print a summary as JSON")
+    add_force(p)
+    add_json(p, "a summary")
 
 
 def run(args: argparse.Namespace) -> int:

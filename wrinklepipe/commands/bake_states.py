@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from wrinklepipe.commands._options import add_force, add_json, add_output
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.bake import BakeOptions
@@ -43,18 +44,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="NAME=SCULPT",
         help="a wrinkled pose's sculpt (repeatable)",
     )
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
-    p.add_argument("--material", default=None, help="the wrinkled material (glTF / USD)")
+    add_output(p, "output folder")
+    p.add_argument(
+        "--material", default=None, metavar="NAME", help="the wrinkled material (glTF / USD)"
+    )
     p.add_argument(
         "--meshes", default=None, metavar="NAMES", help="comma-separated meshes to wrinkle only"
     )
-    p.add_argument("--size", type=int, default=d.size, metavar="N", help=f"map size ({d.size})")
+    p.add_argument("--size", type=int, default=d.size, metavar="N", help="map size")
     p.add_argument(
         "--supersample",
         type=int,
         choices=(1, 2, 3, 4),
         default=d.supersample,
-        help=f"samples per texel per axis ({d.supersample})",
+        metavar="N",
+        help="samples per texel per axis: 1 to 4",
     )
     p.add_argument(
         "--max-distance",
@@ -64,11 +68,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="ray distance either side of the low surface, mesh units (default: measured)",
     )
     p.add_argument(
-        "--padding", type=int, default=None, metavar="PX", help="edge padding (size / 128)"
+        "--padding",
+        type=int,
+        default=None,
+        metavar="PX",
+        help="edge padding in texels (default: size / 128)",
     )
     p.add_argument("--masks", action="store_true", help="also propose a mask per state")
-    p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
-    p.add_argument("--json", action="store_true", help="print bake.json's summary as JSON")
+    add_force(p)
+    add_json(p, "bake.json's summary")
 
 
 def _parse_states(items: list[str]) -> list[tuple[str, str]]:

@@ -8,8 +8,9 @@ from typing import Any
 
 from wrinklepipe.batch import Cache, DaskEngine, LocalEngine, parse_size, plan_batch
 from wrinklepipe.batch.cache import DEFAULT_MAX_BYTES
-from wrinklepipe.batch.options import FAIL_ON, MASK_LAYOUTS, AssetOptions
+from wrinklepipe.batch.options import MASK_LAYOUTS, AssetOptions
 from wrinklepipe.batch.publish import run_and_publish
+from wrinklepipe.commands._options import add_fail_on, add_json, add_report
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.demo.source import cache_root
 from wrinklepipe.errors import input_error
@@ -28,7 +29,7 @@ schemas/batch.schema.json) listing manifests with per-asset options.
 Each asset runs on its own: one that fails never stops or changes the others. Unchanged assets
 are restored from a content-addressed cache (keyed by every input byte, the options and the
 tool), the rest run in --jobs local processes or on a Dask cluster (--scheduler); the outputs
-are byte-identical either way. Reports for CI: --summary (JSON), --junit, --sarif.
+are byte-identical either way. Reports for CI: --report (the JSON summary), --junit, --sarif.
 
 Options given here apply to every asset and win over the batch file's.
 
@@ -38,7 +39,7 @@ not run (or the batch could not start: bad sources, output collisions; nothing w
 examples:
   wrinklepipe batch chars/ -o build/chars --junit junit.xml --sarif wrinkles.sarif
   wrinklepipe batch 'chars/**/manifest.toml' -o build --jobs 4 --force
-  wrinklepipe batch studio-batch.toml --scheduler tcp://farm:8786 --summary summary.json
+  wrinklepipe batch studio-batch.toml --report summary.json
 """
 
 
@@ -80,7 +81,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--cache-size",
         metavar="SIZE",
         default=f"{DEFAULT_MAX_BYTES >> 30}G",
-        help=f"size cap, least recently used evicted first (default {DEFAULT_MAX_BYTES >> 30}G)",
+        help="size cap, least recently used evicted first",
     )
     conv = p.add_argument_group("conversion (every asset; win over the batch file)")
     conv.add_argument("--glb", action="store_const", const=True, help="also write NAME.glb")
@@ -92,12 +93,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--usdz", dest="usd", action="store_const", const="usdz", help="also write NAME.usdz"
     )
     conv.add_argument(
-        "--bits", type=int, choices=(8, 16), help=f"PNG bits of normal maps ({d.bits})"
+        "--bits",
+        type=int,
+        choices=(8, 16),
+        metavar="BITS",
+        help=f"PNG bits of normal maps: 8 or 16 (default: {d.bits})",
     )
     conv.add_argument(
         "--mask-layout",
         choices=MASK_LAYOUTS,
-        help="mask packing",
+        metavar="LAYOUT",
+        help="mask packing: " + ", ".join(MASK_LAYOUTS) + " (default: each manifest's)",
     )
     conv.add_argument(
         "--no-compress", dest="compress", action="store_const", const=False, help="skip DDS/KTX2"
@@ -117,16 +123,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=int,
         choices=range(10),
         metavar="0-9",
-        help=f"zlib level of PNGs (default {d.png_level})",
+        help=f"zlib level of the PNGs (default: {d.png_level})",
     )
-    conv.add_argument(
-        "--fail-on",
-        choices=FAIL_ON,
-        help=f"severity that fails an asset ({d.fail_on})",
-    )
+    add_fail_on(conv, default=None)
     rep = p.add_argument_group("reports")
-    rep.add_argument("--json", action="store_true", help="print the JSON summary on stdout")
-    rep.add_argument("--summary", metavar="FILE", help="write the JSON summary to FILE")
+    add_json(rep, "the summary")
+    add_report(rep, "the summary", old="--summary")
     rep.add_argument("--junit", metavar="FILE", help="write JUnit XML (one test case per asset)")
     rep.add_argument("--sarif", metavar="FILE", help="write SARIF 2.1.0 (validation issues)")
 
@@ -165,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
         cache,
         command="batch",
         console=err,
-        summary_path=args.summary,
+        summary_path=args.report,
         junit_path=args.junit,
         sarif_path=args.sarif,
     )

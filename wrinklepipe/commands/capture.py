@@ -7,6 +7,7 @@ from pathlib import Path
 
 from wrinklepipe.atomic import staged_folder
 from wrinklepipe.capture.orientation import METHODS
+from wrinklepipe.commands._options import add_force, add_json, add_output
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
 from wrinklepipe.jobs.capture import CaptureInputs, CaptureJobOptions, example_session, run_capture
@@ -75,7 +76,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="neutral-photo landmarks paired with --texture-landmarks (default: the neutral set)",
     )
-    p.add_argument("--size", metavar="N|WxH", help="texture size (required with texture landmarks)")
+    p.add_argument(
+        "--size",
+        metavar="SIZE",
+        help="texture size: N (square) or WxH (required with --texture-landmarks)",
+    )
     p.add_argument("--roi", metavar="MASK", help="region of interest on the neutral photo (0..1)")
     p.add_argument(
         "--neutral-normals",
@@ -105,7 +110,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--nz",
         type=float,
         default=d.nz,
-        help="N_z of the neutral surface (default 1: facing camera)",
+        metavar="NZ",
+        help="N_z of the neutral surface (1: facing the camera)",
     )
     p.add_argument(
         "--nz-region",
@@ -118,25 +124,39 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--orientation",
         choices=("auto",) + METHODS,
         default=d.orientation,
-        help=f"orientation method ({d.orientation})",
+        metavar="METHOD",
+        help="orientation method: auto, " + ", ".join(METHODS),
     )
-    p.add_argument("--state", default=d.state, help=f"name of the wrinkle state ({d.state})")
+    p.add_argument("--state", default=d.state, metavar="NAME", help="name of the wrinkle state")
     p.add_argument(
         "--colorspace",
         choices=("auto", "srgb", "linear"),
         default=d.colorspace,
-        help="how photo values are encoded (auto: sRGB unless tagged linear or float)",
+        metavar="SPACE",
+        help="how photo values are encoded: auto (sRGB unless tagged linear or float), srgb, "
+        "linear",
     )
     p.add_argument(
         "--blur",
         type=float,
         default=d.blur,
-        help=f"Gaussian blur of R, px before --scale ({d.blur})",
+        metavar="PX",
+        help="Gaussian blur of R, in pixels before --scale",
     )
     p.add_argument(
-        "--dark", type=float, default=d.dark, help="neutral luminance below which R is not taken"
+        "--dark",
+        type=float,
+        default=d.dark,
+        metavar="L",
+        help="neutral luminance below which R is not taken",
     )
-    p.add_argument("--deadband", type=float, default=d.deadband, help="noise floor of 1 - R (auto)")
+    p.add_argument(
+        "--deadband",
+        type=float,
+        default=d.deadband,
+        metavar="D",
+        help="noise floor of 1 - R (default: measured)",
+    )
     p.add_argument(
         "--no-exposure", action="store_true", help="do not normalise the flash/exposure ratio"
     )
@@ -144,20 +164,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--furrow-sigma",
         type=float,
         default=d.furrow_sigma,
-        help=f"crease half-width, pixels before --scale ({d.furrow_sigma})",
+        metavar="PX",
+        help="crease half-width, in pixels before --scale",
     )
     p.add_argument(
         "--scale",
         type=float,
         default=d.scale,
+        metavar="K",
         help="multiply the blur/furrow sigmas (default: max(1, photo width / 256))",
     )
     p.add_argument("--truth", metavar="MAP", help="a true normal map (texture space) to score")
     p.add_argument("--example", metavar="DIR", help="write a synthetic session into DIR and stop")
-    p.add_argument("-o", "--output", metavar="OUT", help="output folder")
-    p.add_argument("--max-pixels", type=int, default=d.max_pixels, help="cap on photo size")
-    p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
-    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    add_output(p, "output folder (required unless --example)", required=False)
+    p.add_argument(
+        "--max-pixels",
+        type=int,
+        default=d.max_pixels,
+        metavar="N",
+        help="refuse photos of more pixels",
+    )
+    add_force(p)
+    add_json(p)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -7,8 +7,12 @@ import json
 import shutil
 from pathlib import Path
 
+from rich.markup import escape
+
 from wrinklepipe.atomic import staged_folder
-from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.commands._options import add_fail_on, add_force, add_json, add_output
+from wrinklepipe.commands._summary import exit_code, is_problem, summary_lines
+from wrinklepipe.console import emit_json, info, issue_counts, problem, status
 from wrinklepipe.demo.source import demo_source_dir
 from wrinklepipe.jobs.convert import ConvertOptions, convert
 
@@ -37,17 +41,20 @@ DEFAULT_OUTPUT = "demo-out"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("-o", "--output", default=DEFAULT_OUTPUT, help="output folder (./demo-out)")
+    add_output(p, "output folder", required=False, default=DEFAULT_OUTPUT)
     p.add_argument(
         "--size",
         type=int,
         default=1024,
         choices=(64, 128, 256, 512, 1024, 2048),
-        help="demo map size (1024; wrinkle maps are a quarter, masks a sixteenth)",
+        metavar="N",
+        help="side of the demo's maps: 64, 128, 256, 512, 1024 or 2048 (the wrinkle maps "
+        "and masks are made smaller)",
     )
     p.add_argument("--glb", action="store_true", help="also write a self-contained GLB")
-    p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
-    p.add_argument("--json", action="store_true", help="print the conversion report as JSON")
+    add_force(p)
+    add_fail_on(p)
+    add_json(p, "the conversion report")
     p.add_argument(
         "--write-source",
         metavar="DIR",
@@ -69,7 +76,8 @@ def _write_source(manifest: Path, folder: str, force: bool) -> int:
     """Copy the cached demo source into ``folder`` (staged: complete or absent)."""
     with staged_folder(folder, force=force) as tmp:
         shutil.copytree(manifest.parent, tmp, dirs_exist_ok=True)
-    err.print(f"[bold]demo source[/]  {folder}  (edit {Path(folder) / 'manifest.toml'})")
+    edit = escape(str(Path(folder) / "manifest.toml"))
+    info(f"[bold]demo source[/]  {escape(folder)}  (edit {edit})", markup=True)
     return 0
 
 
@@ -79,29 +87,33 @@ def run(args: argparse.Namespace) -> int:
         manifest = demo_source_dir(args.size)
     if args.write_source:
         return _write_source(manifest, args.write_source, args.force)
-    err.print(f"[bold]demo source[/]  {manifest.parent}")
+    info(f"[bold]demo source[/]  {escape(str(manifest.parent))}", markup=True)
     force = args.force or _previous_demo(out)
-    with status("converting and validating"):
-        result = convert(manifest, out, ConvertOptions(glb=args.glb, force=force))
+    result = convert(manifest, out, ConvertOptions(glb=args.glb, force=force))
     rep = result.report
+    code = exit_code(rep, args.fail_on)
     if args.json:
         emit_json(rep)
-        return result.exit_code
+        return code
     validation = rep.get("validation", {})
-    counts = validation.get("counts", {})
-    err.print(f"[bold]outputs[/]      {result.output.resolve()}")
+    shown = escape(args.output)  # as typed
+    info(f"[bold]outputs[/]      {shown}", markup=True)
     for entry in sorted(result.output.iterdir()):
-        err.print(f"  {entry.name}{'/' if entry.is_dir() else ''}")
-    err.print(f"[bold]report[/]       {(result.output / 'report.html').resolve()}")
-    page = result.output / "validation.html"
-    if page.is_file():
-        err.print(f"[bold]renders[/]      {page.resolve()}")
+        info(f"  {entry.name}{'/' if entry.is_dir() else ''}")
+    info(f"[bold]report[/]       {escape(str(Path(args.output) / 'report.html'))}", markup=True)
+    if (result.output / "validation.html").is_file():
+        page = escape(str(Path(args.output) / "validation.html"))
+        info(f"[bold]renders[/]      {page}", markup=True)
     if validation.get("status") == "skipped":
-        err.print(f"[bold]validation[/]   skipped: {validation.get('reason', '')}")
-        return result.exit_code
-    verdict = "[bold green]valid[/]" if result.exit_code == 0 else "[bold red]errors found[/]"
-    err.print(
-        f"[bold]validation[/]   {verdict}: "
-        + ", ".join(f"{counts.get(k, 0)} {k}s" for k in ("error", "warning", "info"))
+        info(f"[bold]validation[/]   skipped: {escape(validation.get('reason', ''))}", markup=True)
+        return code
+    for line in summary_lines(rep, code, args.output, args.fail_on):
+        if is_problem(line):
+            problem(line)
+    verdict = "[bold green]valid[/]" if code == 0 else "[bold red]failed[/]"
+    (problem if code else info)(
+        f"[bold]validation[/]   {verdict}: {issue_counts(validation.get('counts', {}))}"
+        + (f" (failing on {args.fail_on})" if args.fail_on != "error" else ""),
+        markup=True,
     )
-    return result.exit_code
+    return code

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wrinklepipe.commands._options import add_output
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.dynamic import DynamicOptions
@@ -34,7 +35,7 @@ OUT by extension: .npy (float32 [V]), .json ({"values": [...], ...summary}), .tx
 
 examples:
   wrinklepipe dynamic head.glb --morph brow_raise=1 -o w.npy
-  wrinklepipe dynamic figure.glb --time 0.5 -o w.json --json
+  wrinklepipe dynamic RiggedFigure.glb --time 0.5 -o w.json --json
 """
 
 
@@ -45,20 +46,37 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--pose", metavar="POSE", help="deformed mesh file or .npy positions")
     g.add_argument("--morph", metavar="NAME=W", action="append", help="morph weight")
     g.add_argument("--time", type=float, metavar="T", help="time of the file's animation")
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help=".npy, .json, .txt, .csv")
+    add_output(p, "output file: .npy, .json, .txt or .csv")
     p.add_argument(
-        "--weighting", choices=("angle", "uniform"), default=d.weighting, help="vertex smoothing"
+        "--weighting",
+        choices=("angle", "uniform"),
+        default=d.weighting,
+        metavar="HOW",
+        help="vertex smoothing: angle or uniform",
     )
-    p.add_argument("--bias-channel", type=int, choices=(0, 1, 2, 3), default=None)
-    p.add_argument("--texture-space", type=int, default=None, metavar="N", help="also N x N")
+    p.add_argument(
+        "--bias-channel",
+        type=int,
+        choices=(0, 1, 2, 3),
+        default=None,
+        metavar="C",
+        help="vertex colour channel 0-3 holding the rest-pose bias ([0, 1] -> [-1, 1])",
+    )
+    p.add_argument(
+        "--texture-space",
+        type=int,
+        default=None,
+        metavar="N",
+        help="also run Oat's texture-space variant at N x N",
+    )
     p.add_argument(
         "--blur",
         type=float,
         default=DynamicJobOptions().blur,
         metavar="PX",
-        help="texture-space blur",
+        help="texture-space blur in texels",
     )
-    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
 
 
 def _parse_morphs(items: list[str]) -> dict[str, float]:

@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from wrinklepipe.atomic import output_files, write_bytes, write_json
+from wrinklepipe.commands._options import add_json, add_output, add_report
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.normals.job import OUTPUT_FORMATS, EncodeOptions, encode_normals
 
@@ -33,7 +34,7 @@ written).
 
 examples:
   wrinklepipe encode-normals compress.png --base base.png -o compress_pd.dds --encoding pd
-  wrinklepipe encode-normals wrinkle.png -o w.ktx2 --format auto --size 256 --report r.json
+  wrinklepipe encode-normals stretch.png -o w.ktx2 --format auto --size 32 --report r.json
   wrinklepipe encode-normals unreal_normal.png --convention directx -o n.png --encoding full
 """
 
@@ -65,22 +66,39 @@ def _size(text: str) -> int | str:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     d = EncodeOptions()  # the defaults: one place
     p.add_argument("input", metavar="IN", help="normal map to encode")
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
-    p.add_argument("--encoding", choices=("pd", "diff", "full"), default=d.encoding)
-    p.add_argument("--base", metavar="BASE", help="neutral-face normal map (diff; pd wrinkle-only)")
-    p.add_argument("--scale", type=_scale, default=d.scale, help="PD slope scale s or auto")
+    add_output(p, "output file (.dds, .ktx2, .png, .tif or .exr)")
     p.add_argument(
-        "--gain", type=_scale, default=d.gain, help=f"diff gain or auto (default {d.gain:g})"
+        "--encoding",
+        choices=("pd", "diff", "full"),
+        default=d.encoding,
+        metavar="ENCODING",
+        help="pd (slopes), diff (the difference to --base) or full (the normals)",
     )
+    p.add_argument(
+        "--base", metavar="FILE", help="neutral-face normal map (diff; pd: wrinkle-only slopes)"
+    )
+    p.add_argument(
+        "--scale", type=_scale, default=d.scale, metavar="S", help="PD slope scale, or auto"
+    )
+    p.add_argument("--gain", type=_scale, default=d.gain, metavar="G", help="diff gain, or auto")
     p.add_argument(
         "--format",
         dest="fmt",
         choices=OUTPUT_FORMATS,
         default=None,
-        help="output format (default from OUT's suffix: .dds/.ktx2 -> bc5)",
+        metavar="FORMAT",
+        help=", ".join(OUTPUT_FORMATS) + " (default: from OUT's suffix; .dds/.ktx2 -> bc5)",
     )
-    p.add_argument("--convention", choices=("auto", "opengl", "directx"), default=d.convention)
-    p.add_argument("--size", type=_size, default=None, help="target side in texels, or auto")
+    p.add_argument(
+        "--convention",
+        choices=("auto", "opengl", "directx"),
+        default=d.convention,
+        metavar="GREEN",
+        help="the input's green channel: opengl (+Y), directx (-Y) or auto (detected)",
+    )
+    p.add_argument(
+        "--size", type=_size, default=None, metavar="N", help="target side in texels, or auto"
+    )
     p.add_argument("--no-mips", dest="mips", action="store_false", help="level 0 only")
     p.add_argument(
         "--no-pad",
@@ -104,20 +122,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="DX10 header for every format (also BC1/BC3)",
     )
     p.add_argument(
-        "--max-p99", type=float, default=d.max_p99_deg, help="budget: p99 error in degrees"
+        "--max-p99",
+        type=float,
+        default=d.max_p99_deg,
+        metavar="DEG",
+        help="budget: p99 error in degrees",
     )
     p.add_argument(
-        "--max-mean", type=float, default=d.max_mean_deg, help="budget: mean error in degrees"
+        "--max-mean",
+        type=float,
+        default=d.max_mean_deg,
+        metavar="DEG",
+        help="budget: mean error in degrees",
     )
     p.add_argument("--repair", action="store_true", help="repair NaN / zero / z<0 texels")
     p.add_argument(
         "--max-pixels",
         type=int,
         default=d.max_pixels,
-        help=f"refuse images larger than this (default {d.max_pixels})",
+        metavar="N",
+        help="refuse images of more pixels",
     )
-    p.add_argument("--report", metavar="R.json", help="write the report as JSON")
-    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    add_report(p, "the report")
+    add_json(p)
 
 
 def run(args: argparse.Namespace) -> int:

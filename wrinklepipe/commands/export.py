@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from wrinklepipe.commands._options import add_force, add_json, add_output
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.export.presets import ENGINE_PRESETS
 from wrinklepipe.jobs.export import export
@@ -36,10 +37,16 @@ examples:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", metavar="SOURCE", help="convert output folder, .gltf/.glb or USD")
-    p.add_argument("--engine", required=True, choices=sorted(ENGINE_PRESETS), help="target")
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
-    p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
-    p.add_argument("--json", action="store_true", help="print the written files as JSON")
+    p.add_argument(
+        "--engine",
+        required=True,
+        choices=sorted(ENGINE_PRESETS),
+        metavar="ENGINE",
+        help="the target engine: " + ", ".join(sorted(ENGINE_PRESETS)),
+    )
+    add_output(p, "output folder")
+    add_force(p)
+    add_json(p, "the written files")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -44,8 +44,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "files", metavar="FILE", nargs="+", help=".gltf/.glb or a USD file (two with --diff)"
     )
-    p.add_argument("--diff", action="store_true", help="list what differs between FILE A and B")
-    p.add_argument("--json", action="store_true", help="print JSON on stdout")
+    p.add_argument(
+        "--diff",
+        action="store_true",
+        help="list what differs between two files A and B (exit 1 when they differ)",
+    )
+    p.add_argument("--json", action="store_true", help="print what it finds as JSON on stdout")
 
 
 def _table(title: str, rows: list[dict[str, Any]], columns: list[str]) -> Table:

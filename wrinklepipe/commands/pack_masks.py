@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from wrinklepipe.console import emit_json, err, status
+from wrinklepipe.commands._options import add_force, add_json, add_output
+from wrinklepipe.console import emit_json, err, problem, status
 from wrinklepipe.jobs.pack_masks import PackMasksOptions, pack_mask_files
 from wrinklepipe.masks import LAYOUTS
 
@@ -26,7 +27,8 @@ Writes OUT/masks_<t>.png (or masks_array.png) and OUT/channels.json (the channel
 
 examples:
   wrinklepipe pack-masks masks/*.png --layout jimenez8 -o packed/
-  wrinklepipe pack-masks brow_l.png brow_r.png chin.png --layout lr-split -o out --size 64
+  wrinklepipe pack-masks masks/forehead_outer_l.png masks/forehead_outer_r.png masks/chin.png \\
+      --layout lr-split -o out --size 32
 """
 
 
@@ -34,29 +36,41 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d = PackMasksOptions()  # the defaults: one place
     p.add_argument("masks", nargs="+", metavar="MASK", help="grey mask images, one per region")
     p.add_argument(
-        "--layout", choices=LAYOUTS, default=d.layout, help=f"packing layout ({d.layout})"
+        "--layout",
+        choices=LAYOUTS,
+        default=d.layout,
+        metavar="LAYOUT",
+        help="packing layout: " + ", ".join(LAYOUTS),
     )
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
+    add_output(p, "output folder")
     p.add_argument("--size", type=int, default=d.size, metavar="N", help="resample to N x N")
     p.add_argument(
         "--invert", action="store_true", help="inputs are painted white = none, black = full"
     )
-    p.add_argument("--names", default=None, help="comma-separated region names (default: stems)")
+    p.add_argument(
+        "--names",
+        default=None,
+        metavar="NAMES",
+        help="region names, comma-separated (default: the file names' stems)",
+    )
     p.add_argument(
         "--bits",
         type=int,
         choices=(8, 16),
         default=d.bits,
-        help="bits per channel (default: input)",
+        metavar="BITS",
+        help="bits per channel: 8 or 16 (default: the inputs')",
     )
     p.add_argument(
         "--lr-conflict",
         choices=("error", "dominant"),
         default=d.lr_conflict,
-        help="lr-split: texels covered by both sides are an error (default) or go to the larger",
+        metavar="HOW",
+        help="lr-split: a texel covered by both sides is an error, or goes to the larger "
+        "(dominant)",
     )
-    p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
-    p.add_argument("--json", action="store_true", help="print the report and table as JSON")
+    add_force(p)
+    add_json(p, "the report and channel table")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -82,5 +96,5 @@ def run(args: argparse.Namespace) -> int:
         f"{res.bits}-bit) -> {args.output}"
     )
     for warning in [*res.report.warnings, *res.packed.notes]:
-        err.print(f"[yellow]warning:[/] {warning}")
+        problem(f"[yellow]warning:[/] {warning}", markup=True)
     return 0

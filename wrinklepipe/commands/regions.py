@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from wrinklepipe.commands._options import add_force, add_json, add_output
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.jobs.regions import SNIPPET_FILE, RegionsJobOptions, regions_job
 from wrinklepipe.masks.layouts import LAYOUTS
@@ -42,44 +43,56 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d = RegionsJobOptions()
     m = TargetRegionsOptions()
     p.add_argument("mesh", metavar="MESH", help="mesh with morph targets (.glb .gltf .usd* .obj)")
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
-    p.add_argument("--material", default=None, help="the wrinkled material (glTF / USD)")
+    add_output(p, "output folder")
+    p.add_argument(
+        "--material", default=None, metavar="NAME", help="the wrinkled material (glTF / USD)"
+    )
     p.add_argument(
         "--meshes", default=None, metavar="NAMES", help="comma-separated meshes to wrinkle only"
     )
     p.add_argument(
         "--regions", type=int, default=None, metavar="N", help="cluster into at most N regions"
     )
-    p.add_argument("--size", type=int, default=m.size, metavar="N", help=f"mask size ({m.size})")
+    p.add_argument("--size", type=int, default=m.size, metavar="N", help="mask size")
     p.add_argument(
         "--supersample",
         type=int,
         choices=(1, 2, 3, 4),
         default=m.supersample,
-        help=f"samples per texel per axis ({m.supersample})",
+        metavar="N",
+        help="samples per texel per axis: 1 to 4",
     )
     p.add_argument(
-        "--blur", type=float, default=m.blur, metavar="PX", help=f"Gaussian sigma ({m.blur:g})"
+        "--blur", type=float, default=m.blur, metavar="PX", help="Gaussian sigma in texels"
     )
     p.add_argument(
-        "--padding", type=int, default=m.padding, metavar="PX", help=f"edge padding ({m.padding})"
+        "--padding", type=int, default=m.padding, metavar="PX", help="edge padding in texels"
     )
     p.add_argument(
         "--threshold",
         type=float,
         default=m.threshold,
-        help=f"fraction of a target's reference change below which masks are 0 ({m.threshold:g})",
+        metavar="F",
+        help="fraction of a target's reference change below which masks are 0",
     )
     p.add_argument(
         "--layout",
         choices=LAYOUTS,
         default=d.layout,
-        help=f"mask layout convert ships ({d.layout})",
+        metavar="LAYOUT",
+        help="mask layout convert ships: " + ", ".join(LAYOUTS),
     )
-    p.add_argument("--bits", type=int, choices=(8, 16), default=d.bits, help="mask PNG bits")
+    p.add_argument(
+        "--bits",
+        type=int,
+        choices=(8, 16),
+        default=d.bits,
+        metavar="BITS",
+        help="mask PNG bits: 8 or 16",
+    )
     p.add_argument("--maps", default=None, metavar="DIR", help="a bake-states output folder")
-    p.add_argument("--force", action="store_true", help="replace a non-empty output folder")
-    p.add_argument("--json", action="store_true", help="print regions.json's summary as JSON")
+    add_force(p)
+    add_json(p, "regions.json's summary")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -10,11 +10,11 @@ from wrinklepipe.batch import AssetOptions, LocalEngine
 from wrinklepipe.batch.folders import output_folders, plan_validation, single_result
 from wrinklepipe.batch.publish import publish, run_and_publish
 from wrinklepipe.batch.run import BatchRun
+from wrinklepipe.commands._options import add_fail_on, add_json, add_report
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import validate
-from wrinklepipe.validate.catalogue import SEVERITIES
 from wrinklepipe.validate.config import Config, load_config
 from wrinklepipe.validate.context import RENDER_SIZE_MAX, RENDER_SIZE_MIN
 from wrinklepipe.validate.report import print_summary, report_json, write_reports
@@ -39,24 +39,21 @@ folder of outputs: the worst asset's).
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("path", metavar="PATH", help="folder, .gltf/.glb, .usd*, manifest, .wpv, demo")
-    p.add_argument("--json", action="store_true", help="print the JSON report on stdout")
-    p.add_argument(
-        "--report", metavar="FILE", help="write the JSON report (a folder of outputs: summary)"
-    )
+    add_json(p, "the report (a folder of outputs: the summary)")
+    add_report(p, "the report (a folder of outputs: the summary)")
     p.add_argument("--junit", metavar="FILE", help="write JUnit XML (one test case per asset)")
     p.add_argument("--sarif", metavar="FILE", help="write SARIF 2.1.0 (the validation issues)")
     p.add_argument(
-        "-j", "--jobs", type=int, metavar="N", help="a folder of outputs: worker processes (cores)"
+        "-j",
+        "--jobs",
+        type=int,
+        metavar="N",
+        help="a folder of outputs: worker processes (default: the cores)",
     )
     p.add_argument(
         "--html", metavar="FILE", help="write an HTML report (images in FILE's <stem>_files/)"
     )
-    p.add_argument(
-        "--fail-on",
-        choices=SEVERITIES,
-        default=AssetOptions().fail_on,
-        help=f"lowest severity that makes the exit code 1 (default: {AssetOptions().fail_on})",
-    )
+    add_fail_on(p)
     p.add_argument("--config", metavar="FILE", help="TOML/JSON: ignore codes, change severities")
     p.add_argument(
         "--no-timings",
@@ -68,6 +65,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--render-size",
         type=int,
         default=None,
+        metavar="N",
         help=f"render target size (default: the base map's largest side, within "
         f"{RENDER_SIZE_MIN}..{RENDER_SIZE_MAX})",
     )
@@ -78,7 +76,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--textures",
         choices=("auto", "png", "compressed"),
         default=LoadOptions().textures,
-        help="folders: validate the BC copies in compressed/ (auto: when present) or the PNGs",
+        metavar="WHICH",
+        help="a folder: validate the block-compressed copies in compressed/ (auto: when "
+        "present), or the PNGs: auto, png or compressed",
     )
 
 
@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     write_reports(report, args.report, args.html, args.fail_on, inputs=inputs)
     if args.json:
         emit_json(report_json(report, args.fail_on))
-    print_summary(report, err, args.fail_on)
+    print_summary(report, args.fail_on)
     if args.junit or args.sarif:
         _one_asset_reports(args, report, time.perf_counter() - t0)
     return report.exit_code(args.fail_on)

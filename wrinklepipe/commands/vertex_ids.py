@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from wrinklepipe.commands._options import add_output
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.geometry.vertex_ids import VertexIdOptions
 from wrinklepipe.outputs.per_vertex import write_per_vertex
@@ -32,16 +33,16 @@ examples:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     d = VertexIdOptions()  # the defaults: one place
     p.add_argument("mesh", metavar="MESH", help="mesh file")
-    p.add_argument("-o", "--output", metavar="OUT", default=None, help=".npy, .json or .txt")
+    add_output(p, "output file: .npy, .json or .txt (default: the summary only)", required=False)
     p.add_argument("--tolerance", type=float, default=None, metavar="T", help="absolute tolerance")
     p.add_argument(
         "--relative",
         type=float,
         default=d.relative_tolerance,
         metavar="R",
-        help=f"tolerance relative to the bounding-box diagonal (default {d.relative_tolerance:g})",
+        help="tolerance relative to the bounding-box diagonal",
     )
-    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -4,9 +4,15 @@ from __future__ import annotations
 
 import argparse
 import webbrowser
+from pathlib import Path
+from urllib.parse import urlencode
 
-from wrinklepipe.console import err
+from rich.markup import escape
+
+from wrinklepipe.console import info
 from wrinklepipe.errors import input_error
+from wrinklepipe.gltf.container import open_container
+from wrinklepipe.names import unknown_names
 from wrinklepipe.view.server import Site, ViewServer, find_asset, find_three
 
 NAME = "view"
@@ -22,18 +28,42 @@ tools/node; no CDN) and PATH's folder. Ctrl-C stops it.
 examples:
   wrinklepipe view build/ada
   wrinklepipe view build/ada/ada.glb --port 8765 --open
+  wrinklepipe view build/robot --clip Dance
 """
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("path", metavar="PATH", help="convert output folder, .gltf or .glb")
-    p.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (0: any free one)")
+    p.add_argument(
+        "--port", type=int, default=8765, metavar="PORT", help="port on 127.0.0.1 (0: any free one)"
+    )
     p.add_argument("--three", metavar="DIR", default=None, help="an npm `three` package folder")
     p.add_argument("--open", action="store_true", help="open the page in the default browser")
+    p.add_argument(
+        "--clip",
+        metavar="NAME",
+        default=None,
+        help="the animation the timeline opens on (default: the wrinkle weights' clip)",
+    )
+
+
+def _clip_query(gltf: Path, name: str | None) -> str:
+    """``?clip=NAME`` for the page, after checking the asset has an animation of that name."""
+    if name is None:
+        return ""
+    names = [
+        str(a.get("name", ""))
+        for a in open_container(gltf).gltf.get("animations", [])
+        if isinstance(a, dict)
+    ]
+    if name not in names:
+        raise input_error("--clip", unknown_names("clip", [name], names, f" of {gltf.name}"))
+    return "?" + urlencode({"clip": name})
 
 
 def run(args: argparse.Namespace) -> int:
     folder, gltf = find_asset(args.path)
+    query = _clip_query(gltf, args.clip)
     site = Site(folder, gltf, find_three(args.three))
     try:
         server = ViewServer(site, args.port)
@@ -41,9 +71,10 @@ def run(args: argparse.Namespace) -> int:
         raise input_error(
             f"127.0.0.1:{args.port}", f"cannot listen: {exc.strerror or exc}"
         ) from None
-    err.print(f"[bold green]viewing[/] {gltf} at {server.url}  (Ctrl-C stops)")
+    url = server.url + query
+    info(f"[bold green]viewing[/] {escape(str(gltf))} at {url}  (Ctrl-C stops)", markup=True)
     if args.open:
-        webbrowser.open(server.url)
+        webbrowser.open(url)
     try:
         server.serve_forever()
     except KeyboardInterrupt:

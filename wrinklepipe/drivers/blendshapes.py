@@ -44,6 +44,7 @@ from wrinklepipe.drivers.curves import (
     sample_keys,
 )
 from wrinklepipe.errors import InputError, Problem
+from wrinklepipe.names import unknown_names
 from wrinklepipe.presets import arkit
 from wrinklepipe.suffixes import is_gltf
 
@@ -96,17 +97,20 @@ def evaluate_rows(
     problems = []
     for i, r in enumerate(rows):
         if r.input not in in_pos:
-            shown = ", ".join(list(input_names)[:12]) + (" ..." if len(input_names) > 12 else "")
             problems.append(
                 Problem(
                     where,
-                    f"row names an unknown blend shape {r.input!r} (the mesh has: {shown})",
+                    "row names an " + unknown_names("blend shape", [r.input], input_names),
                     f"rows[{i}]",
                 )
             )
         if r.output not in out_pos:
             problems.append(
-                Problem(where, f"row names an unknown output {r.output!r}", f"rows[{i}]")
+                Problem(
+                    where,
+                    "row names an " + unknown_names("output", [r.output], output_names),
+                    f"rows[{i}]",
+                )
             )
     if problems:
         raise InputError(problems)
@@ -158,11 +162,19 @@ def _outputs(ctx: DriverContext, rows: Sequence[Row]) -> list[str]:
         region, _, state = n.partition(":")
         if region not in ctx.regions:
             problems.append(
-                Problem(ctx.source, f"row output names an unknown region {region!r}", "rows")
+                Problem(
+                    ctx.source,
+                    "row output names an " + unknown_names("region", [region], ctx.regions),
+                    "rows",
+                )
             )
         elif state and state not in ctx.states:
             problems.append(
-                Problem(ctx.source, f"row output names an unknown state {state!r}", "rows")
+                Problem(
+                    ctx.source,
+                    "row output names an " + unknown_names("state", [state], ctx.states),
+                    "rows",
+                )
             )
     if problems:
         raise InputError(problems)
@@ -191,7 +203,7 @@ def blendshapes_driver(
         universe = mesh_names or tuple(morphs)
         unknown = [n for n in morphs if n not in universe]
         if unknown:
-            raise spec_problem(ctx, f"unknown blend shape(s) {unknown}", "morphs")
+            raise spec_problem(ctx, unknown_names("blend shape", unknown, universe), "morphs")
         times = np.zeros(1) if times is None else times
         inputs = np.array([[morphs.get(n, 0.0) for n in universe]] * len(times))
     else:
@@ -201,7 +213,9 @@ def blendshapes_driver(
         universe = mesh_names or tuple(keys)
         unknown = [n for n in keys if n not in universe]
         if unknown:
-            raise spec_problem(ctx, f"keys for unknown blend shape(s) {unknown}", "keys")
+            raise spec_problem(
+                ctx, "keys for an " + unknown_names("blend shape", unknown, universe), "keys"
+            )
         if times is None:
             times = frame_times(*keys_range(keys), fps)
         inputs = sample_keys(keys, universe, times, interp)

@@ -45,6 +45,7 @@ import numpy as np
 
 from wrinklepipe.drivers.base import DriverContext, DriverResult, register, resolve, spec_problem
 from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.names import did_you_mean, unknown_names
 from wrinklepipe.suffixes import is_gltf
 
 
@@ -122,10 +123,16 @@ def _gltf_bones_doc(
     joints = [str(j) for j in spec.get("joints", names)]
     unknown = [j for j in joints if j not in names]
     if unknown:
-        raise spec_problem(ctx, f"joints {unknown} are not in {path.name}'s skin", "joints")
+        raise spec_problem(
+            ctx, unknown_names("joint", unknown, names, f" of {path.name}'s skin"), "joints"
+        )
     root = spec.get("root")
     if root is not None and str(root) not in names:
-        raise spec_problem(ctx, f"root joint {root!r} is not in {path.name}'s skin", "root")
+        raise spec_problem(
+            ctx,
+            f"root joint {root!r} is not in {path.name}'s skin{did_you_mean(str(root), names)}",
+            "root",
+        )
     ref_names = [str(k) for k in dict(spec.get("reference_times", {}))]
     ref_times = [float(t) for t in dict(spec.get("reference_times", {})).values()]
     # one read of the file: rest pose, reference frames, animation frames

@@ -41,6 +41,7 @@ from wrinklepipe.drivers.base import (
 from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.geometry.keyframes import sample_channel_at
 from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.names import unknown_names
 from wrinklepipe.suffixes import GLTF_SUFFIXES, is_gltf
 
 INTERPOLATIONS = ("linear", "cubic", "step")
@@ -219,9 +220,9 @@ def sample_keys(keys: Keys, names: Sequence[str], times: np.ndarray, interp: str
 def _target_index(ctx: DriverContext, name: str, key: str) -> tuple[int, int | None]:
     region, _, state = name.partition(":")
     if region not in ctx.regions:
-        raise spec_problem(ctx, f"unknown region {region!r} (regions: {list(ctx.regions)})", key)
+        raise spec_problem(ctx, unknown_names("region", [region], ctx.regions), key)
     if state and state not in ctx.states:
-        raise spec_problem(ctx, f"unknown state {state!r} (states: {list(ctx.states)})", key)
+        raise spec_problem(ctx, unknown_names("state", [state], ctx.states), key)
     return ctx.regions.index(region), (ctx.states.index(state) if state else None)
 
 

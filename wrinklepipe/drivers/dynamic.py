@@ -24,6 +24,7 @@ from wrinklepipe.drivers.base import (
 )
 from wrinklepipe.drivers.curves import keys_range, load_keys, morph_animation, sample_keys
 from wrinklepipe.geometry.dynamic import DynamicWeights, morph_pose
+from wrinklepipe.names import unknown_names
 from wrinklepipe.suffixes import is_gltf
 
 
@@ -56,7 +57,7 @@ def dynamic_driver(
     t, names, x = _morph_frames(ctx, spec, times)
     unknown = [n for n in names if n not in mesh.morph_names]
     if unknown:
-        raise spec_problem(ctx, f"unknown blend shape(s) {unknown}", "keys")
+        raise spec_problem(ctx, unknown_names("blend shape", unknown, mesh.morph_names), "keys")
     op = DynamicWeights.build(mesh.positions, mesh.indices, vertex_ids=mesh.vertex_ids)
     frames = [
         np.asarray(op.frame(morph_pose(mesh, dict(zip(names, map(float, row))))), np.float32)

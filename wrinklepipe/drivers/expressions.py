@@ -32,6 +32,7 @@ from wrinklepipe.drivers.base import (
 )
 from wrinklepipe.drivers.curves import keys_range, load_keys, sample_keys
 from wrinklepipe.errors import InputError, Problem
+from wrinklepipe.names import unknown_names
 from wrinklepipe.presets import jimenez
 
 
@@ -47,7 +48,11 @@ def expression_matrix(
         for region, w in table[e].items():
             if region not in regions:
                 problems.append(
-                    Problem(where, f"unknown region {region!r}", f"expressions.{e}.{region}")
+                    Problem(
+                        where,
+                        unknown_names("region", [region], regions),
+                        f"expressions.{e}.{region}",
+                    )
                 )
                 continue
             mat[i, list(regions).index(region)] = np.float32(w)
@@ -85,9 +90,7 @@ def expressions_driver(
         mix_raw = spec["morphs"]
         unknown = [e for e in mix_raw if e not in names]
         if unknown:
-            raise spec_problem(
-                ctx, f"unknown expression(s) {unknown} (table: {list(names)})", "morphs"
-            )
+            raise spec_problem(ctx, unknown_names("expression", unknown, names), "morphs")
         times = np.zeros(1) if times is None else times
         mix = np.array([[float(mix_raw.get(e, 0.0)) for e in names]] * len(times))
     else:
@@ -96,9 +99,7 @@ def expressions_driver(
             raise spec_problem(ctx, "expressions driver needs 'keys' (or 'morphs')", "keys")
         unknown = [e for e in keys if e not in names]
         if unknown:
-            raise spec_problem(
-                ctx, f"unknown expression(s) {unknown} (table: {list(names)})", "keys"
-            )
+            raise spec_problem(ctx, unknown_names("expression", unknown, names), "keys")
         if times is None:
             times = frame_times(*keys_range(keys), fps)
         mix = sample_keys(keys, names, times, interp)

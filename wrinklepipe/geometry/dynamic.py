@@ -32,6 +32,7 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
+from wrinklepipe.names import unknown_names
 
 NAME = "dynamic"
 
@@ -275,9 +276,7 @@ def morph_pose(mesh: Mesh, weights: dict[str, float], source: str = "") -> np.nd
         )
     unknown = [n for n in weights if n not in names or "@" in n]
     if unknown:
-        raise input_error(
-            src, f"unknown morph target(s) {unknown}; the mesh has {names}", key="--morph"
-        )
+        raise input_error(src, unknown_names("morph target", unknown, names), key="--morph")
     for name, w in weights.items():
         if not np.isfinite(w):
             raise input_error(src, f"morph weight for {name!r} is not finite", key="--morph")

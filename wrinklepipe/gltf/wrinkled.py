@@ -29,6 +29,7 @@ from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.gltf.document import ARRAY_BUFFER, Document, PrimitiveRef
 from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles, rest_positions
 from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE
+from wrinklepipe.names import did_you_mean
 
 #: Largest integer a float32 holds exactly (vertex IDs are FLOAT accessors).
 MAX_FLOAT_ID = 1 << 24
@@ -70,7 +71,8 @@ def select_materials(
             if not hits:
                 raise input_error(
                     file,
-                    f"no material {name!r} in {doc.path.name} (materials: {material_listing(doc)})",
+                    f"no material {name!r} in {doc.path.name}{did_you_mean(name, names)} "
+                    f"(materials: {material_listing(doc)})",
                     key,
                 )
             if len(hits) > 1:
@@ -116,6 +118,15 @@ def mesh_listing(doc: Document, materials: list[int]) -> str:
     return "; ".join(parts) or "none"
 
 
+def _mesh_and_node_names(doc: Document, refs: list[PrimitiveRef]) -> list[str]:
+    """The names of the meshes of ``refs`` and of the nodes instancing them."""
+    out = []
+    for mesh in dict.fromkeys(r.mesh for r in refs):
+        out.append(doc.mesh_name(mesh))
+        out += [doc.node_name(n) for n in doc.mesh_nodes(mesh)]
+    return out
+
+
 def restrict_to_meshes(
     doc: Document,
     refs: list[PrimitiveRef],
@@ -140,7 +151,8 @@ def restrict_to_meshes(
         if not hits:
             raise input_error(
                 file,
-                f"no mesh or node {name!r} in {doc.path.name} has a primitive using {mats} "
+                f"no mesh or node {name!r} in {doc.path.name} has a primitive using {mats}"
+                f"{did_you_mean(name, _mesh_and_node_names(doc, refs))} "
                 f"(meshes using it: {mesh_listing(doc, materials)})",
                 f"meshes[{k}]",
             )
@@ -202,6 +214,8 @@ class Selection:
     materials: list[int]
     refs: list[PrimitiveRef]
     notes: list[str] = field(default_factory=list)
+    #: clone -> the source's material it copies (messages name the material the user named)
+    origin: dict[int, int] = field(default_factory=dict)
 
 
 def select_wrinkled(
@@ -226,11 +240,18 @@ def select_wrinkled(
         notes.append(f"the document has no material: added {mat['name']!r} for its primitives")
     chosen = select_materials(doc, material, manifest)
     refs = wrinkled_primitives(doc, chosen)
+    origin: dict[int, int] = {}
     if meshes:
         refs = restrict_to_meshes(doc, refs, meshes, chosen, manifest)
+        source = {(r.mesh, r.primitive): r.material for r in refs}
         refs, chosen, n = clone_shared_materials(doc, refs)
+        origin = {
+            r.material: source[(r.mesh, r.primitive)]
+            for r in refs
+            if r.material != source[(r.mesh, r.primitive)]
+        }
         notes += n
-    return Selection(chosen, refs, notes)
+    return Selection(chosen, refs, notes, origin)
 
 
 @dataclass
@@ -348,19 +369,24 @@ TEXTURE_TRANSFORM = "KHR_texture_transform"
 
 
 def material_normal_texture(
-    doc: Document, materials: list[int], manifest: str | Path = ""
+    doc: Document,
+    materials: list[int],
+    manifest: str | Path = "",
+    origin: dict[int, int] | None = None,
 ) -> dict[str, Any]:
     """The ``normalTexture`` the wrinkled materials share, when it is to be the base map.
 
     Refused, each with one message: a material without one, materials with different ones,
     a ``KHR_texture_transform`` on it or ``texCoord`` other than 0 (masks and states are laid
     out on TEXCOORD_0 without a transform), a ``scale`` other than 1 (the wrinkle shaders read
-    the base unscaled)."""
+    the base unscaled). Messages name the source's material (``origin`` maps a clone made for
+    a ``meshes`` restriction back to it)."""
     file = str(manifest or doc.file)
+    origin = origin or {}
     infos = []
     for m in materials:
         info = doc.array("materials")[m].get("normalTexture")
-        name = doc.material_name(m)
+        name = doc.material_name(origin.get(m, m))
         if not isinstance(info, dict) or not isinstance(info.get("index"), int):
             raise input_error(
                 file,
@@ -368,7 +394,7 @@ def material_normal_texture(
                 'normalTexture; name the base normal map with base = "FILE"',
                 "base",
             )
-        where = f"{doc.path.name} /materials/{m}/normalTexture"
+        where = f"{doc.path.name} /materials/{origin.get(m, m)}/normalTexture"
         if TEXTURE_TRANSFORM in (info.get("extensions") or {}):
             raise input_error(
                 file,
@@ -396,7 +422,8 @@ def material_normal_texture(
             file,
             "base is omitted but the wrinkled materials use different normal textures ("
             + ", ".join(
-                f"{doc.material_name(m)!r}: texture {i['index']}" for m, i in zip(materials, infos)
+                f"{doc.material_name(origin.get(m, m))!r}: texture {i['index']}"
+                for m, i in zip(materials, infos)
             )
             + '); name the base normal map with base = "FILE"',
             "base",

@@ -134,7 +134,7 @@ def convert(
                 # curves depend on the regions and the mesh, not on the sizes chosen)
                 if asset.mesh is not None and asset.mesh.uvs is not None:
                     asset = replace(asset, mesh=prepare_mesh(asset.mesh))
-                curves, drivers_notes = evaluate_drivers(asset, manifest.root)
+                curves, drivers_notes = evaluate_drivers(asset, manifest.root, manifest.path)
             poses = judged_poses(asset, curves)
             with console.status("choosing sizes, scale and formats by fidelity"):
                 asset, stage_rep = run_stages(
@@ -175,9 +175,10 @@ def convert(
                     choices["color"] = color_format.to_json()
             notes += n
             read = input_rows(manifest.root, manifest.input_files)
-            notes += write_folder(
-                tmp, files, pkg, opt.usd_format, document, got.usd, output, opt.png_level
-            )
+            with console.status("writing the output folder"):
+                notes += write_folder(
+                    tmp, files, pkg, opt.usd_format, document, got.usd, output, opt.png_level
+                )
             with console.status("validating"):
                 validation = (
                     validate_output(tmp, manifest.path, opt.render, html_page=True, source=source)

@@ -189,6 +189,45 @@ def _color_html(color: dict[str, Any] | None, table: Any) -> str:
     )
 
 
+#: A checkerboard behind transparent texels (CSS, 16 px squares).
+CHECKERBOARD = "repeating-conic-gradient(#c8c8c8 0% 25%, #f4f4f4 0% 50%) 0 0 / 16px 16px"
+
+#: An SVG filter showing a texture's alpha channel as grey levels (in sRGB: the stored values).
+#: (Its RGB under alpha 0 cannot be shown from the file: browsers decode PNGs premultiplied;
+#: the regions table shows each region's mask whatever channel holds it.)
+ALPHA_FILTERS = (
+    "<svg width='0' height='0' style='position:absolute' aria-hidden='true'>"
+    "<filter id='alpha' color-interpolation-filters='sRGB'><feColorMatrix type='matrix' "
+    "values='0 0 0 1 0  0 0 0 1 0  0 0 0 1 0  0 0 0 0 1'/></filter></svg>"
+)
+
+
+def _alpha_textures(report: dict[str, Any]) -> set[str]:
+    """The files of the mask textures whose alpha channel holds a region (``channel: "a"`` in a
+    region's channel table; its ``texture`` is the mask texture's index, written as
+    ``textures/mask_<index>.png``)."""
+    out = set()
+    for r in report["asset"]["regions"]:
+        mask = r.get("mask")
+        if isinstance(mask, dict) and mask.get("channel") == "a":
+            t = mask.get("texture")
+            out.add(f"textures/mask_{t}.png" if isinstance(t, int) else str(t))
+    return out
+
+
+def _texture_figures(file: str, alpha: bool) -> str:
+    """A texture's thumbnail on a checkerboard; with ``alpha``, its alpha channel as grey."""
+    esc = html.escape
+    views = [("", "checker", file)]
+    if alpha:
+        views += [("filter:url(#alpha)", "", "alpha")]
+    return "".join(
+        f"<figure class='tex'><img src='{esc(file)}' class='{cls}' style='{style}' "
+        f"alt='{esc(file)} {esc(label)}'><figcaption>{esc(label)}</figcaption></figure>"
+        for style, cls, label in views
+    )
+
+
 def report_html(report: dict[str, Any]) -> str:
     """A static, self-contained HTML summary of report.json (textures linked, not embedded)."""
     esc = html.escape
@@ -206,17 +245,21 @@ def report_html(report: dict[str, Any]) -> str:
         f"<title>wrinklepipe convert: {esc(report['name'])}</title>",
         "<style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}"
         "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}"
-        "img{width:128px;image-rendering:pixelated;margin:2px}</style></head><body>",
+        "img{width:128px;image-rendering:pixelated;margin:2px}"
+        # transparent texels show a checkerboard, never black
+        f".checker{{background:{CHECKERBOARD}}}"
+        "figure.tex{display:inline-block;margin:4px;vertical-align:top}"
+        "figure.tex img{width:160px}</style></head><body>",
+        ALPHA_FILTERS,
         f"<h1>{esc(report['name'])}</h1>",
         f"<p>encoding <b>{esc(a['encoding'])}</b>, scale {a['scale']}, policy "
         f"<b>{esc(a['policy'])}</b>; {a['vertices']} vertices, {a['triangles']} triangles, "
         f"{len(a['morph_targets'])} morph targets.</p>",
-        "<h2>Textures</h2><div>",
+        "<h2>Textures</h2><p>On a checkerboard where they are transparent; a mask texture "
+        "with a region in alpha also as that channel (0 black, 1 white). Each region's mask "
+        "alone, whatever channel holds it: the regions table below.</p><div>",
         "".join(
-            f"<figure style='display:inline-block'><img src='{esc(o['file'])}' "
-            # masks keep a region in alpha: show them on black, texels unsmoothed
-            "style='width:160px;background:#000;image-rendering:pixelated' "
-            f"alt='{esc(o['file'])}'><figcaption>{esc(o['file'])}</figcaption></figure>"
+            _texture_figures(o["file"], o["file"] in _alpha_textures(report))
             for o in report["outputs"]
             if o["file"].startswith("textures/")
         ),

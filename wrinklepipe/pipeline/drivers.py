@@ -15,6 +15,7 @@ from wrinklepipe import drivers as wd
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.drivers.base import resolve
 from wrinklepipe.drivers.curves import load_keys, morph_animation, sample_keys
+from wrinklepipe.errors import InputError, Problem
 from wrinklepipe.gltf.animation import read_morph_tracks
 from wrinklepipe.package import WeightCurves
 from wrinklepipe.readers.rig import GltfRig
@@ -83,8 +84,11 @@ def morph_inputs(
     return sample_keys(keys, names, t, interp or "linear").astype(np.float32)
 
 
-def evaluate_drivers(asset: WrinkleAsset, root: Path) -> tuple[list[WeightCurves], list[str]]:
-    """Weight curves for each driver of the asset (wrinklepipe.drivers); notes on what happened."""
+def evaluate_drivers(
+    asset: WrinkleAsset, root: Path, source: str | Path = ""
+) -> tuple[list[WeightCurves], list[str]]:
+    """Weight curves for each driver of the asset (wrinklepipe.drivers); notes on what happened.
+    A bad driver spec is reported against ``source`` (the manifest) and its ``drivers[i]`` key."""
     notes: list[str] = []
     if not asset.drivers:
         return [expression_cycle(asset)] if asset.expressions else [], [
@@ -97,7 +101,10 @@ def evaluate_drivers(asset: WrinkleAsset, root: Path) -> tuple[list[WeightCurves
     used: set[str] = set()
     for i, spec in enumerate(asset.drivers):
         kind = str(spec["kind"])
-        res = wd.evaluate(kind, ctx, spec)
+        try:
+            res = wd.evaluate(kind, ctx, spec)
+        except InputError as exc:
+            raise _in_manifest(exc, ctx.source, source, i) from None
         if res.per_vertex:
             notes.append(f"drivers[{i}] ({kind}) gives per-vertex weights; not written as a curve")
             continue
@@ -113,3 +120,18 @@ def evaluate_drivers(asset: WrinkleAsset, root: Path) -> tuple[list[WeightCurves
         notes.extend(f"drivers[{i}] ({kind}): {n}" for n in res.notes)
         curves.append(curve)
     return curves, notes
+
+
+def _in_manifest(exc: InputError, placeholder: str, source: str | Path, i: int) -> InputError:
+    """``exc`` with the driver spec's problems placed in the manifest: its file and
+    ``drivers[i].KEY`` (problems about another file keep theirs)."""
+    if not source:
+        return exc
+    return InputError(
+        [
+            Problem(str(source), p.message, f"drivers[{i}]" + (f".{p.key}" if p.key else ""))
+            if p.file == placeholder
+            else p
+            for p in exc.problems
+        ]
+    )

@@ -221,7 +221,7 @@ def read_source_document(manifest: Any) -> SourceDocument:
     base_texture = None
     base_stats: dict[str, Any] | None = None
     if manifest.base is None:
-        info = material_normal_texture(doc, sel.materials, manifest.path)
+        info = material_normal_texture(doc, sel.materials, manifest.path, sel.origin)
         base_texture = int(info["index"])
         key = f"/materials/{sel.materials[0]}/normalTexture"
         base_stats = {}

@@ -328,7 +328,7 @@ def _load_manifest(p: Path) -> ValidationInput:
     inp.asset = asset
     inp.has_source = True
     if asset.drivers:
-        curves, _ = guard_reader(lambda: evaluate_drivers(asset, p.parent), p, "the drivers")
+        curves, _ = guard_reader(lambda: evaluate_drivers(asset, p.parent, p), p, "the drivers")
         inp.weight_curves = {str(c.name): np.asarray(c.values, np.float32) for c in curves}
         inp.curves = list(curves)
     inp.pointers.update({k: str(p) for k in ("meta", "masks", "channels", "textures")})

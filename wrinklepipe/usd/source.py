@@ -31,6 +31,7 @@ from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.merge import merge_meshes
 from wrinklepipe.gltf.wrinkled import front_projection_uvs
+from wrinklepipe.names import did_you_mean
 from wrinklepipe.usd.meshes import open_stage, read_usd_meshes, uv_primvar
 
 
@@ -93,7 +94,9 @@ def _find_material(
     if len(hits) == 1:
         return hits[0]
     if not hits:
-        what = f"no material {name!r} in {stage_name}"
+        what = f"no material {name!r} in {stage_name}" + did_you_mean(
+            name, [m.rsplit("/", 1)[-1] for m in materials]
+        )
     else:
         what = f"material name {name!r} is ambiguous in {stage_name} (name it by path)"
     raise input_error(file, f"{what}; its materials: {_listing(materials) or 'none'}", key)

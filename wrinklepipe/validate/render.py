@@ -39,6 +39,7 @@ from wrinklepipe.codec import srgb
 from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents
 from wrinklepipe.metrics import DECIMALS, Budget, angle_deg, delta_e, weighted_stats
+from wrinklepipe.palette import region_colours_linear
 from wrinklepipe.shading import glsl
 from wrinklepipe.shading.setup import MaskEntry, ShaderSetup
 from wrinklepipe.validate import fidelity_pictures as fp
@@ -727,8 +728,7 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
             images[f"{key}/{e}"] = pic
     # mask overlay from the UV buffer: shipped masks coloured per region over the neutral render
     overlay = np.zeros(cov.shape + (3,), np.float32)
-    rng = np.random.default_rng(7)
-    colors = rng.uniform(0.2, 1.0, (len(a.regions), 3)).astype(np.float32)
+    colors = region_colours_linear(len(a.regions))  # Tol's colour-blind-safe schemes
     overlay[cov] = np.clip(samples.masks.T @ colors, 0.0, 1.0)
     images["mask_overlay"] = 0.5 * neutral.color[..., :3] + 0.5 * overlay
     images["_region_colors"] = colors

@@ -15,6 +15,7 @@ from rich.table import Table
 
 from wrinklepipe import __version__
 from wrinklepipe.atomic import dumps_json, output_files, staged_folder, write_bytes
+from wrinklepipe.console import info, issue_counts, plural, problem, verbosity
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.png import png_bytes
 from wrinklepipe.reuse import map_threads
@@ -98,49 +99,58 @@ def normalized(doc: dict[str, Any]) -> dict[str, Any]:
 # terminal
 
 
-def print_summary(report: Report, console: Any, fail_on: str = "error", limit: int = 40) -> None:
-    """A short summary: counts, the issues (first ``limit``), the render-pass agreement."""
+def print_summary(report: Report, fail_on: str = "error", limit: int = 40) -> None:
+    """A short summary on stderr: the input, the issues (first ``limit``), the render pass's
+    agreement and the verdict. With --quiet only the warnings, errors and a failing verdict."""
 
     style = {"error": "bold red", "warning": "yellow", "info": "cyan"}
     c = report.counts
     inp = report.input
-    console.print(
+    info(
         f"[bold]{escape(str(inp.get('name')))}[/] ({escape(str(inp.get('kind')))}: "
         f"{escape(str(inp.get('path')))}) encoding {inp.get('encoding')}, policy "
-        f"{inp.get('policy')}, {len(inp.get('states', []))} states, "
-        f"{len(inp.get('regions', []))} regions"
+        f"{inp.get('policy')}, {plural(len(inp.get('states', [])), 'state')}, "
+        f"{plural(len(inp.get('regions', [])), 'region')}",
+        markup=True,
     )
-    if report.issues:
+    shown = (
+        report.issues
+        if verbosity() >= 0
+        else [i for i in report.issues if i.severity in ("error", "warning")]
+    )
+    if shown:
         t = Table(show_header=True, header_style="bold", box=None, pad_edge=False)
         t.add_column("severity")
         t.add_column("code")
         t.add_column("message", overflow="fold")
         t.add_column("where", overflow="fold")
-        for i in report.issues[:limit]:
+        for i in shown[:limit]:
             t.add_row(
                 f"[{style[i.severity]}]{i.severity}[/]",
                 i.code,
                 escape(i.message),
                 escape(i.pointer),
             )
-        console.print(t)
-        if len(report.issues) > limit:
-            console.print(f"... and {len(report.issues) - limit} more (see the JSON report)")
+        problem(t)
+        if len(shown) > limit:
+            problem(f"... and {len(shown) - limit} more (see the JSON report)")
     gpu = report.metrics.get("gpu_vs_reference_deg")
     if gpu:
         worst = max(gpu.values(), key=lambda s: s["p99"])
-        console.print(
-            f"render pass ({escape(str(report.render.get('renderer', '')))}): GPU vs numpy "
+        info(
+            f"render pass ({report.render.get('renderer', '')}): GPU vs numpy "
             f"reference worst mean {max(s['mean'] for s in gpu.values()):.3f} deg, "
-            f"p99 {worst['p99']:.3f} deg over {len(gpu)} poses"
+            f"p99 {worst['p99']:.3f} deg over {plural(len(gpu), 'pose')}"
         )
     elif report.render.get("skipped"):
-        console.print(f"render pass skipped: {escape(report.render['skipped'])}")
-    verdict = "[bold red]FAILED[/]" if report.exit_code(fail_on) else "[bold green]passed[/]"
-    console.print(
-        f"{verdict}: {c['error']} error(s), {c['warning']} warning(s), {c['info']} info"
+        info(f"render pass skipped: {report.render['skipped']}")
+    failed = bool(report.exit_code(fail_on))
+    verdict = "[bold red]FAILED[/]" if failed else "[bold green]passed[/]"
+    (problem if failed else info)(
+        f"{verdict}: {escape(issue_counts(c))}"
         + (f", {report.ignored} ignored" if report.ignored else "")
-        + (f" (failing on {fail_on})" if fail_on != "error" else "")
+        + (f" (failing on {fail_on})" if fail_on != "error" else ""),
+        markup=True,
     )
 
 
@@ -364,13 +374,23 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
                 )
             parts.append("</table>")
         else:
-            parts.append(f"<pre>{e(dumps_json(val))}</pre>")
+            parts.append(_raw_json(val))
     if doc["render"]:
         # no timings in the page: the same input gives the same bytes (they are in the JSON)
         r = {k: v for k, v in doc["render"].items() if k not in ("poses", "render_s", "compare_s")}
-        parts.append(f"<h2>Render pass</h2><pre>{e(dumps_json(r))}</pre>")
+        parts.append(f"<h2>Render pass</h2>{_raw_json(r)}")
     parts.append("</body></html>\n")
     return "\n".join(p for p in parts if p)
+
+
+def _raw_json(value: Any) -> str:
+    """Raw JSON folded away: a ``<details>`` whose summary says how long it is."""
+    text = dumps_json(value)
+    lines = text.count("\n") + 1
+    return (
+        f"<details><summary>raw JSON ({lines} lines)</summary>"
+        f"<pre>{html.escape(text)}</pre></details>"
+    )
 
 
 def _stat_cells(st: dict[str, Any]) -> str:

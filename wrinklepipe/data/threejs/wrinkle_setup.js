@@ -153,25 +153,37 @@ export function weightVectors( setup, regionWeights, out = new Float32Array( set
 
 }
 
-// A distinct colour per region (golden-angle hues) at its group lane: vec4 per lane.
+// Region colours colour-blind readers can tell apart: Paul Tol's muted, then light, qualitative
+// schemes (SRON/EPS/TN/09-002), sRGB; the same table as wrinklepipe/palette.py (a test keeps
+// them equal), so the viewer's overlay matches validation.html's legend.
+export const REGION_COLOURS = [
+	'#CC6677', '#332288', '#DDCC77', '#117733', '#88CCEE', '#882255', '#44AA99', '#999933', '#AA4499',
+	'#77AADD', '#EE8866', '#EEDD88', '#FFAABB', '#99DDFF', '#44BB99', '#BBCC33', '#AAAA00', '#DDDDDD',
+];
+
+// The region r's colour, linear RGB (the shader blends in linear light).
+export function regionColour( r ) {
+
+	const hex = REGION_COLOURS[ r % REGION_COLOURS.length ];
+	return [ 1, 3, 5 ].map( ( i ) => {
+
+		const c = parseInt( hex.slice( i, i + 2 ), 16 ) / 255;
+		return c <= 0.04045 ? c / 12.92 : Math.pow( ( c + 0.055 ) / 1.055, 2.4 );
+
+	} );
+
+}
+
+// Each region's colour at its group lane: vec4 per lane.
 export function regionColors( setup ) {
 
 	const out = new Float32Array( setup.nGroups * 16 );
 	setup.lane.forEach( ( lane, r ) => {
 
-		const h = ( r * 0.381966 ) % 1;
-		const c = hsv( h, 0.75, 1.0 );
+		const c = regionColour( r );
 		out.set( [ c[ 0 ], c[ 1 ], c[ 2 ], 1 ], lane * 4 );
 
 	} );
 	return out;
-
-}
-
-function hsv( h, s, v ) {
-
-	const i = Math.floor( h * 6 ), f = h * 6 - i;
-	const p = v * ( 1 - s ), q = v * ( 1 - f * s ), t = v * ( 1 - ( 1 - f ) * s );
-	return [ [ v, t, p ], [ q, v, p ], [ p, v, t ], [ p, q, v ], [ t, p, v ], [ v, p, q ] ][ i % 6 ];
 
 }

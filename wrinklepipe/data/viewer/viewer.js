@@ -121,6 +121,36 @@ function buildPanel( gltf ) {
 	const select = $( 'clip' );
 	select.textContent = '';
 	gltf.animations.forEach( ( a, i ) => select.append( new Option( `${ a.name || 'animation ' + i } (${ a.duration.toFixed( 2 ) } s)`, i ) ) );
+	// the clip is chosen, not yet applied: the character stays in its rest pose until the
+	// timeline plays or is scrubbed
+	const chosen = defaultClip( gltf.animations );
+	select.value = String( chosen );
+	$( 'time' ).max = gltf.animations.length ? gltf.animations[ chosen ].duration : 1;
+	$( 'time' ).value = 0;
+	showTime( 0 );
+
+}
+
+// The clip the timeline opens on: ?clip=NAME (wrinklepipe view --clip), else the first clip
+// that animates the wrinkle weights (convert's weight curve), else the first.
+function defaultClip( animations ) {
+
+	const named = new URLSearchParams( location.search ).get( 'clip' );
+	if ( named !== null ) {
+
+		const i = animations.findIndex( ( a ) => a.name === named );
+		if ( i >= 0 ) return i;
+
+	}
+
+	const wrinkle = animations.findIndex( ( a ) => a.tracks.some( ( t ) => t.name.includes( '.wrinkleWeights[' ) ) );
+	return wrinkle >= 0 ? wrinkle : 0;
+
+}
+
+function showTime( t ) {
+
+	$( 'clock' ).textContent = `${ t.toFixed( 2 ) } s`;
 
 }
 
@@ -188,7 +218,17 @@ $( 'time' ).addEventListener( 'input', () => {
 
 	if ( ! clipAction() ) return;
 	pause();
-	state.mixer.setTime( Number( $( 'time' ).value ) );
+	const t = Number( $( 'time' ).value );
+	state.mixer.setTime( t );
+	showTime( t );
+
+} );
+$( 'clip' ).addEventListener( 'change', () => {
+
+	pause();
+	if ( clipAction() ) state.mixer.setTime( 0 );
+	$( 'time' ).value = 0;
+	showTime( 0 );
 
 } );
 $( 'neutral' ).addEventListener( 'click', () => {
@@ -216,7 +256,7 @@ function animate() {
 		state.mixer.update( dt );
 		const t = state.action ? state.action.time : 0;
 		$( 'time' ).value = t;
-		$( 'clock' ).textContent = `${ t.toFixed( 2 ) } s`;
+		showTime( t );
 
 	}
 

@@ -1,0 +1,129 @@
+"""What a CI log sees: a piped ``wrinklepipe convert`` of the 2048² demo writes one plain line
+per stage as the stage starts and as it ends, at once (read here from the pipe as the run goes),
+never cut to a terminal's width; Ctrl-C and SIGTERM end a run with 130 and 143 and leave nothing
+behind. The console script runs as a CI runner starts it: a process with its stderr on a pipe."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from wrinklepipe.demo.source import demo_source_dir
+
+pytestmark = pytest.mark.slow
+
+SCRIPT = Path(sys.executable).with_name("wrinklepipe")
+LINE = re.compile(r"^\s*(\d+\.\d) s  (.*)$")
+#: convert's stages, in order (wrinklepipe/jobs/convert.py)
+STAGES = [
+    "reading inputs",
+    "evaluating drivers",
+    "choosing sizes, scale and formats by fidelity",
+    "encoding, packing, compressing",
+    "writing the output folder",
+    "validating",
+]
+
+
+class Reader:
+    """Reads a pipe line by line in a thread, noting when each line arrived."""
+
+    def __init__(self, stream, t0: float) -> None:
+        self.lines: list[tuple[float, str]] = []
+        self.t0 = t0
+        self._thread = threading.Thread(target=self._run, args=(stream,), daemon=True)
+        self._thread.start()
+
+    def _run(self, stream) -> None:
+        for raw in stream:
+            self.lines.append((time.monotonic() - self.t0, raw.rstrip("\n")))
+
+    def wait_for(self, text: str, timeout: float = 300) -> float:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for t, line in list(self.lines):
+                if text in line:
+                    return t
+            time.sleep(0.02)
+        pytest.fail(f"no line with {text!r} in {timeout} s:\n" + self.text())
+
+    def join(self) -> None:
+        self._thread.join(timeout=60)
+
+    def text(self) -> str:
+        return "\n".join(line for _, line in self.lines)
+
+
+@pytest.fixture(scope="module")
+def manifest() -> Path:
+    return demo_source_dir(2048)
+
+
+def _start(manifest: Path, out: Path) -> tuple[subprocess.Popen, Reader, float]:
+    env = {k: v for k, v in os.environ.items() if k != "COLUMNS"}
+    t0 = time.monotonic()
+    proc = subprocess.Popen(
+        [str(SCRIPT), "convert", str(manifest), "-o", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    return proc, Reader(proc.stderr, t0), t0
+
+
+def test_piped_convert_prints_each_stage_as_it_runs(manifest: Path, tmp_path: Path) -> None:
+    out = tmp_path / ("a-long-output-folder-name-" * 4 + "end")  # the summary line passes 120
+    proc, reader, t0 = _start(manifest, out)
+    first = reader.wait_for("reading inputs")
+    assert proc.wait(timeout=900) == 0, reader.text()
+    reader.join()
+    ended = time.monotonic() - t0
+    assert proc.stdout.read() == ""  # progress is never on stdout
+    assert first < 2.0, f"the first stage line came {first:.2f} s after the start"
+    progress = [(t, LINE.match(line)) for t, line in reader.lines if LINE.match(line)]
+    said = [m.group(2) for _, m in progress]
+    for stage in STAGES:
+        start = said.index(stage)
+        assert re.fullmatch(rf"{re.escape(stage)}: done in \d+\.\d s", said[start + 1]), said
+    # each line arrived when its stage started or ended, not all at the end: the lines' own
+    # clocks and their arrival times agree, and the run's stages spread over its time
+    for t, m in progress:
+        assert abs(float(m.group(1)) - t) < 2.5, (t, m.group(0))
+    arrivals = [t for t, _ in progress]
+    assert arrivals == sorted(arrivals)
+    assert arrivals[-1] - arrivals[0] > 0.5 * (ended - arrivals[0])
+    # no line cut: the summary names the folder whole, on one line
+    wrote = [line for _, line in reader.lines if line.startswith("wrote ")]
+    assert wrote and str(out) in wrote[0] and wrote[0].endswith("vertices"), reader.text()
+    assert any(line.startswith("validation: 0 errors, ") for _, line in reader.lines)
+
+
+@pytest.mark.parametrize(
+    ("sig", "code", "during"),
+    [
+        (signal.SIGINT, 130, "choosing sizes, scale and formats by fidelity"),
+        (signal.SIGTERM, 143, "encoding, packing, compressing"),
+    ],
+)
+def test_a_signal_ends_convert_with_its_code_and_nothing_partial(
+    manifest: Path, tmp_path: Path, sig: int, code: int, during: str
+) -> None:
+    work = tmp_path / "work"
+    work.mkdir()
+    proc, reader, _ = _start(manifest, work / "out")
+    reader.wait_for(during)
+    time.sleep(0.3)
+    proc.send_signal(sig)
+    assert proc.wait(timeout=120) == code, reader.text()
+    reader.join()
+    assert f"interrupted ({signal.Signals(sig).name})" in reader.text()
+    assert sorted(os.listdir(work)) == []  # no output, no staging folder, no lock file

@@ -1,0 +1,93 @@
+"""The options several commands share, declared once: the same name, metavar, help and default
+wherever they appear (``tests/test_cli_help.py`` checks every command against this vocabulary).
+Not a command (the leading underscore keeps it out of the command list)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from wrinklepipe.console import problem
+
+#: Validation's severities, worst first (``wrinklepipe.validate.catalogue.SEVERITIES``; not
+#: imported from there, which would load the whole validator for every command's ``--help``;
+#: ``tests/test_cli_help.py`` checks the two agree).
+SEVERITIES = ("error", "warning", "info")
+
+#: The lowest severity that fails a run, unless --fail-on says otherwise.
+DEFAULT_FAIL_ON = "error"
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """The description as written (its examples and tables keep their lines), and every
+    option's default shown as ``(default: X)`` unless its help already says what it is."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if "default" in text or default is None or default is False or default == []:
+            return text
+        if default is argparse.SUPPRESS:
+            return text
+        if action.option_strings and action.nargs != 0:
+            return f"{text} (default: %(default)s)"
+        return text
+
+
+def add_output(p: argparse.ArgumentParser, what: str, required: bool = True, **kw: Any) -> None:
+    """``-o OUT, --output OUT``: where the command writes (``what``: "output folder", ...)."""
+    p.add_argument("-o", "--output", metavar="OUT", required=required, help=what, **kw)
+
+
+def add_force(p: argparse.ArgumentParser, what: str = "a non-empty output folder") -> None:
+    p.add_argument("--force", action="store_true", help=f"replace {what}")
+
+
+def add_json(p: argparse.ArgumentParser, what: str = "the report") -> None:
+    p.add_argument("--json", action="store_true", help=f"print {what} as JSON on stdout")
+
+
+def add_fail_on(p: argparse.ArgumentParser | Any, default: str | None = DEFAULT_FAIL_ON) -> None:
+    """``--fail-on SEVERITY``: the lowest validation severity that makes the exit code 1."""
+    p.add_argument(
+        "--fail-on",
+        choices=SEVERITIES,
+        default=default,
+        metavar="SEVERITY",
+        help="lowest validation severity that makes the exit code 1: error, warning or info"
+        + ("" if default else f" (default: the batch file's, else {DEFAULT_FAIL_ON})"),
+    )
+
+
+def fails(counts: dict[str, int], fail_on: str) -> bool:
+    """True when validation ``counts`` hold an issue at or above ``fail_on``."""
+    limit = SEVERITIES.index(fail_on)
+    return any(int(counts.get(s, 0)) for s in SEVERITIES[: limit + 1])
+
+
+class DeprecatedAlias(argparse.Action):
+    """An old option name kept working: stores into the new option's dest and says, once per
+    run, which name to use instead."""
+
+    def __init__(self, option_strings: list[str], dest: str, new: str = "", **kw: Any) -> None:
+        self.new = new
+        kw.setdefault("help", argparse.SUPPRESS)
+        super().__init__(option_strings, dest, **kw)
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        problem(f"warning: {option_string} is deprecated; use {self.new}")
+        setattr(namespace, self.dest, values)
+
+
+def add_report(p: argparse.ArgumentParser | Any, what: str, old: str | None = None) -> None:
+    """``--report FILE``: write the JSON ``--json`` prints to FILE (``old``: a deprecated
+    name of the same option)."""
+    p.add_argument("--report", metavar="FILE", help=f"write {what} as JSON to FILE")
+    if old:
+        p.add_argument(old, dest="report", metavar="FILE", action=DeprecatedAlias, new="--report")
