@@ -50,7 +50,7 @@ mkdir -p "$REPORTS"
 # --force: $OUT may hold the previous run's outputs (each is replaced atomically, as it was).
 "$WP" batch "${sources[@]}" --root "$ROOT" -o "$OUT" --force \
   --cache "$CACHE" --cache-size "$CACHE_SIZE" "${where[@]}" \
-  --junit "$REPORTS/junit.xml" --sarif "$REPORTS/wrinkles.sarif" --summary "$REPORTS/summary.json" \
+  --junit "$REPORTS/junit.xml" --sarif "$REPORTS/wrinkles.sarif" --report "$REPORTS/summary.json" \
   "$@"
 status=$?
 case $status in

@@ -84,7 +84,7 @@ def test_ci_examples_run_batch_with_cache_junit_and_sarif():
     gh = yaml.safe_load((ROOT / "ci" / "github-actions-example.yml").read_text())
     steps = gh["jobs"]["convert-and-validate"]["steps"]
     script = next(s["run"] for s in steps if "wrinklepipe batch" in s.get("run", ""))
-    for flag in ("--cache .wrinkle-cache", "--junit", "--sarif", "--summary"):
+    for flag in ("--cache .wrinkle-cache", "--junit", "--sarif", "--report"):
         assert flag in script
     uses = [s.get("uses", "") for s in steps]
     assert any(u.startswith("actions/cache@") for u in uses)

@@ -298,7 +298,7 @@ def test_real_gltf_mesh_with_external_buffer_is_keyed_and_reconverted(studio, tm
     out = tmp_path / "out"
     cache = tmp_path / "cache"
     args = [str(tmp_path / "real"), "-o", str(out), "--cache", str(cache), "--jobs", "1"]
-    args += ["--no-render", "--summary", str(tmp_path / "s.json")]
+    args += ["--no-render", "--report", str(tmp_path / "s.json")]
 
     def row() -> dict:
         [asset] = json.loads((tmp_path / "s.json").read_text())["assets"]

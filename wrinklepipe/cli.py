@@ -160,7 +160,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = _named_command(argv)
     # Before the command's own modules load (a second or more): a log sees the run start at once.
-    console.configure(quiet=bool({"-q", "--quiet"} & set(argv)), verbose=False)
+    console.configure(quiet=bool({"-q", "--quiet"} & set(argv)), start=True)
     if command and not {"-h", "--help"} & set(argv):
         console.started("wrinklepipe " + shlex.join(argv))
     parser = build_parser(command)

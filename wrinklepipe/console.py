@@ -47,13 +47,15 @@ def _fit(console: Console) -> None:
     console._width = None if tty or os.environ.get("COLUMNS") else UNBOUNDED_WIDTH
 
 
-def configure(quiet: bool = False, verbose: bool = False) -> None:
-    """Set up the consoles for one run: widths for where they write, the verbosity, the clock
-    that progress lines count from."""
+def configure(quiet: bool = False, verbose: bool = False, start: bool = False) -> None:
+    """Set up the consoles for one run: widths for where they write, the verbosity; with
+    ``start``, the run starts now (the clock progress lines count from)."""
     for console in (err, out, _loud):
         _fit(console)
     _state["verbosity"] = -1 if quiet else 1 if verbose else 0
     err.quiet = quiet
+    if start:
+        _state["t0"] = time.monotonic()
 
 
 def verbosity() -> int:
@@ -62,7 +64,8 @@ def verbosity() -> int:
 
 
 def elapsed() -> float:
-    """Seconds since the run started (this module's import: the CLI imports it first)."""
+    """Seconds since the run started (``configure(start=True)``, the first thing the CLI
+    does; else this module's import)."""
     return time.monotonic() - float(_state["t0"])
 
 
@@ -92,8 +95,9 @@ def problem(text: Any, markup: bool = False) -> None:
     """A warning or an error (a line, or a rich table of them): shown even with ``--quiet``;
     paths inside the working folder as the user types them there."""
     if isinstance(text, str):
-        text = as_typed(text)
-    _loud.print(text, markup=markup, highlight=False, soft_wrap=True)
+        _loud.print(as_typed(text), markup=markup, highlight=False, soft_wrap=True)
+    else:  # a table: its cells carry their own markup
+        _loud.print(text, highlight=False)
 
 
 def as_typed(text: str) -> str:

@@ -106,6 +106,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="direction towards the side light in the camera frame (+X right, +Y up, +Z "
         "towards the camera), e.g. 0.4,0.3,0.87",
     )
+    _add_solver_options(p, d)
+
+
+def _add_solver_options(p: argparse.ArgumentParser, d: CaptureJobOptions) -> None:
+    """The ratio, orientation and output options."""
     p.add_argument(
         "--nz",
         type=float,

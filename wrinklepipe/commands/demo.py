@@ -33,7 +33,7 @@ into DIR instead, and stops: a template to start your own character from.
 
 examples:
   wrinklepipe demo
-  wrinklepipe demo -o /tmp/demo --size 512 --glb
+  wrinklepipe demo -o demo-512 --size 512 --glb
   wrinklepipe demo --size 256 --write-source robot
 """
 

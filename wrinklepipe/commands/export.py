@@ -30,8 +30,8 @@ An asset a target cannot express is refused with one message (exit 2, nothing wr
 folder is written atomically and byte-identical on a rerun; --force replaces a non-empty OUT.
 
 examples:
-  wrinklepipe export build/demo --engine unreal -o build/demo_unreal
-  wrinklepipe export build/demo/demo_head.usdz --engine godot -o build/godot --force
+  wrinklepipe export build/ada --engine unreal -o build/ada_unreal
+  wrinklepipe export build/ada/ada.usdz --engine godot -o build/godot --force
 """
 
 

@@ -34,8 +34,8 @@ A, '+' only in B, '~' changed. Exit 0 when they hold the same, 1 when something 
 
 examples:
   wrinklepipe inspect RobotExpressive.glb
-  wrinklepipe inspect build/robot/robot.glb --json
-  wrinklepipe inspect --diff RobotExpressive.glb build/robot/robot.glb
+  wrinklepipe inspect build/ada/ada.glb --json
+  wrinklepipe inspect --diff head.glb build/ada/ada.glb     # exit 1: what convert added
   wrinklepipe inspect --diff assets/hero.usd build/hero/hero.usda --allow-root assets
 """
 

@@ -35,7 +35,7 @@ converting; the command prints the convert command line.
 
 examples:
   wrinklepipe regions head.glb --material Skin --maps maps/ -o regions/
-  wrinklepipe regions face.usda --regions 8 --layout lr-split -o regions8/
+  wrinklepipe regions head.glb --material Skin --regions 8 --layout lr-split -o regions8/
 """
 
 
