@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         for r in results:
             table = Table(title=f"{r.name}: {r.description}", title_justify="left")
             for col in ("step", "median", "ratio", "MP/s", "limit"):
-                table.add_column(col, justify="left" if col == "step" else "right")
+                table.add_column(col, justify="left" if col == "step" else "right", overflow="fold")
             for row in r.rows:
                 mps = "" if row.mpix_per_s is None else f"{row.mpix_per_s:.1f}"
                 table.add_row(

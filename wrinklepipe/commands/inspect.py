@@ -55,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _table(title: str, rows: list[dict[str, Any]], columns: list[str]) -> Table:
     t = Table(title=title, title_justify="left", show_lines=False)
     for c in ["#", *columns]:
-        t.add_column(c)
+        t.add_column(c, overflow="fold")  # a narrow terminal wraps a cell, never cuts it
     for i, r in enumerate(rows):
         t.add_row(str(i), *(_cell(r.get(c)) for c in columns))
     return t
