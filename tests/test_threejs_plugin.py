@@ -85,6 +85,29 @@ def test_javascript_setup_equals_python_setup():
             assert float(js["defines"][k]) == float(v), (layout, policy, k)
 
 
+@pytest.mark.skipif(shutil.which("node") is None, reason="node is not installed")
+def test_javascript_setup_names_the_colour_states_as_python_does():
+    a = demo_asset(64, color=True)
+    a = replace(a, mesh=prepare_mesh(a.mesh))
+    pkg = package_from_asset(a)
+    doc, _, _ = gltf_document(pkg)
+    ext = doc["materials"][0]["extensions"]["WRINKLEPIPE_wrinkle_maps"]
+    chans = [pkg.texture(n).pixels.shape[-1] for n in pkg.meta.masks.textures]
+    py = from_meta(pkg.meta, chans)
+    assert py.color_states == (0, 1)
+    url = json.dumps((PLUGIN_DIR / "wrinkle_setup.js").as_uri())
+    r = subprocess.run(
+        ["node", "--input-type=module", "-e", _JS % url],
+        input=json.dumps([ext]),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 0, r.stderr
+    js = json.loads(r.stdout)[0]
+    assert js["defines"] == tpl.defines(py)  # WP_NUM_COLORS, WP_COLOR_STATE(c) included
+
+
 def test_the_server_serves_its_roots_and_nothing_else(tmp_path):
     (tmp_path / "a.gltf").write_text("{}")
     (tmp_path / "secret.txt").write_text("no")

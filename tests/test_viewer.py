@@ -165,6 +165,15 @@ def _with_occluder(gltf: Path) -> Path:
     return out
 
 
+def _color_asset(root: Path) -> Path:
+    """The demo with colour states (pale where the skin stretches, flushed where it
+    compresses), pd / clamp01."""
+    a = demo_asset(128, color=True)
+    a = replace(a, mesh=prepare_mesh(a.mesh))
+    write_gltf(package_from_asset(a, PackOptions(), [expression_cycle(a)]), root / "color", "demo")
+    return root / "color" / "demo.gltf"
+
+
 def _write_assets(root: Path) -> dict[str, Path]:
     """One package per encoding, one .gltf per policy (the extension's policy edited)."""
     out = {}
@@ -213,6 +222,21 @@ def browser(tmp_path_factory):
         calls.append({"fn": "focusWrinkles", "args": []})
         calls.append({"fn": "renderDebug", "args": [2, None, SIZE], "file": "real_uv.f32"})
         calls.append(_debug_sets("real", _weight_sets(8, "clamp01"), SIZE, plan))
+    color = _color_asset(root)
+    calls.append({"fn": "load", "args": ["/asset/" + color.relative_to(root).as_posix()]})
+    calls.append({"fn": "renderDebug", "args": [2, None, SIZE], "file": "color_uv.f32"})
+    color_sets = _weight_sets(n_regions, "clamp01")
+    color_files = [f"color_{name}.f32" for name in color_sets]
+    calls.append(
+        {
+            "fn": "renderDebugSets",
+            "args": [4, list(color_sets.values()), SIZE],
+            "files": color_files,
+        }
+    )
+    calls.append(
+        {"fn": "renderColor", "args": [color_sets["strong"], SIZE], "file": "color_lit.u8"}
+    )
     characters = _characters(root)
     for name, path in characters.items():
         doc = json.loads(path.read_text())
@@ -249,6 +273,8 @@ def browser(tmp_path_factory):
     assert not errors, errors
     return {
         "assets": assets,
+        "color": color,
+        "color_sets": color_sets,
         "multi": multi,
         "real": real,
         "characters": characters,
@@ -429,3 +455,36 @@ def test_a_whole_characters_weights_play_with_its_morphs(browser, name):
     )
     assert np.abs(expect).max() > 0.5
     np.testing.assert_allclose(got, expect, atol=1e-5)
+
+
+def test_threejs_viewer_blends_the_colour_as_the_model(browser):
+    """Colour states through the plugin: the blended base colour (debug mode 4: three's
+    diffuseColor after the blend, linear) equals the numpy colour model of the shipped texels
+    (decoded, then sampled bilinearly) at every covered pixel, CIEDE2000 p99 <= 1; at strong
+    weights the colour visibly moves."""
+    from wrinklepipe.codec import srgb
+    from wrinklepipe.metrics import delta_e
+    from wrinklepipe.validate import textures as tx
+    from wrinklepipe.validate.render import color_textures
+
+    uvimg = _image(browser, "color_uv.f32")
+    cov = uvimg[..., 3] > 0.5
+    uv = uvimg[cov][:, :2].astype(np.float32)
+    inp = load_input(browser["color"])
+    s = h.samples(inp, uv)
+    base_t, states_t = color_textures(inp)
+
+    def lin(t):
+        return srgb.decode_texels(np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, -1))
+
+    cb = tx.bilinear(lin(base_t)[..., :3], uv)
+    cs = np.stack([tx.bilinear(lin(t)[..., :3], uv) for _, t in states_t])
+    d = inp.asset.region_state_matrix()
+    for name, w in browser["color_sets"].items():
+        act = model.activations(s.masks, np.asarray(w, np.float32)[:, None] * d, "clamp01")
+        ref = model.combine_color(cb, cs, act[[k for k, _ in states_t]])
+        got = _image(browser, f"color_{name}.f32")[cov][:, :3]
+        err = delta_e(got, ref)
+        assert float(np.percentile(err, 99)) <= 1.0, (name, float(err.mean()), float(err.max()))
+        if name == "strong":
+            assert float(delta_e(got, cb).max()) > 5.0  # the flush is there

@@ -92,6 +92,52 @@ def _add_masks(ex: Export) -> None:
     }
 
 
+def _color_pngs(ex: Export) -> None:
+    """Unreal and Blender: each colour state's map as a PNG (sRGB, as painted) and the setup's
+    ``colors`` block (nothing without colour states)."""
+    meta = ex.pkg.meta
+    if meta.base_color is None:
+        return
+    states = []
+    for s in meta.states:
+        if s.color is not None:
+            ex.files[f"textures/{s.color}.png"] = png_bytes(ex.pkg.texture(s.color).pixels)
+            states.append({"name": s.name, "file": f"textures/{s.color}.png"})
+    ex.setup["colors"] = {
+        "states": states,
+        "colorSpace": "srgb",
+        "factor": list(meta.color_factor),
+    }
+    ex.notes.append(
+        "colour states: their maps blend over the material's base colour with the same "
+        "activations, in linear light (import them as sRGB colour textures)"
+    )
+
+
+def _color_array(ex: Export) -> None:
+    """Unity and Godot: the colour maps as one sRGB array strip ``textures/wrinkle_colors.png``
+    and the setup's ``colors`` block (nothing without colour states)."""
+    meta = ex.pkg.meta
+    if meta.base_color is None:
+        return
+    names = meta.color_textures
+    _same_size(ex, "colour", names)
+    ex.files["textures/wrinkle_colors.png"] = strip_png(
+        [ex.pkg.texture(n).pixels[..., :3] for n in names]
+    )
+    ex.setup["colors"] = {
+        "file": "textures/wrinkle_colors.png",
+        "layers": len(names),
+        "states": [s.name for s in meta.states if s.color is not None],
+        "colorSpace": "srgb",
+        "factor": list(meta.color_factor),
+    }
+    ex.notes.append(
+        "colour states: textures/wrinkle_colors.png holds their maps (sRGB) as a texture array; "
+        "they blend over the material's base colour with the same activations, in linear light"
+    )
+
+
 def _names(regions: list[str], style: str) -> list[str]:
     taken: set[str] = set()
     if style == "region":
@@ -224,6 +270,7 @@ def _unreal(ex: Export) -> None:
                 "shipped as PNG"
             )
     _add_masks(ex)
+    _color_pngs(ex)
     setup = _shader_setup(ex, base_layout, state_layout, bits)
     try:
         nodes = hlsl.unreal_nodes(setup)
@@ -241,6 +288,11 @@ def _unreal(ex: Export) -> None:
                 "output": n.output,
                 "code": f"{n.description}.hlsl",
                 "inputs": [{"name": a, "connect": b} for a, b in n.inputs],
+                **(
+                    {"additionalOutputs": [{"name": a, "type": b} for a, b in n.additional_outputs]}
+                    if n.additional_outputs
+                    else {}
+                ),
             }
             for n in (nodes.decode, nodes.wrinkle)
         ],
@@ -271,6 +323,7 @@ def _arrays(ex: Export) -> ShaderSetup:
         "layers": len(masks),
         "table": meta.masks.table_json(),
     }
+    _color_array(ex)
     st = pkg.texture(states[0])
     # the engines compress imported normal maps to two channels: read x, y and rebuild z
     setup = _shader_setup(ex, "rg", _layout(st.pixels.shape[-1]), st.bits)
@@ -291,6 +344,10 @@ def _sidecars(ex: Export) -> list[tuple[str, int, int, int | None]]:
             pkg.meta.states[0].texture if name == "states" else pkg.meta.masks.textures[0]
         ).pixels
         out.append((arr["file"], first.shape[1], first.shape[0] * arr["layers"], arr["layers"]))
+    if "colors" in ex.setup:
+        arr = ex.setup["colors"]
+        first = pkg.texture(pkg.meta.color_textures[0]).pixels
+        out.append((arr["file"], first.shape[1], first.shape[0] * arr["layers"], arr["layers"]))
     return out
 
 
@@ -304,7 +361,8 @@ def _unity(ex: Export) -> None:
                 f"{importers.UNITY_MAX_TEXTURE_SIZE} px per side; Unity scales it down on import"
             )
         guid = importers.unity_guid(ex.pkg.name, rel)
-        meta = importers.unity_texture_meta(guid, importers.unity_max_size(w, h), layers)
+        srgb = rel == ex.setup.get("colors", {}).get("file")
+        meta = importers.unity_texture_meta(guid, importers.unity_max_size(w, h), layers, srgb)
         ex.files[rel + ".meta"] = meta.encode("utf-8")
     setup = ex.setup["shader"]
     ex.files["WrinkleMaps.hlsl"] = hlsl.unity_file(setup, f"WRINKLEPIPE_{ex.pkg.name}").encode()
@@ -338,6 +396,7 @@ def _blender(ex: Export) -> None:
         ex.files[f"textures/{t.name}.png"] = png_bytes(t.pixels)
         ex.setup["states"].append({"name": s.name, "file": f"textures/{t.name}.png"})
     _add_masks(ex)
+    _color_pngs(ex)
     st = pkg.texture(meta.states[0].texture)
     base = next(t for t in pkg.textures if t.role == "base_normal")
     ex.setup["shader"] = _shader_setup(

@@ -48,7 +48,8 @@ def _drop_pointer_channels(doc: dict[str, Any]) -> None:
 def _keep_textures(
     doc: dict[str, Any], images: dict[str, bytes], keep_normal: bool
 ) -> dict[str, bytes]:
-    """Keep only the textures the core materials reference; returns the images still used."""
+    """Keep only the textures the core materials reference (the base normal map, and with
+    colour states the base colour); returns the images still used."""
     keep: list[int] = []
     for m in doc.get("materials", []):
         nt = m.get("normalTexture")
@@ -59,12 +60,20 @@ def _keep_textures(
             continue
         if nt["index"] not in keep:
             keep.append(nt["index"])
+    for m in doc.get("materials", []):
+        bt = (m.get("pbrMetallicRoughness") or {}).get("baseColorTexture")
+        if bt is not None and bt["index"] not in keep:
+            keep.append(bt["index"])
     textures = doc.get("textures", [])
     new_tex = [textures[i] for i in keep]
     remap = {old: new for new, old in enumerate(keep)}
     for m in doc.get("materials", []):
         if "normalTexture" in m:
             m["normalTexture"] = {**m["normalTexture"], "index": remap[m["normalTexture"]["index"]]}
+        pbr = m.get("pbrMetallicRoughness") or {}
+        if "baseColorTexture" in pbr:
+            bt = pbr["baseColorTexture"]
+            pbr["baseColorTexture"] = {**bt, "index": remap[bt["index"]]}
     img_keep = sorted({t["source"] for t in new_tex})
     img_remap = {old: new for new, old in enumerate(img_keep)}
     all_images = doc.get("images", [])

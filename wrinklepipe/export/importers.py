@@ -54,9 +54,12 @@ def unity_max_size(width: int, height: int) -> int:
     return min(1 << (side - 1).bit_length(), UNITY_MAX_TEXTURE_SIZE)
 
 
-def unity_texture_meta(guid: str, max_size: int, layers: int | None = None) -> str:
+def unity_texture_meta(
+    guid: str, max_size: int, layers: int | None = None, srgb: bool = False
+) -> str:
     """A texture's ``.meta``: the base normal map (``layers`` None: a 2D NormalMap) or a data
-    strip imported as a 2D array of ``layers`` cells stacked vertically (Default, sRGB off)."""
+    strip imported as a 2D array of ``layers`` cells stacked vertically (Default, sRGB off;
+    ``srgb``: the colour maps' strip, sRGB on)."""
     texture_type, shape, rows = (1, 1, 1) if layers is None else (0, 4, int(layers))
     return f"""\
 fileFormatVersion: 2
@@ -68,7 +71,7 @@ TextureImporter:
   mipmaps:
     mipMapMode: 0
     enableMipMap: 1
-    sRGBTexture: 0
+    sRGBTexture: {int(srgb)}
     linearTexture: 0
     fadeOut: 0
     borderMipMap: 0
@@ -264,6 +267,11 @@ def _node_t3d(node: CustomNode, index: int, x: int) -> str:
     lines += [
         f"      Inputs({i})=(InputName={unreal_string(name)})"
         for i, (name, _) in enumerate(node.inputs)
+    ]
+    lines += [
+        f"      AdditionalOutputs({i})=(OutputName={unreal_string(name)},"
+        f"OutputType={kind.replace(' ', '_')})"
+        for i, (name, kind) in enumerate(node.additional_outputs)
     ]
     lines += [
         f"      MaterialExpressionEditorX={x}",

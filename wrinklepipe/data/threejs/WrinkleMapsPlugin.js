@@ -20,9 +20,14 @@
 // on that array, added to the same AnimationClip as the glTF animation's morph tracks, so one
 // AnimationMixer plays the face and its wrinkles in step.
 //
+// States with a colour map (colorTexture) blend it over the material's base colour (three's
+// diffuseColor: its map, sRGB, times its color; with exact, the map's level 0 times the color)
+// with the same activations, in linear light; the colour maps are sampled as sRGB textures
+// (decoded before filtering).
+//
 // Options: renderer (required: the arrays are built on the GPU); debug: 0 normal shading,
 // 1 output the tangent-space normal (gl_FragColor = vec4(N, 1)), 2 output (uv, sum |a_k|, 1),
-// 3 output (view-space position, sum |a_k|);
+// 3 output (view-space position, sum |a_k|), 4 the blended base colour (linear, sum |a_k|);
 // exact: sample level 0 without mipmaps (what wrinklepipe's numpy reference does).
 
 import {
@@ -39,20 +44,21 @@ import {
 	OrthographicCamera,
 	PlaneGeometry,
 	RGBAFormat,
+	SRGBColorSpace,
 	ShaderChunk,
 	ShaderMaterial,
 	UnsignedByteType,
 	WebGLArrayRenderTarget,
 	ClampToEdgeWrapping,
 } from 'three';
-import { WRINKLE_CORE, WRINKLE_FUNCTIONS } from './wrinkle_core.js';
+import { WRINKLE_CORE, WRINKLE_CORE_COLOR, WRINKLE_FUNCTIONS } from './wrinkle_core.js';
 import { regionColors, weightVectors, wrinkleSetup } from './wrinkle_setup.js';
 
 export const EXTENSION = 'WRINKLEPIPE_wrinkle_maps';
 const POINTER = /^\/materials\/(\d+)\/extensions\/WRINKLEPIPE_wrinkle_maps\/weights$/;
 
 // The statements that replace three's `vec3 mapN = texture2D( normalMap, vNormalMapUv )...`.
-const BODY = `
+const BODY_HEAD = `
 	vec2 wp_uv = vNormalMapUv;
 	vec2 wp_dx = dFdx( wp_uv );
 	vec2 wp_dy = dFdy( wp_uv );
@@ -68,10 +74,44 @@ const BODY = `
 #define WP_W(i) wpW[ i ]
 #define WP_USED(g) wpUsed[ g ]
 #define WP_REGION_COLOR(i) wpColors[ i ].rgb
-${ WRINKLE_CORE }
+`;
+
+const BODY = BODY_HEAD + `${ WRINKLE_CORE }
 	vec3 mapN = wp_n;
 	diffuseColor.rgb = mix( diffuseColor.rgb, wp_regions, wpShowRegions * 0.7 );
 `;
+
+// With colour states: the colour maps (sRGB textures wpColorMap0..N-1) over diffuseColor.
+function colorBody( nColors ) {
+
+	const sample = ( c ) => `textureLod( wpColorMap${ c }, wp_uv, 0.0 )`;
+	const grad = ( c ) => `textureGrad( wpColorMap${ c }, wp_uv, wp_dx, wp_dy )`;
+	const chain = ( tap ) => {
+
+		let s = tap( nColors - 1 );
+		for ( let c = nColors - 2; c >= 0; c -- ) s = `( (c) == ${ c } ? ${ tap( c ) } : ${ s } )`;
+		return s;
+
+	};
+
+	return BODY_HEAD + `
+#if WP_EXACT && defined( USE_MAP )
+#define WP_COLOR_BASE() ( textureLod( map, vMapUv, 0.0 ).rgb * diffuse )
+#else
+#define WP_COLOR_BASE() diffuseColor.rgb
+#endif
+#if WP_EXACT
+#define WP_COLOR(c) ${ chain( sample ) }.rgb
+#else
+#define WP_COLOR(c) ${ chain( grad ) }.rgb
+#endif
+${ WRINKLE_CORE_COLOR }
+	vec3 mapN = wp_n;
+	diffuseColor.rgb = wp_color;
+	diffuseColor.rgb = mix( diffuseColor.rgb, wp_regions, wpShowRegions * 0.7 );
+`;
+
+}
 
 const DECLARATIONS = `
 uniform highp sampler2DArray wpStates;
@@ -90,6 +130,8 @@ const DEBUG_OUTPUT = `
 	gl_FragColor = vec4( wp_uv, wp_activity, 1.0 );
 #elif WP_DEBUG == 3
 	gl_FragColor = vec4( - vViewPosition, wp_activity );
+#elif WP_DEBUG == 4 && defined( WP_NUM_COLORS )
+	gl_FragColor = vec4( wp_color, wp_activity );
 #endif
 `;
 
@@ -145,6 +187,17 @@ export class WrinkleMapsPlugin {
 		const maskTex = await Promise.all( ext.masks.textures.map( tex ) );
 		const states = this._array( stateTex );
 		const masks = this._array( maskTex );
+		// colour maps: sRGB textures (a clone of each, so a texture the scene also uses keeps
+		// its own colour space)
+		const colorTex = ( await Promise.all( setup.colorStates.map( ( k ) => tex( ext.states[ k ].colorTexture ) ) ) )
+			.map( ( t ) => {
+
+				const c = t.clone();
+				c.colorSpace = SRGBColorSpace;
+				c.needsUpdate = true;
+				return c;
+
+			} );
 		const holder = new Object3D();
 		holder.name = `WRINKLEPIPE_weights_${ index }`;
 		holder.wrinkleWeights = new Float32Array( setup.regions.length );
@@ -162,6 +215,11 @@ export class WrinkleMapsPlugin {
 			wpColors: { value: regionColors( setup ) },
 			wpShowRegions: { value: 0 },
 		};
+		colorTex.forEach( ( t, c ) => {
+
+			uniforms[ `wpColorMap${ c }` ] = { value: t };
+
+		} );
 		const wrinkle = {
 			material: index,
 			extension: ext,
@@ -275,9 +333,12 @@ export class WrinkleMapsPlugin {
 			Object.assign( shader.uniforms, uniforms );
 			const chunk = ShaderChunk.normal_fragment_maps;
 			if ( ! chunk.includes( MAP_LINE ) ) throw new Error( `${ EXTENSION }: this three.js version's normal_fragment_maps chunk is not the one the plugin patches` );
+			const nColors = setup.colorStates.length;
+			const declarations = DECLARATIONS + setup.colorStates.map( ( k, c ) => `uniform sampler2D wpColorMap${ c };\n` ).join( '' );
+			const body = nColors ? colorBody( nColors ) : BODY;
 			shader.fragmentShader = shader.fragmentShader
-				.replace( '#include <common>', '#include <common>\n' + DECLARATIONS )
-				.replace( '#include <normal_fragment_maps>', chunk.replace( MAP_LINE, BODY ) )
+				.replace( '#include <common>', '#include <common>\n' + declarations )
+				.replace( '#include <normal_fragment_maps>', chunk.replace( MAP_LINE, body ) )
 				.replace( '#include <dithering_fragment>', '#include <dithering_fragment>\n' + DEBUG_OUTPUT );
 
 		};

@@ -234,3 +234,120 @@ vec3 wp_regions = vec3(0.0, 0.0, 0.0);  // sum_r M_r colour_r where WP_REGION_CO
     wp_n = wp_activity == 0.0 ? wp_b : normalize(wp_acc);
 }
 `;
+
+// The core with colour states: also needs WP_COLOR_BASE() and WP_COLOR(c); leaves
+// wp_color too (linear light).
+export const WRINKLE_CORE_COLOR = `
+// wrinklepipe core: s_k = sum_r M_r w_rk; a_k = policy(s_k); N = combine(B, {W_k, a_k}).
+vec3 wp_n;
+float wp_activity;
+vec3 wp_color;
+vec3 wp_regions = vec3(0.0, 0.0, 0.0);  // sum_r M_r colour_r where WP_REGION_COLOR is defined
+{
+    vec4 wp_s[4];
+    wp_s[0] = vec4(0.0, 0.0, 0.0, 0.0);
+    wp_s[1] = wp_s[0];
+    wp_s[2] = wp_s[0];
+    wp_s[3] = wp_s[0];
+    float wp_total = 0.0;
+#if WP_GATHER == WP_GATHER_SPLIT
+    float wp_sp = WP_MASK(WP_SPLIT_LAYER)[WP_SPLIT_CHANNEL];
+#endif
+    for (int wp_g = 0; wp_g < WP_NUM_GROUPS; ++wp_g) {
+#if WP_GATHER == WP_GATHER_LAYERS
+        int wp_l = 4 * wp_g;
+        vec4 wp_m = vec4(WP_MASK(wp_l).x,
+                         wp_l + 1 < WP_NUM_LAYERS ? WP_MASK(wp_l + 1).x : 0.0,
+                         wp_l + 2 < WP_NUM_LAYERS ? WP_MASK(wp_l + 2).x : 0.0,
+                         wp_l + 3 < WP_NUM_LAYERS ? WP_MASK(wp_l + 3).x : 0.0);
+#elif WP_GATHER == WP_GATHER_SPLIT
+        int wp_part = wp_g - 3 * (wp_g / 3);
+        vec4 wp_m = WP_MASK(wp_g / 3) * (wp_part == 0 ? 1.0 : (wp_part == 1 ? wp_sp : 1.0 - wp_sp));
+#else
+        vec4 wp_m = WP_MASK(wp_g);
+#endif
+#if WP_POLICY == WP_POL_RENORMALIZE
+        wp_total += dot(wp_m, WP_USED(wp_g));
+#endif
+#ifdef WP_REGION_COLOR
+        int wp_c = 4 * wp_g;
+        wp_regions += wp_m.x * WP_REGION_COLOR(wp_c) + wp_m.y * WP_REGION_COLOR(wp_c + 1);
+        wp_regions += wp_m.z * WP_REGION_COLOR(wp_c + 2) + wp_m.w * WP_REGION_COLOR(wp_c + 3);
+#endif
+        for (int wp_q = 0; wp_q < WP_QUADS; ++wp_q) {
+            int wp_i = 4 * (wp_g * WP_QUADS + wp_q);
+            wp_s[wp_q] += wp_m.x * WP_W(wp_i) + wp_m.y * WP_W(wp_i + 1)
+                        + wp_m.z * WP_W(wp_i + 2) + wp_m.w * WP_W(wp_i + 3);
+        }
+    }
+    vec4 wp_a[4];
+#if WP_POLICY == WP_POL_SIGNED
+    float wp_sig = clamp(wp_s[0].x, -1.0, 1.0);
+    wp_a[0] = vec4(max(-wp_sig, 0.0), max(wp_sig, 0.0), 0.0, 0.0);
+    wp_a[1] = vec4(0.0, 0.0, 0.0, 0.0);
+    wp_a[2] = wp_a[1];
+    wp_a[3] = wp_a[1];
+#elif WP_POLICY == WP_POL_ADDITIVE
+    wp_a[0] = wp_s[0];
+    wp_a[1] = wp_s[1];
+    wp_a[2] = wp_s[2];
+    wp_a[3] = wp_s[3];
+#else
+#if WP_POLICY == WP_POL_RENORMALIZE
+    float wp_div = max(wp_total, 1.0);
+#else
+    float wp_div = 1.0;
+#endif
+    wp_a[0] = clamp(wp_s[0] / wp_div, 0.0, 1.0);
+    wp_a[1] = clamp(wp_s[1] / wp_div, 0.0, 1.0);
+    wp_a[2] = clamp(wp_s[2] / wp_div, 0.0, 1.0);
+    wp_a[3] = clamp(wp_s[3] / wp_div, 0.0, 1.0);
+#if WP_POLICY == WP_POL_LERP
+    float wp_sum = dot(wp_a[0] + wp_a[1] + wp_a[2] + wp_a[3], vec4(1.0, 1.0, 1.0, 1.0));
+    if (wp_sum > 1.0) {
+        wp_a[0] /= wp_sum;
+        wp_a[1] /= wp_sum;
+        wp_a[2] /= wp_sum;
+        wp_a[3] /= wp_sum;
+    }
+#endif
+#endif
+    wp_activity = dot(abs(wp_a[0]) + abs(wp_a[1]) + abs(wp_a[2]) + abs(wp_a[3]),
+                      vec4(1.0, 1.0, 1.0, 1.0));
+    vec3 wp_b = WP_DECODE_BASE(WP_BASE());
+#if WP_ENCODING == WP_ENC_PD
+    vec3 wp_acc = vec3(wp_b.xy / max(wp_b.z, 1e-12), 1.0);
+#else
+    vec3 wp_acc = wp_b;
+#endif
+    for (int wp_k = 0; wp_k < WP_NUM_STATES; ++wp_k) {
+        float wp_ak = wp_a[wp_k / 4][wp_k - 4 * (wp_k / 4)];
+        if (wp_ak != 0.0) {
+            vec4 wp_t = WP_STATE(wp_k);
+#if WP_ENCODING == WP_ENC_PD
+            wp_acc.xy += wp_ak * WP_DECODE_PD(wp_t);
+#elif WP_ENCODING == WP_ENC_DIFF
+            wp_acc += wp_ak * WP_DECODE_DIFF(wp_t);
+#elif WP_ENCODING == WP_ENC_FULL
+            wp_acc += wp_ak * (WP_DECODE_STATE_NORMAL(wp_t) - wp_b);
+#else
+            vec3 wp_w = WP_DECODE_STATE_NORMAL(wp_t);
+            wp_acc.xy += wp_ak * wp_w.xy;
+            wp_acc.z *= 1.0 + wp_ak * (wp_w.z - 1.0);
+#endif
+        }
+    }
+    wp_n = wp_activity == 0.0 ? wp_b : normalize(wp_acc);
+    // colour: C = clamp(C_B + sum_k a_k (C_k - C_B), 0, 1) in linear light, same activations
+    vec3 wp_cb = WP_COLOR_BASE();
+    vec3 wp_cacc = wp_cb;
+    for (int wp_c = 0; wp_c < WP_NUM_COLORS; ++wp_c) {
+        int wp_ck = WP_COLOR_STATE(wp_c);
+        float wp_ca = wp_a[wp_ck / 4][wp_ck - 4 * (wp_ck / 4)];
+        if (wp_ca != 0.0) {
+            wp_cacc += wp_ca * (WP_COLOR(wp_c) - wp_cb);
+        }
+    }
+    wp_color = clamp(wp_cacc, 0.0, 1.0);
+}
+`;

@@ -108,6 +108,13 @@ export function wrinkleSetup( ext, options = {} ) {
 
 	}
 
+	// the states that carry a colour map (colorTexture), in order: the colour textures' states
+	const colorStates = [];
+	ext.states.forEach( ( s, k ) => {
+
+		if ( s.colorTexture ) colorStates.push( k );
+
+	} );
 	const [ splitLayer, splitChannel ] = split || [ 0, 0 ];
 	const output = options.output || 'opengl';
 	const defines = {
@@ -129,9 +136,18 @@ export function wrinkleSetup( ext, options = {} ) {
 		WP_FLIP_BASE: String( Number( ( options.convention || 'opengl' ) !== output ) ),
 		WP_FLIP_STATES: String( Number( ( options.convention || 'opengl' ) !== output ) ),
 	};
+	if ( colorStates.length ) {
+
+		// the state of colour map c (a chain of conditionals, as wrinklepipe.shading.template)
+		const chain = colorStates.slice( 0, - 1 ).map( ( k, c ) => `(c) == ${ c } ? ${ k } : ` ).join( '' );
+		defines.WP_NUM_COLORS = String( colorStates.length );
+		defines[ 'WP_COLOR_STATE(c)' ] = `(${ chain }${ colorStates[ colorStates.length - 1 ] })`;
+
+	}
+
 	return {
 		states, regions: regions.map( ( r ) => r.name ), gather, split, nLayers, nGroups, quads,
-		nWeightVectors, slots, used, lane, defines, problems,
+		nWeightVectors, slots, used, lane, defines, problems, colorStates,
 	};
 
 }
