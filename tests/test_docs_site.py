@@ -63,3 +63,12 @@ def test_site_builds_with_warnings_as_errors(tmp_path: Path) -> None:
         assert (site / page.replace(".md", ".html")).is_file(), page
     reference = (site / "reference" / "commands.html").read_text(encoding="utf-8")
     assert "--fail-on" in reference and "validate-asset" in reference
+
+
+def test_home_page_points_at_every_page() -> None:
+    """The site's home page (docs/index.md, which the README links) names every page, so a
+    newcomer reading the docs on GitHub finds each one: add a new page to its list."""
+    home = (ROOT / "docs" / "index.md").read_text(encoding="utf-8")
+    pages = {p.name for p in (ROOT / "docs").glob("*.md")} - {"index.md"}
+    missing = sorted(p for p in pages if f"({p})" not in home and f"({p}#" not in home)
+    assert not missing, f"add to docs/index.md's list of pages: {missing}"
