@@ -10,6 +10,9 @@ on the line before the block's fence (invisible on GitHub and on the site) tunes
                                               for a long example; repeatable)
     <!-- docs-test: server -->                a server: started, asked for the address it
                                               prints, then stopped
+    <!-- docs-test: checkout -->              run in the checkout itself, not the sandbox (a
+                                              command that reads the source tree and writes
+                                              nothing)
     <!-- docs-test: skip="why" -->            not run (only where running it is impossible)
     <!-- docs-test: edit=PATH -->             (on a toml block) the edit a reader makes: each
                                               ``key = value`` line replaces that key in PATH
@@ -38,6 +41,7 @@ class Block:
     text: str
     needs_shared: bool = False
     server: bool = False
+    checkout: bool = False
     skip: str | None = None
     edit: str | None = None
     subs: list[tuple[str, str]] = field(default_factory=list)
@@ -76,6 +80,8 @@ def _directives(block: Block, text: str) -> None:
             block.needs_shared = True
         elif tok == "server":
             block.server = True
+        elif tok == "checkout":
+            block.checkout = True
         elif tok.startswith("skip="):
             block.skip = tok[5:]
         elif tok.startswith("edit="):

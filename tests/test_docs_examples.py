@@ -16,6 +16,7 @@ from docs_examples import SHELL, apply_edit, blocks, hidden_examples
 from docs_sandbox import (
     HAVE_SHARED,
     PAGES,
+    REPO,
     SHARED,
     build_sandbox,
     cli_server,
@@ -57,6 +58,8 @@ def test_page_examples_run(page: Path, base_sandbox: Path, server: Path, tmp_pat
             apply_edit(block, cwd / block.edit)
         elif block.server:
             run_server(block, cwd, env)
+        elif block.checkout:
+            run_block(block, REPO, env)
         else:
             run_block(block, cwd, env)
     if skipped:
