@@ -2,7 +2,7 @@
 output.
 
     .venv-blender/bin/python tests/blender_render.py -- \
-        OUT_DIR SIZE WEIGHTS.json EXPORT/wrinkle_setup.json [EXPORT2/wrinkle_setup.json ...]
+        OUT_DIR SIZE WEIGHTS.json [--color BASE.png] EXPORT/wrinkle_setup.json [...]
 
 Builds the group with the export's own ``build_wrinkles.py`` (imported from the export folder),
 puts it on a unit plane whose UVs are its x, y, seen by an orthographic camera that maps pixel
@@ -11,7 +11,9 @@ with the group's encoded normal as emission, and renders it with Cycles: one sam
 a 0.01-pixel box filter (the sample is at the pixel centre), no bounces, Standard view
 transform: 32-bit float OpenEXR ``OUT_DIR/E_K.exr`` for export E and weight set K of
 WEIGHTS.json (per export, a list of region-weight lists in the setup's region order). Cycles
-evaluates the nodes on the CPU, without a GPU or a display.
+evaluates the nodes on the CPU, without a GPU or a display. ``--color BASE.png``: render the
+group's Color output instead (the colour states over the base colour BASE.png, an sRGB image
+sampled at the same UVs, into BaseColor): linear light.
 """
 
 from __future__ import annotations
@@ -88,6 +90,9 @@ def _scene(size: int) -> tuple:
 def main() -> None:
     args = sys.argv[sys.argv.index("--") + 1 :]
     out_dir, size, weights_path, setups = args[0], int(args[1]), args[2], args[3:]
+    color_base = None
+    if setups and setups[0] == "--color":
+        color_base, setups = setups[1], setups[2:]
     with open(weights_path, encoding="utf-8") as f:
         weight_sets = json.load(f)
     scene, nt, uvn, gnode, emit = _scene(size)
@@ -99,7 +104,16 @@ def main() -> None:
         setup["shader"].setdefault("stateLayout", "rgb")
         gnode.node_tree = _load_builder(folder).build_group(setup, folder)
         nt.links.new(uvn.outputs["UV"], gnode.inputs["UV"])
-        nt.links.new(gnode.outputs["Normal"], emit.inputs["Color"])
+        if color_base is None:
+            nt.links.new(gnode.outputs["Normal"], emit.inputs["Color"])
+        else:
+            img = bpy.data.images.load(os.path.abspath(color_base), check_existing=True)
+            img.colorspace_settings.name = "sRGB"
+            tex = nt.nodes.new("ShaderNodeTexImage")
+            tex.image, tex.interpolation, tex.extension = img, "Linear", "EXTEND"
+            nt.links.new(uvn.outputs["UV"], tex.inputs["Vector"])
+            nt.links.new(tex.outputs["Color"], gnode.inputs["BaseColor"])
+            nt.links.new(gnode.outputs["Color"], emit.inputs["Color"])
         for k, weights in enumerate(weight_sets[e]):
             for reg, w in zip(setup["regions"], weights):
                 gnode.inputs[reg["parameter"]].default_value = float(w)

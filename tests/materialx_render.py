@@ -27,7 +27,13 @@ from wrinklepipe.validate import gl as glw
 def generate(doc: mx.Document, element: mx.Element) -> tuple[str, str]:
     """(vertex, pixel) GLSL of ``element`` (an output or a material node) of ``doc``."""
     gen = mx_glsl.GlslShaderGenerator.create()
+    # colour management as hosts set it up: sRGB colour maps converted to the linear working
+    # space (images without a colour space are data and left alone)
+    cms = mx_gen.DefaultColorManagementSystem.create(gen.getTarget())
+    cms.loadLibrary(wmx.library())
+    gen.setColorManagementSystem(cms)
     ctx = mx_gen.GenContext(gen)
+    ctx.getOptions().targetColorSpaceOverride = "lin_rec709"
     ctx.registerSourceCodeSearchPath(mx.getDefaultDataSearchPath())
     shader = gen.generate("wrinkle", element, ctx)
     return shader.getSourceCode(mx_gen.VERTEX_STAGE), shader.getSourceCode(mx_gen.PIXEL_STAGE)

@@ -161,6 +161,9 @@ def blender(request, robot_converted_or_none, tmp_path_factory):
     setups, inputs, weights = _render_cases(render)
     jobs.append({"name": "render", "script": HERE / "blender_render.py"})
     jobs[-1]["args"] = [render, RENDER_SIZE, render / "weights.json", *setups]
+    color = _color_case(tmp / "render_color", weights[0])
+    jobs.append({"name": "render_color", "script": HERE / "blender_render.py"})
+    jobs[-1]["args"] = [color["out"], RENDER_SIZE, color["weights"], "--color", *color["args"]]
     results = blender5.run_session(jobs, tmp)
 
     seeded = {}
@@ -176,6 +179,7 @@ def blender(request, robot_converted_or_none, tmp_path_factory):
         "imports": imports,
         "bakes": bakes,
         "render": (render, inputs, weights),
+        "color": color,
         "usd": usd,
         "seeded": seeded,
     }
@@ -418,6 +422,58 @@ def _render_cases(tmp: Path) -> tuple[list[str], list, list]:
         weights.append([w.astype(np.float32) for w in sets])
     (tmp / "weights.json").write_text(json.dumps([[w.tolist() for w in sets] for sets in weights]))
     return setups, inputs, weights
+
+
+def _color_case(tmp: Path, weights: list) -> dict:
+    """The demo with colour states (64^2), its Blender export, and the weights (those of the
+    first render case) written for tests/blender_render.py --color."""
+    a = demo_asset(64, color=True, mesh_resolution=(48, 32))
+    a = replace(a, mesh=prepare_mesh(a.mesh))
+    src = tmp / "src"
+    write_gltf(package_from_asset(a, PackOptions(), [expression_cycle(a)]), src, "demo")
+    export(src, tmp / "blender", "blender")
+    out = tmp / "out"
+    out.mkdir(parents=True)
+    (tmp / "weights.json").write_text(json.dumps([[w.tolist() for w in weights]]))
+    setup = tmp / "blender" / "wrinkle_setup.json"
+    base = src / "textures" / "base_color.png"
+    return {"out": out, "weights": tmp / "weights.json", "args": [base, setup], "src": src,
+            "sets": weights}  # fmt: skip
+
+
+def test_blender_node_group_blends_the_colour_as_the_model(blender):
+    """The group's Color output (the colour states over the base colour, sRGB images decoded
+    before filtering) rendered by Cycles equals the numpy colour model of the exported texels:
+    CIEDE2000 p99 <= 1 at every weight set; strong weights move the colour."""
+    from wrinklepipe.codec import srgb
+    from wrinklepipe.metrics import delta_e
+    from wrinklepipe.validate import textures as tx
+    from wrinklepipe.validate.render import color_textures
+
+    _ok(blender, "render_color")
+    color = blender["color"]
+    inp = load_input(color["src"])
+    c = (np.arange(RENDER_SIZE) + 0.5) / RENDER_SIZE
+    u, v = np.meshgrid(c, c)
+    uv = np.stack([u, v], -1).reshape(-1, 2).astype(np.float32)
+    s = h.samples(inp, uv)
+    base_t, states_t = color_textures(inp)
+
+    def lin(t):
+        return srgb.decode_texels(np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, -1))
+
+    cb = tx.bilinear(lin(base_t)[..., :3], uv)
+    cs = np.stack([tx.bilinear(lin(t)[..., :3], uv) for _, t in states_t])
+    d = inp.asset.region_state_matrix()
+    for k, w in enumerate(color["sets"]):
+        act = model.activations(s.masks, np.asarray(w, np.float32)[:, None] * d, "clamp01")
+        ref = model.combine_color(cb, cs, act[[j for j, _ in states_t]])
+        img = oiio.ImageBuf(str(color["out"] / f"0_{k}.exr")).get_pixels(oiio.FLOAT)
+        got = img.reshape(-1, img.shape[-1])[:, :3]
+        err = delta_e(got, ref)
+        assert float(np.percentile(err, 99)) <= 1.0, (k, float(err.mean()), float(err.max()))
+        if k == 1:
+            assert float(delta_e(got, cb).max()) > 5.0  # the flush is there
 
 
 def test_blender_node_group_renders_the_model(blender):

@@ -220,3 +220,57 @@ def test_the_usd_layer_carries_the_network_and_keeps_the_preview(outputs, name):
     if name == "demo":  # the package's own document, byte for byte
         pkg = demo_package(128)
         assert mtlx.read_bytes() == wmx.to_xml(materialx_document(pkg))
+
+
+@pytest.mark.gpu
+def test_materialx_blends_the_colour_as_the_model(tmp_path):
+    """With colour states the document's ``color`` output (sRGB colour maps converted to
+    linear by MaterialX's colour management, blended with the normals' activations) equals the
+    numpy colour model of the USD's texels, rendered at the texel centres (MaterialX converts
+    after it filters, a GPU's sRGB sampler before: the same at texel centres): CIEDE2000 p99
+    <= 1 at every weight set; strong weights move the colour. SR_wrinkle's base_color reads it."""
+    from dataclasses import replace
+
+    from wrinklepipe.codec import srgb
+    from wrinklepipe.demo import demo_asset
+    from wrinklepipe.metrics import delta_e
+    from wrinklepipe.pipeline.package import package_from_asset
+    from wrinklepipe.pipeline.prepare import prepare_mesh
+    from wrinklepipe.validate import textures as tx
+    from wrinklepipe.validate.render import color_textures
+
+    a = demo_asset(64, color=True, mesh_resolution=(48, 32))
+    a = replace(a, mesh=prepare_mesh(a.mesh))
+    layer = tmp_path / "demo.usda"
+    write_usd(package_from_asset(a), layer)
+    doc = mx.createDocument()
+    mx.readFromXmlFile(doc, str(tmp_path / "demo.mtlx"))
+    surface = doc.getNode(wmx.SHADER)
+    assert surface.getInput("base_color").getOutputString() == "color"
+    inp = load_input(layer)
+    sets = _weight_sets(len(inp.asset.region_names), "clamp01")
+    uniforms = [
+        {wmx.weight_input(r): float(w[i]) for i, r in enumerate(inp.asset.region_names)}
+        for w in sets
+    ]
+    try:
+        images = mr.render_output(doc, tmp_path, "color", uniforms, 64)
+    except GLUnavailable as exc:
+        pytest.skip(f"no OpenGL: {exc}")
+    uv = h.uv_grid(64)
+    s = h.samples(inp, uv)
+    base_t, states_t = color_textures(inp)
+
+    def lin(t):
+        return srgb.decode_texels(np.frombuffer(t.data, np.uint8).reshape(t.height, t.width, -1))
+
+    cb = tx.bilinear(lin(base_t)[..., :3], uv)
+    cs = np.stack([tx.bilinear(lin(t)[..., :3], uv) for _, t in states_t])
+    d = inp.asset.region_state_matrix()
+    for k, (w, img) in enumerate(zip(sets, images, strict=True)):
+        act = model.activations(s.masks, np.asarray(w, np.float32)[:, None] * d, "clamp01")
+        ref = model.combine_color(cb, cs, act[[j for j, _ in states_t]])
+        err = delta_e(img.reshape(-1, 4)[:, :3], ref)
+        assert float(np.percentile(err, 99)) <= 1.0, (k, float(err.mean()), float(err.max()))
+        if k == 1:
+            assert float(delta_e(img.reshape(-1, 4)[:, :3], cb).max()) > 5.0

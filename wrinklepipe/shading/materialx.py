@@ -22,7 +22,16 @@ The document holds one nodegraph, ``NG_wrinkle``, with the whole model of
   (+Y), ``normal`` the ``normalmap`` of it (world space), which feeds
   ``SR_wrinkle.normal``; ``activity`` is ``sum_k |a_k|``.
 
-Images are read linear (no colour space), with linear filtering and clamped addressing.
+With colour states (``setup.has_color``) the graph also reads the base colour (``base_color``)
+and each colour map (``color_<c>``) as ``srgb_texture`` images, blends them with the same
+activations in linear light (``C = clamp(C_B + sum_k a_k (C_k - C_B), 0, 1)``, the base times
+the colour factor) and outputs ``color``, which feeds ``SR_wrinkle.base_color``. MaterialX
+converts an image's colour space after it samples it: a host that filters such an image in its
+encoded values (rather than decoding each texel first, as a GPU's sRGB sampler does) differs
+slightly between texels.
+
+Normal maps and masks are read linear (no colour space), with linear filtering and clamped
+addressing.
 MaterialX's texture coordinates are USD's ``st``: ``(u, 1 - v)`` of glTF's ``uv``, the very
 same texels.
 """
@@ -57,6 +66,10 @@ class MapFiles:
     base: str
     states: tuple[str, ...]
     masks: tuple[str, ...]
+    #: with colour states: the base colour and the colour maps (the setup's colour order)
+    base_color: str = ""
+    colors: tuple[str, ...] = ()
+    color_factor: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
 
 def ident(name: str) -> str:
@@ -183,12 +196,19 @@ class _Graph:
         return acc
 
 
-def _image(g: _Graph, key: str, file: str, kind: str) -> mx.Node:
+def _image(g: _Graph, key: str, file: str, kind: str, colorspace: str = "") -> mx.Node:
     """An ``image`` node reading ``file`` through the graph's filename input ``key``: linear
-    filtering, clamped addressing."""
-    g.g.addInput(key, "filename").setValueString(file)
+    filtering, clamped addressing; ``colorspace``: the file's (``srgb_texture`` for colour
+    maps), converted to the document's linear working space."""
+    inp = g.g.addInput(key, "filename")
+    inp.setValueString(file)
+    if colorspace:
+        inp.setColorSpace(colorspace)
     node = g.node("image", kind, name=f"img_{key}")
-    node.addInput("file", "filename").setInterfaceName(key)
+    file_input = node.addInput("file", "filename")
+    file_input.setInterfaceName(key)
+    if colorspace:  # where colour management reads it
+        file_input.setColorSpace(colorspace)
     for k, v in (("filtertype", "linear"), ("uaddressmode", "clamp"), ("vaddressmode", "clamp")):
         node.addInput(k, "string").setValueString(v)
     return node
@@ -298,6 +318,24 @@ def _combined(g: _Graph, setup: ShaderSetup, files: MapFiles, act: list[object])
     return g.node("normalize", "vector3", name="wrinkled", in_=g.combine3(ax, ay, az))
 
 
+def _color(g: _Graph, setup: ShaderSetup, files: MapFiles, act: list[object]) -> mx.Node:
+    """The colour model: ``clamp(C_B + sum_k a_k (C_k - C_B), 0, 1)`` in linear light."""
+    if not files.base_color or len(files.colors) != len(setup.color_states):
+        raise ValueError("MaterialX output: colour states need the base colour and their maps")
+    base = _image(g, "base_color", files.base_color, "color3", "srgb_texture")
+    if tuple(files.color_factor) != (1.0, 1.0, 1.0):
+        factor = g.node("constant", "color3", name="color_factor")
+        factor.addInput("value", "color3").setValueString(
+            ", ".join(repr(float(x)) for x in files.color_factor)
+        )
+        base = g.mul(base, factor)
+    acc: object = base
+    for c, k in enumerate(setup.color_states):
+        ck = _image(g, f"color_{c}", files.colors[c], "color3", "srgb_texture")
+        acc = g.add(acc, g.mul(g.sub(ck, base), act[k]))
+    return g.node("clamp", "color3", name="wrinkled_color", in_=acc, low=0.0, high=1.0)
+
+
 def wrinkle_document(
     setup: ShaderSetup, files: MapFiles, weights: Sequence[float] | None = None
 ) -> mx.Document:
@@ -330,9 +368,16 @@ def wrinkle_document(
     if not isinstance(activity, mx.Node):
         activity = g.node("constant", "float", value=float(activity))  # type: ignore[arg-type]
     out.setConnectedNode(activity)
+    if setup.has_color:
+        graph.addOutput("color", "color3").setConnectedNode(_color(g, setup, files, act))
 
     surface = doc.addNode("standard_surface", SHADER, "surfaceshader")
-    surface.addInput("base_color", "color3").setValueString(", ".join(map(str, BASE_COLOR)))
+    if setup.has_color:
+        base_color = surface.addInput("base_color", "color3")
+        base_color.setNodeGraphString(NODEGRAPH)
+        base_color.setOutputString("color")
+    else:
+        surface.addInput("base_color", "color3").setValueString(", ".join(map(str, BASE_COLOR)))
     surface.addInput("specular_roughness", "float").setValue(ROUGHNESS)
     normal = surface.addInput("normal", "vector3")
     normal.setNodeGraphString(NODEGRAPH)

@@ -193,6 +193,9 @@ def materialx_document(pkg: WrinklePackage, texture_dir: str = "textures") -> mx
         f"{tdir}base_normal.png",
         tuple(f"{tdir}{s.texture}.png" for s in meta.states),
         tuple(f"{tdir}{n}.png" for n in meta.masks.textures),
+        f"{tdir}{meta.base_color}.png" if meta.base_color else "",
+        tuple(f"{tdir}{n}.png" for n in meta.color_textures),
+        meta.color_factor,
     )
     return wmx.wrinkle_document(setup, files, [float(w) for w in meta.weights])
 

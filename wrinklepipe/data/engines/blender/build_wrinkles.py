@@ -9,7 +9,10 @@ the asset's policy and encoding), inserts it into the wrinkled material (the glT
 in the setup's ``materials``, else the one sampling the base normal map: UV Map -> WrinklePipe
 -> Normal Map -> the BSDF's Normal), gives the mesh object one custom property per region
 (``wp_<region>``) with a driver into the material, and keys those properties from the export's
-weight curves. Prints a JSON summary on its last line.
+weight curves. With colour states (the setup's ``colors``) the group also blends their colour
+maps (sRGB images) over the material's base colour with the same activations, in linear
+light: whatever fed the BSDF's Base Color now feeds the group's BaseColor, and its Color the
+BSDF. Prints a JSON summary on its last line.
 """
 
 from __future__ import annotations
@@ -95,9 +98,9 @@ class Graph:
         self._in(n.inputs[0], vec)
         return n.outputs
 
-    def image(self, path: str, uv: Any) -> Any:
+    def image(self, path: str, uv: Any, colorspace: str = "Non-Color") -> Any:
         img = bpy.data.images.load(path, check_existing=True)
-        img.colorspace_settings.name = "Non-Color"
+        img.colorspace_settings.name = colorspace
         img.alpha_mode = "CHANNEL_PACKED"
         n = self.node("ShaderNodeTexImage", image=img, interpolation="Linear", extension="EXTEND")
         self.link(uv, n.inputs["Vector"])
@@ -140,8 +143,13 @@ def build_group(setup: dict[str, Any], folder: str) -> Any:
     regions = setup["regions"]
     for r in regions:
         _socket(tree, r["parameter"], "INPUT", "NodeSocketFloat")
+    colors = setup.get("colors")
+    if colors:
+        _socket(tree, "BaseColor", "INPUT", "NodeSocketColor")
     _socket(tree, "Normal", "OUTPUT", "NodeSocketColor")
     _socket(tree, "Activity", "OUTPUT", "NodeSocketFloat")
+    if colors:
+        _socket(tree, "Color", "OUTPUT", "NodeSocketColor")
     gin = g.node("NodeGroupInput")
     gout = g.node("NodeGroupOutput")
     uv = gin.outputs["UV"]
@@ -252,6 +260,17 @@ def build_group(setup: dict[str, Any], folder: str) -> Any:
     n = g.vmath("NORMALIZE", g.combine(ax, ay, az))
     col = g.vmath("ADD", g.vmath("MULTIPLY", n, (0.5, 0.5, 0.5)), (0.5, 0.5, 0.5))
     g.link(col, gout.inputs["Normal"])
+    if colors:
+        # colour: C = clamp(C_B + sum_k a_k (C_k - C_B), 0, 1), linear (sRGB images decode)
+        base_color = gin.outputs["BaseColor"]
+        acc = base_color
+        index = {s: k for k, s in enumerate(states)}
+        for c in colors["states"]:
+            ck = g.image(os.path.join(folder, c["file"]), uv, "sRGB").outputs["Color"]
+            delta = g.vmath("SUBTRACT", ck, base_color)
+            acc = g.vmath("ADD", acc, g.vmath("SCALE", delta, scale=act[index[c["name"]]]))
+        acc = g.vmath("MINIMUM", g.vmath("MAXIMUM", acc, (0.0, 0.0, 0.0)), (1.0, 1.0, 1.0))
+        g.link(acc, gout.inputs["Color"])
     g.link(
         activity if isinstance(activity, bpy.types.NodeSocket) else g.math("ADD", 0.0, 0.0),
         gout.inputs["Activity"],
@@ -310,6 +329,15 @@ def install(obj: Any, mat: Any, group: Any, setup: dict[str, Any]) -> int:
     nt.links.new(uvn.outputs["UV"], gnode.inputs["UV"])
     nt.links.new(gnode.outputs["Normal"], nmap.inputs["Color"])
     nt.links.new(nmap.outputs["Normal"], bsdf.inputs["Normal"])
+    if setup.get("colors"):  # the base colour through the group: the colour states over it
+        socket = bsdf.inputs["Base Color"]
+        if socket.is_linked:
+            link = socket.links[0]
+            nt.links.new(link.from_socket, gnode.inputs["BaseColor"])
+            nt.links.remove(link)
+        else:
+            gnode.inputs["BaseColor"].default_value = socket.default_value
+        nt.links.new(gnode.outputs["Color"], socket)
     drivers = 0
     for r in setup["regions"]:
         prop = r["parameter"]
