@@ -152,6 +152,10 @@ def blender(request, robot_converted_or_none, tmp_path_factory):
         bakes[name] = (out, keys)
     usd = {"demo": (tmp / "usd_demo" / "demo.usda", "/demo/Looks/skin")}
     write_usd(demo_package(128), usd["demo"][0])
+    colored = demo_asset(64, color=True, mesh_resolution=(48, 32))
+    colored = replace(colored, mesh=prepare_mesh(colored.mesh))
+    usd["color"] = (tmp / "usd_color" / "demo.usda", "/demo/Looks/skin")
+    write_usd(package_from_asset(colored), usd["color"][0])
     if robot_converted_or_none is not None:
         usd["robot"] = (robot_converted_or_none / "robot.usda", "/robot/Looks/skin")
     for name, (layer, material) in usd.items():
@@ -503,7 +507,7 @@ def test_blender_node_group_renders_the_model(blender):
                 assert h.compare(normal[None], neutral)["p99"] > 2.0, (encoding, policy)
 
 
-@pytest.mark.parametrize("name", ["demo", "robot"])
+@pytest.mark.parametrize("name", ["demo", "robot", "color"])
 def test_a_pxr_with_usdmtlx_composes_the_materialx_material(blender, name):
     """Blender's pxr (USD 25.x with UsdMtlx) opens the USD output (the demo package's, and
     RobotExpressive's convert output): UsdValidation 0 errors of any kind, every shader id is
