@@ -30,7 +30,8 @@ STAGES = [
     "reading inputs",
     "evaluating drivers",
     "choosing sizes, scale and formats by fidelity",
-    "encoding, packing, compressing",
+    "encoding the maps and packing the masks",
+    "compressing and building the files",
     "writing the output folder",
     "validating",
 ]
@@ -135,7 +136,7 @@ def test_piped_convert_prints_each_stage_as_it_runs(manifest: Path, tmp_path: Pa
     ("sig", "code", "during"),
     [
         (signal.SIGINT, 130, "choosing sizes, scale and formats by fidelity"),
-        (signal.SIGTERM, 143, "encoding, packing, compressing"),
+        (signal.SIGTERM, 143, "reading inputs"),
     ],
 )
 def test_a_signal_ends_convert_with_its_code_and_nothing_partial(

@@ -152,7 +152,10 @@ def convert(
                     asset, color_choice = choose_color_size(source, asset, poses, color_ref)
                 notes.append(color_choice.describe())
             layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
-            pkg = package_from_asset(asset, PackOptions(bits=opt.bits, mask_layout=layout), curves)
+            with console.status("encoding the maps and packing the masks"):
+                pkg = package_from_asset(
+                    asset, PackOptions(bits=opt.bits, mask_layout=layout), curves
+                )
             if opt.compressed and not stage_rep.formats:  # not pd: the searches did not run
                 with console.status("choosing block formats by fidelity"):
                     chosen, n, record = formats_by_fidelity(
@@ -160,7 +163,7 @@ def convert(
                     )
                 stage_rep.formats, stage_rep.fidelity = chosen, record
                 notes += n
-            with console.status("encoding, packing, compressing"):
+            with console.status("compressing and building the files"):
                 formats = {**manifest.formats, **stage_rep.formats}
                 if opt.compressed and color_ref is not None:
                     color_format = choose_color_format(
