@@ -51,6 +51,7 @@ from wrinklepipe.fidelity.judge import (
     pick_format,
 )
 from wrinklepipe.metrics import Budget
+from wrinklepipe.normals.encode import MAX_PD_SCALE
 
 _F = np.float32
 
@@ -145,8 +146,10 @@ class Choice:
 
 def scale_candidates(max_slope: float, factors: Sequence[float]) -> list[float]:
     """PD scales to try: ``max_slope`` times each factor, rounded up to a multiple of 1/64
-    (exact in float32 and in every shader), distinct, largest first."""
-    top = max(float(max_slope), 1.0 / 64.0)
+    (exact in float32 and in every shader), distinct, largest first. ``max_slope`` is taken as
+    at most :data:`~wrinklepipe.normals.encode.MAX_PD_SCALE` (a texel on the horizon, z = 0,
+    has a slope of 1e12: no scale holds it, and it clips at every one)."""
+    top = min(max(float(max_slope), 1.0 / 64.0), MAX_PD_SCALE)
     out = sorted({float(np.ceil(top * f * 64.0) / 64.0) for f in factors}, reverse=True)
     return [s for s in out if s > 0]
 
@@ -253,28 +256,32 @@ class _Search:
         """The PD scale of the states at ``size`` with the least error, clipping included."""
         o, judge, ref = self.o, self.judge, self.ref
         u = judge.coarse.union
-        top = max(
-            float(np.abs(fsa.sample_at(x, ref.shape, u)).max(initial=0.0))
-            for x in self.levels[size]
-        )
+        top = max(_largest_held(fsa.sample_at(x, ref.shape, u)) for x in self.levels[size])
         # the validator's clipping rule (WP-MAP-004) counts every texel of the map, active or
         # not: a scale that clips more than it allows is never chosen, and the candidates
         # include the smallest scale that keeps every texel of the map inside the range
         limit = o.max_clipped_fraction * size * size
         level = self.levels[size]
-        # the largest |component| of the map: its largest and its most negative value (no
-        # temporaries: at full size the map is 4M texels)
-        big = max(float(level.max(initial=0.0)), -float(level.min(initial=0.0)))
+        big = _largest_held(level)
         safe = scale_candidates(big, (1.0,))[0]
         candidates = sorted({*scale_candidates(top, o.scale_factors), safe}, reverse=True)
         # only texels with a component above 0.99 of the smallest scale can reach the end of
         # the range (|t| >= 1 - 0.5/127): count clipping on that tail alone, as edge_texels does
         tails = _tails(level, candidates[-1])
+        # texels that clip even at the largest scale (on or near the horizon: a two-channel
+        # texel with x^2 + y^2 >= 1, a z = 0 normal) clip at every scale: counted as clipped in
+        # the report and by the validator, never a reason to pick one scale over another
+        lost = clipped_texels(tails, MAX_PD_SCALE)
 
         def clips(s: float) -> bool:
-            return max(clipped_texels(tails, s), default=0) > limit
+            return max((c - n for c, n in zip(clipped_texels(tails, s), lost)), default=0) > limit
 
-        while clips(safe):
+        # the smallest scale that clips no more than the rule allows, in steps of 1/64 from the
+        # largest |component| held, at most 64 steps (half an 8-bit step is 0.4 % of the range:
+        # the first step past big / (1 - 0.5/127) clips nothing) and never past the largest
+        for _ in range(64):
+            if safe >= MAX_PD_SCALE or not clips(safe):
+                break
             safe += 1.0 / 64.0
             candidates = sorted({*candidates, safe}, reverse=True)
         best: tuple[tuple[float, float], float] | None = None
@@ -563,6 +570,18 @@ class _FormatSearch:
         parts = dict(judge.parts)
         judge.parts = self.kept
         return _Formats(state_fmt, base_fmt, parts, self.found)
+
+
+def _largest_held(x: np.ndarray) -> float:
+    """The largest |component| of slopes ``x`` that some PD scale holds (at most
+    :data:`~wrinklepipe.normals.encode.MAX_PD_SCALE`); 0 when none. Without temporaries when
+    every texel is held (at full size a map is 4M texels); horizon texels (slopes up to 1e12)
+    are left out."""
+    big = max(float(np.max(x, initial=0.0)), -float(np.min(x, initial=0.0)))
+    if big <= MAX_PD_SCALE:
+        return big
+    a = np.abs(x)
+    return float(a[a <= MAX_PD_SCALE].max(initial=0.0))
 
 
 def _tails(level: np.ndarray, smallest: float) -> list[np.ndarray]:

@@ -1,0 +1,128 @@
+"""Issue 39, bounds: every loop that searches ends, and every input's cost is checked before
+anything the size of it is allocated, with a message naming the input."""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+import signal
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from wrinklepipe.cli import main
+from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.normals.bc4 import encode_bc5
+from wrinklepipe.normals.dds import dds_bytes
+
+
+class Hung(BaseException):
+    """Raised in the main thread by the alarm: not an ``Exception``, so no handler hides it."""
+
+
+@contextlib.contextmanager
+def deadline(seconds: float) -> Iterator[None]:
+    """Fail the block (raise :class:`Hung`) if it runs longer than ``seconds``: a loop that
+    never ends fails the test instead of hanging the suite."""
+
+    def ring(signum, frame):  # noqa: ANN001
+        raise Hung(f"still running after {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, ring)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
+@pytest.fixture(scope="module")
+def source(tmp_path_factory) -> Path:
+    return write_demo_source(tmp_path_factory.mktemp("src") / "demo", size=16)
+
+
+def _copy_source(source: Path, tmp_path: Path) -> Path:
+    src = tmp_path / "src"
+    shutil.copytree(source.parent, src)
+    return src / source.name
+
+
+def _read_u16(path: Path) -> np.ndarray:
+    inp = oiio.ImageInput.open(str(path))
+    try:
+        return inp.read_image("uint16")
+    finally:
+        inp.close()
+
+
+def _grey_alpha_png(path: Path, xy: np.ndarray) -> None:
+    """A two-channel (grey + alpha) 16-bit PNG holding x in grey and y in alpha, as stored
+    (unassociated: OpenImageIO would otherwise divide grey by alpha)."""
+    out = oiio.ImageOutput.create(str(path))
+    spec = oiio.ImageSpec(xy.shape[1], xy.shape[0], 2, "uint16")
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    out.open(str(path), spec)
+    out.write_image(np.ascontiguousarray(xy))
+    out.close()
+
+
+def _bc5_dds(path: Path, xy8: np.ndarray) -> None:
+    h, w = xy8.shape[:2]
+    data = encode_bc5(xy8[..., 0], xy8[..., 1])
+    path.write_bytes(dds_bytes("bc5", w, h, [data]))
+
+
+# ------------------------------------------------------------------------------------------------
+# a two-channel map with a texel on or past the horizon (x^2 + y^2 >= 1): the PD scale search
+# looped forever (`while clips(safe): safe += 1/64`)
+
+
+@pytest.mark.parametrize(
+    "role, kind", [("state", "png"), ("base", "png"), ("state", "dds"), ("base", "dds")]
+)
+def test_a_two_channel_map_past_the_horizon_converts_in_bounded_time(
+    source, tmp_path, capsys, role, kind
+):
+    src = _copy_source(source, tmp_path)
+    name = "wrinkle_stretch.png" if role == "state" else "base_normal.png"
+    rgb = _read_u16(src.parent / name)
+    if kind == "png":
+        xy = rgb[..., :2].copy()
+        xy[3, 3] = (65535, 65535)  # x = y = 1: |xy| = 1.41, z rebuilt as 0
+        bad = src.parent / "two_channel.png"
+        _grey_alpha_png(bad, xy)
+    else:
+        xy = np.rint(rgb[..., :2] / 257.0).astype(np.uint8)
+        xy[4:8, 4:8] = (255, 255)  # a whole block: BC5 keeps it exactly
+        bad = src.parent / "two_channel.dds"
+        _bc5_dds(bad, xy)
+    text = src.read_text().replace(f'"{name}"', f'"{bad.name}"')
+    src.write_text(text)
+    out = tmp_path / "out"
+    with deadline(60):
+        rc = main(["convert", str(src), "-o", str(out), "--no-render"])
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    # handled: converted (the validator's verdict is the caller's: 0 or 1), the horizon texels
+    # reported as not unit length and clipped, and the scale chosen by the texels a scale holds
+    assert rc in (0, 1), err
+    assert "WP-MAP-007" in err and "not unit length" in err
+    report = (out / "report.json").read_text()
+    assert '"WP-MAP-004"' in report  # the horizon texels clip at every scale: said
+    assert "pd_scale 64" not in err
+
+
+def test_validate_asset_on_a_manifest_with_a_horizon_texel_ends(source, tmp_path, capsys):
+    src = _copy_source(source, tmp_path)
+    xy = _read_u16(src.parent / "wrinkle_stretch.png")[..., :2].copy()
+    xy[0, 0] = (0, 65535)  # x = -1, y = 1
+    _grey_alpha_png(src.parent / "two_channel.png", xy)
+    src.write_text(src.read_text().replace('"wrinkle_stretch.png"', '"two_channel.png"'))
+    with deadline(60):
+        rc = main(["validate-asset", str(src), "--no-render"])
+    err = capsys.readouterr().err
+    assert rc == 1 and "Traceback" not in err
