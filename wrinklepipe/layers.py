@@ -51,7 +51,7 @@ LAYERS: tuple[Layer, ...] = (
     Layer(
         "files",
         "plain file helpers: pixels (OpenImageIO), PNG bytes, guarded JSON, confined paths, "
-        "the Khronos validator",
+        "USD's diagnostics captured, the Khronos validator",
         ("wrinklepipe.io",),
     ),
     Layer(

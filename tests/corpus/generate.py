@@ -472,6 +472,48 @@ def c_color_linear_tag() -> ValidationInput:
     return inp
 
 
+def _usd_records(layers: dict[str, str]) -> list[dict[str, str]]:
+    """The composition records (:mod:`wrinklepipe.io.usd_composition`) of a real stage made of
+    ``layers`` ({file name: usda text}, the first the root), as USD reports them on opening it;
+    paths relative to the stage's folder."""
+    import json
+    import tempfile
+
+    from wrinklepipe.usd.meshes import open_stage_checked
+
+    with tempfile.TemporaryDirectory() as work:
+        folder = Path(work).resolve()
+        for name, text in layers.items():
+            (folder / name).write_text(text)
+        _, problems = open_stage_checked(folder / next(iter(layers)))
+        text = json.dumps([p.to_json() for p in problems]).replace(f"{folder}/", "")
+    return json.loads(text)
+
+
+def c_usd_missing_layers() -> ValidationInput:
+    inp = ship(demo())
+    inp.extra["usd_composition"] = _usd_records(
+        {
+            "hero.usda": "#usda 1.0\n(\n    subLayers = [@./gone.usda@]\n)\n"
+            'def Xform "Hat" (references = @./hat.usda@</Hat>) {}\n'
+        }
+    )
+    return inp
+
+
+def c_usd_cycles() -> ValidationInput:
+    inp = ship(demo())
+    inp.extra["usd_composition"] = _usd_records(
+        {
+            "hero.usda": "#usda 1.0\n(\n    subLayers = [@./looks.usda@]\n)\n"
+            'def Xform "A" (references = @./b.usda@</B>) {}\n',
+            "looks.usda": "#usda 1.0\n(\n    subLayers = [@./hero.usda@]\n)\n",
+            "b.usda": '#usda 1.0\ndef Xform "B" (references = @./hero.usda@</A>) {}\n',
+        }
+    )
+    return inp
+
+
 CASES: list[Case] = [
     Case("clean", ["WP-TEX-007"], "the demo, 8-bit, nothing wrong", c_clean),
     Case(
@@ -724,6 +766,19 @@ CASES: list[Case] = [
         ["WP-FID-001", "WP-FID-002", "WP-FID-004", "WP-RND-003", "WP-TEX-005", "WP-TEX-007"],
         "wrinkle maps exported flat",
         c_no_wrinkle,
+    ),
+    Case(
+        "usd_missing_layers",
+        ["WP-TEX-007", "WP-USD-001", "WP-USD-003"],
+        "the USD stage's sublayer gone.usda and reference hat.usda do not exist",
+        c_usd_missing_layers,
+    ),
+    Case(
+        "usd_cycles",
+        ["WP-TEX-007", "WP-USD-002", "WP-USD-004"],
+        "the USD stage's sublayers loop (hero -> looks -> hero), and so do its references "
+        "(A -> b.usda B -> A)",
+        c_usd_cycles,
     ),
 ]
 

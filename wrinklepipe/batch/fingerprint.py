@@ -32,6 +32,7 @@ from urllib.parse import unquote
 
 from wrinklepipe import __version__
 from wrinklepipe.batch.options import AssetOptions
+from wrinklepipe.io.confine import confine_usd
 from wrinklepipe.paths import ROOT
 from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.suffixes import USD_SUFFIXES
@@ -115,15 +116,13 @@ def _gltf_dependencies(path: Path) -> list[Path]:
 
 
 def _usd_dependencies(path: Path) -> list[Path]:
-    """Layers and assets a USD file pulls in (sublayers, references, payloads, textures)."""
+    """Layers and assets a USD file pulls in (sublayers, references, payloads, value clips,
+    textures, any asset path): the files :func:`~wrinklepipe.io.confine.confine_usd` found
+    inside the allowed folders; a path outside fails the asset as convert would, before any
+    byte of it is read or hashed."""
     if path.suffix.lower() not in (".usd", ".usda", ".usdc"):
         return []  # a .usdz carries its dependencies inside
-    from pxr import UsdUtils  # deferred on purpose: usd-core costs ~0.3 s to import
-
-    layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(str(path))
-    out = [Path(layer.realPath) for layer in layers if layer.realPath]
-    out += [Path(a) for a in assets if a]
-    return [p for p in out if p.is_file()]
+    return [p for p in confine_usd(path) if p.is_file()]
 
 
 def input_files(manifest_path: Path) -> list[Path]:

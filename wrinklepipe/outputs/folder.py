@@ -190,7 +190,7 @@ def _write_layered(
     out[f"{pkg.name}.usda"] = layer_bytes(stage, ref, ".usda")
     if usd_format == "usdc":
         out[f"{pkg.name}.usdc"] = layer_bytes(stage, ref, ".usdc")
-    out[f"{pkg.name}.usdz"], n = flattened_usdz(stage, pkg, pkg.name, png_level)
+    out[f"{pkg.name}.usdz"], n = flattened_usdz(stage, pkg, pkg.name, png_level, usd_source.path)
     out.update(package_files(pkg))  # the MaterialX document the layer's material names
     for rel, data in sorted(out.items()):
         write_bytes(folder / rel, data)

@@ -317,6 +317,8 @@ def ingest_all(manifest: Any) -> Ingested:
     asset.provenance["warnings"] = warnings
     if source is not None and source.target.base_texture is not None:
         asset.provenance["base_source"] = "material"
+    if usd is not None and usd.problems:  # the validator reports them (WP-USD-xxx)
+        asset.provenance["usd_composition"] = [p.to_json() for p in usd.problems]
     if source is None:
         return Ingested(asset, notes, usd=usd)
     return Ingested(asset, notes, source.doc, source.target)

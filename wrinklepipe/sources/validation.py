@@ -41,6 +41,7 @@ from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.readers.registry import Format, format_of, read_package_file
 from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.sources.package import asset_file
+from wrinklepipe.usd.meshes import open_stage_checked
 from wrinklepipe.validate.inputs import FORMATS, Texture, ValidationInput
 from wrinklepipe.validate.loader import (
     BUNDLE_SUFFIX,
@@ -181,19 +182,19 @@ def _gltf_pointers(inp: ValidationInput, p: Path, gltf: dict[str, Any]) -> None:
 
 
 def _usd_pointers(inp: ValidationInput, p: Path) -> None:
-    """Point issues at prims: the material with WrinkleMapsAPI, its attributes, the mesh."""
-    try:
-        from pxr import Usd, UsdGeom  # deferred: usd-core, USD only
+    """Point issues at prims: the material with WrinkleMapsAPI, its attributes, the mesh; and
+    keep the stage's composition problems (the validator's WP-USD-xxx)."""
+    from pxr import UsdGeom  # deferred: usd-core, USD only
 
-        stage = Usd.Stage.Open(str(p))
-        mat = mesh = None
-        for prim in stage.Traverse():
-            if mat is None and "WrinkleMapsAPI" in prim.GetAppliedSchemas():
-                mat = prim.GetPath()
-            if mesh is None and prim.IsA(UsdGeom.Mesh):
-                mesh = prim.GetPath()
-    except Exception:  # noqa: BLE001 - pointers are a convenience; the reader already worked
-        return
+    stage, problems = guard_reader(lambda: open_stage_checked(p), p, "the USD stage")
+    if problems:
+        inp.extra["usd_composition"] = [x.to_json() for x in problems]
+    mat = mesh = None
+    for prim in stage.Traverse():
+        if mat is None and "WrinkleMapsAPI" in prim.GetAppliedSchemas():
+            mat = prim.GetPath()
+        if mesh is None and prim.IsA(UsdGeom.Mesh):
+            mesh = prim.GetPath()
     if mat is not None:
         inp.pointers.update(
             {
@@ -327,6 +328,7 @@ def _load_manifest(p: Path) -> ValidationInput:
     inp = input_from_package(pkg, str(p), "manifest")
     inp.asset = asset
     inp.has_source = True
+    _source_problems(inp, asset)
     if asset.drivers:
         curves, _ = guard_reader(lambda: evaluate_drivers(asset, p.parent, p), p, "the drivers")
         inp.weight_curves = {str(c.name): np.asarray(c.values, np.float32) for c in curves}
@@ -366,7 +368,15 @@ def attach_source(inp: ValidationInput, src: WrinkleAsset, manifest: Path) -> Va
         provenance={**a.provenance, "maps": src.provenance.get("maps", {})},
     )
     inp.has_source = True
+    _source_problems(inp, src)
     return inp
+
+
+def _source_problems(inp: ValidationInput, src: WrinkleAsset) -> None:
+    """The USD source's composition problems (recorded at ingest) for the validator."""
+    found = src.provenance.get("usd_composition")
+    if found:
+        inp.extra["usd_composition"] = list(found)
 
 
 def demo_input(spec: str = "demo") -> ValidationInput:

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.confine import allowed, confine_usd
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.usd.materialx import drop_materialx_file
@@ -91,6 +92,7 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
     absolute path: :func:`layer_bytes` writes it relative."""
     from pxr import Sdf, Usd  # deferred: usd-core, USD only
 
+    confine_usd(src.path)  # every path the source names: inside its folder, before it opens
     source_layer = Sdf.Layer.FindOrOpen(str(src.path))
     if source_layer is None:
         raise input_error(src.path, "cannot open the USD source layer")
@@ -453,15 +455,26 @@ def _retype_varnames(layer: Any) -> list[str]:
 
 
 def flattened_usdz(
-    stage: Any, pkg: WrinklePackage, name: str, png_level: int = DEFAULT_PNG_LEVEL
+    stage: Any,
+    pkg: WrinklePackage,
+    name: str,
+    png_level: int = DEFAULT_PNG_LEVEL,
+    source: Path | None = None,
 ) -> tuple[bytes, list[str]]:
     """The composed stage flattened into one usdc, packed with every texture it uses: the
-    package's under ``textures/`` (PNGs at zlib ``png_level``), the source's (found through
-    USD's resolver, inside usdz packages too) byte for byte under ``textures/source/``. An
-    asset path naming one of the stage's own layers (``assetInfo`` identifiers) names the
-    flattened layer instead."""
+    package's under ``textures/`` (PNGs at zlib ``png_level``), the source's byte for byte
+    under ``textures/source/``. An asset path naming one of the stage's own layers
+    (``assetInfo`` identifiers) names the flattened layer instead.
+
+    Only files the confined stage resolved are read (``source``: the source layer, whose folder
+    and the ``--allow-root`` folders bound them; :func:`~wrinklepipe.io.confine.confine_usd`
+    checked every path before the stage was opened): an absolute path inside them, a file or a
+    package (a ``.usdz`` holding it). A path USD left unresolved (a search path, a ``<UDIM>``
+    pattern, a missing file) is left as it is and noted, never looked up beside the current
+    folder; one outside is refused."""
     from pxr import Ar, UsdUtils  # deferred: usd-core, USD only
 
+    folder = Path(source).resolve().parent if source is not None else None
     flat = stage.Flatten()
     drop_materialx_file(flat)  # a usdz holds no .mtlx; the network is in the layer
     layers = {
@@ -481,7 +494,18 @@ def flattened_usdz(
             return by_source[asset]
         if os.path.realpath(asset) in layers:
             return f"{name}.usdc"
-        handle = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(asset))
+        file = asset[: asset.index("[")] if asset.endswith("]") and "[" in asset else asset
+        if not os.path.isabs(file):
+            notes.append(f"usdz: {asset} not found: left as it is")
+            return asset
+        real = Path(file).resolve()
+        if folder is None or not allowed(real, folder):
+            raise input_error(
+                source or name,
+                f"USD asset path @{asset}@ is outside {folder} ({real}); only files inside the "
+                "folder of the source are packed (allow another folder with --allow-root DIR)",
+            )
+        handle = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(asset)) if real.is_file() else None
         if handle is None:
             notes.append(f"usdz: {asset} not found: left as it is")
             return asset

@@ -42,6 +42,8 @@ from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.polygons import drop_degenerate, fan_triangles, weld_corners
 from wrinklepipe.io.confine import confine_usd
+from wrinklepipe.io.usd_composition import UsdProblem, composition_problems
+from wrinklepipe.io.usd_diagnostics import captured_diagnostics, plain
 
 
 @dataclass(frozen=True)
@@ -69,17 +71,25 @@ class UsdMeshOptions:
 
 
 def open_stage(path: Path) -> Any:
-    """``Usd.Stage.Open`` after :func:`~wrinklepipe.io.confine.confine_usd`; one clear error."""
+    """``Usd.Stage.Open`` after :func:`~wrinklepipe.io.confine.confine_usd`; one clear error.
+    USD's diagnostics are captured, never printed (:func:`open_stage_checked` returns them)."""
+    return open_stage_checked(path)[0]
+
+
+def open_stage_checked(path: Path) -> tuple[Any, list[UsdProblem]]:
+    """:func:`open_stage` and the stage's composition problems (missing or cyclic sublayers,
+    references, payloads; the other diagnostics USD posted while opening it)."""
     from pxr import Tf, Usd  # deferred: usd-core, USD only
 
-    confine_usd(path)  # sublayers, references, payloads: inside the asset's folder
-    try:
-        stage = Usd.Stage.Open(str(path))
-    except Tf.ErrorException as exc:
-        raise input_error(path, f"cannot open USD stage: {str(exc).strip()[:300]}") from None
+    confine_usd(path)  # every path it names: inside the asset's folder
+    with captured_diagnostics() as said:
+        try:
+            stage = Usd.Stage.Open(str(path))
+        except Tf.ErrorException as exc:
+            raise input_error(path, f"cannot open USD stage: {plain(str(exc))[:300]}") from None
     if stage is None:
-        raise input_error(path, "cannot open USD stage")
-    return stage
+        raise input_error(path, "cannot open USD stage" + (f": {said[0]}" if said else ""))
+    return stage, composition_problems(stage, said, str(path))
 
 
 def read_usd_meshes(path: str | Path, options: UsdMeshOptions | None = None) -> list[Mesh]:

@@ -32,7 +32,8 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.merge import merge_meshes
 from wrinklepipe.gltf.wrinkled import front_projection_uvs
 from wrinklepipe.names import did_you_mean
-from wrinklepipe.usd.meshes import open_stage, read_usd_meshes, uv_primvar
+from wrinklepipe.usd.composition import UsdProblem
+from wrinklepipe.usd.meshes import open_stage_checked, read_usd_meshes, uv_primvar
 
 
 @dataclass
@@ -53,6 +54,7 @@ class UsdSource:
     added_uvs: tuple[str, ...] = ()
     notes: list[str] = field(default_factory=list)
     uv_names: dict[str, str] = field(default_factory=dict)
+    problems: tuple[UsdProblem, ...] = ()  # composition errors USD reported opening it
 
 
 def _bindings(stage: Any, prims: list[str]) -> tuple[dict[str, str | None], dict[str, list[str]]]:
@@ -185,7 +187,7 @@ def read_usd_source(manifest: Any) -> UsdSource:
     path = Path(manifest.mesh).resolve()
     file = str(manifest.path)
     parts = read_usd_meshes(path)
-    stage = open_stage(path)
+    stage, problems = open_stage_checked(path)
     prims, mats, cloned = select_meshes(
         stage, [m.name for m in parts], manifest.material, manifest.meshes, file, path.name
     )
@@ -229,7 +231,15 @@ def read_usd_source(manifest: Any) -> UsdSource:
         + ", ".join(f"{p.name} ({p.count} vertices)" for p in mesh.parts)
     )
     return UsdSource(
-        path, mesh, tuple(prims), tuple(mats), tuple(cloned), tuple(added), notes, uv_names
+        path,
+        mesh,
+        tuple(prims),
+        tuple(mats),
+        tuple(cloned),
+        tuple(added),
+        notes,
+        uv_names,
+        tuple(problems),
     )
 
 

@@ -61,6 +61,7 @@ AREAS = {
     "RND": "Render pass (GPU vs numpy reference)",
     "FID": "Fidelity: the shipped asset against the full-resolution source",
     "COL": "Colour states: colour maps against their base colour",
+    "USD": "USD composition: sublayers, references, payloads",
 }
 
 RULES: tuple[Rule, ...] = (
@@ -471,6 +472,55 @@ RULES: tuple[Rule, ...] = (
         "visible (the base colour given as the state's colour map?).",
         "Give the state its own colour map (paler where the skin stretches, flushed where it "
         "compresses), or drop its color key.",
+    ),
+    # --- USD
+    Rule(
+        "WP-USD-001",
+        "error",
+        "Missing sublayer",
+        "A layer of the USD stage names a sublayer that cannot be opened (not found, or not a "
+        "layer): USD skips it, so everything it holds is missing from the stage.",
+        "Fix the sublayer path (relative to the layer that names it) or remove the entry.",
+    ),
+    Rule(
+        "WP-USD-002",
+        "error",
+        "Sublayer cycle",
+        "The sublayers of the stage form a cycle (a layer reaches itself through its "
+        "sublayers): USD drops the repeated layer.",
+        "Remove the sublayer entry that leads back to a layer already in the stack.",
+    ),
+    Rule(
+        "WP-USD-003",
+        "error",
+        "Missing reference or payload",
+        "A reference or payload names a layer that cannot be opened, or a prim that the layer "
+        "does not hold: the prim composes without it.",
+        "Fix the asset path (relative to the layer that names it) or the target prim path.",
+    ),
+    Rule(
+        "WP-USD-004",
+        "error",
+        "Reference or payload cycle",
+        "References or payloads form a cycle (a prim reaches itself through its arcs): USD "
+        "drops the arc that closes it.",
+        "Remove the arc that leads back to a prim already in the chain.",
+    ),
+    Rule(
+        "WP-USD-005",
+        "warning",
+        "Other composition error",
+        "USD reported another composition error for the stage (a permission, a relocation, "
+        "an inconsistent property type, a bad layer offset, ...).",
+        "Read the message; fix the layer it names.",
+    ),
+    Rule(
+        "WP-USD-006",
+        "warning",
+        "USD diagnostic while opening the stage",
+        "USD posted a warning while opening the stage that is not a composition error (it is "
+        "reported here in one line instead of being printed).",
+        "Read the message; fix the layer it names.",
     ),
 )
 

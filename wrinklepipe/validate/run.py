@@ -15,6 +15,7 @@ from wrinklepipe.validate import (
     rules_maps,
     rules_masks,
     rules_mesh,
+    rules_usd,
     rules_weights,
 )
 from wrinklepipe.validate.catalogue import SEVERITIES, Issue
@@ -24,6 +25,7 @@ from wrinklepipe.validate.inputs import ValidationInput
 
 #: (name, check) in the order they run.
 CHECKS: tuple[tuple[str, Callable[[Context], list[Issue]]], ...] = (
+    ("usd composition", rules_usd.check_composition),
     ("declarations", rules_maps.check_declarations),
     ("formats", rules_compression.check_formats),
     ("maps", rules_maps.check_maps),

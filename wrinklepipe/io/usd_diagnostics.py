@@ -1,0 +1,74 @@
+"""USD's own diagnostics (Tf warnings and status messages, and errors USD reports instead of
+raising), captured, never printed raw to the terminal.
+
+USD prints a diagnostic to stderr ("Warning: in _ReportErrors at line 3326 of ...") only when
+no delegate is registered. The first :func:`captured_diagnostics` registers one
+``UsdUtils.CoalescingDiagnosticDelegate`` for the rest of the process, so from then on nothing
+of USD's reaches the terminal raw: each block gets the diagnostics posted while it ran, as one
+line each in the tool's words (:func:`plain`), and decides what to say (a report issue, a note).
+Diagnostics posted outside any block are kept for :func:`stray_diagnostics`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+_LOCK = threading.Lock()
+_DELEGATE: list[Any] = []  # the one delegate, once made
+_OPEN: list[list[str]] = []  # the blocks running, innermost last
+_STRAY: list[str] = []
+
+_CONTEXT = re.compile(r"\s*\((?:instantiating|composing|opening|loading)[^()]*\)\s*$")
+_ADDRESS = re.compile(r"\s*<0x[0-9a-fA-F]+>")
+
+
+def plain(text: str) -> str:
+    """One line of USD's commentary: no trailing "(instantiating stage on stage ... <0x..>)"
+    context, no memory addresses, whitespace folded."""
+    line = " ".join(str(text).split())
+    line = _CONTEXT.sub("", line)
+    return _ADDRESS.sub("", line).strip()
+
+
+def _take() -> list[str]:
+    """The diagnostics posted since the last take (caller holds the lock)."""
+    if not _DELEGATE:
+        from pxr import UsdUtils  # deferred: usd-core, USD only
+
+        _DELEGATE.append(UsdUtils.CoalescingDiagnosticDelegate())
+        return []
+    return [plain(d.commentary) for d in _DELEGATE[0].TakeUncoalescedDiagnostics()]
+
+
+@contextlib.contextmanager
+def captured_diagnostics() -> Iterator[list[str]]:
+    """Yield a list that holds, after the block, USD's diagnostics posted while it ran (one
+    line each, in order, repeats removed). Blocks nest: an inner block's diagnostics are its
+    own, not the outer one's."""
+    mine: list[str] = []
+    with _LOCK:
+        before = _take()
+        (_OPEN[-1] if _OPEN else _STRAY).extend(before)
+        _OPEN.append(mine)
+    try:
+        yield mine
+    finally:
+        with _LOCK:
+            mine.extend(_take())
+            _OPEN.remove(mine)
+            mine[:] = list(dict.fromkeys(m for m in mine if m))
+
+
+def stray_diagnostics() -> list[str]:
+    """Diagnostics USD posted outside any :func:`captured_diagnostics` block since the last
+    call (one line each, repeats removed); empty before USD was first used."""
+    with _LOCK:
+        if _DELEGATE and not _OPEN:
+            _STRAY.extend(_take())
+        out = list(dict.fromkeys(m for m in _STRAY if m))
+        _STRAY.clear()
+    return out
