@@ -1,25 +1,34 @@
-"""Issue 11, fault test: ``kill -9`` at 10 random moments of ``convert`` and of ``export``.
+"""Issue 11, fault test: ``kill -9`` at 10 moments of ``convert`` and of ``export``; issue 39:
+the moments are steps of the run, so the test is deterministic.
 
 Each kill leaves the output either absent or complete (byte-identical to an undisturbed run),
 never partial; whatever the kill left beside it (a staging folder, a lock file) is gone after
-the next run, and nothing else is there. The moments are drawn (seeded, so CI is reproducible)
-over the whole run, denser where the files are written. The ten runs go at once, into one
-parent folder (so the live ones also meet the dead ones' leftovers), each on its own clock.
+the next run, and nothing else is there. The ten runs go at once, into one parent folder (so the
+live ones also meet the dead ones' leftovers).
+
+A moment is a *file-system step*: the child counts its calls of ``os.mkdir``, ``os.rename``,
+``os.replace``, ``os.unlink``, ``os.rmdir`` and ``os.open`` (every step by which the tool
+creates, publishes or removes anything) and sends itself SIGKILL just before step N. An
+undisturbed run records its steps; the kills are drawn (seeded) over all of them and over the
+writing phase (from the first staging folder to the publishing rename), so every kill lands
+where it was meant to, on any machine at any load, and the ones in the writing phase provably
+die with their staging folder on disk.
 
 Each run is a process of its own running the CLI's ``main``, forked from a ``multiprocessing``
 fork server that imported the CLI once (as ``wrinklepipe batch`` starts its assets): SIGKILL
-ends it as it ends ``python -m wrinklepipe``, the kill moments fall in the command rather than in
-the interpreter's start-up, and the 22 runs skip 22 start-ups (about 1.5 s CPU each).
+ends it as it ends ``python -m wrinklepipe``, and the 22 runs skip 22 start-ups (about 1.5 s
+CPU each).
 """
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 import random
+import shutil
+import signal
 import sys
-import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -55,111 +64,110 @@ PRELOAD = [
 ]
 
 
-def _cli_process(args: list[str]) -> None:
-    """The child: ``wrinklepipe ARGS`` with its output discarded, exiting with its exit code."""
+#: The file-system steps a child counts (see the module doc).
+STEPS = ("mkdir", "rename", "replace", "unlink", "rmdir", "open")
+
+
+def _cli_process(args: list[str], kill_at: int, record: str) -> None:
+    """The child: ``wrinklepipe ARGS`` with its output discarded, killed by SIGKILL just before
+    its file-system step ``kill_at`` (0: never); ``record``: a file to write its steps to (JSON
+    list of [step, path]) when it ends."""
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)
     os.dup2(devnull, 2)
-    sys.exit(main(args))
+    steps: list[tuple[str, str]] = []
+    real = {name: getattr(os, name) for name in STEPS}
+
+    def counted(name: str):  # noqa: ANN202
+        def step(*a, **k):  # noqa: ANN002, ANN003
+            steps.append(
+                (
+                    name,
+                    os.fsdecode(a[0]) if a and isinstance(a[0], (str, bytes, os.PathLike)) else "",
+                )
+            )
+            if len(steps) == kill_at:
+                os.kill(os.getpid(), signal.SIGKILL)
+            return real[name](*a, **k)
+
+        return step
+
+    for name in STEPS:
+        setattr(os, name, counted(name))
+    try:
+        code = main(args)
+    finally:
+        for name in STEPS:
+            setattr(os, name, real[name])
+        if record:
+            Path(record).write_text(json.dumps(steps))
+    sys.exit(code)
 
 
 class CliRun:
     """One CLI run in a process of its own (the slice of ``subprocess.Popen`` the test uses)."""
 
-    def __init__(self, args: list[str]) -> None:
+    def __init__(self, args: list[str], kill_at: int = 0, record: str = "") -> None:
         ctx = multiprocessing.get_context("forkserver")
         ctx.set_forkserver_preload(PRELOAD)
-        self.process = ctx.Process(target=_cli_process, args=(args,), name="wrinklepipe")
+        self.process = ctx.Process(
+            target=_cli_process, args=(args, kill_at, record), name="wrinklepipe"
+        )
         self.process.start()
-
-    def poll(self) -> int | None:
-        return self.process.exitcode
-
-    def kill(self) -> None:
-        self.process.kill()  # SIGKILL
 
     def wait(self) -> int | None:
         self.process.join()
         return self.process.exitcode
 
-    @property
-    def returncode(self) -> int | None:
-        return self.process.exitcode
+
+def _steps(args: list[str], record: Path) -> list[tuple[str, str]]:
+    """An undisturbed run's file-system steps."""
+    assert CliRun(args, 0, str(record)).wait() == 0
+    return [tuple(x) for x in json.loads(record.read_text())]
 
 
-def _timed_run(args: list[str], parent: Path, out: Path) -> tuple[float, float, float]:
-    """An undisturbed run: seconds until its staging folder appears, until the output does,
-    and until it ends (the moments a kill is drawn from)."""
-    t0 = time.monotonic()
-    proc = CliRun(args)
-    staged = published = None
-    while proc.poll() is None:
-        now = time.monotonic() - t0
-        if staged is None and _staged(parent):
-            staged = now
-        if published is None and out.exists():
-            published = now
-        time.sleep(0.002)
-    end = time.monotonic() - t0
-    assert proc.returncode == 0
-    return staged or 0.0, published or end, end
-
-
-def _staged(parent: Path, name: str = "") -> bool:
-    """A staging folder of output ``name`` (any output without it) is in ``parent``: one
-    ``listdir``, as the ten killer threads poll this every few milliseconds."""
-    prefix = f".{name}." if name else "."
-    return any(
-        n.startswith(prefix) and n.endswith(staging.STAGING_SUFFIX) for n in os.listdir(parent)
+def _writing(steps: list[tuple[str, str]], out: Path) -> tuple[int, int]:
+    """Steps (1-based) from the output's first staging folder to its publishing rename."""
+    stem = f".{out.name}."
+    first = next(
+        i for i, (op, p) in enumerate(steps, 1) if op == "mkdir" and Path(p).name.startswith(stem)
     )
+    published = next(
+        i
+        for i, (op, p) in enumerate(steps, 1)
+        if op == "rename" and i > first and len(p) and Path(p).name == out.name
+    )
+    return first, published
 
 
-def _kill_plan(seed: int, staged: float, published: float, end: float) -> list[tuple[str, float]]:
-    """Half the kills at a random moment of the whole run (from its start), half at a random
-    moment of the writing phase (from the moment its staging folder appears: robust to how
-    long the interpreter takes to start on a loaded machine)."""
+def _kill_plan(seed: int, total: int, first: int, published: int) -> list[tuple[str, int]]:
+    """Half the kills at a step of the whole run, half at a step of the writing phase."""
     rng = random.Random(seed)
-    plan = [("run", rng.uniform(0.0, end)) for _ in range(KILLS // 2)]
-    plan += [("writing", rng.uniform(0.0, published - staged + 0.02)) for _ in range(KILLS // 2)]
+    plan = [("run", rng.randint(1, total)) for _ in range(KILLS // 2)]
+    plan += [("writing", rng.randint(first + 1, published)) for _ in range(KILLS // 2)]
     rng.shuffle(plan)
     return plan
 
 
-def _kill_at(proc: CliRun, parent: Path, name: str, phase: str, delay: float) -> None:
-    if phase == "writing":
-        deadline = time.monotonic() + 300
-        while not _staged(parent, name) and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.002)
-    time.sleep(delay)
-    proc.kill()
-    proc.wait()
-
-
 def _fault_cycle(args_for, parent: Path, rerun, seed: int) -> list[str]:
-    """The 10 runs at once (each killed at its own moment, on its own clock), then for each:
-    absent or complete; the next run succeeds; no leftovers at all at the end."""
+    """The 10 runs at once (each killed at its own step), then for each: absent or complete;
+    the next run succeeds; no leftovers at all at the end."""
+    parent.mkdir(exist_ok=True)
     reference = parent / "reference"
-    staged, published, end = _timed_run(args_for(reference), parent, reference)
+    steps = _steps(args_for(reference), parent.parent / f"{parent.name}.steps.json")
     want = _tree(reference)
-    plan = _kill_plan(seed, staged, published, end)
+    first, published = _writing(steps, reference)
+    plan = _kill_plan(seed, len(steps), first, published)
     outs = [parent / f"out{i}" for i in range(len(plan))]
-    procs = [CliRun(args_for(out)) for out in outs]
-    killers = [
-        threading.Thread(target=_kill_at, args=(proc, parent, out.name, phase, delay))
-        for proc, out, (phase, delay) in zip(procs, outs, plan)
-    ]
-    for k in killers:
-        k.start()
-    for k in killers:
-        k.join()
+    procs = [CliRun(args_for(out), kill_at) for out, (_, kill_at) in zip(outs, plan)]
+    codes = [p.wait() for p in procs]
     outcomes = []
-    for i, (out, (phase, delay)) in enumerate(zip(outs, plan)):
-        left = any(p.name.startswith(f".{out.name}.") for p in parent.iterdir())
+    for i, (out, (phase, kill_at), code) in enumerate(zip(outs, plan, codes)):
+        # a step is a step on any machine: every kill lands (writing: with staging on disk)
+        assert code == -signal.SIGKILL, f"kill {i} ({phase} step {kill_at}) did not land: {code}"
         if out.exists():
-            assert _tree(out) == want, f"kill {i} ({phase} +{delay:.3f} s) left a partial output"
-        outcomes.append(
-            f"{phase}: {'complete' if out.exists() else 'absent'}" + (" + leftovers" * left)
-        )
+            assert _tree(out) == want, f"kill {i} ({phase} step {kill_at}) left a partial output"
+        outcomes.append(f"{phase} step {kill_at}: {'complete' if out.exists() else 'absent'}")
     for out in outs:
         assert rerun(out, out.exists()) == 0
         assert _tree(out) == want
@@ -176,15 +184,14 @@ def test_kill_9_during_convert(source, tmp_path):
     def rerun(out: Path, exists: bool) -> int:
         return main([*args_for(out), *(["--force"] if exists else [])])
 
-    outcomes = _fault_cycle(args_for, tmp_path, rerun, seed=11)
+    outcomes = _fault_cycle(args_for, tmp_path / "runs", rerun, seed=11)
     assert len(outcomes) == KILLS
-    assert any("leftovers" in o for o in outcomes)  # the kills did land while it was writing
 
 
 def test_kill_9_during_export(source, tmp_path_factory):
     converted = tmp_path_factory.mktemp("conv") / "asset"
     assert main(["convert", str(source), "-o", str(converted), "--no-validate"]) == 0
-    parent = tmp_path_factory.mktemp("export")
+    parent = tmp_path_factory.mktemp("export") / "runs"
 
     def args_for(out: Path) -> list[str]:
         return ["export", str(converted), "--engine", "unreal", "-o", str(out)]
@@ -194,3 +201,30 @@ def test_kill_9_during_export(source, tmp_path_factory):
 
     outcomes = _fault_cycle(args_for, parent, rerun, seed=12)
     assert len(outcomes) == KILLS
+
+
+def test_a_kill_while_a_staging_folder_is_removed_leaves_nothing_unowned(source, tmp_path):
+    """Issue 39: a run killed between removing its staging folder's marker and the folder
+    (the folder empty and unmarked, listed only in the run's lock) left it for good once
+    another run in the same folder had removed the dead run's lock. Now whichever run removes
+    a dead lock first removes every staging folder it lists that is empty or marked by it."""
+    parent = tmp_path / "runs"
+    parent.mkdir()
+    args = ["convert", str(source), "-o", str(parent / "out1"), "--no-validate"]
+    steps = _steps(args, tmp_path / "steps.json")
+    marker = max(
+        i
+        for i, (op, p) in enumerate(steps, 1)
+        if op == "unlink" and Path(p).name == staging.STAGING_MARKER
+    )
+    assert steps[marker][0] == "rmdir"  # the next step removes the (now empty) folder
+    for p in parent.iterdir():  # the recording run's output and leftovers: start afresh
+        if p.is_dir():
+            shutil.rmtree(p)
+    assert CliRun(args, marker + 1).wait() == -signal.SIGKILL  # killed before that rmdir
+    left = [p.name for p in parent.iterdir()]
+    assert "out1" in left and any(n.endswith(staging.STAGING_SUFFIX) for n in left), left
+    # another run writing beside it meets the dead run's lock first
+    assert main(["convert", str(source), "-o", str(parent / "out2"), "--no-validate"]) == 0
+    assert main([*args, "--force"]) == 0
+    assert sorted(p.name for p in parent.iterdir()) == ["out1", "out2"]

@@ -127,15 +127,18 @@ def temp_path(path: str | Path, inputs: Iterable[str | Path] = ()) -> Iterator[P
     created = _make_parents(path.parent)
     done = False
     try:
-        staging = _Staging(path.parent, path.name)
-        try:
-            tmp = staging.dir / path.name
-            yield tmp
-            os.chmod(tmp, default_mode())
-            os.replace(tmp, path)
-            done = True
-        finally:
-            staging.remove()
+        # the file's lock (taken here when the caller holds none; waiting, not refusing, for
+        # another writer of the same file) records the staging folder before it exists
+        with output_lock(path, wait=True):
+            staging = _Staging(path.parent, path.name)
+            try:
+                tmp = staging.dir / path.name
+                yield tmp
+                os.chmod(tmp, default_mode())
+                os.replace(tmp, path)
+                done = True
+            finally:
+                staging.remove()
     finally:
         if not done:
             _remove_created(created)

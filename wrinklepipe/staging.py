@@ -355,10 +355,11 @@ def _dead_staging_fd(entry: Path) -> int | None:
 
 def _dead_lock(entry: Path) -> None:
     """Remove a lock file whose holder is gone (its flock is free and its pid is dead), after
-    the ``-new`` staging folders its record lists: the record is the only proof that one killed
-    before its marker was written is that run's, so it goes with the lock. (A ``-new`` folder
-    holds a marker at most, so the flock is held a moment only; renamed staging folders carry
-    their marker and are removed as any dead run's, by :func:`remove_dead_leftovers`.)"""
+    every staging folder its record lists: the record is the only proof that a folder without
+    its marker is that run's (one killed before its marker was written, or while removing it:
+    after the marker, before the empty folder), so they go before the lock does. A listed folder
+    is removed only when its marker names that run, or when it is empty or holds nothing but an
+    empty marker (:func:`_remove_recorded`)."""
     if not entry.name.startswith(".") or not entry.name.endswith(LOCK_SUFFIX) or entry in _HELD:
         return
     try:
@@ -370,8 +371,7 @@ def _dead_lock(entry: Path) -> None:
         if owner and _process_gone(owner):
             if os.fstat(fd).st_ino == os.stat(entry, follow_symlinks=False).st_ino:
                 for name in owner.get("staging", []):
-                    if str(name).endswith(STAGING_NEW_SUFFIX):
-                        _remove_recorded(entry.parent, name, owner)
+                    _remove_recorded(entry.parent, name, owner)
                 os.unlink(entry)
     except OSError:
         pass
