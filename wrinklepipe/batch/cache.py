@@ -22,6 +22,12 @@ The protocol is rename-based, so no lock is needed:
 
 Only folders this cache made are ever removed: victims, our own unfinished entries, and in
 ``tmp/`` leftovers of runs killed more than a day ago.
+
+**Faults.** A cache that cannot be written (a full volume, a read-only folder, a quota) never
+fails a batch: the first write that fails sets :attr:`Cache.unwritable` (one line saying why),
+nothing more is written to it for the rest of the batch, and what it already holds is still
+served. An entry that cannot be read back whole (altered, truncated, unreadable, or its
+``entry.json`` damaged) is a miss: the asset converts, and its new entry replaces the damaged one.
 """
 
 from __future__ import annotations
@@ -85,6 +91,36 @@ def _copy_hashing(src: Path, dst: Path) -> tuple[int, str]:
     return n, h.hexdigest()
 
 
+class _Unreadable(Exception):
+    """Reading a cache entry's file failed (not the output being written)."""
+
+
+def _restore_file(src: Path, dst: Path) -> tuple[int, str]:
+    """:func:`_copy_hashing` from the cache into an output: a read of ``src`` that fails is the
+    entry's fault (:class:`_Unreadable`); a write of ``dst`` that fails is the output's."""
+    h = hashlib.sha256()
+    n = 0
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        fi = open(src, "rb")  # noqa: SIM115 - closed below, errors told apart
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise _Unreadable(f"{src}: {exc.strerror or exc}") from None
+    with fi, open(dst, "wb") as fo:
+        while True:
+            try:
+                block = fi.read(1 << 20)
+            except OSError as exc:
+                raise _Unreadable(f"{src}: {exc.strerror or exc}") from None
+            if not block:
+                break
+            h.update(block)
+            fo.write(block)
+            n += len(block)
+    return n, h.hexdigest()
+
+
 class Cache:
     """The cache at ``root`` with a size cap of ``max_bytes`` (None: no cap)."""
 
@@ -93,6 +129,15 @@ class Cache:
         self.max_bytes = max_bytes
         self.entries = self.root / "entries"
         self.tmp = self.root / "tmp"
+        #: Why the cache cannot be written (set by the first write that failed), else None.
+        self.unwritable: str | None = None
+
+    def _cannot_write(self, exc: OSError) -> None:
+        if self.unwritable is None:
+            self.unwritable = (
+                f"the cache {self.root} cannot be written ({exc.strerror or exc}); this batch "
+                "stores nothing more in it (entries already there are still used)"
+            )
 
     def _folder(self, key: str) -> Path:
         if not _KEY.match(key):
@@ -114,6 +159,8 @@ class Cache:
             meta = json.loads((folder / "entry.json").read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return None
+        if not isinstance(meta, dict) or not isinstance(meta.get("files"), list):
+            return None
         if meta.get("schema") != ENTRY_SCHEMA or meta.get("key") != key:
             return None
         return Entry(key, folder, meta)
@@ -128,23 +175,41 @@ class Cache:
                     rel = Path(f["path"])
                     if rel.is_absolute() or ".." in rel.parts:
                         raise CacheMiss(f"bad path in cache entry: {f['path']}")
-                    n, digest = _copy_hashing(entry.folder / "files" / rel, tmp / rel)
+                    n, digest = _restore_file(entry.folder / "files" / rel, tmp / rel)
                     if n != f["bytes"] or digest != f["sha256"]:
                         raise CacheMiss(f"cache entry {entry.key[:12]} altered: {rel}")
         except FileNotFoundError as exc:
             raise CacheMiss(f"cache entry {entry.key[:12]} went away: {exc.filename}") from None
+        except _Unreadable as exc:
+            raise CacheMiss(f"cache entry {entry.key[:12]} cannot be read: {exc}") from None
+        except (KeyError, TypeError, ValueError) as exc:
+            raise CacheMiss(f"cache entry {entry.key[:12]} damaged: {exc}") from None
         with contextlib.suppress(OSError):
             os.utime(entry.folder / "entry.json")
 
     # -- put ------------------------------------------------------------------------------------
 
     def put(self, key: str, output: Path, result: dict[str, Any]) -> Entry | None:
-        """Store the output folder under ``key`` (a no-op when the key is already there)."""
+        """Store the output folder under ``key`` (a no-op when the key is already there);
+        the entry under ``key`` afterwards, if any."""
+        self.store(key, output, result)
+        return self.lookup(key)
+
+    def store(self, key: str, output: Path, result: dict[str, Any], replace: bool = False) -> bool:
+        """Store the output folder under ``key``; True when this call stored it. A complete
+        entry already there is kept (another batch stored the same bytes), unless ``replace``
+        (it could not be restored); a damaged one (no readable ``entry.json``) is replaced.
+        A write that fails makes the cache :attr:`unwritable` (no exception)."""
+        if self.unwritable is not None:
+            return False
         folder = self._folder(key)
-        if folder.exists():
-            return self.lookup(key)
-        tmp = self._new_tmp()
+        if folder.exists() and self.lookup(key) is not None and not replace:
+            return False
+        tmp = None
         try:
+            if folder.exists():
+                self._discard(folder)
+            tmp = self._new_tmp()
             rows = []
             for p in sorted(output.rglob("*")):
                 if p.is_file():
@@ -167,10 +232,29 @@ class Cache:
                 if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY):
                     raise
                 shutil.rmtree(tmp, ignore_errors=True)  # another batch stored it first
-            return self.lookup(key)
+                return False
+            return True
+        except OSError as exc:
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
+            self._cannot_write(exc)
+            return False
         except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
             raise
+
+    def _discard(self, folder: Path) -> bool:
+        """Move an entry out of ``entries/`` (one rename: readers see it whole or not at all),
+        then delete it; False when another batch removed it first."""
+        self.tmp.mkdir(parents=True, exist_ok=True)
+        victim = self.tmp / f"evict.{uuid.uuid4().hex}"
+        try:
+            os.rename(folder, victim)
+        except FileNotFoundError:
+            return False
+        shutil.rmtree(victim, ignore_errors=True)
+        return True
 
     # -- how long each asset took ---------------------------------------------------------------
 
@@ -182,11 +266,18 @@ class Cache:
     def remember_seconds(self, job_id: str, seconds: float) -> None:
         """Record how long converting the asset ``job_id`` took (written whole by a rename;
         the last batch to finish one wins). A hint for scheduling, never part of a result."""
+        if self.unwritable is not None:
+            return
         f = self._times_file(job_id)
-        f.parent.mkdir(parents=True, exist_ok=True)
         tmp = f.with_name(f".{uuid.uuid4().hex}.tmp")
-        tmp.write_text(json.dumps({"id": job_id, "seconds": round(float(seconds), 3)}))
-        os.replace(tmp, f)
+        try:
+            f.parent.mkdir(parents=True, exist_ok=True)
+            tmp.write_text(json.dumps({"id": job_id, "seconds": round(float(seconds), 3)}))
+            os.replace(tmp, f)
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            self._cannot_write(exc)
 
     def last_seconds(self, job_id: str) -> float | None:
         """How long the last conversion of ``job_id`` took, if this cache saw one."""
@@ -203,18 +294,22 @@ class Cache:
 
     def _all(self) -> list[tuple[float, int, Path]]:
         out = []
-        if not self.entries.is_dir():
+        try:
+            shards = [s for s in self.entries.iterdir() if s.is_dir()]
+        except OSError:
             return out
-        for shard in self.entries.iterdir():
-            if not shard.is_dir():
+        for shard in shards:
+            try:
+                folders = list(shard.iterdir())
+            except OSError:
                 continue
-            for folder in shard.iterdir():
+            for folder in folders:
                 meta = folder / "entry.json"
                 try:
                     st = meta.stat()
                     size = int(json.loads(meta.read_text(encoding="utf-8")).get("bytes", 0))
-                except (OSError, ValueError):
-                    continue  # being evicted, or not ours
+                except (OSError, ValueError, AttributeError, TypeError):
+                    continue  # being evicted, damaged, or not ours
                 out.append((st.st_mtime, size, folder))
         return out
 
@@ -224,8 +319,15 @@ class Cache:
 
     def evict(self, keep: Iterable[str] = ()) -> list[str]:
         """Remove least recently used entries until the cache fits its cap; ``keep``: keys not
-        to remove unless nothing else is left. Returns the removed keys."""
-        self._clean_tmp()
+        to remove unless nothing else is left. Returns the removed keys. Nothing is removed
+        from a cache that cannot be written."""
+        if self.unwritable is not None:
+            return []
+        try:
+            self._clean_tmp()
+        except OSError as exc:
+            self._cannot_write(exc)
+            return []
         if self.max_bytes is None:
             return []
         entries = self._all()
@@ -236,15 +338,14 @@ class Cache:
         for _, size, folder in entries:
             if total <= self.max_bytes:
                 break
-            victim = self.tmp / f"evict.{uuid.uuid4().hex}"
-            self.tmp.mkdir(parents=True, exist_ok=True)
             try:
-                os.rename(folder, victim)
-            except FileNotFoundError:
-                continue  # another batch evicted it
-            shutil.rmtree(victim, ignore_errors=True)
+                gone = self._discard(folder)
+            except OSError as exc:
+                self._cannot_write(exc)
+                break
             total -= size
-            removed.append(folder.name)
+            if gone:
+                removed.append(folder.name)
         return removed
 
     def _clean_tmp(self) -> None:

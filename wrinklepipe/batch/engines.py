@@ -8,15 +8,21 @@ the outputs are byte-identical whichever engine ran them.
 
 **Local** (``--jobs N``): every asset runs in a process of its own, forked from a
 ``multiprocessing`` fork server that has imported wrinklepipe once, at most N at a time. A
-process that dies (a crash in a native library, the OOM killer) or overruns ``timeout`` (counted
-from its first message, so the fork server's own start-up is not charged to an asset) fails its
-own asset only; memory goes back to the system after every asset.
+process that dies (a crash in a native library, the OOM killer) or overruns ``timeout`` (a
+watchdog, :data:`DEFAULT_TIMEOUT_S` unless told otherwise; counted from its first message, so
+the fork server's own start-up is not charged to an asset) fails its own asset only; memory goes
+back to the system after every asset. A process stopped early gets SIGTERM first (it removes its
+staging folder and lock, as the CLI does), SIGKILL only if it is still there
+:data:`STOP_GRACE_S` later.
 
 **Dask** (``--scheduler ADDRESS``): the jobs are submitted to the cluster's scheduler as tasks;
 stages come back as worker events (``Worker.log_event`` / ``Client.subscribe_topic``). A task
 whose worker dies is retried by Dask on another worker (its ``allowed-failures``), then fails that
 asset alone. Workers must run the same wrinklepipe (checked: the code digest of every worker
-must equal ours) and see the same file system paths as the client (outputs are checked).
+must equal ours) and see the same file system paths as the client (outputs are checked). A
+cluster with no workers (none joined, or every one died) for ``no_workers_s`` seconds
+(:data:`DEFAULT_NO_WORKERS_S`) fails the assets not yet done, each saying so, instead of
+waiting forever.
 """
 
 from __future__ import annotations
@@ -38,6 +44,12 @@ from wrinklepipe.batch.results import AssetResult
 from wrinklepipe.errors import input_error
 
 StageFn = Callable[[str, str], None]
+#: Seconds an asset may run on a local worker before the watchdog stops it (``--timeout``).
+DEFAULT_TIMEOUT_S = 3600.0
+#: Seconds a process stopped early has to clean up after SIGTERM before SIGKILL.
+STOP_GRACE_S = 5.0
+#: Seconds a Dask cluster may have no worker before the assets left fail (``--no-workers``).
+DEFAULT_NO_WORKERS_S = 60.0
 #: Modules the fork server imports once, so each asset's process starts warm (about 2 s of
 #: imports per asset otherwise). No GL context or thread is created by importing them.
 _PRELOAD = [
@@ -73,19 +85,29 @@ def _lost(job: Job, message: str) -> AssetResult:
     )
 
 
+def _stop(proc: Any) -> None:
+    """End a worker process: SIGTERM (it cleans up), SIGKILL after :data:`STOP_GRACE_S`."""
+    if proc.exitcode is None:
+        proc.terminate()
+        proc.join(STOP_GRACE_S)
+    if proc.exitcode is None:
+        proc.kill()
+    proc.join()
+
+
 class LocalEngine:
-    """``jobs`` worker processes on this machine; ``timeout``: seconds per asset (None: none).
-    ``target(job, conn, threads)`` is what each process runs (default
-    :func:`worker.child_main`)."""
+    """``jobs`` worker processes on this machine; ``timeout``: seconds per asset (the
+    watchdog, :data:`DEFAULT_TIMEOUT_S`; None or 0: none). ``target(job, conn, threads)`` is
+    what each process runs (default :func:`worker.child_main`)."""
 
     def __init__(
         self,
         jobs: int | None = None,
-        timeout: float | None = None,
+        timeout: float | None = DEFAULT_TIMEOUT_S,
         target: Callable[[Job, Any, int], None] | None = None,
     ) -> None:
         self.jobs = max(1, int(jobs or cpu_count()))
-        self.timeout = timeout
+        self.timeout = timeout or None
         self.target = target or worker.child_main
         #: threads each worker's thread pools (wrinklepipe's, OpenBLAS, llvmpipe, OpenImageIO)
         #: may use: the cores shared out, so N workers do not start N x cores threads
@@ -146,8 +168,7 @@ class LocalEngine:
                 yield from self._overdue(running)
         finally:
             for conn, (proc, _, _) in running.items():
-                proc.kill()
-                proc.join()
+                _stop(proc)
                 conn.close()
 
     def _wait(self) -> float | None:
@@ -159,10 +180,13 @@ class LocalEngine:
         now = time.monotonic()
         for conn in [c for c, (_, _, t0) in running.items() if now - t0 > self.timeout]:
             proc, job, _ = running.pop(conn)
-            proc.kill()
-            proc.join()
+            _stop(proc)
             conn.close()
-            yield _lost(job, f"stopped after the {self.timeout:g} s timeout (--timeout)")
+            yield _lost(
+                job,
+                f"stopped by the watchdog after {self.timeout:g} s (--timeout S sets it, "
+                "--timeout 0 turns it off)",
+            )
 
 
 def _nothing() -> None:
@@ -185,9 +209,12 @@ class DaskEngine:
 
     TOPIC = "wrinklepipe-batch"
 
-    def __init__(self, address: str, connect_s: float = 30) -> None:
+    def __init__(
+        self, address: str, connect_s: float = 30, no_workers_s: float = DEFAULT_NO_WORKERS_S
+    ) -> None:
         self.address = address
         self.connect_s = connect_s
+        self.no_workers_s = no_workers_s
         self.description = f"Dask scheduler {address}"
 
     def _client(self) -> Any:
@@ -202,11 +229,22 @@ class DaskEngine:
                 "--scheduler", f"cannot reach the Dask scheduler at {self.address}: {exc}"
             ) from None
 
+    def _no_workers(self) -> str:
+        return (
+            f"the Dask cluster at {self.address} had no workers for {self.no_workers_s:g} s "
+            "(none joined, or every one died); the asset did not run (--no-workers S sets the "
+            "wait)"
+        )
+
     def _check_workers(self, client: Any) -> None:
         ours = tool_fingerprint()
+        try:
+            client.wait_for_workers(1, timeout=self.no_workers_s)
+        except (TimeoutError, OSError):
+            raise input_error("--scheduler", self._no_workers()) from None
         theirs = client.run(tool_fingerprint)
         if not theirs:
-            raise input_error("--scheduler", f"the Dask cluster at {self.address} has no workers")
+            raise input_error("--scheduler", self._no_workers())
         differ = sorted(addr for addr, fp in theirs.items() if fp != ours)
         if differ:
             raise input_error(
@@ -215,9 +253,21 @@ class DaskEngine:
                 "than this client; outputs would not be byte-identical (install the same on all)",
             )
 
-    def run(self, jobs: Sequence[Job], on_stage: StageFn) -> Iterator[AssetResult]:
-        from distributed import as_completed  # deferred: Dask engine only (above)
+    @staticmethod
+    def _result(fut: Any, job: Job) -> AssetResult:
+        try:
+            result = fut.result()
+        except Exception as exc:  # noqa: BLE001 - KilledWorker, lost data: this asset only
+            result = _lost(job, f"the Dask task failed ({type(exc).__name__}: {exc})")
+        if result.source == "converted" and not job.output.is_dir():
+            result = _lost(
+                job,
+                f"worker {result.worker} wrote {job.output}, which this machine cannot "
+                "see: the workers and the client need a shared file system",
+            )
+        return result
 
+    def run(self, jobs: Sequence[Job], on_stage: StageFn) -> Iterator[AssetResult]:
         client = self._client()
         try:
             self._check_workers(client)
@@ -236,19 +286,29 @@ class DaskEngine:
                 )
                 futures[fut] = job
                 on_stage(job.id, "queued")
-            for fut in as_completed(list(futures), loop=client.loop):
-                job = futures[fut]
-                try:
-                    result = fut.result()
-                except Exception as exc:  # noqa: BLE001 - KilledWorker, lost data: this asset only
-                    result = _lost(job, f"the Dask task failed ({type(exc).__name__}: {exc})")
-                if result.source == "converted" and not job.output.is_dir():
-                    result = _lost(
-                        job,
-                        f"worker {result.worker} wrote {job.output}, which this machine cannot "
-                        "see: the workers and the client need a shared file system",
-                    )
-                yield result
+            pending = list(futures)
+            alone_since: float | None = None
+            while pending:
+                done = [f for f in pending if f.done()]
+                for fut in done:
+                    pending.remove(fut)
+                    yield self._result(fut, futures[fut])
+                if not pending or done:
+                    continue
+                # every worker gone (killed, or the pool shut down): the tasks would wait for
+                # one forever; after no_workers_s without any, the assets left fail
+                if client.nthreads():
+                    alone_since = None
+                else:
+                    now = time.monotonic()
+                    alone_since = now if alone_since is None else alone_since
+                    if now - alone_since >= self.no_workers_s:
+                        for fut in pending:
+                            fut.cancel()
+                            yield _lost(futures[fut], self._no_workers())
+                        pending = []
+                        continue
+                time.sleep(0.2)
         finally:
             client.unsubscribe_topic(self.TOPIC)
             client.close()

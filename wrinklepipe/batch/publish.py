@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 
 from wrinklepipe.atomic import dumps_json, write_output
 from wrinklepipe.batch import reports
@@ -33,7 +34,14 @@ def run_and_publish(
     ``command``, then :func:`publish` it; returns the run and the JSON summary."""
     title = f"wrinklepipe {command}: {plural(len(plan.jobs), 'asset')}"
     with BatchProgress(console, len(plan.jobs), title) as progress:
-        run = run_plan(plan, engine, cache, progress.stage, progress.done)
+        run = run_plan(
+            plan,
+            engine,
+            cache,
+            progress.stage,
+            progress.done,
+            lambda text: console.print(f"[yellow]warning:[/] {escape(text)}", soft_wrap=True),
+        )
     doc = publish(
         run,
         plan,

@@ -6,6 +6,11 @@ others run on the engine, the longest first by the cache's record of their last 
 (:func:`longest_first`); each one that was written (exit 0 or 1) is stored, unless its inputs
 changed while it ran (the key is taken again afterwards). Then the cache is trimmed to its cap.
 An asset that cannot be hashed (a broken manifest) fails on its own, like any other.
+
+Nothing stops a batch half-way: a cache that cannot be written is used read-only from then on
+(one warning, :attr:`CacheStats.warning`); an entry that cannot be restored is converted again
+and replaced; an engine that fails (a scheduler gone) fails the assets it had not reported,
+each with the reason. Every asset of the plan gets a result, so the reports are always written.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from wrinklepipe.batch.cache import Cache, CacheMiss, Entry
 from wrinklepipe.batch.fingerprint import asset_key
 from wrinklepipe.batch.plan import BatchPlan, Job
 from wrinklepipe.batch.results import AssetResult, counts_of, status_for, worst_exit_code
-from wrinklepipe.errors import InputError
+from wrinklepipe.errors import InputError, input_error
 
 _CACHED_FIELDS = ("name", "issues", "validation", "stages", "seconds", "worker")
 
@@ -34,6 +39,7 @@ class CacheStats:
     evicted: int = 0
     bytes: int = 0
     max_bytes: int | None = None
+    warning: str = ""  # why the cache could not be written, when it could not
 
     def to_json(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -97,19 +103,41 @@ def longest_first(jobs: list[Job], cache: Cache | None) -> list[Job]:
     return sorted(jobs, key=lambda j: (last[j.id] is not None, -(last[j.id] or 0.0)))
 
 
+def _engine_failed(job: Job, exc: BaseException) -> AssetResult:
+    if isinstance(exc, InputError):
+        reason = "; ".join(p.message for p in exc.problems)
+    else:
+        reason = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc) else ''}"
+    return AssetResult.could_not_run(
+        job, [{"file": job.manifest_rel, "key": "", "message": f"did not run: {reason}"}]
+    )
+
+
 def run_plan(
     plan: BatchPlan,
     engine: Any,
     cache: Cache | None = None,
     on_stage: Callable[[str, str], None] | None = None,
     on_done: Callable[[AssetResult], None] | None = None,
+    on_warning: Callable[[str], None] | None = None,
 ) -> BatchRun:
-    """Run every job of ``plan`` (see the module docstring)."""
+    """Run every job of ``plan`` (see the module docstring); ``on_warning`` is told, once,
+    when the cache cannot be written."""
     t0 = time.perf_counter()
     stage = on_stage or (lambda _job, _stage: None)
-    done = on_done or (lambda _result: None)
+    warned: list[str] = []
+
+    def done(result: AssetResult) -> None:
+        if cache is not None and cache.unwritable and not warned:
+            warned.append(cache.unwritable)
+            if on_warning is not None:
+                on_warning(cache.unwritable)
+        if on_done is not None:
+            on_done(result)
+
     results: dict[str, AssetResult] = {}
     keys: dict[str, str] = {}
+    damaged: set[str] = set()  # keys whose entry could not be restored: replaced when stored
     stats = CacheStats(str(cache.root), max_bytes=cache.max_bytes) if cache else None
     to_run: list[Job] = []
     for job in plan.jobs:
@@ -134,8 +162,16 @@ def run_plan(
                 cache.restore(entry, job.output, force=job.force, inputs=[job.manifest.parent])
             except CacheMiss:
                 stats.unusable += 1
+                damaged.add(key)
             except InputError as exc:
                 results[job.id] = _error(job, exc)
+                done(results[job.id])
+                continue
+            except OSError as exc:  # writing the output folder failed
+                results[job.id] = _error(
+                    job,
+                    input_error(job.output, f"could not write the output ({exc.strerror or exc})"),
+                )
                 done(results[job.id])
                 continue
             else:
@@ -148,25 +184,36 @@ def run_plan(
 
     to_run = longest_first(to_run, cache)
     by_id = {j.id: j for j in to_run}
-    for result in engine.run(to_run, stage):
-        job = by_id[result.id]
-        if cache is not None and result.source == "converted" and job.kind == "convert":
-            cache.remember_seconds(job.id, result.seconds)
-        key = keys.get(job.id)
-        if cache is not None and key and result.status != "error":
-            result.key = key
-            try:
-                same = asset_key(job.manifest, job.options, job.output)[0] == key
-            except Exception:  # noqa: BLE001 - inputs vanished meanwhile: do not store
-                same = False
-            if same:
-                fields = {f: getattr(result, f) for f in _CACHED_FIELDS}
-                if cache.put(key, job.output, fields) is not None:
-                    stats.stored += 1
-        results[result.id] = result
-        done(result)
+    try:
+        for result in engine.run(to_run, stage):
+            job = by_id[result.id]
+            if cache is not None and result.source == "converted" and job.kind == "convert":
+                cache.remember_seconds(job.id, result.seconds)
+            key = keys.get(job.id)
+            if cache is not None and key and result.status != "error":
+                result.key = key
+                try:
+                    same = asset_key(job.manifest, job.options, job.output)[0] == key
+                except Exception:  # noqa: BLE001 - inputs vanished meanwhile: do not store
+                    same = False
+                if same:
+                    fields = {f: getattr(result, f) for f in _CACHED_FIELDS}
+                    if cache.store(key, job.output, fields, replace=key in damaged):
+                        stats.stored += 1
+            results[result.id] = result
+            done(result)
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - the engine failed: the assets it left fail
+        for job in to_run:
+            if job.id not in results:
+                results[job.id] = _engine_failed(job, exc)
+                done(results[job.id])
     if cache is not None:
         stats.evicted = len(cache.evict(keep=keys.values()))
         stats.bytes = cache.size()
+        stats.warning = cache.unwritable or ""
+        if cache.unwritable and not warned and on_warning is not None:
+            on_warning(cache.unwritable)
     ordered = [results[j.id] for j in plan.jobs]
     return BatchRun(ordered, time.perf_counter() - t0, stats, [j.id for j in to_run])

@@ -8,6 +8,7 @@ exception too (with the exception's type and message), so one asset never takes 
 from __future__ import annotations
 
 import os
+import signal
 import socket
 import time
 import traceback
@@ -200,9 +201,18 @@ def limit_threads(threads: int) -> None:
     Work.SetConcurrencyLimit(int(threads))
 
 
+def _exit_on_signal(signum: int, frame: object) -> None:
+    """SIGTERM / SIGHUP in a worker process: leave through every ``finally`` (the staging
+    folder removed, the lock released), as the CLI does, then exit 128 + the signal."""
+    raise SystemExit(128 + signum)
+
+
 def child_main(job: Job, conn: Any, threads: int | None = None) -> None:
     """A local worker process: run one job, sending ``("stage", name)`` messages and finally
-    ``("done", result)`` through ``conn``; ``threads`` caps its thread pools."""
+    ``("done", result)`` through ``conn``; ``threads`` caps its thread pools. SIGTERM (the
+    engine's watchdog, or the batch stopping) ends it cleanly (:func:`_exit_on_signal`)."""
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, _exit_on_signal)
     if threads:
         limit_threads(threads)
     try:

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 from typing import Any
 
 from wrinklepipe.batch import Cache, DaskEngine, LocalEngine, parse_size, plan_batch
 from wrinklepipe.batch.cache import DEFAULT_MAX_BYTES
+from wrinklepipe.batch.engines import DEFAULT_NO_WORKERS_S, DEFAULT_TIMEOUT_S
 from wrinklepipe.batch.options import MASK_LAYOUTS, AssetOptions
 from wrinklepipe.batch.publish import run_and_publish
 from wrinklepipe.commands._options import add_fail_on, add_json, add_report
@@ -68,7 +70,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="run on the Dask scheduler at ADDRESS (tcp://host:8786)",
     )
     run.add_argument(
-        "--timeout", type=float, metavar="S", help="local workers: fail an asset after S seconds"
+        "--timeout",
+        type=float,
+        metavar="S",
+        help="local workers: the watchdog stops an asset after S seconds and fails it "
+        f"(default {DEFAULT_TIMEOUT_S:g}; 0: no watchdog)",
+    )
+    run.add_argument(
+        "--no-workers",
+        type=float,
+        metavar="S",
+        help="Dask: fail the assets left when the cluster has had no worker for S seconds "
+        f"(default {DEFAULT_NO_WORKERS_S:g})",
     )
     cache = p.add_argument_group("cache")
     cache.add_argument(
@@ -153,6 +166,11 @@ def run(args: argparse.Namespace) -> int:
         raise input_error("--jobs", f"{args.jobs} is not a number of workers (1 or more)")
     if args.timeout is not None and args.scheduler:
         raise input_error("--timeout", "applies to local workers; Dask has its own limits")
+    if args.no_workers is not None and not args.scheduler:
+        raise input_error("--no-workers", "applies to a Dask cluster (--scheduler)")
+    for name, value in (("--timeout", args.timeout), ("--no-workers", args.no_workers)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise input_error(name, f"{value:g} is not a number of seconds (0 or more)")
     plan = plan_batch(
         args.sources, args.output, root=args.root, cli_options=_cli_options(args), force=args.force
     )
@@ -160,7 +178,12 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_cache:
         folder = Path(args.cache) if args.cache else cache_root() / "batch"
         cache = Cache(folder, parse_size(args.cache_size))
-    engine = DaskEngine(args.scheduler) if args.scheduler else LocalEngine(args.jobs, args.timeout)
+    if args.scheduler:
+        wait = DEFAULT_NO_WORKERS_S if args.no_workers is None else args.no_workers
+        engine: LocalEngine | DaskEngine = DaskEngine(args.scheduler, no_workers_s=wait)
+    else:
+        timeout = DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout
+        engine = LocalEngine(args.jobs, timeout)
     result, doc = run_and_publish(
         plan,
         engine,

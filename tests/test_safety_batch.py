@@ -1,0 +1,297 @@
+"""Issue 39, faults in the cache and the farm: a full or read-only cache volume, a damaged cache
+entry, a hanging asset, a Dask cluster whose workers all die. None of them stops a batch: every
+asset gets a result, the summary is always written, the cache degrades to what it can still do
+with one warning, and nothing is left behind."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from wrinklepipe import atomic
+from wrinklepipe.batch import DaskEngine, LocalEngine, plan_batch, run_plan
+from wrinklepipe.batch import worker as batch_worker
+from wrinklepipe.cli import main
+from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.paths import ROOT
+
+WP = [sys.executable, "-m", "wrinklepipe"]
+
+
+@pytest.fixture(scope="module")
+def sources(tmp_path_factory) -> Path:
+    """Two small characters, ``src/a`` and ``src/b``."""
+    root = tmp_path_factory.mktemp("batch") / "src"
+    for name in ("a", "b"):
+        m = write_demo_source(root / name, 16)
+        m.write_text(m.read_text() + f"# character {name}\n")  # two cache keys
+    return root
+
+
+def _copy(sources: Path, tmp_path: Path) -> Path:
+    src = tmp_path / "src"
+    shutil.copytree(sources, src)
+    return src
+
+
+def _leftovers(*folders: Path) -> list[str]:
+    """Staging folders and lock files anywhere under ``folders``."""
+    found = []
+    for folder in folders:
+        for p in folder.rglob("*"):
+            if p.name.endswith((atomic.STAGING_SUFFIX, atomic.STAGING_NEW_SUFFIX)) or (
+                p.name.endswith(atomic.LOCK_SUFFIX)
+            ):
+                found.append(str(p))
+    return found
+
+
+def _in_namespace(script: str, *args: str) -> subprocess.CompletedProcess:
+    """``sh -c SCRIPT`` in a user + mount namespace of its own (root there: it may mount a
+    tmpfs, unprivileged), with the project on the path."""
+    if shutil.which("unshare") is None:
+        pytest.skip("no unshare(1): cannot mount a small volume here")
+    probe = subprocess.run(
+        ["unshare", "-rm", "sh", "-c", "mount -t tmpfs -o size=4k tmpfs /mnt 2>/dev/null"],
+        capture_output=True,
+    )
+    if probe.returncode != 0:
+        pytest.skip("user and mount namespaces are not available: cannot mount a tmpfs")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run(
+        ["unshare", "-rm", "sh", "-c", script, "sh", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
+
+
+def _batch_args(src: Path, out: Path, cache: Path, summary: Path) -> list[str]:
+    return [
+        *WP,
+        "batch",
+        str(src),
+        "-o",
+        str(out),
+        "--cache",
+        str(cache),
+        "--jobs",
+        "1",
+        "--no-render",
+        "--summary",
+        str(summary),
+        "--force",
+    ]
+
+
+def test_a_full_cache_volume_degrades_to_no_cache_with_one_warning(sources, tmp_path):
+    src = _copy(sources, tmp_path)
+    out, cache, summary = tmp_path / "out", tmp_path / "cache", tmp_path / "summary.json"
+    cache.mkdir()
+    # a 48 KiB tmpfs: the first entry (a demo folder is ~150 KB) fills it
+    proc = _in_namespace(
+        'mount -t tmpfs -o size=48k tmpfs "$1" && shift && exec "$@"',
+        str(cache),
+        *_batch_args(src, out, cache, summary),
+    )
+    assert proc.returncode in (0, 1), proc.stderr
+    doc = json.loads(summary.read_text())
+    assert [a["id"] for a in doc["assets"]] == ["a/manifest", "b/manifest"]
+    assert all(a["source"] == "converted" and a["status"] != "error" for a in doc["assets"])
+    assert "No space left on device" in doc["cache"]["warning"] and doc["cache"]["stored"] == 0
+    warnings = [ln for ln in proc.stderr.splitlines() if ln.startswith("warning: the cache")]
+    assert len(warnings) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and not _leftovers(out, tmp_path)
+    for name in ("a", "b"):
+        assert (out / name / "manifest" / "demo_head.gltf").is_file()
+
+
+def test_a_read_only_cache_still_serves_its_entries(sources, tmp_path):
+    src = _copy(sources, tmp_path)
+    out, cache, summary = tmp_path / "out", tmp_path / "cache", tmp_path / "summary.json"
+    args = _batch_args(src, out, cache, summary)
+    assert main(args[3:]) in (0, 1)  # fills the cache (in this process)
+    assert json.loads(summary.read_text())["cache"]["stored"] == 2
+    text = (src / "b" / "manifest.toml").read_text()
+    (src / "b" / "manifest.toml").write_text(text + "\n# changed\n")  # b converts again
+    proc = _in_namespace(
+        'mount --bind "$1" "$1" && mount -o remount,bind,ro "$1" && shift && exec "$@"',
+        str(cache),
+        *args,
+    )
+    assert proc.returncode in (0, 1), proc.stderr
+    doc = json.loads(summary.read_text())
+    assert [(a["id"], a["source"]) for a in doc["assets"]] == [
+        ("a/manifest", "cache"),
+        ("b/manifest", "converted"),
+    ]
+    assert "Read-only file system" in doc["cache"]["warning"]
+    assert doc["cache"]["hits"] == 1 and doc["cache"]["stored"] == 0
+    assert sum(ln.startswith("warning: the cache") for ln in proc.stderr.splitlines()) == 1
+    assert not _leftovers(out, tmp_path)
+
+
+@pytest.mark.parametrize("damage", ["file", "entry.json"])
+def test_a_damaged_cache_entry_is_replaced(sources, tmp_path, capsys, damage):
+    src = _copy(sources, tmp_path)
+    out, cache, summary = tmp_path / "out", tmp_path / "cache", tmp_path / "summary.json"
+    args = _batch_args(src, out, cache, summary)[3:]
+    assert main(args) in (0, 1)
+    entries = sorted((cache / "entries").glob("*/*"))
+    assert len(entries) == 2
+    victim = entries[0]
+    if damage == "file":
+        gltf = next((victim / "files").rglob("*.gltf"))
+        gltf.write_bytes(gltf.read_bytes()[:-10])  # truncated
+    else:
+        (victim / "entry.json").write_text('["not an entry"]')
+    assert main(args) in (0, 1)
+    second = json.loads(summary.read_text())
+    assert sorted(a["source"] for a in second["assets"]) == ["cache", "converted"]
+    assert second["cache"]["stored"] == 1  # the damaged entry replaced, and counted once
+    assert main(args) in (0, 1)
+    third = json.loads(summary.read_text())
+    assert [a["source"] for a in third["assets"]] == ["cache", "cache"], third["cache"]
+    assert third["cache"]["stored"] == 0 and third["cache"]["unusable"] == 0
+    assert not list((cache / "tmp").iterdir())
+
+
+# ------------------------------------------------------------------------------------------------
+# the watchdog
+
+
+def _hang(job, conn, threads=None) -> None:  # noqa: ANN001
+    """A worker whose asset hangs (a loop that never ends) after it says hello, the way the PD
+    scale search did."""
+    if job.id.startswith("a/"):
+        batch_worker.child_main(job, conn, threads)
+        return
+    conn.send(("stage", "started"))
+    while True:
+        time.sleep(0.01)
+
+
+def test_the_watchdog_stops_a_hanging_asset_and_the_batch_goes_on(sources, tmp_path):
+    src = _copy(sources, tmp_path)
+    plan = plan_batch([str(src)], tmp_path / "out", force=True)
+    engine = LocalEngine(jobs=2, timeout=3.0, target=_hang)
+    t0 = time.monotonic()
+    run = run_plan(plan, engine, None)
+    assert time.monotonic() - t0 < 120
+    by_id = {r.id: r for r in run.results}
+    assert by_id["a/manifest"].status != "error"
+    lost = by_id["b/manifest"]
+    assert lost.status == "error" and "watchdog" in lost.problems[0]["message"]
+    assert not _leftovers(tmp_path / "out")
+
+
+def test_batch_has_a_watchdog_by_default():
+    from wrinklepipe.batch.engines import DEFAULT_TIMEOUT_S
+
+    assert LocalEngine().timeout == DEFAULT_TIMEOUT_S
+    assert LocalEngine(timeout=0).timeout is None
+
+
+# ------------------------------------------------------------------------------------------------
+# a Dask cluster whose worker pool is killed
+
+
+def _dask(*args: str) -> subprocess.Popen:
+    dask = Path(sys.executable).parent / "dask"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen(
+        [str(dask), *args],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+
+
+def test_a_killed_dask_worker_pool_fails_the_assets_clearly(sources, tmp_path):
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    src = _copy(sources, tmp_path)
+    port = 8786 + os.getpid() % 1000
+    address = f"tcp://127.0.0.1:{port}"
+    scheduler = _dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard")
+    workers = []
+    try:
+        with Client(address, timeout=60) as client:
+            workers = [
+                _dask("worker", address, "--no-nanny", "--nthreads", "1", "--no-dashboard")
+                for _ in range(2)
+            ]
+            client.wait_for_workers(2, timeout=60)
+        plan = plan_batch([str(src)], tmp_path / "out", force=True)
+        stages: list[tuple[str, str]] = []
+
+        def on_stage(job: str, stage: str) -> None:
+            stages.append((job, stage))
+            if stage == "queued" and len([s for s in stages if s[1] == "queued"]) == 2:
+                for w in workers:  # the whole pool dies before any asset is done
+                    os.killpg(w.pid, signal.SIGKILL)
+
+        engine = DaskEngine(address, no_workers_s=3.0)
+        t0 = time.monotonic()
+        run = run_plan(plan, _Staged(engine, on_stage), None)
+        took = time.monotonic() - t0
+    finally:
+        for p in [*workers, scheduler]:
+            with_suppress_kill(p)
+    assert took < 120
+    assert [r.id for r in run.results] == ["a/manifest", "b/manifest"]
+    for r in run.results:
+        assert r.status == "error", r
+        message = r.problems[0]["message"]
+        assert "had no workers for 3 s" in message, message
+
+
+class _Staged:
+    """An engine that also reports its stages to ``on_stage``."""
+
+    def __init__(self, inner, on_stage) -> None:  # noqa: ANN001
+        self.inner, self.on_stage = inner, on_stage
+        self.description = inner.description
+
+    def run(self, jobs, on_stage):  # noqa: ANN001, ANN201
+        def both(job: str, stage: str) -> None:
+            on_stage(job, stage)
+            self.on_stage(job, stage)
+
+        yield from self.inner.run(jobs, both)
+
+
+def with_suppress_kill(proc: subprocess.Popen) -> None:
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    proc.wait()
+
+
+def test_an_unreachable_scheduler_still_writes_the_summary(sources, tmp_path):
+    from wrinklepipe.batch.publish import run_and_publish
+    from wrinklepipe.console import err
+
+    src = _copy(sources, tmp_path)
+    summary = tmp_path / "summary.json"
+    plan = plan_batch([str(src)], tmp_path / "out")
+    engine = DaskEngine("tcp://127.0.0.1:9", connect_s=2)
+    run, _ = run_and_publish(
+        plan, engine, None, command="batch", console=err, summary_path=str(summary)
+    )
+    assert run.exit_code == 2
+    doc = json.loads(summary.read_text())
+    assert [a["status"] for a in doc["assets"]] == ["error", "error"]
+    assert all("Dask scheduler" in a["problems"][0]["message"] for a in doc["assets"])
