@@ -40,7 +40,7 @@ def test_codes_are_unique_and_well_formed():
     codes = [r.code for r in RULES]
     assert len(codes) == len(set(codes))
     for r in RULES:
-        assert re.fullmatch(r"WP-(LOAD|MAP|MASK|WGT|MESH|TEX|RND|FID|COL)-\d{3}", r.code)
+        assert re.fullmatch(r"WP-(LOAD|MAP|MASK|WGT|MESH|TEX|RND|FID|COL|USD)-\d{3}", r.code)
         assert r.severity in ("error", "warning", "info")
         assert r.title and r.description
 

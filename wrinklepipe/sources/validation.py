@@ -26,7 +26,7 @@ import numpy as np
 
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.demo import demo_asset
-from wrinklepipe.errors import input_error
+from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.fidelity.ship import edge_texels
 from wrinklepipe.gltf.container import open_container
 from wrinklepipe.gltf.document import read_document
@@ -39,6 +39,7 @@ from wrinklepipe.pipeline.ingest import ingest
 from wrinklepipe.pipeline.package import package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.readers.registry import Format, format_of, read_package_file
+from wrinklepipe.sources.copies import check_copies
 from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.sources.package import asset_file
 from wrinklepipe.usd.meshes import open_stage_checked
@@ -254,11 +255,18 @@ def _uastc_texture(t: Texture, path: Path, layout: str | None) -> Texture:
 
 
 def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> ValidationInput:
-    """Replace base/state textures by the BC copies that ship beside them (DDS)."""
+    """Replace base/state textures by the BC copies that ship beside them (DDS), after reading
+    every copy the asset lists whole (:func:`~wrinklepipe.sources.copies.check_copies`: DDS and
+    KTX2, every level, decoded; what is wrong goes to ``extra["copy_problems"]``, the
+    validator's WP-TEX-004). A copy that cannot be read leaves its PNG in place."""
     if not folder.is_dir():
         if required:
             raise input_error(folder, "no compressed/ folder (--textures compressed)")
         return inp
+    problems = check_copies(inp, folder.parent)
+    if problems:
+        inp.extra["copy_problems"] = problems
+    broken = {Path(p["file"]).resolve() for p in problems}
     recorded = {str(c["texture"]): c for c in inp.extra.get("compressed", [])}
     out = []
     for t in inp.textures:
@@ -270,6 +278,7 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
             and rec is not None
             and rec.get("format") == "uastc"
             and ktx2.exists()
+            and ktx2.resolve() not in broken
         )
         copied = dds.exists() or uastc_copy
         if t.role == "state" and copied and inp.asset.encoding == "pd" and t.fmt == "rgb8":
@@ -280,7 +289,11 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
             out.append(_uastc_texture(t, ktx2, _copy_layout(rec, "rgba8", t.layout)))
             continue
         if t.role in ("base", "state", "base_color", "state_color") and dds.exists():
-            img = guard_reader(lambda dds=dds: read_dds(dds), dds, "the DDS file")
+            try:
+                img = read_dds(dds)
+            except InputError:
+                out.append(t)  # said in copy_problems; the PNG is measured instead
+                continue
             fmt = str(img.format).lower()
             if fmt not in FORMATS:
                 raise input_error(dds, f"unsupported DDS format {img.format!r}")

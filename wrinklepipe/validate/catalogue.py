@@ -291,8 +291,12 @@ RULES: tuple[Rule, ...] = (
         "WP-TEX-004",
         "error",
         "Texture data does not match its format",
-        "Level 0 holds fewer bytes than its format and size need (truncated or mislabelled).",
-        "Re-export the texture.",
+        "Level 0 holds fewer bytes than its format and size need (truncated or mislabelled), or a "
+        "block-compressed copy the asset lists (DDS or KTX2) cannot be read whole: a truncated "
+        "or damaged container, a mip level missing or short, a level that does not decode to "
+        "the texture it copies (or to the halving of the level above), copies of one texture "
+        "that differ.",
+        "Re-export the texture (convert writes the copies again).",
     ),
     Rule(
         "WP-TEX-005",

@@ -37,6 +37,9 @@ def check_formats(ctx: Context) -> list[Issue]:
                     t.where,
                 )
             )
+    for p in ctx.inp.extra.get("copy_problems", []):  # every compressed copy, read back whole
+        name = str(p.get("file", "")).replace("\\", "/").rsplit("/", 1)[-1]
+        out.append(make_issue("WP-TEX-004", f"{name}: {p.get('message', '')}", str(p["file"])))
     return out
 
 
