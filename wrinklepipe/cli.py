@@ -151,6 +151,24 @@ def _os_message(exc: OSError) -> str:
     return f"{where}: {exc.strerror or exc}"
 
 
+def _out_of_memory(parser: argparse.ArgumentParser, command: str) -> str:
+    """The message for a run that ran out of memory: the options of ``command`` that bound an
+    input's size, when it has any (the inputs' declared sizes are checked before they are
+    allocated, so this is the rare case of many inputs within their caps at once)."""
+    sub = next(
+        (
+            a.choices[command]
+            for a in parser._actions
+            if isinstance(a, argparse._SubParsersAction) and command in a.choices
+        ),
+        None,
+    )
+    have = {s for a in (sub._actions if sub else []) for s in a.option_strings}
+    hints = [o for o in ("--max-pixels", "--size", "--jobs") if o in have]
+    tip = f"; try {' or '.join(hints)}" if hints else ""
+    return f"out of memory: the inputs need more memory than this machine has{tip}"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``wrinklepipe`` console script.
 
@@ -196,7 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MemoryError:
         if debug:
             raise
-        return fail("out of memory (try a smaller input, or --max-pixels / --size)")
+        return fail(_out_of_memory(parser, args.command))
     except RecursionError:
         if debug:
             raise

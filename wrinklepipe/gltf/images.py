@@ -57,10 +57,18 @@ def texture_source(doc: Document, texture: int) -> int:
     return src
 
 
+#: The first bytes of each image format the document's images are read in.
+_SIGNATURES = {
+    "image/png": (b"\x89PNG\r\n\x1a\n",),
+    "image/jpeg": (b"\xff\xd8\xff",),
+    "image/ktx2": (b"\xabKTX 20\xbb\r\n\x1a\n",),
+}
+
+
 def _stored_size(data: bytes, mime: str) -> tuple[int, int] | None:
     """Width and height from a PNG's IHDR or a KTX2 header (None: another format, or too short
-    to say; the decoder refuses those)."""
-    if mime == "image/png" and len(data) >= 24:
+    to say; the decoder refuses those). Only from bytes that are that format (signature)."""
+    if mime == "image/png" and len(data) >= 24 and data[12:16] == b"IHDR":
         return struct.unpack(">II", data[16:24])
     if mime == "image/ktx2" and len(data) >= 28:  # identifier, vkFormat, typeSize, then the size
         return struct.unpack("<II", data[20:28])
@@ -98,6 +106,11 @@ def _decodable(doc: Document, image: int) -> tuple[bytes, str]:
     data = doc.image_bytes(image)
     img = doc.array("images")[image]
     mime = mime_type(data, str(img.get("uri", "")))
+    signatures = _SIGNATURES.get(mime)
+    if signatures is not None and not data.startswith(signatures):
+        kind = mime.split("/")[1].upper()
+        what = "empty" if not data else f"not a {kind} file (its first bytes are not {kind}'s)"
+        raise doc.err(f"image is {what}", key)
     _check_pixels(doc, image, _stored_size(data, mime))
     if mime == "image/ktx2":
         return _ktx2_to_png(data, doc, key), ".png"

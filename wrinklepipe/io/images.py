@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import struct
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -29,7 +30,7 @@ _BITS_TO_TYPE = {8: oiio.UINT8, 16: oiio.UINT16, 32: oiio.FLOAT, "half": oiio.HA
 
 
 @contextlib.contextmanager
-def _native_stderr_silenced() -> Iterator[None]:
+def native_stderr_silenced() -> Iterator[None]:
     """Keep what C libraries print straight to file descriptor 2 (libpng's "libpng error: ...")
     off the terminal while a file is opened or decoded: OpenImageIO reports the same through
     geterror(), which the tool turns into its one message."""
@@ -48,7 +49,7 @@ def _native_stderr_silenced() -> Iterator[None]:
             os.close(saved)
 
 
-def _oiio_message(text: str) -> str:
+def oiio_message(text: str) -> str:
     """OpenImageIO's error text on one line (it may hold several)."""
     lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
     return "; ".join(dict.fromkeys(lines)) or "unrecognised or truncated image"
@@ -76,10 +77,13 @@ def read_header(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Image
         raise input_error(path, "is a folder, expected an image file")
     if path.stat().st_size == 0:
         raise input_error(path, "file is empty")
-    with _native_stderr_silenced():
+    declared = _declared_size(path)
+    if declared is not None:
+        _check_size(path, *declared, max_pixels)  # before OpenImageIO's own limits speak
+    with native_stderr_silenced():
         inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        raise input_error(path, f"cannot read image: {_oiio_message(oiio.geterror())}")
+        raise input_error(path, f"cannot read image: {oiio_message(oiio.geterror())}")
     try:
         spec = inp.spec()
         info = ImageInfo(
@@ -93,15 +97,41 @@ def read_header(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Image
         )
     finally:
         inp.close()
-    if info.width <= 0 or info.height <= 0:
-        raise input_error(path, f"invalid size {info.width} x {info.height}")
-    if info.width * info.height > max_pixels:
+    _check_size(path, info.width, info.height, max_pixels)
+    return info
+
+
+_PNG = b"\x89PNG\r\n\x1a\n"
+
+# The pixel cap (--max-pixels) is the tool's: OpenImageIO's own size limit (its text, "raise
+# the OIIO attribute limits:imagesize_MB") is set out of the way, so a header over the cap is
+# refused by _check_size in the tool's words; headers are read, never pixels, before that.
+oiio.attribute("limits:imagesize_MB", 1 << 30)
+
+
+def _declared_size(path: Path) -> tuple[int, int] | None:
+    """The size a PNG's header declares (IHDR), read without OpenImageIO; None for other files
+    (OpenImageIO reads their header; it refuses a PNG bomb with its own words otherwise)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(24)
+    except OSError:
+        return None
+    if len(head) == 24 and head[:8] == _PNG and head[12:16] == b"IHDR":
+        w, h = struct.unpack(">II", head[16:24])
+        return int(w), int(h)
+    return None
+
+
+def _check_size(path: Path, width: int, height: int, max_pixels: int) -> None:
+    if width <= 0 or height <= 0:
+        raise input_error(path, f"invalid size {width} x {height}")
+    if width * height > max_pixels:
         raise input_error(
             path,
-            f"image is {info.width} x {info.height} = {info.width * info.height} pixels, over the "
-            f"cap of {max_pixels} (raise it with --max-pixels if this is intended)",
+            f"image is {width} x {height} = {width * height} pixels, over the cap of "
+            f"{max_pixels} pixels",
         )
-    return info
 
 
 def read_image(
@@ -112,10 +142,10 @@ def read_image(
     # Keep alpha unassociated: masks and data textures must not be premultiplied on read.
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
-    with _native_stderr_silenced():
+    with native_stderr_silenced():
         inp = oiio.ImageInput.open(str(path), config)
         if inp is None:
-            raise input_error(path, f"cannot read image: {_oiio_message(oiio.geterror())}")
+            raise input_error(path, f"cannot read image: {oiio_message(oiio.geterror())}")
         try:
             data = inp.read_image(0, 0, 0, info.channels, oiio.FLOAT)
             err = inp.geterror()
@@ -123,7 +153,7 @@ def read_image(
             inp.close()
     if data is None or (err and not isinstance(data, np.ndarray)):
         raise input_error(
-            path, f"cannot decode pixels (truncated or corrupt?): {_oiio_message(err)}"
+            path, f"cannot decode pixels (truncated or corrupt?): {oiio_message(err)}"
         )
     arr = np.asarray(data, dtype=np.float32)
     if arr.ndim == 2:

@@ -15,6 +15,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from wrinklepipe.errors import input_error
+from wrinklepipe.io.images import native_stderr_silenced, oiio_message
 from wrinklepipe.reuse import reused
 
 #: zlib level of the PNGs wrinklepipe writes: 6, zlib's and libpng's default. Level 9 makes the
@@ -83,19 +84,23 @@ def png_pixels(data: bytes, file: str = "") -> np.ndarray:
             f.write(data)
         config = oiio.ImageSpec()
         config.attribute("oiio:UnassociatedAlpha", 1)
-        inp = oiio.ImageInput.open(tmp, config)
-        if inp is None:
-            raise input_error(file, f"cannot decode image: {oiio.geterror().strip()}")
-        try:
-            spec = inp.spec()
-            fmt = oiio.UINT16 if spec.format == oiio.UINT16 else oiio.UINT8
-            arr = inp.read_image(0, 0, 0, spec.nchannels, fmt)
-        finally:
-            inp.close()
+        with native_stderr_silenced():  # libpng's own "libpng error: ..." line
+            inp = oiio.ImageInput.open(tmp, config)
+            if inp is None:
+                raise input_error(file, f"cannot decode image: {oiio_message(oiio.geterror())}")
+            try:
+                spec = inp.spec()
+                fmt = oiio.UINT16 if spec.format == oiio.UINT16 else oiio.UINT8
+                arr = inp.read_image(0, 0, 0, spec.nchannels, fmt)
+                err = inp.geterror()
+            finally:
+                inp.close()
     finally:
         os.unlink(tmp)
     if arr is None:
-        raise input_error(file, "cannot decode image pixels (truncated or corrupt?)")
+        raise input_error(
+            file, f"cannot decode image pixels (truncated or corrupt?): {oiio_message(err)}"
+        )
     arr = np.asarray(arr)
     if arr.ndim == 2:
         arr = arr[..., None]

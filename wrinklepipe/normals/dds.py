@@ -215,7 +215,7 @@ def _check_header(
         raise input_error(
             where,
             f"image is {width} x {height} = {width * height} pixels, over the cap of "
-            f"{max_pixels} (raise it with --max-pixels if this is intended)",
+            f"{max_pixels} pixels",
         )
     if not pf_flags & DDPF_FOURCC:
         raise input_error(where, "uncompressed DDS is not supported; expected BC1/BC3/BC5/BC7")
