@@ -254,9 +254,10 @@ def test_validate_asset_reports_a_composition_error(avatar, tmp_path, capsys, ca
     assert _convert(manifest, out) in (0, 1)
     capsys.readouterr()
     code, layer = _broken(usd, case)  # broken after the conversion: the layer over it sees it
-    rc = main(
-        ["validate-asset", str(out / "hero.usda"), "--no-render", "--allow-root", str(usd.parent)]
-    )
+    report = tmp_path / "report.json"
+    args = ["validate-asset", str(out / "hero.usda"), "--no-render", "--report", str(report)]
+    rc = main([*args, "--allow-root", str(usd.parent)])
     err = capsys.readouterr().err
-    assert "Warning:" not in err and "_ReportErrors" not in err, err
-    assert rc == 1 and code in err and layer in err, err
+    assert "Warning:" not in err and "_ReportErrors" not in err and "Traceback" not in err, err
+    issues = [i for i in json.loads(report.read_text())["issues"] if i["code"] == code]
+    assert rc == 1 and issues and any(layer in i["message"] for i in issues), err

@@ -473,7 +473,7 @@ def c_color_linear_tag() -> ValidationInput:
 
 
 def _usd_records(layers: dict[str, str]) -> list[dict[str, str]]:
-    """The composition records (:mod:`wrinklepipe.io.usd_composition`) of a real stage made of
+    """The composition records (:mod:`wrinklepipe.usd.composition`) of a real stage made of
     ``layers`` ({file name: usda text}, the first the root), as USD reports them on opening it;
     paths relative to the stage's folder."""
     import json

@@ -42,8 +42,8 @@ from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.polygons import drop_degenerate, fan_triangles, weld_corners
 from wrinklepipe.io.confine import confine_usd
-from wrinklepipe.io.usd_composition import UsdProblem, composition_problems
 from wrinklepipe.io.usd_diagnostics import captured_diagnostics, plain
+from wrinklepipe.usd.composition import UsdProblem, composition_problems
 
 
 @dataclass(frozen=True)

@@ -296,7 +296,7 @@ RULES: tuple[Rule, ...] = (
         "or damaged container, a mip level missing or short, a level that does not decode to "
         "the texture it copies (or to the halving of the level above), copies of one texture "
         "that differ.",
-        "Re-export the texture (convert writes the copies again).",
+        "Re-export the texture.",
     ),
     Rule(
         "WP-TEX-005",

@@ -1,6 +1,6 @@
 """Rules on a USD stage's composition (WP-USD-*): the missing or cyclic sublayers, references
 and payloads, and the other diagnostics, USD reported opening the stage (the records
-:mod:`wrinklepipe.io.usd_composition` makes, in ``extra["usd_composition"]`` of the input)."""
+:mod:`wrinklepipe.usd.composition` makes, in ``extra["usd_composition"]`` of the input)."""
 
 from __future__ import annotations
 
