@@ -25,7 +25,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import settings
 from threadpoolctl import threadpool_limits
+
+# The property tests are part of a test command that must give the same verdict every run, on a
+# loaded machine too: no wall-clock deadline (a slow example is not a failure; speed is measured
+# by the benchmarks) and the same examples each run (derandomized, no example database). Set
+# HYPOTHESIS_PROFILE=explore to draw fresh examples when hunting for new failures.
+settings.register_profile("deterministic", deadline=None, derandomize=True, database=None)
+settings.register_profile("explore", deadline=None)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 
 #: Libraries' own thread pools that read their size from the environment (OpenBLAS when numpy
 #: loads it, llvmpipe when a GL context is made), for the worker's tests and the processes they
