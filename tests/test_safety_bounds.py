@@ -126,3 +126,62 @@ def test_validate_asset_on_a_manifest_with_a_horizon_texel_ends(source, tmp_path
         rc = main(["validate-asset", str(src), "--no-render"])
     err = capsys.readouterr().err
     assert rc == 1 and "Traceback" not in err
+
+
+# ------------------------------------------------------------------------------------------------
+# input costs, checked on what an input declares before anything its size is made
+
+
+def test_a_usd_mesh_over_the_corner_cap_is_refused_before_its_arrays(tmp_path, monkeypatch):
+    """The counts are read and summed first: a mesh declaring more corners than the cap is
+    refused naming the prim, before its indices, points or any per-corner array are read (a
+    258 KB usdc declaring 10^8 corners took 13.6 GB). The cap is lowered here so the test file
+    stays small; the check is the same."""
+    from pxr import Usd, UsdGeom, Vt
+
+    from wrinklepipe import asset
+
+    monkeypatch.setattr(asset, "MAX_MESH_CORNERS", 3000)
+    path = tmp_path / "big.usdc"
+    stage = Usd.Stage.CreateNew(str(path))
+    mesh = UsdGeom.Mesh.Define(stage, "/Head")
+    mesh.GetPointsAttr().Set(Vt.Vec3fArray([(0, 0, 0), (1, 0, 0), (0, 1, 0)]))
+    mesh.GetFaceVertexCountsAttr().Set(Vt.IntArray([3] * 1001))
+    # no faceVertexIndices at all: the refusal comes from the counts alone
+    stage.Save()
+    from wrinklepipe.errors import InputError
+    from wrinklepipe.usd.meshes import read_usd_meshes
+
+    with pytest.raises(InputError, match=r"/Head declares 3003 face corners, over the cap of 3000"):
+        read_usd_meshes(path)
+
+
+def test_meshopt_data_declaring_too_many_elements_is_refused_before_decoding():
+    from wrinklepipe.gltf.decompress import DecodeError, meshopt_view
+
+    with pytest.raises(DecodeError, match="over the cap"):
+        meshopt_view({"count": 10**9, "byteStride": 16, "mode": "ATTRIBUTES"}, b"\xa0" * 64)
+    with pytest.raises(DecodeError, match="over the cap"):
+        meshopt_view({"count": 10**9, "byteStride": 4, "mode": "TRIANGLES"}, b"\xe0" * 64)
+
+
+@pytest.mark.parametrize(
+    "old, new, needle",
+    [
+        ("base = 16\n", "base = 16384\n", "[resolution.base]: 16384 is out of range"),
+        ("fps = 24", "fps = 1e9", "[drivers[0].fps]: 1000000000.0 is out of range"),
+        ("joy = [[0.0, 0.0]", "joy = [[1000000.0, 0.0]", "over the cap of 1048576"),
+    ],
+)
+def test_resolutions_and_driver_spans_are_costed_before_allocation(
+    source, tmp_path, capsys, old, new, needle
+):
+    src = _copy_source(source, tmp_path)
+    text = src.read_text()
+    assert old in text
+    src.write_text(text.replace(old, new, 1))
+    with deadline(60):  # main: minutes and gigabytes before "out of memory (try --max-pixels)"
+        rc = main(["convert", str(src), "-o", str(tmp_path / "out"), "--no-render"])
+    err = capsys.readouterr().err
+    assert rc == 2 and needle in err and "Traceback" not in err, err
+    assert "--max-pixels" not in err and "out of memory" not in err

@@ -15,6 +15,24 @@ import numpy as np
 from wrinklepipe.codec import srgb
 from wrinklepipe.options import BudgetOptions
 
+#: The largest mesh the readers accept, checked on the counts a file declares before the
+#: arrays are built (every corner costs ~140 bytes through triangulation, welding, tangents and
+#: vertex IDs): 2^24 points and 2^25 face corners (about 11 million triangles, ~4.5 GB).
+MAX_MESH_POINTS = 1 << 24
+MAX_MESH_CORNERS = 1 << 25
+
+
+def mesh_over_cap(points: int, corners: int) -> str:
+    """What is over the mesh caps, in words ("" when nothing is)."""
+    if corners > MAX_MESH_CORNERS:
+        return (
+            f"declares {corners} face corners, over the cap of {MAX_MESH_CORNERS} (about "
+            f"{MAX_MESH_CORNERS // 3 // 1_000_000} million triangles); decimate the mesh"
+        )
+    if points > MAX_MESH_POINTS:
+        return f"declares {points} points, over the cap of {MAX_MESH_POINTS}; decimate the mesh"
+    return ""
+
 
 @dataclass(frozen=True)
 class MeshPart:

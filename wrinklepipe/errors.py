@@ -58,6 +58,14 @@ class ProblemList:
 
 
 _PYTHON_CONVERSIONS = ("could not convert", "invalid literal", "cannot convert", "math domain")
+#: numpy's words for arrays whose shapes do not line up (stack, broadcast, reshape, ragged lists)
+_NUMPY_SHAPES = (
+    "must have the same shape",
+    "could not be broadcast",
+    "cannot reshape array",
+    "inhomogeneous shape",
+    "setting an array element with a sequence",
+)
 
 
 def plain_reason(exc: BaseException) -> str:
@@ -72,6 +80,8 @@ def plain_reason(exc: BaseException) -> str:
         return "a member has the wrong type"
     if isinstance(exc, ValueError) and (not text or text.startswith(_PYTHON_CONVERSIONS)):
         return "a value is not a number or out of range"
+    if isinstance(exc, ValueError) and any(m in text for m in _NUMPY_SHAPES):
+        return "arrays that must hold one value per item have different lengths"
     if isinstance(exc, (OverflowError, ZeroDivisionError)):
         return "a number is out of range"
     return text or type(exc).__name__

@@ -19,7 +19,6 @@ import glob
 import json
 import os
 import re
-import tomllib
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path, PurePosixPath
@@ -29,6 +28,7 @@ import jsonschema
 
 from wrinklepipe.batch.options import OPTION_KEYS, AssetOptions
 from wrinklepipe.errors import InputError, ProblemList
+from wrinklepipe.io.json_safe import loads_toml
 from wrinklepipe.paths import SCHEMAS_DIR
 
 BATCH_SCHEMA = "wrinklepipe/batch@1"
@@ -153,13 +153,12 @@ def load_batch_file(path: str | Path) -> BatchFile:
     path = _abs(Path(path))
     file = str(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError("batch file not found", path) from None
     except UnicodeDecodeError:
         raise InputError("batch file is not UTF-8 text", path) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"invalid TOML: {exc}", path) from None
+    data = loads_toml(text, path)
     problems = ProblemList()
     validator = jsonschema.Draft202012Validator(batch_schema())
     for error in sorted(

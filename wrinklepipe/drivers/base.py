@@ -10,6 +10,7 @@ return ``[frames, vertices, states]`` with ``per_vertex = True``.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -108,8 +109,11 @@ class DriverContext:
         fps: float = DEFAULT_FPS,
         read_rig: Callable[[Path], Rig] | None = None,
         read_morph_tracks: Callable[[Path], list[MorphTrack]] | None = None,
+        source: str = "<driver>",
     ) -> DriverContext:
+        """``source``: the file the drivers come from (the manifest), named in messages."""
         return cls(
+            source=source,
             regions=asset.region_names,
             states=asset.state_names,
             region_states=asset.region_state_matrix(),
@@ -208,17 +212,54 @@ def evaluate(
             f"unknown driver {kind!r}; expected one of {', '.join(sorted(DRIVERS))}", ctx.source
         )
     t = None if times is None else np.asarray(times, np.float64).reshape(-1)
-    res = DRIVERS[kind](ctx, dict(spec or {}), t)
+    per_frame = max(1, len(ctx.regions) * ctx.weight_states)
+    limit = max(1, min(MAX_FRAMES, MAX_WEIGHT_VALUES // per_frame))
+    if t is not None and t.size > limit:
+        raise InputError(
+            [Problem(ctx.source, f"{kind} driver: {t.size} frames, over the cap of {limit}")]
+        )
+    token = _FRAME_LIMIT.set(limit)
+    try:
+        res = DRIVERS[kind](ctx, dict(spec or {}), t)
+    except TooManyFrames as exc:
+        raise InputError([Problem(ctx.source, f"{kind} driver: {exc}")]) from None
+    finally:
+        _FRAME_LIMIT.reset(token)
     if res.weights.ndim != 3 or res.weights.shape[0] != res.times.shape[0]:
         raise RuntimeError(f"driver {kind!r} returned weights of shape {res.weights.shape}")
     return res
 
 
+#: The most frames a driver samples (12 hours at 24 fps), and the most weights ``frames x
+#: regions x states`` it returns (256 MB of float32): checked before the samples are made.
+MAX_FRAMES = 1 << 20
+MAX_WEIGHT_VALUES = 1 << 26
+_FRAME_LIMIT: ContextVar[int] = ContextVar("wrinklepipe_frame_limit", default=MAX_FRAMES)
+
+
+class TooManyFrames(ValueError):
+    """Keys and fps that make more frames than :func:`frame_times` may sample."""
+
+    def __init__(self, t0: float, t1: float, fps: float, frames: float, limit: int) -> None:
+        self.t0, self.t1, self.fps, self.frames, self.limit = t0, t1, fps, frames, limit
+        super().__init__(
+            f"keys from {t0:g} to {t1:g} s at {fps:g} fps make {frames:.4g} frames, over the "
+            f"cap of {limit} for this asset (at most {MAX_FRAMES} frames, {MAX_WEIGHT_VALUES} "
+            "weights over regions and states): shorten the keys' time span or lower fps"
+        )
+
+
 def frame_times(t0: float, t1: float, fps: float) -> np.ndarray:
-    """Sample times ``t0, t0 + 1/fps, ...`` up to and including ``t1`` (and ``t1`` itself)."""
+    """Sample times ``t0, t0 + 1/fps, ...`` up to and including ``t1`` (and ``t1`` itself).
+    Refuses (:class:`TooManyFrames`) more frames than the evaluation allows, before any is
+    made."""
     if t1 < t0:
         t0, t1 = t1, t0
-    n = int(np.floor((t1 - t0) * fps + 1e-9)) + 1
+    span = (t1 - t0) * fps
+    limit = _FRAME_LIMIT.get()
+    if not np.isfinite(span) or span + 1 > limit:
+        raise TooManyFrames(t0, t1, fps, span + 1, limit)
+    n = int(np.floor(span + 1e-9)) + 1
     t = t0 + np.arange(n, dtype=np.float64) / fps
     if t[-1] < t1 - 1e-9:
         t = np.append(t, t1)

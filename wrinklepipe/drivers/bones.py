@@ -43,7 +43,14 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.drivers.base import DriverContext, DriverResult, register, resolve, spec_problem
+from wrinklepipe.drivers.base import (
+    DriverContext,
+    DriverResult,
+    frame_times,
+    register,
+    resolve,
+    spec_problem,
+)
 from wrinklepipe.io.json_safe import loads_json
 from wrinklepipe.names import did_you_mean, unknown_names
 from wrinklepipe.suffixes import is_gltf
@@ -117,6 +124,7 @@ def _gltf_bones_doc(
         raise spec_problem(ctx, f"{path.name} has no skin (no joints)", "file")
     if times is None:
         keys = rig.key_times()
+        frame_times(float(keys[0]), float(keys[-1]), ctx.fps)  # refuses too many, before any
         n = max(int(round((keys[-1] - keys[0]) * ctx.fps)) + 1, 1)
         times = keys[0] + np.arange(n) / ctx.fps
     names = list(rig.joint_names)

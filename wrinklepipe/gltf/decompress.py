@@ -21,6 +21,7 @@ import DracoPy
 import meshoptimizer
 import numpy as np
 
+from wrinklepipe.asset import mesh_over_cap
 from wrinklepipe.gltf.accessors import COMPONENTS, WIDTH, component_dtype
 
 MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
@@ -58,6 +59,11 @@ def meshopt_view(ext: dict[str, Any], source: bytes) -> bytes:
         mode = str(ext["mode"])
     except (KeyError, TypeError, ValueError):
         raise DecodeError("meshopt extension lacks count, byteStride or mode") from None
+    if count < 0 or stride <= 0:
+        raise DecodeError(f"meshopt count {count} / byteStride {stride} are not sizes")
+    over = mesh_over_cap(count, 0) if mode == "ATTRIBUTES" else mesh_over_cap(0, count)
+    if over:  # the decoder allocates count x byteStride before it reads a byte
+        raise DecodeError(f"meshopt data {over}")
     filt = str(ext.get("filter", "NONE"))
     if filt not in ("NONE", "OCTAHEDRAL", "QUATERNION", "EXPONENTIAL"):
         raise DecodeError(f"unknown meshopt filter {filt!r}")

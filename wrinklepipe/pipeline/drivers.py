@@ -94,8 +94,13 @@ def evaluate_drivers(
         return [expression_cycle(asset)] if asset.expressions else [], [
             "no drivers: a curve visiting each expression of the table was written"
         ]
+    manifest = asset.provenance.get("manifest")
     ctx = wd.DriverContext.from_asset(
-        asset, root, read_rig=GltfRig, read_morph_tracks=read_morph_tracks
+        asset,
+        root,
+        read_rig=GltfRig,
+        read_morph_tracks=read_morph_tracks,
+        source=str(Path(root) / manifest) if manifest else "<driver>",
     )
     curves: list[WeightCurves] = []
     used: set[str] = set()

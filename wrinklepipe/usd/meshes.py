@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe.asset import Mesh, MeshPart
+from wrinklepipe.asset import Mesh, MeshPart, mesh_over_cap
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.polygons import drop_degenerate, fan_triangles, weld_corners
 from wrinklepipe.io.confine import confine_usd
@@ -212,10 +212,21 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     ppath = str(prim.GetPath())
     gm = UsdGeom.Mesh(prim)
     time, time_note = mesh_time(prim, time)
-    pts_v = gm.GetPointsAttr().Get(time)
+    # the counts first: the corners they declare are checked before the indices, points and
+    # every per-corner array are read
     counts_v = gm.GetFaceVertexCountsAttr().Get(time)
+    if counts_v is None or len(counts_v) == 0:
+        return None
+    declared = int(np.asarray(counts_v, dtype=np.int64).sum())
+    if over := mesh_over_cap(0, max(declared, len(counts_v))):
+        raise input_error(file, f"mesh {ppath} {over}", key=f"{ppath}.faceVertexCounts")
     fvi_v = gm.GetFaceVertexIndicesAttr().Get(time)
-    if pts_v is None or counts_v is None or fvi_v is None or len(counts_v) == 0:
+    if fvi_v is not None and (over := mesh_over_cap(0, len(fvi_v))):
+        raise input_error(file, f"mesh {ppath} {over}", key=f"{ppath}.faceVertexIndices")
+    pts_v = gm.GetPointsAttr().Get(time)
+    if pts_v is not None and (over := mesh_over_cap(len(pts_v), 0)):
+        raise input_error(file, f"mesh {ppath} {over}", key=f"{ppath}.points")
+    if pts_v is None or fvi_v is None:
         return None
     pts = np.asarray(pts_v, dtype=np.float64).reshape(-1, 3)
     counts = np.asarray(counts_v, dtype=np.int64)

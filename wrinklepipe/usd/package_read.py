@@ -96,6 +96,21 @@ def _asset_bytes(layer_path: Path, asset: Any, file: str, key: str, opt: UsdRead
     return data
 
 
+def _samples(attr: Any, codes: list[float], width: int, what: str, per: str, file: str) -> Any:
+    """The time samples of an array attribute as ``[T, width]`` float32; every sample must hold
+    ``width`` numbers (one message naming the attribute and the time otherwise)."""
+    from pxr import Usd  # deferred: usd-core, USD only
+
+    rows = []
+    for c in codes:
+        value = attr.Get(Usd.TimeCode(c))
+        row = np.asarray(value if value is not None else [], np.float32).reshape(-1)
+        if row.size != width:
+            raise input_error(file, f"{attr.GetPath()} at time {c:g}: {row.size} {what} for {per}")
+        rows.append(row)
+    return np.stack(rows) if rows else np.zeros((0, width), np.float32)
+
+
 def _compressed(prim: Any, mapping: int) -> tuple[CompressedCopy, ...]:
     """The records of the block-compressed copies (``wrinkle:compressed*``), if authored."""
 
@@ -379,7 +394,6 @@ def _curves(stage: Any, mat_prim: Any, r: int, n_morphs: int, file: str) -> list
     """The weight curves: ``wrinkle:weights`` time samples (the first), ``wrinkle:curves:curveI``
     (the others, named by ``wrinkle:curveNames``) and each one's ``wrinkle:morphCurves:curveI``
     morph weights."""
-    from pxr import Usd  # deferred: usd-core, USD only
 
     weights_attr = mat_prim.GetAttribute("wrinkle:weights")
     fps = stage.GetTimeCodesPerSecond()
@@ -389,9 +403,7 @@ def _curves(stage: Any, mat_prim: Any, r: int, n_morphs: int, file: str) -> list
         if not codes:
             return None
         times = np.array([c / fps for c in codes], np.float32)
-        values = np.stack([np.asarray(attr.Get(Usd.TimeCode(c)), np.float32) for c in codes])
-        if values.shape[1] != r:
-            raise input_error(file, f"{attr.GetPath()}: {values.shape[1]} weights for {r} regions")
+        values = _samples(attr, codes, r, "weights", f"{r} regions", file)
         return WeightCurves(name, times, values)
 
     curves = []
@@ -406,9 +418,9 @@ def _curves(stage: Any, mat_prim: Any, r: int, n_morphs: int, file: str) -> list
         if not a or not a.GetTimeSamples():
             return c
         codes = a.GetTimeSamples()
-        mw = np.stack([np.asarray(a.Get(Usd.TimeCode(t)), np.float32) for t in codes])
-        if len(codes) != len(c.times) or mw.shape[1] != n_morphs:
+        if len(codes) != len(c.times):
             raise input_error(file, f"{a.GetPath()}: morph weights do not match the curve")
+        mw = _samples(a, codes, n_morphs, "morph weights", f"{n_morphs} morph targets", file)
         return WeightCurves(c.name, c.times, c.values, mw)
 
     order = mat_prim.GetAttribute("wrinkle:curveNames")
