@@ -22,8 +22,9 @@ Serve a local page that renders PATH (a convert output folder, a .gltf or a .glb
 and wrinklepipe's GLTFLoader plugin: expression sliders (the asset's expression table), a
 timeline that plays its animations (morph targets and wrinkle weights together), a region
 overlay and debug views (tangent-space normal, UV and activation). The server listens on
-127.0.0.1 only and serves nothing but the page, three.js (npm, installed by ci/bootstrap.sh under
-tools/node; no CDN) and PATH's folder. Ctrl-C stops it.
+127.0.0.1 only, answers only requests addressed to 127.0.0.1 or localhost, and serves nothing
+but the page, three.js (npm, installed by ci/bootstrap.sh under tools/node; no CDN), the glTF(s)
+of PATH and the files they reference (no hidden files, no listings). Ctrl-C stops it.
 
 examples:
   wrinklepipe view build/ada
@@ -64,7 +65,7 @@ def _clip_query(gltf: Path, name: str | None) -> str:
 def run(args: argparse.Namespace) -> int:
     folder, gltf = find_asset(args.path)
     query = _clip_query(gltf, args.clip)
-    site = Site(folder, gltf, find_three(args.three))
+    site = Site(folder, gltf, find_three(args.three), only_gltf=Path(args.path).is_file())
     try:
         server = ViewServer(site, args.port)
     except OSError as exc:
