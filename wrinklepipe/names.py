@@ -4,6 +4,8 @@ hint of every message about a name that is not there.
 File stems (:func:`wrinklepipe.package.safe_name`), USD prim and variant names and HLSL
 identifiers (:func:`wrinklepipe.shading.hlsl.identifier`) are all kept apart with it, so two
 regions, textures or prims whose names clash get the same suffixes wherever they are written.
+File names are kept apart *case-insensitively* (``fold_case``): ``wrinkle_Ab.png`` and
+``wrinkle_ab.png`` are one file on macOS and Windows, so the second becomes ``wrinkle_ab_2``.
 """
 
 from __future__ import annotations
@@ -12,13 +14,18 @@ import difflib
 from collections.abc import Iterable
 
 
-def unique_name(stem: str, taken: set[str]) -> str:
-    """``stem``, or ``stem_2``, ``stem_3`` ... the first not in ``taken`` (which it updates)."""
+def unique_name(stem: str, taken: set[str], fold_case: bool = False) -> str:
+    """``stem``, or ``stem_2``, ``stem_3`` ... the first not in ``taken`` (which it updates);
+    ``fold_case``: compared case-insensitively (``taken`` then holds case-folded names)."""
+
+    def key(name: str) -> str:
+        return name.casefold() if fold_case else name
+
     out, i = stem, 1
-    while out in taken:
+    while key(out) in taken:
         i += 1
         out = f"{stem}_{i}"
-    taken.add(out)
+    taken.add(key(out))
     return out
 
 
@@ -49,3 +56,11 @@ def unknown_names(what: str, unknown: Iterable[str], known: Iterable[str], where
     parts = ", ".join(f"{n!r}{did_you_mean(n, known)}" for n in names)
     noun = what if len(names) == 1 else f"{what}s"
     return f"unknown {noun} {parts}; the {what}s{where}: {listing(known)}"
+
+
+def file_stems(keys: list[str]) -> dict[str, str]:
+    """Each key (``"region_mask/Brow"``) -> a file stem (``"region_mask_Brow"``: ``/`` as
+    ``_``), unique case-insensitively, given in sorted key order: every writer of one set of
+    keys names their files alike."""
+    taken: set[str] = set()
+    return {k: unique_name(k.replace("/", "_"), taken, fold_case=True) for k in sorted(keys)}

@@ -29,11 +29,13 @@ MAX_FLOAT_ID = 1 << 24
 
 def safe_name(name: str, taken: set[str] | None = None) -> str:
     """A file stem made from ``name``: letters, digits, ``_ . -`` only, no leading dot, unique
-    within ``taken`` (which it updates). Texture and curve files are named with it, so names
-    from a manifest or a foreign glTF can never point outside the output folder."""
+    within ``taken`` (which it updates; compared case-insensitively, so ``Ab`` and ``ab`` give
+    ``Ab`` and ``ab_2``). Texture and curve files are named with it, so names from a manifest or
+    a foreign glTF can never point outside the output folder nor overwrite each other."""
 
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)).lstrip(".") or "unnamed"
-    return stem if taken is None else unique_name(stem, taken)
+    # unique case-insensitively: two stems differing in case are one file on macOS / Windows
+    return stem if taken is None else unique_name(stem, taken, fold_case=True)
 
 
 @dataclass

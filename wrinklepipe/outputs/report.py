@@ -12,6 +12,7 @@ from wrinklepipe import __version__
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.metrics import angle_deg, weighted_stats
+from wrinklepipe.names import file_stems
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.pipeline.package import asset_from_package
 
@@ -149,8 +150,9 @@ def _regions_html(report: dict[str, Any], table: Any) -> str:
     black or transparent as the texture itself)."""
     a = report["asset"]
     files = {o["file"] for o in report["outputs"]}
+    stems = file_stems([f"region_mask/{r['name']}" for r in a["regions"]])  # as the page names them
     thumbs = {
-        r["name"]: f"{Path(VALIDATION_HTML).stem}_files/region_mask_{r['name']}.png"
+        r["name"]: f"{Path(VALIDATION_HTML).stem}_files/{stems['region_mask/' + r['name']]}.png"
         for r in a["regions"]
     }
     if not all(t in files for t in thumbs.values()):

@@ -18,6 +18,7 @@ from wrinklepipe.atomic import dumps_json, output_files, staged_folder, write_by
 from wrinklepipe.console import info, issue_counts, plural, problem, verbosity
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.png import png_bytes
+from wrinklepipe.names import file_stems
 from wrinklepipe.reuse import map_threads
 from wrinklepipe.validate.catalogue import RULES_BY_CODE
 from wrinklepipe.validate.run import Report
@@ -231,16 +232,30 @@ def colour_bar(vmax: float, unit: str = "degrees") -> str:
 
 
 def _html_pictures(report: Report) -> dict[str, tuple[str, float | str | None]]:
-    """File name -> (image key, heat-map range or None) of every picture the HTML shows."""
-    out: dict[str, tuple[str, float | str | None]] = {}
+    """File name -> (image key, heat-map range or None) of every picture the HTML shows. A
+    key ``group/name`` is the file ``group_name.png``, unique case-insensitively within its
+    group (:func:`~wrinklepipe.names.file_stems`: poses or regions ``Joy`` and ``joy`` are two
+    files on every file system)."""
+    chosen: dict[str, float | str | None] = {}
     for key in sorted(report.images):
         if key.startswith("_"):
             continue
         for prefix, vmax in _PICTURES:
             if key == prefix or (prefix.endswith("/") and key.startswith(prefix)):
-                out[key.replace("/", "_") + ".png"] = (key, vmax)
+                chosen[key] = vmax
                 break
-    return out
+    groups: dict[str, list[str]] = {}
+    for key in chosen:
+        groups.setdefault(key.split("/", 1)[0] if "/" in key else "", []).append(key)
+    stems = {k: v for keys in groups.values() for k, v in file_stems(keys).items()}
+    return {stems[key] + ".png": (key, vmax) for key, vmax in chosen.items()}
+
+
+def picture_names(report: Report) -> dict[str, str]:
+    """Each picture's natural file name (``region_mask_joy.png``, the key with ``/`` as ``_``)
+    -> the file it is written to (the same, or ``region_mask_joy_2.png`` after a case-only
+    clash)."""
+    return {key.replace("/", "_") + ".png": f for f, (key, _) in _html_pictures(report).items()}
 
 
 def html_images(report: Report) -> dict[str, bytes]:
@@ -301,11 +316,12 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
         parts.append("</table>")
     else:
         parts.append("<p>No issues.</p>")
-    images = _html_pictures(report)  # names only: the PNGs are encoded once, by html_images
+    images = picture_names(report)  # names only: the PNGs are encoded once, by html_images
 
     def fig(name: str, caption: str, big: bool = False) -> str:
         if name not in images:
             return ""
+        name = images[name]  # the file it is written to
         cls = " class='big'" if big else ""
         return (
             f"<figure><img{cls} src='{e(files_dir)}/{e(name)}' alt='{e(caption)}'>"
