@@ -1,4 +1,8 @@
-"""Issue 11, fuzz suite: hostile and careless inputs against the CLI verbs, run in-process.
+"""Issue 11, fuzz suite: hostile and careless inputs against the CLI verbs, run in-process;
+issue 39 adds USD sources (hostile asset paths in textures, ``info:*``, sublayers, references,
+payloads and value clips, cycles, counts, damaged text: and nothing of a file outside the
+folder may reach any output) and images (lying PNG headers, damaged data, truncations, other
+formats, two-channel maps past the horizon: an example running a minute is a hang).
 
 Hypothesis mutates valid skeletons (the demo's manifest as TOML, its mesh as glTF JSON + .bin and
 as GLB bytes, a converted asset's glTF with the wrinkle extension): fields set to wrong types
@@ -265,7 +269,7 @@ def _snapshot(folder: Path, skip: Path | None = None) -> dict[str, tuple]:
 _PYTHONISMS = re.compile(
     r"\b(Type|Key|Attribute|Index|Value|Recursion|Name|Overflow)Error\b|object has no attribute|"
     r"argument must be|indices must be|unhashable|not subscriptable|NoneType|object is not "
-    r"(iterable|callable)|could not convert|invalid literal"
+    r"(iterable|callable)|could not convert|invalid literal for"
 )
 
 
@@ -473,5 +477,237 @@ def test_fuzz_glb(skeletons, capsys, data):
             "inspect": ["inspect", str(p)],
         }[verb]
         _check_law(capsys, work, out, lambda: main(args))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+# ------------------------------------------------------------------------------------------------
+# issue 39: USD sources (every path a layer can name, composition arcs, counts) and images
+
+
+SECRET = b"wrinklepipe-fuzz-secret-outside-the-asset\n"
+
+
+class _Hung(BaseException):
+    """Raised by the alarm in the main thread: an example that runs a minute is a hang."""
+
+
+def _within(seconds: float, run: Callable[[], int]) -> Callable[[], int]:
+    import signal
+
+    def timed() -> int:
+        def ring(signum, frame):  # noqa: ANN001
+            raise _Hung(f"still running after {seconds} s")
+
+        old = signal.signal(signal.SIGALRM, ring)
+        signal.setitimer(signal.ITIMER_REAL, seconds)
+        try:
+            return run()
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, old)
+
+    return timed
+
+
+@pytest.fixture(scope="module")
+def usd_skeleton(tmp_path_factory) -> Path:
+    """The generated avatar (tests/test_usd_layer.py) with its manifest in its own folder."""
+    from test_usd_layer import write_avatar
+    from wrinkle_setups import write_setup
+
+    folder = tmp_path_factory.mktemp("usd_skeleton") / "asset"
+    usd = write_avatar(folder)
+    write_setup(folder, Path(usd.name), "hero", material="Skin", meshes=["Head"], size=16)
+    return folder
+
+
+def _hostile_asset(data: st.DataObject, secret: Path) -> str:
+    return data.draw(
+        st.sampled_from(
+            [
+                str(secret),
+                "../outside/secret.png",
+                "textures/../../outside/secret.png",
+                "link.png",  # a symbolic link to the secret, made in the work folder
+                "nowhere.png",
+                "./avatar.usda",  # itself: a cycle when used as a layer
+                "./loop.usda",
+                "pkg.usdz[x.png]",
+            ]
+            + [p for p in _PATHS if "\u0000" not in p and "@" not in p]
+        ),
+        label="asset",
+    )
+
+
+def _usd_mutation(data: st.DataObject, text: str, secret: Path) -> str:
+    kind = data.draw(
+        st.sampled_from(["texture", "info", "sublayer", "arc", "clips", "counts", "points"]),
+        label="usd",
+    )
+    a = _hostile_asset(data, secret)
+    if kind == "texture":
+        return text.replace("@textures/skin.png@", f"@{a}@")
+    if kind == "info":
+        return text.replace(
+            '(kind = "component") {', f'(kind = "component") {{\n    asset info:doc = @{a}@', 1
+        )
+    if kind == "sublayer":
+        return text.replace("(\n    defaultPrim", f"(\n    subLayers = [@{a}@]\n    defaultPrim", 1)
+    if kind == "arc":
+        arc = data.draw(st.sampled_from(["references", "payload"]), label="arc")
+        return text + f'\ndef Xform "Extra" ({arc} = @{a}@</Avatar>) {{}}\n'
+    if kind == "clips":
+        return text.replace(
+            '(kind = "component")',
+            '(kind = "component"\n    clips = { dictionary default = {\n'
+            f'        asset[] assetPaths = [@{a}@]\n        string primPath = "/Clip"\n'
+            "        double2[] active = [(0, 0)]\n    } }\n)",
+            1,
+        )
+    if kind == "counts":
+        n = data.draw(st.sampled_from(_NUMBERS), label="count")
+        pattern = r"int\[\] faceVertexCounts = \[[^\]]*\]"
+        return re.sub(pattern, f"int[] faceVertexCounts = [{n}]", text, count=1)
+    n = data.draw(st.sampled_from(["nan", "inf", "-1e39", "1e30", "0"]), label="coord")
+    return re.sub(r"point3f\[\] points = \[\(", f"point3f[] points = [({n}, ", text, count=1)
+
+
+@_fuzz(30)
+@given(data=st.data())
+def test_fuzz_usd_source(usd_skeleton, capsys, data):
+    """Besides the law: no byte of a file outside the asset folder reaches any output (the
+    usdz included), and USD's own diagnostics never reach the terminal raw."""
+    work = _workdir()
+    try:
+        (work / "outside").mkdir()
+        secret = work / "outside" / "secret.png"
+        secret.write_bytes(SECRET)
+        _link_tree(usd_skeleton, work / "asset")
+        (work / "asset" / "link.png").symlink_to(secret)
+        (work / "asset" / "loop.usda").write_text(
+            "#usda 1.0\n(\n    subLayers = [@./avatar.usda@]\n)\n"
+        )
+        usd = work / "asset" / "avatar.usda"
+        text = usd.read_text()
+        for _ in range(data.draw(st.integers(1, 2), label="mutations")):
+            text = _usd_mutation(data, text, secret)
+        _replace(usd, _damage_text(data, text.encode("utf-8", "surrogatepass")))
+        out = work / "out"
+        m = str(work / "asset" / "manifest.toml")
+        verb = data.draw(st.sampled_from(["convert", "convert", "inspect"]), label="verb")
+        args = (
+            ["convert", m, "-o", str(out), "--no-render", "--no-compress"]
+            if verb == "convert"
+            else ["inspect", str(usd)]
+        )
+        _check_law(capsys, work, out, _within(60, lambda: main(args)))
+        for f in out.rglob("*") if out.exists() else []:
+            if f.is_file():
+                assert SECRET not in f.read_bytes(), f"{f} holds bytes from outside the folder"
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _png_chunks(png: bytes) -> list[tuple[bytes, bytes]]:
+    out, at = [], 8
+    while at + 8 <= len(png):
+        n = struct.unpack(">I", png[at : at + 4])[0]
+        out.append((png[at + 4 : at + 8], png[at + 8 : at + 8 + n]))
+        at += 12 + n
+    return out
+
+
+def _png(chunks: list[tuple[bytes, bytes]]) -> bytes:
+    import zlib
+
+    body = b"".join(
+        struct.pack(">I", len(d)) + k + d + struct.pack(">I", zlib.crc32(k + d) & 0xFFFFFFFF)
+        for k, d in chunks
+    )
+    return b"\x89PNG\r\n\x1a\n" + body
+
+
+def _image_mutation(data: st.DataObject, png: bytes) -> bytes:
+    import zlib
+
+    kind = data.draw(
+        st.sampled_from(["ihdr", "ihdr", "idat", "truncate", "flip", "other", "two_channel"]),
+        label="image",
+    )
+    chunks = _png_chunks(png)
+    if kind == "ihdr":
+        w, h, depth, colour = struct.unpack(">IIBB", chunks[0][1][:10])
+        field = data.draw(st.sampled_from(["w", "h", "depth", "colour"]), label="field")
+        big = st.sampled_from([0, 1, 3, 2**16, 2**24, 2**31 - 1, 2**32 - 1])
+        if field == "w":
+            w = data.draw(big, label="w")
+        elif field == "h":
+            h = data.draw(big, label="h")
+        elif field == "depth":
+            depth = data.draw(st.sampled_from([0, 1, 2, 4, 8, 16, 32, 255]), label="depth")
+        else:
+            colour = data.draw(st.sampled_from([0, 1, 2, 3, 4, 5, 6, 7, 255]), label="colour")
+        chunks[0] = (b"IHDR", struct.pack(">IIBB", w, h, depth, colour) + chunks[0][1][10:])
+        return _png(chunks)
+    if kind == "idat":
+        idat = [i for i, (k, _) in enumerate(chunks) if k == b"IDAT"]
+        raw = bytearray(zlib.decompress(b"".join(chunks[i][1] for i in idat)))
+        at = data.draw(st.integers(0, max(0, len(raw) - 1)), label="at")
+        raw[at : at + 4] = data.draw(st.binary(min_size=1, max_size=4), label="bytes")
+        chunks = [c for i, c in enumerate(chunks) if i not in idat[1:]]
+        chunks[idat[0]] = (b"IDAT", zlib.compress(bytes(raw)))
+        return _png(chunks)
+    if kind == "truncate":
+        return png[: data.draw(st.integers(0, len(png)), label="cut")]
+    if kind == "flip":
+        b = bytearray(png)
+        b[data.draw(st.integers(0, len(b) - 1), label="at")] ^= data.draw(st.integers(1, 255))
+        return bytes(b)
+    if kind == "two_channel":  # grey + alpha, texels on and past the horizon (the PD hang)
+        size = 16
+        x = data.draw(st.sampled_from([0, 128, 200, 255]), label="x")
+        y = data.draw(st.sampled_from([0, 128, 200, 255]), label="y")
+        rows = b"".join(b"\0" + bytes([x, y]) * size for _ in range(size))
+        ihdr = struct.pack(">IIBBBBB", size, size, 8, 4, 0, 0, 0)
+        return _png([(b"IHDR", ihdr), (b"IDAT", zlib.compress(rows)), (b"IEND", b"")])
+    return data.draw(
+        st.sampled_from(
+            [
+                b"",
+                b"plain text, not an image\n",
+                b"DDS " + b"\xff" * 124,
+                b"\xabKTX 20\xbb\r\n\x1a\n" + b"\xff" * 80,
+                b"\xff\xd8\xff\xe0" + b"\0" * 16,
+                b"GIF89a" + b"\xff" * 10,
+            ]
+        ),
+        label="bytes",
+    )
+
+
+@_fuzz(40)
+@given(data=st.data())
+def test_fuzz_images(skeletons, capsys, data):
+    src = skeletons["manifest"]
+    which = data.draw(
+        st.sampled_from(["base_normal.png", "wrinkle_stretch.png", "masks/chin.png"]),
+        label="file",
+    )
+    work = _workdir()
+    try:
+        _link_tree(src.parent, work / "src")
+        target = work / "src" / which
+        _replace(target, _image_mutation(data, target.read_bytes()))
+        m = str(work / "src" / "manifest.toml")
+        out = work / "out"
+        verb = data.draw(st.sampled_from(["convert", "validate-asset"]), label="verb")
+        if verb == "convert":
+            run = lambda: main(["convert", m, "-o", str(out), "--no-render"])  # noqa: E731
+        else:
+            out = work / "r.json"
+            run = lambda: main(["validate-asset", m, "--no-render", "--report", str(out)])  # noqa: E731
+        _check_law(capsys, work, out, _within(60, run))
     finally:
         shutil.rmtree(work, ignore_errors=True)

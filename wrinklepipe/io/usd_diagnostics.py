@@ -34,6 +34,15 @@ def plain(text: str) -> str:
     return _ADDRESS.sub("", line).strip()
 
 
+def error_text(exc: BaseException) -> str:
+    """A USD exception (``Tf.ErrorException``) as one line; its text may hold the bytes of a
+    damaged layer that are no UTF-8 (its own ``str`` then raises)."""
+    try:
+        return plain(str(exc))
+    except UnicodeDecodeError:
+        return "USD cannot parse it (it holds bytes that are not UTF-8 text)"
+
+
 def _take() -> list[str]:
     """The diagnostics posted since the last take (caller holds the lock)."""
     if not _DELEGATE:

@@ -42,7 +42,7 @@ from wrinklepipe.asset import Mesh, MeshPart, mesh_over_cap
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.polygons import drop_degenerate, fan_triangles, weld_corners
 from wrinklepipe.io.confine import confine_usd
-from wrinklepipe.io.usd_diagnostics import captured_diagnostics, plain
+from wrinklepipe.io.usd_diagnostics import captured_diagnostics, error_text
 from wrinklepipe.usd.composition import UsdProblem, composition_problems
 
 
@@ -86,7 +86,7 @@ def open_stage_checked(path: Path) -> tuple[Any, list[UsdProblem]]:
         try:
             stage = Usd.Stage.Open(str(path))
         except Tf.ErrorException as exc:
-            raise input_error(path, f"cannot open USD stage: {plain(str(exc))[:300]}") from None
+            raise input_error(path, f"cannot open USD stage: {error_text(exc)[:300]}") from None
     if stage is None:
         raise input_error(path, "cannot open USD stage" + (f": {said[0]}" if said else ""))
     return stage, composition_problems(stage, said, str(path))
