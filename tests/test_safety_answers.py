@@ -161,7 +161,7 @@ def test_schema_errors_say_what_is_allowed(source, tmp_path, capsys):
     joined = "\n".join(errors)
     assert "not valid under any of the given schemas" not in joined
     assert "[pd_scale]: 0 is out of range" in joined or "[pd_scale]: 0 is not allowed" in joined
-    assert "expected 'auto' or a number > 0 and <= 64" in joined
+    assert "expected 'auto' or a number >= 0.015625 and <= 64" in joined
     assert (
         "[convention]: 'dx' is not allowed; expected one of 'opengl', 'directx', 'auto'" in joined
     )

@@ -178,7 +178,7 @@ def test_flattened_usdz_refuses_an_asset_outside_the_source_folder(avatar, tmp_p
     """The packer itself checks: a stage composed from a source whose asset lies outside (the
     confinement above bypassed) packs nothing from outside."""
     from pxr import Usd
-    from wrinklepipe.io.package import WrinklePackage
+    from wrinklepipe.package import WrinklePackage
 
     from wrinklepipe.usd.layer import flattened_usdz
 
