@@ -178,8 +178,8 @@ def test_flattened_usdz_refuses_an_asset_outside_the_source_folder(avatar, tmp_p
     """The packer itself checks: a stage composed from a source whose asset lies outside (the
     confinement above bypassed) packs nothing from outside."""
     from pxr import Usd
-    from wrinklepipe.package import WrinklePackage
 
+    from wrinklepipe.package import WrinklePackage
     from wrinklepipe.usd.layer import flattened_usdz
 
     _, usd = avatar
@@ -261,3 +261,21 @@ def test_validate_asset_reports_a_composition_error(avatar, tmp_path, capsys, ca
     assert "Warning:" not in err and "_ReportErrors" not in err and "Traceback" not in err, err
     issues = [i for i in json.loads(report.read_text())["issues"] if i["code"] == code]
     assert rc == 1 and issues and any(layer in i["message"] for i in issues), err
+
+
+def test_usd_diagnostics_are_captured_per_block_and_never_printed(tmp_path, capfd):
+    from pxr import Usd
+
+    from wrinklepipe.io.usd_diagnostics import captured_diagnostics, quiet
+
+    layer = tmp_path / "a.usda"
+    layer.write_text("#usda 1.0\n(\n    subLayers = [@./gone.usda@]\n)\n")
+    with captured_diagnostics() as outer:
+        with captured_diagnostics() as inner:
+            Usd.Stage.Open(str(layer))
+        with captured_diagnostics() as empty:
+            pass
+        quiet(Usd.Stage.Open)(str(layer))  # said inside its own block: neither outer's nor ours
+    assert len(inner) == 1 and "gone.usda" in inner[0] and "instantiating" not in inner[0]
+    assert empty == [] and outer == []
+    assert "Warning" not in capfd.readouterr().err

@@ -12,10 +12,13 @@ Diagnostics posted outside any block are kept for :func:`stray_diagnostics`.
 from __future__ import annotations
 
 import contextlib
+import functools
 import re
 import threading
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import Callable, Iterator
+from typing import Any, TypeVar
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 _LOCK = threading.Lock()
 _DELEGATE: list[Any] = []  # the one delegate, once made
@@ -68,8 +71,20 @@ def captured_diagnostics() -> Iterator[list[str]]:
     finally:
         with _LOCK:
             mine.extend(_take())
-            _OPEN.remove(mine)
+            del _OPEN[next(i for i, x in enumerate(_OPEN) if x is mine)]  # by identity
             mine[:] = list(dict.fromkeys(m for m in mine if m))
+
+
+def quiet(fn: F) -> F:
+    """``fn`` run inside :func:`captured_diagnostics` (for USD work whose diagnostics are not
+    the user's business, such as composing the tool's own output layer): USD prints nothing."""
+
+    @functools.wraps(fn)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        with captured_diagnostics():
+            return fn(*args, **kwargs)
+
+    return run  # type: ignore[return-value]
 
 
 def stray_diagnostics() -> list[str]:

@@ -48,6 +48,7 @@ import numpy as np
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.confine import allowed, confine_usd
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
+from wrinklepipe.io.usd_diagnostics import quiet
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.usd.materialx import drop_materialx_file
 from wrinklepipe.usd.meshes import mesh_time
@@ -86,6 +87,7 @@ def _unique_child(stage: Any, parent: Any, name: str) -> Any:
     return path
 
 
+@quiet
 def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
     """The source sublayered into an in-memory stage whose root layer holds the wrinkle data
     (see the module doc); returns the stage and notes. The root layer names the source by its
@@ -398,6 +400,7 @@ def _mesh_overs(
         put(uv_name, Sdf.ValueTypeNames.TexCoord2fArray, st, Vt.Vec2fArray)
 
 
+@quiet
 def layer_bytes(stage: Any, reference: str, suffix: str = ".usda") -> bytes:
     """The stage's root layer as a file (``.usda`` text or ``.usdc``), the source sublayered by
     ``reference`` (:func:`source_reference`)."""
@@ -454,6 +457,7 @@ def _retype_varnames(layer: Any) -> list[str]:
     ]
 
 
+@quiet
 def flattened_usdz(
     stage: Any,
     pkg: WrinklePackage,

@@ -53,6 +53,7 @@ from wrinklepipe.atomic import check_not_input, write_bytes
 from wrinklepipe.errors import input_error
 from wrinklepipe.gltf.package_write import skin_weights_normalized
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
+from wrinklepipe.io.usd_diagnostics import quiet
 from wrinklepipe.package import MAX_FLOAT_ID, WrinklePackage, safe_name
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.usd import materialx as mtlx
@@ -245,6 +246,7 @@ def _morph_curves(stage: Any, root_path: Any, prim: Any, pkg: WrinklePackage, fp
                 bsw.Set(Vt.FloatArray.FromNumpy(row), code)
 
 
+@quiet
 def build_stage(
     pkg: WrinklePackage, options: UsdOptions | None = None, with_mesh: bool = True
 ) -> Any:
@@ -503,6 +505,7 @@ def _color_values(meta: Any) -> dict[str, list[str]]:
     return out
 
 
+@quiet
 def write_usd(
     pkg: WrinklePackage,
     path: str | Path,
