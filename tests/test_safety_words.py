@@ -107,7 +107,7 @@ def test_strict_json_refuses_nan(tmp_path):
     from wrinklepipe.errors import InputError
     from wrinklepipe.io.json_safe import loads_json
 
-    with pytest.raises(InputError, match="NaN is not a number JSON allows"):
+    with pytest.raises(InputError, match="NaN is not finite"):
         loads_json(b'{"a": NaN}', tmp_path / "x.json")
 
 

@@ -66,7 +66,7 @@ def loads_json(data: bytes | str, file: str | Path, what: str = "JSON", key: str
 
 
 def _no_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not a number JSON allows (numbers are finite)")
+    raise ValueError(f"{name} is not finite (JSON numbers are finite)")
 
 
 def loads_toml(text: str, file: str | Path, what: str = "TOML") -> dict[str, Any]:
