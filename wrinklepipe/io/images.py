@@ -7,12 +7,7 @@ for integer formats (0..255 or 0..65535 mapped exactly), as stored for float for
 
 from __future__ import annotations
 
-import contextlib
-import os
 import struct
-import sys
-import tempfile
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,37 +17,12 @@ import OpenImageIO as oiio
 from wrinklepipe.atomic import check_not_input, temp_path, write_bytes
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.png import png_bytes
+from wrinklepipe.io.quiet import native_stderr_silenced, oiio_message
 
 #: Default cap on width x height for any image read (64 Mpx, e.g. 8192 x 8192).
 DEFAULT_MAX_PIXELS = 8192 * 8192
 
 _BITS_TO_TYPE = {8: oiio.UINT8, 16: oiio.UINT16, 32: oiio.FLOAT, "half": oiio.HALF}
-
-
-@contextlib.contextmanager
-def native_stderr_silenced() -> Iterator[None]:
-    """Keep what C libraries print straight to file descriptor 2 (libpng's "libpng error: ...")
-    off the terminal while a file is opened or decoded: OpenImageIO reports the same through
-    geterror(), which the tool turns into its one message."""
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):
-        yield
-        return
-    with tempfile.TemporaryFile() as sink:
-        os.dup2(sink.fileno(), 2)
-        try:
-            yield
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-
-
-def oiio_message(text: str) -> str:
-    """OpenImageIO's error text on one line (it may hold several)."""
-    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
-    return "; ".join(dict.fromkeys(lines)) or "unrecognised or truncated image"
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.images import native_stderr_silenced, oiio_message
+from wrinklepipe.io.quiet import native_stderr_silenced, oiio_message
 from wrinklepipe.reuse import reused
 
 #: zlib level of the PNGs wrinklepipe writes: 6, zlib's and libpng's default. Level 9 makes the
