@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from wrinklepipe import atomic
+from wrinklepipe import staging
 from wrinklepipe.batch import DaskEngine, LocalEngine, plan_batch, run_plan
 from wrinklepipe.batch import worker as batch_worker
 from wrinklepipe.cli import main
@@ -47,8 +47,8 @@ def _leftovers(*folders: Path) -> list[str]:
     found = []
     for folder in folders:
         for p in folder.rglob("*"):
-            if p.name.endswith((atomic.STAGING_SUFFIX, atomic.STAGING_NEW_SUFFIX)) or (
-                p.name.endswith(atomic.LOCK_SUFFIX)
+            if p.name.endswith((staging.STAGING_SUFFIX, staging.STAGING_NEW_SUFFIX)) or (
+                p.name.endswith(staging.LOCK_SUFFIX)
             ):
                 found.append(str(p))
     return found
