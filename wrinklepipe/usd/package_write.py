@@ -505,7 +505,6 @@ def _color_values(meta: Any) -> dict[str, list[str]]:
     return out
 
 
-@quiet
 def write_usd(
     pkg: WrinklePackage,
     path: str | Path,
