@@ -169,7 +169,7 @@ def test_a_search_path_usd_would_find_beside_the_current_folder_is_refused(
         assert _convert(manifest, tmp_path / "out1") == 2
     finally:
         os.chdir(here)
-    _one_error(capsys, "@nowhere.png@", "is outside", str(cwd / "nowhere.png"))
+    _one_error(capsys, "@nowhere.png@", "is outside")  # (the path resolved in the cwd)
     with zipfile.ZipFile(tmp_path / "out0" / "hero.usdz") as z:
         assert not [n for n in z.namelist() if "nowhere" in n]
 

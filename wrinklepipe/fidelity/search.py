@@ -36,7 +36,7 @@ import numpy as np
 
 from wrinklepipe import reuse
 from wrinklepipe.fidelity import metric as fm
-from wrinklepipe.fidelity import pyramid, ship
+from wrinklepipe.fidelity import pyramid, scales, ship
 from wrinklepipe.fidelity import reference as fre
 from wrinklepipe.fidelity import sampling as fsa
 from wrinklepipe.fidelity.judge import (
@@ -50,6 +50,7 @@ from wrinklepipe.fidelity.judge import (
     _smallest_passing,
     pick_format,
 )
+from wrinklepipe.fidelity.scales import clipped_texels, largest_held, scale_candidates
 from wrinklepipe.metrics import Budget
 from wrinklepipe.normals.encode import MAX_PD_SCALE
 
@@ -142,22 +143,6 @@ class Choice:
 
 # ------------------------------------------------------------------------------------------------
 # candidates as decoded shipped data
-
-
-def scale_candidates(max_slope: float, factors: Sequence[float]) -> list[float]:
-    """PD scales to try: ``max_slope`` times each factor, rounded up to a multiple of 1/64
-    (exact in float32 and in every shader), distinct, largest first. ``max_slope`` is taken as
-    at most :data:`~wrinklepipe.normals.encode.MAX_PD_SCALE` (a texel on the horizon, z = 0,
-    has a slope of 1e12: no scale holds it, and it clips at every one)."""
-    top = min(max(float(max_slope), 1.0 / 64.0), MAX_PD_SCALE)
-    out = sorted({float(np.ceil(top * f * 64.0) / 64.0) for f in factors}, reverse=True)
-    return [s for s in out if s > 0]
-
-
-def clipped_texels(level: np.ndarray, scale: float) -> list[int]:
-    """Per state: texels stored at the end of the range at ``scale`` (:func:`ship.edge_texels`,
-    the one clipped count)."""
-    return [ship.edge_texels(ship.pd_texels(x, scale)[0]) for x in level]
 
 
 # ------------------------------------------------------------------------------------------------
@@ -256,18 +241,18 @@ class _Search:
         """The PD scale of the states at ``size`` with the least error, clipping included."""
         o, judge, ref = self.o, self.judge, self.ref
         u = judge.coarse.union
-        top = max(_largest_held(fsa.sample_at(x, ref.shape, u)) for x in self.levels[size])
+        top = max(largest_held(fsa.sample_at(x, ref.shape, u)) for x in self.levels[size])
         # the validator's clipping rule (WP-MAP-004) counts every texel of the map, active or
         # not: a scale that clips more than it allows is never chosen, and the candidates
         # include the smallest scale that keeps every texel of the map inside the range
         limit = o.max_clipped_fraction * size * size
         level = self.levels[size]
-        big = _largest_held(level)
+        big = largest_held(level)
         safe = scale_candidates(big, (1.0,))[0]
         candidates = sorted({*scale_candidates(top, o.scale_factors), safe}, reverse=True)
         # only texels with a component above 0.99 of the smallest scale can reach the end of
         # the range (|t| >= 1 - 0.5/127): count clipping on that tail alone, as edge_texels does
-        tails = _tails(level, candidates[-1])
+        tails = scales.tails(level, candidates[-1])
         # texels that clip even at the largest scale (on or near the horizon: a two-channel
         # texel with x^2 + y^2 >= 1, a z = 0 normal) clip at every scale: counted as clipped in
         # the report and by the validator, never a reason to pick one scale over another
@@ -570,35 +555,6 @@ class _FormatSearch:
         parts = dict(judge.parts)
         judge.parts = self.kept
         return _Formats(state_fmt, base_fmt, parts, self.found)
-
-
-def _largest_held(x: np.ndarray) -> float:
-    """The largest |component| of slopes ``x`` that some PD scale holds (at most
-    :data:`~wrinklepipe.normals.encode.MAX_PD_SCALE`); 0 when none. Without temporaries when
-    every texel is held (at full size a map is 4M texels); horizon texels (slopes up to 1e12)
-    are left out."""
-    big = max(float(np.max(x, initial=0.0)), -float(np.min(x, initial=0.0)))
-    if big <= MAX_PD_SCALE:
-        return big
-    a = np.abs(x)
-    return float(a[a <= MAX_PD_SCALE].max(initial=0.0))
-
-
-def _tails(level: np.ndarray, smallest: float) -> list[np.ndarray]:
-    """Per state of ``level`` ``[K, s, s, 2]``: its texels ``[n, 1, 2]`` (in map order) whose
-    larger |component| is at least 0.99 of scale ``smallest`` (the only ones that can clip at
-    a scale of at least that). In chunks of rows (:func:`~wrinklepipe.fidelity.sampling.chunks`:
-    the same texels, small temporaries) and two planes per chunk (a reduction over a last axis
-    of 2 is ten times slower than one elementwise maximum; the same values)."""
-    out = []
-    for x in level:
-        parts = []
-        for sl in fsa.chunks(x.shape[0], max(1, fsa.CHUNK_TEXELS // max(x.shape[1], 1))):
-            c = x[sl]
-            amax = np.maximum(np.abs(c[..., 0]), np.abs(c[..., 1]))
-            parts.append(c[amax >= 0.99 * smallest])
-        out.append(np.concatenate(parts)[:, None, :])
-    return out
 
 
 @dataclass
