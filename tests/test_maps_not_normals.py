@@ -4,6 +4,7 @@ by the flip rule before anything is written (pipeline.ingest.check_conventions).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -74,10 +75,16 @@ def source(tmp_path):
     return write_demo_source(tmp_path / "src", 64)
 
 
+_PROGRESS = re.compile(r"^\s*\d+(\.\d+)? s  ")
+
+
 def _convert(tmp_path, manifest, capsys) -> tuple[int, list[str]]:
     code = main(["convert", str(manifest), "-o", str(tmp_path / "out"), "--no-render"])
     err = capsys.readouterr().err
-    lines = [ln for ln in err.replace("\n ", " ").splitlines() if ln.strip()]
+    # the progress log's lines ("   0.0 s  wrinklepipe convert ...") are not messages
+    lines = [
+        ln for ln in err.replace("\n ", " ").splitlines() if ln.strip() and not _PROGRESS.match(ln)
+    ]
     assert not (tmp_path / "out").exists()  # nothing written
     assert not any(tmp_path.glob(".out*"))
     return code, lines
