@@ -38,11 +38,21 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
         yield sock
 
 
-@pytest.mark.parametrize("page", PAGES, ids=page_id)
+def _examples(page: Path) -> list:
+    return [b for b in blocks(page) if b.lang in SHELL or b.edit]
+
+
+# only the pages that have shell examples (a page of prose alone has nothing to run)
+EXAMPLE_PAGES = [page for page in PAGES if _examples(page)]
+
+
+def test_the_example_pages_are_found():
+    assert REPO / "README.md" in EXAMPLE_PAGES and len(EXAMPLE_PAGES) >= 10, EXAMPLE_PAGES
+
+
+@pytest.mark.parametrize("page", EXAMPLE_PAGES, ids=page_id)
 def test_page_examples_run(page: Path, base_sandbox: Path, server: Path, tmp_path: Path):
-    found = [b for b in blocks(page) if b.lang in SHELL or b.edit]
-    if not found:
-        pytest.skip("no shell examples")
+    found = _examples(page)
     cwd = tmp_path / "repo"
     shutil.copytree(base_sandbox, cwd, symlinks=True)
     if SHARED.is_dir():
