@@ -21,7 +21,7 @@ from wrinklepipe.demo import demo_asset
 from wrinklepipe.metrics import angle_deg
 from wrinklepipe.normals import compress, copies, dds, ktx2
 from wrinklepipe.normals.compress import angular_error_stats
-from wrinklepipe.options import BudgetOptions
+from wrinklepipe.options import BudgetOptions, FormatOptions
 from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 
 #: A budget every format meets: the copies are made in the format asked for.
@@ -65,7 +65,7 @@ def _as_normals(rgba: np.ndarray, layout: str) -> np.ndarray:
 
 @pytest.mark.parametrize("fmt", ["bc1", "bc7", "bc5", "bc3nm"])
 def test_base_copy_read_by_its_convention(tmp_path, pkg, fmt):
-    made, notes, choices = copies.compressed_copies(pkg, LOOSE, {"base": fmt})
+    made, notes, choices = copies.compressed_copies(pkg, LOOSE, FormatOptions(base=fmt))
     base = next(c for c in made if c.texture == "base_normal")
     assert base.format == fmt and choices["base"]["chosen"] == fmt
     assert base.layout == {"bc1": "rgb", "bc7": "rgb", "bc5": "rg", "bc3nm": "ag"}[fmt]
@@ -100,7 +100,7 @@ def test_base_copy_read_by_its_convention(tmp_path, pkg, fmt):
 
 
 def test_container_ids_say_the_layout(pkg):
-    made, _, _ = copies.compressed_copies(pkg, LOOSE, {"base": "bc3nm", "wrinkle": "bc5"})
+    made, _, _ = copies.compressed_copies(pkg, LOOSE, FormatOptions(base="bc3nm", wrinkle="bc5"))
     for c in made:
         f = c.files()
         img = dds.read_dds(f[f"compressed/{c.texture}.dds"])
@@ -120,7 +120,7 @@ def test_container_ids_say_the_layout(pkg):
 
 @pytest.mark.parametrize("fmt", ["bc5", "bc7"])
 def test_full_mip_chains_averaged_in_the_right_space(pkg, fmt):
-    made, _, _ = copies.compressed_copies(pkg, LOOSE, {"base": fmt, "wrinkle": fmt})
+    made, _, _ = copies.compressed_copies(pkg, LOOSE, FormatOptions(base=fmt, wrinkle=fmt))
     for c in made:
         h, w = c.height, c.width
         assert len(c.levels) == max(h, w).bit_length()  # 64 -> 7 levels, down to 1 x 1
@@ -159,7 +159,7 @@ def test_auto_never_picks_a_state_format_that_clips(pkg):
         textures = [type(state)(state.name, q, "state")]
 
     budget = BudgetOptions(max_mean_deg=30.0, max_p99_deg=60.0)
-    made, _, choices = copies.compressed_copies(Pkg(), budget, {"wrinkle": "auto"}, False)
+    made, _, choices = copies.compressed_copies(Pkg(), budget, FormatOptions(wrinkle="auto"), False)
     tried = choices["wrinkle"]["checks"]
     assert list(tried) == ["bc1", "bc5"] and choices["wrinkle"]["chosen"] == "bc5"
     assert tried["bc1"][state.name]["verdict"] == "fail"

@@ -63,3 +63,19 @@ def test_the_loader_builds_it_typed(tmp_path: Path):
     end = text.index("\n[", start + 1)
     manifest.path.write_text(text[:start] + text[end + 1 :])
     assert load_manifest(manifest.path).budget == BudgetOptions()
+
+
+def test_formats_default_to_the_schema_and_load_typed(tmp_path: Path):
+    from wrinklepipe.options import FORMATS_SCHEMA, FormatOptions
+
+    assert FormatOptions().to_json() == {k: v["default"] for k, v in FORMATS_SCHEMA.items()}
+    assert FormatOptions() == FormatOptions(
+        base="auto", wrinkle="auto", mask="rgba8", mask_layout="rgba", color="auto"
+    )
+    assert FormatOptions.from_json({"base": "bc5"}) == FormatOptions(base="bc5")
+    with pytest.raises(ValueError, match="wrinkles"):
+        FormatOptions.from_json({"wrinkles": "bc5"})
+    from wrinklepipe.demo.source import write_demo_source
+
+    manifest = load_manifest(write_demo_source(tmp_path / "demo", 64))
+    assert isinstance(manifest.formats, FormatOptions)

@@ -1,4 +1,5 @@
-"""A manifest's error budget, typed and declared once: ``[budget]`` as :class:`BudgetOptions`.
+"""A manifest's options, typed and declared once: ``[budget]`` as :class:`BudgetOptions`,
+``[formats]`` as :class:`FormatOptions`.
 
 The defaults are the manifest schema's (``schemas/manifest.schema.json``: each key's
 ``default``), read once here. The manifest loader builds the options from the manifest's table
@@ -24,10 +25,13 @@ from typing import Any
 from wrinklepipe.metrics import Budget
 from wrinklepipe.paths import SCHEMAS_DIR
 
-#: The ``[budget]`` properties of the manifest schema (types, bounds, defaults).
-BUDGET_SCHEMA: dict[str, Any] = json.loads(
+_SCHEMA: dict[str, Any] = json.loads(
     (SCHEMAS_DIR / "manifest.schema.json").read_text(encoding="utf-8")
-)["properties"]["budget"]["properties"]
+)["properties"]
+#: The ``[budget]`` properties of the manifest schema (types, bounds, defaults).
+BUDGET_SCHEMA: dict[str, Any] = _SCHEMA["budget"]["properties"]
+#: The ``[formats]`` properties (the formats each map kind may be stored in, defaults).
+FORMATS_SCHEMA: dict[str, Any] = _SCHEMA["formats"]["properties"]
 
 
 def _default(key: str) -> float | None:
@@ -119,3 +123,28 @@ class BudgetOptions:
         return Budget(
             self.compressed_max_mean_deg, self.compressed_max_p99_deg, self.compressed_max_max_deg
         )
+
+
+@dataclass(frozen=True)
+class FormatOptions:
+    """A manifest's ``[formats]``: the storage format of the base, the wrinkle states, the masks
+    and the colour states (``"auto"``: chosen by fidelity within the budget) and the mask
+    layout. Each field defaults to the schema's ``default``."""
+
+    base: str = str(FORMATS_SCHEMA["base"]["default"])
+    wrinkle: str = str(FORMATS_SCHEMA["wrinkle"]["default"])
+    mask: str = str(FORMATS_SCHEMA["mask"]["default"])
+    mask_layout: str = str(FORMATS_SCHEMA["mask_layout"]["default"])
+    color: str = str(FORMATS_SCHEMA["color"]["default"])
+
+    @classmethod
+    def from_json(cls, table: dict[str, Any] | None) -> FormatOptions:
+        """From a manifest's ``[formats]`` table (already checked by the schema)."""
+        table = table or {}
+        unknown = sorted(set(table) - {f.name for f in fields(cls)})
+        if unknown:
+            raise ValueError(f"unknown formats keys {unknown}")
+        return cls(**{k: str(v) for k, v in table.items()})
+
+    def to_json(self) -> dict[str, str]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}

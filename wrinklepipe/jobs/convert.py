@@ -151,7 +151,7 @@ def convert(
                     color_ref = color_reference(source, poses)
                     asset, color_choice = choose_color_size(source, asset, poses, color_ref)
                 notes.append(color_choice.describe())
-            layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
+            layout = opt.mask_layout or manifest.formats.mask_layout
             with console.status("encoding the maps and packing the masks"):
                 pkg = package_from_asset(
                     asset, PackOptions(bits=opt.bits, mask_layout=layout), curves
@@ -164,10 +164,10 @@ def convert(
                 stage_rep.formats, stage_rep.fidelity = chosen, record
                 notes += n
             with console.status("compressing and building the files"):
-                formats = {**manifest.formats, **stage_rep.formats}
+                formats = replace(manifest.formats, **stage_rep.formats)
                 if opt.compressed and color_ref is not None:
                     color_format = choose_color_format(
-                        source, asset, poses, pkg, manifest.formats.get("color", "auto"), color_ref
+                        source, asset, poses, pkg, manifest.formats.color, color_ref
                     )
                     notes += color_format.notes
                 files, n, choices = build_outputs(

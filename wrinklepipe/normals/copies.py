@@ -31,7 +31,7 @@ from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import mips, uastc
 from wrinklepipe.normals.dds import dds_bytes
 from wrinklepipe.normals.ktx2 import ktx2_bytes
-from wrinklepipe.options import BudgetOptions
+from wrinklepipe.options import BudgetOptions, FormatOptions
 
 #: Formats ``auto`` tries, smallest blocks first (BC1: 8 bytes; then BC5, BC3nm, BC7: 16).
 AUTO_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")
@@ -181,7 +181,7 @@ def _copy(m: _Map, fmt: str, check: cmp.FormatCheck, with_mips: bool) -> Copy:
 def compressed_copies(
     pkg: Any,
     budget: BudgetOptions | None = None,
-    formats: dict[str, str] | None = None,
+    formats: FormatOptions | None = None,
     with_mips: bool = True,
 ) -> tuple[list[Copy], list[str], dict[str, Any]]:
     """Compressed copies of the base and the states of a
@@ -192,7 +192,7 @@ def compressed_copies(
     report (requested, chosen, layout, levels and every check tried).
     """
     limits = (budget or BudgetOptions()).copies()
-    formats = formats or {}
+    formats = formats or FormatOptions()
     meta = pkg.meta
     enc = meta.encoding
     version = int(meta.mapping)
@@ -203,7 +203,7 @@ def compressed_copies(
         groups.append(
             (
                 "base",
-                formats.get("base", "auto"),
+                formats.base,
                 [_Map(base_tex.name, "full", base_tex.pixels, 1.0, 1)],
             )
         )
@@ -211,7 +211,7 @@ def compressed_copies(
     groups.append(
         (
             "wrinkle",
-            formats.get("wrinkle", "auto"),
+            formats.wrinkle,
             [_Map(t.name, enc, t.pixels, param, version) for t in states],
         )
     )

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from wrinklepipe.normals import copies as nc
-from wrinklepipe.options import BudgetOptions
+from wrinklepipe.options import BudgetOptions, FormatOptions
 from wrinklepipe.package import WrinklePackage
 
 #: Block formats ``auto`` tries (smallest blocks first; ``bc7xy`` only when asked for).
@@ -19,7 +19,7 @@ AUTO_FORMATS: tuple[str, ...] = nc.AUTO_FORMATS
 def compressed_copies(
     pkg: WrinklePackage,
     budget: BudgetOptions | None = None,
-    formats: dict[str, str] | None = None,
+    formats: FormatOptions | None = None,
 ) -> tuple[list[nc.Copy], list[str], dict[str, Any]]:
     """The copies of the base and every state (:func:`wrinklepipe.normals.copies.compressed_copies`:
     the manifest's ``formats.base`` / ``formats.wrinkle``, ``auto`` = the smallest format whose
@@ -31,7 +31,7 @@ def compressed_copies(
 def compressed_files(
     pkg: WrinklePackage,
     budget: BudgetOptions | None = None,
-    formats: dict[str, str] | None = None,
+    formats: FormatOptions | None = None,
 ) -> tuple[dict[str, bytes], list[str], dict[str, Any]]:
     """Like :func:`compressed_copies`, as ``{relative path: bytes}`` (``compressed/NAME.dds``
     and ``compressed/NAME.ktx2``, full mip chains), notes and choices."""

@@ -28,6 +28,7 @@ from wrinklepipe.gltf.write import document_files
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.normals.copies import files as copy_files
 from wrinklepipe.normals.copies import records as copy_records
+from wrinklepipe.options import BudgetOptions, FormatOptions
 from wrinklepipe.outputs.compression import compressed_copies
 from wrinklepipe.outputs.curves import curve_files
 from wrinklepipe.package import WrinklePackage
@@ -70,8 +71,8 @@ def build_outputs(
     pkg: WrinklePackage,
     glb: bool = False,
     compressed: bool = True,
-    budget: dict[str, float] | None = None,
-    formats: dict[str, str] | None = None,
+    budget: BudgetOptions | None = None,
+    formats: FormatOptions | None = None,
     source: tuple[Document, WrinkleTarget] | None = None,
     png_level: int = DEFAULT_PNG_LEVEL,
     color_copies: list[ColorCopy] | None = None,

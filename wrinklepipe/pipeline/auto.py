@@ -24,7 +24,7 @@ from wrinklepipe.fidelity import formats as ff
 from wrinklepipe.fidelity import search as fs
 from wrinklepipe.fidelity import ship
 from wrinklepipe.metrics import Budget
-from wrinklepipe.options import BudgetOptions
+from wrinklepipe.options import BudgetOptions, FormatOptions
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.pipeline.package import resize_normals_pd
 
@@ -92,7 +92,7 @@ def _for_copies(want: str | None, chosen: str) -> str:
 
 def auto_choices(
     asset: WrinkleAsset,
-    formats: dict[str, str] | None = None,
+    formats: FormatOptions | None = None,
     auto_scale: bool = True,
     compressed: bool = True,
     poses: Sequence[fd.Pose] | None = None,
@@ -101,7 +101,7 @@ def auto_choices(
     chosen size, the chosen PD scale; the formats to pass to the compressed copies. ``poses``:
     what the searches judge (the poses the drivers produce, as validation measures them);
     by default every expression of the table at full amount."""
-    formats = formats or {}
+    formats = formats or FormatOptions()
     auto = set(asset.provenance.get("auto_resolution", ()))
     res = asset.resolution
     slopes = (
@@ -128,8 +128,8 @@ def auto_choices(
         wrinkle=None if "wrinkle" in auto else int(res.get("wrinkle", H)),
         mask=None if "mask" in auto else int(res.get("mask", asset.masks.shape[1])),
         scale=None if auto_scale else float(asset.pd_scale),
-        base_format="png" if not compressed else _fixed_format(formats.get("base")),
-        state_format="png" if not compressed else _fixed_format(formats.get("wrinkle")),
+        base_format="png" if not compressed else _fixed_format(formats.base),
+        state_format="png" if not compressed else _fixed_format(formats.wrinkle),
     )
     png_budget, comp_budget = budgets(asset.budget)
     choice = fs.search(src, png_budget, comp_budget, fixed)
@@ -154,8 +154,8 @@ def auto_choices(
         asset=out,
         choice=choice,
         formats={
-            "base": _for_copies(formats.get("base"), choice.base_format),
-            "wrinkle": _for_copies(formats.get("wrinkle"), choice.state_format),
+            "base": _for_copies(formats.base, choice.base_format),
+            "wrinkle": _for_copies(formats.wrinkle, choice.state_format),
         },
         notes=notes,
     )
@@ -166,7 +166,7 @@ def formats_by_fidelity(
     shipped: WrinkleAsset,
     pkg: WrinklePackage,
     poses: Sequence[fd.Pose],
-    formats: dict[str, str] | None = None,
+    formats: FormatOptions | None = None,
 ) -> tuple[dict[str, str], list[str], dict[str, Any] | None]:
     """The block formats of an asset the searches do not make (another encoding than pd: its
     maps ship at the manifest's sizes) chosen by fidelity (:func:`ff.choose_formats`), from the
@@ -174,8 +174,8 @@ def formats_by_fidelity(
     region: ``({"base": fmt | "png8", "wrinkle": ...}`` for the copies, notes, the record for
     report.json). Nothing is chosen (``{}``) when fidelity cannot be measured, or no format is
     automatic; the copies then choose as they do."""
-    formats = formats or {}
-    want = {g: formats.get(g, "auto") for g in ("base", "wrinkle")}
+    formats = formats or FormatOptions()
+    want = {"base": formats.base, "wrinkle": formats.wrinkle}
     if all(w != "auto" for w in want.values()) or can_measure(source, poses):
         return {}, [], None
     base_tex = next((t for t in pkg.textures if t.role == "base_normal"), None)
@@ -232,7 +232,7 @@ def describe_formats(c: ff.FormatChoice, encoding: str) -> str:
     )
 
 
-def describe_choice(c: fs.Choice, auto: set[str], auto_scale: bool, formats: dict[str, str]) -> str:
+def describe_choice(c: fs.Choice, auto: set[str], auto_scale: bool, formats: FormatOptions) -> str:
     """One line for the notes: what was chosen (and how) and the fidelity it gives."""
 
     def how(flag: bool) -> str:

@@ -23,6 +23,7 @@ from wrinklepipe.geometry.normals import vertex_normals
 from wrinklepipe.geometry.tangents import mikktspace_tangents
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.normals.encode import auto_pd_scale as _auto_pd_scale
+from wrinklepipe.options import FormatOptions
 from wrinklepipe.pipeline import auto
 from wrinklepipe.pipeline.package import resize_normals_pd
 
@@ -81,7 +82,7 @@ class StageReport:
 def run_stages(
     asset: WrinkleAsset,
     auto_scale: bool,
-    formats: dict[str, str] | None = None,
+    formats: FormatOptions | None = None,
     compressed: bool = True,
     poses: Sequence[fd.Pose] | None = None,
 ) -> tuple[WrinkleAsset, StageReport]:
