@@ -13,6 +13,7 @@ import pytest
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.errors import InputError
 from wrinklepipe.io.images import write_image
+from wrinklepipe.options import ResolutionOptions
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.sources.manifest import load_manifest, manifest_schema
 
@@ -41,7 +42,8 @@ def test_demo_manifest_loads(src):
     assert len(m.regions) == 8
     assert m.expressions["surprise"]["forehead_inner_l"] == 0.8
     assert m.mesh == (src / "head.glb").resolve()
-    assert m.resolution == {"base": 64, "wrinkle": "auto", "mask": "auto"}
+    assert m.resolution == ResolutionOptions(base=64, wrinkle="auto", mask="auto")
+    assert m.resolution.sizes() == {"base": 64} and m.resolution.automatic() == ["mask", "wrinkle"]
 
 
 def _problems(path: Path) -> list[tuple[str, str, str]]:

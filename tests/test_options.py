@@ -14,7 +14,9 @@ from wrinklepipe.options import (
     BUDGET_SCHEMA,
     DEFAULT_MAX_MEAN_DEG,
     DEFAULT_MAX_P99_DEG,
+    RESOLUTION_SCHEMA,
     BudgetOptions,
+    ResolutionOptions,
 )
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.pipeline import auto
@@ -79,3 +81,19 @@ def test_formats_default_to_the_schema_and_load_typed(tmp_path: Path):
 
     manifest = load_manifest(write_demo_source(tmp_path / "demo", 64))
     assert isinstance(manifest.formats, FormatOptions)
+
+
+def test_resolution_is_typed_by_the_schema(tmp_path: Path):
+    from wrinklepipe.demo.source import write_demo_source
+
+    assert set(RESOLUTION_SCHEMA) == set(ResolutionOptions.__dataclass_fields__)
+    r = ResolutionOptions.from_json({"mask": "auto", "base": 64, "color": 32})
+    assert r == ResolutionOptions(base=64, mask="auto", color=32)
+    assert r.sizes() == {"base": 64, "color": 32} and r.automatic() == ["mask"]
+    assert ResolutionOptions.from_json(r.to_json()) == r
+    assert ResolutionOptions.from_json(None) == ResolutionOptions()
+    assert ResolutionOptions().sizes() == {} and ResolutionOptions().automatic() == []
+    with pytest.raises(ValueError, match="height"):
+        ResolutionOptions.from_json({"height": 4})
+    manifest = load_manifest(write_demo_source(tmp_path / "demo", 64))
+    assert manifest.resolution == ResolutionOptions(base=64, wrinkle="auto", mask="auto")

@@ -1,5 +1,5 @@
 """A manifest's options, typed and declared once: ``[budget]`` as :class:`BudgetOptions`,
-``[formats]`` as :class:`FormatOptions`.
+``[formats]`` as :class:`FormatOptions`, ``[resolution]`` as :class:`ResolutionOptions`.
 
 The defaults are the manifest schema's (``schemas/manifest.schema.json``: each key's
 ``default``), read once here. The manifest loader builds the options from the manifest's table
@@ -32,6 +32,10 @@ _SCHEMA: dict[str, Any] = json.loads(
 BUDGET_SCHEMA: dict[str, Any] = _SCHEMA["budget"]["properties"]
 #: The ``[formats]`` properties (the formats each map kind may be stored in, defaults).
 FORMATS_SCHEMA: dict[str, Any] = _SCHEMA["formats"]["properties"]
+#: The ``[resolution]`` properties (the sizes each map kind may ship at).
+RESOLUTION_SCHEMA: dict[str, Any] = _SCHEMA["resolution"]["properties"]
+#: The value of a ``[resolution]`` key that asks for the size to be chosen by fidelity.
+AUTO = "auto"
 
 
 def _default(key: str) -> float | None:
@@ -148,3 +152,38 @@ class FormatOptions:
 
     def to_json(self) -> dict[str, str]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class ResolutionOptions:
+    """A manifest's ``[resolution]``: the size (texels, square) the base, the wrinkle states, the
+    masks and the colour states ship at; ``"auto"`` (not the base): the smallest size whose
+    fidelity meets the budget; None (left out): the source's own size."""
+
+    base: int | None = None
+    wrinkle: int | str | None = None
+    mask: int | str | None = None
+    color: int | str | None = None
+
+    @classmethod
+    def from_json(cls, table: dict[str, Any] | None) -> ResolutionOptions:
+        """From a manifest's ``[resolution]`` table (already checked by the schema)."""
+        table = table or {}
+        unknown = sorted(set(table) - {f.name for f in fields(cls)})
+        if unknown:
+            raise ValueError(f"unknown resolution keys {unknown}")
+        return cls(**{k: (v if v == AUTO else int(v)) for k, v in table.items()})
+
+    def to_json(self) -> dict[str, int | str]:
+        """The keys the manifest gave, as it gave them."""
+        return {
+            f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None
+        }
+
+    def sizes(self) -> dict[str, int]:
+        """The sizes the manifest fixes (``{kind: texels}``; neither ``auto`` nor left out)."""
+        return {k: v for k, v in self.to_json().items() if isinstance(v, int)}
+
+    def automatic(self) -> list[str]:
+        """The kinds whose size is chosen by fidelity (``"auto"``), sorted."""
+        return sorted(k for k, v in self.to_json().items() if v == AUTO)

@@ -352,10 +352,10 @@ def _asset(
         mesh=mesh,
         drivers=[dict(d) for d in manifest.drivers],
         budget=manifest.budget,
-        resolution={k: v for k, v in manifest.resolution.items() if isinstance(v, int)},
+        resolution=manifest.resolution.sizes(),
         provenance={
             "manifest": manifest.path.name,
-            "auto_resolution": sorted(k for k, v in manifest.resolution.items() if v == "auto"),
+            "auto_resolution": manifest.resolution.automatic(),
         },
     )
 

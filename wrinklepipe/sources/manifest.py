@@ -23,7 +23,7 @@ from wrinklepipe.io.confine import confine
 from wrinklepipe.io.images import read_header
 from wrinklepipe.io.json_safe import loads_toml
 from wrinklepipe.model import POLICY_WEIGHT_RANGE
-from wrinklepipe.options import BudgetOptions, FormatOptions
+from wrinklepipe.options import BudgetOptions, FormatOptions, ResolutionOptions
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.presets import jimenez
 from wrinklepipe.readers.registry import MESH_SUFFIXES
@@ -69,7 +69,7 @@ class Manifest:
     states_include_base: bool = True
     expressions: dict[str, dict[str, float]] = field(default_factory=dict)
     drivers: list[dict[str, Any]] = field(default_factory=list)
-    resolution: dict[str, int | str] = field(default_factory=dict)
+    resolution: ResolutionOptions = field(default_factory=ResolutionOptions)
     formats: FormatOptions = field(default_factory=FormatOptions)
     budget: BudgetOptions = field(default_factory=BudgetOptions)
     raw: dict[str, Any] = field(default_factory=dict)
@@ -312,7 +312,7 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
         states_include_base=data.get("states_include_base", True),
         expressions={e: {r: float(w) for r, w in row.items()} for e, row in expressions.items()},
         drivers=list(data.get("drivers", [])),
-        resolution=dict(data.get("resolution", {})),
+        resolution=ResolutionOptions.from_json(data.get("resolution")),
         formats=FormatOptions.from_json(data.get("formats")),
         budget=BudgetOptions.from_json(data.get("budget")),
         raw=data,
