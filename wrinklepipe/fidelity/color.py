@@ -352,16 +352,3 @@ def base_color_fidelity(
     want = ref.base.reshape(-1, 3)[flat]
     err = delta_e_lab(linear_to_lab(got), linear_to_lab(want)).astype(_F)
     return weighted_stats(err, overwrite=True)
-
-
-def describe_color(fid: ColorFidelity, budget: Budget | None = None) -> list[str]:
-    """The colour fidelity table as text lines: one line per pose, worst first."""
-    lines = ["pose            mean    p99     max   (CIEDE2000, inside the active region)"]
-    for p in sorted(fid.poses, key=lambda p: -p.overall.p99):
-        o = p.overall
-        flag = "" if budget is None or budget.ok(o) else "  over budget"
-        lines.append(f"{p.pose:<14} {o.mean:6.2f} {o.p99:6.2f} {o.max:7.2f}{flag}")
-    if fid.base is not None:
-        b = fid.base
-        lines.append(f"{'base (face)':<14} {b.mean:6.2f} {b.p99:6.2f} {b.max:7.2f}")
-    return lines

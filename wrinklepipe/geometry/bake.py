@@ -81,10 +81,6 @@ class HighMesh:
     normals: np.ndarray | None = None
     name: str = "high"
 
-    @classmethod
-    def from_mesh(cls, mesh: Mesh) -> HighMesh:
-        return cls(mesh.positions, mesh.indices, mesh.normals, mesh.name)
-
 
 class RayScene:
     """Embree's BVH over one triangle mesh; :meth:`first_hit` casts rays (float32)."""
