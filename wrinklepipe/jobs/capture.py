@@ -18,11 +18,10 @@ import numpy as np
 
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.capture import landmarks as L
-from wrinklepipe.capture import mesh_view as MV
 from wrinklepipe.capture.evaluate import errors as truth_errors
 from wrinklepipe.capture.orientation import OrientationOptions
 from wrinklepipe.capture.pipeline import CaptureOptions, CaptureResult, capture
-from wrinklepipe.capture.ratio import RatioOptions, luminance, srgb_to_linear
+from wrinklepipe.capture.ratio import RatioOptions
 from wrinklepipe.capture.report import (
     UNOBSERVABLE,
     build_report,
@@ -31,10 +30,16 @@ from wrinklepipe.capture.report import (
 )
 from wrinklepipe.capture.synthetic import dome_height, make_scene, normal_of
 from wrinklepipe.errors import InputError, Problem, input_error
-from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image, write_image
+from wrinklepipe.io.images import read_image, write_image
+from wrinklepipe.jobs.capture_inputs import (
+    neutral_normals_from_mesh,
+    parse_light,
+    parse_size,
+    read_mask,
+    read_neutral_normals,
+    read_photo,
+)
 from wrinklepipe.model import normalize
-from wrinklepipe.readers.meshes import LoadOptions, load_mesh
-from wrinklepipe.validate.gl import GLUnavailable, create_context
 
 
 @dataclass(frozen=True)
@@ -112,175 +117,6 @@ class CaptureOutput:
             write_image(folder / rel, img, bits=bits)
         for rel, data in sorted(self.texts.items()):
             write_bytes(folder / rel, data)
-
-
-def parse_size(text: str | None) -> tuple[int, int] | None:
-    """``N`` or ``WxH`` -> ``(height, width)``."""
-    if text is None:
-        return None
-    try:
-        if "x" in text.lower():
-            w, h = (int(v) for v in text.lower().split("x"))
-        else:
-            w = h = int(text)
-    except ValueError:
-        raise input_error("<arguments>", f"--size must be N or WxH, got {text!r}") from None
-    if w <= 0 or h <= 0 or w * h > 16384 * 16384:
-        raise input_error("<arguments>", f"--size out of range: {text!r}")
-    return h, w
-
-
-def parse_light(text: str) -> np.ndarray:
-    """``X,Y,Z`` -> the unit direction towards the side light (camera frame)."""
-    try:
-        v = np.array([float(t) for t in text.split(",")], np.float64)
-    except ValueError:
-        v = np.zeros(0)
-    if v.shape != (3,) or not np.all(np.isfinite(v)) or np.linalg.norm(v) == 0:
-        raise input_error(
-            "<arguments>", f"--side-light must be X,Y,Z (three numbers), got {text!r}"
-        )
-    v = v / np.linalg.norm(v)
-    if v[2] <= 0.2:
-        raise input_error(
-            "<arguments>",
-            f"--side-light {text}: the light must be in front of the face, within about 78 "
-            "degrees of the camera (z > 0.2 of the unit direction)",
-        )
-    return v
-
-
-def read_photo(path: str, colorspace: str, max_pixels: int | None) -> tuple[np.ndarray, Any]:
-    """Linear luminance of a photo (decoded from sRGB unless linear or tagged so)."""
-    img, info = read_image(path, max_pixels or DEFAULT_MAX_PIXELS)
-    linear = colorspace == "linear"
-    if colorspace == "auto":
-        tag = info.colorspace.lower()
-        linear = info.format in ("half", "float", "double") or "lin" in tag or tag == "raw"
-    if not linear:
-        img = srgb_to_linear(np.clip(img, 0.0, 1.0))
-    return luminance(img), info
-
-
-def read_mask(path: str, shape: tuple[int, int], what: str) -> np.ndarray:
-    """A 0..1 mask of the neutral photo's size (alpha times red when there is alpha)."""
-    m, info = read_image(path)
-    if (info.height, info.width) != shape:
-        raise input_error(
-            path,
-            f"{what} is {info.width} x {info.height} but the neutral photo is "
-            f"{shape[1]} x {shape[0]}",
-        )
-    m = m[..., 0] if m.shape[2] < 4 else m[..., 3] * m[..., 0]
-    if not np.all(np.isfinite(m)):
-        raise input_error(path, f"{what} has non-finite values")
-    return np.clip(m, 0.0, 1.0)
-
-
-def read_neutral_normals(path: str, shape: tuple[int, int], roi: np.ndarray | None) -> np.ndarray:
-    """The neutral face's normals in the neutral photo's view: camera frame, +X right, +Y up,
-    +Z towards the camera; stored ``0.5 + 0.5 n`` (8/16-bit) or as raw ``n`` (float files)."""
-    img, info = read_image(path)
-    if (info.height, info.width) != shape:
-        raise input_error(
-            path,
-            f"neutral normal map is {info.width} x {info.height} but the neutral photo is "
-            f"{shape[1]} x {shape[0]}; render it from the photo's camera at the photo's size",
-        )
-    if img.shape[2] < 3:
-        raise input_error(path, "neutral normal map needs three channels (x, y, z)")
-    v = np.asarray(img[..., :3], np.float64)
-    if not np.all(np.isfinite(v)):
-        raise input_error(path, "neutral normal map has non-finite values")
-    if info.format not in ("half", "float", "double"):
-        v = 2.0 * v - 1.0
-    return _facing(path, v, shape, roi, "expected +Z towards the camera")
-
-
-def _facing(
-    path: str, v: np.ndarray, shape: tuple[int, int], roi: np.ndarray | None, hint: str
-) -> np.ndarray:
-    """Unit normals where every ROI pixel faces the camera (else one message naming the
-    first pixel that does not); +Z outside the ROI."""
-    length = np.linalg.norm(v, axis=-1)
-    inside = np.ones(shape, bool) if roi is None else np.asarray(roi) > 0.5
-    bad = inside & ((length < 0.5) | (v[..., 2] <= 0.0))
-    if bad.any():
-        r, c = np.argwhere(bad)[0]
-        raise input_error(
-            path,
-            f"{int(bad.sum())} pixel(s) of the ROI are not normals facing the camera (first at "
-            f"x={c}, y={r}: {np.round(v[r, c], 3).tolist()}); {hint}",
-        )
-    return np.where(inside[..., None], normalize(v), np.array([0.0, 0.0, 1.0], np.float32))
-
-
-#: A camera fit worse than this (RMS pixels) means the landmarks do not match the mesh.
-MAX_CAMERA_RESIDUAL_PX = 3.0
-
-
-def neutral_normals_from_mesh(
-    path: str,
-    uv: np.ndarray,
-    photo: np.ndarray,
-    names: list[str] | None,
-    shape: tuple[int, int],
-    roi: np.ndarray | None,
-) -> tuple[np.ndarray, dict[str, Any]]:
-    """The neutral's normals in the photo's view, rendered from the mesh at ``path`` with the
-    camera that the landmark pairs define (``uv`` on the mesh's layout, ``photo`` pixels); and
-    what the fit found (for the report). See :mod:`.mesh_view`."""
-    mesh = load_mesh(path, LoadOptions(generate_uvs=False))
-    if mesh.uvs is None:
-        raise input_error(path, "mesh has no texture coordinates; the landmarks are UVs on it")
-    world, found = MV.points_at_uv(mesh, uv)
-    if not found.all():
-        off = [names[i] if names else str(i) for i in np.flatnonzero(~found)[:5]]
-        raise input_error(
-            path,
-            f"{int((~found).sum())} texture landmark(s) fall outside the mesh's UV layout "
-            f"(first: {', '.join(off)}); the texture landmarks must lie on this mesh",
-        )
-    cam = MV.fit_camera(world, photo)
-    if cam.residual_px > MAX_CAMERA_RESIDUAL_PX:
-        raise input_error(
-            path,
-            f"no camera projects the mesh's landmark points onto the photo's (RMS error "
-            f"{cam.residual_px:.2f} px, worst {cam.max_residual_px:.2f} px > "
-            f"{MAX_CAMERA_RESIDUAL_PX} px): is this the character's neutral mesh, and do the "
-            "texture landmarks pair with the photo landmarks?",
-        )
-    try:
-        ctx = create_context()
-    except GLUnavailable as exc:
-        raise input_error(
-            path, f"{exc}; render the neutral's normal pass elsewhere and give --neutral-normals"
-        ) from None
-    try:
-        n0, covered = MV.render_normals(mesh, cam, shape, ctx)
-    finally:
-        ctx.release()
-    inside = np.ones(shape, bool) if roi is None else np.asarray(roi) > 0.5
-    if not covered[inside].all():
-        share = float(covered[inside].mean())
-        raise input_error(
-            path,
-            f"seen from the landmarks' camera the mesh covers {100 * share:.1f} % of the ROI; "
-            "the ROI must lie on the mesh",
-        )
-    n0 = _facing(path, n0, shape, roi, "the mesh turns away from the landmarks' camera there")
-    info = {
-        "file": str(path),
-        "vertices": mesh.vertex_count,
-        "triangles": mesh.triangle_count,
-        "camera": "scaled orthographic",
-        "view_from_mesh_z_deg": round(cam.view_deg, 4),
-        "scale_px_per_unit": round(cam.scale, 6),
-        "landmark_residual_rms_px": round(cam.residual_px, 4),
-        "landmark_residual_max_px": round(cam.max_residual_px, 4),
-        "roi_min_nz": round(float(n0[..., 2][inside].min()), 4),
-    }
-    return n0, info
 
 
 def _nz_map(o: CaptureJobOptions, shape: tuple[int, int]) -> np.ndarray | float:
@@ -377,23 +213,7 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
     """
     o = options or CaptureJobOptions()
     check_options(inputs, o)
-    i0, info0 = read_photo(inputs.neutral, o.colorspace, o.max_pixels)
-    i1, info1 = read_photo(inputs.expression, o.colorspace, o.max_pixels)
-    if (info0.width, info0.height) != (info1.width, info1.height):
-        raise input_error(
-            inputs.expression,
-            f"photo is {info1.width} x {info1.height} but the neutral photo {inputs.neutral} is "
-            f"{info0.width} x {info0.height}; take both with the same camera settings (or crop "
-            "them to one size)",
-        )
-    for path, lum in ((inputs.neutral, i0), (inputs.expression, i1)):
-        top = float(np.nanmax(lum)) if lum.size else 0.0
-        if not np.isfinite(top) or top < o.dark:
-            raise input_error(
-                path,
-                f"photo is all black (brightest linear luminance {top:.4f} is below --dark "
-                f"{o.dark}); nothing to divide",
-            )
+    i0, info0, i1, info1 = _photos(inputs, o)
     shape = (info0.height, info0.width)
     lm_n = L.read_landmarks(inputs.neutral_landmarks).to_pixels(info0.width, info0.height)
     lm_e = L.read_landmarks(inputs.expression_landmarks).to_pixels(info1.width, info1.height)
@@ -401,26 +221,7 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
     L.check_inside(lm_n, info0.width, info0.height, "neutral photo")
     L.check_inside(lm_e, info1.width, info1.height, "expression photo")
 
-    tex_shape = parse_size(inputs.size)
-    if inputs.texture_landmarks:
-        if tex_shape is None:
-            raise input_error("<arguments>", "--size is required with --texture-landmarks")
-        th, tw = tex_shape
-        lm_t = L.read_landmarks(inputs.texture_landmarks).to_pixels(tw, th)
-        lm_p = (
-            L.read_landmarks(inputs.photo_landmarks).to_pixels(info0.width, info0.height)
-            if inputs.photo_landmarks
-            else lm_n
-        )
-        pp, pt = L.pair(lm_p, lm_t)
-        lm_t_names = lm_p.names if lm_p.names is not None and lm_t.names is not None else None
-        L.check_inside(lm_p, info0.width, info0.height, "neutral photo")
-        L.check_inside(lm_t, tw, th, "texture")
-    else:  # identity: the map stays in photo space
-        lm_t_names = None
-        tex_shape = shape
-        w, h = info0.width, info0.height
-        pp = pt = np.array([[0, 0], [w, 0], [0, h], [w, h]], float)
+    tex_shape, pp, pt, lm_t_names = _photo_to_texture(inputs, info0, lm_n)
 
     roi = read_mask(inputs.roi, shape, "ROI mask") if inputs.roi else None
     nz = _nz_map(o, shape)
@@ -429,19 +230,11 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
     )
     mesh_info = None
     if inputs.neutral_mesh:
-        uv = pt / np.array([tw, th], np.float64)
+        uv = pt / np.array([tex_shape[1], tex_shape[0]], np.float64)
         n0, mesh_info = neutral_normals_from_mesh(
             inputs.neutral_mesh, uv, pp, lm_t_names, shape, roi
         )
-    truth = None
-    if inputs.truth:
-        t, tinfo = read_image(inputs.truth)
-        if (tinfo.height, tinfo.width) != tuple(tex_shape) or t.shape[2] < 3:
-            raise input_error(
-                inputs.truth,
-                f"truth map must be an RGB {tex_shape[1]} x {tex_shape[0]} normal map",
-            )
-        truth = normalize(2.0 * t[..., :3] - 1.0)
+    truth = _read_truth(inputs.truth, tex_shape) if inputs.truth else None
 
     copts = CaptureOptions(
         ratio=RatioOptions(
@@ -453,18 +246,7 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
         orientation=OrientationOptions(method=o.orientation, furrow_sigma=o.furrow_sigma),
         scale=o.scale,
     )
-    side_img = None
-    if inputs.side_lit:
-        side_img, info_s = read_photo(inputs.side_lit, o.colorspace, o.max_pixels)
-        if (info_s.width, info_s.height) != (info1.width, info1.height):
-            raise input_error(
-                inputs.side_lit,
-                f"photo is {info_s.width} x {info_s.height} but the expression photo "
-                f"{inputs.expression} is {info1.width} x {info1.height}; the side-lit photo is "
-                "the expression again, same pose and camera",
-            )
-        if not float(np.nanmax(side_img)) >= o.dark:
-            raise input_error(inputs.side_lit, "photo is all black; nothing to divide")
+    side_img = _side_photo(inputs, o, info1) if inputs.side_lit else None
     res = capture(
         i0,
         i1,
@@ -492,23 +274,8 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
         "texture_size": [int(tex_shape[1]), int(tex_shape[0])],
         "space": "texture" if inputs.texture_landmarks else "photo",
     }
-    opts = {
-        "orientation": o.orientation,
-        "blur_sigma": o.blur,
-        "dark_threshold": o.dark,
-        "deadband": o.deadband,
-        "normalize_exposure": o.normalize_exposure,
-        "furrow_sigma": o.furrow_sigma,
-        "nz": o.nz,
-        "nz_regions": list(o.nz_regions),
-        "neutral_shape": (
-            "mesh" if mesh_info else "normal map" if n0 is not None else "N_z constant/regions"
-        ),
-        "colorspace": o.colorspace,
-        "scale": o.scale,
-        "side_light": o.side_light,
-    }
-    report = build_report(res, inputs.given(), opts, outputs, te)
+    shape_from = "mesh" if mesh_info else "normal map" if n0 is not None else "N_z constant/regions"
+    report = build_report(res, inputs.given(), _options_json(o, shape_from), outputs, te)
     if mesh_info is not None:
         report["neutral_shape"] = "mesh"
         report["neutral_mesh"] = mesh_info
@@ -530,6 +297,100 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
         "report.html": render_html(report, {c: rel for c, (rel, _) in pics.items()}).encode(),
     }
     return CaptureOutput(images, texts, report, res, te)
+
+
+def _photos(inputs: CaptureInputs, o: CaptureJobOptions) -> tuple[np.ndarray, Any, np.ndarray, Any]:
+    """The neutral and expression photos (linear luminance) and their headers: one size, and
+    neither all black."""
+    i0, info0 = read_photo(inputs.neutral, o.colorspace, o.max_pixels)
+    i1, info1 = read_photo(inputs.expression, o.colorspace, o.max_pixels)
+    if (info0.width, info0.height) != (info1.width, info1.height):
+        raise input_error(
+            inputs.expression,
+            f"photo is {info1.width} x {info1.height} but the neutral photo {inputs.neutral} is "
+            f"{info0.width} x {info0.height}; take both with the same camera settings (or crop "
+            "them to one size)",
+        )
+    for path, lum in ((inputs.neutral, i0), (inputs.expression, i1)):
+        top = float(np.nanmax(lum)) if lum.size else 0.0
+        if not np.isfinite(top) or top < o.dark:
+            raise input_error(
+                path,
+                f"photo is all black (brightest linear luminance {top:.4f} is below --dark "
+                f"{o.dark}); nothing to divide",
+            )
+    return i0, info0, i1, info1
+
+
+def _photo_to_texture(
+    inputs: CaptureInputs, info0: Any, lm_n: L.Landmarks
+) -> tuple[tuple[int, int], np.ndarray, np.ndarray, list[str] | None]:
+    """The texture's shape ``(h, w)``, the paired photo and texture points of the warp between
+    them, and the texture landmarks' names; without ``--texture-landmarks`` the map stays in
+    photo space (the identity: the photo's corners)."""
+    tex_shape = parse_size(inputs.size)
+    if not inputs.texture_landmarks:
+        w, h = info0.width, info0.height
+        corners = np.array([[0, 0], [w, 0], [0, h], [w, h]], float)
+        return (info0.height, info0.width), corners, corners, None
+    if tex_shape is None:
+        raise input_error("<arguments>", "--size is required with --texture-landmarks")
+    th, tw = tex_shape
+    lm_t = L.read_landmarks(inputs.texture_landmarks).to_pixels(tw, th)
+    lm_p = (
+        L.read_landmarks(inputs.photo_landmarks).to_pixels(info0.width, info0.height)
+        if inputs.photo_landmarks
+        else lm_n
+    )
+    pp, pt = L.pair(lm_p, lm_t)
+    lm_t_names = lm_p.names if lm_p.names is not None and lm_t.names is not None else None
+    L.check_inside(lm_p, info0.width, info0.height, "neutral photo")
+    L.check_inside(lm_t, tw, th, "texture")
+    return tex_shape, pp, pt, lm_t_names
+
+
+def _read_truth(path: str, tex_shape: tuple[int, int]) -> np.ndarray:
+    """The true texture-space normal map (unit normals), of the texture's size."""
+    t, tinfo = read_image(path)
+    if (tinfo.height, tinfo.width) != tuple(tex_shape) or t.shape[2] < 3:
+        raise input_error(
+            path,
+            f"truth map must be an RGB {tex_shape[1]} x {tex_shape[0]} normal map",
+        )
+    return normalize(2.0 * t[..., :3] - 1.0)
+
+
+def _side_photo(inputs: CaptureInputs, o: CaptureJobOptions, info1: Any) -> np.ndarray:
+    """The side-lit photo (linear luminance): the expression again, its size, not all black."""
+    side_img, info_s = read_photo(inputs.side_lit, o.colorspace, o.max_pixels)
+    if (info_s.width, info_s.height) != (info1.width, info1.height):
+        raise input_error(
+            inputs.side_lit,
+            f"photo is {info_s.width} x {info_s.height} but the expression photo "
+            f"{inputs.expression} is {info1.width} x {info1.height}; the side-lit photo is "
+            "the expression again, same pose and camera",
+        )
+    if not float(np.nanmax(side_img)) >= o.dark:
+        raise input_error(inputs.side_lit, "photo is all black; nothing to divide")
+    return side_img
+
+
+def _options_json(o: CaptureJobOptions, neutral_shape: str) -> dict[str, Any]:
+    """The options as the report records them."""
+    return {
+        "orientation": o.orientation,
+        "blur_sigma": o.blur,
+        "dark_threshold": o.dark,
+        "deadband": o.deadband,
+        "normalize_exposure": o.normalize_exposure,
+        "furrow_sigma": o.furrow_sigma,
+        "nz": o.nz,
+        "nz_regions": list(o.nz_regions),
+        "neutral_shape": neutral_shape,
+        "colorspace": o.colorspace,
+        "scale": o.scale,
+        "side_light": o.side_light,
+    }
 
 
 def _summary(self: CaptureOutput, out: Path) -> list[str]:
