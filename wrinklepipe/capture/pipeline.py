@@ -306,14 +306,7 @@ def capture(
         raise ValueError("a side-lit photo needs the neutral's normals (neutral_normals)")
 
     # 2-3. ratio, tilt, orientation.
-    if neutral_normals is not None:
-        n0 = normalize(np.asarray(neutral_normals, np.float32)).astype(np.float64)
-        nz_neutral = n0[..., 2]
-        shape_src = "normal map"
-    else:
-        n0 = np.zeros((h, w, 3))
-        n0[..., 2] = 1.0
-        shape_src = "N_z given" if np.any(np.asarray(nz_neutral) != 1.0) else "facing the camera"
+    n0, nz_neutral, shape_src = _neutral_shape(neutral_normals, nz_neutral, (h, w))
     rr = ratio_image(i0, warped, inside, roi_m, nz_neutral, ratio_opts)
     chosen = resolve_method(
         o.orientation.method, n0[..., 2][roi_m > 0.5] if neutral_normals is not None else None
@@ -338,52 +331,13 @@ def capture(
         if m in methods or (m == "integrable" and "sfs" in methods):
             opts = dataclasses.replace(orient_opts, method=m)
             photo[m] = apply_roi(orient(rr.ratio, rr.nz, opts, roi_m), roi_m)
-    # What the solve explains: R against the neutral's normals; without them (a neutral facing
-    # the camera, or a constant N_z) the neutral is flat and R the cosine of the extra tilt.
-    if neutral_normals is not None:
-        r_model = rr.plain.astype(np.float64)
-    else:
-        nzn = np.broadcast_to(np.asarray(nz_neutral, np.float64), (h, w))
-        extra = np.arccos(np.clip(rr.plain * nzn, 0.0, 1.0)) - np.arccos(np.clip(nzn, 0.0, 1.0))
-        r_model = np.where(nzn < 1.0, np.cos(np.clip(extra, 0.0, np.pi / 2)), rr.plain)
-    # the solve's own blur on top of the ratio's (Gaussians compose in quadrature)
-    more = float(np.sqrt(max((o.sfs.blur * k) ** 2 - ratio_opts.blur_sigma**2, 0.0)))
-    if more > 0:
-        r_model = masked_blur(r_model, rr.valid.astype(np.float64), more)
-    r_blur = float(np.hypot(ratio_opts.blur_sigma, more))  # R's blur in all: the model's too
+    r_model, r_blur = _ratio_model(rr, nz_neutral, neutral_normals is not None, o, k, ratio_opts)
     side = None
     if side_args is not None:
         side = side_ratio(*side_args, r_blur)
     sfs_res = None
     if "sfs" in methods:
-        prior = photo["integrable"].astype(np.float64)
-        z = np.maximum(prior[..., 2], 1e-3)
-        q = np.stack([-prior[..., 0] / z, prior[..., 1] / z], axis=-1)  # the prior's slopes
-        sfs_res = S.solve_crease(
-            r_model,
-            n0,
-            roi_m,
-            rr.valid,
-            {"integrable": q, "mirror": -q},
-            o.sfs,
-            r_blur,
-            side=(side.ratio, side.light) if side is not None else None,
-        )
-        # the tilt: R's own (the data's detail), or with a side-lit photo the solve's slopes
-        # (fitted to both photos: measured on mixed N_z 0.995, tilt 0.33x -> 0.12x)
-        n1z = None if side is not None else np.clip(r_model * n0[..., 2] / sfs_res.exposure, 0, 1)
-        n_sfs = slopes.normals_from_slopes(sfs_res.slopes, n0, n1z)
-        if side is None and o.flat_level > 0:  # flat skin stays flat (CaptureOptions.flat_level)
-            noise = blurred_noise(pixel_noise(rr.raw, rr.valid), r_blur)
-            flat = flat_skin(
-                r_model / sfs_res.exposure,
-                rr.valid,
-                roi_m,
-                noise,
-                o.flat_level,
-                o.flat_window * k,
-            )[..., None]
-            n_sfs = normalize((1.0 - flat) * n_sfs + flat * np.array([0.0, 0.0, 1.0]))
+        sfs_res, n_sfs = _solve(photo["integrable"], r_model, r_blur, n0, roi_m, rr, side, o, k)
         photo["sfs"] = apply_roi(n_sfs.astype(np.float32), roi_m)
         if auto_solve and chosen != "sfs" and solve_explains_better(sfs_res):
             chosen = "sfs"
@@ -398,20 +352,9 @@ def capture(
     }
 
     # 5. photo -> texture.
-    th, tw = texture_shape
-    warp2 = W.fit_tps(lm_texture, lm_photo)
-    map2 = W.dense_map(warp2, (th, tw), o.warp_step)
-    rot = W.jacobian_rotation(map2) if o.rotate_normals else None
-    texture: dict[str, np.ndarray] = {}
-    inside2 = np.zeros((th, tw), bool)
-    for m, n in photo.items():
-        s, inside2 = W.sample(n, map2, o.sample_order)
-        s = np.where(inside2[..., None], s, np.array([0.0, 0.0, 1.0], np.float32))
-        s = normalize(s)
-        if rot is not None:
-            s = W.rotate_normals(s, rot)
-        texture[m] = s
-    roi_t, _ = W.sample(roi_m, map2)
+    map2, texture, inside2, roi_t = _to_texture(
+        photo, roi_m, lm_photo, lm_texture, texture_shape, o
+    )
     return CaptureResult(
         expression_warped=warped,
         ratio=rr,
@@ -429,3 +372,111 @@ def capture(
         neutral_shape=shape_src,
         side=side,
     )
+
+
+def _neutral_shape(
+    neutral_normals: np.ndarray | None, nz_neutral: np.ndarray | float, shape: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray | float, str]:
+    """The neutral's normals ``[H, W, 3]`` (float64; +Z where only N_z is known), its N_z, and
+    where its shape came from (for the report)."""
+    if neutral_normals is not None:
+        n0 = normalize(np.asarray(neutral_normals, np.float32)).astype(np.float64)
+        return n0, n0[..., 2], "normal map"
+    n0 = np.zeros((*shape, 3))
+    n0[..., 2] = 1.0
+    given = "N_z given" if np.any(np.asarray(nz_neutral) != 1.0) else "facing the camera"
+    return n0, nz_neutral, given
+
+
+def _ratio_model(
+    rr: RatioResult,
+    nz_neutral: np.ndarray | float,
+    have_normals: bool,
+    o: CaptureOptions,
+    k: float,
+    ratio_opts: RatioOptions,
+) -> tuple[np.ndarray, float]:
+    """What the solve explains, and R's blur in all (sigma, pixels): R against the neutral's
+    normals; without them (a neutral facing the camera, or a constant N_z) the neutral is
+    flat and R the cosine of the extra tilt. Blurred by the solve's own blur on top of the
+    ratio's (Gaussians compose in quadrature)."""
+    if have_normals:
+        r_model = rr.plain.astype(np.float64)
+    else:
+        nzn = np.broadcast_to(np.asarray(nz_neutral, np.float64), rr.plain.shape)
+        extra = np.arccos(np.clip(rr.plain * nzn, 0.0, 1.0)) - np.arccos(np.clip(nzn, 0.0, 1.0))
+        r_model = np.where(nzn < 1.0, np.cos(np.clip(extra, 0.0, np.pi / 2)), rr.plain)
+    more = float(np.sqrt(max((o.sfs.blur * k) ** 2 - ratio_opts.blur_sigma**2, 0.0)))
+    if more > 0:
+        r_model = masked_blur(r_model, rr.valid.astype(np.float64), more)
+    return r_model, float(np.hypot(ratio_opts.blur_sigma, more))
+
+
+def _solve(
+    integrable: np.ndarray,
+    r_model: np.ndarray,
+    r_blur: float,
+    n0: np.ndarray,
+    roi_m: np.ndarray,
+    rr: RatioResult,
+    side: SideRatio | None,
+    o: CaptureOptions,
+    k: float,
+) -> tuple[S.SfsResult, np.ndarray]:
+    """The crease solve started from the integrable prior's slopes, and its normals."""
+    prior = integrable.astype(np.float64)
+    z = np.maximum(prior[..., 2], 1e-3)
+    q = np.stack([-prior[..., 0] / z, prior[..., 1] / z], axis=-1)  # the prior's slopes
+    sfs_res = S.solve_crease(
+        r_model,
+        n0,
+        roi_m,
+        rr.valid,
+        {"integrable": q, "mirror": -q},
+        o.sfs,
+        r_blur,
+        side=(side.ratio, side.light) if side is not None else None,
+    )
+    # the tilt: R's own (the data's detail), or with a side-lit photo the solve's slopes
+    # (fitted to both photos: measured on mixed N_z 0.995, tilt 0.33x -> 0.12x)
+    n1z = None if side is not None else np.clip(r_model * n0[..., 2] / sfs_res.exposure, 0, 1)
+    n_sfs = slopes.normals_from_slopes(sfs_res.slopes, n0, n1z)
+    if side is None and o.flat_level > 0:  # flat skin stays flat (CaptureOptions.flat_level)
+        noise = blurred_noise(pixel_noise(rr.raw, rr.valid), r_blur)
+        flat = flat_skin(
+            r_model / sfs_res.exposure,
+            rr.valid,
+            roi_m,
+            noise,
+            o.flat_level,
+            o.flat_window * k,
+        )[..., None]
+        n_sfs = normalize((1.0 - flat) * n_sfs + flat * np.array([0.0, 0.0, 1.0]))
+    return sfs_res, n_sfs
+
+
+def _to_texture(
+    photo: dict[str, np.ndarray],
+    roi_m: np.ndarray,
+    lm_photo: np.ndarray,
+    lm_texture: np.ndarray,
+    texture_shape: tuple[int, int],
+    o: CaptureOptions,
+) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """Photo -> texture: the dense map, each method's normals in texture space (+Z outside
+    the photo, rotated with the warp), where the photo covers the texture, the ROI there."""
+    th, tw = texture_shape
+    warp2 = W.fit_tps(lm_texture, lm_photo)
+    map2 = W.dense_map(warp2, (th, tw), o.warp_step)
+    rot = W.jacobian_rotation(map2) if o.rotate_normals else None
+    texture: dict[str, np.ndarray] = {}
+    inside2 = np.zeros((th, tw), bool)
+    for m, n in photo.items():
+        s, inside2 = W.sample(n, map2, o.sample_order)
+        s = np.where(inside2[..., None], s, np.array([0.0, 0.0, 1.0], np.float32))
+        s = normalize(s)
+        if rot is not None:
+            s = W.rotate_normals(s, rot)
+        texture[m] = s
+    roi_t, _ = W.sample(roi_m, map2)
+    return map2, texture, inside2, roi_t
