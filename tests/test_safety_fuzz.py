@@ -272,6 +272,9 @@ _PYTHONISMS = re.compile(
     r"(iterable|callable)|could not convert|invalid literal for"
 )
 
+#: A library's internals in a message: USD's C++ namespace, source files and grammar rules.
+_LIBRARY_TEXT = re.compile(r"pxrInternal|Error in '|\.(?:cpp|h) :|pegtl|parse error matching")
+
 
 def _check_law(capsys, work: Path, out: Path | None, run: Callable[[], int]) -> int:
     before, outside = _snapshot(work), _snapshot(work, out)
@@ -284,6 +287,7 @@ def _check_law(capsys, work: Path, out: Path | None, run: Callable[[], int]) -> 
     assert "Traceback" not in err, err
     assert "internal error" not in err, err
     assert not _PYTHONISMS.search(err), err  # Python's own wording helps no user
+    assert not _LIBRARY_TEXT.search(err), err  # nor a C++ library's (USD's error text)
     if code == 2:
         assert _snapshot(work) == before, f"exit 2 wrote or changed something: {err}"
     assert _snapshot(work, out) == outside, "something outside the output changed"

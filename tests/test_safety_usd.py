@@ -279,3 +279,33 @@ def test_usd_diagnostics_are_captured_per_block_and_never_printed(tmp_path, capf
     assert len(inner) == 1 and "gone.usda" in inner[0] and "instantiating" not in inner[0]
     assert empty == [] and outer == []
     assert "Warning" not in capfd.readouterr().err
+
+
+# ------------------------------------------------------------------------------------------------
+# a layer that cannot be read: one line in plain words, not USD's C++ error text
+
+
+@pytest.mark.parametrize("damage", ["missing", "parse", "usdc", "usdc_short"])
+@pytest.mark.parametrize("verb", ["inspect", "convert", "validate-asset"])
+def test_a_layer_that_cannot_be_read_is_one_plain_line(tmp_path, capsys, damage, verb):
+    folder = tmp_path / "asset"
+    folder.mkdir()
+    layer = folder / ("head.usdc" if damage.startswith("usdc") else "head.usda")
+    if damage == "parse":
+        layer.write_text('#usda 1.0\ndef Xform "A" {\n    asset x = @oops\n}\n')
+        said = "head.usda:3:"
+    elif damage == "usdc":
+        layer.write_bytes(b"PXR-USDC" + bytes(range(256)) * 4)
+        said = "corrupt"
+    elif damage == "usdc_short":
+        layer.write_bytes(b"PXR-USDC\0\0\0\0")
+        said = "too small"
+    else:
+        said = "not found"
+    manifest = write_setup(folder, Path(layer.name), "hero")
+    target = {"inspect": layer, "convert": manifest, "validate-asset": manifest}[verb]
+    args = [verb, str(target)] + (["-o", str(tmp_path / "out")] if verb == "convert" else [])
+    assert main(args) == 2
+    err = _one_error(capsys, said)
+    assert "pxrInternal" not in err and "Error in '" not in err and ".cpp" not in err, err
+    assert "pegtl" not in err and "parse error matching" not in err, err

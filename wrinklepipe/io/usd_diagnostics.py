@@ -37,11 +37,29 @@ def plain(text: str) -> str:
     return _ADDRESS.sub("", line).strip()
 
 
+#: USD's C++ namespace in function and type names ("pxrInternal_v0_26_11__pxrReserved__::").
+_NAMESPACE = re.compile(r"pxrInternal_v\d+(?:_\d+)*__pxrReserved__(?:_)?::")
+#: The text parser's grammar rule in a parse error ("parse error matching pegtl::until<...> at
+#: '' in </A.x>"): the position before it and the prim after it are what a user can use.
+_GRAMMAR = re.compile(r"parse error matching .*? at '([^']*)'")
+
+
+def _tidy(text: str) -> str:
+    text = _NAMESPACE.sub("", text)
+    text = _GRAMMAR.sub(
+        lambda m: "parse error" + (f" at {m.group(1)!r}" if m.group(1) else ""), text
+    )
+    return text
+
+
 def error_text(exc: BaseException) -> str:
-    """A USD exception (``Tf.ErrorException``) as one line; its text may hold the bytes of a
-    damaged layer that are no UTF-8 (its own ``str`` then raises)."""
+    """A USD exception (``Tf.ErrorException``) as one line in plain words: the commentary of
+    each error it carries (no C++ function, source file or line, no parser grammar), joined
+    with "; ". Its text may hold the bytes of a damaged layer that are no UTF-8."""
     try:
-        return plain(str(exc))
+        said = [str(getattr(a, "commentary", "") or a) for a in exc.args] or [str(exc)]
+        lines = [plain(_tidy(s)) for s in said]
+        return "; ".join(dict.fromkeys(s for s in lines if s))
     except UnicodeDecodeError:
         return "USD cannot parse it (it holds bytes that are not UTF-8 text)"
 

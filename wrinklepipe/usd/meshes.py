@@ -81,6 +81,8 @@ def open_stage_checked(path: Path) -> tuple[Any, list[UsdProblem]]:
     references, payloads; the other diagnostics USD posted while opening it)."""
     from pxr import Tf, Usd  # deferred: usd-core, USD only
 
+    if not Path(path).is_file():
+        raise input_error(path, "file not found")
     confine_usd(path)  # every path it names: inside the asset's folder
     with captured_diagnostics() as said:
         try:
