@@ -172,11 +172,13 @@ def test_a_damaged_cache_entry_is_replaced(sources, tmp_path, capsys, damage):
 def _hang(job, conn, threads=None) -> None:  # noqa: ANN001
     """A worker whose asset ``b`` hangs (a loop that never ends) after it says hello, the way
     the PD scale search did; asset ``a`` is done at once."""
-    conn.send(("stage", "started"))
-    if job.id.startswith("a/"):  # a healthy asset: done at once, whatever the machine's load
+    if job.id.startswith("a/"):
+        # a healthy asset: its result is its first message, so the watchdog's clock (which
+        # starts at an asset's first message) never runs for it, whatever the machine's load
         conn.send(("done", batch_worker._judged(job, "a", "converted", "ran", [])))
         conn.close()
         return
+    conn.send(("stage", "started"))
     while True:
         time.sleep(0.01)
 
@@ -218,16 +220,34 @@ def _dask(*args: str) -> subprocess.Popen:
     )
 
 
+def _scheduler_address(file: Path, scheduler: subprocess.Popen) -> str:
+    """The address a ``dask scheduler --scheduler-file FILE`` listens on, once it has written
+    the file (whole: it is read until it parses)."""
+    for _ in range(6000):  # up to 10 minutes on a loaded machine; the scheduler is polled
+        if scheduler.poll() is not None:
+            pytest.fail(f"the Dask scheduler ended (exit {scheduler.returncode})")
+        try:
+            return str(json.loads(file.read_text())["address"])
+        except (OSError, ValueError, KeyError):
+            time.sleep(0.1)
+    pytest.fail("the Dask scheduler wrote no scheduler file in 10 minutes")
+
+
 def test_a_killed_dask_worker_pool_fails_the_assets_clearly(sources, tmp_path):
     pytest.importorskip("distributed")
     from distributed import Client
 
     src = _copy(sources, tmp_path)
-    port = 8786 + os.getpid() % 1000
-    address = f"tcp://127.0.0.1:{port}"
-    scheduler = _dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard")
+    # port 0: the scheduler takes a free port and says which in its file (a fixed port may be
+    # taken by another process, or by this test running in another checkout at the same time)
+    file = tmp_path / "scheduler.json"
+    scheduler = _dask(
+        "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+        "--scheduler-file", str(file),
+    )  # fmt: skip
     workers = []
     try:
+        address = _scheduler_address(file, scheduler)
         with Client(address, timeout=60) as client:
             workers = [
                 _dask("worker", address, "--no-nanny", "--nthreads", "1", "--no-dashboard")
@@ -296,3 +316,20 @@ def test_an_unreachable_scheduler_still_writes_the_summary(sources, tmp_path):
     doc = json.loads(summary.read_text())
     assert [a["status"] for a in doc["assets"]] == ["error", "error"]
     assert all("Dask scheduler" in a["problems"][0]["message"] for a in doc["assets"])
+
+
+def test_a_cluster_without_workers_fails_each_asset_with_the_reason(sources, tmp_path):
+    """No worker at the start (none joined yet, or all gone before the batch): each asset fails
+    with the wait's message, not with an error about the event topic the engine never
+    subscribed to (it hid the reason: 'ValueError: No event handler known for topic')."""
+    pytest.importorskip("distributed")
+    from distributed import LocalCluster
+
+    src = _copy(sources, tmp_path)
+    plan = plan_batch([str(src)], tmp_path / "out", force=True)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+        run = run_plan(plan, DaskEngine(cluster.scheduler_address, no_workers_s=0.5), None)
+    assert [r.status for r in run.results] == ["error", "error"]
+    for r in run.results:
+        message = r.problems[0]["message"]
+        assert "had no workers for 0.5 s" in message and "Error" not in message, message

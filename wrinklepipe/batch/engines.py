@@ -269,6 +269,7 @@ class DaskEngine:
 
     def run(self, jobs: Sequence[Job], on_stage: StageFn) -> Iterator[AssetResult]:
         client = self._client()
+        subscribed = False
         try:
             self._check_workers(client)
 
@@ -278,6 +279,7 @@ class DaskEngine:
                     on_stage(str(msg.get("job", "")), str(msg.get("stage", "")))
 
             client.subscribe_topic(self.TOPIC, handler)
+            subscribed = True
             run_id = uuid.uuid4().hex[:8]
             futures = {}
             for job in jobs:
@@ -310,5 +312,6 @@ class DaskEngine:
                         continue
                 time.sleep(0.2)
         finally:
-            client.unsubscribe_topic(self.TOPIC)
+            if subscribed:  # (unsubscribing a topic never subscribed raises, hiding the reason)
+                client.unsubscribe_topic(self.TOPIC)
             client.close()
