@@ -235,15 +235,33 @@ def _f(x: Any, nd: int = 2) -> str:
 
 def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
     """The picture sheet (self-contained HTML; images by relative path)."""
-    w1 = report["warps"]["expression_to_neutral"]
-    w2 = report["warps"]["photo_to_texture"]
-    rt = report["ratio"]
     parts = [
         "<!doctype html><html><head><meta charset=utf-8><title>wrinklepipe capture</title>",
         f"<style>{_CSS}</style></head><body>",
         "<h1>wrinklepipe capture</h1>",
         f"<p class=muted>orientation: <b>{html.escape(report['method'])}</b> &middot; output: "
         f"{html.escape(str(report['outputs'].get('normal_map', '')))}</p>",
+        *_warps_html(report),
+        *_ratio_html(report),
+        "<h2>Orientation methods</h2>",
+        *_methods_html(report),
+    ]
+    parts.append("<h2>Pictures</h2><div>")
+    for caption, rel in pictures.items():
+        parts.append(
+            f"<figure><a href='{html.escape(rel)}'><img src='{html.escape(rel)}' "
+            f"alt='{html.escape(caption)}'></a><figcaption>{html.escape(caption)}"
+            "</figcaption></figure>"
+        )
+    parts.append("</div></body></html>\n")
+    return "\n".join(parts)
+
+
+def _warps_html(report: dict[str, Any]) -> list[str]:
+    """The landmark residuals of both warps."""
+    w1 = report["warps"]["expression_to_neutral"]
+    w2 = report["warps"]["photo_to_texture"]
+    return [
         "<h2>Landmark residuals (pixels)</h2>",
         _table(
             [
@@ -279,6 +297,13 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
         "<p class=muted>fit: the evaluated warp at each landmark (0 up to the coarse-grid "
         "approximation); leave-one-out: the warp fitted without that landmark, predicting it "
         "(large values flag a misplaced landmark).</p>",
+    ]
+
+
+def _ratio_html(report: dict[str, Any]) -> list[str]:
+    """The ratio image's quantities."""
+    rt = report["ratio"]
+    return [
         "<h2>Ratio image</h2>",
         _table(
             ["quantity", "value"],
@@ -297,8 +322,13 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
                 ["texels outside the photo", _f(report["texture"]["fraction_outside_photo"], 4)],
             ],
         ),
-        "<h2>Orientation methods</h2>",
     ]
+
+
+def _methods_html(report: dict[str, Any]) -> list[str]:
+    """The orientation methods: against the truth (when given), the residuals, the solve's
+    ambiguous share."""
+    parts: list[str] = []
     methods = report["orientation"]
     names = list(methods)
     has_truth = all("truth" in methods[m] for m in names)
@@ -374,15 +404,7 @@ def render_html(report: dict[str, Any], pictures: dict[str, str]) -> str:
         )
         if amb > AUTO_MAX_AMBIGUOUS:
             parts.append(f"<p><b>Sign not observable.</b> {html.escape(UNOBSERVABLE)}</p>")
-    parts.append("<h2>Pictures</h2><div>")
-    for caption, rel in pictures.items():
-        parts.append(
-            f"<figure><a href='{html.escape(rel)}'><img src='{html.escape(rel)}' "
-            f"alt='{html.escape(caption)}'></a><figcaption>{html.escape(caption)}"
-            "</figcaption></figure>"
-        )
-    parts.append("</div></body></html>\n")
-    return "\n".join(parts)
+    return parts
 
 
 def write_report(folder: Path, report: dict[str, Any], pictures: dict[str, str]) -> None:
