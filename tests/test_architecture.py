@@ -273,7 +273,6 @@ TO_SPLIT = {
     "wrinklepipe/validate/render.py",
     "wrinklepipe/batch/plan.py:plan_batch",
     "wrinklepipe/bench/capture.py:bench_capture",
-    "wrinklepipe/capture/sessions.py:make_session",
     "wrinklepipe/demo/avatar.py:avatar_document",
     "wrinklepipe/geometry/vertex_ids.py:_cluster",
     "wrinklepipe/normals/job.py:encode_normals",

@@ -268,24 +268,7 @@ def make_session(options: SessionOptions | None = None) -> Session:
     def height1(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return height0(x, y) + crease(x, y)
 
-    # Non-rigid warp psi: expression pixel -> neutral pixel.
-    amp = o.warp_amplitude * s
-    freq = rng.uniform(0.6, 1.8, (4, 2)) * 2 * np.pi / s
-    phase = rng.uniform(0, 2 * np.pi, (4, 2))
-    coef = rng.normal(0, 1, (4, 2))
-    coef = coef / np.abs(coef).sum(axis=0)
-    aff = np.array([[1.02, 0.015], [-0.01, 0.985]])
-    shift = np.array([0.006, -0.004]) * s
-
-    def psi(qx: np.ndarray, qy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        cx, cy = qx - 0.5 * s, qy - 0.5 * s
-        px = 0.5 * s + aff[0, 0] * cx + aff[0, 1] * cy + shift[0]
-        py = 0.5 * s + aff[1, 0] * cx + aff[1, 1] * cy + shift[1]
-        for k in range(4):  # four smooth bends
-            arg = freq[k, 0] * qx + freq[k, 1] * qy
-            px = px + amp * coef[k, 0] * np.sin(arg + phase[k, 0])
-            py = py + amp * coef[k, 1] * np.sin(arg + phase[k, 1])
-        return px, py
+    psi = _expression_warp(o.warp_amplitude * s, s, rng)
 
     theta = np.radians(o.texture_rotation_deg)
     scale = 0.85 * s / t_size
@@ -326,35 +309,14 @@ def make_session(options: SessionOptions | None = None) -> Session:
         side = _photo(shade_side, albedo, psi, o.size, ss, o.exposure_side)
         side_lit = develop(side, np.random.default_rng([o.seed, 1])).astype(np.float32)
 
-    # Landmarks: a jittered grid over the ROI's box in the neutral photo.
-    rx, ry = o.roi_radii
-    gx = np.linspace(0.5 - 1.05 * rx, 0.5 + 1.05 * rx, o.landmarks) * s
-    gy = np.linspace(0.5 - 1.05 * ry, 0.5 + 1.05 * ry, o.landmarks) * s
-    my, mx = np.meshgrid(gy, gx, indexing="ij")
-    jit = rng.uniform(-0.015, 0.015, (2,) + mx.shape) * s
-    lx = np.clip((mx + jit[0]).ravel(), 1.0, s - 1.0)
-    ly = np.clip((my + jit[1]).ravel(), 1.0, s - 1.0)
+    lx, ly = _landmarks(o, s, rng)
     qx, qy = _invert(psi, lx, ly)
     tx, ty = _invert(tau, lx, ly)
 
     n0 = _unit_normals(height0, xx, yy)
     n1 = _unit_normals(height1, xx, yy)
     truth_photo = relative_to(n1, n0)
-    tidx = np.arange(o.texture_size) + 0.5
-    tyy, txx = np.meshgrid(tidx, tidx, indexing="ij")
-    tpx, tpy = tau(txx, tyy)
-    tn = relative_to(_unit_normals(height1, tpx, tpy), _unit_normals(height0, tpx, tpy))
-    e = 1e-3
-    ax1, ay1 = tau(txx + e, tyy)
-    ax0, ay0 = tau(txx - e, tyy)
-    bx1, by1 = tau(txx, tyy + e)
-    bx0, by0 = tau(txx, tyy - e)
-    ang = np.arctan2((ay1 - ay0) - (bx1 - bx0), (ax1 - ax0) + (by1 - by0))
-    vx, vy = tn[..., 0], -tn[..., 1]  # photo pixel frame (y down)
-    rxx = np.cos(ang) * vx + np.sin(ang) * vy
-    ryy = -np.sin(ang) * vx + np.cos(ang) * vy
-    truth_texture = np.stack([rxx, -ryy, tn[..., 2]], axis=-1)
-    truth_texture /= np.linalg.norm(truth_texture, axis=-1, keepdims=True)
+    truth_texture, tpx, tpy = _truth_texture(tau, height0, height1, o.texture_size)
 
     return Session(
         options=o,
@@ -375,6 +337,66 @@ def make_session(options: SessionOptions | None = None) -> Session:
         psi=psi,
         tau=tau,
     )
+
+
+def _expression_warp(amp: float, s: float, rng: np.random.Generator) -> Callable:
+    """The non-rigid warp psi: expression pixel -> neutral pixel (an affine map and four
+    smooth bends of amplitude ``amp`` pixels, drawn from ``rng``)."""
+    freq = rng.uniform(0.6, 1.8, (4, 2)) * 2 * np.pi / s
+    phase = rng.uniform(0, 2 * np.pi, (4, 2))
+    coef = rng.normal(0, 1, (4, 2))
+    coef = coef / np.abs(coef).sum(axis=0)
+    aff = np.array([[1.02, 0.015], [-0.01, 0.985]])
+    shift = np.array([0.006, -0.004]) * s
+
+    def psi(qx: np.ndarray, qy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        cx, cy = qx - 0.5 * s, qy - 0.5 * s
+        px = 0.5 * s + aff[0, 0] * cx + aff[0, 1] * cy + shift[0]
+        py = 0.5 * s + aff[1, 0] * cx + aff[1, 1] * cy + shift[1]
+        for k in range(4):  # four smooth bends
+            arg = freq[k, 0] * qx + freq[k, 1] * qy
+            px = px + amp * coef[k, 0] * np.sin(arg + phase[k, 0])
+            py = py + amp * coef[k, 1] * np.sin(arg + phase[k, 1])
+        return px, py
+
+    return psi
+
+
+def _landmarks(
+    o: SessionOptions, s: float, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """The landmarks in the neutral photo: a jittered grid over the ROI's box."""
+    rx, ry = o.roi_radii
+    gx = np.linspace(0.5 - 1.05 * rx, 0.5 + 1.05 * rx, o.landmarks) * s
+    gy = np.linspace(0.5 - 1.05 * ry, 0.5 + 1.05 * ry, o.landmarks) * s
+    my, mx = np.meshgrid(gy, gx, indexing="ij")
+    jit = rng.uniform(-0.015, 0.015, (2,) + mx.shape) * s
+    lx = np.clip((mx + jit[0]).ravel(), 1.0, s - 1.0)
+    ly = np.clip((my + jit[1]).ravel(), 1.0, s - 1.0)
+    return lx, ly
+
+
+def _truth_texture(
+    tau: Callable, height0: Callable, height1: Callable, size: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The true wrinkle normals in texture space (relative to the neutral, turned by the
+    texture warp ``tau``'s rotation) and the photo pixels ``tau`` puts each texel at."""
+    tidx = np.arange(size) + 0.5
+    tyy, txx = np.meshgrid(tidx, tidx, indexing="ij")
+    tpx, tpy = tau(txx, tyy)
+    tn = relative_to(_unit_normals(height1, tpx, tpy), _unit_normals(height0, tpx, tpy))
+    e = 1e-3
+    ax1, ay1 = tau(txx + e, tyy)
+    ax0, ay0 = tau(txx - e, tyy)
+    bx1, by1 = tau(txx, tyy + e)
+    bx0, by0 = tau(txx, tyy - e)
+    ang = np.arctan2((ay1 - ay0) - (bx1 - bx0), (ax1 - ax0) + (by1 - by0))
+    vx, vy = tn[..., 0], -tn[..., 1]  # photo pixel frame (y down)
+    rxx = np.cos(ang) * vx + np.sin(ang) * vy
+    ryy = -np.sin(ang) * vx + np.cos(ang) * vy
+    truth_texture = np.stack([rxx, -ryy, tn[..., 2]], axis=-1)
+    truth_texture /= np.linalg.norm(truth_texture, axis=-1, keepdims=True)
+    return truth_texture, tpx, tpy
 
 
 def neutral_mesh(session: Session, step: float = 8.0, world_scale: float = 0.01) -> Mesh:
