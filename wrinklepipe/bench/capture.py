@@ -10,6 +10,8 @@ normals, on the issue-like curved forehead session (:mod:`wrinklepipe.capture.se
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy import ndimage
 
@@ -145,7 +147,23 @@ def bench_capture(quick: bool) -> BenchResult:
     ):
         t = median_time(fn, repeat, warmup)
         res.rows.append(BenchRow(step, t, mpix_per_s=fpix / t if t > 0 else None, note=note))
-    res.extra = {
+    res.extra = _accuracy(table, out, fs, cur, curved, light, lit_err)
+    return res.finish()
+
+
+def _accuracy(
+    table: dict[str, Any],
+    out: CaptureResult,
+    fs: Session,
+    cur: CaptureResult,
+    curved: dict[str, Any],
+    light: tuple[float, float, float],
+    lit_err: dict[str, Any],
+) -> dict[str, Any]:
+    """The accuracy against the synthetic truth (degrees, texture space, ROI): every method on
+    the flat-facing scene, on the curved forehead with the neutral's normals, and with a
+    side-lit photo."""
+    return {
         "accuracy_deg": {
             m: {
                 "tilt_mean": round(e["tilt"]["mean"], 3),
@@ -180,4 +198,3 @@ def bench_capture(quick: bool) -> BenchResult:
             },
         },
     }
-    return res.finish()
