@@ -91,3 +91,39 @@ def test_a_damaged_copy_fails_validation_naming_it(converted, tmp_path, capsys, 
     found = [i for i in issues if i["code"] == "WP-TEX-004"]
     assert found and any(named.name in i["message"] for i in found), found
     assert all(i["severity"] == "error" for i in found)
+
+
+@pytest.mark.parametrize("given", ["demo_head.gltf", "demo_head.usda"])
+@pytest.mark.parametrize("damage", ["truncated", "level 0 random"])
+def test_the_file_that_lists_a_damaged_copy_fails_too(converted, tmp_path, capsys, given, damage):
+    """validate-asset on the .gltf or USD layer alone (not its folder) reads the copies it lists
+    too: a damaged KTX2 (listed first) fails the file's validation as it fails the folder's."""
+    out = _copy(converted, tmp_path)
+    ktx2 = sorted((out / "compressed").glob("wrinkle_*.ktx2"))[0]
+    raw = bytearray(ktx2.read_bytes())
+    if damage == "truncated":
+        raw = raw[:-40]
+    else:
+        off, _ = _level_offsets(ktx2)[0]
+        raw[off + 64 : off + 128] = bytes(np.random.default_rng(39).integers(0, 256, 64, np.uint8))
+    ktx2.write_bytes(bytes(raw))
+    report = tmp_path / "report.json"
+    rc = main(["validate-asset", str(out / given), "--no-render", "--report", str(report)])
+    err = capsys.readouterr().err
+    found = [i for i in json.loads(report.read_text())["issues"] if i["code"] == "WP-TEX-004"]
+    assert rc == 1 and found and all(ktx2.name in i["message"] for i in found), err
+
+
+@pytest.mark.parametrize("listed", ["/etc/hostname", "../outside.ktx2"])
+def test_a_copy_listed_outside_the_folder_is_never_opened(converted, tmp_path, capsys, listed):
+    out = _copy(converted, tmp_path)
+    (tmp_path / "outside.ktx2").write_bytes(b"outside the asset folder")
+    gltf = out / "demo_head.gltf"
+    doc = json.loads(gltf.read_text())
+    copies = doc["materials"][0]["extensions"]["WRINKLEPIPE_wrinkle_maps"]["compressed"]
+    copies[0]["uris"][0] = listed
+    gltf.write_text(json.dumps(doc))
+    for target in (out, gltf):
+        assert main(["validate-asset", str(target), "--no-render"]) == 2
+        err = capsys.readouterr().err
+        assert "is outside" in err and "Traceback" not in err and "WP-TEX-004" not in err, err

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.errors import InputError
+from wrinklepipe.io.confine import confine
 from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals import uastc
 from wrinklepipe.normals.dds import container_format, mip_dims, read_dds
@@ -146,6 +147,14 @@ def _read(path: Path, kind: str) -> Copy:
     return Copy(path, str(img.format).lower(), int(img.width), int(img.height), list(img.levels))
 
 
+def copy_path(inp: ValidationInput, folder: Path, rel: str, texture: str) -> Path:
+    """The file of a copy the asset lists (or the default ``compressed/NAME.dds``), refused
+    unless it lies inside the asset's folder (or an ``--allow-root``), as every path an input
+    names is: a copy listed as ``/etc/hostname`` or ``../x.ktx2`` is never opened."""
+    confine(folder, rel, inp.path or folder, key=f"the copies of {texture}", what="compressed copy")
+    return folder / rel  # as the asset names it (messages show it so)
+
+
 def check_copies(inp: ValidationInput, folder: Path) -> list[dict[str, str]]:
     """The problems of every compressed copy of ``inp``'s base and state textures in the asset
     folder ``folder`` (see the module doc); empty when every copy reads back whole."""
@@ -157,7 +166,7 @@ def check_copies(inp: ValidationInput, folder: Path) -> list[dict[str, str]]:
         rec: dict[str, Any] | None = recorded.get(t.name)
         names = {"dds": f"compressed/{t.name}.dds", "ktx2": f"compressed/{t.name}.ktx2"}
         listed = {k: str(rec.get(k) or "") for k in ("dds", "ktx2")} if rec else {}
-        files = {k: folder / (listed.get(k) or names[k]) for k in names}
+        files = {k: copy_path(inp, folder, listed.get(k) or names[k], t.name) for k in names}
         wanted = {k for k in names if listed.get(k) or files[k].is_file()}
         if rec is not None and str(rec.get("format")) == "uastc":
             problems += _check_uastc(t, files["ktx2"], rec)

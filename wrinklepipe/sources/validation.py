@@ -39,7 +39,7 @@ from wrinklepipe.pipeline.ingest import ingest
 from wrinklepipe.pipeline.package import package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.readers.registry import Format, format_of, read_package_file
-from wrinklepipe.sources.copies import check_copies
+from wrinklepipe.sources.copies import check_copies, copy_path
 from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.sources.package import asset_file
 from wrinklepipe.usd.meshes import open_stage_checked
@@ -84,7 +84,7 @@ def load_input(path: str | Path, options: LoadOptions | None = None) -> Validati
         if p.is_dir():
             inp = _load_folder(p, o)
         elif fmt is not None and fmt.package is not None:
-            inp = _from_written(p, fmt, o)
+            inp = _listed_copies(_from_written(p, fmt, o), p.parent)
         elif suffix == ".toml":
             inp = _load_manifest(p)
         elif suffix == BUNDLE_SUFFIX:
@@ -161,6 +161,17 @@ def _from_written(p: Path, fmt: Format, o: LoadOptions) -> ValidationInput:
         _usd_pointers(inp, p)
     else:
         _gltf_pointers(inp, p, gltf)
+    return inp
+
+
+def _listed_copies(inp: ValidationInput, folder: Path) -> ValidationInput:
+    """A .gltf/.glb/USD file given alone: every compressed copy it lists, read whole and
+    decoded (:func:`~wrinklepipe.sources.copies.check_copies`, the validator's WP-TEX-004),
+    as for its folder; the PNGs stay the textures measured."""
+    if inp.extra.get("compressed"):
+        problems = check_copies(inp, folder)
+        if problems:
+            inp.extra["copy_problems"] = problems
     return inp
 
 
@@ -270,9 +281,9 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
     recorded = {str(c["texture"]): c for c in inp.extra.get("compressed", [])}
     out = []
     for t in inp.textures:
-        dds = folder / f"{t.name}.dds"
+        dds = copy_path(inp, folder.parent, f"{folder.name}/{t.name}.dds", t.name)
         rec = recorded.get(t.name)
-        ktx2 = folder / f"{t.name}.ktx2"
+        ktx2 = copy_path(inp, folder.parent, f"{folder.name}/{t.name}.ktx2", t.name)
         uastc_copy = (
             t.role in ("base", "state")
             and rec is not None
