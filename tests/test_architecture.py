@@ -274,7 +274,6 @@ TO_SPLIT = {
     "wrinklepipe/batch/plan.py:plan_batch",
     "wrinklepipe/demo/avatar.py:avatar_document",
     "wrinklepipe/geometry/vertex_ids.py:_cluster",
-    "wrinklepipe/normals/job.py:encode_normals",
     "wrinklepipe/usd/animation.py:add_animations",
     "wrinklepipe/usd/looks.py:material",
     "wrinklepipe/usd/meshes.py:_read_mesh",

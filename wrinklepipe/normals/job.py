@@ -166,15 +166,7 @@ def encode_normals(
     """Run the whole job in memory. Raises :class:`InputError` for bad inputs or options."""
     o = options
     src, out = Path(src), Path(out)
-    if o.encoding not in ENCODINGS:
-        raise input_error(out, f"unknown encoding {o.encoding!r}; expected pd, diff or full")
-    fmt, container = _resolve_format(out, o.fmt)
-    if o.encoding == "diff" and base_path is None:
-        raise input_error(src, "encoding diff needs --base (the neutral face's normal map)")
-    if o.encoding == "diff" and fmt in ("bc5", "bc3nm"):
-        raise input_error(out, f"a diff map has three channels; {fmt} holds two (use bc1 or bc7)")
-    if isinstance(o.scale, float) and not (o.scale > 0 and math.isfinite(o.scale)):
-        raise input_error(src, f"--scale must be a positive number or auto, got {o.scale}")
+    fmt, container = _checked_format(src, out, o, base_path)
     nm = _read(src, o)
     base_nm = _read(Path(base_path), o) if base_path is not None else None
     w_n = nm.normals
@@ -186,23 +178,8 @@ def encode_normals(
         )
     notes: list[str] = list(nm.notes)
     budget = Budget(o.max_mean_deg, o.max_p99_deg)
-    h0, w0 = w_n.shape[:2]
-
-    # --- resize (in PD space for pd, renormalised otherwise)
-    size_report: dict[str, Any] = {"source": [w0, h0]}
-    target = o.size
-    if target == "auto":
-        target, tried = _auto_size(w_n, b_n, o.encoding, budget)
-        size_report["auto"] = {str(k): v.to_json() for k, v in sorted(tried.items())}
-    if target is not None and int(target) != max(h0, w0):
-        t = int(target)
-        th, tw = (t, max(1, round(w0 * t / h0))) if h0 >= w0 else (max(1, round(h0 * t / w0)), t)
-        space = "pd" if o.encoding == "pd" else "normal"
-        w_n = resample.resize_normals(w_n, (th, tw), space=space)
-        if b_n is not None:
-            b_n = resample.resize_normals(b_n, (th, tw), space=space)
+    w_n, b_n, size_report = _resized(w_n, b_n, o, budget)
     h, w = w_n.shape[:2]
-    size_report["output"] = [w, h]
 
     scale = o.scale
     if o.encoding == "pd" and scale == "auto":
@@ -250,18 +227,7 @@ def encode_normals(
     dec = cmp.decoder_for(o.encoding, params.get("scale", 1.0), params.get("gain", 1.0), b_n)
     blend = _blend_fn(o.encoding, params, b_n, truth)
     if fmt == "uastc":
-        q = _components(o.encoding, x, "uastc", params)
-        try:
-            check, data = uastc.uastc_check(q, truth, dec, budget, mips=o.mips)
-        except ValueError as exc:
-            raise input_error(out, str(exc)) from None
-        ok = check.verdict == "pass"
-        report["format"] = {"name": "uastc", "container": "ktx2", "bytes": len(data)}
-        report["checks"] = [check.to_json()]
-        report["verdict"] = "pass" if ok else "fail"
-        report["footprint"] = fp.footprint([(out.name, "bc5", w, h, o.mips)]).to_json()
-        report["notes"] = notes + ["uastc: GPU footprint as 8 bpp (transcoded to BC7/ASTC)"]
-        return EncodeResult(data, report, ok, report["notes"])
+        return _uastc(out, o, x, params, truth, dec, budget, report, notes)
     if fmt != "auto" and not codec.storage_format(fmt).holds(o.encoding):
         raise input_error(out, f"a {o.encoding} map has three channels; {fmt} holds two")
     candidates = (
@@ -305,6 +271,73 @@ def encode_normals(
     report["footprint"] = fp.footprint([(out.name, chosen.format, w, h, o.mips)]).to_json()
     report["notes"] = notes
     return EncodeResult(data, report, ok, notes)
+
+
+def _checked_format(
+    src: Path, out: Path, o: EncodeOptions, base_path: str | Path | None
+) -> tuple[str, str]:
+    """The output's format and container, once the encoding, the base and ``--scale`` that
+    the options give are known to fit together."""
+    if o.encoding not in ENCODINGS:
+        raise input_error(out, f"unknown encoding {o.encoding!r}; expected pd, diff or full")
+    fmt, container = _resolve_format(out, o.fmt)
+    if o.encoding == "diff" and base_path is None:
+        raise input_error(src, "encoding diff needs --base (the neutral face's normal map)")
+    if o.encoding == "diff" and fmt in ("bc5", "bc3nm"):
+        raise input_error(out, f"a diff map has three channels; {fmt} holds two (use bc1 or bc7)")
+    if isinstance(o.scale, float) and not (o.scale > 0 and math.isfinite(o.scale)):
+        raise input_error(src, f"--scale must be a positive number or auto, got {o.scale}")
+    return fmt, container
+
+
+def _resized(
+    w_n: np.ndarray, b_n: np.ndarray | None, o: EncodeOptions, budget: Budget
+) -> tuple[np.ndarray, np.ndarray | None, dict[str, Any]]:
+    """The map (and the base) at ``--size`` (``auto``: the smallest within the budget),
+    resampled in PD space for pd, renormalised otherwise; and the size report."""
+    h0, w0 = w_n.shape[:2]
+    size_report: dict[str, Any] = {"source": [w0, h0]}
+    target = o.size
+    if target == "auto":
+        target, tried = _auto_size(w_n, b_n, o.encoding, budget)
+        size_report["auto"] = {str(k): v.to_json() for k, v in sorted(tried.items())}
+    if target is not None and int(target) != max(h0, w0):
+        t = int(target)
+        th, tw = (t, max(1, round(w0 * t / h0))) if h0 >= w0 else (max(1, round(h0 * t / w0)), t)
+        space = "pd" if o.encoding == "pd" else "normal"
+        w_n = resample.resize_normals(w_n, (th, tw), space=space)
+        if b_n is not None:
+            b_n = resample.resize_normals(b_n, (th, tw), space=space)
+    h, w = w_n.shape[:2]
+    size_report["output"] = [w, h]
+    return w_n, b_n, size_report
+
+
+def _uastc(
+    out: Path,
+    o: EncodeOptions,
+    x: np.ndarray,
+    params: dict[str, Any],
+    truth: np.ndarray,
+    dec: Any,
+    budget: Budget,
+    report: dict[str, Any],
+    notes: list[str],
+) -> EncodeResult:
+    """The map as Basis Universal UASTC in KTX2, checked against the budget."""
+    h, w = x.shape[:2]
+    q = _components(o.encoding, x, "uastc", params)
+    try:
+        check, data = uastc.uastc_check(q, truth, dec, budget, mips=o.mips)
+    except ValueError as exc:
+        raise input_error(out, str(exc)) from None
+    ok = check.verdict == "pass"
+    report["format"] = {"name": "uastc", "container": "ktx2", "bytes": len(data)}
+    report["checks"] = [check.to_json()]
+    report["verdict"] = "pass" if ok else "fail"
+    report["footprint"] = fp.footprint([(out.name, "bc5", w, h, o.mips)]).to_json()
+    report["notes"] = notes + ["uastc: GPU footprint as 8 bpp (transcoded to BC7/ASTC)"]
+    return EncodeResult(data, report, ok, report["notes"])
 
 
 def _blend_fn(encoding: str, params: dict[str, Any], base: np.ndarray | None, truth: np.ndarray):  # noqa: ANN202
