@@ -332,23 +332,7 @@ def avatar_document() -> tuple[dict[str, Any], bytes]:
             ],
         },
     ]
-    # joints: nodes 0..19 in JOINTS order, rest TRS; mesh nodes 20..23; the root 24
-    nodes: list[dict[str, Any]] = []
-    for name, parent, p in JOINTS:
-        base = JOINTS[JOINT_NAMES.index(parent)][2] if parent else (0.0, 0.0, 0.0)
-        node: dict[str, Any] = {
-            "name": name,
-            "translation": [float(np.float32(a - b)) for a, b in zip(p, base)],
-        }
-        if name in REST_ROTATIONS:
-            node["rotation"] = _quat(*REST_ROTATIONS[name])
-        kids = [i for i, j in enumerate(JOINTS) if j[1] == name]
-        if kids:
-            node["children"] = kids
-        nodes.append(node)
-    for i, m in enumerate(meshes):
-        nodes.append({"name": m["name"], "mesh": i, "skin": 0})
-    nodes.append({"name": "Avatar", "children": [0], "extras": {"rig": "wrinklepipe avatar"}})
+    nodes = _nodes([m["name"] for m in meshes])
     ibm = np.zeros((len(JOINTS), 16), np.float32)
     for i, (_, _, p) in enumerate(JOINTS):
         m = np.eye(4)
@@ -373,32 +357,6 @@ def avatar_document() -> tuple[dict[str, Any], bytes]:
         for n, d in zip(names, images_data)
     ]
     textures = [{"sampler": 0, "source": i, "name": n} for i, n in enumerate(names)]
-    materials = [
-        {
-            "name": "Skin",
-            "pbrMetallicRoughness": {
-                "baseColorTexture": {"index": 0},
-                "metallicFactor": 0.0,
-                "roughnessFactor": 0.6,
-            },
-            "normalTexture": {"index": 1},
-        },
-        {
-            "name": "Eye",
-            "pbrMetallicRoughness": {"baseColorTexture": {"index": 2}, "roughnessFactor": 0.1},
-            "emissiveFactor": [0.1, 0.1, 0.1],
-            "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 2.0}},
-        },
-        {
-            "name": "Teeth",
-            "pbrMetallicRoughness": {"baseColorTexture": {"index": 3}, "metallicFactor": 0.0},
-        },
-        {
-            "name": "Body",
-            "pbrMetallicRoughness": {"baseColorTexture": {"index": 4}},
-            "doubleSided": True,
-        },
-    ]
     # Idle: the head turns and the brows rise, 0..2 s
     times = np.array([0.0, 1.0, 2.0], np.float32)
     rot = np.array([_quat((0, 1, 0), a) for a in (10.0, -10.0, 10.0)], np.float32)
@@ -425,7 +383,7 @@ def avatar_document() -> tuple[dict[str, Any], bytes]:
         "nodes": nodes,
         "meshes": meshes,
         "skins": [skin],
-        "materials": materials,
+        "materials": _materials(),
         "textures": textures,
         "images": images,
         "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}],
@@ -435,6 +393,58 @@ def avatar_document() -> tuple[dict[str, Any], bytes]:
         "buffers": [{"byteLength": len(data)}],
     }
     return doc, data
+
+
+def _nodes(mesh_names: list[str]) -> list[dict[str, Any]]:
+    """The avatar's nodes: the joints 0..19 in JOINTS order (rest TRS), a node per mesh
+    (20..23, skinned), the root 24."""
+    nodes: list[dict[str, Any]] = []
+    for name, parent, p in JOINTS:
+        base = JOINTS[JOINT_NAMES.index(parent)][2] if parent else (0.0, 0.0, 0.0)
+        node: dict[str, Any] = {
+            "name": name,
+            "translation": [float(np.float32(a - b)) for a, b in zip(p, base)],
+        }
+        if name in REST_ROTATIONS:
+            node["rotation"] = _quat(*REST_ROTATIONS[name])
+        kids = [i for i, j in enumerate(JOINTS) if j[1] == name]
+        if kids:
+            node["children"] = kids
+        nodes.append(node)
+    for i, m in enumerate(mesh_names):
+        nodes.append({"name": m, "mesh": i, "skin": 0})
+    nodes.append({"name": "Avatar", "children": [0], "extras": {"rig": "wrinklepipe avatar"}})
+    return nodes
+
+
+def _materials() -> list[dict[str, Any]]:
+    """Skin (its colour and normal maps), eyes (emissive), teeth, body."""
+    return [
+        {
+            "name": "Skin",
+            "pbrMetallicRoughness": {
+                "baseColorTexture": {"index": 0},
+                "metallicFactor": 0.0,
+                "roughnessFactor": 0.6,
+            },
+            "normalTexture": {"index": 1},
+        },
+        {
+            "name": "Eye",
+            "pbrMetallicRoughness": {"baseColorTexture": {"index": 2}, "roughnessFactor": 0.1},
+            "emissiveFactor": [0.1, 0.1, 0.1],
+            "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 2.0}},
+        },
+        {
+            "name": "Teeth",
+            "pbrMetallicRoughness": {"baseColorTexture": {"index": 3}, "metallicFactor": 0.0},
+        },
+        {
+            "name": "Body",
+            "pbrMetallicRoughness": {"baseColorTexture": {"index": 4}},
+            "doubleSided": True,
+        },
+    ]
 
 
 def avatar_glb_bytes() -> bytes:
