@@ -274,7 +274,6 @@ TO_SPLIT = {
     "wrinklepipe/batch/plan.py:plan_batch",
     "wrinklepipe/geometry/vertex_ids.py:_cluster",
     "wrinklepipe/usd/animation.py:add_animations",
-    "wrinklepipe/usd/looks.py:material",
     "wrinklepipe/usd/meshes.py:_read_mesh",
     "wrinklepipe/usd/package_write.py:_material",
     "wrinklepipe/validate/render.py:render_pass",

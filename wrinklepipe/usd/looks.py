@@ -14,6 +14,7 @@ its ``texCoord`` honoured).
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -155,53 +156,7 @@ class Looks:
         surf = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild("Surface"))
         surf.CreateIdAttr("UsdPreviewSurface")
         mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
-        readers: dict[int, Any] = {}
-
-        def reader(tc: int) -> Any:
-            if tc not in readers:
-                r = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(f"StReader{tc}"))
-                r.CreateIdAttr("UsdPrimvarReader_float2")
-                r.CreateInput("varname", Sdf.ValueTypeNames.String).Set(
-                    "st" if tc == 0 else f"st{tc}"
-                )
-                r.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-                readers[tc] = r
-            return readers[tc]
-
-        def texture(key: str, info: Any, color_space: str, scale: tuple, bias: tuple) -> Any:
-            if not isinstance(info, dict) or not isinstance(info.get("index"), int):
-                return None
-            path = self.image_path(info["index"])
-            if path is None:
-                return None
-            tc = int(info.get("texCoord", 0))
-            xf = (info.get("extensions") or {}).get("KHR_texture_transform")
-            st = None
-            if isinstance(xf, dict):
-                tc = int(xf.get("texCoord", tc))
-                st = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(f"{key}_uv"))
-                st.CreateIdAttr("UsdTransform2d")
-                st.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(
-                    reader(tc).ConnectableAPI(), "result"
-                )
-                uv_scale, degrees, uv_move = usd_texture_transform(xf)
-                st.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*uv_scale))
-                st.CreateInput("rotation", Sdf.ValueTypeNames.Float).Set(degrees)
-                st.CreateInput("translation", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*uv_move))
-                st.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-            tex = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(key))
-            tex.CreateIdAttr("UsdUVTexture")
-            tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"./{path}"))
-            tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
-                (st or reader(tc)).ConnectableAPI(), "result"
-            )
-            tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(color_space)
-            tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*scale))
-            tex.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*bias))
-            for out, kind in (("rgb", "Float3"), ("r", "Float"), ("g", "Float"), ("b", "Float")):
-                tex.CreateOutput(out, getattr(Sdf.ValueTypeNames, kind))
-            tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
-            return tex
+        texture = partial(self._texture, mat, {})  # one st reader per texCoord
 
         pbr = m.get("pbrMetallicRoughness") or {}
         f = [float(x) for x in pbr.get("baseColorFactor", [1, 1, 1, 1])]
@@ -289,3 +244,63 @@ class Looks:
             )
         self.materials[index] = mat
         return mat
+
+    def _reader(self, mat: Any, readers: dict[int, Any], tc: int) -> Any:
+        """The material's primvar reader of texture coordinate set ``tc`` (made once)."""
+        from pxr import Sdf, UsdShade  # deferred: usd-core, USD only
+
+        if tc not in readers:
+            r = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(f"StReader{tc}"))
+            r.CreateIdAttr("UsdPrimvarReader_float2")
+            r.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st" if tc == 0 else f"st{tc}")
+            r.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+            readers[tc] = r
+        return readers[tc]
+
+    def _texture(
+        self,
+        mat: Any,
+        readers: dict[int, Any],
+        key: str,
+        info: Any,
+        color_space: str,
+        scale: tuple,
+        bias: tuple,
+    ) -> Any:
+        """A UsdUVTexture of the material for a glTF texture info (its texCoord and
+        KHR_texture_transform through a UsdTransform2d), or None when there is none."""
+        from pxr import Gf, Sdf, UsdShade  # deferred: usd-core, USD only
+
+        if not isinstance(info, dict) or not isinstance(info.get("index"), int):
+            return None
+        path = self.image_path(info["index"])
+        if path is None:
+            return None
+        tc = int(info.get("texCoord", 0))
+        xf = (info.get("extensions") or {}).get("KHR_texture_transform")
+        st = None
+        if isinstance(xf, dict):
+            tc = int(xf.get("texCoord", tc))
+            st = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(f"{key}_uv"))
+            st.CreateIdAttr("UsdTransform2d")
+            st.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(
+                self._reader(mat, readers, tc).ConnectableAPI(), "result"
+            )
+            uv_scale, degrees, uv_move = usd_texture_transform(xf)
+            st.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*uv_scale))
+            st.CreateInput("rotation", Sdf.ValueTypeNames.Float).Set(degrees)
+            st.CreateInput("translation", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*uv_move))
+            st.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+        tex = UsdShade.Shader.Define(self.stage, mat.GetPath().AppendChild(key))
+        tex.CreateIdAttr("UsdUVTexture")
+        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"./{path}"))
+        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+            (st or self._reader(mat, readers, tc)).ConnectableAPI(), "result"
+        )
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(color_space)
+        tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*scale))
+        tex.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*bias))
+        for out, kind in (("rgb", "Float3"), ("r", "Float"), ("g", "Float"), ("b", "Float")):
+            tex.CreateOutput(out, getattr(Sdf.ValueTypeNames, kind))
+        tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
+        return tex
