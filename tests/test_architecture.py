@@ -278,7 +278,6 @@ TO_SPLIT = {
     "wrinklepipe/usd/package_write.py:_material",
     "wrinklepipe/validate/render.py:render_pass",
     "wrinklepipe/validate/report.py:report_html",
-    "wrinklepipe/validate/rules_mesh.py:check_mesh",
 }
 
 

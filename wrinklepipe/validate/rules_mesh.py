@@ -20,7 +20,7 @@ def reference_tangents(mesh: Mesh) -> tuple[np.ndarray, float, str]:
 
 
 def check_mesh(ctx: Context) -> list[Issue]:
-    a, inp, o = ctx.asset, ctx.inp, ctx.options
+    a, inp = ctx.asset, ctx.inp
     mesh = a.mesh
     where = inp.pointer("mesh")
     if mesh is None or mesh.uvs is None:
@@ -30,53 +30,7 @@ def check_mesh(ctx: Context) -> list[Issue]:
         ]
     out: list[Issue] = []
     v = mesh.vertex_count
-    if mesh.tangents is None:
-        out.append(make_issue("WP-MESH-001", f"mesh {mesh.name!r} has no tangents", where))
-    elif mesh.normals is not None:
-        tg = np.asarray(mesh.tangents, np.float64)
-        if tg.shape != (v, 4):
-            out.append(
-                make_issue(
-                    "WP-MESH-002", f"tangents have shape {tg.shape}, expected ({v}, 4)", where
-                )
-            )
-        else:
-            n = np.asarray(mesh.normals, np.float64)
-            ref, tol_deg, ref_name = reference_tangents(mesh)
-            length = np.linalg.norm(tg[:, :3], axis=1)
-            t = tg[:, :3] / np.maximum(length, 1e-30)[:, None]
-            not_unit = np.abs(length - 1.0) > 0.01
-            not_orth = np.abs(np.einsum("ij,ij->i", t, n)) > 0.1
-            bad_w = np.abs(np.abs(tg[:, 3]) - 1.0) > 1e-3
-            # reference tangents exist where some triangle had a UV gradient
-            has_ref = np.linalg.norm(ref[:, :3], axis=1) > 0.5
-            cos = np.einsum("ij,ij->i", t, ref[:, :3])
-            off_dir = has_ref & (cos < np.cos(np.radians(tol_deg)))
-            flip = has_ref & (np.sign(tg[:, 3]) != np.sign(ref[:, 3])) & ~bad_w
-            bad = not_unit | not_orth | bad_w | off_dir | flip
-            ctx.metrics["tangent_mismatch_vertices"] = int(bad.sum())
-            if bad.sum() > max(o.max_bad_fraction * v, 0.01 * v):
-                first = int(np.flatnonzero(bad)[0])
-                parts = [
-                    f"{int(x.sum())} {label}"
-                    for x, label in (
-                        (not_unit, "not unit"),
-                        (not_orth, "not orthogonal to the normal"),
-                        (bad_w, "with |w| != 1"),
-                        (off_dir, f"more than {tol_deg:g} degrees off {ref_name}"),
-                        (flip, "with flipped handedness"),
-                    )
-                    if x.any()
-                ]
-                out.append(
-                    make_issue(
-                        "WP-MESH-002",
-                        f"{int(bad.sum())} of {v} tangents are not MikkTSpace-like ("
-                        + ", ".join(parts)
-                        + f"); first vertex {first}",
-                        where + f" vertex {first}",
-                    )
-                )
+    out += _tangent_issues(ctx, where)
     if mesh.vertex_ids is not None and len(mesh.vertex_ids) == v:
         ids = np.asarray(mesh.vertex_ids, np.int64)
         groups = ctx.vertex_groups
@@ -143,4 +97,61 @@ def check_mesh(ctx: Context) -> list[Issue]:
                     inp.pointer("drivers") + f"/{i}",
                 )
             )
+    return out
+
+
+def _tangent_issues(ctx: Context, where: str) -> list[Issue]:
+    """WP-MESH-001 (no tangents) and WP-MESH-002 (tangents not MikkTSpace-like: length,
+    orthogonality, handedness, direction against the reference tangents); records how many
+    vertices are off in ``ctx.metrics``."""
+    mesh, o = ctx.asset.mesh, ctx.options
+    v = mesh.vertex_count
+    out: list[Issue] = []
+    if mesh.tangents is None:
+        out.append(make_issue("WP-MESH-001", f"mesh {mesh.name!r} has no tangents", where))
+    elif mesh.normals is not None:
+        tg = np.asarray(mesh.tangents, np.float64)
+        if tg.shape != (v, 4):
+            out.append(
+                make_issue(
+                    "WP-MESH-002", f"tangents have shape {tg.shape}, expected ({v}, 4)", where
+                )
+            )
+        else:
+            n = np.asarray(mesh.normals, np.float64)
+            ref, tol_deg, ref_name = reference_tangents(mesh)
+            length = np.linalg.norm(tg[:, :3], axis=1)
+            t = tg[:, :3] / np.maximum(length, 1e-30)[:, None]
+            not_unit = np.abs(length - 1.0) > 0.01
+            not_orth = np.abs(np.einsum("ij,ij->i", t, n)) > 0.1
+            bad_w = np.abs(np.abs(tg[:, 3]) - 1.0) > 1e-3
+            # reference tangents exist where some triangle had a UV gradient
+            has_ref = np.linalg.norm(ref[:, :3], axis=1) > 0.5
+            cos = np.einsum("ij,ij->i", t, ref[:, :3])
+            off_dir = has_ref & (cos < np.cos(np.radians(tol_deg)))
+            flip = has_ref & (np.sign(tg[:, 3]) != np.sign(ref[:, 3])) & ~bad_w
+            bad = not_unit | not_orth | bad_w | off_dir | flip
+            ctx.metrics["tangent_mismatch_vertices"] = int(bad.sum())
+            if bad.sum() > max(o.max_bad_fraction * v, 0.01 * v):
+                first = int(np.flatnonzero(bad)[0])
+                parts = [
+                    f"{int(x.sum())} {label}"
+                    for x, label in (
+                        (not_unit, "not unit"),
+                        (not_orth, "not orthogonal to the normal"),
+                        (bad_w, "with |w| != 1"),
+                        (off_dir, f"more than {tol_deg:g} degrees off {ref_name}"),
+                        (flip, "with flipped handedness"),
+                    )
+                    if x.any()
+                ]
+                out.append(
+                    make_issue(
+                        "WP-MESH-002",
+                        f"{int(bad.sum())} of {v} tangents are not MikkTSpace-like ("
+                        + ", ".join(parts)
+                        + f"); first vertex {first}",
+                        where + f" vertex {first}",
+                    )
+                )
     return out
