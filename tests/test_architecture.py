@@ -272,7 +272,6 @@ ALLOWED_LONG: dict[str, str] = {}
 TO_SPLIT = {
     "wrinklepipe/validate/render.py",
     "wrinklepipe/batch/plan.py:plan_batch",
-    "wrinklepipe/geometry/vertex_ids.py:_cluster",
     "wrinklepipe/usd/animation.py:add_animations",
     "wrinklepipe/usd/meshes.py:_read_mesh",
     "wrinklepipe/usd/package_write.py:_material",

@@ -158,22 +158,7 @@ def _cluster(
         # node and a candidate; the k-d tree links them (exact, only slower).
         return local, local
     use32 = n_cells < _MAX_CELLS_FLOAT32 and all(c.dtype == np.float32 for c in cols)
-    inv = 1.0 / cell
-    fr: list[np.ndarray] = []
-    q: list[np.ndarray] = []
-    for c, o in zip(cols, lo):
-        if use32:  # exact: lo is one of the float32 values
-            ga = np.subtract(c, np.float32(o))
-            ga *= np.float32(inv)
-        else:
-            ga = np.subtract(c, o, dtype=np.float64)
-            ga *= inv
-        fl = np.floor(ga)
-        ga -= fl  # the fraction within the cell (exact)
-        if not top:
-            fl -= fl.min()
-        fr.append(ga)
-        q.append(fl.astype(np.int64))
+    fr, q = _cell_coordinates(cols, lo, 1.0 / cell, use32, top)
     # Rounding of the cell coordinates (a few roundings of eps relative): widen the near-face
     # margin by it so the candidates stay a superset.
     eps = 2.0**-23 if use32 else 2.0**-52
@@ -182,31 +167,7 @@ def _cluster(
     bits = max(1, qmax.bit_length())
     idx_bits = max(1, int(m - 1).bit_length())
 
-    point_key = None  # packed cell key of every point (original order), when packed
-    key_shift = 0
-    if 3 * bits + idx_bits <= 63:
-        # One sort of (cell key, index) packed in an int64: groups the cells, index ascending.
-        np.left_shift(q[0], 2 * bits + idx_bits, out=q[0])
-        np.left_shift(q[1], bits + idx_bits, out=q[1])
-        np.left_shift(q[2], idx_bits, out=q[2])
-        key = q[0]
-        key |= q[1]
-        key |= q[2]
-        key |= local
-        cellk = np.sort(key, kind="stable")
-        order = cellk & np.int64((1 << idx_bits) - 1)
-        np.right_shift(cellk, idx_bits, out=cellk)
-        point_key, key_shift = key, idx_bits
-    elif 3 * bits <= 63:  # 21 bits or fewer per axis: one int64 key, indirect sort
-        key = q[0] << (2 * bits)
-        key |= q[1] << bits
-        key |= q[2]
-        order = np.argsort(key, kind="stable")
-        cellk = key[order]
-        point_key = key
-    else:  # more than 2^21 cells on an axis: sort the rows lexicographically
-        order = np.lexsort((q[2], q[1], q[0]))
-        cellk = None
+    order, cellk, point_key, key_shift = _sort_by_cell(q, local, bits, idx_bits)
     start = np.empty(m, dtype=bool)
     start[0] = True
     if cellk is not None:
@@ -285,6 +246,63 @@ def _cluster(
     sub_f, sub_cand = _cluster(sub_cols, lo, sub_ext, cell / 8.0, tol, cell)
     f[dense] = dense[sub_f]
     return f, np.concatenate([cand, dense[sub_cand]])
+
+
+def _cell_coordinates(
+    cols: list[np.ndarray], lo: np.ndarray, inv: float, use32: bool, top: bool
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per axis, each point's fraction within its cell and its integer cell coordinate (cells
+    of size ``1 / inv`` from ``lo``; below the top level, from the lowest occupied cell)."""
+    fr: list[np.ndarray] = []
+    q: list[np.ndarray] = []
+    for c, o in zip(cols, lo):
+        if use32:  # exact: lo is one of the float32 values
+            ga = np.subtract(c, np.float32(o))
+            ga *= np.float32(inv)
+        else:
+            ga = np.subtract(c, o, dtype=np.float64)
+            ga *= inv
+        fl = np.floor(ga)
+        ga -= fl  # the fraction within the cell (exact)
+        if not top:
+            fl -= fl.min()
+        fr.append(ga)
+        q.append(fl.astype(np.int64))
+    return fr, q
+
+
+def _sort_by_cell(
+    q: list[np.ndarray], local: np.ndarray, bits: int, idx_bits: int
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int]:
+    """The points in cell order, index ascending within a cell: ``(order, sorted cell keys
+    or None, each point's packed cell key or None, the key's index bits)``. Shifts ``q`` in
+    place when the key and the index pack into one int64."""
+    point_key = None  # packed cell key of every point (original order), when packed
+    key_shift = 0
+    if 3 * bits + idx_bits <= 63:
+        # One sort of (cell key, index) packed in an int64: groups the cells, index ascending.
+        np.left_shift(q[0], 2 * bits + idx_bits, out=q[0])
+        np.left_shift(q[1], bits + idx_bits, out=q[1])
+        np.left_shift(q[2], idx_bits, out=q[2])
+        key = q[0]
+        key |= q[1]
+        key |= q[2]
+        key |= local
+        cellk = np.sort(key, kind="stable")
+        order = cellk & np.int64((1 << idx_bits) - 1)
+        np.right_shift(cellk, idx_bits, out=cellk)
+        point_key, key_shift = key, idx_bits
+    elif 3 * bits <= 63:  # 21 bits or fewer per axis: one int64 key, indirect sort
+        key = q[0] << (2 * bits)
+        key |= q[1] << bits
+        key |= q[2]
+        order = np.argsort(key, kind="stable")
+        cellk = key[order]
+        point_key = key
+    else:  # more than 2^21 cells on an axis: sort the rows lexicographically
+        order = np.lexsort((q[2], q[1], q[0]))
+        cellk = None
+    return order, cellk, point_key, key_shift
 
 
 def _bounds(p: np.ndarray, block: int = 1024) -> tuple[np.ndarray, np.ndarray]:
