@@ -25,19 +25,25 @@ class Hung(BaseException):
 
 @contextlib.contextmanager
 def deadline(seconds: float) -> Iterator[None]:
-    """Fail the block (raise :class:`Hung`) if it runs longer than ``seconds``: a loop that
-    never ends fails the test instead of hanging the suite."""
+    """Fail the block (raise :class:`Hung`) once it has used ``seconds`` of CPU (a loop that
+    never ends spins), or ten times that in wall-clock time (a wait that never ends): a hang
+    fails the test instead of hanging the suite, and a loaded machine, which stretches the wall
+    clock but not the CPU a run needs, fails nothing."""
 
     def ring(signum, frame):  # noqa: ANN001
-        raise Hung(f"still running after {seconds} s")
+        what = "of CPU" if signum == signal.SIGPROF else "of wall-clock time"
+        raise Hung(f"still running after {seconds} s {what}")
 
-    old = signal.signal(signal.SIGALRM, ring)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
+    old = {s: signal.signal(s, ring) for s in (signal.SIGPROF, signal.SIGALRM)}
+    signal.setitimer(signal.ITIMER_PROF, seconds)
+    signal.setitimer(signal.ITIMER_REAL, 10 * seconds)
     try:
         yield
     finally:
+        signal.setitimer(signal.ITIMER_PROF, 0)
         signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
+        for s, handler in old.items():
+            signal.signal(s, handler)
 
 
 @pytest.fixture(scope="module")

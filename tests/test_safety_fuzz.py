@@ -497,19 +497,26 @@ class _Hung(BaseException):
 
 
 def _within(seconds: float, run: Callable[[], int]) -> Callable[[], int]:
+    """``run`` failed (:class:`_Hung`) once it has used ``seconds`` of CPU, or ten times that
+    in wall-clock time: a spinning loop or an endless wait is a hang; a loaded machine, which
+    stretches the wall clock but not the CPU an example needs, is not."""
     import signal
 
     def timed() -> int:
         def ring(signum, frame):  # noqa: ANN001
-            raise _Hung(f"still running after {seconds} s")
+            what = "of CPU" if signum == signal.SIGPROF else "of wall-clock time"
+            raise _Hung(f"still running after {seconds} s {what}")
 
-        old = signal.signal(signal.SIGALRM, ring)
-        signal.setitimer(signal.ITIMER_REAL, seconds)
+        old = {s: signal.signal(s, ring) for s in (signal.SIGPROF, signal.SIGALRM)}
+        signal.setitimer(signal.ITIMER_PROF, seconds)
+        signal.setitimer(signal.ITIMER_REAL, 10 * seconds)
         try:
             return run()
         finally:
+            signal.setitimer(signal.ITIMER_PROF, 0)
             signal.setitimer(signal.ITIMER_REAL, 0)
-            signal.signal(signal.SIGALRM, old)
+            for s, handler in old.items():
+                signal.signal(s, handler)
 
     return timed
 

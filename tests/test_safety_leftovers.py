@@ -10,7 +10,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -34,21 +33,33 @@ def _staging(folder: Path) -> list[Path]:
     return sorted(folder.glob(f".*{staging.STAGING_SUFFIX}"))
 
 
-def _kill_once_staging_appears(cmd: list[str], folder: Path) -> None:
+#: A child running ``python -m wrinklepipe ARGS`` that kills itself (SIGKILL) right after its
+#: first staging folder appears (the rename of ``...-new`` onto the staging name): the moment
+#: is a step of the run, not a guess of a poller racing it on a loaded machine.
+_KILL_AT_STAGING = """
+import os, runpy, signal, sys
+real = os.rename
+def rename(src, dst, *a, **k):
+    real(src, dst, *a, **k)
+    if os.fsdecode(dst).endswith(suffix):
+        os.kill(os.getpid(), signal.SIGKILL)
+os.rename = rename
+suffix, sys.argv = sys.argv[1], ["wrinklepipe", *sys.argv[2:]]
+runpy.run_module("wrinklepipe", run_name="__main__", alter_sys=True)
+"""
+
+
+def _kill_once_staging_appears(args: list[str]) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
-    deadline = time.monotonic() + 60
-    while not _staging(folder) and proc.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.005)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
+    cmd = [sys.executable, "-c", _KILL_AT_STAGING, staging.STAGING_SUFFIX, *args]
+    proc = subprocess.run(cmd, env=env, capture_output=True, timeout=900)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr.decode(errors="replace")
 
 
 def test_later_run_removes_what_a_killed_run_left(source, tmp_path):
     """Defect 6: kill -9 left ``.OUT.<random>.partial`` folders that no later run removed."""
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "wrinklepipe", "convert", str(source), "-o", str(out)]
-    _kill_once_staging_appears([*cmd, "--no-validate"], tmp_path)
+    _kill_once_staging_appears(["convert", str(source), "-o", str(out), "--no-validate"])
     left = _staging(tmp_path)
     assert left and not out.exists()  # the kill left its staging folder, never a partial output
     marker = json.loads((left[0] / staging.STAGING_MARKER).read_text())

@@ -295,7 +295,11 @@ def _remove_staging(folder: Path, fd: int) -> None:
     """Remove a staging folder: its contents first, the marker last (a kill part-way through
     leaves a folder still marked as a dead run's, which the next run removes)."""
     try:
-        for child in folder.iterdir():
+        try:
+            children = list(folder.iterdir())
+        except FileNotFoundError:  # another run removing the same dead run's folder was first
+            children = []
+        for child in children:
             if child.name == STAGING_MARKER:
                 continue
             if child.is_dir() and not child.is_symlink():
