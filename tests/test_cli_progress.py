@@ -73,14 +73,21 @@ def manifest() -> Path:
 
 def _start(manifest: Path, out: Path) -> tuple[subprocess.Popen, Reader, float]:
     env = {k: v for k, v in os.environ.items() if k != "COLUMNS"}
-    t0 = time.monotonic()
-    proc = subprocess.Popen(
-        [str(SCRIPT), "convert", str(manifest), "-o", str(out)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-    )
+    # A test run started in the background of a shell (`pytest ... &`) has SIGINT ignored, and
+    # an ignored signal stays ignored in a child: the child gets the default disposition, as a
+    # convert started from a terminal has (a Python handler here becomes the default there).
+    ignored = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        t0 = time.monotonic()
+        proc = subprocess.Popen(
+            [str(SCRIPT), "convert", str(manifest), "-o", str(out)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+    finally:
+        signal.signal(signal.SIGINT, ignored)
     return proc, Reader(proc.stderr, t0), t0
 
 

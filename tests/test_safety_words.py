@@ -77,6 +77,35 @@ def test_a_non_finite_number_is_one_clear_message(source, tmp_path, capsys, old,
     _one_line(capsys, "manifest.toml", f"[{key}]", "is not a finite number")
 
 
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["bake", "{m}", "-o", "{o}", "--fps", "nan"],
+        ["bake", "{m}", "-o", "{o}", "--end", "inf"],
+        ["batch", "{d}", "-o", "{o}", "--timeout", "nan"],
+        ["batch", "{d}", "-o", "{o}", "--no-workers", "inf"],
+        ["vertex-ids", "{d}/head.glb", "-o", "{o}.npy", "--tolerance", "nan"],
+    ],
+)
+def test_a_non_finite_number_option_is_refused(source, tmp_path, capsys, args):
+    """A number option given nan or inf (which float() accepts) is refused like any other value
+    that is not a number: before the command runs (bake's --end inf, batch's --timeout nan, a
+    watchdog that never fires, passed)."""
+    fill = {"m": str(source), "d": str(source.parent), "o": str(tmp_path / "out")}
+    with pytest.raises(SystemExit) as stop:
+        main([a.format(**fill) for a in args])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and "is not a finite number" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_bake_between_start_and_end_is_costed_in_words(source, tmp_path, capsys):
+    """--end far out: one message naming the options, not an internal error."""
+    assert main(["bake", str(source), "-o", str(tmp_path / "out"), "--end", "1e9"]) == 2
+    _one_line(capsys, "--start/--end", "over the cap")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_tiny_pd_scale_is_refused_without_runtime_warnings(source, tmp_path, capsys):
     src = _copy(source.parent, tmp_path) / source.name
     _edit(src, 'pd_scale = "auto"', "pd_scale = 1e-46")

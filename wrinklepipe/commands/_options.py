@@ -5,6 +5,7 @@ Not a command (the leading underscore keeps it out of the command list)."""
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 from wrinklepipe.console import problem
@@ -16,6 +17,18 @@ SEVERITIES = ("error", "warning", "info")
 
 #: The lowest severity that fails a run, unless --fail-on says otherwise.
 DEFAULT_FAIL_ON = "error"
+
+
+def finite_float(text: str) -> float:
+    """A number option's value (``type=finite_float``): ``nan`` and ``inf``, which ``float``
+    accepts, are refused as argparse refuses any other value that is not a number."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+    return value
+
+
+finite_float.__name__ = "number"  # argparse names the type so: "invalid number value: 'x'"
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):

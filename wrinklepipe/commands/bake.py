@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from wrinklepipe.commands._options import add_force, add_json, add_output
+from wrinklepipe.commands._options import add_force, add_json, add_output, finite_float
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.drivers import KINDS
 from wrinklepipe.jobs.bake import BakeOptions, bake_manifest
@@ -46,16 +46,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--maps", action="store_true", help="also write a blended normal map per frame")
     p.add_argument(
         "--fps",
-        type=float,
+        type=finite_float,
         default=d.fps,
         metavar="FPS",
         help="frames per second (default: the driver's)",
     )
-    p.add_argument("--start", type=float, default=d.start, metavar="S", help="first time (s)")
-    p.add_argument("--end", type=float, default=d.end, metavar="S", help="last time (s)")
+    p.add_argument(
+        "--start", type=finite_float, default=d.start, metavar="S", help="first time (s)"
+    )
+    p.add_argument("--end", type=finite_float, default=d.end, metavar="S", help="last time (s)")
     p.add_argument(
         "--tolerance",
-        type=float,
+        type=finite_float,
         default=d.tolerance,
         metavar="W",
         help="weights within W of the last rendered frame count as unchanged",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from wrinklepipe.commands._options import add_force, add_json, add_output
+from wrinklepipe.commands._options import add_force, add_json, add_output, finite_float
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.bake import BakeOptions
@@ -62,7 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--max-distance",
-        type=float,
+        type=finite_float,
         default=None,
         metavar="D",
         help="ray distance either side of the low surface, mesh units (default: measured)",

@@ -12,7 +12,7 @@ from wrinklepipe.batch.cache import DEFAULT_MAX_BYTES
 from wrinklepipe.batch.engines import DEFAULT_NO_WORKERS_S, DEFAULT_TIMEOUT_S
 from wrinklepipe.batch.options import MASK_LAYOUTS, AssetOptions
 from wrinklepipe.batch.publish import run_and_publish
-from wrinklepipe.commands._options import add_fail_on, add_json, add_report
+from wrinklepipe.commands._options import add_fail_on, add_json, add_report, finite_float
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.demo.source import cache_root
 from wrinklepipe.errors import input_error
@@ -71,14 +71,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     run.add_argument(
         "--timeout",
-        type=float,
+        type=finite_float,
         metavar="S",
         help="local workers: the watchdog stops an asset after S seconds and fails it "
         f"(default {DEFAULT_TIMEOUT_S:g}; 0: no watchdog)",
     )
     run.add_argument(
         "--no-workers",
-        type=float,
+        type=finite_float,
         metavar="S",
         help="Dask: fail the assets left when the cluster has had no worker for S seconds "
         f"(default {DEFAULT_NO_WORKERS_S:g})",

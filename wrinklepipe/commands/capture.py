@@ -7,7 +7,7 @@ from pathlib import Path
 
 from wrinklepipe.atomic import staged_folder
 from wrinklepipe.capture.orientation import METHODS
-from wrinklepipe.commands._options import add_force, add_json, add_output
+from wrinklepipe.commands._options import add_force, add_json, add_output, finite_float
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
 from wrinklepipe.jobs.capture import CaptureInputs, CaptureJobOptions, example_session, run_capture
@@ -113,7 +113,7 @@ def _add_solver_options(p: argparse.ArgumentParser, d: CaptureJobOptions) -> Non
     """The ratio, orientation and output options."""
     p.add_argument(
         "--nz",
-        type=float,
+        type=finite_float,
         default=d.nz,
         metavar="NZ",
         help="N_z of the neutral surface (1: facing the camera)",
@@ -143,21 +143,21 @@ def _add_solver_options(p: argparse.ArgumentParser, d: CaptureJobOptions) -> Non
     )
     p.add_argument(
         "--blur",
-        type=float,
+        type=finite_float,
         default=d.blur,
         metavar="PX",
         help="Gaussian blur of R, in pixels before --scale",
     )
     p.add_argument(
         "--dark",
-        type=float,
+        type=finite_float,
         default=d.dark,
         metavar="L",
         help="neutral luminance below which R is not taken",
     )
     p.add_argument(
         "--deadband",
-        type=float,
+        type=finite_float,
         default=d.deadband,
         metavar="D",
         help="noise floor of 1 - R (default: measured)",
@@ -167,14 +167,14 @@ def _add_solver_options(p: argparse.ArgumentParser, d: CaptureJobOptions) -> Non
     )
     p.add_argument(
         "--furrow-sigma",
-        type=float,
+        type=finite_float,
         default=d.furrow_sigma,
         metavar="PX",
         help="crease half-width, in pixels before --scale",
     )
     p.add_argument(
         "--scale",
-        type=float,
+        type=finite_float,
         default=d.scale,
         metavar="K",
         help="multiply the blur/furrow sigmas (default: max(1, photo width / 256))",

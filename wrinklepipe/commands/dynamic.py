@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wrinklepipe.commands._options import add_output
+from wrinklepipe.commands._options import add_output, finite_float
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.dynamic import DynamicOptions
@@ -45,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--pose", metavar="POSE", help="deformed mesh file or .npy positions")
     g.add_argument("--morph", metavar="NAME=W", action="append", help="morph weight")
-    g.add_argument("--time", type=float, metavar="T", help="time of the file's animation")
+    g.add_argument("--time", type=finite_float, metavar="T", help="time of the file's animation")
     add_output(p, "output file: .npy, .json, .txt or .csv")
     p.add_argument(
         "--weighting",
@@ -71,7 +71,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--blur",
-        type=float,
+        type=finite_float,
         default=DynamicJobOptions().blur,
         metavar="PX",
         help="texture-space blur in texels",

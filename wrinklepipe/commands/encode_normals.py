@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 
 from wrinklepipe.atomic import output_files, write_bytes, write_json
-from wrinklepipe.commands._options import add_json, add_output, add_report
+from wrinklepipe.commands._options import add_json, add_output, add_report, finite_float
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.normals.job import OUTPUT_FORMATS, EncodeOptions, encode_normals
 
@@ -123,14 +123,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--max-p99",
-        type=float,
+        type=finite_float,
         default=d.max_p99_deg,
         metavar="DEG",
         help="budget: p99 error in degrees",
     )
     p.add_argument(
         "--max-mean",
-        type=float,
+        type=finite_float,
         default=d.max_mean_deg,
         metavar="DEG",
         help="budget: mean error in degrees",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from wrinklepipe.commands._options import add_force, add_json, add_output
+from wrinklepipe.commands._options import add_force, add_json, add_output, finite_float
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.jobs.regions import SNIPPET_FILE, RegionsJobOptions, regions_job
 from wrinklepipe.masks.layouts import LAYOUTS
@@ -63,14 +63,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="samples per texel per axis: 1 to 4",
     )
     p.add_argument(
-        "--blur", type=float, default=m.blur, metavar="PX", help="Gaussian sigma in texels"
+        "--blur", type=finite_float, default=m.blur, metavar="PX", help="Gaussian sigma in texels"
     )
     p.add_argument(
         "--padding", type=int, default=m.padding, metavar="PX", help="edge padding in texels"
     )
     p.add_argument(
         "--threshold",
-        type=float,
+        type=finite_float,
         default=m.threshold,
         metavar="F",
         help="fraction of a target's reference change below which masks are 0",

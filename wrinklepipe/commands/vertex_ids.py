@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from wrinklepipe.commands._options import add_output
+from wrinklepipe.commands._options import add_output, finite_float
 from wrinklepipe.console import emit_json, err, status
 from wrinklepipe.geometry.vertex_ids import VertexIdOptions
 from wrinklepipe.outputs.per_vertex import write_per_vertex
@@ -34,10 +34,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d = VertexIdOptions()  # the defaults: one place
     p.add_argument("mesh", metavar="MESH", help="mesh file")
     add_output(p, "output file: .npy, .json or .txt (default: the summary only)", required=False)
-    p.add_argument("--tolerance", type=float, default=None, metavar="T", help="absolute tolerance")
+    p.add_argument(
+        "--tolerance", type=finite_float, default=None, metavar="T", help="absolute tolerance"
+    )
     p.add_argument(
         "--relative",
-        type=float,
+        type=finite_float,
         default=d.relative_tolerance,
         metavar="R",
         help="tolerance relative to the bounding-box diagonal",

@@ -17,7 +17,7 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.atomic import dumps_json, staged_folder, write_bytes
 from wrinklepipe.console import track
 from wrinklepipe.drivers.bake import blend_frames, changed_frames, encode_states, weights_csv
-from wrinklepipe.drivers.base import DriverContext, evaluate, frame_times
+from wrinklepipe.drivers.base import DriverContext, TooManyFrames, evaluate, frame_times
 from wrinklepipe.errors import InputError, input_error
 from wrinklepipe.gltf.animation import read_morph_tracks
 from wrinklepipe.io.images import write_image
@@ -99,7 +99,10 @@ def bake_manifest(
         probe = evaluate(kind, ctx, spec)
         t0 = opt.start if opt.start is not None else float(probe.times[0])
         t1 = opt.end if opt.end is not None else float(probe.times[-1])
-        times = frame_times(t0, t1, float(spec.get("fps", ctx.fps)))
+        try:
+            times = frame_times(t0, t1, float(spec.get("fps", ctx.fps)))
+        except TooManyFrames as exc:
+            raise InputError(f"{kind} driver: {exc}", "--start/--end") from None
     res = evaluate(kind, ctx, spec, times)
     if opt.maps and res.per_vertex:
         raise input_error(
