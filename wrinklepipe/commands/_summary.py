@@ -71,11 +71,31 @@ def fidelity_table(fid: dict[str, Any], which: str) -> list[str]:
     return out
 
 
-def color_table(color: dict[str, Any] | None) -> list[str]:
+def color_table(color: dict[str, Any] | None, copies: dict[str, Any] | None = None) -> list[str]:
     """The colour states' size and the per-pose colour fidelity table (CIEDE2000, worst
-    first) of report.json's ``color`` record; nothing without colour states."""
+    first) of report.json's ``color`` record, then the colour copies' block format and their
+    worst pose (``copies``: report.json's ``compression.color``); nothing without colour
+    states."""
     if not color:
         return []
+    return _color_rows(color) + _color_copies(copies)
+
+
+def _color_copies(copies: dict[str, Any] | None) -> list[str]:
+    if not copies:
+        return []
+    fid = copies.get("fidelity")
+    worst = ""
+    if fid and fid.get("poses"):
+        p = max(fid["poses"], key=lambda p: p["p99_delta_e"])
+        worst = f": worst pose {p['pose']} mean {p['mean_delta_e']:.2f}, p99 {p['p99_delta_e']:.2f}"
+    return [
+        f"colour copies: states {_fmt(copies.get('chosen', 'png'))}, base colour "
+        f"{_fmt(copies.get('base', 'png'))}{worst} CIEDE2000"
+    ]
+
+
+def _color_rows(color: dict[str, Any]) -> list[str]:
     b = color["budget"]
     verdict = Budget(b["max_mean_delta_e"], b["max_p99_delta_e"])
     h, w = color["size"]
@@ -124,7 +144,7 @@ def summary_lines(
         )
         out += fidelity_table(fid, "png") + fidelity_table(fid, "compressed")
         out += [f"note: {n}" for n in fid.get("notes", [])]
-    out += color_table(rep.get("color"))
+    out += color_table(rep.get("color"), rep.get("compression", {}).get("color"))
     clipped = rep.get("pd_scale", {}).get("clipped_texels") or {}
     if any(clipped.values()):
         out.append(

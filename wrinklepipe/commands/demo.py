@@ -11,7 +11,7 @@ from rich.markup import escape
 
 from wrinklepipe.atomic import staged_folder
 from wrinklepipe.commands._options import add_fail_on, add_force, add_json, add_output
-from wrinklepipe.commands._summary import exit_code, is_problem, summary_lines
+from wrinklepipe.commands._summary import color_table, exit_code, is_problem, summary_lines
 from wrinklepipe.console import emit_json, info, issue_counts, problem, status
 from wrinklepipe.demo.source import demo_source_dir
 from wrinklepipe.jobs.convert import ConvertOptions, convert
@@ -104,6 +104,9 @@ def run(args: argparse.Namespace) -> int:
     if (result.output / "validation.html").is_file():
         page = escape(str(Path(args.output) / "validation.html"))
         info(f"[bold]renders[/]      {page}", markup=True)
+    copies = rep.get("compression", {}).get("color")
+    for line in color_table(rep.get("color"), copies):  # the colour states, their fidelity
+        info(escape(line))
     if validation.get("status") == "skipped":
         info(f"[bold]validation[/]   skipped: {escape(validation.get('reason', ''))}", markup=True)
         return code

@@ -27,7 +27,7 @@ from wrinklepipe.model import height_to_normal
 from wrinklepipe.presets import jimenez
 
 DEMO_SEED = 20111
-DEMO_VERSION = 5
+DEMO_VERSION = 6  # 6: colour states (base_color, color_<state>)
 STATE_NAMES: tuple[str, ...] = ("stretch", "compress")
 MORPH_NAMES: tuple[str, ...] = (
     "brow_raise",

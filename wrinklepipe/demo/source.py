@@ -23,7 +23,9 @@ import pygltflib
 
 from wrinklepipe.atomic import staged_folder, write_bytes
 from wrinklepipe.demo.character import DEMO_VERSION, DemoCharacter, generate
+from wrinklepipe.demo.colors import demo_colors
 from wrinklepipe.io.images import write_image
+from wrinklepipe.io.png import png_bytes
 from wrinklepipe.staging import output_lock
 
 
@@ -114,6 +116,7 @@ def manifest_text(c: DemoCharacter, size: int) -> str:
         'name = "demo_head"',
         'mesh = "head.glb"',
         'base = "base_normal.png"',
+        'base_color = "base_color.png"  # the skin; each state\'s colour blends over it',
         'convention = "opengl"',
         'encoding = "pd"',
         'policy = "clamp01"',
@@ -125,14 +128,17 @@ def manifest_text(c: DemoCharacter, size: int) -> str:
         f"base = {size}",
         'wrinkle = "auto"  # the smallest size whose blended error meets the budget',
         'mask = "auto"  # the smallest mask size within the budget',
+        'color = "auto"  # the colour states\' size, by CIEDE2000 within the colour budget',
         "",
         "[budget]",
         "max_mean_deg = 0.5",
         "max_p99_deg = 2.0",
         "",
     ]
+    tint = {"stretch": "pale: blood pushed out", "compress": "flushed: blood pooling"}
     for name in c.state_names:
-        lines += ["[[states]]", f'name = "{name}"', f'map = "wrinkle_{name}.png"', ""]
+        lines += ["[[states]]", f'name = "{name}"', f'map = "wrinkle_{name}.png"']
+        lines += [f'color = "color_{name}.png"  # {tint.get(name, "its colour")}', ""]
     for name, side in zip(c.region_names, c.region_sides):
         lines += [
             "[[regions]]",
@@ -168,6 +174,10 @@ def write_demo_source(folder: str | Path, size: int = 1024) -> Path:
     masks = _box_down(c.masks, 4) if size >= 16 else c.masks
     for name, mask in zip(c.region_names, masks):
         write_image(folder / "masks" / f"{name}.png", mask, bits=8)
+    colors = demo_colors(c.base_height, c.state_names)  # sRGB, as painted
+    write_bytes(folder / "base_color.png", png_bytes(colors.base))
+    for j, k in enumerate(colors.state_index):
+        write_bytes(folder / f"color_{c.state_names[k]}.png", png_bytes(colors.states[j]))
     manifest = folder / "manifest.toml"
     write_bytes(manifest, manifest_text(c, size).encode("utf-8"))
     return manifest
