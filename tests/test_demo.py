@@ -127,7 +127,8 @@ def test_demo_source_is_byte_identical(tmp_path):
     a = write_demo_source(tmp_path / "a", 64).parent
     b = write_demo_source(tmp_path / "b", 64).parent
     files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
-    assert len(files) == 13
+    assert len(files) == 16  # 13 + the colour maps: base_color, color_stretch, color_compress
+    assert {"base_color.png", "color_stretch.png", "color_compress.png"} <= {f.name for f in files}
     for f in files:
         assert (a / f).read_bytes() == (b / f).read_bytes(), f
 
