@@ -388,6 +388,8 @@ def attach_source(inp: ValidationInput, src: WrinkleAsset, manifest: Path) -> Va
         base=src.base,
         states=src.states,
         masks=masks,
+        # the colour maps too: the shipped ones may be smaller (the colour states' auto size)
+        color=src.color if src.color is not None else a.color,
         budget=src.budget if src.budget.given else a.budget,
         provenance={**a.provenance, "maps": src.provenance.get("maps", {})},
     )
