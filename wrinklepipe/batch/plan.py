@@ -239,8 +239,68 @@ def plan_batch(
         root_dir = _abs(Path(dirs[0]))
     else:
         root_dir = cwd
-    skip = (out_dir,)
 
+    manifests = _listed_manifests(sources, batch, root_dir, cwd, (out_dir,), problems)
+
+    by_rel: dict[PurePosixPath, Path] = {}
+    for m in manifests:
+        rel = _rel_under(m, root_dir)
+        if rel is None:
+            problems.add(m, f"lies outside the batch root {root_dir} (use --root)")
+            continue
+        by_rel.setdefault(rel, _abs(m))
+    if batch is not None and batch.exclude:
+        by_rel = {
+            r: m
+            for r, m in by_rel.items()
+            if not any(fnmatch.fnmatch(str(r), x) for x in batch.exclude)
+        }
+
+    base = defaults or AssetOptions()
+    try:
+        base = base.updated(batch.defaults if batch else {})
+    except KeyError as exc:  # the schema lists the same keys; defensive only
+        problems.add(batch.path if batch else "batch", str(exc), "defaults")
+    per_asset, out_override = _asset_entries(batch, root_dir, by_rel, problems)
+    problems.raise_if_any()
+
+    jobs: list[Job] = []
+    for rel, path in sorted(by_rel.items()):
+        out_rel = out_override.get(rel, (default_output(rel), ""))[0]
+        options = base.updated({**per_asset.get(rel, {}), **(cli_options or {})})
+        jobs.append(
+            Job(
+                id=out_rel.as_posix(),
+                manifest=path,
+                manifest_rel=rel.as_posix(),
+                output=_abs(out_dir / out_rel),
+                options=options,
+                force=force,
+            )
+        )
+    if not jobs:
+        raise InputError("no manifests to convert", " ".join(sources) or "batch")
+    _check_outputs(jobs, out_dir, force, problems)
+    problems.raise_if_any()
+    return BatchPlan(
+        root=root_dir,
+        output=out_dir,
+        jobs=sorted(jobs, key=lambda j: j.id),
+        batch_file=batch.path if batch else None,
+    )
+
+
+def _listed_manifests(
+    sources: list[str],
+    batch: BatchFile | None,
+    root_dir: Path,
+    cwd: Path,
+    skip: tuple[Path, ...],
+    problems: ProblemList,
+) -> list[Path]:
+    """The manifests the sources name: the batch file's ``include`` patterns (else every
+    manifest under the root), or each source as a glob, a folder or a file; a source that
+    names none is a problem."""
     manifests: list[Path] = []
     if batch is not None:
         if batch.include:
@@ -273,31 +333,23 @@ def plan_batch(
             else:
                 problems.add(s, "not found")
 
-    def rel_of(p: Path) -> PurePosixPath | None:
-        r = os.path.relpath(_abs(p), root_dir)
-        return (
-            None if r == ".." or r.startswith(".." + os.sep) else PurePosixPath(Path(r).as_posix())
-        )
+    return manifests
 
-    by_rel: dict[PurePosixPath, Path] = {}
-    for m in manifests:
-        rel = rel_of(m)
-        if rel is None:
-            problems.add(m, f"lies outside the batch root {root_dir} (use --root)")
-            continue
-        by_rel.setdefault(rel, _abs(m))
-    if batch is not None and batch.exclude:
-        by_rel = {
-            r: m
-            for r, m in by_rel.items()
-            if not any(fnmatch.fnmatch(str(r), x) for x in batch.exclude)
-        }
 
-    base = defaults or AssetOptions()
-    try:
-        base = base.updated(batch.defaults if batch else {})
-    except KeyError as exc:  # the schema lists the same keys; defensive only
-        problems.add(batch.path if batch else "batch", str(exc), "defaults")
+def _rel_under(p: Path, root_dir: Path) -> PurePosixPath | None:
+    """``p`` relative to the batch root, or None when it lies outside it."""
+    r = os.path.relpath(_abs(p), root_dir)
+    return None if r == ".." or r.startswith(".." + os.sep) else PurePosixPath(Path(r).as_posix())
+
+
+def _asset_entries(
+    batch: BatchFile | None,
+    root_dir: Path,
+    by_rel: dict[PurePosixPath, Path],
+    problems: ProblemList,
+) -> tuple[dict[PurePosixPath, dict[str, Any]], dict[PurePosixPath, tuple[PurePosixPath, str]]]:
+    """The batch file's ``[[assets]]``: each entry's options per manifest and its output
+    folder (a manifest an entry names is added to ``by_rel``)."""
     per_asset: dict[PurePosixPath, dict[str, Any]] = {}
     out_override: dict[PurePosixPath, tuple[PurePosixPath, str]] = {}
     for i, entry in enumerate(batch.assets if batch else []):
@@ -305,13 +357,13 @@ def plan_batch(
         pattern = str(entry["manifest"])
         if _GLOB_MAGIC.search(pattern):
             for p in _glob(pattern, root_dir):
-                r = rel_of(p)
+                r = _rel_under(p, root_dir)
                 if r is not None and declares_manifest(p):
                     by_rel.setdefault(r, _abs(p))
             hits = [r for r in by_rel if fnmatch.fnmatch(str(r), pattern)]
         else:
             p = root_dir / pattern
-            r = rel_of(p)
+            r = _rel_under(p, root_dir)
             if not p.is_file() or r is None:
                 problems.add(batch.path, f"manifest not found: {p}", f"{key}.manifest")
                 continue
@@ -339,32 +391,7 @@ def plan_batch(
             else:
                 for r in hits:
                     out_override[r] = (out_rel, f"{batch.path} [{key}.output]")
-    problems.raise_if_any()
-
-    jobs: list[Job] = []
-    for rel, path in sorted(by_rel.items()):
-        out_rel = out_override.get(rel, (default_output(rel), ""))[0]
-        options = base.updated({**per_asset.get(rel, {}), **(cli_options or {})})
-        jobs.append(
-            Job(
-                id=out_rel.as_posix(),
-                manifest=path,
-                manifest_rel=rel.as_posix(),
-                output=_abs(out_dir / out_rel),
-                options=options,
-                force=force,
-            )
-        )
-    if not jobs:
-        raise InputError("no manifests to convert", " ".join(sources) or "batch")
-    _check_outputs(jobs, out_dir, force, problems)
-    problems.raise_if_any()
-    return BatchPlan(
-        root=root_dir,
-        output=out_dir,
-        jobs=sorted(jobs, key=lambda j: j.id),
-        batch_file=batch.path if batch else None,
-    )
+    return per_asset, out_override
 
 
 def _check_outputs(jobs: list[Job], out_dir: Path, force: bool, problems: ProblemList) -> None:
