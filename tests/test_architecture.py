@@ -275,7 +275,6 @@ TO_SPLIT = {
     "wrinklepipe/usd/meshes.py:_read_mesh",
     "wrinklepipe/usd/package_write.py:_material",
     "wrinklepipe/validate/render.py:render_pass",
-    "wrinklepipe/validate/report.py:report_html",
 }
 
 

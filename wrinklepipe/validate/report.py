@@ -301,21 +301,7 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
         f"{c['warning']} warnings, {c['info']} info (exit code {doc['exit_code']}).</p>",
         "<h2>Issues</h2>",
     ]
-    if doc["issues"]:
-        parts.append(
-            "<table><tr><th>severity</th><th>code</th><th>message</th><th>where</th>"
-            "<th>suggested fix</th></tr>"
-        )
-        for i in doc["issues"]:
-            title = RULES_BY_CODE[i["code"]].title
-            parts.append(
-                f"<tr><td class='{i['severity']}'>{i['severity']}</td>"
-                f"<td title='{e(title)}'><code>{e(i['code'])}</code></td><td>{e(i['message'])}"
-                f"</td><td><code>{e(i['pointer'])}</code></td><td>{e(i['fix'])}</td></tr>"
-            )
-        parts.append("</table>")
-    else:
-        parts.append("<p>No issues.</p>")
+    parts.extend(_issues_html(doc))
     images = picture_names(report)  # names only: the PNGs are encoded once, by html_images
 
     def fig(name: str, caption: str, big: bool = False) -> str:
@@ -374,6 +360,41 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
         parts.append("<h2>Masks as shipped</h2><p>Each region's mask, 0 black to 1 white.</p><div>")
         parts.extend(fig(k, k[len("region_mask_") : -4]) for k in masks)
         parts.append("</div>")
+    parts.extend(_metrics_html(doc))
+    if doc["render"]:
+        # no timings in the page: the same input gives the same bytes (they are in the JSON)
+        r = {k: v for k, v in doc["render"].items() if k not in ("poses", "render_s", "compare_s")}
+        parts.append(f"<h2>Render pass</h2>{_raw_json(r)}")
+    parts.append("</body></html>\n")
+    return "\n".join(p for p in parts if p)
+
+
+def _issues_html(doc: dict[str, Any]) -> list[str]:
+    """The issues table (severity, code with its title, message, where, fix)."""
+    e = html.escape
+    parts: list[str] = []
+    if doc["issues"]:
+        parts.append(
+            "<table><tr><th>severity</th><th>code</th><th>message</th><th>where</th>"
+            "<th>suggested fix</th></tr>"
+        )
+        for i in doc["issues"]:
+            title = RULES_BY_CODE[i["code"]].title
+            parts.append(
+                f"<tr><td class='{i['severity']}'>{i['severity']}</td>"
+                f"<td title='{e(title)}'><code>{e(i['code'])}</code></td><td>{e(i['message'])}"
+                f"</td><td><code>{e(i['pointer'])}</code></td><td>{e(i['fix'])}</td></tr>"
+            )
+        parts.append("</table>")
+    else:
+        parts.append("<p>No issues.</p>")
+    return parts
+
+
+def _metrics_html(doc: dict[str, Any]) -> list[str]:
+    """The metrics: a table for a dict of dicts, else the value as JSON."""
+    e = html.escape
+    parts: list[str] = []
     parts.append("<h2>Metrics</h2>")
     for key, val in sorted(doc["metrics"].items()):
         parts.append(f"<h3>{e(key)}</h3>")
@@ -391,12 +412,7 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
             parts.append("</table>")
         else:
             parts.append(_raw_json(val))
-    if doc["render"]:
-        # no timings in the page: the same input gives the same bytes (they are in the JSON)
-        r = {k: v for k, v in doc["render"].items() if k not in ("poses", "render_s", "compare_s")}
-        parts.append(f"<h2>Render pass</h2>{_raw_json(r)}")
-    parts.append("</body></html>\n")
-    return "\n".join(p for p in parts if p)
+    return parts
 
 
 def _raw_json(value: Any) -> str:
