@@ -21,11 +21,11 @@ import numpy as np
 
 from wrinklepipe import model
 from wrinklepipe.metrics import angle_deg
-from wrinklepipe.validate import ValidateOptions
+from wrinklepipe.validate import ValidateOptions, renderer
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate.context import Context
 from wrinklepipe.validate.inputs import ValidationInput
-from wrinklepipe.validate.render import _mask_layers, sample_reference
+from wrinklepipe.validate.render import sample_reference
 
 TOOLS = ("glslangValidator", "spirv-cross")
 
@@ -187,4 +187,4 @@ def compare(image: np.ndarray, ref: np.ndarray) -> dict[str, float]:
 
 
 def mask_layers(inp: ValidationInput) -> list:
-    return _mask_layers(inp)
+    return renderer.mask_layers(inp)

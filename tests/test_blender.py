@@ -452,7 +452,7 @@ def test_blender_node_group_blends_the_colour_as_the_model(blender):
     from wrinklepipe.codec import srgb
     from wrinklepipe.metrics import delta_e
     from wrinklepipe.validate import textures as tx
-    from wrinklepipe.validate.render import color_textures
+    from wrinklepipe.validate.renderer import color_textures
 
     _ok(blender, "render_color")
     color = blender["color"]

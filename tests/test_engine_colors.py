@@ -20,7 +20,7 @@ from wrinklepipe.metrics import delta_e
 from wrinklepipe.shading import godot, hlsl
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate import textures as tx
-from wrinklepipe.validate.render import color_textures, shader_setup
+from wrinklepipe.validate.renderer import color_textures, shader_setup
 from wrinklepipe.validate.ship import ShipOptions, ship_asset
 
 pytestmark = pytest.mark.gpu

@@ -22,7 +22,7 @@ from wrinkle_setups import overlapping_demo
 from wrinklepipe import codec
 from wrinklepipe.shading import godot, hlsl
 from wrinklepipe.validate import gl as glw
-from wrinklepipe.validate.render import shader_setup
+from wrinklepipe.validate.renderer import shader_setup
 from wrinklepipe.validate.ship import ShipOptions, ship_asset
 
 pytestmark = pytest.mark.gpu

@@ -49,7 +49,7 @@ from wrinklepipe.pipeline.prepare import prepare_mesh
 from wrinklepipe.shading import hlsl
 from wrinklepipe.sources.validation import load_input
 from wrinklepipe.validate.inputs import ChannelEntry, Texture
-from wrinklepipe.validate.render import shader_setup
+from wrinklepipe.validate.renderer import shader_setup
 
 ENGINES = ["unreal", "unity", "godot", "blender"]
 DATA = ROOT.parent / "shared" / "data"

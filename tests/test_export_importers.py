@@ -39,7 +39,7 @@ from wrinklepipe.io.png import png_pixels
 from wrinklepipe.jobs.export import export
 from wrinklepipe.shading import hlsl
 from wrinklepipe.validate.inputs import ChannelEntry, Texture
-from wrinklepipe.validate.render import shader_setup
+from wrinklepipe.validate.renderer import shader_setup
 
 
 @pytest.fixture(scope="module")

@@ -34,7 +34,7 @@ from wrinklepipe.sources.validation import load_input
 from wrinklepipe.usd.materialx import MATERIALX_ATTRIBUTE, materialx_document
 from wrinklepipe.usd.package_write import write_usd
 from wrinklepipe.validate.gl import GLUnavailable
-from wrinklepipe.validate.render import shader_setup
+from wrinklepipe.validate.renderer import shader_setup
 
 SIZE = 96  # rendered pixels (the maps are 128^2 / 64^2: samples fall between texels)
 #: The nodes the document may use: MaterialX's standard library, nothing of its own.
@@ -237,7 +237,7 @@ def test_materialx_blends_the_colour_as_the_model(tmp_path):
     from wrinklepipe.pipeline.package import package_from_asset
     from wrinklepipe.pipeline.prepare import prepare_mesh
     from wrinklepipe.validate import textures as tx
-    from wrinklepipe.validate.render import color_textures
+    from wrinklepipe.validate.renderer import color_textures
 
     a = demo_asset(64, color=True, mesh_resolution=(48, 32))
     a = replace(a, mesh=prepare_mesh(a.mesh))

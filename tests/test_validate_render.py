@@ -20,7 +20,8 @@ from wrinklepipe.sources.validation import load_input
 from wrinklepipe.validate import ValidateOptions, validate
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate.context import Context
-from wrinklepipe.validate.render import Renderer, ortho_front, render_pass
+from wrinklepipe.validate.render import render_pass
+from wrinklepipe.validate.renderer import Renderer, ortho_front
 from wrinklepipe.validate.ship import ShipOptions, ship_asset
 
 pytestmark = pytest.mark.gpu
@@ -116,7 +117,7 @@ def test_reading_back_the_covered_box_gives_the_full_read_back():
 
 
 def test_alpha_box_is_in_gl_window_coordinates():
-    from wrinklepipe.validate.render import alpha_box
+    from wrinklepipe.validate.renderer import alpha_box
 
     img = np.zeros((10, 8, 4), np.float32)
     assert alpha_box(img) is None

@@ -23,7 +23,7 @@ from wrinklepipe.validate.catalogue import RULES, issues_markdown, make_issue
 from wrinklepipe.validate.config import parse_config
 from wrinklepipe.validate.context import Context, position_groups
 from wrinklepipe.validate.inputs import Texture
-from wrinklepipe.validate.render import triangle_layer_touch
+from wrinklepipe.validate.renderer import triangle_layer_touch
 from wrinklepipe.validate.report import normalized
 from wrinklepipe.validate.rules_maps import convention_score
 from wrinklepipe.validate.rules_masks import check_masks, side_centroids, stored_step

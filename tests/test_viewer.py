@@ -465,7 +465,7 @@ def test_threejs_viewer_blends_the_colour_as_the_model(browser):
     from wrinklepipe.codec import srgb
     from wrinklepipe.metrics import delta_e
     from wrinklepipe.validate import textures as tx
-    from wrinklepipe.validate.render import color_textures
+    from wrinklepipe.validate.renderer import color_textures
 
     uvimg = _image(browser, "color_uv.f32")
     cov = uvimg[..., 3] > 0.5

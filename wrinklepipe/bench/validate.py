@@ -27,7 +27,7 @@ from wrinklepipe.sources.validation import load_input
 from wrinklepipe.validate import ValidateOptions, validate
 from wrinklepipe.validate import gl as glw
 from wrinklepipe.validate.context import expression_weights
-from wrinklepipe.validate.render import Renderer
+from wrinklepipe.validate.renderer import Renderer
 
 
 def _interleaved(fns: dict[str, Callable[[], Any]], repeat: int) -> dict[str, float]:
