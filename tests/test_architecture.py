@@ -273,7 +273,6 @@ TO_SPLIT = {
     "wrinklepipe/usd/animation.py:add_animations",
     "wrinklepipe/usd/meshes.py:_read_mesh",
     "wrinklepipe/usd/package_write.py:_material",
-    "wrinklepipe/validate/render.py:render_pass",
 }
 
 

@@ -307,7 +307,6 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
     leaks = []
     missing = []
     n_gpu_neutral = neutral.normal[cov][:, :3]
-    dilate = np.ones((5, 5), bool)
     min_strong = MIN_STRONG_SHARE * cov.size
     for label, fr in frames.items():
         w = by_name[label].weights
@@ -323,29 +322,13 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
         images[f"gpu_error/{label}"] = emap
         images[f"render/{label}"] = fr.color[..., :3]
         if label != "neutral":
-            change = angle_deg(gpu, n_gpu_neutral)
-            changed = change > o.wrinkle_deg
-            masks_expected = samples.src_masks if samples.src_masks is not None else samples.masks
-            act = model.activations(masks_expected, w, a.policy)
-            active = np.abs(act).sum(axis=0) > 1e-4
-            act_img = np.zeros(cov.shape, bool)
-            act_img[cov] = active
-            act_img = ndimage.binary_dilation(act_img, dilate, iterations=2)
-            leak = changed & ~act_img[cov]
-            n_leak = int(leak.sum())
-            entry["changed_pixels"] = int(changed.sum())
-            entry["leak_pixels"] = n_leak
-            if n_leak > o.leak_fraction * cov.sum():
-                leaks.append((label, n_leak))
-            if samples.src_relief is not None and len(samples.src_relief) == len(act):
-                k_rel = samples.src_relief
-                full_act = act > 0.5
-                strong = (full_act & (k_rel > 4.0 * o.wrinkle_deg)).any(axis=0)
-                quiet = strong & (change < 0.5 * o.wrinkle_deg)
-                entry["strong_pixels"] = int(strong.sum())
-                entry["quiet_pixels"] = int(quiet.sum())
-                if strong.sum() > min_strong and quiet.sum() > 0.25 * strong.sum():
-                    missing.append((label, int(quiet.sum()), int(strong.sum())))
+            change, leaked, quiet = _change_from_neutral(
+                ctx, samples, cov, gpu, n_gpu_neutral, w, min_strong, entry
+            )
+            if leaked is not None:
+                leaks.append((label, leaked))
+            if quiet is not None:
+                missing.append((label, *quiet))
             cmap = np.zeros(cov.shape, np.float32)
             cmap[cov] = change
             images[f"change/{label}"] = cmap
@@ -360,45 +343,8 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
     ctx.metrics["gpu_vs_reference_deg"] = {
         k: v["gpu_vs_reference_deg"] for k, v in per_pose.items()
     }
-    # fidelity in screen space: the GPU render against the full-resolution source's
-    gpu = {e: fr.normal[cov][:, :3] for e, fr in frames.items() if e is not None}
-    f_issues, f_info = render_fidelity(ctx, uv, gpu, samples.masks)
-    issues += f_issues
-    for e, err in f_info.get("maps", {}).items():
-        emap = np.zeros(cov.shape, np.float32)
-        emap[cov] = err
-        images[f"fidelity_render/{e}"] = emap
-        # the full-resolution source's render beside the shipped one: blended normals per pixel
-        for key, n in (("render_source", f_info["normals"][e]), ("render_shipped", gpu[e])):
-            pic = np.ones(cov.shape + (3,), np.float32)
-            pic[cov] = fp.normal_picture(n)
-            images[f"{key}/{e}"] = pic
-    # mask overlay from the UV buffer: shipped masks coloured per region over the neutral render
-    overlay = np.zeros(cov.shape + (3,), np.float32)
-    colors = region_colours_linear(len(a.regions))  # Tol's colour-blind-safe schemes
-    overlay[cov] = np.clip(samples.masks.T @ colors, 0.0, 1.0)
-    images["mask_overlay"] = 0.5 * neutral.color[..., :3] + 0.5 * overlay
-    images["_region_colors"] = colors
-    # crop the contact sheet to the masked area (with a margin), square
-    union = np.zeros(cov.shape, bool)
-    union[cov] = samples.masks.max(axis=0) > 1.0 / 255.0
-    if union.any():
-        ys, xs = np.nonzero(union)
-        cy, cx = (ys.min() + ys.max()) / 2, (xs.min() + xs.max()) / 2
-        half = int(max(ys.max() - ys.min(), xs.max() - xs.min()) * 0.6) + 4
-        y0, x0 = max(int(cy) - half, 0), max(int(cx) - half, 0)
-        y1, x1 = min(int(cy) + half, cov.shape[0]), min(int(cx) + half, cov.shape[1])
-        info["crop"] = [int(x0), int(y0), int(x1), int(y1)]
-        for k in list(images):
-            if k.split("/")[0] in (
-                "render",
-                "gpu_error",
-                "change",
-                "fidelity_render",
-                "render_source",
-                "render_shipped",
-            ):
-                images[k] = images[k][y0:y1, x0:x1]
+    issues += _fidelity_render(ctx, uv, cov, frames, samples, images)
+    _overlay_and_crop(len(a.regions), cov, samples, neutral, images, info)
     if gpu_bad:
         worst = max(gpu_bad, key=lambda x: x[1]["p99"])
         issues.append(
@@ -431,3 +377,104 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
             )
         )
     return issues, info, images
+
+
+def _change_from_neutral(
+    ctx: Context,
+    samples: Samples,
+    cov: np.ndarray,
+    gpu: np.ndarray,
+    n_gpu_neutral: np.ndarray,
+    w: np.ndarray,
+    min_strong: float,
+    entry: dict[str, Any],
+) -> tuple[np.ndarray, int | None, tuple[int, int] | None]:
+    """An expression's change from the neutral render (degrees per covered pixel); the pixels
+    it changes where masks x weights are zero, when more than ``leak_fraction`` (WP-RND-002);
+    (quiet, strong) pixels when it leaves the source's strongly active pixels unchanged
+    (WP-RND-003). Counts go into ``entry``."""
+    o, a = ctx.options, ctx.asset
+    change = angle_deg(gpu, n_gpu_neutral)
+    changed = change > o.wrinkle_deg
+    masks_expected = samples.src_masks if samples.src_masks is not None else samples.masks
+    act = model.activations(masks_expected, w, a.policy)
+    active = np.abs(act).sum(axis=0) > 1e-4
+    act_img = np.zeros(cov.shape, bool)
+    act_img[cov] = active
+    act_img = ndimage.binary_dilation(act_img, np.ones((5, 5), bool), iterations=2)
+    leak = changed & ~act_img[cov]
+    n_leak = int(leak.sum())
+    entry["changed_pixels"] = int(changed.sum())
+    entry["leak_pixels"] = n_leak
+    leaked = n_leak if n_leak > o.leak_fraction * cov.sum() else None
+    quiet_strong = None
+    if samples.src_relief is not None and len(samples.src_relief) == len(act):
+        k_rel = samples.src_relief
+        full_act = act > 0.5
+        strong = (full_act & (k_rel > 4.0 * o.wrinkle_deg)).any(axis=0)
+        quiet = strong & (change < 0.5 * o.wrinkle_deg)
+        entry["strong_pixels"] = int(strong.sum())
+        entry["quiet_pixels"] = int(quiet.sum())
+        if strong.sum() > min_strong and quiet.sum() > 0.25 * strong.sum():
+            quiet_strong = (int(quiet.sum()), int(strong.sum()))
+    return change, leaked, quiet_strong
+
+
+def _fidelity_render(
+    ctx: Context,
+    uv: np.ndarray,
+    cov: np.ndarray,
+    frames: dict[str, Frame],
+    samples: Samples,
+    images: dict[str, Any],
+) -> list[Issue]:
+    """Fidelity in screen space: the GPU render against the full-resolution source's; its
+    error maps and the two renders' normals go into ``images``."""
+    gpu = {e: fr.normal[cov][:, :3] for e, fr in frames.items() if e is not None}
+    f_issues, f_info = render_fidelity(ctx, uv, gpu, samples.masks)
+    for e, err in f_info.get("maps", {}).items():
+        emap = np.zeros(cov.shape, np.float32)
+        emap[cov] = err
+        images[f"fidelity_render/{e}"] = emap
+        # the full-resolution source's render beside the shipped one: blended normals per pixel
+        for key, n in (("render_source", f_info["normals"][e]), ("render_shipped", gpu[e])):
+            pic = np.ones(cov.shape + (3,), np.float32)
+            pic[cov] = fp.normal_picture(n)
+            images[f"{key}/{e}"] = pic
+    return f_issues
+
+
+def _overlay_and_crop(
+    n_regions: int,
+    cov: np.ndarray,
+    samples: Samples,
+    neutral: Frame,
+    images: dict[str, Any],
+    info: dict[str, Any],
+) -> None:
+    """The mask overlay (shipped masks coloured per region over the neutral render, from the
+    UV buffer) and the contact sheet cropped to the masked area (with a margin, square)."""
+    overlay = np.zeros(cov.shape + (3,), np.float32)
+    colors = region_colours_linear(n_regions)  # Tol's colour-blind-safe schemes
+    overlay[cov] = np.clip(samples.masks.T @ colors, 0.0, 1.0)
+    images["mask_overlay"] = 0.5 * neutral.color[..., :3] + 0.5 * overlay
+    images["_region_colors"] = colors
+    union = np.zeros(cov.shape, bool)
+    union[cov] = samples.masks.max(axis=0) > 1.0 / 255.0
+    if union.any():
+        ys, xs = np.nonzero(union)
+        cy, cx = (ys.min() + ys.max()) / 2, (xs.min() + xs.max()) / 2
+        half = int(max(ys.max() - ys.min(), xs.max() - xs.min()) * 0.6) + 4
+        y0, x0 = max(int(cy) - half, 0), max(int(cx) - half, 0)
+        y1, x1 = min(int(cy) + half, cov.shape[0]), min(int(cx) + half, cov.shape[1])
+        info["crop"] = [int(x0), int(y0), int(x1), int(y1)]
+        for k in list(images):
+            if k.split("/")[0] in (
+                "render",
+                "gpu_error",
+                "change",
+                "fidelity_render",
+                "render_source",
+                "render_shipped",
+            ):
+                images[k] = images[k][y0:y1, x0:x1]
