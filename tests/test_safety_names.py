@@ -82,3 +82,17 @@ def test_every_reference_names_a_file_that_was_written(written):
         "wrinkle_ab_2" in usda
         and "validation_files/region_mask_nose_2.png" in (written / "report.html").read_text()
     )
+
+
+def test_batch_outputs_that_differ_only_in_case_are_refused(tmp_path, capsys):
+    """Characters ``Ada/`` and ``ada/`` (a case-sensitive source tree) would be written to
+    ``OUT/Ada/...`` and ``OUT/ada/...``: one folder on macOS and Windows. Refused up front,
+    nothing written."""
+    for name in ("Ada", "ada"):
+        m = write_demo_source(tmp_path / "src" / name, 16)
+        m.write_text(m.read_text() + f"# {name}\n")
+    out = tmp_path / "out"
+    assert main(["batch", str(tmp_path / "src"), "-o", str(out), "--no-render"]) == 2
+    err = capsys.readouterr().err
+    assert "differs only in case from 'Ada/manifest'" in err, err
+    assert not out.exists()

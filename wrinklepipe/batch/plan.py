@@ -395,21 +395,24 @@ def _asset_entries(
 
 
 def _check_outputs(jobs: list[Job], out_dir: Path, force: bool, problems: ProblemList) -> None:
-    """Two outputs may not meet; no output may hold an input; existing outputs need ``force``."""
+    """Two outputs may not meet (nor differ only in case: on macOS and Windows they are one
+    folder); no output may hold an input; existing outputs need ``force``."""
     by_id: dict[str, Job] = {}
     for j in jobs:
-        other = by_id.get(j.id)
+        other = by_id.get(j.id.casefold())
         if other is not None:
+            same = "is also" if other.id == j.id else f"differs only in case from {other.id!r},"
             problems.add(
                 j.manifest_rel,
-                f"output {j.id!r} is also the output of {other.manifest_rel}; "
-                "give one of them another `output` in a batch file",
+                f"output {j.id!r} {same} the output of {other.manifest_rel}"
+                + ("" if other.id == j.id else " (one folder on macOS and Windows)")
+                + "; give one of them another `output` in a batch file",
             )
         else:
-            by_id[j.id] = j
+            by_id[j.id.casefold()] = j
     for j in jobs:
         for parent in PurePosixPath(j.id).parents:
-            other = by_id.get(parent.as_posix())
+            other = by_id.get(parent.as_posix().casefold())
             if other is not None and other is not j:
                 problems.add(
                     j.manifest_rel,
