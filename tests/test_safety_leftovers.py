@@ -10,13 +10,17 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
+import numpy as np
+import OpenImageIO as oiio
 import pytest
 
 from wrinklepipe import staging
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.io import png
 from wrinklepipe.paths import ROOT
 
 
@@ -253,3 +257,21 @@ staging._remove_recorded = die  # the lock is taken and written, the dead run's 
 with staging.output_lock(Path(sys.argv[1])):
     pass
 """
+
+
+def test_decoding_an_embedded_png_puts_nothing_on_disk(tmp_path, monkeypatch):
+    """A glTF's or USD package's PNG bytes are decoded from an anonymous memory file: nothing
+    is in the temporary folder while OpenImageIO reads it (a temporary file there was left by
+    every run killed at that moment: dozens piled up in /tmp under the fault tests)."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    seen: list[list[str]] = []
+    real_open = oiio.ImageInput.open
+
+    def watched(*args):  # noqa: ANN002, ANN202
+        seen.append(sorted(p.name for p in tmp_path.iterdir()))
+        return real_open(*args)
+
+    monkeypatch.setattr(png.oiio.ImageInput, "open", watched)
+    pixels = np.arange(48, dtype=np.uint8).reshape(4, 4, 3)
+    assert (png.png_pixels(png.png_bytes(pixels)) == pixels).all()
+    assert seen == [[]] and list(tmp_path.iterdir()) == []

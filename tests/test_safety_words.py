@@ -152,8 +152,9 @@ def test_a_text_file_used_as_a_gltf_texture_is_not_read_as_a_size(converted, tmp
         (src / "textures" / f).write_text("some notes, not an image at all\n")
     demo = write_demo_source(tmp_path / "maps", 16)
     shutil.copytree(demo.parent / "masks", src / "masks")
-    for f in ("wrinkle_stretch.png", "wrinkle_compress.png"):
-        shutil.copy(demo.parent / f, src / f)
+    for f in demo.parent.glob("*.png"):  # the wrinkle and colour maps
+        if f.name != "base_normal.png":
+            shutil.copy(f, src / f.name)
     text = demo.read_text().replace('mesh = "head.glb"', 'mesh = "demo_head.gltf"')
     text = "\n".join(ln for ln in text.splitlines() if not ln.startswith("base = "))
     (src / "manifest.toml").write_text(text + "\n")

@@ -6,10 +6,12 @@ flags colour-space chunks), so the same pixels and zlib level give the same byte
 
 from __future__ import annotations
 
+import contextlib
 import os
 import struct
 import tempfile
 import zlib
+from collections.abc import Iterator
 
 import numpy as np
 import OpenImageIO as oiio
@@ -75,19 +77,50 @@ def _png(px: np.ndarray, level: int, linear: bool = False) -> bytes:
     )
 
 
-def png_pixels(data: bytes, file: str = "") -> np.ndarray:
-    """Decode a PNG's pixels as stored (uint8/uint16 ``[H, W, C]``) via OpenImageIO."""
-
+@contextlib.contextmanager
+def _bytes_path(data: bytes) -> Iterator[str]:
+    """A path OpenImageIO can open (it reads only files) holding ``data``: an anonymous memory
+    file where the system has them (Linux: nothing on disk, so a run killed while it reads
+    leaves no file behind), else a temporary file, removed after."""
+    if hasattr(os, "memfd_create") and os.path.isdir("/proc/self/fd"):
+        fd = os.memfd_create("wrinklepipe-png", os.MFD_CLOEXEC)
+        try:
+            with os.fdopen(fd, "wb", closefd=False) as f:
+                f.write(data)
+            yield f"/proc/self/fd/{fd}"
+        finally:
+            os.close(fd)
+        return
     fd, tmp = tempfile.mkstemp(suffix=".png")
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        yield tmp
+    finally:
+        os.unlink(tmp)
+
+
+def _open_problem(data: bytes) -> str:
+    """Why OpenImageIO could not open ``data`` as an image, in words (the memory file has no
+    name, so its own text would be about a format reader for ``/proc/self/fd/N``)."""
+    said = oiio_message(oiio.geterror())
+    if not data.startswith(b"\x89PNG\r\n\x1a\n"):
+        return "not a PNG file"
+    if "format reader" in said or "/proc/self/fd" in said:
+        return "damaged PNG data (its chunks cannot be read)"
+    return said
+
+
+def png_pixels(data: bytes, file: str = "") -> np.ndarray:
+    """Decode a PNG's pixels as stored (uint8/uint16 ``[H, W, C]``) via OpenImageIO."""
+
+    with _bytes_path(data) as tmp:
         config = oiio.ImageSpec()
         config.attribute("oiio:UnassociatedAlpha", 1)
         with native_stderr_silenced():  # libpng's own "libpng error: ..." line
             inp = oiio.ImageInput.open(tmp, config)
             if inp is None:
-                raise input_error(file, f"cannot decode image: {oiio_message(oiio.geterror())}")
+                raise input_error(file, f"cannot decode image: {_open_problem(data)}")
             try:
                 spec = inp.spec()
                 fmt = oiio.UINT16 if spec.format == oiio.UINT16 else oiio.UINT8
@@ -95,8 +128,6 @@ def png_pixels(data: bytes, file: str = "") -> np.ndarray:
                 err = inp.geterror()
             finally:
                 inp.close()
-    finally:
-        os.unlink(tmp)
     if arr is None:
         raise input_error(
             file, f"cannot decode image pixels (truncated or corrupt?): {oiio_message(err)}"
