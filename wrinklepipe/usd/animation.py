@@ -110,7 +110,7 @@ def add_animations(
     (its transform op left without a value: every variant authors its rest matrix, a clip that
     moves it time samples too); ``wrinkle``: a callable ``(variant name) -> None`` authoring
     convert's morph-weight animation inside the ``wrinkle`` variant, or None. Returns notes."""
-    from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel, Vt  # deferred: usd-core, USD only
+    from pxr import Tf, Usd, UsdGeom  # deferred: usd-core, USD only
 
     nodes = doc.array("nodes")
     parent = {int(c): i for i, n in enumerate(nodes) for c in n.get("children", [])}
@@ -187,63 +187,8 @@ def add_animations(
                     for f, code in enumerate(codes):
                         op.Set(gf_matrix(mats[f]), Usd.TimeCode(float(code)))
             for g, (tokens, members) in enumerate(groups.items()):
-                first = members[0]
-                in_skel = set(first.joints)
-
-                moved = [  # animated joints, and those a moving non-joint ancestor carries
-                    k
-                    for k, j in enumerate(first.joints)
-                    if j in by_node
-                    or (
-                        parent.get(j) not in in_skel
-                        and local.moves(parent.get(j), _joint_parent(j, parent, in_skel))
-                    )
-                ]
-                shapes: list[str] = []
-                weights: list[np.ndarray] = []
-                for sk in members:
-                    for node, targets in sk.morph_nodes.items():
-                        c = by_node.get(node, {}).get("weights")
-                        if c is None:
-                            continue
-                        w = sample_channel_at(c.times, c.values, times, c.interpolation, "weights")
-                        for i, target in enumerate(targets[: w.shape[1]]):
-                            tok = Tf.MakeValidIdentifier(target)
-                            if tok not in shapes:
-                                shapes.append(tok)
-                                weights.append(w[:, i])
-                if not moved and not shapes:
-                    continue
-                path = holder.AppendChild(var if len(groups) == 1 else f"{var}_{g}")
-                anim = UsdSkel.Animation.Define(stage, path)
-                if moved:
-                    anim.CreateJointsAttr(Vt.TokenArray([tokens[k] for k in moved]))
-                    mats = np.empty((len(times), len(moved), 4, 4))
-                    for col, k in enumerate(moved):
-                        j = first.joints[k]
-                        up = _joint_parent(j, parent, in_skel)
-                        if up is None:  # a root: skeleton space (its ancestors' world)
-                            mats[:, col] = local.world(j)
-                        elif parent.get(j) == up:
-                            mats[:, col] = local.local(j)
-                        else:  # non-joint nodes between it and its joint parent
-                            mats[:, col] = np.linalg.inv(local.world(up)) @ local.world(j)
-                    for f, code in enumerate(codes):
-                        anim.SetTransforms(
-                            Vt.Matrix4dArray.FromNumpy(
-                                np.ascontiguousarray(mats[f].transpose(0, 2, 1))
-                            ),
-                            Usd.TimeCode(float(code)),
-                        )
-                if shapes:
-                    anim.CreateBlendShapesAttr(Vt.TokenArray(shapes))
-                    attr = anim.CreateBlendShapeWeightsAttr()
-                    table = np.stack(weights, 1).astype(np.float32)
-                    for f, code in enumerate(codes):
-                        attr.Set(Vt.FloatArray.FromNumpy(table[f]), Usd.TimeCode(float(code)))
-                for sk in members:
-                    api = UsdSkel.BindingAPI(sk.skel.GetPrim())
-                    api.CreateAnimationSourceRel().SetTargets([Sdf.Path(path)])
+                name = var if len(groups) == 1 else f"{var}_{g}"
+                _skel_animation(stage, holder.AppendChild(name), tokens, members, by_node, local)
         vset.ClearVariantSelection()
     default = WRINKLE_VARIANT if wrinkle is not None else first_clip
     vset.SetVariantSelection(default)
@@ -258,6 +203,78 @@ def add_animations(
             f"(selected: {default})"
         )
     return notes
+
+
+def _skel_animation(
+    stage: Any,
+    path: Any,
+    tokens: tuple[str, ...],
+    members: list[SkeletonInfo],
+    by_node: dict[int, dict[str, Channel]],
+    local: _Locals,
+) -> None:
+    """One clip's SkelAnimation at ``path`` for the skeletons that share ``tokens``: the
+    joints it moves (or a moving non-joint ancestor carries) and the blend-shape weights of
+    their meshes, bound as each skeleton's animation source; nothing when the clip moves
+    neither."""
+    from pxr import Sdf, Tf, Usd, UsdSkel, Vt  # deferred: usd-core, USD only
+
+    parent, times = local.parent, local.times
+    codes = times * stage.GetTimeCodesPerSecond()
+    first = members[0]
+    in_skel = set(first.joints)
+
+    moved = [  # animated joints, and those a moving non-joint ancestor carries
+        k
+        for k, j in enumerate(first.joints)
+        if j in by_node
+        or (
+            parent.get(j) not in in_skel
+            and local.moves(parent.get(j), _joint_parent(j, parent, in_skel))
+        )
+    ]
+    shapes: list[str] = []
+    weights: list[np.ndarray] = []
+    for sk in members:
+        for node, targets in sk.morph_nodes.items():
+            c = by_node.get(node, {}).get("weights")
+            if c is None:
+                continue
+            w = sample_channel_at(c.times, c.values, times, c.interpolation, "weights")
+            for i, target in enumerate(targets[: w.shape[1]]):
+                tok = Tf.MakeValidIdentifier(target)
+                if tok not in shapes:
+                    shapes.append(tok)
+                    weights.append(w[:, i])
+    if not moved and not shapes:
+        return
+    anim = UsdSkel.Animation.Define(stage, path)
+    if moved:
+        anim.CreateJointsAttr(Vt.TokenArray([tokens[k] for k in moved]))
+        mats = np.empty((len(times), len(moved), 4, 4))
+        for col, k in enumerate(moved):
+            j = first.joints[k]
+            up = _joint_parent(j, parent, in_skel)
+            if up is None:  # a root: skeleton space (its ancestors' world)
+                mats[:, col] = local.world(j)
+            elif parent.get(j) == up:
+                mats[:, col] = local.local(j)
+            else:  # non-joint nodes between it and its joint parent
+                mats[:, col] = np.linalg.inv(local.world(up)) @ local.world(j)
+        for f, code in enumerate(codes):
+            anim.SetTransforms(
+                Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(mats[f].transpose(0, 2, 1))),
+                Usd.TimeCode(float(code)),
+            )
+    if shapes:
+        anim.CreateBlendShapesAttr(Vt.TokenArray(shapes))
+        attr = anim.CreateBlendShapeWeightsAttr()
+        table = np.stack(weights, 1).astype(np.float32)
+        for f, code in enumerate(codes):
+            attr.Set(Vt.FloatArray.FromNumpy(table[f]), Usd.TimeCode(float(code)))
+    for sk in members:
+        api = UsdSkel.BindingAPI(sk.skel.GetPrim())
+        api.CreateAnimationSourceRel().SetTargets([Sdf.Path(path)])
 
 
 def _xform_op(stage: Any, path: Any) -> Any:
