@@ -23,7 +23,8 @@ from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.io.images import write_image
 from wrinklepipe.normals import dds
-from wrinklepipe.sources.validation import load_input
+from wrinklepipe.sources.validation import LoadOptions, load_input
+from wrinklepipe.validate import ValidateOptions, validate
 from wrinklepipe.validate.context import Context
 
 
@@ -199,3 +200,30 @@ def _mean_angle(a: np.ndarray, b: np.ndarray, name: str, scale: float) -> float:
 def _oiio_png(path: Path) -> np.ndarray:
     buf = oiio.ImageBuf(str(path))
     return np.asarray(buf.get_pixels(oiio.UINT8))
+
+
+def test_copies_judged_by_the_compressed_budget_everywhere(source, tmp_path):
+    """A manifest whose ``compressed_max_*`` keys are looser than the maps' budget, BC1 forced:
+    the copies the validator reads are inside the compressed budget, so neither the fidelity
+    rules nor the shipping error (WP-TEX-005) call them over. WP-TEX-005 judged them by the
+    maps' budget, which BC1 on the base is over at 64^2 (mean ~3 degrees against 0.5)."""
+    text = source.read_text()
+    maps = "[budget]\nmax_mean_deg = 0.5\nmax_p99_deg = 2.0\n"
+    assert maps in text
+    text = text.replace(
+        maps, maps + "compressed_max_mean_deg = 8.0\ncompressed_max_p99_deg = 20.0\n"
+    )
+    m = source.parent / "manifest_loose_copies.toml"
+    m.write_text(text + '\n[formats]\nbase = "bc1"\nwrinkle = "bc1"\n')
+    out = tmp_path / "out"
+    main(["convert", str(m), "-o", str(out), "--no-render"])
+    report = json.loads((out / "report.json").read_text())
+    assert report["compression"]["base"]["chosen"] == "bc1"
+    codes = [i["code"] for i in report["validation"]["issues"]]
+    assert "WP-TEX-005" not in codes and "WP-FID-001" not in codes, report["validation"]
+    # the shipping error is over the maps' budget: judged by it, WP-TEX-005 would fire
+    inp = load_input(out, LoadOptions(source=str(m)))
+    assert any(t.is_block for t in inp.textures if t.role == "base")
+    r = validate(inp, ValidateOptions(render=False))
+    worst = max(s["mean"] for s in r.metrics["shipping_error_deg"].values())
+    assert 0.5 < worst <= 8.0

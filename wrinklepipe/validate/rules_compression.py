@@ -44,7 +44,10 @@ def check_formats(ctx: Context) -> list[Issue]:
 
 
 def _budget(ctx: Context) -> Budget:
-    return ctx.asset.budget.maps()
+    """The budget the shipped textures are judged by: the compressed copies' when a base or
+    state texture is block-compressed (as the fidelity rules and the automatic choices judge
+    them), else the maps' (:func:`wrinklepipe.validate.rules_fidelity.budgets`)."""
+    return rules_fidelity.budgets(ctx)[0]
 
 
 def shipping_errors(
