@@ -38,6 +38,8 @@ class BenchResult:
     #: step -> (another step, max ratio of the two medians): a limit against a second reference
     limits_to: dict[str, tuple[str, float]] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: failures the benchmark found itself (a limit that is not a time: memory, an exit code)
+    extra_failures: list[str] = field(default_factory=list)
 
     def finish(self) -> BenchResult:
         base = next((r.median_s for r in self.rows if r.step == self.baseline), None)
@@ -47,7 +49,7 @@ class BenchResult:
         return self
 
     def failures(self) -> list[str]:
-        out = []
+        out = list(self.extra_failures)
         for step, limit in self.limits.items():
             row = next((r for r in self.rows if r.step == step), None)
             if row is not None and not row.ratio <= limit:

@@ -168,19 +168,34 @@ def face_disc(mesh: Mesh) -> FaceDisc:
 
 
 def _pores(size: int, rng: np.random.Generator) -> F.Field:
-    """Plane waves of 6 to 14 texels (at 1024) in random directions: pore-scale relief.
+    """Plane waves of 6 to 14 texels (at 1024) in random directions: pore-scale relief."""
+    return pores_rows(size, pore_waves(rng))
 
-    ``sin(a(u) + b(v)) = sin a cos b + cos a sin b`` makes every wave separable, so the sum
-    over waves is two small matrix products (no trigonometry per texel).
-    """
+
+def pore_waves(rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """The pore waves' wave numbers, directions, phases and amplitudes (40 plane waves)."""
     n = 40
     k = 2.0 * np.pi / (rng.uniform(6.0, 14.0, n) / 1024.0)
     theta = rng.uniform(0.0, np.pi, n)
     phase = rng.uniform(0.0, 2.0 * np.pi, n)
     amp = 0.012 / k  # slope amplitude 0.012 per wave: a few degrees in total
+    return k, theta, phase, amp
+
+
+def pores_rows(
+    size: int, waves: tuple[np.ndarray, ...], rows: tuple[int, int] | None = None
+) -> F.Field:
+    """The pore relief of :func:`pore_waves` on texel rows ``rows`` (half-open; all rows by
+    default) of a ``size`` x ``size`` map.
+
+    ``sin(a(u) + b(v)) = sin a cos b + cos a sin b`` makes every wave separable, so the sum
+    over waves is two small matrix products (no trigonometry per texel).
+    """
+    k, theta, phase, amp = waves
+    r0, r1 = rows or (0, size)
     c = (np.arange(size, dtype=np.float64) + 0.5) / size
     a = np.outer(k * np.cos(theta), c) + phase[:, None]  # [n, W] along u
-    b = np.outer(k * np.sin(theta), c)  # [n, H] along v
+    b = np.outer(k * np.sin(theta), c[r0:r1])  # [n, H] along v
     sa, ca, sb, cb = np.sin(a), np.cos(a), np.sin(b), np.cos(b)
 
     def outer(x: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:  # sum_i w_i y_i[v] x_i[u]
@@ -261,8 +276,32 @@ def _slopes(size: int, disc: FaceDisc, rng: np.random.Generator) -> tuple[np.nda
     return base, wrinkles
 
 
-def _masks(size: int, disc: FaceDisc) -> np.ndarray:
-    u, v = F.coords(size)
+def fixture_rows(
+    size: int, disc: FaceDisc, waves: tuple[np.ndarray, ...], rows: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Texel rows ``rows`` (half-open) of the fixture at ``size``: base slopes ``[n, W, 2]``,
+    wrinkle slopes ``[K, n, W, 2]`` and masks ``[R, n, W]``, so a large fixture is made band
+    by band (:mod:`wrinklepipe.bench.head_case`). Texel for texel the values of the whole
+    fixture, up to the pore sum's matrix products (summed in another order per band)."""
+    r0, r1 = rows
+    base = pores_rows(size, waves, rows).slopes
+    wrinkles = np.zeros((2, r1 - r0, size, 2), np.float32)
+    (f0, f1), cols = face_window(size, disc)
+    a, b = max(r0, f0), min(r1, f1)
+    if a < b:
+        u, v = F.coords(size, (a, b), cols)
+        scar, stretch, compress = _face_heights(u, v, disc)
+        win = (slice(a - r0, b - r0), slice(*cols))
+        base[win] += scar.slopes
+        wrinkles[(0, *win)] = stretch.slopes
+        wrinkles[(1, *win)] = compress.slopes
+    return base, wrinkles, _masks(size, disc, rows)
+
+
+def _masks(size: int, disc: FaceDisc, rows: tuple[int, int] | None = None) -> np.ndarray:
+    """The 8 regions' masks ``[R, H, W]`` (8-bit values; on texel rows ``rows`` only when
+    given)."""
+    u, v = F.coords(size, rows)
     fx = (u.f - disc.cu) / disc.ru
     fy = (v.f - disc.cv) / disc.rv
 

@@ -12,6 +12,7 @@ import struct
 import tempfile
 import zlib
 from collections.abc import Iterator
+from typing import BinaryIO
 
 import numpy as np
 import OpenImageIO as oiio
@@ -53,28 +54,90 @@ def _png(px: np.ndarray, level: int, linear: bool = False) -> bytes:
     if px.ndim == 2:
         px = px[..., None]
     h, w, c = px.shape
-    color_type = {1: 0, 2: 4, 3: 2, 4: 6}[c]
     depth = 16 if px.dtype == np.uint16 else 8
-    raw = px.astype(">u2").view(np.uint8) if depth == 16 else px.astype(np.uint8)
+    data = zlib.compress(_filtered(px, None), level)
+    return _head(w, h, c, depth, linear) + _chunk(b"IDAT", data) + _chunk(b"IEND", b"")
+
+
+def _filtered(px: np.ndarray, above: np.ndarray | None) -> bytes:
+    """Rows ``[h, w, c]`` as PNG scanlines with the Up filter (``above``: the stored bytes of
+    the row before the first, None at the top of the image)."""
+    h = px.shape[0]
+    raw = px.astype(">u2").view(np.uint8) if px.dtype == np.uint16 else px.astype(np.uint8)
     rows = raw.reshape(h, -1)
     up = rows.copy()
     up[1:] = rows[1:] - rows[:-1]  # uint8 wraps mod 256 as PNG requires
-    body = np.concatenate([np.full((h, 1), 2, np.uint8), up], axis=1)
-    data = zlib.compress(body.tobytes(), level)
+    if above is not None:
+        up[0] = rows[0] - above
+    return np.concatenate([np.full((h, 1), 2, np.uint8), up], axis=1).tobytes()
 
-    def chunk(tag: bytes, payload: bytes) -> bytes:
-        crc = zlib.crc32(tag + payload) & 0xFFFFFFFF
-        return struct.pack(">I", len(payload)) + tag + payload + struct.pack(">I", crc)
 
+def _chunk(tag: bytes, payload: bytes) -> bytes:
+    crc = zlib.crc32(tag + payload) & 0xFFFFFFFF
+    return struct.pack(">I", len(payload)) + tag + payload + struct.pack(">I", crc)
+
+
+def _head(w: int, h: int, c: int, depth: int, linear: bool) -> bytes:
+    """Signature, IHDR (and gAMA 1.0 when ``linear``)."""
+    color_type = {1: 0, 2: 4, 3: 2, 4: 6}[c]
     ihdr = struct.pack(">IIBBBBB", w, h, depth, color_type, 0, 0, 0)
-    gama = chunk(b"gAMA", struct.pack(">I", 100000)) if linear else b""  # gamma 1.0 (x 1e5)
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", ihdr)
-        + gama
-        + chunk(b"IDAT", data)
-        + chunk(b"IEND", b"")
-    )
+    gama = _chunk(b"gAMA", struct.pack(">I", 100000)) if linear else b""  # gamma 1.0 (x 1e5)
+    return b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr) + gama
+
+
+class PngRows:
+    """A PNG written band by band into a seekable binary file, with the bytes
+    :func:`png_bytes` gives for the whole image (one IDAT: zlib fed row by row makes the same
+    stream as zlib over all rows at once; the chunk's length and CRC are filled in at the end).
+    Memory: one band and zlib's window, whatever the image size.
+
+    ``add(rows)`` takes the next rows ``[n, w, c]`` (uint8 or uint16, the dtype of the first
+    band for all), ``close()`` checks that ``h`` rows came and writes the end."""
+
+    def __init__(
+        self, file: BinaryIO, w: int, h: int, c: int, depth: int, level: int, linear: bool = False
+    ) -> None:
+        if not 0 <= int(level) <= 9:
+            raise ValueError(f"PNG compression level must be 0..9, got {level}")
+        self._f, self._w, self._h, self._c, self._depth = file, w, h, c, depth
+        self._z = zlib.compressobj(int(level))
+        self._f.write(_head(w, h, c, depth, linear))
+        self._start = self._f.tell()
+        self._f.write(b"\0\0\0\0IDAT")
+        self._crc = zlib.crc32(b"IDAT")
+        self._size = 0
+        self._rows = 0
+        self._above: np.ndarray | None = None
+
+    def _put(self, data: bytes) -> None:
+        self._f.write(data)
+        self._crc = zlib.crc32(data, self._crc)
+        self._size += len(data)
+
+    def add(self, rows: np.ndarray) -> None:
+        px = rows[..., None] if rows.ndim == 2 else rows
+        want = np.uint16 if self._depth == 16 else np.uint8
+        if px.shape[1:] != (self._w, self._c) or px.dtype != want:
+            raise ValueError(
+                f"rows {px.shape} {px.dtype} do not fit a {self._w}-wide {self._c}-channel "
+                f"{self._depth}-bit PNG"
+            )
+        if self._rows + px.shape[0] > self._h:
+            raise ValueError(f"more than {self._h} rows")
+        self._put(self._z.compress(_filtered(px, self._above)))
+        raw = px[-1:].astype(">u2").view(np.uint8) if self._depth == 16 else px[-1:]
+        self._above = raw.reshape(-1).copy()
+        self._rows += px.shape[0]
+
+    def close(self) -> None:
+        if self._rows != self._h:
+            raise ValueError(f"{self._rows} rows written of {self._h}")
+        self._put(self._z.flush())
+        end = self._f.tell()
+        self._f.seek(self._start)
+        self._f.write(struct.pack(">I", self._size))
+        self._f.seek(end)
+        self._f.write(struct.pack(">I", self._crc & 0xFFFFFFFF) + _chunk(b"IEND", b""))
 
 
 @contextlib.contextmanager

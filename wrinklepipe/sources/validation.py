@@ -382,7 +382,10 @@ def attach_source(inp: ValidationInput, src: WrinkleAsset, manifest: Path) -> Va
             "does not describe the same asset (regions or states differ): "
             + ", ".join(missing[:5]),
         )
-    masks = np.stack([src.masks[names.index(r)] for r in a.region_names])
+    order = [names.index(r) for r in a.region_names]
+    # the source's own array when the regions come in its order (a full-size copy of every
+    # mask otherwise: 2 GB for eight 8192² masks)
+    masks = src.masks if order == list(range(len(names))) else src.masks[order]
     inp.asset = replace(
         a,
         base=src.base,
