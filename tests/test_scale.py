@@ -11,6 +11,7 @@ import pytest
 
 from wrinklepipe.bench import head_case, load_all
 from wrinklepipe.demo import face_fixture as ff
+from wrinklepipe.errors import InputError
 from wrinklepipe.io.png import PngRows, png_bytes, png_pixels
 
 # ------------------------------------------------------------------------------------------------
@@ -84,7 +85,8 @@ def test_head_case_is_the_fixture_made_band_by_band(tmp_path, monkeypatch):
 @pytest.mark.shared
 @pytest.mark.skipif(not head_case.MESH.is_file(), reason="../shared/data is absent")
 def test_scale_bench_quick_runs(tmp_path, monkeypatch):
-    """``bench scale --quick`` at 128² (the smallest the case validates at: at 64² too few texels tell the green convention): both commands exit 0 and their own peak
+    """``bench scale --quick`` at 128² (at 64² too few texels tell the green convention):
+    both commands exit 0 and their own peak
     memory is measured (a child's ``ru_maxrss``, more than the interpreter alone)."""
     monkeypatch.setenv("WRINKLEPIPE_CACHE", str(tmp_path / "cache"))
     monkeypatch.setenv("WRINKLEPIPE_SCALE_SIZES", "128")
@@ -96,3 +98,80 @@ def test_scale_bench_quick_runs(tmp_path, monkeypatch):
         assert 50 < got[cmd]["peak_rss_mb"] < 2000
         assert got[cmd]["cpu_s"] > 0
     assert res.failures() == [] and res.rows[0].ratio == 1.0
+
+
+# ------------------------------------------------------------------------------------------------
+# band by band == whole image
+
+
+def _hostile_texels(rng: np.random.Generator, channels: int, bits: int) -> np.ndarray:
+    """Texels [37, 23, C] in [0, 1] (integer levels when ``bits``) with NaN, zero-length,
+    short and z < 0 vectors at known places."""
+    v = rng.uniform(0.0, 1.0, (37, 23, channels)).astype(np.float32)
+    if bits:
+        top = (1 << bits) - 1
+        v = (np.rint(v * top) / top).astype(np.float32)
+    v[3, 4] = np.nan
+    v[20, 1, :3] = 0.5  # zero length once decoded
+    v[30, 7, :2] = 0.5 + 1e-4  # short
+    return v
+
+
+@pytest.mark.parametrize(
+    ("layout", "channels", "bits", "signed"),
+    [("auto", 3, 16, False), ("rgb", 3, 8, False), ("rg", 2, 0, False), ("ag", 4, 8, False),
+     ("rgb", 3, 0, True)],
+)  # fmt: skip
+@pytest.mark.parametrize("keep_short", [False, True])
+def test_decode_by_bands_is_the_whole_image(
+    monkeypatch, layout, channels, bits, signed, keep_short
+):
+    """Normal-map decoding in bands of 5 rows gives the whole image's vectors bit for bit and
+    the same counts, first texels included (found in a later band, told in image rows)."""
+    from wrinklepipe.normals import read as nr
+
+    v = _hostile_texels(np.random.default_rng(channels + bits), channels, bits)
+    if signed:
+        v = v * np.float32(2.0) - np.float32(1.0)
+    whole, ws = nr.decode_texels(v, layout, signed, 0.05, bits, keep_short)
+    monkeypatch.setattr(nr, "band_rows", lambda width, per: 5)
+    band, bs = nr.decode_texels(v, layout, signed, 0.05, bits, keep_short)
+    assert band.dtype == np.float32 and band.shape == (37, 23, 3)
+    assert np.array_equal(band.view(np.uint32), whole.view(np.uint32))  # NaN payloads too
+    assert bs == ws
+    assert ws.first_nan == (3, 4) and ws.nan == 1 and ws.texels == 37 * 23
+
+
+def test_masks_read_into_one_stack(tmp_path):
+    """Masks read one by one into their place in the stack: the values of each file, and
+    masks of another size refused naming both files."""
+    from wrinklepipe.io.images import write_image
+    from wrinklepipe.masks.read import read_masks
+
+    rng = np.random.default_rng(3)
+    ms = rng.integers(0, 256, (3, 9, 11)).astype(np.uint8)
+    paths = []
+    for i, m in enumerate(ms):
+        paths.append(write_image(tmp_path / f"m{i}.png", m.astype(np.float32) / 255, 8))
+    got = read_masks(paths)
+    assert got.masks.dtype == np.float32 and got.masks.shape == (3, 9, 11)
+    assert np.array_equal(np.rint(got.masks * 255).astype(np.uint8), ms)
+    write_image(tmp_path / "odd.png", np.zeros((9, 12), np.float32), 8)
+    with pytest.raises(InputError, match="masks of different sizes"):
+        read_masks([*paths, tmp_path / "odd.png"])
+
+
+def test_working_set_sizes(monkeypatch):
+    from wrinklepipe import workset
+
+    assert workset.parse_size("512M") == 512 << 20 and workset.parse_size("2g") == 2 << 30
+    assert workset.parse_size("1.5G") == 3 << 29 and workset.parse_size("33554432") == 1 << 25
+    for bad in ("lots", "1T", "1M"):
+        with pytest.raises(InputError, match="WRINKLEPIPE_WORKING_SET|16M|not a size"):
+            workset.parse_size(bad)
+    monkeypatch.setenv(workset.ENV, "64M")
+    assert workset.working_set_bytes() == 64 << 20
+    assert workset.band_rows(1024, 16) == (4 << 20) // (1024 * 16)  # 1/16 of 64M
+    assert workset.band_rows(1 << 20, 1 << 10) == 1
+    monkeypatch.delenv(workset.ENV)
+    assert workset.working_set_bytes() == workset.DEFAULT_BYTES

@@ -43,6 +43,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.console",
             "wrinklepipe.layers",
             "wrinklepipe.reuse",
+            "wrinklepipe.workset",
             "wrinklepipe.package",
             "wrinklepipe.options",
             "wrinklepipe.palette",

@@ -36,8 +36,11 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-#: Default bound of one run's memo (bytes of stored results).
-DEFAULT_MAX_BYTES = 1 << 30
+from wrinklepipe.workset import DEFAULT_BYTES, working_set_bytes
+
+#: Default bound of one run's memo (bytes of stored results) when none is given: the
+#: default working set (``WRINKLEPIPE_WORKING_SET`` sets another, docs/scale.md).
+DEFAULT_MAX_BYTES = DEFAULT_BYTES
 #: Calls whose array / bytes arguments total less than this are not worth a key: they just run.
 MIN_INPUT_BYTES = 1 << 16
 #: Environment variable capping the threads this process's own pools run at once (the block
@@ -104,14 +107,15 @@ _MEMO: ContextVar[Memo | None] = ContextVar("wrinklepipe_reuse", default=None)
 
 
 @contextlib.contextmanager
-def reuse(max_bytes: int = DEFAULT_MAX_BYTES) -> Iterator[Memo]:
+def reuse(max_bytes: int | None = None) -> Iterator[Memo]:
     """Within the block, :func:`reused` functions compute each distinct input once. Nested
-    blocks share the outer memo."""
+    blocks share the outer memo. ``max_bytes``: the memo's bound (default: the working set,
+    :func:`wrinklepipe.workset.working_set_bytes`)."""
     outer = _MEMO.get()
     if outer is not None:
         yield outer
         return
-    memo = Memo(max_bytes=max_bytes)
+    memo = Memo(max_bytes=working_set_bytes() if max_bytes is None else max_bytes)
     token = _MEMO.set(memo)
     try:
         yield memo

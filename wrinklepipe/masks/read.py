@@ -106,10 +106,20 @@ def stack_masks(
     files: Sequence[str | Path] | None = None,
 ) -> np.ndarray:
     """Stack ``[H, W]`` masks into ``[R, H, W]``; refuse different sizes and duplicate names."""
+    check_masks([np.shape(a) for a in arrays], names, files)
+    return np.ascontiguousarray(np.stack([np.asarray(a, np.float32) for a in arrays]))
+
+
+def check_masks(
+    shapes: Sequence[tuple[int, ...]],
+    names: Sequence[str],
+    files: Sequence[str | Path] | None = None,
+) -> None:
+    """Refuse masks of different ``shapes`` and duplicate or empty ``names`` (one problem each)."""
     files = [str(f) for f in files] if files is not None else [f"<{n}>" for n in names]
-    if len(arrays) != len(names):
-        raise InputError(f"{len(arrays)} masks but {len(names)} names", "<masks>")
-    if not arrays:
+    if len(shapes) != len(names):
+        raise InputError(f"{len(shapes)} masks but {len(names)} names", "<masks>")
+    if not shapes:
         raise InputError("no masks given", "<masks>")
     problems: list[Problem] = []
     seen: dict[str, str] = {}
@@ -122,7 +132,7 @@ def stack_masks(
             )
         else:
             seen[name] = f
-    shapes = [np.shape(a) for a in arrays]
+    shapes = [tuple(a) for a in shapes]
     if len(set(shapes)) > 1:
         first = shapes[0]
         for s, f in zip(shapes, files):
@@ -136,7 +146,6 @@ def stack_masks(
                 )
     if problems:
         raise InputError(problems)
-    return np.ascontiguousarray(np.stack([np.asarray(a, np.float32) for a in arrays]))
 
 
 def read_masks(
@@ -151,18 +160,27 @@ def read_masks(
         names = [p.stem for p in paths]
     if len(names) != len(paths):
         raise InputError(f"{len(paths)} mask files but {len(names)} names", "<masks>")
-    arrays = []
+    # each mask goes into its place in the stack as it is read: one full-size mask beside the
+    # stack, not a list of them and a stacked copy
+    stacked: np.ndarray | None = None
+    shapes: list[tuple[int, ...]] = []
     bits = 8
     problems: list[Problem] = []
-    for p in paths:
+    for i, p in enumerate(paths):
         try:
             m, info = read_mask(p, invert, max_pixels)
         except InputError as exc:
             problems.extend(exc.problems)
             continue
-        arrays.append(m)
+        shapes.append(m.shape)
+        if stacked is None:
+            stacked = np.empty((len(paths), *m.shape), np.float32)
+        if m.shape == stacked.shape[1:]:
+            stacked[i] = m
+        del m
         bits = max(bits, _bits_of(info))
     if problems:
         raise InputError(problems)
-    stacked = stack_masks(arrays, list(names), paths)
+    check_masks(shapes, list(names), paths)
+    assert stacked is not None  # check_masks refuses no masks
     return MaskSet(tuple(names), stacked, tuple(str(p) for p in paths), bits)

@@ -33,6 +33,7 @@ from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image
 from wrinklepipe.normals import compress, dds
 from wrinklepipe.normals.convention import ConventionReport, detect_convention, flip_green
 from wrinklepipe.normals.identify import looks_like
+from wrinklepipe.workset import band_rows
 
 _F = np.float32
 LAYOUTS: tuple[str, ...] = ("auto", "rgb", "rg", "ag")
@@ -180,6 +181,49 @@ def decode_texels(
         raise ValueError(f"layout 'rgb' needs 3 channels, the map has {c}")
     if lay == "ag" and c < 4:
         raise ValueError(f"layout 'ag' (DXT5nm) needs 4 channels, the map has {c}")
+    h, w = v.shape[:2]
+    rows = band_rows(w, BAND_BYTES_PER_TEXEL) if v.ndim == 3 else h
+    if h <= rows:
+        return _decode(v, lay, signed, unit_tolerance, bits, keep_short)
+    # band by band: every step is per texel, so the vectors are the whole image's, and the
+    # temporaries are one band's (a whole 8192² map's are about 2.5 GB)
+    out = np.empty((h, w, 3), _F)
+    stats = NormalStats()
+    for r0 in range(0, h, rows):
+        n, st = _decode(v[r0 : r0 + rows], lay, signed, unit_tolerance, bits, keep_short)
+        out[r0 : r0 + rows] = n
+        del n
+        stats = _merged(stats, st, r0)
+    return out, stats
+
+
+#: Bytes of temporaries per texel while decoding (float32 vectors, lengths, flags).
+BAND_BYTES_PER_TEXEL = 48
+
+
+def _merged(a: NormalStats, b: NormalStats, row: int) -> NormalStats:
+    """Counts of ``a`` (the rows above) and ``b`` (a band starting at ``row``) together."""
+
+    def first(x: tuple[int, int] | None, y: tuple[int, int] | None) -> tuple[int, int] | None:
+        return x if x is not None else None if y is None else (y[0] + row, y[1])
+
+    return NormalStats(
+        texels=a.texels + b.texels,
+        nan=a.nan + b.nan,
+        zero=a.zero + b.zero,
+        non_unit=a.non_unit + b.non_unit,
+        z_negative=a.z_negative + b.z_negative,
+        first_nan=first(a.first_nan, b.first_nan),
+        first_zero=first(a.first_zero, b.first_zero),
+        short=a.short + b.short,
+        first_short=first(a.first_short, b.first_short),
+    )
+
+
+def _decode(
+    v: np.ndarray, lay: str, signed: bool, unit_tolerance: float, bits: int, keep_short: bool
+) -> tuple[np.ndarray, NormalStats]:
+    """:func:`decode_texels` of float32 texels ``v`` [H, W, C] in the resolved layout ``lay``."""
 
     def sig(x: np.ndarray) -> np.ndarray:
         """A new float32 array of signed components."""

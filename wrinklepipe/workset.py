@@ -1,0 +1,57 @@
+"""The working set: how much memory a run may spend beyond the maps it holds (docs/scale.md).
+
+``WRINKLEPIPE_WORKING_SET`` (bytes, or a number with ``K``, ``M`` or ``G``: ``512M``, ``2G``;
+default :data:`DEFAULT_BYTES`) sets two things:
+
+* the run's memo of repeated work (:mod:`wrinklepipe.reuse`) keeps at most that many bytes;
+* a stage that works band by band (decoding a normal map, ...) sizes each band's temporaries
+  to :data:`BAND_SHARE` of it.
+
+Neither changes a result: a band's texels are computed exactly as the whole image's, and a memo
+miss computes what a hit would have returned. A smaller working set trades time (recomputation,
+more bands) for memory.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+
+from wrinklepipe.errors import InputError
+
+ENV = "WRINKLEPIPE_WORKING_SET"
+#: The working set when the environment does not set one: 1 GiB.
+DEFAULT_BYTES = 1 << 30
+#: The smallest working set accepted: 16 MiB.
+MIN_BYTES = 1 << 24
+#: The part of the working set one band's temporaries may take.
+BAND_SHARE = 1 / 16
+
+_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30}
+
+
+def parse_size(text: str) -> int:
+    """``"512M"`` -> bytes (``K``, ``M``, ``G`` are powers of 1024; a plain number is bytes)."""
+    m = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([KMG]?)i?B?\s*", text, flags=re.IGNORECASE)
+    if m is None:
+        raise InputError(
+            f"{text!r} is not a size; give bytes or a number with K, M or G (e.g. 512M, 2G)",
+            ENV,
+        )
+    size = int(float(m.group(1)) * _UNITS[m.group(2).upper()])
+    if size < MIN_BYTES:
+        raise InputError(f"{text!r} is below the smallest working set, 16M", ENV)
+    return size
+
+
+def working_set_bytes() -> int:
+    """The working set in bytes (``WRINKLEPIPE_WORKING_SET``, else :data:`DEFAULT_BYTES`)."""
+    given = os.environ.get(ENV, "").strip()
+    return parse_size(given) if given else DEFAULT_BYTES
+
+
+def band_rows(width: int, bytes_per_texel: int) -> int:
+    """Rows of a ``width``-wide image whose temporaries (``bytes_per_texel`` each) fit one
+    band's share of the working set (at least one row)."""
+    share = int(working_set_bytes() * BAND_SHARE)
+    return max(1, share // max(1, width * bytes_per_texel))
