@@ -175,3 +175,43 @@ def test_working_set_sizes(monkeypatch):
     assert workset.band_rows(1 << 20, 1 << 10) == 1
     monkeypatch.delenv(workset.ENV)
     assert workset.working_set_bytes() == workset.DEFAULT_BYTES
+
+
+@pytest.mark.parametrize("encoding", ["pd", "diff", "full", "composite"])
+def test_source_states_by_bands_are_the_whole_image(monkeypatch, encoding):
+    """The source states in combine's representation, made in bands of 3 rows, are the whole
+    image's bit for bit (what the searches and the validator measure against)."""
+    from wrinklepipe import model
+    from wrinklepipe.fidelity import reference as fre
+
+    rng = np.random.default_rng(7)
+    base = model.normalize(rng.normal(0, 0.3, (17, 13, 3)) + [0, 0, 1]).astype(np.float32)
+    states = model.normalize(rng.normal(0, 0.4, (2, 17, 13, 3)) + [0, 0, 1]).astype(np.float32)
+    whole = fre.source_states(base, states, encoding)
+    monkeypatch.setattr(fre, "band_rows", lambda width, per: 3)
+    band = fre.source_states(base, states, encoding)
+    assert band.dtype == whole.dtype and band.shape == whole.shape
+    assert np.array_equal(band, whole)
+    if encoding == "pd":  # x/z, y/z of the state less the base's, by hand at one texel
+        n, b = states[1, 16, 12], base[16, 12]
+        want = n[:2] / n[2] - b[:2] / b[2]
+        assert np.allclose(band[1, 16, 12], want, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_base_texels_by_bands_are_the_whole_image(monkeypatch, bits):
+    """The base's stored texels and their decoded normals, made in bands of 4 rows, are the
+    whole map's; the texels are the glTF mapping's by hand (round(255 (n + 1) / 2))."""
+    from wrinklepipe import model, workset
+    from wrinklepipe.pipeline import package as pp
+
+    rng = np.random.default_rng(bits)
+    base = model.normalize(rng.normal(0, 0.3, (19, 11, 3)) + [0, 0, 1]).astype(np.float32)
+    whole = pp.encode_base(base, bits)
+    back = pp.decode_base(whole)
+    monkeypatch.setattr(workset, "band_rows", lambda width, per: 4)
+    band = pp.encode_base(base, bits)
+    assert band.dtype == whole.dtype and np.array_equal(band, whole)
+    assert np.array_equal(pp.decode_base(band), back)
+    top = (1 << bits) - 1
+    assert np.abs(whole.astype(np.int64) - np.rint((base + 1) / 2 * top)).max() <= 1

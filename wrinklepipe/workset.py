@@ -16,6 +16,9 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Callable
+
+import numpy as np
 
 from wrinklepipe.errors import InputError
 
@@ -55,3 +58,25 @@ def band_rows(width: int, bytes_per_texel: int) -> int:
     band's share of the working set (at least one row)."""
     share = int(working_set_bytes() * BAND_SHARE)
     return max(1, share // max(1, width * bytes_per_texel))
+
+
+def map_rows(
+    fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray, bytes_per_texel: int
+) -> np.ndarray:
+    """``fn(x)`` for a per-texel ``fn`` of an image ``x`` ``[H, W, ...]``, made band by band of
+    rows (:func:`band_rows`): the whole image's result, with one band's temporaries."""
+    a = np.asarray(x)
+    if a.ndim < 2:
+        return fn(a)
+    h = a.shape[0]
+    rows = band_rows(a.shape[1], bytes_per_texel)
+    if h <= rows:
+        return fn(a)
+    out: np.ndarray | None = None
+    for r0 in range(0, h, rows):
+        band = fn(a[r0 : r0 + rows])
+        if out is None:
+            out = np.empty((h, *band.shape[1:]), band.dtype)
+        out[r0 : r0 + rows] = band
+    assert out is not None
+    return out

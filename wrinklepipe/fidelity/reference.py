@@ -19,6 +19,7 @@ from wrinklepipe.fidelity.sampling import (
 )
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.reuse import reused
+from wrinklepipe.workset import band_rows
 
 _F = np.float32
 
@@ -299,7 +300,34 @@ def source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.nda
     """Source (float) wrinkled normals ``[K, H, W, 3]`` in the representation
     :func:`wrinklepipe.model.combine` takes under ``encoding`` (``base`` on their grid): PD
     slopes of the wrinkle only, the biased difference, the normals, or the wrinkle-only
-    normals (composite)."""
+    normals (composite).
+
+    Made band by band of rows (every step is per texel: the whole image's values), so the
+    temporaries are a band's (:func:`wrinklepipe.workset.band_rows`), not several copies of
+    every state at full size."""
+    st = np.asarray(states)
+    if st.ndim != 4:
+        return _source_states(base, states, encoding)
+    K, H, W = st.shape[:3]
+    rows = band_rows(W, SOURCE_BYTES_PER_TEXEL * max(K, 1))
+    if H <= rows:
+        return _source_states(base, st, encoding)
+    out: np.ndarray | None = None
+    for r0 in range(0, H, rows):
+        band = _source_states(base[r0 : r0 + rows], st[:, r0 : r0 + rows], encoding)
+        if out is None:
+            out = np.empty((K, H, *band.shape[2:]), band.dtype)
+        out[:, r0 : r0 + rows] = band
+    assert out is not None
+    return out
+
+
+#: Bytes of temporaries per texel and state while encoding source states (float32 slopes,
+#: normals and their differences).
+SOURCE_BYTES_PER_TEXEL = 40
+
+
+def _source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.ndarray:
     if encoding == "pd":
         return model.normal_to_pd(states) - model.normal_to_pd(base)[None]
     if encoding == "diff":

@@ -104,9 +104,9 @@ def auto_choices(
     formats = formats or FormatOptions()
     auto = set(asset.provenance.get("auto_resolution", ()))
     res = asset.resolution
-    slopes = (
-        model.normal_to_pd(asset.states)
-        - model.normal_to_pd(resize_normals_pd(asset.base, *asset.states.shape[1:3]))[None]
+    # PD slopes of the wrinkles alone (band by band: the same values, a band's temporaries)
+    slopes = fd.source_states(
+        resize_normals_pd(asset.base, *asset.states.shape[1:3]), asset.states, "pd"
     )
     H = asset.states.shape[1]
     if poses is None:

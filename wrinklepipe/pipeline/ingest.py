@@ -253,16 +253,18 @@ def check_masks_on_mesh(masks: np.ndarray, mesh: Mesh, manifest: Any) -> None:
         return
     r, h, w = masks.shape
     size = max(h, w)
-    ids = rasterise_triangle_ids(mesh.uvs, mesh.indices, size)
-    rows = np.minimum((np.arange(h) + 0.5) / h * size, size - 1).astype(np.int64)
-    cols = np.minimum((np.arange(w) + 0.5) / w * size, size - 1).astype(np.int64)
-    covered = ids[rows][:, cols] >= 0
+    covered = rasterise_triangle_ids(mesh.uvs, mesh.indices, size) >= 0
+    if (h, w) != (size, size):  # the texel of the square grid under each mask texel's centre
+        rows = np.minimum((np.arange(h) + 0.5) / h * size, size - 1).astype(np.int64)
+        cols = np.minimum((np.arange(w) + 0.5) / w * size, size - 1).astype(np.int64)
+        covered = covered[np.ix_(rows, cols)]
     uv = np.asarray(mesh.uvs, np.float64)
     ok = np.isfinite(uv).all(axis=1)
     vy = np.clip(np.floor(uv[ok, 1] * h), 0, h - 1).astype(np.int64)
     vx = np.clip(np.floor(uv[ok, 0] * w), 0, w - 1).astype(np.int64)
     covered[vy, vx] = True
-    touched = (np.asarray(masks) > 0)[:, covered].any(axis=1)
+    # one mask at a time (no flags of every mask at full size)
+    touched = [bool(np.logical_and(m > 0, covered).any()) for m in np.asarray(masks)]
     missing = [reg.name for reg, t in zip(manifest.regions, touched) if not t]
     if missing:
         where = ", ".join(p.name for p in mesh.parts) or mesh.name

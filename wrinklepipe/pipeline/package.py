@@ -27,6 +27,7 @@ from wrinklepipe.metadata import (
 )
 from wrinklepipe.normals.resample import resize_normals
 from wrinklepipe.package import PackedTexture, WeightCurves, WrinklePackage, safe_name
+from wrinklepipe.workset import map_rows
 
 
 @dataclass(frozen=True)
@@ -60,13 +61,22 @@ def _dq(q: np.ndarray) -> np.ndarray:
 
 
 def encode_base(base: np.ndarray, bits: int = 8) -> np.ndarray:
-    """The base normal map's texels ``[H, W, 3]`` (glTF ``normalTexture``: xyz in RGB)."""
-    return codec.encode("full", base, _plain_format(bits), channels=3)[0]
+    """The base normal map's texels ``[H, W, 3]`` (glTF ``normalTexture``: xyz in RGB), made
+    band by band (per texel: the whole map's texels; float64 temporaries of one band only)."""
+    fmt = _plain_format(bits)
+    return map_rows(lambda b: codec.encode("full", b, fmt, channels=3)[0], base, CODEC_BYTES)
 
 
 def decode_base(texels: np.ndarray) -> np.ndarray:
-    """Unit normals of stored base texels (``[H, W, >= 3]``)."""
-    return codec.decode("full", np.asarray(texels)[..., :3], "rgb")
+    """Unit normals of stored base texels (``[H, W, >= 3]``), band by band as
+    :func:`encode_base`."""
+    return map_rows(
+        lambda b: codec.decode("full", b, "rgb"), np.asarray(texels)[..., :3], CODEC_BYTES
+    )
+
+
+#: Bytes of temporaries per texel while encoding or decoding texels (float64 vectors).
+CODEC_BYTES = 96
 
 
 def encode_state(
