@@ -215,3 +215,22 @@ def test_base_texels_by_bands_are_the_whole_image(monkeypatch, bits):
     assert np.array_equal(pp.decode_base(band), back)
     top = (1 << bits) - 1
     assert np.abs(whole.astype(np.int64) - np.rint((base + 1) / 2 * top)).max() <= 1
+
+
+@pytest.mark.parametrize("fmt", ["bc1", "bc3nm"])
+def test_quicktex_blocks_by_bands_are_the_whole_image(monkeypatch, fmt):
+    """quicktex's best blocks picked band by band (4 block rows... here 1 or 2) are the whole
+    map's, and they decode (texture2ddecoder) near the texels."""
+    from wrinklepipe.normals import compress as nc
+
+    rng = np.random.default_rng(11)
+    a = rng.integers(0, 256, (24, 20, 4)).astype(np.uint8)
+    a[8:16] = a[0:8]  # repeated rows of blocks
+    whole = nc._quicktex_best(a, fmt)
+    for rows in (4, 8):
+        monkeypatch.setattr(nc, "band_rows", lambda width, per, r=rows: r)
+        assert np.array_equal(nc._quicktex_best(a, fmt), whole)
+    assert whole.shape == (30, 8 if fmt == "bc1" else 16)
+    if fmt == "bc1":
+        got = nc.decode_bc_bgra(whole.tobytes(), 20, 24, "bc1")[..., 2::-1].astype(int)
+        assert np.abs(got - a[..., :3]).mean() < 48  # random texels: a 4-colour palette's error

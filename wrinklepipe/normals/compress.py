@@ -46,6 +46,7 @@ from wrinklepipe.normals import bc4
 from wrinklepipe.normals._chunks import map_rows
 from wrinklepipe.normals.blocks import encode_distinct
 from wrinklepipe.reuse import reused
+from wrinklepipe.workset import band_rows
 
 _F = np.float32
 
@@ -204,7 +205,22 @@ def keep_quicktex_encoders() -> None:
 def _quicktex_best(a: np.ndarray, fmt: str) -> np.ndarray:
     """quicktex's blocks [N, bytes] of RGBA8 ``a`` at each of :data:`QUICKTEX_LEVELS`, each
     block the one whose decoded R, G, B (:func:`decode_bc_bgra`) are nearest ``a``'s (squared
-    error; a tie keeps the first level); BC3's alpha half is left to the caller."""
+    error; a tie keeps the first level); BC3's alpha half is left to the caller.
+
+    Band by band of block rows (every block is encoded and judged on its own: the whole map's
+    blocks), so the int32 errors are a band's (:func:`wrinklepipe.workset.band_rows`)."""
+    h, w = a.shape[:2]
+    rows = max(4, band_rows(w, QUICKTEX_BYTES_PER_TEXEL) // 4 * 4)
+    if h <= rows:
+        return _quicktex_band(a, fmt)
+    return np.concatenate([_quicktex_band(a[r : r + rows], fmt) for r in range(0, h, rows)])
+
+
+#: Bytes of temporaries per texel while picking quicktex's blocks (int32 texels and errors).
+QUICKTEX_BYTES_PER_TEXEL = 48
+
+
+def _quicktex_band(a: np.ndarray, fmt: str) -> np.ndarray:
     h, w = a.shape[:2]
     tex = quicktex.RawTexture.frombytes(a.tobytes(), w, h)
     want = a[..., 2::-1].astype(np.int32)  # B, G, R: texture2ddecoder's order
