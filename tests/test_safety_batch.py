@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from wrinklepipe import staging
+from wrinklepipe import atomic, staging
 from wrinklepipe.batch import DaskEngine, LocalEngine, plan_batch, run_plan
 from wrinklepipe.batch import worker as batch_worker
 from wrinklepipe.cli import main
@@ -333,3 +333,28 @@ def test_a_cluster_without_workers_fails_each_asset_with_the_reason(sources, tmp
     for r in run.results:
         message = r.problems[0]["message"]
         assert "had no workers for 0.5 s" in message and "Error" not in message, message
+
+
+class _RacingWorkers:
+    """Two workers as the local engine runs them: each makes its output's missing parents
+    (``atomic._make_parents``: the batch's output folder too, when it is not there yet), then
+    both fail (a full disk) and remove what they made (``atomic._remove_created``)."""
+
+    description = "two racing workers"
+
+    def run(self, jobs, on_stage):  # noqa: ANN001, ANN201
+        made = {j.id: atomic._make_parents(j.output.parent) for j in jobs}
+        for j in jobs:
+            atomic._remove_created(made[j.id])
+            yield batch_worker._error_result(j, [{"file": str(j.output), "message": "full"}])
+
+
+def test_an_output_folder_every_asset_failed_in_is_removed(sources, tmp_path):
+    """The first worker made the batch's output folder, the second found it there; the first
+    failed first (its folder not empty yet), the second did not make it: an empty output
+    folder stayed behind. The batch makes it before any asset and removes it if still empty."""
+    src = _copy(sources, tmp_path)
+    plan = plan_batch([str(src)], tmp_path / "out" / "batch")
+    run = run_plan(plan, _RacingWorkers(), None)
+    assert [r.status for r in run.results] == ["error", "error"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["src"]

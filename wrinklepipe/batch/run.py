@@ -15,9 +15,11 @@ each with the reason. Every asset of the plan gets a result, so the reports are 
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from wrinklepipe.batch.cache import Cache, CacheMiss, Entry
@@ -122,7 +124,37 @@ def run_plan(
     on_warning: Callable[[str], None] | None = None,
 ) -> BatchRun:
     """Run every job of ``plan`` (see the module docstring); ``on_warning`` is told, once,
-    when the cache cannot be written."""
+    when the cache cannot be written. The output folder is made here, before any asset, and
+    removed again if it is still empty at the end (every asset failed): the assets' processes,
+    racing to make it, each thought another had made it, and an empty folder stayed."""
+    made = _make_output(plan.output)
+    try:
+        return _run_plan(plan, engine, cache, on_stage, on_done, on_warning)
+    finally:
+        for folder in made:  # deepest first; only if still empty
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+
+
+def _make_output(folder: Path) -> list[Path]:
+    """Make ``folder`` and its missing parents; the ones made, deepest first (none when it
+    cannot be made: each asset then says why)."""
+    missing = [p for p in (folder, *folder.parents) if not p.exists()]
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return []
+    return missing
+
+
+def _run_plan(
+    plan: BatchPlan,
+    engine: Any,
+    cache: Cache | None,
+    on_stage: Callable[[str, str], None] | None,
+    on_done: Callable[[AssetResult], None] | None,
+    on_warning: Callable[[str], None] | None,
+) -> BatchRun:
     t0 = time.perf_counter()
     stage = on_stage or (lambda _job, _stage: None)
     warned: list[str] = []
