@@ -89,12 +89,17 @@ def test_wrinkle_maps_api_is_applied_and_typed(usda):
 
 
 def test_api_attributes_match_generated_schema():
-    from wrinklepipe.usd.package_write import API_ATTRIBUTES, COLOR_ATTRIBUTES, USD_SCHEMA_DIR
+    from wrinklepipe.usd.package_write import (
+        API_ATTRIBUTES,
+        COLOR_ATTRIBUTES,
+        TILE_ATTRIBUTES,
+        USD_SCHEMA_DIR,
+    )
 
     layer = Sdf.Layer.FindOrOpen(str(USD_SCHEMA_DIR / "generatedSchema.usda"))
     spec = layer.GetPrimAtPath("/WrinkleMapsAPI")
     declared = {a.name: str(a.typeName) for a in spec.attributes}
-    assert declared == {**API_ATTRIBUTES, **COLOR_ATTRIBUTES}
+    assert declared == {**API_ATTRIBUTES, **COLOR_ATTRIBUTES, **TILE_ATTRIBUTES}
 
 
 def test_typed_values_without_the_plugin(usda):

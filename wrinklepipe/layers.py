@@ -47,6 +47,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.package",
             "wrinklepipe.options",
             "wrinklepipe.palette",
+            "wrinklepipe.udim",
         ),
     ),
     Layer(

@@ -72,9 +72,23 @@ class WrinklePackage:
     textures: list[PackedTexture]
     meta: WrinkleMeta
     curves: list[WeightCurves] = field(default_factory=list)
+    #: UDIM tiles (:mod:`wrinklepipe.udim`), ascending; empty: one texture per map. A tiled
+    #: package holds each tile's textures as ``NAME.TILE``; ``meta`` names them ``NAME``.
+    tiles: tuple[int, ...] = ()
 
     def texture(self, name: str) -> PackedTexture:
+        """The texture ``name``; in a tiled package, a name ``meta`` uses (``NAME``) gives
+        its first tile's texture (every tile of a map has its depth and channels)."""
         for t in self.textures:
             if t.name == name:
                 return t
+        if self.tiles:
+            return self.texture(f"{name}.{self.tiles[0]}")
         raise KeyError(name)
+
+    @property
+    def base_name(self) -> str:
+        """The base normal map's texture name as ``meta`` would name it: ``base_normal`` (one
+        tile of a tiled package, :func:`wrinklepipe.udim.tile_package`: ``base_normal.1001``)."""
+        name = next((t.name for t in self.textures if t.role == "base_normal"), "base_normal")
+        return name.rsplit(".", 1)[0] if self.tiles and "." in name else name

@@ -413,7 +413,16 @@ def export_files(
     pkg: WrinklePackage, engine: str, document: Document | None = None
 ) -> tuple[dict[str, bytes], list[str]]:
     """The files of an engine export as ``{relative path: bytes}`` and the notes. ``document``:
-    the converted glTF as a document (the mesh file is then the whole character)."""
+    the converted glTF as a document (the mesh file is then the whole character). A UDIM
+    asset is refused: every engine file here samples one texture per map."""
+    if pkg.tiles:
+        raise input_error(
+            pkg.name,
+            f"has UDIM tiles ({', '.join(map(str, pkg.tiles))}); the {engine} export's material "
+            "and shader sample one texture per map (Unity and Godot have no UDIM; Unreal's and "
+            "Blender's UDIM texture sets are not written): export a character converted "
+            "without tiles, or use the USD (UDIM) or glTF (one material per tile) output",
+        )
     preset = ENGINE_PRESETS[engine]
     work = rgba_masks(pkg) if engine == "unreal" else pkg
     work = to_8bit_states(work) if engine in ("unity", "godot") else work

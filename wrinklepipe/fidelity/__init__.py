@@ -17,6 +17,7 @@ from wrinklepipe.fidelity.metric import (
     evaluate,
     measure,
     merge,
+    pooled,
     sample,
 )
 from wrinklepipe.fidelity.reference import (
@@ -42,6 +43,7 @@ __all__ = [
     "footprint",
     "measure",
     "merge",
+    "pooled",
     "prepare",
     "sample",
     "sample_at",

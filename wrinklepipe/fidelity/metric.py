@@ -56,6 +56,8 @@ from wrinklepipe.metrics import (
 )
 
 _F = np.float32
+#: The key of the base's own errors over the face in :attr:`Fidelity.samples`.
+BASE_SAMPLES = "(base over the face)"
 
 
 # ------------------------------------------------------------------------------------------------
@@ -175,6 +177,11 @@ class Fidelity:
     base: Stats | None = None
     active_fraction: float = 0.0
     errors: dict[str, np.ndarray] = field(default_factory=dict)  # pose -> [H, W] (on request)
+    #: on request (``evaluate(samples=True)``): per pose its texels' errors and weights, and
+    #: under :data:`BASE_SAMPLES` the base's over the face (weights None: unweighted), to pool the
+    #: stats of several grids (UDIM tiles: :func:`pooled`)
+    samples: dict[str, tuple[np.ndarray, np.ndarray | None]] = field(default_factory=dict)
+    step: int = 1  # the reference's: each sampled texel stands for ``step`` texels
 
     @property
     def worst(self) -> PoseFidelity | None:
@@ -298,11 +305,13 @@ def evaluate(
     leaks: bool = True,
     base_over_face: bool = False,
     error_maps: bool = False,
+    samples: bool = False,
 ) -> Fidelity:
     """Score shipped samples against the reference: per pose (and per region), weighted by
     activation. Missing parts of ``s`` are taken from the source (e.g. only the states
     shipped: their loss alone). ``base_over_face`` also measures the shipped base on its own
-    over the footprint (it needs ``s.raw["base"]``)."""
+    over the footprint (it needs ``s.raw["base"]``). ``samples``: keep every pose's errors
+    and weights (:attr:`Fidelity.samples`)."""
     H, W = ref.shape
     if s.states is None:
         raise ValueError("evaluate needs the shipped states")
@@ -311,6 +320,7 @@ def evaluate(
     states = planes(s.states)
     out = []
     maps: dict[str, np.ndarray] = {}
+    kept: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
     leak_at = None
     if leaks and s.leaks is not None and any(lk is not None for lk in s.leaks):
         leak_at = _leak_normals(ref, s)
@@ -332,6 +342,8 @@ def evaluate(
             ws.append(_activation_weight(lact))
             n_leak = int(idx.size)
         overall = weighted_stats(np.concatenate(errs), np.concatenate(ws))
+        if samples:
+            kept[pr.pose.name] = (np.concatenate(errs), np.concatenate(ws))
         per_region: dict[str, Stats] = {}
         if regions:
             # the regions that touch the pose's texels (shares are >= 0: a region's stats
@@ -347,9 +359,12 @@ def evaluate(
             if leak is not None:
                 emap[leak[0]] = lerr
             maps[pr.pose.name] = emap.reshape(H, W)
-    fid = Fidelity(out, None, ref.active_fraction, maps)
+    fid = Fidelity(out, None, ref.active_fraction, maps, kept, ref.step)
     if base_over_face and "base" in s.raw:
-        fid.base = base_fidelity(ref, s.raw["base"])
+        base_err: list[np.ndarray] | None = [] if samples else None
+        fid.base = base_fidelity(ref, s.raw["base"], errors=base_err)
+        if base_err:
+            kept[BASE_SAMPLES] = (base_err[0], None)
     return fid
 
 
@@ -359,9 +374,11 @@ def base_fidelity(
     base: np.ndarray,
     flat: np.ndarray | None = None,
     reader: Reader | None = None,
+    errors: list[np.ndarray] | None = None,
 ) -> Stats:
     """The shipped base (unit normals, or what ``reader`` makes of its texels; any size)
-    against the source base over the footprint (or at the grid texels ``flat``)."""
+    against the source base over the footprint (or at the grid texels ``flat``); ``errors``:
+    a list the per-texel errors are appended to (then kept, not overwritten)."""
     src = ref.base.reshape(-1, 3)
     same_grid = np.asarray(base).shape[:2] == ref.shape
     if flat is None and same_grid:
@@ -385,7 +402,50 @@ def base_fidelity(
         got = planes(model.normalize(sample_at(base, ref.shape, f, reader)))
         err[at : at + f.size] = angle_deg_planes(got, _gather_planes(src, f))
         at += f.size
+    if errors is not None:
+        errors.append(err)
+        return weighted_stats(err)
     return weighted_stats(err, overwrite=True)
+
+
+def pooled(parts: Sequence[tuple[Fidelity, float]]) -> Fidelity:
+    """Several grids' fidelity as one (UDIM tiles over the whole face): per pose, every
+    part's texels pooled, each weighted by its activation times ``area`` (what one texel of
+    its grid covers: ``1 / (H W)`` of a tile) times the part's ``step``; the base over the
+    face likewise by area. The parts must have kept their samples (``evaluate(samples=
+    True)``); a pose some part lacks is pooled over the parts that have it. No per-region
+    stats (they are each part's)."""
+    names: list[str] = []
+    for fid, _ in parts:
+        names += [p.pose for p in fid.poses if p.pose not in names]
+    poses = []
+    for name in names:
+        errs, ws = [], []
+        leaks = 0
+        for fid, area in parts:
+            got = fid.samples.get(name)
+            if got is None:
+                continue
+            e, w = got
+            errs.append(e)
+            ws.append(np.asarray(w, np.float64) * (area * fid.step))
+            leaks += next(p.leak_texels for p in fid.poses if p.pose == name)
+        if errs:
+            stats = weighted_stats(np.concatenate(errs), np.concatenate(ws))
+            poses.append(PoseFidelity(name, stats, {}, leaks))
+    out = Fidelity(poses)
+    base = [
+        (fid.samples[BASE_SAMPLES][0], area) for fid, area in parts if BASE_SAMPLES in fid.samples
+    ]
+    if base:
+        out.base = weighted_stats(
+            np.concatenate([e for e, _ in base]),
+            np.concatenate([np.full(e.size, a) for e, a in base]),
+        )
+    total = sum(area for _, area in parts)
+    if total > 0:
+        out.active_fraction = sum(f.active_fraction * a for f, a in parts) / total
+    return out
 
 
 def measure(

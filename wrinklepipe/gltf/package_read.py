@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from wrinklepipe import udim
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error, plain_reason
 from wrinklepipe.gltf.document import Document, read_document
@@ -101,7 +102,55 @@ def _wrinkled_package(doc: Document, name: str) -> WrinklePackage:
                 raise doc.err(f"wrinkled primitive has no {need} attribute", r.pointer)
     mesh = wrinkled_mesh(doc, refs)
     morph_nodes = morph_columns(doc, refs, mesh.morph_names)
+    tiles = _material_tiles(doc, materials)
+    if tiles:
+        return _tiled_package(doc, tiles, refs, mesh, name, morph_nodes)
     return package_from_document(doc, materials[0], mesh, name, morph_nodes)
+
+
+def _material_tiles(doc: Document, materials: list[int]) -> dict[int, int]:
+    """``{material: tile}`` of a UDIM asset (each wrinkled material's block names its
+    ``tile``), empty for one that names none; refused when some do and some do not, or two
+    name one tile."""
+    got: dict[int, int] = {}
+    for m in materials:
+        ext = doc.array("materials")[m]["extensions"][EXTENSION]
+        tile = ext.get("tile") if isinstance(ext, dict) else None
+        if isinstance(tile, int) and not isinstance(tile, bool) and udim.valid(tile):
+            got[m] = tile
+    if got and len(got) != len(materials):
+        plain = [m for m in materials if m not in got]
+        raise doc.err(
+            f"materials {sorted(got)} are UDIM tiles but {plain} name no tile: a tiled asset "
+            "gives every wrinkled material its tile",
+            f"/materials/{plain[0]}/extensions/{EXTENSION}",
+        )
+    if len(set(got.values())) != len(got):
+        raise doc.err("two wrinkled materials are the same UDIM tile", "/materials")
+    return got
+
+
+def _tiled_package(
+    doc: Document,
+    tiles: dict[int, int],
+    refs: list[Any],
+    mesh: Mesh,
+    name: str,
+    morph_nodes: dict[int, list[int]],
+) -> WrinklePackage:
+    """A UDIM asset written one material per tile (:mod:`wrinklepipe.gltf.package_write`):
+    the render mesh with each primitive's UVs put back on its material's tile
+    (:func:`wrinklepipe.udim.from_tile`), and the tiles' packages joined
+    (:func:`wrinklepipe.udim.join_tiles`)."""
+    uvs = np.array(mesh.uvs, np.float32, copy=True)
+    for part, ref in zip(mesh.parts, refs):
+        rows = slice(part.start, part.start + part.count)
+        uvs[rows] = udim.from_tile(uvs[rows], tiles[ref.material])
+    whole = replace(mesh, uvs=uvs)
+    packages = {
+        t: package_from_document(doc, m, whole, name, morph_nodes) for m, t in tiles.items()
+    }
+    return udim.join_tiles(packages, whole)
 
 
 def _scalar(doc: Document, i: int) -> np.ndarray:

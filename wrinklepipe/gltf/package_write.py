@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from wrinklepipe import udim
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
@@ -141,8 +142,9 @@ def skin_weights_normalized(weights: np.ndarray) -> np.ndarray:
     return w
 
 
-def _skin(m: Any, buf: _Buffer, attrs: dict[str, int]) -> dict[str, Any] | None:
-    """JOINTS_0/WEIGHTS_0 and a skin whose joints are root nodes placed at their bind pose.
+def _skin(m: Any, buf: _Buffer, attrs: dict[str, int], skin: bool = True) -> dict[str, Any] | None:
+    """JOINTS_0/WEIGHTS_0 and a skin whose joints are root nodes placed at their bind pose
+    (``skin`` False: the attributes only, for a primitive after the first of a tiled mesh).
 
     The mesh keeps joint names and inverse bind matrices but no hierarchy, so every joint is a
     root node whose matrix is its bind-pose world matrix ``inverse(IBM)``: the rest pose renders
@@ -157,6 +159,8 @@ def _skin(m: Any, buf: _Buffer, attrs: dict[str, int]) -> dict[str, Any] | None:
         raise input_error(m.name, f"joint indices must lie in [0, {n})")
     attrs["JOINTS_0"] = buf.accessor(j.astype(np.uint16), _ARRAY_BUFFER)
     attrs["WEIGHTS_0"] = buf.accessor(w, _ARRAY_BUFFER)
+    if not skin:
+        return None
     ibm = (
         np.asarray(m.inverse_bind, np.float32)
         if m.inverse_bind is not None
@@ -262,36 +266,25 @@ def gltf_document(
 
     With ``embed_images`` the PNGs go into the buffer as bufferViews (GLB) and the returned dict
     is empty. The buffer's ``uri`` is left for the caller to set (absent for GLB).
+
+    A UDIM package (``pkg.tiles``; glTF has no UDIM) is written one primitive per tile, each
+    with its own material: the tile's triangles with their UVs moved into [0, 1]
+    (:func:`wrinklepipe.udim.tile_package`), the tile's textures, and the extension block
+    naming its ``tile``; the weight curves play on every tile's material at once.
     """
     opt = options or GltfOptions()
     _check_mesh(pkg)
-    m = pkg.mesh
     buf = _Buffer()
-    attrs = {
-        "POSITION": buf.accessor(m.positions.astype(np.float32), _ARRAY_BUFFER, minmax=True),
-        "NORMAL": buf.accessor(m.normals.astype(np.float32), _ARRAY_BUFFER),
-        "TANGENT": buf.accessor(m.tangents.astype(np.float32), _ARRAY_BUFFER),
-        "TEXCOORD_0": buf.accessor(m.uvs.astype(np.float32), _ARRAY_BUFFER),
-        VERTEX_ID_ATTRIBUTE: buf.accessor(m.vertex_ids.astype(np.float32), _ARRAY_BUFFER),
-    }
-    if m.colors is not None:
-        for c, name in enumerate(BIAS_CHANNEL_ATTRIBUTES):
-            attrs[name] = buf.accessor(m.colors[:, c].astype(np.float32), _ARRAY_BUFFER)
-    skin = _skin(m, buf, attrs)
-    idx = m.indices.reshape(-1)
-    idx_arr = idx.astype(np.uint16 if m.vertex_count < 65535 else np.uint32)
-    prim: dict[str, Any] = {
-        "attributes": attrs,
-        "indices": buf.accessor(idx_arr, _ELEMENT_ARRAY_BUFFER, minmax=False),
-        "material": 0,
-        "mode": 4,
-    }
-    mesh: dict[str, Any] = {"name": m.name, "primitives": [prim]}
+    views = [udim.tile_package(pkg, t) for t in pkg.tiles] if pkg.tiles else [pkg]
+    m = pkg.mesh
+    prims = []
+    skin = None
+    for i, view in enumerate(views):
+        prim, got = _primitive(view.mesh, buf, i, skin=i == 0)
+        prims.append(prim)
+        skin = skin or got
+    mesh: dict[str, Any] = {"name": m.name, "primitives": prims}
     if m.morph_deltas is not None and len(m.morph_names):
-        prim["targets"] = [
-            {"POSITION": buf.accessor(d.astype(np.float32), _ARRAY_BUFFER, minmax=True)}
-            for d in m.morph_deltas
-        ]
         mesh["weights"] = [0.0] * len(m.morph_names)
         mesh["extras"] = {"targetNames": list(m.morph_names)}
 
@@ -313,32 +306,24 @@ def gltf_document(
         textures.append({"sampler": 0, "source": len(images) - 1, "name": t.name})
         tex_index[t.name] = len(textures) - 1
 
-    ext = extension_block(pkg.meta, tex_index)
     animations = curve_animations(
         pkg.curves,
         len(pkg.meta.regions),
         lambda a, minmax: buf.accessor(a, minmax=minmax),
-        [WEIGHTS_POINTER],
+        [weights_pointer(i) for i in range(len(views))],
         [MorphChannel(0, np.arange(len(m.morph_names)))] if len(m.morph_names) else [],
         pkg.name,
     )
-    if animations:
-        ext["weightCurves"] = [{"name": c.name, "animation": i} for i, c in enumerate(pkg.curves)]
-
-    pbr: dict[str, Any] = {
-        "baseColorFactor": [0.8, 0.62, 0.52, 1.0],
-        "metallicFactor": 0.0,
-        "roughnessFactor": 0.55,
-    }
-    if pkg.meta.base_color is not None:  # the colour states blend over the base colour
-        pbr["baseColorTexture"] = {"index": tex_index[pkg.meta.base_color]}
-        pbr["baseColorFactor"] = [*(float(x) for x in pkg.meta.color_factor), 1.0]
-    material = {
-        "name": f"{pkg.name}_skin",
-        "normalTexture": {"index": tex_index["base_normal"]},
-        "pbrMetallicRoughness": pbr,
-        "extensions": {EXTENSION: ext},
-    }
+    materials = []
+    for view in views:
+        ext = extension_block(view.meta, tex_index)
+        if view is not pkg:
+            ext["tile"] = udim.split_name(view.base_name)[1]
+        if animations:
+            ext["weightCurves"] = [
+                {"name": c.name, "animation": i} for i, c in enumerate(pkg.curves)
+            ]
+        materials.append(_material(view, tex_index, ext))
     used = [EXTENSION] + ([POINTER_EXTENSION] if animations else [])
     nodes: list[dict[str, Any]] = [{"name": pkg.name, "mesh": 0}]
     if skin is not None:
@@ -351,7 +336,7 @@ def gltf_document(
         "scenes": [{"name": pkg.name, "nodes": list(range(len(nodes)))}],
         "nodes": nodes,
         "meshes": [mesh],
-        "materials": [material],
+        "materials": materials,
         "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}],
         "images": images,
         "textures": textures,
@@ -367,6 +352,59 @@ def gltf_document(
     data += b"\0" * ((-len(data)) % 4)
     doc["buffers"][0]["byteLength"] = len(data)
     return doc, data, files
+
+
+def _material(
+    pkg: WrinklePackage, tex_index: dict[str, int], ext: dict[str, Any]
+) -> dict[str, Any]:
+    """The wrinkled material of a package (one tile of a UDIM package: its ``NAME_skin.TILE``)."""
+    pbr: dict[str, Any] = {
+        "baseColorFactor": [0.8, 0.62, 0.52, 1.0],
+        "metallicFactor": 0.0,
+        "roughnessFactor": 0.55,
+    }
+    if pkg.meta.base_color is not None:  # the colour states blend over the base colour
+        pbr["baseColorTexture"] = {"index": tex_index[pkg.meta.base_color]}
+        pbr["baseColorFactor"] = [*(float(x) for x in pkg.meta.color_factor), 1.0]
+    tile = udim.split_name(pkg.base_name)[1]
+    return {
+        "name": f"{pkg.name}_skin" + ("" if tile is None else f".{tile}"),
+        "normalTexture": {"index": tex_index[pkg.base_name]},
+        "pbrMetallicRoughness": pbr,
+        "extensions": {EXTENSION: ext},
+    }
+
+
+def _primitive(
+    m: Any, buf: _Buffer, material: int, skin: bool
+) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """One triangle primitive of the render mesh ``m`` (its accessors added to ``buf``) using
+    ``material``; with ``skin`` also the skin object (the first primitive's)."""
+    attrs = {
+        "POSITION": buf.accessor(m.positions.astype(np.float32), _ARRAY_BUFFER, minmax=True),
+        "NORMAL": buf.accessor(m.normals.astype(np.float32), _ARRAY_BUFFER),
+        "TANGENT": buf.accessor(m.tangents.astype(np.float32), _ARRAY_BUFFER),
+        "TEXCOORD_0": buf.accessor(m.uvs.astype(np.float32), _ARRAY_BUFFER),
+        VERTEX_ID_ATTRIBUTE: buf.accessor(m.vertex_ids.astype(np.float32), _ARRAY_BUFFER),
+    }
+    if m.colors is not None:
+        for c, name in enumerate(BIAS_CHANNEL_ATTRIBUTES):
+            attrs[name] = buf.accessor(m.colors[:, c].astype(np.float32), _ARRAY_BUFFER)
+    got = _skin(m, buf, attrs, skin)
+    idx = m.indices.reshape(-1)
+    idx_arr = idx.astype(np.uint16 if m.vertex_count < 65535 else np.uint32)
+    prim: dict[str, Any] = {
+        "attributes": attrs,
+        "indices": buf.accessor(idx_arr, _ELEMENT_ARRAY_BUFFER, minmax=False),
+        "material": material,
+        "mode": 4,
+    }
+    if m.morph_deltas is not None and len(m.morph_names):
+        prim["targets"] = [
+            {"POSITION": buf.accessor(d.astype(np.float32), _ARRAY_BUFFER, minmax=True)}
+            for d in m.morph_deltas
+        ]
+    return prim, got
 
 
 def glb_bytes(doc: dict[str, Any], data: bytes) -> bytes:

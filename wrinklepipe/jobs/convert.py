@@ -23,7 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from wrinklepipe import console  # console.status is looked up per call (tests hook it)
+from wrinklepipe import (
+    console,  # console.status is looked up per call (tests hook it)
+    udim,
+)
 from wrinklepipe import fidelity as fd
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.atomic import staged_folder
@@ -49,10 +52,13 @@ from wrinklepipe.pipeline.color import (
 )
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest_all
+from wrinklepipe.pipeline.ingest_tiles import ingest_tiles
 from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
+from wrinklepipe.pipeline.tiles import run_tile_stages
 from wrinklepipe.reuse import reuse
 from wrinklepipe.sources.manifest import load_manifest
+from wrinklepipe.sources.manifest_tiles import tile_notes
 
 
 @dataclass(frozen=True)
@@ -117,6 +123,8 @@ def convert(
         raise ValueError(f"usd_format must be usda, usdc or usdz, got {opt.usd_format!r}")
     output = Path(output)
     manifest = load_manifest(manifest_path)
+    if manifest.tiles:
+        return _convert_tiles(manifest, output, opt)
     inputs = [manifest.root, *manifest.input_files]
     try:
         # The output checks (not an input, empty or --force) run first, before any work.
@@ -206,6 +214,96 @@ def convert(
                 validation=validation,
                 color=None if color_choice is None else color_choice.to_json(),
             )
+            write_report(tmp, report)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        where = f" ({exc.filename})" if exc.filename else ""
+        raise input_error(
+            output, f"conversion stopped: {reason}{where}; nothing was changed"
+        ) from None
+    errors = int(validation.get("counts", {}).get("error", 0))
+    return ConvertResult(output, report, 1 if errors else 0)
+
+
+def _convert_tiles(manifest: Any, output: Path, opt: ConvertOptions) -> ConvertResult:
+    """:func:`convert` of a manifest with UDIM tiles: the mesh and the drivers once, each tile
+    through the stages on its own with one joint choice for all
+    (:func:`wrinklepipe.pipeline.tiles.run_tile_stages`), packed per tile and joined into one
+    tiled package (:func:`wrinklepipe.udim.join_tiles`), written (USD with ``<UDIM>`` paths,
+    glTF one primitive and material per tile) and validated tile by tile and over the face."""
+    inputs = [manifest.root, *manifest.input_files]
+    try:
+        with staged_folder(output, force=opt.force, inputs=inputs) as tmp, reuse():
+            with console.status("reading inputs (UDIM tiles)"):
+                got = ingest_tiles(manifest)
+            notes = tile_notes(manifest) + got.notes
+            with console.status("evaluating drivers"):
+                whole = replace(got.whole, mesh=prepare_mesh(got.whole.mesh))
+                curves, drivers_notes = evaluate_drivers(whole, manifest.root)
+            poses = judged_poses(whole, curves)
+            tiles = {
+                t: replace(a, mesh=udim.tile_mesh(whole.mesh, t)) for t, a in got.tiles.items()
+            }
+            with console.status("choosing sizes, scale and formats by fidelity, tile by tile"):
+                staged = run_tile_stages(
+                    tiles,
+                    auto_scale=manifest.pd_scale == "auto",
+                    formats=manifest.formats,
+                    compressed=opt.compressed,
+                    poses=poses,
+                )
+            for t, rep in staged.reports.items():
+                notes += [f"tile {t}: {n}" for n in rep.notes]
+            notes += staged.notes + whole.mesh.notes + drivers_notes
+            layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
+            pack = PackOptions(bits=opt.bits, mask_layout=layout)
+            pkgs = {t: package_from_asset(a, pack, curves) for t, a in staged.assets.items()}
+            formats = {**manifest.formats, **staged.formats}
+            with console.status("encoding, packing, compressing"):
+                pkg = udim.join_tiles(pkgs, whole.mesh)
+                files, n, choices = build_outputs(
+                    pkg, opt.glb, opt.compressed, whole.budget, formats, None, opt.png_level
+                )
+            notes += n
+            read = input_rows(manifest.root, manifest.input_files)
+            notes += write_folder(
+                tmp, files, pkg, opt.usd_format, None, got.usd, output, opt.png_level
+            )
+            with console.status("validating, tile by tile"):
+                validation = (
+                    validate_output(
+                        tmp, manifest.path, opt.render, html_page=True, source=got.tiles
+                    )
+                    if opt.validate
+                    else {"status": "skipped", "reason": "--no-validate"}
+                )
+            first = staged.reports[min(staged.reports)]
+            report = convert_report(
+                manifest=manifest.path.name,
+                inputs=read,
+                pkg=pkg,
+                pd_scale={
+                    "value": float(pkg.meta.scale) if pkg.meta.encoding == "pd" else None,
+                    "source": first.pd_scale_source,
+                    "clipped_texels": {
+                        f"{s} (tile {t})": c
+                        for t in pkg.tiles
+                        for s, c in clipped_texels(udim.tile_package(pkg, t)).items()
+                    },
+                },
+                fidelity=staged.fidelity(),
+                warnings=list(whole.provenance.get("warnings", [])),
+                decode_error={
+                    f"{s} (tile {t})": e
+                    for t in pkg.tiles
+                    for s, e in decode_errors(staged.assets[t], pkgs[t]).items()
+                },
+                compression=choices,
+                notes=notes,
+                outputs=output_rows(tmp),
+                validation=validation,
+            )
+            report["udim"] = {"tiles": list(pkg.tiles)}
             write_report(tmp, report)
     except OSError as exc:
         reason = exc.strerror or str(exc)

@@ -32,7 +32,7 @@ def validate_output(
     manifest_path: Path | None = None,
     render: bool = True,
     html_page: bool = False,
-    source: WrinkleAsset | None = None,
+    source: WrinkleAsset | dict[int, WrinkleAsset] | None = None,
 ) -> dict[str, Any]:
     """Run :mod:`wrinklepipe.validate` on a written folder.
 
@@ -43,7 +43,9 @@ def validate_output(
     overlay, metrics) is written into the folder as ``validation.html`` + ``validation_files/``.
     ``source``: the asset ``convert`` ingested from the manifest (its maps at source resolution),
     used instead of reading and decoding the manifest's files again; the written folder itself
-    is always read back, so the validator judges the bytes that were written.
+    is always read back, so the validator judges the bytes that were written. A UDIM asset:
+    ``source`` one asset per tile, and the result also holds the fidelity per tile and over
+    the whole face (``fidelity``: the validator's ``fidelity_by_tile``).
     """
     if source is not None and manifest_path is not None:
         inp = attach_source(load_input(folder, LoadOptions()), source, manifest_path)
@@ -62,4 +64,7 @@ def validate_output(
         page = _scrub(validation_page(report, files_dir), replacements)
         write_bytes(folder / VALIDATION_HTML, page.encode("utf-8"))
     counts = {k: int(v) for k, v in report.counts.items()}
-    return _scrub({"status": "ran", "counts": counts, "issues": issues}, replacements)
+    out: dict[str, Any] = {"status": "ran", "counts": counts, "issues": issues}
+    if inp.tiles and "fidelity_by_tile" in report.metrics:
+        out["fidelity"] = report.metrics["fidelity_by_tile"]
+    return _scrub(out, replacements)

@@ -32,6 +32,7 @@ from wrinklepipe.normals import mips, uastc
 from wrinklepipe.normals.dds import dds_bytes
 from wrinklepipe.normals.ktx2 import ktx2_bytes
 from wrinklepipe.options import BudgetOptions, FormatOptions
+from wrinklepipe.udim import split_name
 
 #: Formats ``auto`` tries, smallest blocks first (BC1: 8 bytes; then BC5, BC3nm, BC7: 16).
 AUTO_FORMATS: tuple[str, ...] = ("bc1", "bc5", "bc3nm", "bc7")
@@ -197,14 +198,15 @@ def compressed_copies(
     enc = meta.encoding
     version = int(meta.mapping)
     param = float(meta.scale)
-    base_tex = next((t for t in pkg.textures if t.role == "base_normal"), None)
+    # a UDIM package's tiles are maps of one group each (one format for every tile)
+    bases = [t for t in pkg.textures if t.role == "base_normal"]
     groups: list[tuple[str, str, list[_Map]]] = []
-    if base_tex is not None:
+    if bases:
         groups.append(
             (
                 "base",
                 formats.base,
-                [_Map(base_tex.name, "full", base_tex.pixels, 1.0, 1)],
+                [_Map(t.name, "full", t.pixels, 1.0, 1) for t in bases],
             )
         )
     states = [t for t in pkg.textures if t.role == "state"]
@@ -218,7 +220,7 @@ def compressed_copies(
     copies: list[Copy] = []
     notes: list[str] = []
     choices: dict[str, Any] = {}
-    base_normals = None
+    base_normals: dict[int | None, np.ndarray] = {}
     for group, want, maps in groups:
         if not maps:
             continue
@@ -227,12 +229,16 @@ def compressed_copies(
         if any(m.texels.dtype != np.uint8 for m in maps):
             notes.append(f"{group}: 16-bit maps ship as PNG only (block formats are 8-bit)")
             continue
-        base = None
+        base: dict[int | None, np.ndarray] | None = None
         if maps[0].encoding == "diff":
-            if base_normals is None and base_tex is not None:
-                base_normals = codec.decode("full", base_tex.pixels[..., :3], "rgb")
-            base = base_normals
-            if base is not None and base.shape[:2] != maps[0].texels.shape[:2]:
+            if not base_normals:
+                for t in bases:  # by tile (one, without tiles)
+                    px = t.pixels[..., :3]
+                    base_normals[split_name(t.name)[1]] = codec.decode("full", px, "rgb")
+            base = base_normals or None
+            if base is not None and any(
+                b.shape[:2] != maps[0].texels.shape[:2] for b in base.values()
+            ):
                 notes.append(f"{group}: diff states at another size than the base; PNG only")
                 continue
         holds = [f for f in REQUESTABLE[1:] if codec.storage_format(f).holds(maps[0].encoding)]
@@ -242,7 +248,7 @@ def compressed_copies(
         candidates = [f for f in AUTO_FORMATS if f in holds] if want == "auto" else [want]
         checks: dict[str, list[cmp.FormatCheck]] = {}
         for f in candidates:
-            checks[f] = [_check(m, f, limits, base, with_mips) for m in maps]
+            checks[f] = [_check(m, f, limits, _tile_base(base, m), with_mips) for m in maps]
             if want == "auto":
                 for m, c in zip(maps, checks[f]):
                     if c.verdict == "pass" and _clips(m, c):
@@ -281,6 +287,13 @@ def compressed_copies(
             },
         }
     return copies, notes, choices
+
+
+def _tile_base(bases: dict[int | None, np.ndarray] | None, m: _Map) -> np.ndarray | None:
+    """The base (decoded) a diff state of ``m``'s tile is stored over."""
+    if bases is None:
+        return None
+    return bases.get(split_name(m.name)[1], next(iter(bases.values())))
 
 
 def files(copies: list[Copy]) -> dict[str, bytes]:

@@ -32,6 +32,7 @@ from wrinklepipe.options import BudgetOptions, FormatOptions
 from wrinklepipe.outputs.compression import compressed_copies
 from wrinklepipe.outputs.curves import curve_files
 from wrinklepipe.package import WrinklePackage
+from wrinklepipe.udim import untiled_copies
 from wrinklepipe.usd.layer import (
     flattened_usdz,
     layer_bytes,
@@ -99,6 +100,8 @@ def build_outputs(
         files.update(copy_files(made))
         notes += n
         records = copy_records(made)
+        if pkg.tiles:  # one record per UDIM set (compressed/NAME.<UDIM>.dds)
+            records = untiled_copies(records)
         for c in color_copies or []:
             files.update(c.files())
         if color_copies:

@@ -168,6 +168,8 @@ def read_maps(
             st = model.pd_to_normal(model.normal_to_pd(base) + model.normal_to_pd(st))
         states.append(st)
     check_conventions(read, manifest.convention, manifest.base, manifest.states_include_base)
+    if not manifest.regions:  # one UDIM tile without masks (pipeline.ingest_tiles)
+        return base, np.stack(states), np.zeros((0, 1, 1), np.float32), notes
     channels = [r.channel for r in manifest.regions]
     if any(c is not None for c in channels):
         masks = []

@@ -261,7 +261,7 @@ def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
     meta = pkg.meta
     enc, scale = meta.encoding, float(meta.scale)
     version = mapping_version(meta)
-    base = decode_base(pkg.texture("base_normal").pixels)
+    base = decode_base(pkg.texture(pkg.base_name).pixels)
     states = []
     cache: dict[tuple[int, ...], np.ndarray] = {}
     for s in meta.states:

@@ -27,6 +27,7 @@ from wrinklepipe.options import BudgetOptions, FormatOptions, ResolutionOptions
 from wrinklepipe.paths import SCHEMAS_DIR
 from wrinklepipe.presets import jimenez
 from wrinklepipe.readers.registry import MESH_SUFFIXES
+from wrinklepipe.sources import manifest_tiles as mt
 from wrinklepipe.suffixes import is_gltf, is_usd
 
 _CHANNELS = "rgba"
@@ -44,7 +45,7 @@ class StateSpec:
 @dataclass(frozen=True)
 class RegionSpec:
     name: str
-    mask: Path
+    mask: Path | None  # None only in one tile of a tiled manifest: no mask there (zero)
     channel: str | None = None
     side: str = "center"
     states: tuple[str, ...] = ()
@@ -75,6 +76,20 @@ class Manifest:
     raw: dict[str, Any] = field(default_factory=dict)
     #: the base colour map (None: the wrinkled glTF material's own baseColorTexture)
     base_color: Path | None = None
+    #: UDIM tiles (:mod:`wrinklepipe.sources.manifest_tiles`): each tiled map field's files,
+    #: ``{"base": {1001: path, ...}, "states[0].map": {...}, "regions[2].mask": {...}}``;
+    #: a tiled field's own path above is its pattern (a label: :meth:`tile` reads the files)
+    tile_paths: dict[str, dict[int, Path]] = field(default_factory=dict)
+
+    @property
+    def tiles(self) -> tuple[int, ...]:
+        """The UDIM tiles (the base's), ascending; empty when the maps are not tiled."""
+        return tuple(sorted(self.tile_paths.get("base", {})))
+
+    def tile(self, tile: int) -> Manifest:
+        """This manifest as one of its tiles: a manifest without tiles whose maps are that
+        tile's files (:func:`wrinklepipe.sources.manifest_tiles.tile_manifest`)."""
+        return mt.tile_manifest(self, tile)
 
     @property
     def has_color(self) -> bool:
@@ -88,14 +103,17 @@ class Manifest:
     @property
     def input_files(self) -> list[Path]:
         """Every file the manifest reads (the manifest itself included)."""
-        files = [
-            self.path,
-            *([self.base] if self.base is not None else []),
-            *([self.base_color] if self.base_color is not None else []),
-            *(s.map for s in self.states if s.map is not None),
-            *(s.color for s in self.states if s.color is not None),
-            *(r.mask for r in self.regions),
-        ]
+        if self.tile_paths:
+            files = [self.path, *(p for got in self.tile_paths.values() for p in got.values())]
+        else:
+            files = [
+                self.path,
+                *([self.base] if self.base is not None else []),
+                *([self.base_color] if self.base_color is not None else []),
+                *(s.map for s in self.states if s.map is not None),
+                *(s.color for s in self.states if s.color is not None),
+                *(r.mask for r in self.regions if r.mask is not None),
+            ]
         if self.mesh is not None:
             files.append(self.mesh)
         for d in self.drivers:
@@ -274,8 +292,12 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
     root = path.resolve().parent
     typed = _schema_problems(data, file, problems)
     _path_problems(data, root, file, problems, check_files)  # reported with schema errors
+    tile_paths = mt.expand(data, root, file, problems, check_files)
     if not typed:
         problems.raise_if_any()  # the semantic checks below rely on well-typed data
+
+    def map_path(key: str, value: Any) -> Path:
+        return mt.label(root, key, value) if mt.tiled_value(value) else root / value
 
     expressions = data.get("expressions", {})
     if expressions == "jimenez":
@@ -283,24 +305,24 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
     m = Manifest(
         path=path.resolve(),
         name=data["name"],
-        base=(root / data["base"]) if "base" in data else None,
+        base=map_path("base", data["base"]) if "base" in data else None,
         states=[
             StateSpec(
                 s["name"],
-                root / s["map"] if "map" in s else None,
-                root / s["color"] if "color" in s else None,
+                map_path(f"states[{i}].map", s["map"]) if "map" in s else None,
+                map_path(f"states[{i}].color", s["color"]) if "color" in s else None,
             )
-            for s in data["states"]
+            for i, s in enumerate(data["states"])
         ],
         regions=[
             RegionSpec(
                 r["name"],
-                root / r["mask"],
+                map_path(f"regions[{i}].mask", r["mask"]),
                 r.get("channel"),
                 r.get("side", "center"),
                 tuple(r.get("states", ())),
             )
-            for r in data["regions"]
+            for i, r in enumerate(data["regions"])
         ],
         mesh=(root / data["mesh"]) if "mesh" in data else None,
         material=data.get("material"),
@@ -316,9 +338,11 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
         formats=FormatOptions.from_json(data.get("formats")),
         budget=BudgetOptions.from_json(data.get("budget")),
         raw=data,
-        base_color=(root / data["base_color"]) if "base_color" in data else None,
+        base_color=map_path("base_color", data["base_color"]) if "base_color" in data else None,
+        tile_paths=tile_paths,
     )
     _semantic_problems(m, file, problems, check_files)
+    mt.tile_problems(m, file, problems, check_files)
     problems.raise_if_any()
     return m
 
@@ -326,7 +350,11 @@ def load_manifest(path: str | Path, check_files: bool = True) -> Manifest:
 def _path_fields(data: dict[str, Any]) -> list[tuple[str, str]]:
     """(key, path) of every file the manifest names, wherever the value is a string (so this
     works on a manifest that also has schema errors)."""
-    out = [(k, data[k]) for k in ("mesh", "base", "base_color") if isinstance(data.get(k), str)]
+    out = [
+        (k, data[k])
+        for k in ("mesh", "base", "base_color")
+        if isinstance(data.get(k), str) and not mt.tiled_value(data[k])
+    ]
     fields = (
         ("states", "map"),
         ("states", "color"),
@@ -336,8 +364,9 @@ def _path_fields(data: dict[str, Any]) -> list[tuple[str, str]]:
     for table, field_name in fields:
         rows = data.get(table)
         for i, row in enumerate(rows if isinstance(rows, list) else []):
-            if isinstance(row, dict) and isinstance(row.get(field_name), str):
-                out.append((f"{table}[{i}].{field_name}", row[field_name]))
+            value = row.get(field_name) if isinstance(row, dict) else None
+            if isinstance(value, str) and not mt.tiled_value(value):
+                out.append((f"{table}[{i}].{field_name}", value))
     return out
 
 
@@ -491,7 +520,7 @@ def _file_problems(m: Manifest, file: str, problems: ProblemList) -> None:
     sizes: dict[tuple[int, int], str] = {}  # existence and confinement: _path_problems
     for i, r in enumerate(m.regions):
         key = f"regions[{i}].mask"
-        if not r.mask.is_file():
+        if r.mask is None or not r.mask.is_file():  # tiles: manifest_tiles checks them
             continue
         try:
             info = read_header(r.mask)

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from wrinklepipe import udim
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.demo import demo_asset
 from wrinklepipe.errors import InputError, input_error
@@ -36,8 +37,10 @@ from wrinklepipe.normals import uastc
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.pipeline.drivers import evaluate_drivers
 from wrinklepipe.pipeline.ingest import ingest
+from wrinklepipe.pipeline.ingest_tiles import ingest_tiles
 from wrinklepipe.pipeline.package import package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
+from wrinklepipe.pipeline.tiles import run_tile_stages
 from wrinklepipe.readers.registry import Format, format_of, read_package_file
 from wrinklepipe.sources.copies import check_copies, copy_path
 from wrinklepipe.sources.manifest import load_manifest
@@ -269,7 +272,11 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
     """Replace base/state textures by the BC copies that ship beside them (DDS), after reading
     every copy the asset lists whole (:func:`~wrinklepipe.sources.copies.check_copies`: DDS and
     KTX2, every level, decoded; what is wrong goes to ``extra["copy_problems"]``, the
-    validator's WP-TEX-004). A copy that cannot be read leaves its PNG in place."""
+    validator's WP-TEX-004). A copy that cannot be read leaves its PNG in place. A UDIM input's, tile by tile."""
+    if inp.tiles:
+        inp.tiles = {t: _use_compressed(one, folder, required) for t, one in inp.tiles.items()}
+        inp.textures = [x for one in inp.tiles.values() for x in one.textures]
+        return inp
     if not folder.is_dir():
         if required:
             raise input_error(folder, "no compressed/ folder (--textures compressed)")
@@ -347,6 +354,9 @@ def _source_asset(manifest_path: Path, stages: bool = False) -> WrinkleAsset:
 
 
 def _load_manifest(p: Path) -> ValidationInput:
+    m = load_manifest(p)
+    if m.tiles:
+        return _load_tiled_manifest(p, m)
     asset = _source_asset(p, stages=True)
     pkg = guard_reader(lambda: package_from_asset(asset), p, "the packed asset")
     inp = input_from_package(pkg, str(p), "manifest")
@@ -362,17 +372,54 @@ def _load_manifest(p: Path) -> ValidationInput:
     return inp
 
 
+def _load_tiled_manifest(p: Path, m: Any) -> ValidationInput:
+    """A manifest with UDIM tiles, run through the stages convert runs tile by tile
+    (:func:`wrinklepipe.pipeline.tiles.run_tile_stages`) and packed as it would: one input per
+    tile, its asset the tile's after the stages."""
+    got = guard_reader(lambda: ingest_tiles(m), p, "the manifest's files")
+    whole = replace(got.whole, mesh=guard_reader(lambda: prepare_mesh(got.whole.mesh), p, "mesh"))
+    tiles = {t: replace(a, mesh=udim.tile_mesh(whole.mesh, t)) for t, a in got.tiles.items()}
+    auto = m.pd_scale == "auto"
+    staged = guard_reader(lambda: run_tile_stages(tiles, auto_scale=auto), p, "the stages")
+    curves: list[Any] = []
+    if whole.drivers:
+        curves, _ = guard_reader(lambda: evaluate_drivers(whole, p.parent), p, "the drivers")
+    pkgs = {t: package_from_asset(a, curves=curves) for t, a in staged.assets.items()}
+    pkg = guard_reader(lambda: udim.join_tiles(pkgs, whole.mesh), p, "the packed asset")
+    inp = input_from_package(pkg, str(p), "manifest")
+    for t, one in inp.tiles.items():
+        one.asset = staged.assets[t]
+        one.has_source = True
+        one.pointers.update({k: str(p) for k in ("meta", "masks", "channels", "textures")})
+    inp.has_source = True
+    if curves:
+        inp.weight_curves = {str(c.name): np.asarray(c.values, np.float32) for c in curves}
+        inp.curves = list(curves)
+        for one in inp.tiles.values():
+            one.weight_curves, one.curves = inp.weight_curves, inp.curves
+    inp.pointers.update({k: str(p) for k in ("meta", "masks", "channels", "textures")})
+    return inp
+
+
 def _attach_source(inp: ValidationInput, manifest: Path) -> ValidationInput:
     m = load_manifest(manifest)
+    if m.tiles:
+        got = guard_reader(lambda: ingest_tiles(m), manifest, "the manifest's files")
+        return attach_source(inp, got.tiles, manifest)
     src, _ = guard_reader(lambda: ingest(m), manifest, "the manifest's files")
     return attach_source(inp, src, manifest)
 
 
-def attach_source(inp: ValidationInput, src: WrinkleAsset, manifest: Path) -> ValidationInput:
+def attach_source(
+    inp: ValidationInput, src: WrinkleAsset | dict[int, WrinkleAsset], manifest: Path
+) -> ValidationInput:
     """Use ``src`` (an ingested asset at its source resolution: base, states, masks, budget) as
     the source the shipped textures are measured against. ``convert`` passes the asset it has
     just ingested, so the validator neither re-reads nor re-decodes the source files; the
-    shipped side is still what was read back from the written folder."""
+    shipped side is still what was read back from the written folder. A UDIM input takes one
+    source asset per tile (``{tile: asset}``), and every tile needs its own."""
+    if inp.tiles or isinstance(src, dict):
+        return _attach_tiles(inp, src, manifest)
     a = inp.asset
     names = list(src.region_names)
     missing = [r for r in a.region_names if r not in names]
@@ -406,6 +453,31 @@ def _source_problems(inp: ValidationInput, src: WrinkleAsset) -> None:
     found = src.provenance.get("usd_composition")
     if found:
         inp.extra["usd_composition"] = list(found)
+
+
+def _attach_tiles(
+    inp: ValidationInput, src: WrinkleAsset | dict[int, WrinkleAsset], manifest: Path
+) -> ValidationInput:
+    """:func:`attach_source` tile by tile."""
+    if not isinstance(src, dict) or not inp.tiles:
+        what = "has UDIM tiles" if isinstance(src, dict) else "has no UDIM tiles"
+        raise input_error(
+            manifest,
+            f"does not describe the same asset: the manifest {what}, {inp.path} "
+            + ("does not" if isinstance(src, dict) else "does"),
+        )
+    missing = sorted(set(inp.tiles) - set(src))
+    if missing:
+        raise input_error(
+            manifest,
+            f"does not describe the same asset: no source for tile(s) "
+            f"{', '.join(map(str, missing))} of {inp.path}",
+        )
+    inp.tiles = {t: attach_source(one, src[t], manifest) for t, one in inp.tiles.items()}
+    first = inp.tiles[min(inp.tiles)]
+    inp.asset = replace(first.asset, mesh=inp.asset.mesh)
+    inp.has_source = True
+    return inp
 
 
 def demo_input(spec: str = "demo") -> ValidationInput:

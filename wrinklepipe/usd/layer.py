@@ -50,10 +50,12 @@ from wrinklepipe.io.confine import allowed, confine_usd
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.io.usd_diagnostics import quiet
 from wrinklepipe.package import WrinklePackage
+from wrinklepipe.udim import TOKEN, split_name
 from wrinklepipe.usd.materialx import drop_materialx_file
 from wrinklepipe.usd.meshes import mesh_time
-from wrinklepipe.usd.package_write import LAYERED_OVER, UsdOptions, build_stage, usdz_bytes
+from wrinklepipe.usd.package_write import LAYERED_OVER, UsdOptions, build_stage
 from wrinklepipe.usd.source import UsdSource
+from wrinklepipe.usd.usdz import usdz_bytes
 
 #: Stage metadata copied from the source's root layer (only a stage's root layer sets them).
 STAGE_METADATA = (
@@ -488,6 +490,9 @@ def flattened_usdz(
     files: dict[str, bytes] = {
         ours[k]: png_bytes(t.pixels, png_level) for k, t in zip(ours, pkg.textures)
     }
+    if pkg.tiles:  # the layer names each UDIM set (its tiles are packed beside it)
+        for stem in sorted({split_name(t.name)[0] for t in pkg.textures}):
+            ours[f"./textures/{stem}.{TOKEN}.png"] = f"textures/{stem}.{TOKEN}.png"
     by_source: dict[str, str] = {}
     notes: list[str] = []
 

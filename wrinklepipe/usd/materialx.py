@@ -28,6 +28,7 @@ import numpy as np
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.shading import materialx as wmx
 from wrinklepipe.shading.setup import from_meta
+from wrinklepipe.udim import TOKEN as UDIM_TOKEN
 
 #: MaterialX type -> Sdf value type name (as UsdMtlx maps them).
 SDF_TYPES = {
@@ -189,12 +190,13 @@ def materialx_document(pkg: WrinklePackage, texture_dir: str = "textures") -> mx
     setup = from_meta(meta, channels, state_bits=bits)
     if setup.problems():
         return None
+    u = f".{UDIM_TOKEN}" if pkg.tiles else ""  # MaterialX reads <UDIM> in file names
     files = wmx.MapFiles(
-        f"{tdir}base_normal.png",
-        tuple(f"{tdir}{s.texture}.png" for s in meta.states),
-        tuple(f"{tdir}{n}.png" for n in meta.masks.textures),
-        f"{tdir}{meta.base_color}.png" if meta.base_color else "",
-        tuple(f"{tdir}{n}.png" for n in meta.color_textures),
+        f"{tdir}{pkg.base_name}{u}.png",
+        tuple(f"{tdir}{s.texture}{u}.png" for s in meta.states),
+        tuple(f"{tdir}{n}{u}.png" for n in meta.masks.textures),
+        f"{tdir}{meta.base_color}{u}.png" if meta.base_color else "",
+        tuple(f"{tdir}{n}{u}.png" for n in meta.color_textures),
         meta.color_factor,
     )
     return wmx.wrinkle_document(setup, files, [float(w) for w in meta.weights])

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from wrinklepipe import udim
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.normals import vertex_normals
@@ -48,6 +49,7 @@ from wrinklepipe.metadata import (
     sorted_expressions,
 )
 from wrinklepipe.package import PackedTexture, WeightCurves, WrinklePackage, safe_name
+from wrinklepipe.udim import TOKEN as UDIM_TOKEN
 from wrinklepipe.usd.meshes import UsdMeshOptions, open_stage, read_usd_meshes
 from wrinklepipe.usd.package_write import (
     API_NAME,
@@ -111,8 +113,10 @@ def _samples(attr: Any, codes: list[float], width: int, what: str, per: str, fil
     return np.stack(rows) if rows else np.zeros((0, width), np.float32)
 
 
-def _compressed(prim: Any, mapping: int) -> tuple[CompressedCopy, ...]:
-    """The records of the block-compressed copies (``wrinkle:compressed*``), if authored."""
+def _compressed(prim: Any, mapping: int, tiled: bool = False) -> tuple[CompressedCopy, ...]:
+    """The records of the block-compressed copies (``wrinkle:compressed*``), if authored (a
+    UDIM asset's files name ``<UDIM>``)."""
+    u = f".{UDIM_TOKEN}" if tiled else ""
 
     def get(name: str) -> list[Any]:
         a = prim.GetAttribute(f"wrinkle:{name}")
@@ -128,8 +132,8 @@ def _compressed(prim: Any, mapping: int) -> tuple[CompressedCopy, ...]:
             layout=str(lay),
             mapping=1 if n == "base_normal" or space == "srgb" else mapping,
             levels=int(lv),
-            ktx2=f"compressed/{n}.ktx2",
-            dds="" if str(f) == "uastc" else f"compressed/{n}.dds",  # UASTC: KTX2 only
+            ktx2=f"compressed/{n}{u}.ktx2",
+            dds="" if str(f) == "uastc" else f"compressed/{n}{u}.dds",  # UASTC: KTX2 only
             color_space=space,
         )
         for n, f, lay, lv, space in zip(names, fmts, lays, levels, spaces)
@@ -234,9 +238,22 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
 
     # -- textures ----------------------------------------------------------------------------
     textures: list[PackedTexture] = []
+    tiles = _tiles(mat_prim, file)
 
     def add_texture(asset: Any, key: str, role: str, name: str | None = None) -> str:
-        name = name or safe_name(_stem(asset))
+        stem = _stem(asset)
+        if tiles:  # a UDIM set: NAME.<UDIM>.png, one file per tile
+            if not stem.endswith(f".{UDIM_TOKEN}"):
+                raise input_error(file, f"a texture of a UDIM asset names no {UDIM_TOKEN}", key)
+            name = name or safe_name(stem[: -len(UDIM_TOKEN) - 1])
+            for t in tiles:
+                tile_name = udim.tiled_name(name, t)
+                if not any(x.name == tile_name for x in textures):
+                    data = _asset_bytes(path, _tile_asset(stage, asset, t), file, key, opt)
+                    pixels = png_pixels(data, f"{file} {key} tile {t}")
+                    textures.append(PackedTexture(tile_name, pixels, role))
+            return name
+        name = name or safe_name(stem)
         if not any(t.name == name for t in textures):
             data = _asset_bytes(path, asset, file, key, opt)
             textures.append(PackedTexture(name, png_pixels(data, f"{file} {key}"), role))
@@ -251,9 +268,44 @@ def read_usd(path: str | Path, options: UsdReadOptions | None = None) -> Wrinkle
     add_texture(base_file, f"{base_shader.GetPath()}.inputs:file", "base_normal", "base_normal")
 
     meta = _meta(mat_prim, add_texture, file)
+    if tiles:
+        meta = replace(meta, compressed=_compressed(mat_prim, meta.mapping, tiled=True))
+        udim.triangle_tiles(mesh.uvs, mesh.indices, file)  # every triangle inside one tile
     curves = _curves(stage, mat_prim, len(meta.regions), len(mesh.morph_names), file)
     name = stage.GetDefaultPrim().GetName() if stage.GetDefaultPrim() else path.stem
-    return WrinklePackage(name, mesh, textures, meta, curves)
+    return WrinklePackage(name, mesh, textures, meta, curves, tiles)
+
+
+def _tiles(mat_prim: Any, file: str) -> tuple[int, ...]:
+    """``wrinkle:tiles`` (a UDIM asset's tiles), or () when not authored."""
+    a = mat_prim.GetAttribute("wrinkle:tiles")
+    if not a or not a.HasAuthoredValue():
+        return ()
+    got = tuple(int(t) for t in a.Get())
+    if not got or not all(udim.valid(t) for t in got) or list(got) != sorted(set(got)):
+        raise input_error(
+            file,
+            f"wrinkle:tiles must list UDIM tiles (1001..9999) ascending, got {list(got)}",
+            str(mat_prim.GetPath()),
+        )
+    return got
+
+
+class _TileAsset:
+    """One tile of a ``<UDIM>`` asset path, resolved as USD resolves the layer's assets."""
+
+    def __init__(self, path: str, resolved: str) -> None:
+        self.path, self.resolvedPath = path, resolved
+
+
+def _tile_asset(stage: Any, asset: Any, tile: int) -> _TileAsset:
+    """The file of tile ``tile`` of ``asset`` (its ``<UDIM>`` replaced), resolved against the
+    layer that authored it (the root layer: wrinklepipe writes its textures there)."""
+    from pxr import Ar, Sdf  # deferred: usd-core, USD only
+
+    raw = udim.pattern_path(asset.path, tile)
+    anchored = Sdf.ComputeAssetPathRelativeToLayer(stage.GetRootLayer(), raw)
+    return _TileAsset(raw, str(Ar.GetResolver().Resolve(anchored)))
 
 
 def _meta(mat_prim: Any, add_texture: Callable[[Any, str, str], str], file: str) -> WrinkleMeta:

@@ -34,12 +34,9 @@ rigged scene beside it, the wrinkled primitives among its meshes
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 import os
-import struct
 import tempfile
-import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,7 +53,9 @@ from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.io.usd_diagnostics import quiet
 from wrinklepipe.package import MAX_FLOAT_ID, WrinklePackage, safe_name
 from wrinklepipe.paths import SCHEMAS_DIR
+from wrinklepipe.udim import TOKEN as UDIM_TOKEN
 from wrinklepipe.usd import materialx as mtlx
+from wrinklepipe.usd.usdz import usdz_bytes
 
 API_NAME = "WrinkleMapsAPI"
 USD_SCHEMA_DIR = SCHEMAS_DIR / "usd"
@@ -99,6 +98,16 @@ COLOR_ATTRIBUTES: dict[str, str] = {
     "wrinkle:colorOnlyStates": "token[]",
     "wrinkle:compressedColorSpaces": "token[]",
 }
+
+
+#: The UDIM attribute of ``WrinkleMapsAPI``, authored only on the material of a tiled
+#: package (:mod:`wrinklepipe.udim`): its textures' file names say ``<UDIM>``.
+TILE_ATTRIBUTES: dict[str, str] = {"wrinkle:tiles": "int[]"}
+
+
+def udim_suffix(pkg: WrinklePackage) -> str:
+    """What a texture's file stem takes in a USD of ``pkg``: ``.<UDIM>`` when it is tiled."""
+    return f".{UDIM_TOKEN}" if pkg.tiles else ""
 
 
 #: Custom attribute on the wrinkled material of a layer over a USD source (the source's file
@@ -365,8 +374,11 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
         tex.CreateOutput("rgba", Sdf.ValueTypeNames.Float4)
         return tex
 
+    tiled = udim_suffix(pkg)  # ".<UDIM>": every texture is a UDIM set
     base = texture("base_normal", (2, 2, 2, 1), (-1, -1, -1, 0))
-    base.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"{tdir}base_normal.png"))
+    base.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(
+        Sdf.AssetPath(f"{tdir}{pkg.base_name}{tiled}.png")
+    )
     surf.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(
         base.ConnectableAPI(), "rgb"
     )
@@ -389,7 +401,7 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
         kind: str, key: str, name: str, sc: tuple, bi: tuple, space: str = "raw"
     ) -> None:
         inp = mat.CreateInput(f"wrinkle:{kind}:{key}", Sdf.ValueTypeNames.Asset)
-        inp.Set(Sdf.AssetPath(f"{tdir}{name}.png"))
+        inp.Set(Sdf.AssetPath(f"{tdir}{name}{tiled}.png"))
         tex = texture(name, sc, bi, space)
         tex.CreateInput("file", Sdf.ValueTypeNames.Asset).ConnectToSource(inp)
 
@@ -442,6 +454,9 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
         values["wrinkle:compressedLevels"] = Vt.IntArray([c.levels for c in comp])
     for attr_name, value in values.items():
         attrs[attr_name].Set(value)
+    if pkg.tiles:
+        a = prim.CreateAttribute("wrinkle:tiles", Sdf.ValueTypeNames.IntArray, custom=False)
+        a.Set(Vt.IntArray(list(pkg.tiles)))
     for attr_name, value in _color_values(meta).items():
         a = prim.CreateAttribute(attr_name, Sdf.ValueTypeNames.Find(COLOR_ATTRIBUTES[attr_name]))
         a.SetCustom(False)
@@ -557,30 +572,6 @@ def _export_via_temp(layer: Any, path: Path, fmt: str) -> Path:
             os.unlink(tmp)
         raise
     return path
-
-
-def usdz_bytes(entries: list[tuple[str, bytes]]) -> bytes:
-    """A usdz archive: uncompressed zip, every file's data 64-byte aligned, fixed timestamps.
-
-    The first entry must be the root layer. Alignment uses a padding extra field (id 0x1986, as
-    USD's own writer does); the date is 1980-01-01 so the bytes never depend on the clock.
-    """
-
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_STORED) as zf:
-        for name, data in entries:
-            info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_STORED
-            info.create_system = 3
-            info.external_attr = 0o644 << 16
-            start = buf.tell() + 30 + len(name.encode("utf-8"))
-            pad = (-start) % 64
-            if 0 < pad < 4:
-                pad += 64
-            if pad:
-                info.extra = struct.pack("<HH", 0x1986, pad - 4) + b"\0" * (pad - 4)
-            zf.writestr(info, data)
-    return buf.getvalue()
 
 
 def _write_usdz(

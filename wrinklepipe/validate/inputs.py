@@ -123,6 +123,10 @@ class ValidationInput:
     #: them: the render pass draws the frames where each region's weight peaks.
     curves: list[Any] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: UDIM: one plain input per tile (its textures, the mesh of its triangles with UVs in
+    #: [0, 1]); this input then describes the whole asset and the validator runs the tiles
+    #: (:mod:`wrinklepipe.validate.tiles`)
+    tiles: dict[int, ValidationInput] = field(default_factory=dict)
 
     def texture(self, name: str) -> Texture | None:
         return next((t for t in self.textures if t.name == name), None)

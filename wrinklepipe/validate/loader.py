@@ -11,11 +11,13 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from wrinklepipe import udim
 from wrinklepipe.asset import ColorMaps, Mesh, Region, WrinkleAsset
 from wrinklepipe.atomic import write_output
 from wrinklepipe.errors import InputError, input_error, plain_reason
@@ -67,7 +69,22 @@ def _fmt_for(pixels: np.ndarray) -> str:
 def input_from_package(
     pkg: Any, path: str, kind: str, file_of: dict[str, str] | None = None
 ) -> ValidationInput:
-    """A :class:`ValidationInput` from a :class:`wrinklepipe.package.WrinklePackage`."""
+    """A :class:`ValidationInput` from a :class:`wrinklepipe.package.WrinklePackage`; a UDIM
+    package's has one input per tile (:func:`wrinklepipe.udim.tile_package`) and describes
+    the whole (its textures every tile's, its mesh the whole mesh)."""
+    if pkg.tiles:
+        tiles = {
+            t: input_from_package(udim.tile_package(pkg, t), path, kind, file_of) for t in pkg.tiles
+        }
+        for t, one in tiles.items():
+            one.extra["tile"] = t
+        first = tiles[pkg.tiles[0]]
+        return replace(
+            first,
+            asset=replace(first.asset, mesh=pkg.mesh),
+            textures=[x for one in tiles.values() for x in one.textures],
+            tiles=tiles,
+        )
     asset = guard_reader(lambda: asset_from_package(pkg), Path(path), "the wrinkle data")
     meta = pkg.meta
     version = guard_reader(lambda: mapping_version(meta), Path(path), "the mapping version")

@@ -144,7 +144,9 @@ def shipped_fidelity(ctx: Context) -> fd.Fidelity | None:
         states = ctx.shipped_states
         s = shipped_samples(ctx, np.stack(states)) if states is not None else None
         if s is not None:  # fd.measure of the shipped maps
-            c["fidelity"] = fd.evaluate(reference(ctx), s, base_over_face=True, error_maps=True)
+            c["fidelity"] = fd.evaluate(
+                reference(ctx), s, base_over_face=True, error_maps=True, samples=True
+            )
     return c["fidelity"]
 
 

@@ -193,16 +193,25 @@ def side_centroids(masks: np.ndarray, mesh: object | None) -> tuple[np.ndarray, 
         vals = np.moveaxis(masks, 0, -1).reshape(-1, r)
         x = np.tile((np.arange(w) + 0.5) / w, h).astype(np.float64)
         unit = "u"
+    cent, centre = _centroids(vals, x)
+    return cent, centre, unit
+
+
+def _centroids(vals: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, float]:
+    """Each region's ``vals``-weighted mean of ``x`` (``[V, R]``, ``[V]``) and the centre of
+    their union (a region without weight: the centre)."""
     vals = np.nan_to_num(vals).astype(np.float64)
     wsum = vals.sum(axis=0)
     cent = (vals * x[:, None]).sum(axis=0) / np.maximum(wsum, 1e-12)
     union = vals.sum(axis=1)
     centre = float((union * x).sum() / max(union.sum(), 1e-12))
-    return np.where(wsum > 0, cent, centre), centre, unit
+    return np.where(wsum > 0, cent, centre), centre
 
 
 def _check_sides(ctx: Context) -> list[Issue]:
     a, inp = ctx.asset, ctx.inp
+    if inp.extra.get("tile") is not None:
+        return []  # one UDIM tile: the sides are the whole face's (check_face_sides)
     masks = ctx.shipped_masks if ctx.shipped_masks is not None else np.asarray(a.masks)
     if masks.shape[0] != len(a.regions) or masks.shape[0] == 0:
         return []
@@ -212,6 +221,33 @@ def _check_sides(ctx: Context) -> list[Issue]:
         half = max(float(x.max() - x.min()) / 2.0, 1e-12)
     else:
         half = 0.5
+    return _side_issues(ctx, cent, centre, half, unit)
+
+
+def check_face_sides(ctxs: list[Context]) -> list[Issue]:
+    """WP-MASK-005 over a UDIM asset's whole face: every tile's masks (shipped, else source)
+    sampled at that tile's vertices, one centre for the face."""
+    vals, xs = [], []
+    for ctx in ctxs:
+        a = ctx.asset
+        masks = ctx.shipped_masks if ctx.shipped_masks is not None else np.asarray(a.masks)
+        if a.mesh is None or a.mesh.uvs is None or masks.shape[0] != len(a.regions):
+            return []
+        uv = np.asarray(a.mesh.uvs, np.float32)
+        vals.append(tx.bilinear(np.moveaxis(masks, 0, -1), uv))
+        xs.append(np.asarray(a.mesh.positions, np.float64)[:, 0])
+    if not vals or not len(ctxs[0].asset.regions):
+        return []
+    x = np.concatenate(xs)
+    cent, centre = _centroids(np.concatenate(vals), x)
+    half = max(float(x.max() - x.min()) / 2.0, 1e-12)
+    return _side_issues(ctxs[0], cent, centre, half, "x")
+
+
+def _side_issues(
+    ctx: Context, cent: np.ndarray, centre: float, half: float, unit: str
+) -> list[Issue]:
+    a, inp = ctx.asset, ctx.inp
     out = []
     for i, reg in enumerate(a.regions):
         off = (cent[i] - centre) / half  # -1..1 across the whole head (or texture)

@@ -17,6 +17,7 @@ from wrinklepipe.validate import (
     rules_mesh,
     rules_usd,
     rules_weights,
+    tiles,
 )
 from wrinklepipe.validate.catalogue import SEVERITIES, Issue
 from wrinklepipe.validate.config import Config
@@ -72,7 +73,9 @@ class Report:
 
 def describe_input(inp: ValidationInput) -> dict[str, Any]:
     a = inp.asset
+    tiled = {"tiles": sorted(inp.tiles)} if inp.tiles else {}
     return {
+        **tiled,
         "path": inp.path,
         "kind": inp.kind,
         "name": a.name,
@@ -116,7 +119,20 @@ def validate(
     config: Config | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> Report:
-    """Validate one asset: all rules, then (``options.render``) the GPU render pass."""
+    """Validate one asset: all rules, then (``options.render``) the GPU render pass; a UDIM
+    asset tile by tile and over the whole face (:mod:`wrinklepipe.validate.tiles`)."""
+    if inp.tiles:
+        return _validate_tiles(inp, options, config, progress)
+    return _validate_one(inp, options, config, progress)[0]
+
+
+def _validate_one(
+    inp: ValidationInput,
+    options: ValidateOptions | None = None,
+    config: Config | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[Report, Context]:
+    """:func:`validate` of a plain input, with the context the rules shared."""
     cfg = config or Config()
     opts = cfg.validate_options(options) if cfg.options else (options or ValidateOptions())
     ctx = Context(inp, opts)
@@ -144,11 +160,74 @@ def validate(
     images.update(ctx.metrics.pop("fidelity_pictures", {}))  # keyed as the page shows them
     issues, dropped = cfg.apply(issues)
     issues.sort(key=lambda i: (_RANK[i.severity], i.code, i.pointer, i.message))
-    return Report(
+    report = Report(
         input=describe_input(inp),
         issues=issues,
         metrics=ctx.metrics,
         timings={k: round(v, 4) for k, v in ctx.timings.items()},
+        render=render_info,
+        images=images,
+        ignored=dropped,
+    )
+    return report, ctx
+
+
+def _validate_tiles(
+    inp: ValidationInput,
+    options: ValidateOptions | None,
+    config: Config | None,
+    progress: Callable[[str], None] | None,
+) -> Report:
+    """Every tile validated on its own, then one report with the whole face's fidelity
+    (:mod:`wrinklepipe.validate.tiles`)."""
+    cfg = config or Config()
+    per_tile: dict[int, list[Issue]] = {}
+    ctxs: list[Context] = []
+    metrics: dict[str, Any] = {"tiles": {}}
+    timings: dict[str, float] = {}
+    poses: dict[str, Any] = {}
+    render_rest: dict[str, Any] = {}
+    images: dict[str, Any] = {}
+    fids: dict[int, Any] = {}
+    areas: dict[int, float] = {}
+    dropped = 0
+    budget_of: tuple[Any, str] | None = None
+    for i, (t, one) in enumerate(sorted(inp.tiles.items())):
+        report, ctx = _validate_one(one, options, config, progress)
+        per_tile[t] = report.issues
+        ctxs.append(ctx)
+        metrics["tiles"][str(t)] = report.metrics
+        for k, v in report.timings.items():
+            timings[k] = round(timings.get(k, 0.0) + v, 4)
+        got, rest = tiles.tile_render(report.render, t)
+        poses.update(got)
+        if rest:
+            render_rest[str(t)] = rest
+        images.update(tiles.tile_images(report.images, t, i == 0))
+        dropped += report.ignored
+        fid = rules_fidelity.shipped_fidelity(ctx)
+        if fid is not None:
+            fids[t] = fid
+            h, w = rules_fidelity.reference(ctx).shape  # type: ignore[union-attr]
+            areas[t] = 1.0 / float(h * w)
+            budget_of = budget_of or rules_fidelity.budgets(ctx)
+    issues = tiles.merge_issues(per_tile)
+    issues += cfg.apply(rules_masks.check_face_sides(ctxs))[0]
+    face = tiles.face_fidelity(fids, areas)
+    if fids:
+        metrics["fidelity_by_tile"] = tiles.by_tile(fids, face)
+    if face is not None and budget_of is not None:
+        budget, which = budget_of
+        metrics["fidelity"] = {**face.to_json(), "budget": budget.to_json(), "applies": which}
+        got_issues, _ = cfg.apply(tiles.face_issues(face, budget, which, inp.pointer("textures")))
+        issues += got_issues
+    issues.sort(key=lambda i: (_RANK[i.severity], i.code, i.pointer, i.message))
+    render_info = {"poses": poses, "tiles": render_rest} if poses or render_rest else {}
+    return Report(
+        input=describe_input(inp),
+        issues=issues,
+        metrics=metrics,
+        timings=timings,
         render=render_info,
         images=images,
         ignored=dropped,
