@@ -272,7 +272,8 @@ def _use_compressed(inp: ValidationInput, folder: Path, required: bool) -> Valid
     """Replace base/state textures by the BC copies that ship beside them (DDS), after reading
     every copy the asset lists whole (:func:`~wrinklepipe.sources.copies.check_copies`: DDS and
     KTX2, every level, decoded; what is wrong goes to ``extra["copy_problems"]``, the
-    validator's WP-TEX-004). A copy that cannot be read leaves its PNG in place. A UDIM input's, tile by tile."""
+    validator's WP-TEX-004). A copy that cannot be read leaves its PNG in place. A UDIM input's
+    copies are read tile by tile."""
     if inp.tiles:
         inp.tiles = {t: _use_compressed(one, folder, required) for t, one in inp.tiles.items()}
         inp.textures = [x for one in inp.tiles.values() for x in one.textures]
