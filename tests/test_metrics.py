@@ -99,6 +99,14 @@ def test_many_rows_at_once_equal_one_row_at_a_time(n, g, seed):
         assert got.mean == pytest.approx(want.mean, rel=1e-9, abs=1e-12)
 
 
+def test_no_texel_gives_one_empty_row_per_region():
+    """A pose with no texel (on one UDIM tile, all its regions painted on another): every
+    region's row is empty, not an error."""
+    got = weighted_stats_many(np.zeros(0, np.float32), np.zeros((3, 0), np.float32))
+    assert [(s.texels, s.weight) for s in got] == [(0, 0.0)] * 3
+    assert [s.texels for s in weighted_stats_many(np.zeros(0), np.zeros(0))] == [0]
+
+
 def dense_stats_many(err, weights):
     """Per row, by the whole sorted row: one stable sort of err, the float64 running sum of
     the row's weights over every texel in that order (zeros included), the first texel

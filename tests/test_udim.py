@@ -161,6 +161,36 @@ def test_bad_tiled_manifests_say_what_is_wrong(tmp_path, change, said):
         load_manifest(path)
 
 
+@pytest.mark.parametrize("tiled_colors", [True, False])
+def test_colour_maps_with_tiles_are_refused_in_one_message(tmp_path, tiled_colors):
+    """Colour states do not take tiles: a tiled manifest with colour maps (tiled or one file
+    each) is refused by one problem naming every colour map, before anything is read."""
+    path = write_udim_setup(tmp_path, size=16, mask_size=8)
+    for t in (1001, 1002):
+        Image.new("RGB", (16, 16), (200, 150, 120)).save(tmp_path / "maps" / f"skin.{t}.png")
+        Image.new("RGB", (16, 16), (220, 120, 110)).save(tmp_path / "maps" / f"flush.{t}.png")
+    tile = "<UDIM>" if tiled_colors else "1001"
+    text = path.read_text().replace(
+        'base = "maps/base.<UDIM>.png"',
+        f'base = "maps/base.<UDIM>.png"\nbase_color = "maps/skin.{tile}.png"',
+    )
+    text = text.replace(
+        'map = "maps/compress.<UDIM>.png"',
+        f'map = "maps/compress.<UDIM>.png"\ncolor = "maps/flush.{tile}.png"',
+    )
+    path.write_text(text)
+    with pytest.raises(InputError) as err:
+        load_manifest(path)
+    problems = err.value.problems
+    assert len(problems) == 1, [p.message for p in problems]
+    assert problems[0].key == "base_color"
+    assert problems[0].message.startswith(
+        "colour maps do not take UDIM tiles yet (base_color, states[1].color)"
+    )
+    code = main(["convert", str(path), "-o", str(tmp_path / "out")])
+    assert code == 2 and not (tmp_path / "out").exists()
+
+
 def test_a_state_tile_the_base_lacks_and_tiles_of_two_sizes(tmp_path):
     path = write_udim_setup(tmp_path, size=16, mask_size=8)
     Image.new("RGB", (16, 16), (128, 128, 255)).save(tmp_path / "maps" / "stretch.1003.png")

@@ -200,3 +200,151 @@ def write_udim_setup(
     ]
     (folder / "manifest.toml").write_text("\n".join(lines) + "\n" + extra, encoding="utf-8")
     return folder / "manifest.toml"
+
+
+# ------------------------------------------------------------------------------------------------
+# a two-tile head made from a shared sample: CesiumMan's face split over tiles 1001 and 1002
+
+#: CesiumMan (Khronos glTF sample) under ``../shared/data``.
+CESIUM = (
+    Path(__file__).resolve().parents[2]
+    / "shared"
+    / "data"
+    / "gltf-samples"
+    / "CesiumMan"
+    / "glTF-Binary"
+    / "CesiumMan.glb"
+)
+
+
+def _head_usda(positions: np.ndarray, normals: np.ndarray, tris: np.ndarray, st: np.ndarray) -> str:
+    """A USD layer of one triangle mesh (``/Head/Mesh``, Y up, metres) with faceVarying
+    ``st`` (one UV per triangle corner, USD's t up) and a material to wrinkle."""
+    fmt = ", ".join
+    lo, hi = (tuple(x.round(6).tolist()) for x in (positions.min(0), positions.max(0)))
+    return f"""#usda 1.0
+(
+    defaultPrim = "Head"
+    metersPerUnit = 1
+    upAxis = "Y"
+)
+
+def Xform "Head" (
+    kind = "component"
+)
+{{
+    def Mesh "Mesh" (
+        prepend apiSchemas = ["MaterialBindingAPI"]
+    )
+    {{
+        float3[] extent = [{lo}, {hi}]
+        int[] faceVertexCounts = [{fmt(["3"] * len(tris))}]
+        int[] faceVertexIndices = [{fmt(map(str, tris.reshape(-1).tolist()))}]
+        point3f[] points = [{fmt(f"({a:.7g}, {b:.7g}, {c:.7g})" for a, b, c in positions)}]
+        normal3f[] normals = [{fmt(f"({a:.7g}, {b:.7g}, {c:.7g})" for a, b, c in normals)}] (
+            interpolation = "vertex"
+        )
+        texCoord2f[] primvars:st = [{fmt(f"({u:.9g}, {t:.9g})" for u, t in st)}] (
+            interpolation = "faceVarying"
+        )
+        uniform token orientation = "rightHanded"
+        uniform token subdivisionScheme = "none"
+        rel material:binding = </Head/Looks/Skin>
+    }}
+
+    def Scope "Looks"
+    {{
+        def Material "Skin"
+        {{
+            token outputs:surface.connect = </Head/Looks/Skin/Surface.outputs:surface>
+
+            def Shader "Surface"
+            {{
+                uniform token info:id = "UsdPreviewSurface"
+                float inputs:roughness = 0.6
+                token outputs:surface
+            }}
+        }}
+    }}
+}}
+"""
+
+
+def _keep(boxes: np.ndarray, size: int, pad: int = 3) -> np.ndarray:
+    """Texels ``[size, size]`` inside any UV box ``[N, 4]`` (u0, v0, u1, v1; v down), each
+    grown by ``pad`` texels."""
+    keep = np.zeros((size, size), bool)
+    px = np.clip(
+        np.stack(
+            [
+                np.floor(boxes[:, 0] * size) - pad,
+                np.floor(boxes[:, 1] * size) - pad,
+                np.ceil(boxes[:, 2] * size) + pad,
+                np.ceil(boxes[:, 3] * size) + pad,
+            ],
+            1,
+        ),
+        0,
+        size,
+    ).astype(int)
+    for x0, y0, x1, y1 in px:  # a few hundred boxes of a test setup
+        keep[y0:y1, x0:x1] = True
+    return keep
+
+
+def write_cesium_udim(folder: Path, size: int = 512) -> tuple[Path, dict]:
+    """CesiumMan made a two-tile UDIM head: the face fixture's analytic maps
+    (:mod:`wrinklepipe.demo.face_fixture`: a real artist's UV layout, exact wrinkle slopes)
+    on its mesh, the triangles of the face's +u half (the character's left) moved to tile
+    1002 (u + 1: same texels), the maps and masks split: each tile keeps the texels its own
+    triangles reach (boxes grown by 3 texels), flat elsewhere. Writes ``head.usda``,
+    ``maps/{base,stretch,compress}.<UDIM>.png`` (16-bit), ``masks/<region>.<UDIM>.png``
+    (8-bit; a region's tile left out where its mask is zero there) and ``manifest.toml``
+    (every choice on auto, the fixture's budget). Returns the manifest and what the test
+    compares with: ``{"fixture", "tiles" (triangle -> tile), "keep" {tile: texels},
+    "moved" (triangles on 1002)}``."""
+    from wrinklepipe.demo import face_fixture as ff
+
+    fx = ff.build_fixture(CESIUM, size)
+    mesh, disc = fx.mesh, fx.disc
+    tris = np.asarray(mesh.indices, np.int64).reshape(-1, 3)
+    uv = np.asarray(mesh.uvs, np.float64)[tris]  # [T, 3, 2], glTF (v down)
+    in_face = (np.abs(uv[..., 0] - disc.cu) <= disc.ru * 1.05).all(1) & (
+        np.abs(uv[..., 1] - disc.cv) <= disc.rv * 1.05
+    ).all(1)
+    moved = in_face & (uv[..., 0] > disc.cu).all(1)
+    boxes = np.concatenate([uv.min(1), uv.max(1)], 1)  # [T, 4]
+    keep = {1001: _keep(boxes[~moved], size), 1002: _keep(boxes[moved], size)}
+    corner_uv = uv.reshape(-1, 2).copy()
+    corner_uv[np.repeat(moved, 3), 0] += 1.0
+    st = np.stack([corner_uv[:, 0], 1.0 - corner_uv[:, 1]], 1)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "head.usda").write_text(
+        _head_usda(
+            np.asarray(mesh.positions, np.float64),
+            np.asarray(mesh.normals, np.float64),
+            tris,
+            st,
+        ),
+        encoding="utf-8",
+    )
+    flat = np.array([0.0, 0.0, 1.0])
+    maps = {"base": fx.base_normal}
+    maps.update({s: fx.wrinkled_normal(k) for k, s in enumerate(fx.state_names)})
+    for t, k in keep.items():
+        for label, n in maps.items():
+            out = np.where(k[..., None], n, flat)
+            write_image(folder / "maps" / f"{label}.{t}.png", 0.5 + 0.5 * out, 16)
+        for r, m in zip(fx.regions, fx.masks):
+            if (m * k).any():
+                write_image(folder / "masks" / f"{r.name}.{t}.png", m * k, 8)
+    text = ff.manifest_text(fx, folder / "head.usda")
+    text = text.replace(f'mesh = "{(folder / "head.usda").as_posix()}"', 'mesh = "head.usda"')
+    text = text.replace('base = "base_normal.png"', 'base = "maps/base.<UDIM>.png"')
+    for s in fx.state_names:
+        text = text.replace(f'map = "wrinkle_{s}.png"', f'map = "maps/{s}.<UDIM>.png"')
+    for r in fx.regions:
+        text = text.replace(f'mask = "masks/{r.name}.png"', f'mask = "masks/{r.name}.<UDIM>.png"')
+    (folder / "manifest.toml").write_text(text, encoding="utf-8")
+    tiles = np.where(moved, 1002, 1001)
+    return folder / "manifest.toml", {"fixture": fx, "tiles": tiles, "keep": keep, "moved": moved}

@@ -177,9 +177,10 @@ def weighted_stats_many(errors: np.ndarray, weights: np.ndarray) -> list[Stats]:
     mean is the row's dot product over those texels (equal to :func:`weighted_stats`'s to
     rounding); p99, max and texels are the same values."""
     e = _finite(np.asarray(errors).ravel())
-    w = np.asarray(weights).reshape(-1, e.size)
-    if e.size == 0:
-        return [EMPTY] * w.shape[0]
+    w = np.asarray(weights)
+    if e.size == 0:  # no texel (a pose with nothing on one UDIM tile): every row is empty
+        return [EMPTY] * (w.shape[0] if w.ndim > 1 else 1)
+    w = w.reshape(-1, e.size)
     order = np.argsort(e, kind="stable")
     rank = np.empty(e.size, np.int64)  # each texel's place in the sorted order
     rank[order] = np.arange(e.size)

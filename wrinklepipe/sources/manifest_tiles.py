@@ -11,8 +11,9 @@ The base's tiles are the asset's. A state's normal map or a region's mask may le
 out: there the state is the base (no wrinkle on that tile) and the mask zero. Every tiled map
 names no tile the base lacks; one map's tiles share one size, and every mask file of every
 tile has one size. When the base is tiled, the states and masks are too (one file for every
-tile would be ambiguous). Colour maps do not take tiles yet, and a glTF mesh cannot carry
-them (glTF has no UDIM: UVs outside [0, 1] repeat the texture).
+tile would be ambiguous). Colour maps, tiled or not, are refused with a tiled base, in one
+message naming them (colour states do not take tiles yet). A glTF mesh cannot carry tiles
+(glTF has no UDIM: UVs outside [0, 1] repeat the texture).
 """
 
 from __future__ import annotations
@@ -145,11 +146,16 @@ def tile_problems(m: Any, file: str, problems: ProblemList, check_files: bool) -
             "one texture); give the mesh as .usd/.usda/.usdc/.usdz or .obj",
             "mesh",
         )
-    for key in ("base_color", *(f"states[{i}].color" for i in range(len(m.states)))):
-        if key in paths or (key == "base_color" and m.base_color is not None):
-            problems.add(
-                file, "colour maps do not take UDIM tiles yet (normal maps and masks do)", key
-            )
+    colors = ["base_color"] if m.base_color is not None else []
+    colors += [f"states[{i}].color" for i, s in enumerate(m.states) if s.color is not None]
+    if colors:
+        problems.add(
+            file,
+            f"colour maps do not take UDIM tiles yet ({', '.join(colors)}): a tiled asset is "
+            "converted with its normal maps and masks only (leave the colour maps out, or "
+            "convert the colours of an untiled asset)",
+            colors[0],
+        )
     for i, s in enumerate(m.states):
         key = f"states[{i}].map"
         if s.map is not None and key not in paths:

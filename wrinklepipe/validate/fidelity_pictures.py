@@ -74,6 +74,8 @@ def pose_pictures(
     for pr in ref.poses:
         name = pr.pose.name
         active = pr.active if pr.active is not None else ref.union[pr.sel]
+        if active.size == 0:  # the pose touches nothing here (another UDIM tile's pose)
+            continue
         box = crop_box(active, ref.shape)
         flat, h, w = _crop_texels(box, W, crop_max)
         # the source: its base, the blended normal where the pose is active
