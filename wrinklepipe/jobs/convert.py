@@ -255,10 +255,10 @@ def _convert_tiles(manifest: Any, output: Path, opt: ConvertOptions) -> ConvertR
             for t, rep in staged.reports.items():
                 notes += [f"tile {t}: {n}" for n in rep.notes]
             notes += staged.notes + whole.mesh.notes + drivers_notes
-            layout = opt.mask_layout or manifest.formats.get("mask_layout", "rgba")
+            layout = opt.mask_layout or manifest.formats.mask_layout
             pack = PackOptions(bits=opt.bits, mask_layout=layout)
             pkgs = {t: package_from_asset(a, pack, curves) for t, a in staged.assets.items()}
-            formats = {**manifest.formats, **staged.formats}
+            formats = replace(manifest.formats, **staged.formats)
             with console.status("encoding, packing, compressing"):
                 pkg = udim.join_tiles(pkgs, whole.mesh)
                 files, n, choices = build_outputs(

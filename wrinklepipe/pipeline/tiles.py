@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 
 from wrinklepipe import fidelity as fd
 from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.options import FormatOptions
 from wrinklepipe.pipeline.prepare import StageReport, run_stages
 
 #: Block formats from the least to the most precise (``png8``: no copy, the PNG ships).
@@ -64,13 +65,13 @@ def _choices(asset: WrinkleAsset, rep: StageReport) -> dict[str, object]:
 def run_tile_stages(
     tiles: dict[int, WrinkleAsset],
     auto_scale: bool,
-    formats: dict[str, str] | None = None,
+    formats: FormatOptions | None = None,
     compressed: bool = True,
     poses: Sequence[fd.Pose] | None = None,
 ) -> TileStages:
     """:func:`run_stages` on every tile, then the joint choice (module doc) measured on every
     tile whose own choice differs."""
-    formats = dict(formats or {})
+    formats = formats or FormatOptions()
     got = {
         t: run_stages(a, auto_scale=auto_scale, formats=formats, compressed=compressed, poses=poses)
         for t, a in tiles.items()
@@ -95,10 +96,10 @@ def run_tile_stages(
             f"UDIM: the tiles chose differently ({said} for all: what the most demanding tile "
             f"needs); tile(s) {', '.join(map(str, redo))} measured again at that choice"
         )
-    fixed_formats = {
-        **formats,
+    fixed_formats = replace(
+        formats,
         **{k.removeprefix("format_"): str(v) for k, v in joint.items() if k.startswith("format_")},
-    }
+    )
     for t in redo:
         src = tiles[t]
         prov = {**src.provenance, "auto_resolution": []}
