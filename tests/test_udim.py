@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
-from udim_setups import REGIONS, tile_maps, write_udim_setup
+from udim_setups import tile_maps, write_udim_setup
 
 from wrinklepipe import fidelity as fd
 from wrinklepipe import udim
@@ -350,8 +350,3 @@ def test_engine_exports_refuse_tiles_by_name(face, tmp_path, capsys):
     assert code == 2
     assert "has UDIM tiles (1001, 1002)" in capsys.readouterr().err
     assert not (tmp_path / "g").exists()
-
-
-def test_regions_sit_on_their_tiles():
-    for name, (tile, box, side) in REGIONS.items():
-        assert tile in (1001, 1002) and side in ("left", "right", "center") and len(box) == 4, name
