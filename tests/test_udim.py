@@ -202,6 +202,21 @@ def test_a_state_tile_the_base_lacks_and_tiles_of_two_sizes(tmp_path):
     assert "tiles of one map have different sizes: 16x16 (tile 1001), 8x8 (tile 1002)" in text
 
 
+def test_a_composition_error_of_a_tiled_usd_source_is_an_issue(tmp_path, capsys):
+    """A reference the tiled USD source cannot resolve is the validator's WP-USD-003, said
+    once for every tile, naming the layer; the output is written (exit 1)."""
+    path = write_udim_setup(tmp_path / "src", size=16, mask_size=8)
+    usd = tmp_path / "src" / "face.usda"
+    usd.write_text(usd.read_text() + '\ndef Xform "Extra" (references = @./gone.usda@</X>) {}\n')
+    out = tmp_path / "out"
+    assert main(["convert", str(path), "-o", str(out), "--no-render"]) == 1
+    capsys.readouterr()
+    issues = json.loads((out / "report.json").read_text())["validation"]["issues"]
+    found = [i for i in issues if i["code"] == "WP-USD-003"]
+    assert len(found) == 1 and "gone.usda" in found[0]["message"], issues
+    assert found[0]["message"].startswith("every tile: "), found
+
+
 # ------------------------------------------------------------------------------------------------
 # a two-tile face converted
 

@@ -115,6 +115,25 @@ def _color_rows(color: dict[str, Any]) -> list[str]:
     return out
 
 
+def _choice_lines(fid: dict[str, Any], prefix: str = "") -> list[str]:
+    """The choices made by fidelity and their tables (``prefix``: a UDIM tile's)."""
+    if "wrinkle" not in fid:  # another encoding than pd: only the formats are chosen
+        out = [
+            f"{prefix}chosen: compressed copies: base {_fmt(fid['base_format'])}, states "
+            f"{_fmt(fid['state_format'])} (maps at the manifest's sizes)"
+        ]
+        out += fidelity_table(fid, "compressed")
+        out += [f"note: {n}" for n in fid.get("notes", [])]
+        return out + _formats_tried(fid.get("tried", []))
+    out = [
+        f"{prefix}chosen: states {fid['wrinkle']}^2, masks {fid['mask']}^2, pd_scale "
+        f"{fid['pd_scale']:g}; compressed copies: base "
+        f"{_fmt(fid['base_format'])}, states {_fmt(fid['state_format'])}"
+    ]
+    out += fidelity_table(fid, "png") + fidelity_table(fid, "compressed")
+    return out + [f"note: {n}" for n in fid.get("notes", [])]
+
+
 def summary_lines(
     rep: dict[str, Any], exit_code: int, where: str = "", fail_on: str = "error"
 ) -> list[str]:
@@ -128,22 +147,11 @@ def summary_lines(
         f"{a['vertices']} vertices"
     ]
     fid = rep.get("fidelity")
-    if fid and "wrinkle" not in fid:  # another encoding than pd: only the formats are chosen
-        out.append(
-            f"chosen: compressed copies: base {_fmt(fid['base_format'])}, states "
-            f"{_fmt(fid['state_format'])} (maps at the manifest's sizes)"
-        )
-        out += fidelity_table(fid, "compressed")
-        out += [f"note: {n}" for n in fid.get("notes", [])]
-        out += _formats_tried(fid.get("tried", []))
+    if fid and "tiles" in fid:  # UDIM: one choice record per tile (the joint choice in each)
+        for t, one in sorted(fid["tiles"].items()):
+            out += _choice_lines(one, f"tile {t}: ")
     elif fid:
-        out.append(
-            f"chosen: states {fid['wrinkle']}^2, masks {fid['mask']}^2, pd_scale "
-            f"{fid['pd_scale']:g}; compressed copies: base "
-            f"{_fmt(fid['base_format'])}, states {_fmt(fid['state_format'])}"
-        )
-        out += fidelity_table(fid, "png") + fidelity_table(fid, "compressed")
-        out += [f"note: {n}" for n in fid.get("notes", [])]
+        out += _choice_lines(fid)
     out += color_table(rep.get("color"), rep.get("compression", {}).get("color"))
     clipped = rep.get("pd_scale", {}).get("clipped_texels") or {}
     if any(clipped.values()):

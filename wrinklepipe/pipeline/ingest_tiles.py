@@ -135,6 +135,8 @@ def ingest_tiles(manifest: Any) -> TiledIngest:
         asset.provenance["warnings"] = list(warnings)
         asset.provenance["tile"] = t
         asset.color_only = tuple(k for k, s in enumerate(manifest.states) if s.map is None)
+        if usd is not None and usd.problems:  # the validator reports them (WP-USD-xxx)
+            asset.provenance["usd_composition"] = [p.to_json() for p in usd.problems]
         tiles[t] = asset
         stats[str(t)] = tile_stats
     check_tiled_masks_on_mesh(tiles, manifest)

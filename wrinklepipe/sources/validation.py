@@ -391,6 +391,7 @@ def _load_tiled_manifest(p: Path, m: Any) -> ValidationInput:
     for t, one in inp.tiles.items():
         one.asset = staged.assets[t]
         one.has_source = True
+        _source_problems(one, got.tiles[t])
         one.pointers.update({k: str(p) for k in ("meta", "masks", "channels", "textures")})
     inp.has_source = True
     if curves:
