@@ -12,11 +12,13 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 import pytest
+from pxr import Sdf, Usd
 
 from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.normals.bc4 import encode_bc5
 from wrinklepipe.normals.dds import dds_bytes
+from wrinklepipe.usd import layer
 
 
 class Hung(BaseException):
@@ -191,3 +193,23 @@ def test_resolutions_and_driver_spans_are_costed_before_allocation(
     err = capsys.readouterr().err
     assert rc == 2 and needle in err and "Traceback" not in err, err
     assert "--max-pixels" not in err and "out of memory" not in err
+
+
+def test_uninstancing_a_wrinkled_mesh_is_bounded(monkeypatch):
+    """The layer makes the instances over a wrinkled mesh ordinary prims, a level of nesting a
+    pass; an override that does not take (here: none is written) ends in an error after as
+    many passes as the path has levels, instead of a loop that never ends."""
+    stage = Usd.Stage.CreateInMemory()
+    stage.GetRootLayer().ImportFromString(
+        '#usda 1.0\ndef Xform "Proto" {\n    def Mesh "M" {\n    }\n}\n'
+        'def Xform "I" (instanceable = true\n    references = </Proto>) {\n}\n'
+    )
+    assert stage.GetPrimAtPath("/I/M").IsInstanceProxy()
+
+    class Ignored:
+        def SetInfo(self, *args) -> None:  # noqa: ANN002, N802
+            pass
+
+    monkeypatch.setattr(Sdf, "CreatePrimInLayer", lambda *args: Ignored())
+    with deadline(30), pytest.raises(RuntimeError, match="stay instances"):
+        layer._deinstance(stage, ["/I/M"], [])

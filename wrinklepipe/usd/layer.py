@@ -186,7 +186,8 @@ def _deinstance(stage: Any, paths: list[str], notes: list[str]) -> None:
     from pxr import Sdf  # deferred: usd-core, USD only
 
     done: list[str] = []
-    while True:
+    # each pass uninstances one level of nesting: at most as many passes as a path has parts
+    for _ in range(max((p.count("/") for p in paths), default=0) + 1):
         roots = set()
         for p in paths:
             prim = stage.GetPrimAtPath(p)
@@ -199,6 +200,8 @@ def _deinstance(stage: Any, paths: list[str], notes: list[str]) -> None:
         for r in sorted(roots):
             Sdf.CreatePrimInLayer(stage.GetRootLayer(), r).SetInfo("instanceable", False)
             done.append(str(r))
+    else:
+        raise RuntimeError(f"instances over {', '.join(paths)} stay instances in the layer")
     if done:
         notes.append(
             f"USD: {', '.join(done)} made not instanceable in the layer (instance proxies "
