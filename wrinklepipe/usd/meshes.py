@@ -255,26 +255,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     uv_c, why = _primvar_corners(st, time, counts, fvi, n_p, 2)
     if why:
         notes.append(f"ignored UVs ({why})")
-    nrm_pv = api.GetPrimvar("normals")
-    if nrm_pv and nrm_pv.HasValue():
-        n_c, why = _primvar_corners(nrm_pv, time, counts, fvi, n_p, 3)
-    else:
-        n_c, why = None, ""
-        nv = gm.GetNormalsAttr().Get(time)
-        try:
-            a = np.asarray(nv, dtype=np.float64).reshape(-1, 3) if nv is not None else None
-        except (TypeError, ValueError):
-            a, why = None, "normals: values are not 3-vectors"
-        if a is not None and len(a):
-            interp = gm.GetNormalsInterpolation()
-            if interp == "faceVarying" and len(a) == len(fvi):
-                n_c = a
-            elif interp in ("vertex", "varying") and len(a) == n_p:
-                n_c = a[fvi]
-            elif interp == "uniform" and len(a) == len(counts):
-                n_c = np.repeat(a, counts, axis=0)
-            else:
-                why = f"normals: {len(a)} values with interpolation {interp}"
+    n_c, why = _normal_corners(gm, api, time, counts, fvi, n_p)
     if why:
         notes.append(f"ignored normals ({why})")
 
@@ -311,24 +292,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
             nn /= np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-30)
         normals = nn
 
-    vertex_ids = None
-    vid_pv = api.GetPrimvar("wrinkle:vertexId")
-    if vid_pv and vid_pv.HasValue():
-        vid_c, why = _primvar_corners(vid_pv, time, counts, fvi, n_p, 1)
-        if vid_c is not None and np.all(vid_c >= 0) and np.all(vid_c == np.rint(vid_c)):
-            vertex_ids = vid_c[src, 0].astype(np.int64)
-        else:
-            notes.append("ignored primvars:wrinkle:vertexId" + (f" ({why})" if why else ""))
-    wrinkle4: dict[str, np.ndarray | None] = {}
-    for name in ("tangent", "bias"):
-        got = None
-        p4 = api.GetPrimvar(f"wrinkle:{name}")
-        if p4 and p4.HasValue():
-            got, why = _primvar_corners(p4, time, counts, fvi, n_p, 4)
-            if got is None or not np.isfinite(got).all():
-                notes.append(f"ignored primvars:wrinkle:{name}" + (f" ({why})" if why else ""))
-                got = None
-        wrinkle4[name] = None if got is None else got[src].astype(np.float32)
+    vertex_ids, wrinkle4 = _wrinkle_primvars(api, time, counts, fvi, n_p, src, notes)
     mesh = Mesh(
         vertex_ids=vertex_ids,
         positions=positions.astype(np.float32),
@@ -362,6 +326,58 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     if len(mesh.indices) == 0:
         raise input_error(file, "every triangle is degenerate", key=ppath)
     return mesh
+
+
+def _normal_corners(
+    gm: Any, api: Any, time: Any, counts: np.ndarray, fvi: np.ndarray, n_p: int
+) -> tuple[np.ndarray | None, str]:
+    """Normals per face corner (the primvar, else the attribute), or None and why not."""
+    nrm_pv = api.GetPrimvar("normals")
+    if nrm_pv and nrm_pv.HasValue():
+        n_c, why = _primvar_corners(nrm_pv, time, counts, fvi, n_p, 3)
+    else:
+        n_c, why = None, ""
+        nv = gm.GetNormalsAttr().Get(time)
+        try:
+            a = np.asarray(nv, dtype=np.float64).reshape(-1, 3) if nv is not None else None
+        except (TypeError, ValueError):
+            a, why = None, "normals: values are not 3-vectors"
+        if a is not None and len(a):
+            interp = gm.GetNormalsInterpolation()
+            if interp == "faceVarying" and len(a) == len(fvi):
+                n_c = a
+            elif interp in ("vertex", "varying") and len(a) == n_p:
+                n_c = a[fvi]
+            elif interp == "uniform" and len(a) == len(counts):
+                n_c = np.repeat(a, counts, axis=0)
+            else:
+                why = f"normals: {len(a)} values with interpolation {interp}"
+    return n_c, why
+
+
+def _wrinkle_primvars(
+    api: Any, time: Any, counts: Any, fvi: Any, n_p: int, src: Any, notes: list[str]
+) -> tuple[np.ndarray | None, dict[str, np.ndarray | None]]:
+    """The vertex IDs and wrinkle:tangent/bias a USD wrinklepipe wrote has, per render vertex."""
+    vertex_ids = None
+    vid_pv = api.GetPrimvar("wrinkle:vertexId")
+    if vid_pv and vid_pv.HasValue():
+        vid_c, why = _primvar_corners(vid_pv, time, counts, fvi, n_p, 1)
+        if vid_c is not None and np.all(vid_c >= 0) and np.all(vid_c == np.rint(vid_c)):
+            vertex_ids = vid_c[src, 0].astype(np.int64)
+        else:
+            notes.append("ignored primvars:wrinkle:vertexId" + (f" ({why})" if why else ""))
+    wrinkle4: dict[str, np.ndarray | None] = {}
+    for name in ("tangent", "bias"):
+        got = None
+        p4 = api.GetPrimvar(f"wrinkle:{name}")
+        if p4 and p4.HasValue():
+            got, why = _primvar_corners(p4, time, counts, fvi, n_p, 4)
+            if got is None or not np.isfinite(got).all():
+                notes.append(f"ignored primvars:wrinkle:{name}" + (f" ({why})" if why else ""))
+                got = None
+        wrinkle4[name] = None if got is None else got[src].astype(np.float32)
+    return vertex_ids, wrinkle4
 
 
 def _apply(mesh: Mesh, m: np.ndarray) -> None:
