@@ -418,40 +418,7 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
         name: prim.CreateAttribute(name, Sdf.ValueTypeNames.Find(t), custom=False)
         for name, t in API_ATTRIBUTES.items()
     }
-    table = meta.masks.table
-    regions = meta.regions
-    names = meta.region_names
-    expr_names = list(meta.expressions)
-    expr = np.array(
-        [[meta.expressions[e].get(n, 0.0) for n in names] for e in expr_names], np.float64
-    ).reshape(-1)
-    values = {
-        "wrinkle:encoding": enc,
-        "wrinkle:scale": scale,
-        "wrinkle:mapping": version,
-        "wrinkle:policy": meta.policy,
-        "wrinkle:stateNames": Vt.TokenArray(meta.state_names),
-        "wrinkle:maskLayout": meta.masks.layout,
-        "wrinkle:maskNames": Vt.TokenArray([_ident(n) for n in meta.masks.textures]),
-        "wrinkle:regionNames": Vt.TokenArray(names),
-        "wrinkle:regionSides": Vt.TokenArray([r.side for r in regions]),
-        "wrinkle:regionStates": Vt.StringArray([",".join(r.states) for r in regions]),
-        "wrinkle:maskTexture": Vt.IntArray(
-            [-1 if e.layer is None and e.texture is None else e.index for e in table]
-        ),
-        "wrinkle:maskChannel": Vt.TokenArray([e.channel or "" for e in table]),
-        "wrinkle:splitTexture": Vt.IntArray([e.split.texture if e.split else -1 for e in table]),
-        "wrinkle:splitChannel": Vt.TokenArray([e.split.channel if e.split else "" for e in table]),
-        "wrinkle:expressionNames": Vt.TokenArray(expr_names),
-        "wrinkle:expressionWeights": Vt.DoubleArray.FromNumpy(expr),
-        "wrinkle:drivers": json.dumps(list(meta.drivers), sort_keys=True),
-    }
-    comp = meta.compressed
-    if comp:  # the block-compressed copies beside the PNGs (compressed/NAME.ktx2 and .dds)
-        values["wrinkle:compressedTextures"] = Vt.TokenArray([c.texture for c in comp])
-        values["wrinkle:compressedFormats"] = Vt.TokenArray([c.format for c in comp])
-        values["wrinkle:compressedLayouts"] = Vt.TokenArray([c.layout for c in comp])
-        values["wrinkle:compressedLevels"] = Vt.IntArray([c.levels for c in comp])
+    values = _api_values(meta)
     for attr_name, value in values.items():
         attrs[attr_name].Set(value)
     if pkg.tiles:
@@ -461,7 +428,7 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
         a = prim.CreateAttribute(attr_name, Sdf.ValueTypeNames.Find(COLOR_ATTRIBUTES[attr_name]))
         a.SetCustom(False)
         a.Set(Vt.TokenArray(value))
-    if [e.region for e in table] != names:
+    if [e.region for e in meta.masks.table] != meta.region_names:
         raise input_error(pkg.name, "channel table must list the regions in region order")
     weights = attrs["wrinkle:weights"]
     weights.Set(Vt.FloatArray([float(w) for w in meta.weights]))
@@ -485,6 +452,45 @@ def _material(stage: Any, root_path: Any, pkg: WrinklePackage, opt: UsdOptions) 
         _morph_curves(stage, root_path, prim, pkg, opt.fps)
     mtlx.add_package_materialx(stage, mat, pkg, opt.texture_dir, opt.fps)
     return mat
+
+
+def _api_values(meta: Any) -> dict[str, Any]:
+    """The values of the WrinkleMapsAPI attributes (the compressed copies' when there are)."""
+    from pxr import Vt  # deferred: usd-core, USD only
+
+    table, regions, names = meta.masks.table, meta.regions, meta.region_names
+    expr_names = list(meta.expressions)
+    expr = np.array(
+        [[meta.expressions[e].get(n, 0.0) for n in names] for e in expr_names], np.float64
+    ).reshape(-1)
+    values = {
+        "wrinkle:encoding": meta.encoding,
+        "wrinkle:scale": float(meta.scale),
+        "wrinkle:mapping": int(meta.mapping),
+        "wrinkle:policy": meta.policy,
+        "wrinkle:stateNames": Vt.TokenArray(meta.state_names),
+        "wrinkle:maskLayout": meta.masks.layout,
+        "wrinkle:maskNames": Vt.TokenArray([_ident(n) for n in meta.masks.textures]),
+        "wrinkle:regionNames": Vt.TokenArray(names),
+        "wrinkle:regionSides": Vt.TokenArray([r.side for r in regions]),
+        "wrinkle:regionStates": Vt.StringArray([",".join(r.states) for r in regions]),
+        "wrinkle:maskTexture": Vt.IntArray(
+            [-1 if e.layer is None and e.texture is None else e.index for e in table]
+        ),
+        "wrinkle:maskChannel": Vt.TokenArray([e.channel or "" for e in table]),
+        "wrinkle:splitTexture": Vt.IntArray([e.split.texture if e.split else -1 for e in table]),
+        "wrinkle:splitChannel": Vt.TokenArray([e.split.channel if e.split else "" for e in table]),
+        "wrinkle:expressionNames": Vt.TokenArray(expr_names),
+        "wrinkle:expressionWeights": Vt.DoubleArray.FromNumpy(expr),
+        "wrinkle:drivers": json.dumps(list(meta.drivers), sort_keys=True),
+    }
+    comp = meta.compressed
+    if comp:  # the block-compressed copies beside the PNGs (compressed/NAME.ktx2 and .dds)
+        values["wrinkle:compressedTextures"] = Vt.TokenArray([c.texture for c in comp])
+        values["wrinkle:compressedFormats"] = Vt.TokenArray([c.format for c in comp])
+        values["wrinkle:compressedLayouts"] = Vt.TokenArray([c.layout for c in comp])
+        values["wrinkle:compressedLevels"] = Vt.IntArray([c.levels for c in comp])
+    return values
 
 
 def _color_textures(
