@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import argparse
 import re
+import subprocess
+import sys
 
 import pytest
 
@@ -137,3 +139,56 @@ def test_deprecated_alias_still_works_and_says_so(capsys):
     args = build_parser("batch").parse_args(["batch", "x.toml", "--summary", "s.json"])
     assert args.report == "s.json"
     assert "--summary is deprecated; use --report" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("argv", "usage", "hint"),
+    [
+        (["conver", "m.toml"], "wrinklepipe: error", "(did you mean 'convert'?)"),
+        (["validate-assets", "x"], "wrinklepipe: error", "(did you mean 'validate-asset'?)"),
+        (
+            ["convert", "m.toml", "-o", "o", "--fial-on", "warning"],
+            "wrinklepipe convert: error",
+            "--fial-on (did you mean '--fail-on'?)",
+        ),
+        (
+            ["inspect", "a.glb", "--jsn"],
+            "wrinklepipe inspect: error",
+            "unrecognized argument: --jsn (did you mean '--json'?)",
+        ),
+        (
+            ["validate-asset", "x", "--fail-on", "warnig"],
+            "wrinklepipe validate-asset: error",
+            "invalid choice: 'warnig' (did you mean 'warning'?); "
+            "choose from 'error', 'warning', 'info'",
+        ),
+        (
+            ["export", "x", "--engine=Unreal", "-o", "o"],
+            "wrinklepipe export: error",
+            "(did you mean 'unreal'?)",
+        ),
+    ],
+)
+def test_a_mistyped_command_option_or_value_gets_a_did_you_mean(argv, usage, hint, capsys):
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2
+    assert usage in err and hint in err, err
+
+
+def test_no_did_you_mean_when_nothing_is_close(capsys):
+    for argv in (["frobnicate"], ["inspect", "a.glb", "--zzz"]):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(argv)
+        err = capsys.readouterr().err
+        assert "unrecognized argument: --zzz" in err or "invalid choice: 'frobnicate'" in err
+        assert "did you mean" not in err, err
+
+
+def test_the_console_script_exits_2_with_the_hint():
+    proc = subprocess.run(
+        [sys.executable, "-m", "wrinklepipe", "conver", "m.toml"], capture_output=True, text=True
+    )
+    assert proc.returncode == 2
+    assert "did you mean 'convert'?" in proc.stderr and not proc.stdout

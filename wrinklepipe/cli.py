@@ -24,7 +24,7 @@ from rich.markup import escape
 
 import wrinklepipe.commands as pkg
 from wrinklepipe import __version__, console
-from wrinklepipe.commands._options import HelpFormatter
+from wrinklepipe.commands._options import HelpFormatter, Parser
 from wrinklepipe.errors import InputError
 from wrinklepipe.io.confine import allowed_roots
 
@@ -80,7 +80,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The parser of every command, or (``only``) of that one command alone: running one
     command imports its module only, not the other commands' stages (``wrinklepipe convert``
     starts without loading capture's solvers or the batch engines)."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="wrinklepipe",
         description="Process and validate animated facial wrinkle maps.",
     )

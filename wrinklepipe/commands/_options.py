@@ -6,9 +6,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
+from collections.abc import Sequence
 from typing import Any
 
 from wrinklepipe.console import problem
+from wrinklepipe.names import did_you_mean, listing
 
 #: Validation's severities, worst first (``wrinklepipe.validate.catalogue.SEVERITIES``; not
 #: imported from there, which would load the whole validator for every command's ``--help``;
@@ -45,6 +48,50 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
         if action.option_strings and action.nargs != 0:
             return f"{text} (default: %(default)s)"
         return text
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser with a "did you mean" for every name typed wrong: a command
+    (``conver``), an option (``--fial-on``) or an option's value (``--fail-on warnig``); and an
+    unknown option is reported with the usage of the command it was given to."""
+
+    def _check_value(self, action: argparse.Action, value: Any) -> None:
+        choices = action.choices
+        if choices is None or value in choices:
+            return
+        names = [str(c) for c in choices]
+        raise argparse.ArgumentError(
+            action,
+            f"invalid choice: {value!r}{did_you_mean(str(value), names)}; "
+            f"choose from {listing(names, limit=len(names))}",
+        )
+
+    def parse_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> argparse.Namespace:
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            command = self._command_parser(getattr(parsed, "command", None))
+            command.error(command.unknown_arguments(extras))
+        return parsed
+
+    def _command_parser(self, name: str | None) -> Parser:
+        """The parser of the subcommand ``name`` (this parser when there is none)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction) and name in action.choices:
+                return action.choices[name]
+        return self
+
+    def unknown_arguments(self, extras: list[str]) -> str:
+        """``unrecognized arguments: --fial-on (did you mean '--fail-on'?), x``."""
+        known = [s for a in self._actions for s in a.option_strings if s.startswith("--")]
+        words = []
+        for word in extras:
+            option = word.split("=", 1)[0]
+            hint = did_you_mean(option, known) if re.match(r"--?[A-Za-z]", option) else ""
+            words.append(word + hint)
+        noun = "argument" if len(extras) == 1 else "arguments"
+        return f"unrecognized {noun}: " + ", ".join(words)
 
 
 def add_output(p: argparse.ArgumentParser, what: str, required: bool = True, **kw: Any) -> None:
