@@ -426,4 +426,4 @@ def test_usd_output_carries_the_whole_avatar(source, converted):
     delta = ref.accessor(g, src, g.meshes[2].primitives[0].targets[0]["POSITION"])
     np.testing.assert_array_equal(np.asarray(shape.GetOffsetsAttr().Get()), delta)
     # the source's animation: a SkelAnimation variant (tests/test_usd_scene_skin.py plays them)
-    assert any("1 glTF animation(s) are SkelAnimations" in n for n in report["notes"])
+    assert any("the 1 glTF animation is a SkelAnimation" in n for n in report["notes"])

@@ -174,7 +174,7 @@ def _convert_cli(tmp_path, manifest) -> tuple[int, Path]:
     "material, meshes, message",
     [
         ("Skin", None, "no material 'Skin' in RobotExpressive.glb (materials: 'Grey' ("),
-        (None, None, "RobotExpressive.glb has 3 materials; name the wrinkled one(s)"),
+        (None, None, "RobotExpressive.glb has 3 materials; name the wrinkled one with"),
         ("Main", ["Hat"], "no mesh or node 'Hat' in RobotExpressive.glb has a primitive using"),
     ],
 )
@@ -199,7 +199,7 @@ def test_robot_masks_on_no_wrinkled_primitive_are_refused(tmp_path, capsys):
     code, out = _convert_cli(tmp_path, manifest)
     err = " ".join(capsys.readouterr().err.split())
     assert code == 2 and not out.exists()
-    assert "region(s) 'ghost' fall on no wrinkled primitive" in err and "Head/1" in err
+    assert "the mask of region 'ghost' falls on no wrinkled primitive" in err and "Head/1" in err
 
 
 @needs_robot

@@ -116,7 +116,7 @@ def test_an_all_degenerate_primitive_is_read_empty_and_ingest_skips_it(tmp_path)
     meshes = read_gltf_meshes(f)
     assert [m.triangle_count for m in meshes] == [2]
     assert any(
-        "skipped 1 primitive(s) whose triangles are all degenerate" in n for n in meshes[0].notes
+        "skipped 1 primitive whose triangles are all degenerate" in n for n in meshes[0].notes
     )
 
 

@@ -183,7 +183,7 @@ def test_points_only_time_sampled_are_read_at_the_start_time_code():
     np.testing.assert_array_equal(m.positions, at_start[nearest(at_start, m.positions)])
     assert len(np.unique(nearest(at_start, m.positions))) == len(at_start)  # every point
     assert any(
-        "only 113 time sample(s): read at time code 1 (the stage's startTimeCode)" in n
+        "only 113 time samples: read at time code 1 (the stage's startTimeCode)" in n
         for n in m.notes
     )
     assert not any("time sample" in n for n in meshes["/TestPlane/Mesh"].notes)

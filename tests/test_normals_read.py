@@ -269,9 +269,7 @@ def test_bad_nan_texels(tmp_path, capsys):
     p = tmp_path / "nan.exr"
     write_image(p, v, bits=32)
     out = tmp_path / "o.dds"
-    _assert_refused(
-        capsys, out, [p, "-o", out], "1 NaN texel(s), first at row 2, col 5", "--repair"
-    )
+    _assert_refused(capsys, out, [p, "-o", out], "1 NaN texel, first at row 2, col 5", "--repair")
     code, _ = _run(capsys, p, "-o", out, "--repair")
     assert code == 0 and out.exists()
 

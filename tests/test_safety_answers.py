@@ -76,7 +76,7 @@ def test_flat_grey_base_gets_the_same_answer_from_every_verb(source, tmp_path, c
         assert len(errors) == 1, errors
         messages[verb] = errors[0][errors[0].index("base_normal.png") :]
     assert len(set(messages.values())) == 1, messages
-    assert "1024 of 1024 texel(s) too short to be normals" in messages["convert"]
+    assert "1024 of 1024 texels too short to be normals" in messages["convert"]
     assert "flat mid-grey" in messages["convert"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["src"]
 
@@ -110,7 +110,7 @@ def test_nan_in_an_exr_base_does_not_suggest_an_option_convert_lacks(source, tmp
     _edit(src / "manifest.toml", 'base = "base_normal.png"', 'base = "base.exr"')
     assert main(["convert", str(src / "manifest.toml"), "-o", str(tmp_path / "o")]) == 2
     (err,) = _errors(capsys)
-    assert "base.exr" in err and "1 NaN texel(s), first at row 3, col 4" in err
+    assert "base.exr" in err and "1 NaN texel, first at row 3, col 4" in err
     assert "use --repair" not in err and "encode-normals --repair" in err
 
 

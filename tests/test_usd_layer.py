@@ -438,7 +438,7 @@ GAP = {"gap": ((0.45, 0.1, 0.75, 0.9), "center")}  # between the head's two UV i
         ({"material": "Skin", "meshes": ["Eye"]}, "no Mesh prim 'Eye' bound to /Avatar/Looks/Skin"),
         (
             {"material": "Skin", "meshes": ["Head"], "regions": GAP},
-            "region(s) 'gap' fall on no wrinkled primitive",
+            "the mask of region 'gap' falls on no wrinkled primitive",
         ),
     ],
 )

@@ -25,6 +25,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from wrinklepipe.atomic import dumps_json
+from wrinklepipe.names import plural
 
 T = TypeVar("T")
 
@@ -118,22 +119,9 @@ def emit_json(obj: Any) -> None:
     sys.stdout.flush()
 
 
-def plural(n: int, word: str, many: str | None = None) -> str:
-    """``1 info``, ``2 warnings``, ``0 errors``, ``3 assets`` (``many``: an irregular plural)."""
-    if n == 1:
-        return f"{n} {word}"
-    if many is None:
-        many = word if word in _UNCOUNTABLE else word + "s"
-    return f"{n} {many}"
-
-
 def issue_counts(counts: dict[str, int]) -> str:
     """``0 errors, 1 warning, 2 info``: validation's counts, always in this order."""
     return ", ".join(plural(int(counts.get(k, 0)), k) for k in ("error", "warning", "info"))
-
-
-#: Words whose plural is the word itself in the tool's messages.
-_UNCOUNTABLE = frozenset({"info", "information", "data"})
 
 
 def _plain(text: str) -> None:

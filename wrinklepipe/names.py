@@ -39,6 +39,32 @@ def did_you_mean(name: str, known: Iterable[str]) -> str:
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
+#: Words whose plural is the word itself in the tool's messages.
+_UNCOUNTABLE = frozenset({"info", "information", "data"})
+
+#: Irregular plurals of the words the messages count.
+_IRREGULAR = {"mesh": "meshes", "inbetween": "inbetweens", "vertex": "vertices"}
+
+
+def plural(n: int, word: str, many: str | None = None) -> str:
+    """``1 info``, ``2 warnings``, ``0 errors``, ``1 mesh``, ``3 meshes`` (``many``: an irregular
+    plural the table does not know): every count in a message, never ``word(s)``."""
+    return f"{n} {noun(n, word, many)}"
+
+
+def noun(n: int, word: str, many: str | None = None) -> str:
+    """``word`` for one, its plural for any other count (``plural`` without the number)."""
+    if n == 1:
+        return word
+    if many is not None:
+        return many
+    if word in _UNCOUNTABLE:
+        return word
+    head, _, last = word.rpartition(" ")
+    last = _IRREGULAR.get(last, last + "s")
+    return f"{head} {last}" if head else last
+
+
 def listing(known: Iterable[str], limit: int = 12) -> str:
     """``'a', 'b', 'c'`` (the first ``limit``, then ``... and N more``), or ``none``."""
     names = [repr(str(k)) for k in dict.fromkeys(known)]

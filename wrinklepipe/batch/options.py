@@ -11,6 +11,7 @@ from typing import Any
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL
 from wrinklepipe.jobs.convert import ConvertOptions
 from wrinklepipe.masks.layouts import LAYOUTS
+from wrinklepipe.names import noun
 from wrinklepipe.validate.catalogue import SEVERITIES
 
 USD_FORMATS = ("usda", "usdc", "usdz")
@@ -58,7 +59,7 @@ class AssetOptions:
         known = {f.name for f in fields(self)}
         unknown = sorted(set(values) - known)
         if unknown:
-            raise KeyError(f"unknown option(s) {unknown}")
+            raise KeyError(f"unknown {noun(len(unknown), 'option')} {unknown}")
         return replace(self, **values)
 
 

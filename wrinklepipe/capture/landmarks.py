@@ -26,6 +26,7 @@ import numpy as np
 from wrinklepipe.capture.warp import is_collinear
 from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.io.json_safe import loads_json
+from wrinklepipe.names import noun, plural
 
 MIN_LANDMARKS = 3
 
@@ -158,7 +159,8 @@ def check_inside(lm: Landmarks, width: int, height: int, what: str) -> None:
         more = f" and {len(bad) - 5} more" if len(bad) > 5 else ""
         raise input_error(
             lm.file,
-            f"{len(bad)} landmark(s) outside the {what} ({width} x {height} px): {shown}{more}",
+            f"{plural(len(bad), 'landmark')} outside the {what} ({width} x {height} px): "
+            f"{shown}{more}",
         )
 
 
@@ -173,9 +175,17 @@ def pair(a: Landmarks, b: Landmarks) -> tuple[np.ndarray, np.ndarray]:
         if missing_a or missing_b:
             probs = []
             if missing_b:
-                probs.append(Problem(b.file, f"missing landmark(s) {', '.join(missing_b)}"))
+                probs.append(
+                    Problem(
+                        b.file, f"missing {noun(len(missing_b), 'landmark')} {', '.join(missing_b)}"
+                    )
+                )
             if missing_a:
-                probs.append(Problem(a.file, f"missing landmark(s) {', '.join(missing_a)}"))
+                probs.append(
+                    Problem(
+                        a.file, f"missing {noun(len(missing_a), 'landmark')} {', '.join(missing_a)}"
+                    )
+                )
             raise InputError(probs)
         idx = [b.names.index(n) for n in a.names]
         pa, pb = a.points, b.points[idx]
@@ -191,7 +201,7 @@ def pair(a: Landmarks, b: Landmarks) -> tuple[np.ndarray, np.ndarray]:
         if len(lm.points) < MIN_LANDMARKS:
             raise input_error(
                 lm.file,
-                f"only {len(lm.points)} landmark(s); a thin-plate warp needs at least "
+                f"only {plural(len(lm.points), 'landmark')}; a thin-plate warp needs at least "
                 f"{MIN_LANDMARKS} that are not on one line",
             )
     for lm, pts in ((a, pa), (b, pb)):

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wrinklepipe.names import plural
+
 
 @dataclass(frozen=True)
 class Layout:
@@ -97,7 +99,7 @@ def unpack(texels: np.ndarray, lay: Layout) -> np.ndarray:
     if t.shape[-1] < need:
         raise ValueError(
             f"layout {lay.name} reads channel {'rgba'[need - 1]}; the texels have "
-            f"{t.shape[-1]} channel(s)"
+            f"{plural(t.shape[-1], 'channel')}"
         )
     return t[..., list(lay.components)]
 

@@ -13,6 +13,7 @@ from wrinklepipe.atomic import dumps_json, write_output
 from wrinklepipe.bench import load_all
 from wrinklepipe.console import emit_json, err, out
 from wrinklepipe.errors import input_error
+from wrinklepipe.names import unknown_names
 
 NAME = "bench"
 HELP = "run benchmarks (medians, ratios against a baseline measured in the same run)"
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     names = args.names or sorted(registry)
     unknown = [n for n in names if n not in registry]
     if unknown:
-        raise input_error("bench", f"unknown benchmark(s) {unknown}; known: {sorted(registry)}")
+        raise input_error("bench", unknown_names("benchmark", unknown, sorted(registry)))
     results = []
     for name in names:
         err.print(f"[bold]running[/] {name} ...")

@@ -52,7 +52,7 @@ from wrinklepipe.drivers.base import (
     spec_problem,
 )
 from wrinklepipe.io.json_safe import loads_json
-from wrinklepipe.names import did_you_mean, unknown_names
+from wrinklepipe.names import did_you_mean, noun, unknown_names
 from wrinklepipe.suffixes import is_gltf
 
 
@@ -101,7 +101,7 @@ def _xyz_table(
 ) -> np.ndarray:
     missing = [b for b in bones if b not in table]
     if missing:
-        raise spec_problem(ctx, f"no position for bone(s) {missing}", key)
+        raise spec_problem(ctx, f"no position for {noun(len(missing), 'bone')} {missing}", key)
     try:
         out = np.array([table[b] for b in bones], np.float64)
     except (TypeError, ValueError):

@@ -32,7 +32,7 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
-from wrinklepipe.names import unknown_names
+from wrinklepipe.names import noun, plural, unknown_names
 
 NAME = "dynamic"
 
@@ -107,7 +107,9 @@ def check_topology(
         t = int(np.flatnonzero(bad.any(axis=1))[0])
         raise input_error(
             source,
-            f"{int(bad.any(axis=1).sum())} triangle(s) index vertices out of range 0..{len(p) - 1}"
+            f"{plural(int(bad.any(axis=1).sum()), 'triangle')} "
+            f"{noun(int(bad.any(axis=1).sum()), 'indexes', 'index')} vertices out of range "
+            f"0..{len(p) - 1}"
             f" (first: triangle {t} = {idx[t].tolist()})",
             key=f"triangle {t}",
         )
@@ -117,7 +119,8 @@ def check_topology(
         v = int(np.flatnonzero(~finite)[0])
         raise input_error(
             source,
-            f"{int((~finite).sum())} position(s) are NaN or infinite (first: vertex {v})",
+            f"{plural(int((~finite).sum()), 'position')} "
+            f"{noun(int((~finite).sum()), 'is', 'are')} NaN or infinite (first: vertex {v})",
             key=f"vertex {v}",
         )
     return p64, idx
@@ -198,7 +201,7 @@ class DynamicWeights:
         smooth.sort_indices()
         notes = []
         if skipped:
-            notes.append(f"skipped {skipped} zero-area triangle(s) (weight 0, no vote)")
+            notes.append(f"skipped {plural(skipped, 'zero-area triangle')} (weight 0, no vote)")
         valid = ok.astype(dtype)
         return cls(corners, smooth, inv.astype(dtype), valid, bias, ids, skipped, notes)
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.asset import Mesh
+from wrinklepipe.names import plural
 
 
 def merge_meshes(meshes: list[Mesh]) -> Mesh:
@@ -25,7 +26,9 @@ def merge_meshes(meshes: list[Mesh]) -> Mesh:
         if not any(have):
             return None
         if not all(have):
-            notes.append(f"{get}: missing on {have.count(False)} part(s), filled with {fill}")
+            notes.append(
+                f"{get}: missing on {plural(have.count(False), 'part')}, filled with {fill}"
+            )
         return np.concatenate(
             [
                 getattr(m, get) if getattr(m, get) is not None else np.full((c, width), fill)

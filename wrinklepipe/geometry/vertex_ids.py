@@ -40,6 +40,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from wrinklepipe.errors import input_error
+from wrinklepipe.names import noun, plural
 
 NAME = "vertex-ids"
 _SPACING_FRACTION = 0.25
@@ -352,7 +353,8 @@ def compute_vertex_ids(
         if len(bad):
             raise input_error(
                 source,
-                f"{len(bad)} position(s) are NaN or infinite (first at vertex {int(bad[0])})",
+                f"{plural(len(bad), 'position')} {noun(len(bad), 'is', 'are')} NaN or infinite "
+                f"(first at vertex {int(bad[0])})",
                 key=f"vertex {int(bad[0])}",
             )
     if opts.tolerance is not None and not (np.isfinite(opts.tolerance) and opts.tolerance >= 0):

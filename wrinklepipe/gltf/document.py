@@ -39,6 +39,7 @@ from wrinklepipe.gltf import decompress
 from wrinklepipe.gltf import primitive as gltf_primitive
 from wrinklepipe.gltf.container import Container, data_uri_bytes, open_container
 from wrinklepipe.gltf.limits import GltfReadOptions
+from wrinklepipe.names import plural
 
 ARRAY_BUFFER = 34962
 ELEMENT_ARRAY_BUFFER = 34963
@@ -365,7 +366,7 @@ def _true_bounds(doc: Document, views: set[int]) -> None:
             fixed.append(i)
     if fixed:
         doc.notes.append(
-            f"min/max of {len(fixed)} decoded accessor(s) set to the decoded data's bounds "
+            f"min/max of {plural(len(fixed), 'decoded accessor')} set to the decoded data's bounds "
             f"(the encoder's differed): {', '.join(map(str, fixed[:12]))}"
             + (" ..." if len(fixed) > 12 else "")
         )

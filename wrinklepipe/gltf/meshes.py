@@ -49,6 +49,7 @@ from wrinklepipe.gltf.primitive import (
     world_matrices,
 )
 from wrinklepipe.gltf.read import GltfFile, GltfReadOptions
+from wrinklepipe.names import plural
 
 #: Required extensions that do not change geometry (textures/materials/lights): ignored.
 _HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_")
@@ -150,9 +151,11 @@ def _read_gltf_meshes(path: str | Path, options: GltfMeshOptions | None = None) 
                 mesh.notes.append(f"skin {nodes[ni]['skin']}: {len(mesh.joint_names)} joints")
             out.append(mesh)
     if skipped_modes and out:
-        out[0].notes.append(f"skipped {skipped_modes} point/line primitive(s)")
+        out[0].notes.append(f"skipped {plural(skipped_modes, 'point/line primitive')}")
     if faceless and out:
-        out[0].notes.append(f"skipped {faceless} primitive(s) whose triangles are all degenerate")
+        out[0].notes.append(
+            f"skipped {plural(faceless, 'primitive')} whose triangles are all degenerate"
+        )
     if not out and faceless:
         raise r.err("every triangle is degenerate (zero area or a repeated index)", "/meshes")
     if not out:

@@ -41,6 +41,7 @@ from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import InputError
 from wrinklepipe.geometry.polygons import drop_degenerate
 from wrinklepipe.metadata import BIAS_ATTRIBUTE, BIAS_CHANNEL_ATTRIBUTES, VERTEX_ID_ATTRIBUTE
+from wrinklepipe.names import noun, plural
 
 #: Modes read as triangles: TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN.
 TRIANGLE_MODES = (4, 5, 6)
@@ -271,7 +272,8 @@ def read_primitive(
     if bad.any():
         v = int(np.flatnonzero(bad)[0])
         raise src.err(
-            f"{int(bad.sum())} position(s) are NaN or infinite (first: vertex {v})",
+            f"{plural(int(bad.sum()), 'position')} {noun(int(bad.sum()), 'is', 'are')} NaN or "
+            f"infinite (first: vertex {v})",
             key + "/attributes/POSITION",
         )
     notes: list[str] = []
@@ -295,7 +297,7 @@ def read_primitive(
         notes.append(f"triangulated a {'strip' if mode == 5 else 'fan'}")
     tris, n_degen = drop_degenerate(pos, tris)
     if n_degen:
-        notes.append(f"skipped {n_degen} degenerate triangle(s)")
+        notes.append(f"skipped {plural(n_degen, 'degenerate triangle')}")
 
     normals = attr("NORMAL", (3,))
     tangents = attr("TANGENT", (4,))

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.gltf.document import ARRAY_BUFFER, Document
+from wrinklepipe.names import plural
 
 #: Largest |sum - 1| left alone (float32 rounding of a normalised row stays far below).
 WEIGHT_SUM_TOLERANCE = 1e-6
@@ -99,7 +100,8 @@ def unstride_animation_and_skin_accessors(doc: Document) -> list[str]:
     if not fixed:
         return []
     return [
-        f"{len(fixed)} animation / inverse-bind-matrix accessor(s) read from strided bufferViews "
+        f"{plural(len(fixed), 'animation / inverse-bind-matrix accessor')} read from strided "
+        "bufferViews "
         "(the spec forbids a byteStride there) were given tightly packed copies (same values)"
     ]
 

@@ -29,7 +29,7 @@ from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.gltf.document import ARRAY_BUFFER, Document, PrimitiveRef
 from wrinklepipe.gltf.scene import node_world_matrices, primitive_triangles, rest_positions
 from wrinklepipe.metadata import VERTEX_ID_ATTRIBUTE
-from wrinklepipe.names import did_you_mean
+from wrinklepipe.names import did_you_mean, plural
 
 #: Largest integer a float32 holds exactly (vertex IDs are FLOAT accessors).
 MAX_FLOAT_ID = 1 << 24
@@ -59,7 +59,7 @@ def select_materials(
         else:
             raise input_error(
                 file,
-                f"{doc.path.name} has {len(mats)} materials; name the wrinkled one(s) with "
+                f"{doc.path.name} has {len(mats)} materials; name the wrinkled one with "
                 f'material = "NAME" (materials: {material_listing(doc)})',
                 "material",
             )
@@ -184,7 +184,8 @@ def clone_shared_materials(
         doc.gltf["materials"].append(mat)
         clones[m] = len(doc.gltf["materials"]) - 1
         notes.append(
-            f"material {doc.material_name(m)!r} is shared with {len(others)} primitive(s) outside "
+            f"material {doc.material_name(m)!r} is shared with {plural(len(others), 'primitive')} "
+            "outside "
             f"the wrinkled meshes: cloned as {mat['name']!r} (materials[{clones[m]}]) for the "
             "wrinkled primitives; the others keep the original"
         )

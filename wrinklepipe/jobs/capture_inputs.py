@@ -15,6 +15,7 @@ from wrinklepipe.capture.ratio import luminance, srgb_to_linear
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image
 from wrinklepipe.model import normalize
+from wrinklepipe.names import noun, plural
 from wrinklepipe.readers.meshes import LoadOptions, load_mesh
 from wrinklepipe.validate.gl import GLUnavailable, create_context
 
@@ -114,8 +115,9 @@ def _facing(
         r, c = np.argwhere(bad)[0]
         raise input_error(
             path,
-            f"{int(bad.sum())} pixel(s) of the ROI are not normals facing the camera (first at "
-            f"x={c}, y={r}: {np.round(v[r, c], 3).tolist()}); {hint}",
+            f"{plural(int(bad.sum()), 'pixel')} of the ROI {noun(int(bad.sum()), 'is', 'are')} not "
+            f"normals facing the camera (first at x={c}, y={r}: "
+            f"{np.round(v[r, c], 3).tolist()}); {hint}",
         )
     return np.where(inside[..., None], normalize(v), np.array([0.0, 0.0, 1.0], np.float32))
 
@@ -143,8 +145,9 @@ def neutral_normals_from_mesh(
         off = [names[i] if names else str(i) for i in np.flatnonzero(~found)[:5]]
         raise input_error(
             path,
-            f"{int((~found).sum())} texture landmark(s) fall outside the mesh's UV layout "
-            f"(first: {', '.join(off)}); the texture landmarks must lie on this mesh",
+            f"{plural(int((~found).sum()), 'texture landmark')} "
+            f"{noun(int((~found).sum()), 'falls', 'fall')} outside the mesh's UV layout (first: "
+            f"{', '.join(off)}); the texture landmarks must lie on this mesh",
         )
     cam = MV.fit_camera(world, photo)
     if cam.residual_px > MAX_CAMERA_RESIDUAL_PX:

@@ -35,6 +35,7 @@ from wrinklepipe.masks.files import write_packed
 from wrinklepipe.masks.layouts import LAYOUTS, PackedMasks, pack
 from wrinklepipe.masks.targets import STATES, TargetRegions, TargetRegionsOptions
 from wrinklepipe.masks.targets import regions_from_targets as make_regions
+from wrinklepipe.names import noun, plural
 from wrinklepipe.outputs.manifest_snippet import Snippet, SnippetRegion, snippet_text
 from wrinklepipe.pipeline.character import CharacterSource, read_character
 
@@ -113,7 +114,8 @@ def _maps(maps: str | None, states: list[str], mesh: Path) -> tuple[Path | None,
     if missing:
         raise input_error(
             folder,
-            f"no {', '.join(missing)} here: the regions drive the state(s) {states}; bake them "
+            f"no {', '.join(missing)} here: the regions drive the "
+            f"{noun(len(states), 'state')} {states}; bake them "
             f"with bake-states --state NAME=SCULPT, or name hand-made maps so",
             "--maps",
         )
@@ -208,7 +210,8 @@ def regions_job(
         write_json(tmp / REPORT_FILE, report)
         write_bytes(tmp / SNIPPET_FILE, text.encode("utf-8"))
     tell(
-        f"wrote {packed.textures.shape[0]} mask texture(s), {len(res.rows)} driver rows and "
+        f"wrote {plural(packed.textures.shape[0], 'mask texture')}, "
+        f"{plural(len(res.rows), 'driver row')} and "
         f"{SNIPPET_FILE} -> {out}"
     )
     return RegionsJobResult(out, res, packed, text, roots, notes + res.notes)

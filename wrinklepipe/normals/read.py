@@ -30,6 +30,7 @@ import numpy as np
 
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image
+from wrinklepipe.names import plural
 from wrinklepipe.normals import compress, dds
 from wrinklepipe.normals.convention import ConventionReport, detect_convention, flip_green
 from wrinklepipe.normals.identify import looks_like
@@ -359,18 +360,18 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
             where = []
             if stats.nan:
                 where.append(
-                    f"{stats.nan} NaN texel(s), first at row {stats.first_nan[0]}, "
+                    f"{plural(stats.nan, 'NaN texel')}, first at row {stats.first_nan[0]}, "
                     f"col {stats.first_nan[1]}"
                 )
             if stats.zero:
                 where.append(
-                    f"{stats.zero} zero-length texel(s), first at row "
+                    f"{plural(stats.zero, 'zero-length texel')}, first at row "
                     f"{stats.first_zero[0]}, col {stats.first_zero[1]}"
                 )
             if too_short:
                 flat = " (a flat mid-grey image is no normal map: flat is (128, 128, 255))"
                 where.append(
-                    f"{stats.short} of {stats.texels} texel(s) too short to be normals "
+                    f"{stats.short} of {plural(stats.texels, 'texel')} too short to be normals "
                     f"(length < {MIN_LENGTH}), first at row {stats.first_short[0]}, col "
                     f"{stats.first_short[1]}" + (flat if stats.short == stats.texels else "")
                 )

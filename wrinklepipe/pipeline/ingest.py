@@ -36,6 +36,7 @@ from wrinklepipe.gltf.wrinkled import (
     material_normal_texture,
 )
 from wrinklepipe.io.images import read_image
+from wrinklepipe.names import noun
 from wrinklepipe.normals import alignment as al
 from wrinklepipe.normals.convention import BEYOND_DOUBT, CONVENTIONS
 from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
@@ -238,7 +239,7 @@ def read_source_document(manifest: Any) -> SourceDocument:
     mesh = wrinkled_mesh(doc, sel.refs)
     listing = ", ".join(f"{p.name} ({p.count} vertices)" for p in mesh.parts)
     mats = ", ".join(repr(doc.material_name(m)) for m in sel.materials)
-    notes.append(f"wrinkled material(s) {mats}: primitives {listing}")
+    notes.append(f"wrinkled {noun(len(sel.materials), 'material')} {mats}: primitives {listing}")
     target = WrinkleTarget(
         tuple(sel.materials),
         tuple(sel.refs),
@@ -272,9 +273,10 @@ def check_masks_on_mesh(masks: np.ndarray, mesh: Mesh, manifest: Any) -> None:
         where = ", ".join(p.name for p in mesh.parts) or mesh.name
         raise input_error(
             manifest.path,
-            f"the mask(s) of region(s) {', '.join(map(repr, missing))} fall on no wrinkled "
-            f"primitive: they are zero over the UV layout of {where} (a mask painted for another "
-            "part, or the wrong material)",
+            f"the {noun(len(missing), 'mask')} of {noun(len(missing), 'region')} "
+            f"{', '.join(map(repr, missing))} {noun(len(missing), 'falls', 'fall')} on no wrinkled "
+            f"primitive: {noun(len(missing), 'it is', 'they are')} zero over the UV layout of "
+            f"{where} (a mask painted for another part, or the wrong material)",
             "regions",
         )
 

@@ -16,6 +16,7 @@ import numpy as np
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.polygons import drop_degenerate, fan_triangles, weld_corners
+from wrinklepipe.names import plural
 
 
 def _floats(rows: list[list[str]], width: int, file: str, what: str) -> np.ndarray:
@@ -139,9 +140,9 @@ def _part(
     tris, n_degen = drop_degenerate(positions, tris)
     notes = []
     if (counts > 3).any():
-        notes.append(f"fan-triangulated {int((counts > 3).sum())} polygon(s)")
+        notes.append(f"fan-triangulated {plural(int((counts > 3).sum()), 'polygon')}")
     if n_degen:
-        notes.append(f"skipped {n_degen} degenerate triangle(s)")
+        notes.append(f"skipped {plural(n_degen, 'degenerate triangle')}")
     if len(tris) == 0:
         raise input_error(file, f"part {name!r}: every triangle is degenerate")
     uvs = None

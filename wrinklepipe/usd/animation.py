@@ -39,7 +39,7 @@ from wrinklepipe.geometry.keyframes import sample_channel_at
 from wrinklepipe.gltf.animation import Channel, read_channels
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.primitive import node_matrix, trs_matrices  # the one glTF TRS
-from wrinklepipe.names import unique_name
+from wrinklepipe.names import noun, plural, unique_name
 from wrinklepipe.usd.looks import gf_matrix
 
 #: The variant that plays convert's weight curve (morph weights) on the wrinkled meshes.
@@ -134,8 +134,9 @@ def add_animations(
             clips.append((name, usable))
     if skipped:
         notes.append(
-            f"USD: {skipped} animation channel(s) on nodes outside the scene (or weights of "
-            "meshes bound to no skeleton) are not carried (kept in the glTF)"
+            f"USD: {plural(skipped, 'animation channel')} on nodes outside the scene (or weights "
+            f"of meshes bound to no skeleton) {noun(skipped, 'is', 'are')} not carried (kept in "
+            "the glTF)"
         )
     if not clips and wrinkle is None:
         for n, path in xforms.items():  # no variant set: the rest matrix, as authored
@@ -198,7 +199,8 @@ def add_animations(
         stage.SetEndTimeCode(max(ends))  # the timeline holds the longest clip too
     if clips:
         notes.append(
-            f"USD: the {len(clips)} glTF animation(s) are SkelAnimations (and time-sampled "
+            f"USD: the {plural(len(clips), 'glTF animation')} "
+            f"{noun(len(clips), 'is a SkelAnimation', 'are SkelAnimations')} (and time-sampled "
             f"Xforms), one variant each of the variant set 'animation' on {scene} "
             f"(selected: {default})"
         )

@@ -49,6 +49,7 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.io.confine import allowed, confine_usd
 from wrinklepipe.io.png import DEFAULT_PNG_LEVEL, png_bytes
 from wrinklepipe.io.usd_diagnostics import quiet
+from wrinklepipe.names import noun, plural
 from wrinklepipe.package import WrinklePackage
 from wrinklepipe.udim import TOKEN, split_name
 from wrinklepipe.usd.materialx import drop_materialx_file
@@ -134,7 +135,8 @@ def layer_stage(src: UsdSource, pkg: WrinklePackage) -> tuple[Any, list[str]]:
             )
     notes.append(
         f"USD: {pkg.name}.usda sublayers the source {src.path.name} unchanged and adds the "
-        f"wrinkle data over {len(pkg.mesh.parts)} mesh(es) and the material(s) "
+        f"wrinkle data over {plural(len(pkg.mesh.parts), 'mesh')} and the "
+        f"{noun(len(mat_paths), 'material')} "
         f"{', '.join(map(str, mat_paths))}; {pkg.name}.usdz is it flattened"
     )
     return stage, notes

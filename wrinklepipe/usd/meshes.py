@@ -43,6 +43,7 @@ from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.polygons import drop_degenerate, fan_triangles, weld_corners
 from wrinklepipe.io.confine import confine_usd
 from wrinklepipe.io.usd_diagnostics import captured_diagnostics, error_text
+from wrinklepipe.names import noun, plural
 from wrinklepipe.usd.composition import UsdProblem, composition_problems
 
 
@@ -122,7 +123,7 @@ def read_usd_meshes(path: str | Path, options: UsdMeshOptions | None = None) -> 
             p, "no UsdGeom.Mesh with faces" + (f" under {opts.prim}" if opts.prim else "")
         )
     if skipped:
-        out[0].notes.append(f"skipped {len(skipped)} mesh(es) without faces: {skipped[:5]}")
+        out[0].notes.append(f"skipped {plural(len(skipped), 'mesh')} without faces: {skipped[:5]}")
     return out
 
 
@@ -148,7 +149,8 @@ def mesh_time(prim: Any, time: Any) -> tuple[Any, str]:
         code = float(samples[0])
         why = f"the earliest of {len(samples)} samples"
     note = (
-        f"points have no default value, only {len(samples)} time sample(s): read at time code "
+        f"points have no default value, only {plural(len(samples), 'time sample')}: read at time "
+        "code "
         f"{code:g} ({why})"
     )
     return Usd.TimeCode(code), note
@@ -245,8 +247,9 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     bad = ~np.isfinite(pts).all(axis=1)
     if bad.any():
         v = int(np.flatnonzero(bad)[0])
-        raise input_error(file, f"{int(bad.sum())} point(s) are NaN or infinite (first: {v})",
-                          key=f"{ppath}.points")  # fmt: skip
+        n = int(bad.sum())
+        raise input_error(file, f"{plural(n, 'point')} {noun(n, 'is', 'are')} NaN or infinite "
+                          f"(first: {v})", key=f"{ppath}.points")  # fmt: skip
     if gm.GetHoleIndicesAttr().Get(time):
         notes.append("holeIndices ignored (holes are not cut)")
 
@@ -274,7 +277,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
 
     tris = corner_v[fan_triangles(counts)]
     if (counts > 3).any():
-        notes.append(f"fan-triangulated {int((counts > 3).sum())} polygon(s)")
+        notes.append(f"fan-triangulated {plural(int((counts > 3).sum()), 'polygon')}")
     if gm.GetOrientationAttr().Get(time) == UsdGeom.Tokens.leftHanded:
         tris = tris[:, [0, 2, 1]]
         notes.append("leftHanded orientation: winding flipped")
@@ -322,7 +325,7 @@ def _read_mesh(path: Path, prim: Any, time: Any, opts: UsdMeshOptions) -> Mesh |
     tris2, n_degen = drop_degenerate(mesh.positions, mesh.indices.astype(np.int64))
     if n_degen:
         mesh.indices = tris2.astype(np.uint32)
-        mesh.notes.append(f"skipped {n_degen} degenerate triangle(s)")
+        mesh.notes.append(f"skipped {plural(n_degen, 'degenerate triangle')}")
     if len(mesh.indices) == 0:
         raise input_error(file, "every triangle is degenerate", key=ppath)
     return mesh
@@ -467,7 +470,8 @@ def _blend_shapes(
         mesh.morph_deltas = np.stack(deltas)
         n_ib = sum("@" in n for n in out_names)
         mesh.notes.append(
-            f"{len(out_names) - n_ib} blend shape(s)" + (f", {n_ib} inbetween(s)" if n_ib else "")
+            f"{plural(len(out_names) - n_ib, 'blend shape')}"
+            + (f", {plural(n_ib, 'inbetween')}" if n_ib else "")
         )
 
 
@@ -561,7 +565,9 @@ def _skin(
     mesh.skin_weights = jw[vmap].astype(np.float32)
     mesh.joint_names = tuple(joint_names if authored is None else [names[r] for r in rows])
     mesh.inverse_bind = ibm.astype(np.float32)
-    mesh.notes.append(f"UsdSkel skin: {len(joint_names)} joints, {k} influence(s) per point")
+    mesh.notes.append(
+        f"UsdSkel skin: {len(joint_names)} joints, {plural(k, 'influence')} per point"
+    )
     return True, geom
 
 

@@ -31,7 +31,7 @@ from wrinklepipe.asset import Mesh, MeshPart
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.merge import merge_meshes
 from wrinklepipe.gltf.wrinkled import front_projection_uvs
-from wrinklepipe.names import did_you_mean
+from wrinklepipe.names import did_you_mean, noun
 from wrinklepipe.usd.composition import UsdProblem
 from wrinklepipe.usd.meshes import open_stage_checked, read_usd_meshes, uv_primvar
 
@@ -227,7 +227,8 @@ def read_usd_source(manifest: Any) -> UsdSource:
         f"{m} (cloned: also bound to meshes not wrinkled)" if m in cloned else m for m in mats
     )
     notes.append(
-        f"wrinkled {'material(s) ' + what if mats else 'meshes (no material bound)'}: "
+        "wrinkled "
+        f"{noun(len(mats), 'material') + ' ' + what if mats else 'meshes (no material bound)'}: "
         + ", ".join(f"{p.name} ({p.count} vertices)" for p in mesh.parts)
     )
     return UsdSource(

@@ -35,6 +35,7 @@ from scipy import ndimage
 from wrinklepipe import model
 from wrinklepipe.codec import srgb
 from wrinklepipe.metrics import DECIMALS, Budget, angle_deg, delta_e, weighted_stats
+from wrinklepipe.names import noun, plural
 from wrinklepipe.palette import region_colours_linear
 from wrinklepipe.shading.setup import ShaderSetup
 from wrinklepipe.validate import fidelity_pictures as fp
@@ -361,8 +362,8 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
         issues.append(
             make_issue(
                 "WP-RND-002",
-                f"{len(leaks)} expression(s) change the render where masks x weights are zero; "
-                f"worst {worst[0]}: {worst[1]} pixels",
+                f"{plural(len(leaks), 'expression')} {noun(len(leaks), 'changes', 'change')} the "
+                f"render where masks x weights are zero; worst {worst[0]}: {worst[1]} pixels",
                 inp.pointer("masks"),
             )
         )
@@ -371,8 +372,9 @@ def render_pass(ctx: Context) -> tuple[list[Issue], dict[str, Any], dict[str, An
         issues.append(
             make_issue(
                 "WP-RND-003",
-                f"{len(missing)} expression(s) show no wrinkle where the source is fully "
-                f"active; worst {worst[0]}: {worst[1]} of {worst[2]} pixels unchanged",
+                f"{plural(len(missing), 'expression')} {noun(len(missing), 'shows', 'show')} no "
+                f"wrinkle where the source is fully active; worst {worst[0]}: {worst[1]} of "
+                f"{worst[2]} pixels unchanged",
                 inp.pointer("masks"),
             )
         )

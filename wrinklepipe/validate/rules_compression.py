@@ -7,6 +7,7 @@ import numpy as np
 from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.metrics import DECIMALS, Budget, Stats, angle_deg, weighted_stats
+from wrinklepipe.names import noun, plural
 from wrinklepipe.validate import rules_fidelity
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
@@ -134,8 +135,9 @@ def _half_resolution(ctx: Context, budget_grid: Budget) -> list[Issue]:
         return [
             make_issue(
                 "WP-TEX-006",
-                f"the {len(texs)} state map(s) at {w // 2}x{h // 2} instead of {w}x{h} still "
-                f"meet the budget (worst p99 {worst:.2f} degrees); {wasted} bytes wasted",
+                f"the {plural(len(texs), 'state map')} at {w // 2}x{h // 2} instead of {w}x{h} "
+                f"still {noun(len(texs), 'meets', 'meet')} the budget (worst p99 {worst:.2f} "
+                f"degrees); {wasted} bytes wasted",
                 ctx.inp.pointer("textures"),
                 wasted_bytes=int(wasted),
             )

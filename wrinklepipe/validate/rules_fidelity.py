@@ -23,6 +23,7 @@ from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.masks import infer_side
 from wrinklepipe.metrics import Budget, Stats, angle_deg, weighted_stats
+from wrinklepipe.names import noun
 from wrinklepipe.normals import alignment as al
 from wrinklepipe.validate import fidelity_pictures as fp
 from wrinklepipe.validate import textures as tx
@@ -306,10 +307,12 @@ def check_alignment(ctx: Context) -> list[Issue]:
     names = [a.state_names[k] if k < len(a.state_names) else f"state {k}" for k in lost]
     share = min(kept[k] for k in lost)  # type: ignore[type-var]
     pct = 100 * max(share, 0.0)
+    one = len(names) == 1
     said = (
-        f"the {what} state(s) {', '.join(repr(n) for n in names)} keep {pct:.0f}% of "
-        f"the base's detail where every mask is zero (a state of the same face and bake keeps "
-        f"all of it) and differ from the base by more than {MISALIGNED_DEG:g} degree on "
+        f"the {what} {noun(len(names), 'state')} {', '.join(repr(n) for n in names)} "
+        f"{'keeps' if one else 'keep'} {pct:.0f}% of the base's detail where every mask is zero "
+        f"(a state of the same face and bake keeps all of it) and {'differs' if one else 'differ'} "
+        f"from the base by more than {MISALIGNED_DEG:g} degree on "
         f"{100 * spread:.1f}% of the face there"
     )
     data: dict[str, Any] = {"spread": round(spread, 4), "detail_kept": round(share, 4)}

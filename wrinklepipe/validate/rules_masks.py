@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wrinklepipe.names import plural
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context
@@ -56,7 +57,7 @@ def check_channel_table(ctx: Context) -> list[Issue]:
                 make_issue(
                     "WP-MASK-004",
                     f"region {e.region!r} uses channel {e.channel} of {t.name!r}, a {t.fmt} "
-                    f"texture with {t.channels} channel(s)",
+                    f"texture with {plural(t.channels, 'channel')}",
                     where,
                 )
             )
