@@ -17,7 +17,7 @@ from wrinklepipe.commands._options import HelpFormatter
 from wrinklepipe.validate.catalogue import SEVERITIES
 
 #: Commands whose run validates an asset: each must take --fail-on.
-VALIDATING = {"demo", "convert", "validate-asset", "batch"}
+VALIDATING = {"demo", "convert", "validate-asset", "batch", "pack-masks"}
 
 #: The shared options: option strings -> (metavar, what its help starts with).
 SHARED = {

@@ -69,6 +69,20 @@ def test_pack_masks_resamples_to_size(tmp_path):
     np.testing.assert_allclose(tex[..., 0], [[1.0, 0.0], [0.0, 0.5]], atol=1 / 65535)
 
 
+def test_pack_masks_fail_on_warning_fails_a_region_that_covers_nothing(tmp_path, capsys):
+    brow = np.zeros((4, 4), np.float32)
+    brow[:2] = 1.0
+    paths = _write_masks(tmp_path, ["brow", "chin"], [brow, np.zeros((4, 4), np.float32)])
+    args = ["pack-masks", *paths, "-o"]
+    assert main([*args, str(tmp_path / "a")]) == 0  # a warning, written, exit 0 by default
+    assert "region 'chin' covers nothing" in capsys.readouterr().err
+    assert main([*args, str(tmp_path / "b"), "--fail-on", "warning", "--json"]) == 1
+    out = json.loads(capsys.readouterr().out)
+    assert (tmp_path / "b" / "channels.json").is_file() and out["report"]["empty"] == ["chin"]
+    both = _write_masks(tmp_path / "ok", ["brow", "chin"], [brow, 1.0 - brow])
+    assert main(["pack-masks", *both, "-o", str(tmp_path / "c"), "--fail-on", "warning"]) == 0
+
+
 def test_resample_box_and_bilinear():
     m = np.zeros((1, 4, 4), np.float32)
     m[0, :2, :2] = 1.0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from wrinklepipe.commands._options import add_force, add_json, add_output
+from wrinklepipe.commands._options import add_fail_on, add_force, add_json, add_output, fails
 from wrinklepipe.console import emit_json, err, problem, status
 from wrinklepipe.jobs.pack_masks import PackMasksOptions, pack_mask_files
 from wrinklepipe.masks import LAYOUTS
@@ -24,6 +24,8 @@ overlaps (sum above 1) and empty regions, optionally resample, and pack them:
 
 Writes OUT/masks_<t>.png (or masks_array.png) and OUT/channels.json (the channel table).
 --invert reads masks painted as Reis et al. do (white = no wrinkle, black = full).
+The findings (a region that covers nothing, masks summing above 1, texels no region covers) are
+warnings: the outputs are written; --fail-on warning makes the exit code 1 when there is one.
 
 examples:
   wrinklepipe pack-masks masks/*.png --layout jimenez8 -o packed/
@@ -71,6 +73,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     add_force(p)
     add_json(p, "the report and channel table")
+    add_fail_on(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -85,9 +88,11 @@ def run(args: argparse.Namespace) -> int:
     )
     with status(f"packing {len(args.masks)} masks"):
         res = pack_mask_files(args.masks, args.output, opts)
+    warnings = [*res.report.warnings, *res.packed.notes]
+    code = 1 if fails({"warning": len(warnings)}, args.fail_on) else 0
     if args.json:
         emit_json(res.to_json())
-        return 0
+        return code
     n_tex = res.packed.textures.shape[0]
     kind = "layers" if res.packed.layout == "array" else "textures"
     w, h = res.size
@@ -95,6 +100,6 @@ def run(args: argparse.Namespace) -> int:
         f"packed {len(res.names)} regions into {n_tex} {kind} ({res.layout}, {w} x {h}, "
         f"{res.bits}-bit) -> {args.output}"
     )
-    for warning in [*res.report.warnings, *res.packed.notes]:
+    for warning in warnings:
         problem(f"[yellow]warning:[/] {warning}", markup=True)
-    return 0
+    return code
