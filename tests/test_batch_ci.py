@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -44,9 +45,15 @@ def test_asset_conversion_script_converts_then_serves_from_the_cache(tmp_path):
             timeout=600,
         )
         assert proc.returncode == 0, proc.stderr + proc.stdout
+        logs.append(proc.stderr)
         return json.loads((tmp_path / "reports" / "summary.json").read_text())
 
+    logs: list[str] = []
     first = run()
+    # a CI log: one plain line per asset as it finishes, its verdict, time and where it came from
+    for asset in ("heroes/face/manifest", "villains/face/manifest"):
+        assert re.search(rf"^passed {asset} \(\d+\.\d s, converted\)$", logs[0], re.M), logs[0]
+    assert "\x1b[" not in logs[0]  # no terminal codes in a log
     assert [(a["id"], a["source"]) for a in first["assets"]] == [
         ("heroes/face/manifest", "converted"),
         ("villains/face/manifest", "converted"),
@@ -57,6 +64,7 @@ def test_asset_conversion_script_converts_then_serves_from_the_cache(tmp_path):
     assert json.loads((tmp_path / "reports" / "wrinkles.sarif").read_text())["version"] == "2.1.0"
     second = run()
     assert [a["source"] for a in second["assets"]] == ["cache", "cache"]
+    assert re.search(r"^passed heroes/face/manifest \(\d+\.\d s, from cache\)$", logs[1], re.M)
     assert second["cache"]["hits"] == 2
 
     # BASE: only the manifests changed since BASE (the cache still applies)
