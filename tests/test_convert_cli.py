@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import errno
 import json
+import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -218,3 +221,19 @@ def test_json_output(small_source, tmp_path, capsys):
     assert main(["convert", str(small_source), "-o", str(out), "--json", "--no-validate"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["name"] == "demo_head" and report["validation"]["status"] == "skipped"
+
+
+def test_piped_json_run_keeps_stdout_for_the_json(small_source, tmp_path):
+    """As a CI step reads it: stdout is the JSON alone, the progress lines go to stderr."""
+    out = tmp_path / "p"
+    proc = subprocess.run(
+        [sys.executable, "-m", "wrinklepipe", "convert", str(small_source), "-o", str(out),
+         "--json", "--no-validate"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["name"] == "demo_head"  # nothing but the JSON
+    assert re.search(r"^\s*\d+\.\d s  reading inputs: done in \d+\.\d s$", proc.stderr, re.M)
+    assert "\x1b[" not in proc.stderr + proc.stdout

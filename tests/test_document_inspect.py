@@ -6,8 +6,10 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import gltf_reference as ref
@@ -120,3 +122,24 @@ def test_diff_lists_exactly_the_change(tmp_path, capsys):
     assert main(["inspect", "--diff", str(src), str(out), "--json"]) == 1
     assert json.loads(capsys.readouterr().out)["differences"] == lines
     assert main(["inspect", "--diff", str(src), str(src)]) == 0
+
+
+@pytest.mark.skipif(not SAMPLES.is_dir(), reason="../shared/data is absent")
+def test_piped_inspect_cuts_no_cell():
+    """In a CI log (a pipe, no COLUMNS) the tables are as wide as their cells: every attribute
+    list and name whole, never cut to 80 columns with an ellipsis."""
+    robot = SAMPLES / "RobotExpressive" / "RobotExpressive.glb"
+    env = {k: v for k, v in os.environ.items() if k != "COLUMNS"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "wrinklepipe", "inspect", str(robot)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    text = proc.stdout
+    assert "…" not in text and "\x1b[" not in text
+    attrs = "JOINTS_0:VEC4:u16, NORMAL:VEC3:f32, POSITION:VEC3:f32, WEIGHTS_0:VEC4:f32"
+    assert attrs in text  # the longest cell, whole
+    assert max(len(line) for line in text.splitlines()) > 120  # wider than a terminal's 80

@@ -874,7 +874,7 @@ def test_eye_with_only_time_sampled_points_is_wrinkled_at_the_start_time_code(tm
     source.write_text(text.replace(rest, sampled))
     out, report, _ = _convert(tmp_path, source, "eye", material="/Avatar/Looks/Eye")
     assert any(
-        "only 2 time sample(s): read at time code 0 (the stage's startTimeCode)" in n
+        "only 2 time samples: read at time code 0 (the stage's startTimeCode)" in n
         for n in report["notes"]
     ), report["notes"]
     stage = Usd.Stage.Open(str(out / "eye.usda"))

@@ -17,8 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wrinklepipe.names import plural
-
 
 @dataclass(frozen=True)
 class Layout:
@@ -99,7 +97,7 @@ def unpack(texels: np.ndarray, lay: Layout) -> np.ndarray:
     if t.shape[-1] < need:
         raise ValueError(
             f"layout {lay.name} reads channel {'rgba'[need - 1]}; the texels have "
-            f"{plural(t.shape[-1], 'channel')}"
+            f"{t.shape[-1]} channel{'' if t.shape[-1] == 1 else 's'}"
         )
     return t[..., list(lay.components)]
 
