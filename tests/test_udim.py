@@ -84,7 +84,7 @@ def test_a_mesh_cut_by_tile():
 def test_a_triangle_across_two_tiles_is_refused():
     m = _two_quads()
     m.uvs[1, 0] = 1.5  # quad A's corner moved into tile 1002
-    with pytest.raises(InputError, match="span two UDIM tiles"):
+    with pytest.raises(InputError, match="1 triangle spans two UDIM tiles"):
         udim.triangle_tiles(m.uvs, m.indices, "face")
 
 
@@ -198,7 +198,7 @@ def test_a_state_tile_the_base_lacks_and_tiles_of_two_sizes(tmp_path):
     with pytest.raises(InputError) as err:
         load_manifest(path)
     text = str(err.value)
-    assert "tile(s) 1003 are not tiles of the base" in text
+    assert "tile 1003 is not a tile of the base" in text
     assert "tiles of one map have different sizes: 16x16 (tile 1001), 8x8 (tile 1002)" in text
 
 

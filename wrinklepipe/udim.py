@@ -30,6 +30,7 @@ import numpy as np
 from wrinklepipe.asset import Mesh
 from wrinklepipe.errors import input_error
 from wrinklepipe.metadata import CompressedCopy, MaskMeta, StateMeta, WrinkleMeta
+from wrinklepipe.names import noun, plural
 from wrinklepipe.package import PackedTexture, WrinklePackage
 
 #: The token a file pattern names the tile number with.
@@ -116,7 +117,8 @@ def triangle_tiles(uvs: np.ndarray, indices: np.ndarray, where: str = "mesh") ->
         k = int(np.flatnonzero(outside)[0])
         raise input_error(
             where,
-            f"{int(outside.sum())} triangle(s) lie outside the UDIM tiles (u in [0, 10), t >= 0), "
+            f"{plural(int(outside.sum()), 'triangle')} {noun(int(outside.sum()), 'lies', 'lie')} "
+            f"outside the UDIM tiles (u in [0, 10), t >= 0), "
             f"the first at UV ({u[k].mean():.4g}, {t[k].mean():.4g})",
         )
     spans = (
@@ -131,7 +133,8 @@ def triangle_tiles(uvs: np.ndarray, indices: np.ndarray, where: str = "mesh") ->
         corners = ", ".join(f"({a:.4g}, {b:.4g})" for a, b in zip(u[k], t[k]))
         raise input_error(
             where,
-            f"{int(spans.sum())} triangle(s) span two UDIM tiles (a face must lie inside one "
+            f"{plural(int(spans.sum()), 'triangle')} {noun(int(spans.sum()), 'spans', 'span')} "
+            f"two UDIM tiles (a face must lie inside one "
             f"tile's square); the first, in tile {tiles[k]}, has UVs {corners}",
         )
     return tiles

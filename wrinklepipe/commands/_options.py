@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from wrinklepipe.console import problem
-from wrinklepipe.names import did_you_mean, listing
+from wrinklepipe.names import did_you_mean
 
 #: Validation's severities, worst first (``wrinklepipe.validate.catalogue.SEVERITIES``; not
 #: imported from there, which would load the whole validator for every command's ``--help``;
@@ -63,7 +63,7 @@ class Parser(argparse.ArgumentParser):
         raise argparse.ArgumentError(
             action,
             f"invalid choice: {value!r}{did_you_mean(str(value), names)}; "
-            f"choose from {listing(names, limit=len(names))}",
+            f"choose from {', '.join(map(repr, choices))}",
         )
 
     def parse_args(  # type: ignore[override]

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from wrinklepipe.commands._options import SEVERITIES, fails
-from wrinklepipe.console import issue_counts
+from wrinklepipe.console import issue_counts, plural
 from wrinklepipe.metrics import Budget, Stats
 
 
@@ -142,8 +142,8 @@ def summary_lines(
     a = rep["asset"]
     out = [
         f"wrote {where + ' ' if where else ''}({len(rep['outputs']) + 2} files): "
-        f"{len(a['states'])} states, "
-        f"{len(a['regions'])} regions, encoding {a['encoding']} (scale {a['scale']}), "
+        f"{plural(len(a['states']), 'state')}, "
+        f"{plural(len(a['regions']), 'region')}, encoding {a['encoding']} (scale {a['scale']}), "
         f"{a['vertices']} vertices"
     ]
     fid = rep.get("fidelity")

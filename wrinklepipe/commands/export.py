@@ -8,6 +8,7 @@ from wrinklepipe.commands._options import add_force, add_json, add_output
 from wrinklepipe.console import emit_json, err
 from wrinklepipe.export.presets import ENGINE_PRESETS
 from wrinklepipe.jobs.export import export
+from wrinklepipe.names import plural
 
 NAME = "export"
 HELP = "export a converted asset for Unreal, Unity, Godot or Blender"
@@ -54,7 +55,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         emit_json({"engine": args.engine, "files": sorted(files), "notes": notes})
     else:
-        err.print(f"[bold green]wrote[/] {args.output} ({len(files)} files) for {args.engine}")
+        err.print(
+            f"[bold green]wrote[/] {args.output} ({plural(len(files), 'file')}) for {args.engine}"
+        )
         for n in notes:
             err.print(f"  {n}")
     return 0

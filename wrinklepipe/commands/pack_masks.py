@@ -8,6 +8,7 @@ from wrinklepipe.commands._options import add_fail_on, add_force, add_json, add_
 from wrinklepipe.console import emit_json, err, problem, status
 from wrinklepipe.jobs.pack_masks import PackMasksOptions, pack_mask_files
 from wrinklepipe.masks import LAYOUTS
+from wrinklepipe.names import plural
 
 NAME = "pack-masks"
 HELP = "pack region masks into RGBA textures, a texture array or the left/right split layout"
@@ -86,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         lr_conflict=args.lr_conflict,
         force=args.force,
     )
-    with status(f"packing {len(args.masks)} masks"):
+    with status(f"packing {plural(len(args.masks), 'mask')}"):
         res = pack_mask_files(args.masks, args.output, opts)
     warnings = [*res.report.warnings, *res.packed.notes]
     code = 1 if fails({"warning": len(warnings)}, args.fail_on) else 0
@@ -94,10 +95,11 @@ def run(args: argparse.Namespace) -> int:
         emit_json(res.to_json())
         return code
     n_tex = res.packed.textures.shape[0]
-    kind = "layers" if res.packed.layout == "array" else "textures"
+    kind = "layer" if res.packed.layout == "array" else "texture"
     w, h = res.size
     err.print(
-        f"packed {len(res.names)} regions into {n_tex} {kind} ({res.layout}, {w} x {h}, "
+        f"packed {plural(len(res.names), 'region')} into {plural(n_tex, kind)} ({res.layout}, "
+        f"{w} x {h}, "
         f"{res.bits}-bit) -> {args.output}"
     )
     for warning in warnings:

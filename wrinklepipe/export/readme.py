@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from wrinklepipe.names import plural
+
 
 def _files(files: list[str]) -> str:
     return "\n".join(f"- `{f}`" for f in files if f != "README.md")
@@ -17,8 +19,9 @@ def _common(doc: dict[str, Any]) -> str:
         f"The wrinkled material: {materials} in `{doc['mesh']}` (apply the wrinkle shader to the "
         "surfaces using it; every other part and material is as in the source).\n\n"
         f"Encoding `{doc['encoding']}` (scale {doc['scale']}, value mapping v{doc['mapping']}), "
-        f"policy `{doc['policy']}`, {len(doc['states'])} states ({states}), "
-        f"{len(doc['regions'])} regions, normal maps in the {doc['convention']} convention "
+        f"policy `{doc['policy']}`, {plural(len(doc['states']), 'state')} ({states}), "
+        f"{plural(len(doc['regions']), 'region')}, normal maps in the {doc['convention']} "
+        "convention "
         f"({'+Y' if doc['convention'] == 'opengl' else '-Y'}).\n\n"
         "The shader is wrinklepipe's one template (the numpy model `wrinklepipe.model`, "
         "rendered equal to it in wrinklepipe's tests); `wrinkle_setup.json` describes everything "

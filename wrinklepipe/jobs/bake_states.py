@@ -30,6 +30,7 @@ from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.geometry.bake import BakeOptions, BakeResult, HighMesh, bake_normal_maps
 from wrinklepipe.io.images import write_image
 from wrinklepipe.masks.from_states import ProposalOptions, propose_masks
+from wrinklepipe.names import plural
 from wrinklepipe.pipeline.character import CharacterSource, read_character
 from wrinklepipe.readers.meshes import LoadOptions, load_mesh
 
@@ -126,7 +127,7 @@ def bake_states_job(
     b = o.bake
     how = "given" if b.max_distance else "measured"
     tell(
-        f"baked {len(highs)} maps at {b.size}^2, {b.supersample}^2 samples a texel "
+        f"baked {plural(len(highs), 'map')} at {b.size}^2, {b.supersample}^2 samples a texel "
         f"({res.samples} samples), rays {res.max_distance:.4g} either side ({how}), "
         f"padding {b.padding_px} px"
     )
@@ -147,7 +148,7 @@ def bake_states_job(
     masks = None
     if o.masks:
         masks = propose_masks(res.maps[0], np.stack(res.maps[1:]), res.covered, o.proposal)
-        tell(f"proposed {len(names)} masks from the states' differences to the base")
+        tell(f"proposed {plural(len(names), 'mask')} from the states' differences to the base")
     report = _report(low, paths, names, o, res)
     with staged_folder(out, force=o.force, inputs=[low, *paths]) as tmp:
         write_image(tmp / BASE_FILE, res.maps[0] * 0.5 + 0.5, 16)

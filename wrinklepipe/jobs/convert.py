@@ -190,12 +190,12 @@ def convert(
                 notes += write_folder(
                     tmp, files, pkg, opt.usd_format, document, got.usd, output, opt.png_level
                 )
-            with console.status("validating"):
-                validation = (
-                    validate_output(tmp, manifest.path, opt.render, html_page=True, source=source)
-                    if opt.validate
-                    else {"status": "skipped", "reason": "--no-validate"}
-                )
+            validation: dict[str, Any] = {"status": "skipped", "reason": "--no-validate"}
+            if opt.validate:
+                with console.status("validating"):
+                    validation = validate_output(
+                        tmp, manifest.path, opt.render, html_page=True, source=source
+                    )
             report = convert_report(
                 manifest=manifest.path.name,
                 inputs=read,

@@ -157,7 +157,7 @@ def regions_job(
     )
     res = make_regions(m, o.masks, str(mesh))
     tell(
-        f"area change of {len(res.targets)} targets at full weight, smoothed over "
+        f"area change of {plural(len(res.targets), 'target')} at full weight, smoothed over "
         f"{int(m.vertex_ids.max()) + 1 if m.vertex_ids is not None else m.vertex_count} "
         f"vertex IDs" + (f"; {len(res.skipped)} change no area" if res.skipped else "")
     )
@@ -165,8 +165,9 @@ def regions_job(
     sides = [r.side for r in res.regions]
     kind = "per target and state" if o.masks.regions is None else "clustered"
     tell(
-        f"{len(names)} regions ({kind}) rendered at {o.masks.size}^2, {o.masks.supersample}^2 "
-        f"samples a texel, blur {o.masks.blur:g} px, padding {o.masks.padding} px"
+        f"{plural(len(names), 'region')} ({kind}) rendered at {o.masks.size}^2, "
+        f"{o.masks.supersample}^2 samples a texel, blur {o.masks.blur:g} px, "
+        f"padding {o.masks.padding} px"
     )
     packed = pack(res.masks, names, "rgba")
     if o.layout != "rgba":

@@ -48,6 +48,7 @@ from wrinklepipe.geometry.symmetry import SymmetryPlane, mirror_partners, symmet
 from wrinklepipe.geometry.uv_samples import render_sparse, uv_samples
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.model import MAX_REGIONS
+from wrinklepipe.names import plural
 from wrinklepipe.presets.targets import describe, mirror_name
 
 NAME = "regions"
@@ -353,7 +354,7 @@ def _clustered(
     rows, fit = _fit_rows(names, scaled, vm, [r.name for r in regions], area)
     notes = [
         f"clustered the {len(act)} moved vertices into {len(group_names)} groups -> "
-        f"{len(regions)} regions ({sum(split)} split left/right)"
+        f"{plural(len(regions), 'region')} ({sum(split)} split left/right)"
     ]
     return tuple(regions), vm, rows, fit, notes
 

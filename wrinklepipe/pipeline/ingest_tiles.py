@@ -20,6 +20,7 @@ from wrinklepipe.asset import Mesh, WrinkleAsset
 from wrinklepipe.errors import input_error
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
 from wrinklepipe.io.images import read_header
+from wrinklepipe.names import noun
 from wrinklepipe.pipeline.ingest import _asset, _load_mesh, _regions, read_maps
 from wrinklepipe.readers.registry import format_of
 from wrinklepipe.usd.source import UsdSource, read_usd_source
@@ -85,8 +86,9 @@ def check_tiled_masks_on_mesh(tiles: dict[int, WrinkleAsset], manifest: Any) -> 
     if missing:
         raise input_error(
             manifest.path,
-            f"the mask(s) of region(s) {', '.join(map(repr, missing))} fall on no wrinkled "
-            f"triangle of any tile ({', '.join(map(str, sorted(tiles)))})",
+            f"the {noun(len(missing), 'mask')} of {noun(len(missing), 'region')} "
+            f"{', '.join(map(repr, missing))} {noun(len(missing), 'falls', 'fall')} on no "
+            f"wrinkled triangle of any tile ({', '.join(map(str, sorted(tiles)))})",
             "regions",
         )
 
@@ -113,14 +115,16 @@ def ingest_tiles(manifest: Any) -> TiledIngest:
     if lacking:
         raise input_error(
             manifest.path,
-            f"the wrinkled meshes have triangles on tile(s) {', '.join(map(str, lacking))}, "
+            f"the wrinkled meshes have triangles on "
+            f"{noun(len(lacking), 'tile')} {', '.join(map(str, lacking))}, "
             f"which the base has no file for (its tiles: {', '.join(map(str, manifest.tiles))})",
             "base",
         )
     unused = [t for t in manifest.tiles if t not in used]
     if unused:
         notes.append(
-            f"tile(s) {', '.join(map(str, unused))}: no wrinkled triangle lies there; not converted"
+            f"{noun(len(unused), 'tile')} {', '.join(map(str, unused))}: no wrinkled triangle "
+            "lies there; not converted"
         )
     regions, warnings = _regions(manifest)
     stats: dict[str, Any] = {}

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 
 from wrinklepipe import fidelity as fd
 from wrinklepipe.asset import WrinkleAsset
+from wrinklepipe.names import noun
 from wrinklepipe.options import FormatOptions
 from wrinklepipe.pipeline.prepare import StageReport, run_stages
 
@@ -94,7 +95,8 @@ def run_tile_stages(
         )
         notes.append(
             f"UDIM: the tiles chose differently ({said} for all: what the most demanding tile "
-            f"needs); tile(s) {', '.join(map(str, redo))} measured again at that choice"
+            f"needs); {noun(len(redo), 'tile')} {', '.join(map(str, redo))} measured again at "
+            "that choice"
         )
     fixed_formats = replace(
         formats,

@@ -26,6 +26,7 @@ from wrinklepipe import udim
 from wrinklepipe.errors import InputError, ProblemList
 from wrinklepipe.io.confine import confine
 from wrinklepipe.io.images import read_header
+from wrinklepipe.names import noun
 from wrinklepipe.suffixes import is_gltf
 
 #: The manifest's map fields: (table, key) (table "" for the top level).
@@ -169,7 +170,8 @@ def tile_problems(m: Any, file: str, problems: ProblemList, check_files: bool) -
         if extra:
             problems.add(
                 file,
-                f"tile(s) {', '.join(map(str, extra))} are not tiles of the base "
+                f"{noun(len(extra), 'tile')} {', '.join(map(str, extra))} "
+                f"{noun(len(extra), 'is not a tile', 'are not tiles')} of the base "
                 f"({', '.join(map(str, sorted(tiles)))})",
                 key,
             )
@@ -240,14 +242,16 @@ def tile_notes(m: Any) -> list[str]:
         missing = [t for t in tiles if t not in paths.get(f"states[{i}].map", {})]
         if s.map is not None and missing:
             notes.append(
-                f"state {s.name!r} has no map on tile(s) {', '.join(map(str, missing))}: it is the "
+                f"state {s.name!r} has no map on {noun(len(missing), 'tile')} "
+                f"{', '.join(map(str, missing))}: it is the "
                 "base there (no wrinkle)"
             )
     for i, r in enumerate(m.regions):
         missing = [t for t in tiles if t not in paths.get(f"regions[{i}].mask", {})]
         if missing:
             notes.append(
-                f"region {r.name!r} has no mask on tile(s) {', '.join(map(str, missing))}: "
+                f"region {r.name!r} has no mask on {noun(len(missing), 'tile')} "
+                f"{', '.join(map(str, missing))}: "
                 "zero there"
             )
     return notes

@@ -33,6 +33,7 @@ from wrinklepipe.gltf.container import open_container
 from wrinklepipe.gltf.document import read_document
 from wrinklepipe.gltf.package_read import wrinkled_package
 from wrinklepipe.model import ENCODINGS
+from wrinklepipe.names import noun
 from wrinklepipe.normals import uastc
 from wrinklepipe.normals.dds import read_dds
 from wrinklepipe.pipeline.drivers import evaluate_drivers
@@ -472,7 +473,8 @@ def _attach_tiles(
     if missing:
         raise input_error(
             manifest,
-            f"does not describe the same asset: no source for tile(s) "
+            f"does not describe the same asset: no source for "
+            f"{noun(len(missing), 'tile')} "
             f"{', '.join(map(str, missing))} of {inp.path}",
         )
     inp.tiles = {t: attach_source(one, src[t], manifest) for t, one in inp.tiles.items()}
