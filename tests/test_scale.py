@@ -234,3 +234,20 @@ def test_quicktex_blocks_by_bands_are_the_whole_image(monkeypatch, fmt):
     if fmt == "bc1":
         got = nc.decode_bc_bgra(whole.tobytes(), 20, 24, "bc1")[..., 2::-1].astype(int)
         assert np.abs(got - a[..., :3]).mean() < 48  # random texels: a 4-colour palette's error
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_masks_sampled_plane_by_plane_are_the_channels_last_samples(dtype):
+    """Masks sampled plane by plane are the channels-last bilinear samples bit for bit (UVs
+    outside [0, 1] clamp), and a texel centre gives the texel itself."""
+    from wrinklepipe.validate import textures as tx
+
+    rng = np.random.default_rng(5)
+    masks = rng.uniform(0, 1, (5, 13, 9)).astype(dtype)
+    uv = rng.uniform(-0.2, 1.2, (300, 2)).astype(np.float32)
+    uv[0] = ((4 + 0.5) / 9, (7 + 0.5) / 13)  # texel (row 7, column 4)'s centre
+    want = tx.bilinear(np.moveaxis(masks, 0, -1), uv)
+    got = tx.bilinear_planes(masks, uv)
+    assert got.dtype == want.dtype == np.float32 and got.shape == (300, 5)
+    assert np.array_equal(got, want)
+    assert np.allclose(got[0], masks[:, 7, 4], atol=1e-6)

@@ -190,6 +190,7 @@ def convert(
                 notes += write_folder(
                     tmp, files, pkg, opt.usd_format, document, got.usd, output, opt.png_level
                 )
+            del files  # written: the validator reads the folder back (no second copy held)
             validation: dict[str, Any] = {"status": "skipped", "reason": "--no-validate"}
             if opt.validate:
                 with console.status("validating"):

@@ -132,7 +132,7 @@ def sample_reference(ctx: Context, uv: np.ndarray) -> Samples:
     src = ctx.source_at_shipped_size
     if src is not None:
         # the source at the shipped sizes: resolution choices are WP-TEX-006's business
-        src_masks = tx.bilinear(np.moveaxis(src["masks"], 0, -1), uv).T
+        src_masks = tx.bilinear_planes(src["masks"], uv).T
         b = model.normalize(tx.bilinear(src["base_at_states"], uv))
         rel = []
         for s in src["states"]:

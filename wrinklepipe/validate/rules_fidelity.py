@@ -445,7 +445,7 @@ def render_fidelity(
     states_src = np.stack([tx.bilinear(s, uv) for s in enc])
     if a.encoding in ("full", "composite"):
         states_src = model.normalize(states_src)
-    masks_src = tx.bilinear(np.moveaxis(np.asarray(a.masks, np.float32), 0, -1), uv).T
+    masks_src = tx.bilinear_planes(np.asarray(a.masks, np.float32), uv).T
     texture_budget, which = budgets(ctx)
     o = ctx.options
     # the GPU's own filtering error (WP-RND-001 bounds it) is allowed on top of the budget

@@ -186,7 +186,7 @@ def side_centroids(masks: np.ndarray, mesh: object | None) -> tuple[np.ndarray, 
     """
     r = masks.shape[0]
     if mesh is not None and getattr(mesh, "uvs", None) is not None:
-        vals = tx.bilinear(np.moveaxis(masks, 0, -1), np.asarray(mesh.uvs, np.float32))  # [V, R]
+        vals = tx.bilinear_planes(masks, np.asarray(mesh.uvs, np.float32))  # [V, R]
         x = np.asarray(mesh.positions, np.float64)[:, 0]
         unit = "x"
     else:

@@ -165,6 +165,17 @@ def bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return (top * (1 - fy) + bot * fy).astype(np.float32)
 
 
+def bilinear_planes(planes: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """``bilinear(np.moveaxis(planes, 0, -1), uv)`` of planes ``[R, H, W]`` (masks) -> ``[N, R]``,
+    the same values (every channel is sampled on its own), sampled plane by plane: no
+    channels-last copy of every plane at full size (2 GB for eight 8192² masks)."""
+    p = np.asarray(planes)
+    out = np.empty((len(uv), p.shape[0]), np.float32)
+    for i, plane in enumerate(p):
+        out[:, i] = bilinear(plane[..., None], uv)[:, 0]
+    return out
+
+
 def resize_bilinear(img: np.ndarray, h: int, w: int) -> np.ndarray:
     """Resample ``[H, W, C]`` to ``[h, w, C]`` by bilinear sampling at texel centres."""
     if img.shape[0] == h and img.shape[1] == w:
