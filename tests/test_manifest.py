@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -42,8 +43,9 @@ def test_demo_manifest_loads(src):
     assert len(m.regions) == 8
     assert m.expressions["surprise"]["forehead_inner_l"] == 0.8
     assert m.mesh == (src / "head.glb").resolve()
-    assert m.resolution == ResolutionOptions(base=64, wrinkle="auto", mask="auto")
-    assert m.resolution.sizes() == {"base": 64} and m.resolution.automatic() == ["mask", "wrinkle"]
+    assert m.resolution == ResolutionOptions(base=64, wrinkle="auto", mask="auto", color="auto")
+    assert m.resolution.sizes() == {"base": 64}
+    assert m.resolution.automatic() == ["color", "mask", "wrinkle"]
 
 
 def _problems(path: Path) -> list[tuple[str, str, str]]:
@@ -104,7 +106,8 @@ def test_missing_manifest(tmp_path):
 
 def test_signed_policy_needs_two_states(src):
     text = (src / "manifest.toml").read_text().replace('policy = "clamp01"', 'policy = "signed"')
-    text = text.replace('[[states]]\nname = "compress"\nmap = "wrinkle_compress.png"\n', "")
+    text, n = re.subn(r'\[\[states\]\]\nname = "compress"\n(?:[^\[\n][^\n]*\n)*', "", text)
+    assert n == 1  # the state and its lines (map, color), up to the next table
     (src / "manifest.toml").write_text(text)
     probs = _problems(src / "manifest.toml")
     # Table 1.1 weights are in [-1, 1], so only the state count is wrong.

@@ -96,4 +96,6 @@ def test_resolution_is_typed_by_the_schema(tmp_path: Path):
     with pytest.raises(ValueError, match="height"):
         ResolutionOptions.from_json({"height": 4})
     manifest = load_manifest(write_demo_source(tmp_path / "demo", 64))
-    assert manifest.resolution == ResolutionOptions(base=64, wrinkle="auto", mask="auto")
+    assert manifest.resolution == ResolutionOptions(
+        base=64, wrinkle="auto", mask="auto", color="auto"
+    )
