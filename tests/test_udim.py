@@ -359,6 +359,33 @@ def test_validate_asset_reads_the_folder_tile_by_tile(face, capsys):
     assert sorted(got["metrics"]["tiles"]) == ["1001", "1002"]
 
 
+def test_a_tiled_usd_output_over_a_broken_layer_is_an_issue_of_every_tile(tmp_path, capsys):
+    """validate-asset on a tiled USD output whose source layer gained a reference that cannot
+    be opened: WP-USD-003 once, for every tile (the stage's problems reach each tile's
+    input), naming the layer; tile 1002's block-compressed copy cut short: WP-TEX-004 for
+    that tile (every tile's listed copies are read)."""
+    path = write_udim_setup(tmp_path / "src", size=16, mask_size=8)
+    out = tmp_path / "out"
+    assert main(["convert", str(path), "-o", str(out), "--no-render"]) == 0
+    usd = tmp_path / "src" / "face.usda"
+    usd.write_text(usd.read_text() + '\ndef Xform "Extra" (references = @./gone.usda@</X>) {}\n')
+    dds = out / "compressed" / "base_normal.1002.dds"
+    dds.write_bytes(dds.read_bytes()[:200])  # tile 1002's copy cut short
+    capsys.readouterr()
+    report = tmp_path / "report.json"
+    args = ["validate-asset", str(out / "face.usda"), "--no-render", "--report", str(report)]
+    code = main([*args, "--allow-root", str(tmp_path / "src")])
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "internal error" not in err, err
+    found = [i for i in json.loads(report.read_text())["issues"] if i["code"].startswith("WP-USD")]
+    assert code == 1 and len(found) == 1, (err, found)
+    assert found[0]["code"] == "WP-USD-003" and "gone.usda" in found[0]["message"]
+    assert found[0]["message"].startswith("every tile: "), found
+    cut = [i for i in json.loads(report.read_text())["issues"] if i["code"] == "WP-TEX-004"]
+    assert len(cut) == 1 and cut[0]["message"].startswith("tile 1002: "), cut
+    assert "base_normal.1002.dds" in cut[0]["message"], cut
+
+
 def test_engine_exports_refuse_tiles_by_name(face, tmp_path, capsys):
     _, out, _ = face
     code = main(["export", str(out), "--engine", "godot", "-o", str(tmp_path / "g")])

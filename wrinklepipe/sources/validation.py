@@ -172,29 +172,39 @@ def _listed_copies(inp: ValidationInput, folder: Path) -> ValidationInput:
     """A .gltf/.glb/USD file given alone: every compressed copy it lists, read whole and
     decoded (:func:`~wrinklepipe.sources.copies.check_copies`, the validator's WP-TEX-004),
     as for its folder; the PNGs stay the textures measured."""
-    if inp.extra.get("compressed"):
-        problems = check_copies(inp, folder)
-        if problems:
-            inp.extra["copy_problems"] = problems
+    for one in _parts(inp):
+        if one.extra.get("compressed"):
+            problems = check_copies(one, folder)
+            if problems:
+                one.extra["copy_problems"] = problems
     return inp
+
+
+def _parts(inp: ValidationInput) -> list[ValidationInput]:
+    """What the validator measures: the input, or a UDIM input's tiles (each read on its
+    own; the input itself shares the first tile's records)."""
+    return list(inp.tiles.values()) if inp.tiles else [inp]
 
 
 def _gltf_pointers(inp: ValidationInput, p: Path, gltf: dict[str, Any]) -> None:
     """JSON pointers to where the extension actually sits (a material's, or the document's)."""
-    ext = f"/extensions/{EXTENSION}"
-    for i, m in enumerate(gltf.get("materials", []) or []):
-        if isinstance(m, dict) and EXTENSION in (m.get("extensions") or {}):
-            ext = f"/materials/{i}/extensions/{EXTENSION}"
-            break
-    inp.pointers.update(
-        {
-            "meta": f"{p}#{ext}",
-            "channels": f"{p}#{ext}/masks/table",
-            "masks": f"{p}#{ext}/masks",
-            "expressions": f"{p}#{ext}/expressions",
-            "drivers": f"{p}#{ext}/drivers",
-        }
-    )
+    for one in _parts(inp):
+        tile = one.extra.get("tile")  # a UDIM tile's material says which tile it is
+        ext = f"/extensions/{EXTENSION}"
+        for i, m in enumerate(gltf.get("materials", []) or []):
+            block = (m.get("extensions") or {}).get(EXTENSION) if isinstance(m, dict) else None
+            if isinstance(block, dict) and (tile is None or block.get("tile") == tile):
+                ext = f"/materials/{i}/extensions/{EXTENSION}"
+                break
+        one.pointers.update(
+            {
+                "meta": f"{p}#{ext}",
+                "channels": f"{p}#{ext}/masks/table",
+                "masks": f"{p}#{ext}/masks",
+                "expressions": f"{p}#{ext}/expressions",
+                "drivers": f"{p}#{ext}/drivers",
+            }
+        )
 
 
 def _usd_pointers(inp: ValidationInput, p: Path) -> None:
@@ -204,25 +214,27 @@ def _usd_pointers(inp: ValidationInput, p: Path) -> None:
 
     stage, problems = guard_reader(lambda: open_stage_checked(p), p, "the USD stage")
     if problems:
-        inp.extra["usd_composition"] = [x.to_json() for x in problems]
+        for one in _parts(inp):
+            one.extra["usd_composition"] = [x.to_json() for x in problems]
     mat = mesh = None
     for prim in stage.Traverse():
         if mat is None and "WrinkleMapsAPI" in prim.GetAppliedSchemas():
             mat = prim.GetPath()
         if mesh is None and prim.IsA(UsdGeom.Mesh):
             mesh = prim.GetPath()
-    if mat is not None:
-        inp.pointers.update(
-            {
-                "meta": f"{p}<{mat}>",
-                "channels": f"{p}<{mat}>.wrinkle:maskChannel",
-                "expressions": f"{p}<{mat}>.wrinkle:expressionWeights",
-                "drivers": f"{p}<{mat}>.wrinkle:drivers",
-                "masks": f"{p}<{mat}>",
-            }
-        )
-    if mesh is not None:
-        inp.pointers["mesh"] = f"{p}<{mesh}>"
+    for one in _parts(inp):
+        if mat is not None:
+            one.pointers.update(
+                {
+                    "meta": f"{p}<{mat}>",
+                    "channels": f"{p}<{mat}>.wrinkle:maskChannel",
+                    "expressions": f"{p}<{mat}>.wrinkle:expressionWeights",
+                    "drivers": f"{p}<{mat}>.wrinkle:drivers",
+                    "masks": f"{p}<{mat}>",
+                }
+            )
+        if mesh is not None:
+            one.pointers["mesh"] = f"{p}<{mesh}>"
 
 
 def _load_folder(p: Path, o: LoadOptions) -> ValidationInput:
