@@ -179,11 +179,11 @@ def test_the_choices_and_the_rules_judge_the_poses_the_drivers_produce(request, 
     out, report = request.getfixturevalue("robot")  # converted once for the document tests
     poses = {p["pose"]: p for p in report["fidelity"]["png"]["poses"]}
     # the manifest's keys: Angry peaks at t = 1 s (brow_L, brow_R), Surprised at 3 s (mouth)
-    assert set(poses) == {"blendshapes@1.000s", "blendshapes@3.000s"}
+    assert set(poses) == {"Angry @ 1.0 s", "Surprised @ 3.0 s"}
     # active texels on the 64^2 grid: a mask box of n 16^2 texels, magnified 4x bilinearly, is
     # non-zero on (n + 1) * 4 texels a side (brows 6 x 6 each, mouth 10 x 6)
-    assert poses["blendshapes@1.000s"]["texels"] == 2 * 28 * 28
-    assert poses["blendshapes@3.000s"]["texels"] == 44 * 28
+    assert poses["Angry @ 1.0 s"]["texels"] == 2 * 28 * 28
+    assert poses["Surprised @ 3.0 s"]["texels"] == 44 * 28
     v = tmp_path / "v.json"
     args = ["validate-asset", str(out), "--source", str(out.parent / "src" / "manifest.toml")]
     args += ["--no-render", "--report", str(v), "--allow-root", str(ROBOT.parent)]
@@ -191,4 +191,4 @@ def test_the_choices_and_the_rules_judge_the_poses_the_drivers_produce(request, 
     measured = json.loads(v.read_text())["metrics"]["fidelity"]["poses"]
     assert {p["pose"]: p["texels"] for p in measured} == {k: p["texels"] for k, p in poses.items()}
     by_pose = {p["pose"]: set(p["regions"]) for p in measured}
-    assert by_pose == {"blendshapes@1.000s": {"brow_L", "brow_R"}, "blendshapes@3.000s": {"mouth"}}
+    assert by_pose == {"Angry @ 1.0 s": {"brow_L", "brow_R"}, "Surprised @ 3.0 s": {"mouth"}}

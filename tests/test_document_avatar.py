@@ -291,17 +291,17 @@ def test_blendshapes_driver_renders_its_wrinkled_poses_and_frames_the_face(conve
     rep = validate(load_input(out), ValidateOptions(render=True))
     poses = rep.render["poses"]
     # the driver's keys: browInnerUp peaks at 1 s (both brows), jawOpen at 3 s (the mouth)
-    assert list(poses) == ["neutral", "blendshapes@1.000s", "blendshapes@3.000s"]
+    assert list(poses) == ["neutral", "browInnerUp @ 1.0 s", "jawOpen @ 3.0 s"]
     src = rep.render["pose_sources"]
-    assert src["blendshapes@1.000s"]["regions"] == ["brow_L", "brow_R"]
-    assert src["blendshapes@3.000s"] == {
+    assert src["browInnerUp @ 1.0 s"]["regions"] == ["brow_L", "brow_R"]
+    assert src["jawOpen @ 3.0 s"] == {
         "curve": "blendshapes",
         "time": 3.0,
         "regions": ["mouth"],
         "morphs": {"jawOpen": 1.0},
     }
     covered = rep.render["covered_pixels"]
-    for name in ("blendshapes@1.000s", "blendshapes@3.000s"):
+    for name in ("browInnerUp @ 1.0 s", "jawOpen @ 3.0 s"):
         # 8-12 % of the head changes (the render's size follows the 64^2 maps: 160^2)
         assert poses[name]["changed_pixels"] > 0.05 * covered and poses[name]["leak_pixels"] == 0
         assert poses[name]["gpu_vs_reference_deg"]["p99"] < 1.0

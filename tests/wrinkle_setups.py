@@ -189,3 +189,85 @@ def write_tokyo_setup(folder: Path) -> Path:
         regions=regions,
         link_mesh=True,
     )
+
+
+#: RobotExpressive's blendshapes rows read from a glTF file's animation (``file``): its Angry /
+#: Surprised morphs drive the brows and the mouth. ``{file}`` and ``{clip}`` are filled in.
+ROBOT_CLIP_DRIVERS = """
+[[drivers]]
+kind = "blendshapes"
+file = "{file}"{clip}
+rows = [["Angry", "brow_L", 0, 1, 1, 0], ["Angry", "brow_R", 0, 1, 1, 0],
+        ["Surprised", "mouth", 0, 1, 1, 0]]
+"""
+
+
+def write_robot_clip_setup(folder: Path, file: str = "RobotExpressive.glb", clip=None) -> Path:
+    """RobotExpressive's wrinkle setup driven by the morph-weight animation of ``file`` (beside
+    the manifest; ``RobotExpressive.glb`` is the mesh's link, whose 14 clips all keep every
+    morph weight at 0), reading ``clip`` (None: not named)."""
+    named = "" if clip is None else f"\nclip = {clip!r}".replace("'", '"')
+    drivers = ROBOT_CLIP_DRIVERS.format(file=file, clip=named)
+    return write_setup(folder, ROBOT, "robot", "Main", ["Head"], drivers=drivers, link_mesh=True)
+
+
+def write_face_clips(path: Path, names=("Angry", "Surprised", "Sad")) -> Path:
+    """A small glTF (GLB) whose only mesh has the morph targets ``names`` and two animations
+    of their weights: ``Idle`` (every weight 0) and ``Talk`` (Angry up at 1 s, Surprised at
+    3 s): a performance file a blendshapes driver reads with ``clip``."""
+    import pygltflib as g  # deferred: only the rig tests write glTF by hand
+
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    delta = np.array([[0, 0, 0.1]] * 3, np.float32)
+    times = np.array([0, 1, 2, 3, 4], np.float32)
+    talk = np.zeros((5, len(names)), np.float32)
+    talk[1, 0] = 1.0
+    talk[3, 1] = 1.0
+    idle = np.zeros((5, len(names)), np.float32)
+    blobs = [pos, *([delta] * len(names)), times, talk, idle]
+    data = b"".join(b.tobytes() for b in blobs)
+    views, accessors, at = [], [], 0
+    for b in blobs:
+        views.append(g.BufferView(buffer=0, byteOffset=at, byteLength=b.nbytes))
+        at += b.nbytes
+    for i, b in enumerate(blobs):
+        kind = "VEC3" if b.ndim == 2 and b.shape[1] == 3 and i <= len(names) else "SCALAR"
+        count = b.shape[0] if kind == "VEC3" else b.size
+        acc = g.Accessor(bufferView=i, componentType=g.FLOAT, count=count, type=kind)
+        if i == 0 or kind == "VEC3":
+            acc.min = b.min(axis=0).tolist()
+            acc.max = b.max(axis=0).tolist()
+        if i == len(names) + 1:
+            acc.min, acc.max = [float(times.min())], [float(times.max())]
+        accessors.append(acc)
+    n = len(names)
+    prim = g.Primitive(
+        attributes=g.Attributes(POSITION=0), targets=[{"POSITION": 1 + k} for k in range(n)]
+    )
+    mesh = g.Mesh(primitives=[prim], weights=[0.0] * n, extras={"targetNames": list(names)})
+
+    def anim(name: str, values: int) -> g.Animation:
+        return g.Animation(
+            name=name,
+            samplers=[g.AnimationSampler(input=n + 1, output=values, interpolation="LINEAR")],
+            channels=[
+                g.AnimationChannel(
+                    sampler=0, target=g.AnimationChannelTarget(node=0, path="weights")
+                )
+            ],
+        )
+
+    doc = g.GLTF2(
+        asset=g.Asset(version="2.0"),
+        scenes=[g.Scene(nodes=[0])],
+        scene=0,
+        nodes=[g.Node(mesh=0, name="Face")],
+        meshes=[mesh],
+        buffers=[g.Buffer(byteLength=len(data))],
+        bufferViews=views,
+        accessors=accessors,
+        animations=[anim("Idle", n + 3), anim("Talk", n + 2)],
+    )
+    doc.set_binary_blob(data)
+    path.write_bytes(b"".join(doc.save_to_bytes()))
+    return path

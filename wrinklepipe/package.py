@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -55,12 +56,16 @@ class PackedTexture:
 class WeightCurves:
     """Region weights keyed over time: ``times`` [T] seconds, ``values`` [T, R] (float32), and
     optionally the morph-target weights ``morph_weights`` [T, M] that drive them (a blendshapes
-    driver's inputs), played together."""
+    driver's inputs), played together. ``driver``: what made the curve (JSON: its driver's
+    index, name and kind, and what it read: :attr:`wrinklepipe.drivers.base.DriverResult.source`),
+    for the report and the validator's rig rules; None when not known (a curve read back from a
+    file)."""
 
     name: str
     times: np.ndarray
     values: np.ndarray
     morph_weights: np.ndarray | None = None
+    driver: dict[str, Any] | None = None
 
 
 @dataclass

@@ -514,6 +514,85 @@ def c_usd_cycles() -> ValidationInput:
     return inp
 
 
+def _rig(
+    drivers: list[dict], curves: dict[str, np.ndarray], records: list[dict], expressions=None
+) -> ValidationInput:
+    """The demo driven by ``drivers`` whose region-weight curves are ``curves`` (``[T, R]``,
+    keyed by frame) and whose records (what they read) are ``records``."""
+    a = demo()
+    prov = {**a.provenance, "drivers": records}
+    ex = a.expressions if expressions is None else expressions
+    inp = ship(replace(a, drivers=tuple(drivers), provenance=prov, expressions=ex))
+    inp.weight_curves = {k: np.asarray(v, np.float32) for k, v in curves.items()}
+    return inp
+
+
+def _ramp(regions: list[int], r: int = 8) -> np.ndarray:
+    """One frame per region of ``regions`` where it is fully on (the others 0)."""
+    v = np.zeros((len(regions) + 1, r), np.float32)
+    for f, k in enumerate(regions):
+        v[f + 1, k] = 1.0
+    return v
+
+
+_DEAD_CLIP = {
+    "file": "performance.glb",
+    "clip": "Dance",
+    "index": 0,
+    "clips": ["Dance", "Idle", "Walk"],
+    "named": False,
+    "inputs": ["browInnerUp", "jawOpen"],
+    "moving": [],
+    "clips_moving": [],
+}
+_BLENDSHAPES = {"kind": "blendshapes", "file": "performance.glb"}
+
+
+def c_dead_rig() -> ValidationInput:
+    """A blendshapes driver reading a performance whose clips never move its blend shapes."""
+    rec = {"index": 0, "name": "blendshapes", "kind": "blendshapes", "from": "file"}
+    rec |= {"clip": _DEAD_CLIP, "inputs": ["browInnerUp", "jawOpen"], "moving": []}
+    return _rig([_BLENDSHAPES], {"blendshapes": np.zeros((5, 8))}, [rec], expressions={})
+
+
+def c_region_never_driven() -> ValidationInput:
+    """Keyed curves that drive every region but the chin."""
+    return _rig([{"kind": "curves"}], {"curves": _ramp(list(range(7)))}, [], expressions={})
+
+
+def c_state_never_reached() -> ValidationInput:
+    """Every region drives the stretch state only: compress is never reached."""
+    a = demo()
+    regions = tuple(replace(r, states=("stretch",)) for r in a.regions)
+    return ship(replace(a, regions=regions))
+
+
+def c_clip_implicit() -> ValidationInput:
+    """A blendshapes driver that read the second of three clips (the first that moves its
+    inputs) because the manifest names none."""
+    clip = dict(_DEAD_CLIP, clip="Talk", index=1, clips=["Idle", "Talk", "Walk"])
+    clip |= {"moving": ["browInnerUp", "jawOpen"], "clips_moving": ["Talk"]}
+    rec = {"index": 0, "name": "blendshapes", "kind": "blendshapes", "from": "file"}
+    rec |= {"clip": clip, "inputs": ["browInnerUp", "jawOpen"], "moving": ["browInnerUp"]}
+    curves = {"blendshapes": _ramp(list(range(8)))}
+    return _rig([_BLENDSHAPES], curves, [rec], expressions={})
+
+
+def c_table_and_curves() -> ValidationInput:
+    """An expression table beside keyed curves that drive every region: the curves win."""
+    return _rig([{"kind": "curves"}], {"curves": _ramp(list(range(8)))}, [])
+
+
+def c_blendshapes_idle() -> ValidationInput:
+    """Keyed curves drive every region; a second driver, blendshapes, reads blend shapes
+    that stay 0 in its keys."""
+    rec = {"index": 1, "name": "blendshapes", "kind": "blendshapes", "from": "keys"}
+    rec |= {"inputs": ["browInnerUp", "jawOpen"], "moving": []}
+    curves = {"curves": _ramp(list(range(8))), "blendshapes": np.zeros((3, 8))}
+    drivers = [{"kind": "curves"}, {"kind": "blendshapes"}]
+    return _rig(drivers, curves, [rec], expressions={})
+
+
 CASES: list[Case] = [
     Case("clean", ["WP-TEX-007"], "the demo, 8-bit, nothing wrong", c_clean),
     Case(
@@ -779,6 +858,42 @@ CASES: list[Case] = [
         "the USD stage's sublayers loop (hero -> looks -> hero), and so do its references "
         "(A -> b.usda B -> A)",
         c_usd_cycles,
+    ),
+    Case(
+        "wgt_dead_rig",
+        ["WP-TEX-007", "WP-WGT-004"],
+        "a blendshapes driver whose clips never move its blend shapes",
+        c_dead_rig,
+    ),
+    Case(
+        "wgt_region_never_driven",
+        ["WP-TEX-007", "WP-WGT-005"],
+        "keyed curves that never drive the chin",
+        c_region_never_driven,
+    ),
+    Case(
+        "wgt_state_never_reached",
+        ["WP-TEX-007", "WP-WGT-006"],
+        "every region drives the stretch state only",
+        c_state_never_reached,
+    ),
+    Case(
+        "wgt_clip_implicit",
+        ["WP-TEX-007", "WP-WGT-007"],
+        "a driver's clip chosen among three: the manifest names none",
+        c_clip_implicit,
+    ),
+    Case(
+        "wgt_table_and_curves",
+        ["WP-TEX-007", "WP-WGT-008"],
+        "an expression table beside driver curves",
+        c_table_and_curves,
+    ),
+    Case(
+        "wgt_blendshapes_idle",
+        ["WP-TEX-007", "WP-WGT-009"],
+        "a blendshapes driver whose keys never move its blend shapes",
+        c_blendshapes_idle,
     ),
 ]
 

@@ -153,6 +153,7 @@ def summary_lines(
     elif fid:
         out += _choice_lines(fid)
     out += color_table(rep.get("color"), rep.get("compression", {}).get("color"))
+    out += [f"note: {n}" for n in rep.get("key_notes", [])]
     clipped = rep.get("pd_scale", {}).get("clipped_texels") or {}
     if any(clipped.values()):
         out.append(

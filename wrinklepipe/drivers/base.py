@@ -55,6 +55,27 @@ class MorphTrack:
     node: int | None = None
 
 
+@dataclass(frozen=True)
+class MorphClip:
+    """One animation of a glTF that drives morph-target weights: its name (or ``animation
+    <i>``), its index among the file's animations, and its weight tracks (the pipeline gives a
+    reader of every clip through :attr:`DriverContext.read_morph_clips`)."""
+
+    name: str
+    index: int
+    tracks: tuple[MorphTrack, ...]
+
+    def moving(self, inputs: Sequence[str] = ()) -> tuple[str, ...]:
+        """The targets (of ``inputs``, or all) whose weight is not 0 at some key."""
+        want = set(inputs)
+        out: list[str] = []
+        for t in self.tracks:
+            v = np.abs(np.asarray(t.values, np.float64)).reshape(-1, len(t.names))
+            peak = v.max(axis=0) if v.size else np.zeros(len(t.names))
+            out += [n for n, p in zip(t.names, peak) if p > 0 and (not want or n in want)]
+        return tuple(dict.fromkeys(out))
+
+
 @dataclass
 class DriverContext:
     """Everything a driver may read besides its own spec.
@@ -78,6 +99,7 @@ class DriverContext:
     source: str = "<driver>"
     read_rig: Callable[[Path], Rig] | None = None
     read_morph_tracks: Callable[[Path], list[MorphTrack]] | None = None
+    read_morph_clips: Callable[[Path], list[MorphClip]] | None = None
 
     def __post_init__(self) -> None:
         self.regions = tuple(str(r) for r in self.regions)
@@ -110,6 +132,7 @@ class DriverContext:
         read_rig: Callable[[Path], Rig] | None = None,
         read_morph_tracks: Callable[[Path], list[MorphTrack]] | None = None,
         source: str = "<driver>",
+        read_morph_clips: Callable[[Path], list[MorphClip]] | None = None,
     ) -> DriverContext:
         """``source``: the file the drivers come from (the manifest), named in messages."""
         return cls(
@@ -124,6 +147,7 @@ class DriverContext:
             fps=fps,
             read_rig=read_rig,
             read_morph_tracks=read_morph_tracks,
+            read_morph_clips=read_morph_clips,
         )
 
     @classmethod
@@ -133,6 +157,7 @@ class DriverContext:
         mesh: Mesh | None = None,
         read_rig: Callable[[Path], Rig] | None = None,
         read_morph_tracks: Callable[[Path], list[MorphTrack]] | None = None,
+        read_morph_clips: Callable[[Path], list[MorphClip]] | None = None,
     ) -> DriverContext:
         """From a :class:`wrinklepipe.sources.manifest.Manifest` (the mesh is loaded by the
         caller)."""
@@ -155,6 +180,7 @@ class DriverContext:
             source=str(manifest.path),
             read_rig=read_rig,
             read_morph_tracks=read_morph_tracks,
+            read_morph_clips=read_morph_clips,
         )
 
 
@@ -169,6 +195,10 @@ class DriverResult:
     states: tuple[str, ...]  # labels of axis 2
     per_vertex: bool = False
     notes: list[str] = field(default_factory=list)
+    #: what the driver read (JSON): its inputs, those that move, and for a glTF file the clip
+    #: chosen (:class:`wrinklepipe.drivers.clips.ClipChoice`); the report and the validator's
+    #: rig rules say it
+    source: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self, digits: int = 6) -> dict[str, Any]:
         """Deterministic JSON: ``weights[frame][region][state]`` rounded to ``digits``."""

@@ -40,7 +40,7 @@ from wrinklepipe.drivers.curves import (
     curves_to_weights,
     keys_range,
     load_keys,
-    morph_animation,
+    morph_clip_animation,
     sample_keys,
 )
 from wrinklepipe.errors import InputError, Problem
@@ -191,8 +191,13 @@ def blendshapes_driver(
     fps = float(spec.get("fps", ctx.fps))
     mesh_names = tuple(ctx.mesh.morph_names) if ctx.mesh is not None else ()
     file = spec.get("file")
+    read = {"from": "keys"}
+    wanted = tuple(dict.fromkeys(r.input for r in rows))  # the blend shapes the rows read
     if file is not None and is_gltf(file):
-        times, names, x = morph_animation(ctx, resolve(ctx, str(file)), times, fps)
+        times, names, x, clip = morph_clip_animation(
+            ctx, resolve(ctx, str(file)), times, fps, spec.get("clip"), wanted
+        )
+        read = {"from": "file", **({"clip": clip.to_json()} if clip is not None else {})}
         universe = mesh_names or names
         inputs = np.zeros((len(times), len(universe)))
         for j, n in enumerate(names):
@@ -206,6 +211,7 @@ def blendshapes_driver(
             raise spec_problem(ctx, unknown_names("blend shape", unknown, universe), "morphs")
         times = np.zeros(1) if times is None else times
         inputs = np.array([[morphs.get(n, 0.0) for n in universe]] * len(times))
+        read = {"from": "morphs"}
     else:
         keys, interp, _ = load_keys(ctx, spec)
         if not keys:
@@ -228,4 +234,9 @@ def blendshapes_driver(
     out = evaluate_rows(inputs, universe, rows, outputs, clamp=True, where=ctx.source)
     w = curves_to_weights(ctx, outputs, out.astype(np.float64), "rows")
     states = ("signed",) if ctx.policy == "signed" else ctx.states
-    return DriverResult("blendshapes", np.asarray(times), w, ctx.regions, states, notes=notes)
+    peak = np.abs(np.asarray(inputs, np.float64)).max(axis=0, initial=0.0)
+    moving = [n for n in wanted if n in universe and peak[list(universe).index(n)] > 0]
+    source = {**read, "inputs": list(wanted), "moving": moving}
+    return DriverResult(
+        "blendshapes", np.asarray(times), w, ctx.regions, states, notes=notes, source=source
+    )

@@ -38,6 +38,7 @@ from wrinklepipe.drivers.base import (
     resolve,
     spec_problem,
 )
+from wrinklepipe.drivers.clips import ClipChoice, choose_clip
 from wrinklepipe.errors import InputError, Problem, input_error
 from wrinklepipe.geometry.keyframes import sample_channel_at
 from wrinklepipe.io.json_safe import loads_json
@@ -136,15 +137,46 @@ def read_curves_json(path: str | Path) -> tuple[Keys, str | None]:
 
 
 def morph_animation(
-    ctx: DriverContext, path: str | Path, times: np.ndarray | None = None, fps: float = 30.0
+    ctx: DriverContext,
+    path: str | Path,
+    times: np.ndarray | None = None,
+    fps: float = 30.0,
+    clip: str | int | None = None,
+    inputs: Sequence[str] = (),
 ) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
-    """The morph-target weights a glTF's animation drives, read through
-    ``ctx.read_morph_tracks`` and sampled by :func:`sample_morph_tracks`."""
+    """The morph-target weights a glTF's animation drives, sampled by
+    :func:`sample_morph_tracks`: :func:`morph_clip_animation` without the record."""
+    return morph_clip_animation(ctx, path, times, fps, clip, inputs)[:3]  # type: ignore[return-value]
+
+
+def morph_clip_animation(
+    ctx: DriverContext,
+    path: str | Path,
+    times: np.ndarray | None = None,
+    fps: float = 30.0,
+    clip: str | int | None = None,
+    inputs: Sequence[str] = (),
+) -> tuple[np.ndarray, tuple[str, ...], np.ndarray, ClipChoice | None]:
+    """The morph-target weights of the clip a driver reads from a glTF (``clip``: its name or
+    index, as the spec's ``clip`` key gives it; else :func:`wrinklepipe.drivers.clips.
+    choose_clip` chooses, preferring a clip that moves ``inputs``) and the record of the choice.
+    Read through ``ctx.read_morph_clips`` (every clip), or ``ctx.read_morph_tracks`` (the first
+    animation only: no choice, no record)."""
+    if ctx.read_morph_clips is not None:
+        try:
+            chosen, choice = choose_clip(
+                ctx.read_morph_clips(Path(path)), clip, inputs, Path(path).name
+            )
+        except ValueError as exc:
+            raise spec_problem(ctx, str(exc), "clip") from None
+        return (*sample_morph_tracks(chosen.tracks, times, fps), choice)
     if ctx.read_morph_tracks is None:
         raise spec_problem(
-            ctx, "no glTF animation reader was given (DriverContext.read_morph_tracks)", "file"
+            ctx, "no glTF animation reader was given (DriverContext.read_morph_clips)", "file"
         )
-    return sample_morph_tracks(ctx.read_morph_tracks(Path(path)), times, fps)
+    if clip is not None:
+        raise spec_problem(ctx, "'clip' needs a reader of every clip (read_morph_clips)", "clip")
+    return (*sample_morph_tracks(ctx.read_morph_tracks(Path(path)), times, fps), None)
 
 
 def sample_morph_tracks(
@@ -256,8 +288,11 @@ def curves_driver(
     names: list[str] = []
     cols: list[np.ndarray] = []
     gltf = None
+    clip = None
     if "file" in spec and is_gltf(spec["file"]):
-        gltf = morph_animation(ctx, resolve(ctx, str(spec["file"])), times, fps)
+        *gltf, clip = morph_clip_animation(
+            ctx, resolve(ctx, str(spec["file"])), times, fps, spec.get("clip")
+        )
         times = gltf[0]
     if not keys and gltf is None:
         raise spec_problem(ctx, "curves driver needs 'keys' or a 'file'", "keys")
@@ -280,4 +315,11 @@ def curves_driver(
     values = np.stack(cols, axis=1)
     w = curves_to_weights(ctx, names, values)
     states = ("signed",) if ctx.policy == "signed" else ctx.states
-    return DriverResult("curves", np.asarray(times), w, ctx.regions, states, notes=notes)
+    moving = [n for n, col in zip(names, values.T) if np.any(col != 0)]
+    source: dict[str, Any] = {"from": "file" if clip is not None else "keys"}
+    if clip is not None:
+        source["clip"] = clip.to_json()
+    source.update(inputs=list(dict.fromkeys(names)), moving=list(dict.fromkeys(moving)))
+    return DriverResult(
+        "curves", np.asarray(times), w, ctx.regions, states, notes=notes, source=source
+    )

@@ -34,7 +34,7 @@ def _morph_frames(
     fps = float(spec.get("fps", ctx.fps))
     file = spec.get("file")
     if file is not None and is_gltf(file):
-        return morph_animation(ctx, resolve(ctx, str(file)), times, fps)
+        return morph_animation(ctx, resolve(ctx, str(file)), times, fps, spec.get("clip"))
     if "morphs" in spec and "keys" not in spec:
         names = tuple(str(k) for k in spec["morphs"])
         t = np.zeros(1) if times is None else times

@@ -8,9 +8,11 @@
 - for every weight curve of another driver (``blendshapes``, ``curves``, and any other driver
   written as a region-weight curve): the frames where each region's weight peaks (its first
   maximum), so every region the curve drives is shown at least once; frames shared by several
-  regions are drawn once. They are named by curve and time: ``blendshapes@1.000s``; a curve's
-  morph-target weights at that frame (a blendshapes driver's inputs) come along, so the face can
-  be shown in the shape that produced the wrinkles.
+  regions are drawn once. They are named by what drives them (:func:`pose_name`): the blend
+  shapes weighted at that frame, ``Surprised @ 1.0 s``, else the regions peaking there,
+  ``brow_L peak @ 1.0 s`` (with the curve's name added when two frames would share a name); a
+  curve's morph-target weights at that frame (a blendshapes driver's inputs) come along, so the
+  face can be shown in the shape that produced the wrinkles.
 
 Per-vertex drivers (``bones``, ``dynamic``) give no region curve; they add no pose here.
 Weights are ``[R, K]`` (``[R]`` under the ``signed`` policy), as the validator and
@@ -50,6 +52,27 @@ def _shape(asset: WrinkleAsset, per_region: np.ndarray) -> np.ndarray:
     return w[:, None] * asset.region_state_matrix()
 
 
+def seconds(t: float) -> str:
+    """``1.0``, ``1.25``, ``0.042``: a time in seconds, to the millisecond, one decimal at
+    least."""
+    text = f"{t:.3f}".rstrip("0")
+    return text + "0" if text.endswith(".") else text
+
+
+def pose_name(morphs: dict[str, float], regions: Sequence[str], t: float) -> str:
+    """A curve frame named by what drives it: the blend shapes weighted there, strongest
+    first (``Surprised @ 1.0 s``, ``Angry + Sad @ 2.5 s``), else the regions whose weight
+    peaks there (``brow_L, brow_R peak @ 1.0 s``)."""
+    if morphs:
+        top = [n for n, _ in sorted(morphs.items(), key=lambda kv: (-abs(kv[1]), kv[0]))]
+        what = " + ".join(top[:2]) + (f" + {len(top) - 2} more" if len(top) > 2 else "")
+    else:
+        shown = list(regions[:3])
+        what = ", ".join(shown) + (f" + {len(regions) - 3} more" if len(regions) > 3 else "")
+        what += " peak"
+    return f"{what} @ {seconds(t)} s"
+
+
 def curve_kinds(drivers: Sequence[dict[str, Any]]) -> dict[str, str]:
     """Curve name -> driver kind, named as :func:`wrinklepipe.pipeline.drivers.evaluate_drivers`
     names the curves it writes (``name`` or the kind, ``_i`` added to repeats)."""
@@ -87,6 +110,7 @@ def driver_poses(
             poses.append(DriverPose(e, _shape(asset, row)))
     if not morph_names and asset.mesh is not None:
         morph_names = asset.mesh.morph_names
+    taken = {p.name for p in poses}
     for c in curves:
         if kinds.get(str(c.name)) == "expressions" or (table and str(c.name) == "expressions"):
             continue  # the table itself (or the cycle convert writes through it)
@@ -104,9 +128,13 @@ def driver_poses(
             shape: dict[str, float] = {}
             if morph is not None and len(morph_names) == np.shape(morph)[1]:
                 shape = {n: float(v) for n, v in zip(morph_names, np.asarray(morph)[f]) if v}
+            name = pose_name(shape, peaks[f], float(times[f]))
+            if name in taken:
+                name = f"{name} ({c.name})"
+            taken.add(name)
             poses.append(
                 DriverPose(
-                    f"{c.name}@{times[f]:.3f}s",
+                    name,
                     _shape(asset, values[f]),
                     str(c.name),
                     float(times[f]),

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wrinklepipe.drivers.base import MorphTrack
+from wrinklepipe.drivers.base import MorphClip, MorphTrack
 from wrinklepipe.errors import input_error, plain_reason
 from wrinklepipe.gltf.primitive import GltfSource, target_names
 from wrinklepipe.gltf.read import GltfFile, GltfReadOptions
@@ -118,6 +118,23 @@ def read_morph_tracks(path: str | Path, animation: int = 0) -> list[MorphTrack]:
         if not tracks:
             raise r.err("the animation drives no morph-target weights", f"/animations/{animation}")
         return tracks
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        raise input_error(path, f"malformed glTF animation: {plain_reason(exc)}") from None
+
+
+def read_morph_clips(path: str | Path) -> list[MorphClip]:
+    """Every animation of a glTF that drives morph-target ``weights``, as a
+    :class:`~wrinklepipe.drivers.base.MorphClip` (named by the animation's ``name``, else
+    ``animation <i>``), in the file's order: what a driver chooses its clip from
+    (:func:`wrinklepipe.drivers.clips.choose_clip`)."""
+    try:
+        r = GltfFile(Path(path), GltfReadOptions())
+        out = []
+        for i, anim in enumerate(r.gltf.get("animations") or []):
+            tracks = morph_tracks(r, i)
+            if tracks:
+                out.append(MorphClip(str(anim.get("name") or f"animation {i}"), i, tuple(tracks)))
+        return out
     except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
         raise input_error(path, f"malformed glTF animation: {plain_reason(exc)}") from None
 

@@ -19,7 +19,7 @@ from wrinklepipe.console import track
 from wrinklepipe.drivers.bake import blend_frames, changed_frames, encode_states, weights_csv
 from wrinklepipe.drivers.base import DriverContext, TooManyFrames, evaluate, frame_times
 from wrinklepipe.errors import InputError, input_error
-from wrinklepipe.gltf.animation import read_morph_tracks
+from wrinklepipe.gltf.animation import read_morph_clips, read_morph_tracks
 from wrinklepipe.io.images import write_image
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.pipeline.ingest import read_maps
@@ -87,7 +87,11 @@ def bake_manifest(
     needs_mesh = kind in ("blendshapes", "bones", "dynamic")
     mesh = load_mesh_for_drivers(manifest.mesh) if needs_mesh else None
     ctx = DriverContext.from_manifest(
-        manifest, mesh, read_rig=GltfRig, read_morph_tracks=read_morph_tracks
+        manifest,
+        mesh,
+        read_rig=GltfRig,
+        read_morph_tracks=read_morph_tracks,
+        read_morph_clips=read_morph_clips,
     )
     ctx.source = f"{manifest.path} [drivers[{index}]]"
     if opt.fps is not None:

@@ -30,6 +30,7 @@ from wrinklepipe import (
 from wrinklepipe import fidelity as fd
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.atomic import staged_folder
+from wrinklepipe.drivers.clips import describe_clip
 from wrinklepipe.drivers.poses import driver_poses
 from wrinklepipe.errors import input_error
 from wrinklepipe.fidelity.ship import edge_texels
@@ -114,6 +115,29 @@ def judged_poses(asset: WrinkleAsset, curves: list[WeightCurves]) -> list[fd.Pos
     return [fd.Pose(p.name, p.weights) for p in driver_poses(asset, curves) if p.name != "neutral"]
 
 
+def verdict_notes(
+    ingest_notes: list[str],
+    stage_notes: list[str],
+    drivers: list[dict[str, Any]],
+    validation: dict[str, Any],
+) -> list[str]:
+    """The notes that matter to the verdict, each once (the terminal prints them, report.json
+    and report.html hold them): why sizes were not searched, which clip of which file drove the
+    poses (unless a rig rule's message says it: WP-WGT-004, WP-WGT-007), which UVs were
+    generated."""
+    said: set[str] = set()  # clips a rig rule's message names already
+    for i in validation.get("issues", []):
+        data = i.get("data", {})
+        said.update([data["clip"]] if "clip" in data else data.get("clips", []))
+    out = [n for n in ingest_notes if "UVs" in n and ("generat" in n or "project" in n)]
+    out += stage_notes
+    for d in drivers:
+        clip = d.get("clip")
+        if clip and clip.get("clip") not in said:
+            out.append(f"drivers[{d['index']}] ({d['kind']}) read {describe_clip(clip)}")
+    return list(dict.fromkeys(out))
+
+
 def convert(
     manifest_path: str | Path, output: str | Path, options: ConvertOptions | None = None
 ) -> ConvertResult:
@@ -143,6 +167,9 @@ def convert(
                 if asset.mesh is not None and asset.mesh.uvs is not None:
                     asset = replace(asset, mesh=prepare_mesh(asset.mesh))
                 curves, drivers_notes = evaluate_drivers(asset, manifest.root, manifest.path)
+            records = [c.driver for c in curves if c.driver is not None]
+            if records:  # what the drivers read: the validator's rig rules say it
+                source = replace(source, provenance={**source.provenance, "drivers": records})
             poses = judged_poses(asset, curves)
             with console.status("choosing sizes, scale and formats by fidelity"):
                 asset, stage_rep = run_stages(
@@ -197,6 +224,7 @@ def convert(
                     validation = validate_output(
                         tmp, manifest.path, opt.render, html_page=True, source=source
                     )
+            key_notes = verdict_notes(got.notes, stage_rep.key_notes, records, validation)
             report = convert_report(
                 manifest=manifest.path.name,
                 inputs=read,
@@ -211,6 +239,7 @@ def convert(
                 decode_error=decode_errors(asset, pkg),
                 compression=choices,
                 notes=notes,
+                key_notes=key_notes,
                 outputs=output_rows(tmp),
                 validation=validation,
                 color=None if color_choice is None else color_choice.to_json(),

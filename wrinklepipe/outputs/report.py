@@ -101,6 +101,7 @@ def convert_report(
     notes: list[str],
     outputs: list[dict[str, Any]],
     validation: dict[str, Any],
+    key_notes: list[str] | None = None,
     fidelity: dict[str, Any] | None = None,
     warnings: list[str] | None = None,
     color: dict[str, Any] | None = None,
@@ -121,6 +122,7 @@ def convert_report(
         "decode_error": decode_error,
         "compression": compression,
         "notes": notes,
+        "key_notes": list(key_notes or []),
         "outputs": outputs,
         "validation": validation,
     }
@@ -257,6 +259,7 @@ def report_html(report: dict[str, Any]) -> str:
         f"<p>encoding <b>{esc(a['encoding'])}</b>, scale {a['scale']}, policy "
         f"<b>{esc(a['policy'])}</b>; {a['vertices']} vertices, {a['triangles']} triangles, "
         f"{len(a['morph_targets'])} morph targets.</p>",
+        "".join(f"<p class='note'><b>Note:</b> {esc(n)}</p>" for n in report.get("key_notes", [])),
         "<h2>Textures</h2><p>On a checkerboard where they are transparent; a mask texture "
         "with a region in alpha also as that channel (0 black, 1 white). Each region's mask "
         "alone, whatever channel holds it: the regions table below.</p><div>",

@@ -57,7 +57,14 @@ def can_measure(asset: WrinkleAsset, poses: Sequence[fd.Pose] | None = None) -> 
     if asset.policy == "signed" and len(asset.state_names) != 2:
         return "policy 'signed' needs two states"
     if not (asset.expressions if poses is None else poses):
-        return "no poses to judge by (no expressions, no driver curve)"
+        if poses is None or not asset.drivers:
+            return "no poses to judge by (no expressions, no driver curve)"
+        unplayed = (
+            " (the expression table is not played while driver curves are)"
+            if asset.expressions
+            else ""
+        )
+        return f"no poses to judge by: no frame of the drivers' curves activates a region{unplayed}"
     k, h, w = asset.states.shape[:3]
     if h != w or asset.masks.shape[1] != asset.masks.shape[2]:
         return "maps that are not square"

@@ -14,9 +14,10 @@ import numpy as np
 from wrinklepipe import drivers as wd
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.drivers.base import resolve
+from wrinklepipe.drivers.clips import describe_clip
 from wrinklepipe.drivers.curves import load_keys, morph_animation, sample_keys
 from wrinklepipe.errors import InputError, Problem
-from wrinklepipe.gltf.animation import read_morph_tracks
+from wrinklepipe.gltf.animation import read_morph_clips, read_morph_tracks
 from wrinklepipe.package import WeightCurves
 from wrinklepipe.readers.rig import GltfRig
 from wrinklepipe.suffixes import is_gltf
@@ -69,7 +70,7 @@ def morph_inputs(
     t = np.asarray(times, np.float64)
     file = spec.get("file")
     if file is not None and is_gltf(file):
-        _, got, x = morph_animation(ctx, resolve(ctx, str(file)), t)
+        _, got, x = morph_animation(ctx, resolve(ctx, str(file)), t, clip=spec.get("clip"))
         out = np.zeros((t.size, len(names)), np.float32)
         for j, n in enumerate(got):
             if n in names:
@@ -101,6 +102,7 @@ def evaluate_drivers(
         read_rig=GltfRig,
         read_morph_tracks=read_morph_tracks,
         source=str(Path(root) / manifest) if manifest else "<driver>",
+        read_morph_clips=read_morph_clips,
     )
     curves: list[WeightCurves] = []
     used: set[str] = set()
@@ -118,8 +120,13 @@ def evaluate_drivers(
             name = f"{name}_{i}"
         used.add(name)
         curve, lost = curves_from_weights(name, res.times, res.weights, asset.region_state_matrix())
+        curve.driver = {"index": i, "name": name, "kind": kind, **res.source}
+        # the morph weights played with the curve are those of the clip the driver read
+        played = {**spec, "clip": res.source["clip"]["index"]} if "clip" in res.source else spec
+        if "clip" in res.source:
+            notes.append(f"drivers[{i}] ({kind}) read {describe_clip(res.source['clip'])}")
         if kind == "blendshapes" and asset.mesh is not None and asset.mesh.morph_names:
-            curve.morph_weights = morph_inputs(ctx, spec, res.times, asset.mesh.morph_names)
+            curve.morph_weights = morph_inputs(ctx, played, res.times, asset.mesh.morph_names)
         if lost > 1e-6:
             notes.append(f"drivers[{i}] ({kind}): per-state weights differ by up to {lost:.3g}")
         notes.extend(f"drivers[{i}] ({kind}): {n}" for n in res.notes)

@@ -73,6 +73,8 @@ class StageReport:
     """What the stages did, for report.json."""
 
     notes: list[str] = field(default_factory=list)
+    #: the notes that matter to the verdict (why sizes were not searched), shown on the terminal
+    key_notes: list[str] = field(default_factory=list)
     pd_scale: float | None = None
     pd_scale_source: str = ""
     fidelity: dict[str, Any] | None = None  # the automatic choices' record (auto.choice_report)
@@ -125,6 +127,7 @@ def run_stages(
         return asset, rep
     if asset.provenance.get("auto_resolution"):
         rep.notes.append(f"automatic sizes not searched: {why_not}")
+        rep.key_notes.append(rep.notes[-1])
     states, masks = asset.states, asset.masks
     if "wrinkle" in res and res["wrinkle"] != states.shape[1]:
         states = np.stack([_resize_normals(s, int(res["wrinkle"])) for s in states])

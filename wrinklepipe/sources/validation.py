@@ -381,6 +381,9 @@ def _load_manifest(p: Path) -> ValidationInput:
         curves, _ = guard_reader(lambda: evaluate_drivers(asset, p.parent, p), p, "the drivers")
         inp.weight_curves = {str(c.name): np.asarray(c.values, np.float32) for c in curves}
         inp.curves = list(curves)
+        records = [c.driver for c in curves if c.driver is not None]
+        if records:  # what the drivers read, for the rig rules
+            inp.asset = replace(inp.asset, provenance={**inp.asset.provenance, "drivers": records})
     inp.pointers.update({k: str(p) for k in ("meta", "masks", "channels", "textures")})
     inp.pointers["expressions"] = f"{p} [expressions]"
     return inp
@@ -456,7 +459,11 @@ def attach_source(
         # the colour maps too: the shipped ones may be smaller (the colour states' auto size)
         color=src.color if src.color is not None else a.color,
         budget=src.budget if src.budget.given else a.budget,
-        provenance={**a.provenance, "maps": src.provenance.get("maps", {})},
+        provenance={
+            **a.provenance,
+            "maps": src.provenance.get("maps", {}),
+            **({"drivers": src.provenance["drivers"]} if "drivers" in src.provenance else {}),
+        },
     )
     inp.has_source = True
     _source_problems(inp, src)

@@ -219,6 +219,61 @@ RULES: tuple[Rule, ...] = (
         "weights, so dynamic wrinkles show a seam.",
         "Smooth per-vertex weights over vertex IDs (Oat), not over render vertices.",
     ),
+    Rule(
+        "WP-WGT-004",
+        "error",
+        "No pose of any driver activates a region (dead rig)",
+        "Every frame of every driver (and the expression table, when it is played) leaves every "
+        "region at weight 0, so no wrinkle ever shows: a blend-shape driver reading a clip whose "
+        "morph weights are all 0, curves of zeros, rows naming shapes that never move. One "
+        "message names each driver, why it gives nothing (the clip, the inputs that stay 0) and "
+        "the regions; the per-region, per-state and per-driver rules are not repeated.",
+        'Drive the regions: name the clip that moves the blend shapes (clip = "..." in the '
+        "driver's table), key the curves, or fix the rows' inputs.",
+    ),
+    Rule(
+        "WP-WGT-005",
+        "warning",
+        "A region no pose activates",
+        "No frame of any driver (nor the expression table, when played) gives this region a "
+        "weight, while others are driven: its wrinkles never show.",
+        "Add the region to a driver's rows, keys or expressions, or remove it.",
+    ),
+    Rule(
+        "WP-WGT-006",
+        "warning",
+        "A state no pose reaches",
+        "No pose activates this wrinkle state: no driven region gives it a positive weight "
+        "(the regions' ``states`` leave it out, or only negative weights reach it).",
+        "Let a driven region drive the state, or ship without it.",
+    ),
+    Rule(
+        "WP-WGT-007",
+        "warning",
+        "Driver clip chosen implicitly",
+        "A driver reads a glTF file with several animations that drive morph weights and the "
+        "manifest names none: the tool took the first that moves the driver's inputs (else the "
+        "first); the message says which and how many there were.",
+        'Name the clip in the driver\'s table: clip = "Name" (or its index).',
+    ),
+    Rule(
+        "WP-WGT-008",
+        "info",
+        "Expression table and driver curves both present",
+        "The asset has an expression table and drivers that are not an expressions driver: the "
+        "drivers' curves drive the wrinkles and the poses judged; the table ships for engines "
+        "but is not played. Said once.",
+        "Add an expressions driver to play the table, or leave it for engines that read it.",
+    ),
+    Rule(
+        "WP-WGT-009",
+        "warning",
+        "A blend-shape driver whose inputs never move",
+        "The blend shapes a blendshapes driver's rows read stay 0 in every frame of its clip or "
+        "keys (for a file: and in every clip of it), while another driver keeps the rig alive: "
+        "this driver never adds a wrinkle.",
+        'Name a clip that moves them (clip = "..."), or fix the rows\' inputs.',
+    ),
     # --- MESH
     Rule(
         "WP-MESH-001",

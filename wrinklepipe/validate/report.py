@@ -18,7 +18,7 @@ from wrinklepipe.atomic import dumps_json, output_files, staged_folder, write_by
 from wrinklepipe.console import info, issue_counts, plural, problem, verbosity
 from wrinklepipe.errors import input_error
 from wrinklepipe.io.png import png_bytes
-from wrinklepipe.names import file_stems
+from wrinklepipe.names import unique_name
 from wrinklepipe.reuse import map_threads
 from wrinklepipe.validate.catalogue import RULES_BY_CODE
 from wrinklepipe.validate.run import Report
@@ -231,6 +231,12 @@ def colour_bar(vmax: float, unit: str = "degrees") -> str:
     )
 
 
+def picture_file(name: str) -> str:
+    """A picture's file name: a pose is named by what drives it (``Surprised @ 1.0 s``), a
+    file by letters, digits, ``.``, ``-`` and ``_`` only."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name)
+
+
 def _html_pictures(report: Report) -> dict[str, tuple[str, float | str | None]]:
     """File name -> (image key, heat-map range or None) of every picture the HTML shows. A
     key ``group/name`` is the file ``group_name.png``, unique case-insensitively within its
@@ -247,7 +253,11 @@ def _html_pictures(report: Report) -> dict[str, tuple[str, float | str | None]]:
     groups: dict[str, list[str]] = {}
     for key in chosen:
         groups.setdefault(key.split("/", 1)[0] if "/" in key else "", []).append(key)
-    stems = {k: v for keys in groups.values() for k, v in file_stems(keys).items()}
+    stems: dict[str, str] = {}
+    for keys in groups.values():
+        taken: set[str] = set()
+        for k in sorted(keys):  # as file_stems names them, in letters a file name may hold
+            stems[k] = unique_name(picture_file(k.replace("/", "_")), taken, fold_case=True)
     return {stems[key] + ".png": (key, vmax) for key, vmax in chosen.items()}
 
 
@@ -255,7 +265,8 @@ def picture_names(report: Report) -> dict[str, str]:
     """Each picture's natural file name (``region_mask_joy.png``, the key with ``/`` as ``_``)
     -> the file it is written to (the same, or ``region_mask_joy_2.png`` after a case-only
     clash)."""
-    return {key.replace("/", "_") + ".png": f for f, (key, _) in _html_pictures(report).items()}
+    pictures = _html_pictures(report).items()
+    return {picture_file(key.replace("/", "_")) + ".png": f for f, (key, _) in pictures}
 
 
 def html_images(report: Report) -> dict[str, bytes]:
@@ -305,6 +316,7 @@ def report_html(report: Report, files_dir: str, fail_on: str = "error") -> str:
     images = picture_names(report)  # names only: the PNGs are encoded once, by html_images
 
     def fig(name: str, caption: str, big: bool = False) -> str:
+        name = picture_file(name)
         if name not in images:
             return ""
         name = images[name]  # the file it is written to

@@ -103,8 +103,11 @@ def check_compression(ctx: Context) -> list[Issue]:
 
 
 def _half_resolution(ctx: Context, budget_grid: Budget) -> list[Issue]:
-    """Would the states at half size still meet the budget? Then the extra bytes are wasted."""
+    """Would the states at half size still meet the budget? Then the extra bytes are wasted.
+    Not asked without a pose to judge by (a dead rig: WP-WGT-004 says so)."""
     a = ctx.asset
+    if not rules_fidelity.poses(ctx):
+        return []
     texs = ctx.inp.state_textures()
     if not texs or any(t is None for t in texs) or ctx.shipped_states is None:
         return []
