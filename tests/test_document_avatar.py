@@ -427,3 +427,18 @@ def test_usd_output_carries_the_whole_avatar(source, converted):
     np.testing.assert_array_equal(np.asarray(shape.GetOffsetsAttr().Get()), delta)
     # the source's animation: a SkelAnimation variant (tests/test_usd_scene_skin.py plays them)
     assert any("the 1 glTF animation is a SkelAnimation" in n for n in report["notes"])
+
+
+def test_states_with_the_base_detail_everywhere_are_of_one_face(converted, capsys):
+    """The avatar's states are its skin's normal map plus ridges over the whole face (PD
+    addition, ``avatar._ridged``): they differ from the base everywhere and keep all of its
+    detail (the ridges, 4 and 8 cycles along v, are orthogonal to the skin's 11 x 7 bumps: the
+    regression slope of the states' slopes on the base's is 1). WP-FID-006/007 stay silent."""
+    out, report = converted
+    codes = [i["code"] for i in report["validation"]["issues"]]
+    assert "WP-FID-006" not in codes and "WP-FID-007" not in codes
+    capsys.readouterr()
+    assert main(["validate-asset", str(out), "--json", "--no-render"]) == 0
+    metrics = json.loads(capsys.readouterr().out)["metrics"]
+    assert metrics["base_state_spread"] > 0.9
+    assert metrics["base_detail_kept"] == pytest.approx([1.0, 1.0], abs=0.02)

@@ -107,6 +107,21 @@ def test_a_colour_photo_given_as_base_is_refused_in_one_line(source, tmp_path, c
     )
 
 
+PHOTO = SHARED / "usd/usd-wg/full_assets/Teapot/textures/tea_set_01_diff_2k.jpg"
+
+
+@pytest.mark.skipif(not PHOTO.is_file(), reason="../shared/data is absent")
+def test_a_real_photo_given_as_base_is_refused_in_one_line(source, tmp_path, capsys):
+    """A photographed texture (the USD Teapot's diffuse scan, 2048^2 JPEG, averaged down to
+    the demo's 64^2): exit 2, one line naming the file and what it looks like."""
+    photo, _ = read_image(PHOTO)
+    photo = photo[..., :3].reshape(64, 32, 64, 32, 3).mean(axis=(1, 3))
+    write_image(source.parent / "base_normal.png", photo, bits=8)
+    code, lines = _convert(tmp_path, source, capsys)
+    assert code == 2 and len(lines) == 1, lines
+    assert "base_normal.png: is not a tangent-space normal map: it looks like a colour" in lines[0]
+
+
 def test_a_grey_image_given_as_base_is_refused_in_one_line(source, tmp_path, capsys):
     ramp = np.linspace(0.1, 0.9, 64)[None, :] * np.ones((64, 1))
     write_image(source.parent / "base_normal.png", np.stack([ramp] * 3, -1), bits=8)

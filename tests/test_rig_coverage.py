@@ -144,3 +144,26 @@ def test_poses_are_named_by_what_drives_them():
     assert pose_name({"Surprised": 1.0}, ["mouth"], 1.0) == "Surprised @ 1.0 s"
     assert pose_name({"Sad": 0.2, "Angry": 0.9}, ["brow_L"], 2.5) == "Angry + Sad @ 2.5 s"
     assert pose_name({}, ["brow_L", "brow_R"], 1.0) == "brow_L, brow_R peak @ 1.0 s"
+
+
+@needs_robot
+def test_batch_marks_the_dead_robot_failed_and_the_named_clip_passed(tmp_path, capsys):
+    """batch over the dead RobotExpressive and the one whose clip is named (the robot read
+    through --allow-root: the worker processes honour it)."""
+    dead = write_robot_clip_setup(tmp_path / "src" / "dead")
+    named = write_robot_clip_setup(tmp_path / "src" / "named", "faces.glb", "Talk")
+    write_face_clips(named.parent / "faces.glb")
+    for m in (dead, named):  # batch finds the manifests that declare themselves
+        m.write_text('schema = "wrinklepipe/manifest@1"\n' + m.read_text())
+    args = ["batch", str(tmp_path / "src"), "-o", str(tmp_path / "out"), "--no-render", "-j", "1"]
+    code = main([*args, "--allow-root", str(ROBOT.parent), "--report", str(tmp_path / "s.json")])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 1, "\n".join(err)
+    assert any(ln.startswith("failed dead") and "WP-WGT-004" in ln for ln in err), err
+    assert any(ln.startswith("passed named") for ln in err), err
+    assets = {a["id"]: a for a in json.loads((tmp_path / "s.json").read_text())["assets"]}
+    assert assets["dead/manifest"]["exit_code"] == 1
+    assert [
+        i["data"]["regions"] for i in assets["dead/manifest"]["issues"] if i["code"] == "WP-WGT-004"
+    ] == [["brow_L", "brow_R", "mouth"]]
+    assert assets["named/manifest"]["exit_code"] == 0

@@ -19,10 +19,11 @@ from wrinklepipe.errors import InputError
 from wrinklepipe.model import height_to_normal, normal_to_pd
 from wrinklepipe.sources.validation import check_gltf_claims_wrinkles
 from wrinklepipe.validate import textures as tx
-from wrinklepipe.validate.catalogue import RULES, issues_markdown, make_issue
+from wrinklepipe.validate.catalogue import RULES, make_issue
 from wrinklepipe.validate.config import parse_config
 from wrinklepipe.validate.context import Context, position_groups
 from wrinklepipe.validate.inputs import Texture
+from wrinklepipe.validate.issues_table import issues_markdown
 from wrinklepipe.validate.renderer import triangle_layer_touch
 from wrinklepipe.validate.report import normalized
 from wrinklepipe.validate.rules_maps import convention_score

@@ -28,6 +28,7 @@ import jsonschema
 
 from wrinklepipe.batch.options import OPTION_KEYS, AssetOptions
 from wrinklepipe.errors import InputError, ProblemList
+from wrinklepipe.io.confine import current_roots
 from wrinklepipe.io.json_safe import loads_toml
 from wrinklepipe.paths import SCHEMAS_DIR
 
@@ -52,6 +53,9 @@ class Job:
     force: bool = False
     kind: str = "convert"  # "convert" | "validate"
     params: dict[str, Any] = field(default_factory=dict, hash=False, compare=False)
+    #: the folders ``--allow-root`` allowed where the job was planned: the worker process
+    #: reads under them too (a context variable does not cross processes)
+    roots: tuple[Path, ...] = field(default_factory=current_roots, hash=False, compare=False)
 
 
 @dataclass

@@ -23,6 +23,7 @@ from wrinklepipe.batch.plan import Job
 from wrinklepipe.batch.results import AssetResult, counts_of, status_for
 from wrinklepipe.console import stage_listener
 from wrinklepipe.errors import InputError
+from wrinklepipe.io.confine import allowed_roots
 from wrinklepipe.jobs.convert import convert
 from wrinklepipe.reuse import THREADS_ENV
 from wrinklepipe.sources.validation import LoadOptions, load_input
@@ -173,7 +174,8 @@ def run_job(job: Job, emit: Callable[[str], None] = _ignore) -> AssetResult:
     KeyboardInterrupt / SystemExit)."""
     t0, c0 = time.perf_counter(), time.process_time()
     stages = _Stages(emit)
-    result = _validate(job, stages) if job.kind == "validate" else _convert(job, stages)
+    with allowed_roots(job.roots):
+        result = _validate(job, stages) if job.kind == "validate" else _convert(job, stages)
     stages.close()
     result.stages = stages.seconds
     result.seconds = round(time.perf_counter() - t0, 4)

@@ -34,6 +34,11 @@ def allowed_roots(roots: Iterable[str | Path]) -> Iterator[tuple[Path, ...]]:
         _ROOTS.reset(token)
 
 
+def current_roots() -> tuple[Path, ...]:
+    """The folders allowed now (resolved): a batch job carries them to its worker process."""
+    return _ROOTS.get()
+
+
 def is_inside(path: Path, root: Path) -> bool:
     return path == root or root in path.parents
 

@@ -1,5 +1,5 @@
 """``python -m wrinklepipe.validate [docs/ISSUES.md]``: write the issue-code table."""
 
-from wrinklepipe.validate.catalogue import main
+from wrinklepipe.validate.issues_table import main
 
 raise SystemExit(main())
