@@ -96,6 +96,8 @@ def test_a_dead_blendshape_driver_fails_in_one_line_and_the_right_clip_passes(tm
     poses = [p["pose"] for p in report["fidelity"]["png"]["poses"]]
     assert poses == ["Angry @ 1.0 s", "Surprised @ 3.0 s"]  # named by what drives them
     assert any("read clip 'Talk'" in n for n in report["key_notes"])
+    page = (tmp_path / "out_named" / "report.html").read_text()
+    assert "<b>Note:</b> drivers[0] (blendshapes) read clip &#x27;Talk&#x27; of faces.glb" in page
     # not named: the first clip that moves the inputs is read, and said once
     implicit = write_robot_clip_setup(tmp_path / "implicit", "faces.glb")
     write_face_clips(implicit.parent / "faces.glb")
