@@ -5,6 +5,7 @@ with one warning, and nothing is left behind."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -12,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -299,6 +301,113 @@ def with_suppress_kill(proc: subprocess.Popen) -> None:
     except ProcessLookupError:
         pass
     proc.wait()
+
+
+@contextlib.contextmanager
+def _cluster(tmp_path: Path, n_workers: int) -> Iterator[tuple[str, subprocess.Popen, list]]:
+    """A Dask scheduler (on a free port) and ``n_workers`` worker processes without nannies
+    (a worker killed stays dead), each a process group of its own; all killed at the end."""
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    file = tmp_path / "scheduler.json"
+    scheduler = _dask(
+        "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+        "--scheduler-file", str(file),
+    )  # fmt: skip
+    workers: list[subprocess.Popen] = []
+    try:
+        address = _scheduler_address(file, scheduler)
+        with Client(address, timeout=60) as client:
+            workers = [
+                _dask("worker", address, "--no-nanny", "--nthreads", "1", "--no-dashboard")
+                for _ in range(n_workers)
+            ]
+            if n_workers:
+                client.wait_for_workers(n_workers, timeout=60)
+        yield address, scheduler, workers
+    finally:
+        for p in [*workers, scheduler]:
+            with_suppress_kill(p)
+
+
+class _DiesWhereItIsRun:
+    """Called here: the real fingerprint. Sent to a worker (pickled): the worker, unpickling it,
+    ends at once (``os._exit``), as a worker killed while it answers the engine's check."""
+
+    def __init__(self, real: Callable[[], str]) -> None:
+        self.real = real
+
+    def __call__(self) -> str:
+        return self.real()
+
+    def __reduce__(self):  # noqa: ANN204
+        return (os._exit, (3,))
+
+
+def test_a_worker_that_dies_while_it_is_checked_is_waited_for(
+    sources, tmp_path, capfd, monkeypatch
+):
+    """The only worker dies while it answers the version check: the assets fail with the
+    no-workers wait's message, not distributed's 'CommClosedError: in <TCP (closed) ...>'."""
+    from wrinklepipe.batch import engines
+
+    src = _copy(sources, tmp_path)
+    with _cluster(tmp_path, 1) as (address, _, workers):
+        monkeypatch.setattr(
+            engines, "tool_fingerprint", _DiesWhereItIsRun(engines.tool_fingerprint)
+        )
+        plan = plan_batch([str(src)], tmp_path / "out", force=True)
+        run = run_plan(plan, DaskEngine(address, no_workers_s=2.0), None)
+        assert workers[0].wait(60) == 3  # it died in the check, as meant
+    for r in run.results:
+        assert r.status == "error", r
+        message = r.problems[0]["message"]
+        assert "had no workers for 2 s" in message and "Error" not in message, message
+    assert "Traceback" not in capfd.readouterr().err
+
+
+def test_a_scheduler_that_goes_away_fails_the_assets_in_words(sources, tmp_path, capfd):
+    """The scheduler is killed once both assets are queued: every asset fails saying the
+    scheduler went away, in one line of the tool's words; distributed's reconnect traceback
+    never reaches the terminal."""
+    src = _copy(sources, tmp_path)
+    with _cluster(tmp_path, 1) as (address, scheduler, _):
+        plan = plan_batch([str(src)], tmp_path / "out", force=True)
+        queued: list[str] = []
+
+        def on_stage(job: str, stage: str) -> None:
+            if stage == "queued":
+                queued.append(job)
+                if len(queued) == 2:
+                    os.killpg(scheduler.pid, signal.SIGKILL)
+                    scheduler.wait()
+
+        run = run_plan(plan, _Staged(DaskEngine(address, no_workers_s=600), on_stage), None)
+    assert [r.id for r in run.results] == ["a/manifest", "b/manifest"]
+    for r in run.results:
+        assert r.status == "error", r
+        message = r.problems[0]["message"]
+        assert "scheduler" in message and ("went away" in message or "was lost" in message)
+        assert "Error" not in message and "<" not in message and "\n" not in message, message
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "distributed." not in err, err
+
+
+def test_a_task_whose_workers_all_died_is_said_in_words():
+    pytest.importorskip("distributed")
+    from types import SimpleNamespace
+
+    from distributed import KilledWorker
+
+    from wrinklepipe.batch.engines import _task_failed
+
+    exc = KilledWorker("wrinklepipe-1-a", SimpleNamespace(address="tcp://10.0.0.7:4000"), 3)
+    assert _task_failed(exc) == (
+        "every Dask worker that ran the asset died (4 tried; the last tcp://10.0.0.7:4000): "
+        "a crash or a worker's memory limit (see the worker's log)"
+    )
+    assert _task_failed(ValueError("bad\nsecond line")) == "the Dask task failed (ValueError: bad)"
 
 
 def test_an_unreachable_scheduler_still_writes_the_summary(sources, tmp_path):

@@ -27,6 +27,9 @@ waiting forever.
 
 from __future__ import annotations
 
+import concurrent.futures
+import contextlib
+import logging
 import multiprocessing
 import multiprocessing.connection
 import os
@@ -77,6 +80,46 @@ def cpu_count() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not Linux
         return max(1, os.cpu_count() or 1)
+
+
+def _task_failed(exc: BaseException) -> str:
+    """A Dask task's failure in words: the workers that ran it died, it was cancelled (its
+    scheduler went away), or the first line of another error."""
+    name = type(exc).__name__
+    if name == "KilledWorker":
+        tries = getattr(exc, "allowed_failures", 0) + 1
+        last = getattr(getattr(exc, "last_worker", None), "address", "?")
+        return (
+            f"every Dask worker that ran the asset died ({tries} tried; the last {last}): "
+            "a crash or a worker's memory limit (see the worker's log)"
+        )
+    if isinstance(exc, concurrent.futures.CancelledError):
+        if "connection-lost" in str(getattr(exc, "reason", "")):
+            return "the Dask task was cancelled: the connection to its scheduler was lost"
+        return "the Dask task was cancelled (its scheduler went away, or it was stopped)"
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return f"the Dask task failed ({name}: {first})" if first else f"the Dask task failed ({name})"
+
+
+@contextlib.contextmanager
+def _quiet_distributed() -> Iterator[None]:
+    """distributed's own log lines (a lost scheduler's reconnect traceback, a dead worker's
+    broadcast error) kept off the terminal: each asset's result says what happened in words."""
+    import distributed  # noqa: F401 - deferred (about a second); its loggers exist once imported
+
+    loggers = [logging.getLogger("distributed")] + [
+        logger
+        for name, logger in list(logging.root.manager.loggerDict.items())
+        if name.startswith("distributed.") and isinstance(logger, logging.Logger)
+    ]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for logger, level in zip(loggers, levels, strict=True):
+            logger.setLevel(level)
 
 
 def _lost(job: Job, message: str) -> AssetResult:
@@ -236,15 +279,29 @@ class DaskEngine:
             "wait)"
         )
 
+    def _lost_scheduler(self) -> str:
+        return (
+            f"the connection to the Dask scheduler at {self.address} was lost (the scheduler "
+            "stopped, or the network between it and this machine failed); the asset did not finish"
+        )
+
     def _check_workers(self, client: Any) -> None:
+        """Wait for a worker (up to ``no_workers_s``) and check that every worker runs our
+        code. A worker that dies while it answers is left out (``on_error="ignore"``; its
+        connection error was the asset's message); none left is a wait for another."""
         ours = tool_fingerprint()
-        try:
-            client.wait_for_workers(1, timeout=self.no_workers_s)
-        except (TimeoutError, OSError):
-            raise input_error("--scheduler", self._no_workers()) from None
-        theirs = client.run(tool_fingerprint)
-        if not theirs:
-            raise input_error("--scheduler", self._no_workers())
+        deadline = time.monotonic() + self.no_workers_s
+        while True:
+            try:
+                client.wait_for_workers(1, timeout=max(0.0, deadline - time.monotonic()))
+            except TimeoutError:
+                raise input_error("--scheduler", self._no_workers()) from None
+            theirs = client.run(tool_fingerprint, on_error="ignore")
+            if theirs:
+                break
+            if time.monotonic() >= deadline:
+                raise input_error("--scheduler", self._no_workers())
+            time.sleep(0.2)
         differ = sorted(addr for addr, fp in theirs.items() if fp != ours)
         if differ:
             raise input_error(
@@ -258,7 +315,7 @@ class DaskEngine:
         try:
             result = fut.result()
         except Exception as exc:  # noqa: BLE001 - KilledWorker, lost data: this asset only
-            result = _lost(job, f"the Dask task failed ({type(exc).__name__}: {exc})")
+            result = _lost(job, _task_failed(exc))
         if result.source == "converted" and not job.output.is_dir():
             result = _lost(
                 job,
@@ -268,6 +325,13 @@ class DaskEngine:
         return result
 
     def run(self, jobs: Sequence[Job], on_stage: StageFn) -> Iterator[AssetResult]:
+        with _quiet_distributed():
+            try:
+                yield from self._run(jobs, on_stage)
+            except OSError:  # CommClosedError, a call that timed out: the scheduler went away
+                raise input_error("--scheduler", self._lost_scheduler()) from None
+
+    def _run(self, jobs: Sequence[Job], on_stage: StageFn) -> Iterator[AssetResult]:
         client = self._client()
         subscribed = False
         try:
@@ -312,6 +376,7 @@ class DaskEngine:
                         continue
                 time.sleep(0.2)
         finally:
-            if subscribed:  # (unsubscribing a topic never subscribed raises, hiding the reason)
-                client.unsubscribe_topic(self.TOPIC)
+            with contextlib.suppress(OSError):  # (a scheduler gone: nothing to unsubscribe from)
+                if subscribed:  # (unsubscribing a topic never subscribed raises, hiding the reason)
+                    client.unsubscribe_topic(self.TOPIC)
             client.close()
