@@ -424,7 +424,34 @@ def test_an_unreachable_scheduler_still_writes_the_summary(sources, tmp_path):
     assert run.exit_code == 2
     doc = json.loads(summary.read_text())
     assert [a["status"] for a in doc["assets"]] == ["error", "error"]
-    assert all("Dask scheduler" in a["problems"][0]["message"] for a in doc["assets"])
+    for a in doc["assets"]:
+        assert a["problems"][0]["message"] == (
+            "did not run: cannot reach the Dask scheduler at tcp://127.0.0.1:9: no answer in 2 s"
+        )
+
+
+@pytest.mark.parametrize(
+    ("address", "why"),
+    [
+        ("not a url", "no host and port"),
+        ("http://127.0.0.1:8786", "unknown scheme 'http'"),
+        ("tcp://farm", "no host and port"),
+        ("tcp://farm:86x", "'86x' is not a port number"),
+    ],
+)
+def test_a_scheduler_address_dask_cannot_use_is_one_message(sources, tmp_path, capfd, address, why):
+    """Refused before anything runs, in words (distributed's ValueError reached each asset, and
+    its half-made client waited a minute at exit and printed a traceback)."""
+    code = main(["batch", str(sources), "-o", str(tmp_path / "out"), "--scheduler", address])
+    err = capfd.readouterr().err
+    assert code == 2
+    lines = [ln for ln in err.splitlines() if ln.startswith("error")]
+    assert len(lines) == 1, err
+    assert lines[0].startswith(
+        f"error: --scheduler: {address} is not a Dask scheduler address ({why}"
+    )
+    assert "expected tcp://HOST:PORT" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_cluster_without_workers_fails_each_asset_with_the_reason(sources, tmp_path):

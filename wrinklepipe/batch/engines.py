@@ -247,6 +247,38 @@ def _exit_text(code: int | None) -> str:
     return f"exit status {code}"
 
 
+#: The address schemes distributed speaks; those with a host and port.
+_DASK_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
+_HOST_PORT_SCHEMES = ("tcp", "tls", "ws", "wss")
+
+
+def check_scheduler_address(address: str) -> None:
+    """Refuse, in words, an address distributed cannot connect to (``not a url``,
+    ``http://...``, ``tcp://farm`` with no port) before a client is made: distributed's own
+    refusal is a ValueError, and its half-made client then waits a minute at exit and prints
+    a traceback."""
+    scheme, sep, rest = address.partition("://")
+    if not sep:
+        scheme, rest = "tcp", address  # (distributed's default)
+    why = ""
+    if scheme not in _DASK_SCHEMES:
+        why = f"unknown scheme {scheme!r}; Dask speaks {', '.join(_DASK_SCHEMES)}"
+    elif scheme in _HOST_PORT_SCHEMES:
+        host, colon, port = rest.rpartition(":")
+        if not colon or not host.strip("[]"):
+            why = "no host and port"
+        elif not (port.isdigit() and 0 < int(port) < 65536):
+            why = f"{port!r} is not a port number"
+        elif any(c.isspace() for c in rest) or "/" in rest:
+            why = f"{rest!r} is not a host and port"
+    if why:
+        raise input_error(
+            "--scheduler",
+            f"{address} is not a Dask scheduler address ({why}); expected tcp://HOST:PORT, "
+            "e.g. tcp://farm:8786",
+        )
+
+
 class DaskEngine:
     """The jobs as tasks on the Dask distributed scheduler at ``address``."""
 
@@ -265,11 +297,14 @@ class DaskEngine:
         # engine needs it.
         from distributed import Client
 
+        check_scheduler_address(self.address)
         try:
             return Client(self.address, timeout=self.connect_s, set_as_default=False)
-        except (OSError, TimeoutError) as exc:
+        except OSError as exc:  # a TimeoutError, or distributed's "Timed out trying to connect"
+            timed_out = isinstance(exc, TimeoutError) or str(exc).startswith("Timed out")
+            why = f"no answer in {self.connect_s:g} s" if timed_out else exc.strerror or exc
             raise input_error(
-                "--scheduler", f"cannot reach the Dask scheduler at {self.address}: {exc}"
+                "--scheduler", f"cannot reach the Dask scheduler at {self.address}: {why}"
             ) from None
 
     def _no_workers(self) -> str:

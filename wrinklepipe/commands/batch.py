@@ -9,7 +9,11 @@ from typing import Any
 
 from wrinklepipe.batch import Cache, DaskEngine, LocalEngine, parse_size, plan_batch
 from wrinklepipe.batch.cache import DEFAULT_MAX_BYTES
-from wrinklepipe.batch.engines import DEFAULT_NO_WORKERS_S, DEFAULT_TIMEOUT_S
+from wrinklepipe.batch.engines import (
+    DEFAULT_NO_WORKERS_S,
+    DEFAULT_TIMEOUT_S,
+    check_scheduler_address,
+)
 from wrinklepipe.batch.options import MASK_LAYOUTS, AssetOptions
 from wrinklepipe.batch.publish import run_and_publish
 from wrinklepipe.commands._options import add_fail_on, add_json, add_report, finite_float
@@ -171,6 +175,8 @@ def run(args: argparse.Namespace) -> int:
     for name, value in (("--timeout", args.timeout), ("--no-workers", args.no_workers)):
         if value is not None and not (math.isfinite(value) and value >= 0):
             raise input_error(name, f"{value:g} is not a number of seconds (0 or more)")
+    if args.scheduler:
+        check_scheduler_address(args.scheduler)
     plan = plan_batch(
         args.sources, args.output, root=args.root, cli_options=_cli_options(args), force=args.force
     )
