@@ -309,3 +309,30 @@ def test_a_layer_that_cannot_be_read_is_one_plain_line(tmp_path, capsys, damage,
     err = _one_error(capsys, said)
     assert "pxrInternal" not in err and "Error in '" not in err and ".cpp" not in err, err
     assert "pegtl" not in err and "parse error matching" not in err, err
+
+
+@pytest.mark.parametrize(
+    ("pattern", "value", "place"),
+    [
+        (r"point3f\[\] points = \[\(", "point3f[] points = [(nan, ", "in </Avatar/Head.points>"),
+        (
+            r"int\[\] faceVertexCounts = \[[^\]]*\]",
+            "int[] faceVertexCounts = [4294967297]",
+            "in </Avatar/Head.faceVertexCounts>",
+        ),
+    ],
+)
+def test_a_value_usd_cannot_parse_is_said_once_with_its_place(
+    avatar, capsys, pattern, value, place
+):
+    """USD quotes the text it could not parse (a whole points array) and says some errors twice
+    (with and without layer:line:column): the quote is cut short and the error said once, so
+    the prim and property it names still fit the line (they were cut off at 300 characters)."""
+    import re
+
+    _, usd = avatar
+    usd.write_text(re.sub(pattern, value, usd.read_text(), count=1))
+    assert main(["inspect", str(usd)]) == 2
+    err = _one_error(capsys, "cannot open USD stage", place)
+    line = next(ln for ln in err.splitlines() if ln.startswith("error:"))
+    assert line.count("Error parsing shaped value") <= 1 and "1.3, 0.1), (0, 1.5" not in line, line

@@ -44,12 +44,30 @@ _NAMESPACE = re.compile(r"pxrInternal_v\d+(?:_\d+)*__pxrReserved__(?:_)?::")
 _GRAMMAR = re.compile(r"parse error matching .*? at '([^']*)'")
 
 
+#: The text around a parse error that USD quotes ("at ', (0.3, 1.3, 0.1), ...' in </A.points>":
+#: a whole array): its start is kept, so the prim and property after it still fit the line.
+_ECHO = re.compile(r" at '([^']{40})[^']{8,}'")
+#: The "layer:line:column: " USD puts before some errors it also reports without it.
+_WHERE = re.compile(r"^\S+:\d+:\d+: ")
+
+
 def _tidy(text: str) -> str:
     text = _NAMESPACE.sub("", text)
     text = _GRAMMAR.sub(
         lambda m: "parse error" + (f" at {m.group(1)!r}" if m.group(1) else ""), text
     )
-    return text
+    return _ECHO.sub(lambda m: f" at '{m.group(1)}...'", text)
+
+
+def _once(lines: list[str]) -> list[str]:
+    """``lines`` without repeats, an error said twice (with and without its layer:line:column)
+    kept once, where it is said with its place."""
+    kept: dict[str, str] = {}
+    for line in lines:
+        key = _WHERE.sub("", line)
+        if key not in kept or _WHERE.match(line):
+            kept[key] = line
+    return list(kept.values())
 
 
 def error_text(exc: BaseException) -> str:
@@ -59,7 +77,7 @@ def error_text(exc: BaseException) -> str:
     try:
         said = [str(getattr(a, "commentary", "") or a) for a in exc.args] or [str(exc)]
         lines = [plain(_tidy(s)) for s in said]
-        return "; ".join(dict.fromkeys(s for s in lines if s))
+        return "; ".join(_once([s for s in lines if s]))
     except UnicodeDecodeError:
         return "USD cannot parse it (it holds bytes that are not UTF-8 text)"
 
