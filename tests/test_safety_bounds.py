@@ -213,3 +213,40 @@ def test_uninstancing_a_wrinkled_mesh_is_bounded(monkeypatch):
     monkeypatch.setattr(Sdf, "CreatePrimInLayer", lambda *args: Ignored())
     with deadline(30), pytest.raises(RuntimeError, match="stay instances"):
         layer._deinstance(stage, ["/I/M"], [])
+
+
+@pytest.mark.parametrize(
+    "command, needle",
+    [
+        (["encode-normals", "{base}", "-o", "{out}.png", "--size", "100000"], "over the cap"),
+        (["encode-normals", "{base}", "-o", "{out}.png", "--size", "9000",
+          "--max-pixels", "1000000"],
+         "9000 x 9000 = 81000000 pixels, over the cap of 1000000 pixels"),
+        (["pack-masks", "{mask}", "-o", "{out}", "--size", "100000"], "over the cap"),
+        (["bake", "{manifest}", "-o", "{out}", "--maps", "--size", "100000"],
+         "100000 is out of range; expected 4..8192"),
+        (["capture", "{base}", "{base}", "--neutral-landmarks", "{lm}", "--expression-landmarks",
+          "{lm}", "--size", "9000x8000", "-o", "{out}"],
+         "9000 x 8000 = 72000000 pixels, over the cap of 67108864 pixels"),
+    ],
+    ids=["encode-normals", "encode-normals-max-pixels", "pack-masks", "bake", "capture"],
+)  # fmt: skip
+def test_a_size_option_is_costed_before_allocation(source, tmp_path, capsys, command, needle):
+    """A command's --size (the side of what it makes) is checked against the pixel cap (or the
+    [resolution] range) before any input is read: it was an internal error ('ImageBuf unable to
+    allocate 80000000000 bytes') or minutes and gigabytes before 'out of memory'."""
+    paths = {
+        "base": source.parent / "base_normal.png",
+        "mask": source.parent / "masks" / "chin.png",
+        "manifest": source,
+        "lm": tmp_path / "landmarks.json",  # never read: the size is refused first
+        "out": tmp_path / "out",
+    }
+    args = [a.format(**paths) for a in command]
+    with deadline(60):
+        rc = main(args)
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error")]
+    assert rc == 2 and len(lines) == 1 and lines[0].startswith("error: --size: "), err
+    assert needle in lines[0] and "internal error" not in err and "out of memory" not in err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "out.png").exists()

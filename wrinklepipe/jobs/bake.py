@@ -28,6 +28,9 @@ from wrinklepipe.readers.meshes import load_mesh
 from wrinklepipe.readers.rig import GltfRig
 from wrinklepipe.sources.manifest import load_manifest
 
+#: The blended maps' side (``--size``): the range a manifest's ``[resolution]`` allows.
+MIN_MAP_SIDE, MAX_MAP_SIDE = 4, 8192
+
 
 @dataclass(frozen=True)
 class BakeOptions:
@@ -81,6 +84,12 @@ def bake_manifest(
 ) -> dict[str, Any]:
     """Load the manifest, evaluate its driver, write the output folder; return a summary."""
     opt = options or BakeOptions()
+    if opt.size is not None and not MIN_MAP_SIDE <= opt.size <= MAX_MAP_SIDE:  # before any read
+        raise input_error(
+            "--size",
+            f"{opt.size} is out of range; expected {MIN_MAP_SIDE}..{MAX_MAP_SIDE} (the sizes "
+            "[resolution] allows)",
+        )
     manifest = load_manifest(manifest_path)
     index, spec = _pick_driver(manifest, opt.driver)
     kind = str(spec["kind"])

@@ -213,6 +213,7 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
     """
     o = options or CaptureJobOptions()
     check_options(inputs, o)
+    parse_size(inputs.size, o.max_pixels)  # the texture costed before the photos are read
     i0, info0, i1, info1 = _photos(inputs, o)
     shape = (info0.height, info0.width)
     lm_n = L.read_landmarks(inputs.neutral_landmarks).to_pixels(info0.width, info0.height)
@@ -221,7 +222,7 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
     L.check_inside(lm_n, info0.width, info0.height, "neutral photo")
     L.check_inside(lm_e, info1.width, info1.height, "expression photo")
 
-    tex_shape, pp, pt, lm_t_names = _photo_to_texture(inputs, info0, lm_n)
+    tex_shape, pp, pt, lm_t_names = _photo_to_texture(inputs, info0, lm_n, o.max_pixels)
 
     roi = read_mask(inputs.roi, shape, "ROI mask") if inputs.roi else None
     nz = _nz_map(o, shape)
@@ -323,12 +324,12 @@ def _photos(inputs: CaptureInputs, o: CaptureJobOptions) -> tuple[np.ndarray, An
 
 
 def _photo_to_texture(
-    inputs: CaptureInputs, info0: Any, lm_n: L.Landmarks
+    inputs: CaptureInputs, info0: Any, lm_n: L.Landmarks, max_pixels: int | None
 ) -> tuple[tuple[int, int], np.ndarray, np.ndarray, list[str] | None]:
     """The texture's shape ``(h, w)``, the paired photo and texture points of the warp between
     them, and the texture landmarks' names; without ``--texture-landmarks`` the map stays in
     photo space (the identity: the photo's corners)."""
-    tex_shape = parse_size(inputs.size)
+    tex_shape = parse_size(inputs.size, max_pixels)
     if not inputs.texture_landmarks:
         w, h = info0.width, info0.height
         corners = np.array([[0, 0], [w, 0], [0, h], [w, h]], float)

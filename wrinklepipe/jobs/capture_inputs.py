@@ -20,8 +20,11 @@ from wrinklepipe.readers.meshes import LoadOptions, load_mesh
 from wrinklepipe.validate.gl import GLUnavailable, create_context
 
 
-def parse_size(text: str | None) -> tuple[int, int] | None:
-    """``N`` or ``WxH`` -> ``(height, width)``."""
+def parse_size(
+    text: str | None, max_pixels: int | None = DEFAULT_MAX_PIXELS
+) -> tuple[int, int] | None:
+    """``N`` or ``WxH`` -> ``(height, width)``; at most ``max_pixels`` texels (the photos'
+    cap, ``--max-pixels``), checked before anything of that size is made."""
     if text is None:
         return None
     try:
@@ -31,8 +34,15 @@ def parse_size(text: str | None) -> tuple[int, int] | None:
             w = h = int(text)
     except ValueError:
         raise input_error("<arguments>", f"--size must be N or WxH, got {text!r}") from None
-    if w <= 0 or h <= 0 or w * h > 16384 * 16384:
+    if w <= 0 or h <= 0:
         raise input_error("<arguments>", f"--size out of range: {text!r}")
+    cap = max_pixels or DEFAULT_MAX_PIXELS
+    if w * h > cap:
+        raise input_error(
+            "--size",
+            f"{text} makes a texture of {w} x {h} = {w * h} pixels, over the cap of {cap} "
+            "pixels (--max-pixels N raises it)",
+        )
     return h, w
 
 

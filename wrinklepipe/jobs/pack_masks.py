@@ -15,7 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from wrinklepipe.atomic import staged_folder
-from wrinklepipe.errors import InputError
+from wrinklepipe.errors import InputError, input_error
+from wrinklepipe.io.images import DEFAULT_MAX_PIXELS
 from wrinklepipe.masks.check import MaskReport, check_masks
 from wrinklepipe.masks.files import write_packed
 from wrinklepipe.masks.layouts import PackedMasks, pack
@@ -80,6 +81,12 @@ def pack_mask_files(
     o = options or PackMasksOptions()
     if o.size is not None and o.size <= 0:
         raise InputError(f"--size must be positive, got {o.size}", "<arguments>")
+    if o.size is not None and o.size * o.size > DEFAULT_MAX_PIXELS:  # costed before any read
+        raise input_error(
+            "--size",
+            f"{o.size} makes masks of {o.size} x {o.size} = {o.size * o.size} pixels, over the "
+            f"cap of {DEFAULT_MAX_PIXELS} pixels",
+        )
     ms = read_masks(paths, list(o.names) if o.names else None, invert=o.invert)
     masks = ms.masks if o.size is None else resample_masks(ms.masks, o.size)
     report = check_masks(masks, ms.names)

@@ -167,6 +167,12 @@ def encode_normals(
     o = options
     src, out = Path(src), Path(out)
     fmt, container = _checked_format(src, out, o, base_path)
+    if isinstance(o.size, int) and o.size * o.size > o.max_pixels:  # costed before any read
+        raise input_error(
+            "--size",
+            f"{o.size} makes maps of up to {o.size} x {o.size} = {o.size * o.size} pixels, over "
+            f"the cap of {o.max_pixels} pixels (--max-pixels N raises it)",
+        )
     nm = _read(src, o)
     base_nm = _read(Path(base_path), o) if base_path is not None else None
     w_n = nm.normals
