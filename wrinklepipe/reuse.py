@@ -227,6 +227,16 @@ def known_rows(
     return found, values
 
 
+def rows_room(name: str, nbytes: int) -> bool:
+    """Whether :func:`remember_rows` would store ``nbytes`` more under ``name`` (the stores stop
+    growing past a quarter of the memo's bound); False outside :func:`reuse`."""
+    memo = _MEMO.get()
+    if memo is None:
+        return False
+    old = memo.rows.get(name)
+    return (0 if old is None else old.nbytes) + int(nbytes) <= memo.max_bytes // 4
+
+
 def remember_rows(name: str, hashes: np.ndarray, keys: np.ndarray, values: np.ndarray) -> None:
     """Store the results ``values`` [M, V] of rows ``keys`` [M, K] (``hashes`` [M] uint64) under
     ``name`` in this run's memo, for :func:`known_rows`. Only for a function whose result for a
@@ -239,15 +249,24 @@ def remember_rows(name: str, hashes: np.ndarray, keys: np.ndarray, values: np.nd
     with memo.lock:
         old = memo.rows.get(name)
         h, k, v = np.asarray(hashes, np.uint64), np.asarray(keys), np.asarray(values)
-        if old is not None:
-            if old.nbytes + h.nbytes + k.nbytes + v.nbytes > memo.max_bytes // 4:
-                return
-            h, k, v = (np.concatenate(p) for p in ((old.hashes, h), (old.keys, k), (old.values, v)))
-        order = np.argsort(h, kind="stable")  # the stored rows first among equal hashes
-        h, k, v = h[order], k[order], v[order]
+        held = 0 if old is None else old.nbytes
+        if held + h.nbytes + k.nbytes + v.nbytes > memo.max_bytes // 4:
+            return
+        order = np.argsort(h, kind="stable")  # of the new rows, the first among equal hashes
+        h = h[order]
         first = np.ones(len(h), bool)
         first[1:] = h[1:] != h[:-1]
-        memo.rows[name] = Rows(h[first].copy(), k[first].copy(), v[first].copy())
+        if old is not None:  # the stored rows first: a new row of a stored hash is dropped
+            pos = np.minimum(np.searchsorted(old.hashes, h), len(old.hashes) - 1)
+            first &= old.hashes[pos] != h
+        pick = order[first]
+        h, k, v = h[first], k[pick], v[pick]
+        if old is not None:  # merged in hash order, one copy of the store (not a sort of it)
+            at = np.searchsorted(old.hashes, h)
+            h = np.insert(old.hashes, at, h)
+            k = np.insert(old.keys, at, k, axis=0)
+            v = np.insert(old.values, at, v, axis=0)
+        memo.rows[name] = Rows(h, np.ascontiguousarray(k), np.ascontiguousarray(v))
 
 
 def reused(fn: F) -> F:

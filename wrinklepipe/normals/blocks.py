@@ -59,12 +59,26 @@ def _rows(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _group(rows: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = len(h)
     _, first, inverse = np.unique(h, return_index=True, return_inverse=True)
-    if not np.array_equal(rows[first[inverse]], rows):  # a hash collision: no regrouping
+    if not _same_rows(rows, first[inverse]):  # a hash collision: no regrouping
         return np.arange(n), np.arange(n)
     order = np.argsort(first, kind="stable")  # distinct blocks in order of first occurrence
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size)
     return first[order], rank[inverse.reshape(-1)]
+
+
+#: Rows compared at a time when checking the hashes against the bytes.
+_CHECK_ROWS = 1 << 16
+
+
+def _same_rows(rows: np.ndarray, source: np.ndarray) -> bool:
+    """Whether ``rows[source]`` equals ``rows``, compared a slice of rows at a time (no copy of
+    every row)."""
+    for r0 in range(0, len(rows), _CHECK_ROWS):
+        r = slice(r0, r0 + _CHECK_ROWS)
+        if not np.array_equal(rows[source[r]], rows[r]):
+            return False
+    return True
 
 
 def distinct(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,7 +103,14 @@ def encode_distinct(
     n = blocks.shape[0]
     rows, h = _rows(blocks)
     first, inverse = _group(rows, h)
-    d_rows, d_h = rows[first], h[first]
+    d_h = h[first]
+    # the distinct rows are copied only when the memo has room for them
+    memo_name = (
+        memo_name
+        if memo_name and reuse.rows_room(memo_name, rows[:1].nbytes * first.size)
+        else None
+    )
+    d_rows = rows[first] if memo_name else rows[:0]
     found, known = np.zeros(first.size, bool), None
     if memo_name:
         found, known = reuse.known_rows(memo_name, d_h, d_rows)

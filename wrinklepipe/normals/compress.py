@@ -305,16 +305,33 @@ def angular_error_stats(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = 
     return error_stats(angle_deg(a, b), mask)
 
 
-def psnr(reference: np.ndarray, decoded: np.ndarray) -> list[float]:
-    """PSNR in dB per channel (last axis) of 8-bit texels; ``inf`` where identical."""
-    r = np.asarray(reference).reshape(-1, np.asarray(reference).shape[-1]).astype(np.int32)
+def squared_errors(reference: np.ndarray, decoded: np.ndarray) -> np.ndarray:
+    """Per channel (last axis), the sum of squared differences of 8-bit texels, exact (int64):
+    what :func:`psnr` takes, summed band by band (:func:`psnr_of`)."""
+    r = np.asarray(reference)
+    c = r.shape[-1]
+    r = r.reshape(-1, c).astype(np.int32)
     d = np.asarray(decoded).reshape(r.shape).astype(np.int32)
+    e = r - d
+    return np.einsum("ij,ij->j", e, e, dtype=np.int64)
+
+
+def psnr_of(sse: np.ndarray, texels: int) -> list[float]:
+    """PSNR in dB per channel from :func:`squared_errors` over ``texels`` texels (``inf`` where
+    identical). The mean of exact integer squares, each partial sum exact in float64, is
+    the sum divided by the count: the whole image's :func:`psnr` bit for bit."""
     out = []
-    for c in range(r.shape[1]):
-        e = r[:, c] - d[:, c]
-        mse = float(np.mean((e * e).astype(np.float64))) if e.size else 0.0
+    for s in np.asarray(sse, np.int64):
+        mse = float(int(s)) / texels if texels else 0.0
         out.append(float("inf") if mse == 0 else 10.0 * math.log10(255.0**2 / mse))
     return out
+
+
+def psnr(reference: np.ndarray, decoded: np.ndarray) -> list[float]:
+    """PSNR in dB per channel (last axis) of 8-bit texels; ``inf`` where identical."""
+    r = np.asarray(reference)
+    n = r.size // r.shape[-1] if r.ndim else 0
+    return psnr_of(squared_errors(r, decoded), n)
 
 
 # ------------------------------------------------------------------------------------------
@@ -391,9 +408,18 @@ def decoder_for(
     return dec
 
 
+def _blocks_rgba(q: np.ndarray, fmt: str) -> np.ndarray:
+    """``q`` padded to whole blocks and placed in ``fmt``'s RGBA layout, band by band."""
+    qp, _ = pad_to_blocks(q)
+    hp, wp = qp.shape[:2]
+    rgba = np.empty((hp, wp, 4), dtype=np.uint8)
+    map_rows(lambda r: pack_rgba(qp[r], fmt, out=rgba[r]), hp, wp)
+    return rgba
+
+
 def compress_and_check(
     stored_u8: np.ndarray,
-    reference: np.ndarray,
+    reference: np.ndarray | None,
     fmt: str,
     decode: Callable[[np.ndarray, slice], np.ndarray],
     budget: Budget | None = None,
@@ -406,10 +432,14 @@ def compress_and_check(
     stored_u8: [H, W, 2 or 3] uint8 texels of the map (x, y[, z]) as an 8-bit file would hold;
                three components go to x, y, z in R, G, B (bc1 / bc7), two to the format's
                two-component layout.
-    reference: [H, W, 3] float unit normals the map is meant to reproduce.
+    reference: [H, W, 3] float unit normals the map is meant to reproduce; None: the
+               uncompressed map itself (``decode`` of ``stored_u8``, band by band: the error
+               is then the compression error, and no full-size reference is held).
     decode:    texels chunk -> normals chunk (see :func:`decoder_for`).
     blend:     optional ``f(decoded normals, weight) -> (blended, reference blended)``.
     Sizes that are not multiples of 4 are padded by edge replication (``pad``) or refused.
+    The measures are made band by band of rows (the decoded normals, angles' temporaries and
+    PSNR sums of one band); the angles of every texel are kept for the statistics.
     """
     check_format(fmt)
     q = np.asarray(stored_u8)
@@ -419,30 +449,29 @@ def compress_and_check(
         raise ValueError(
             f"{fmt} needs sizes that are multiples of 4; {w} x {h} is not (allow padding or resize)"
         )
-    qp, _ = pad_to_blocks(q)
-    hp, wp = qp.shape[:2]
-    rgba = np.empty((hp, wp, 4), dtype=np.uint8)
-    map_rows(lambda r: pack_rgba(qp[r], fmt, out=rgba[r]), hp, wp)
-    data = encode_bc(rgba, fmt)
+    hp, wp = -(-h // 4) * 4, -(-w // 4) * 4
+    data = encode_bc(_blocks_rgba(q, fmt), fmt)  # the RGBA texels let go once encoded
     bgra = decode_bc_bgra(data, wp, hp, fmt)[:h, :w]
-    ref = np.asarray(reference, _F)
+    ref = None if reference is None else np.asarray(reference, _F)
     angles = np.empty((h, w), dtype=_F)
-    angles_c = np.empty((h, w), dtype=_F)
-    dec_u8 = np.empty((h, w, c), dtype=np.uint8) if keep_decoded else None
+    angles_c = angles if ref is None else np.empty((h, w), dtype=_F)
+    dec_u8 = np.empty((h, w, c), dtype=np.uint8) if keep_decoded or blend else None
 
-    def work(rows: slice) -> None:
+    def work(rows: slice) -> np.ndarray:
         d8 = unpack_u8(bgra[rows], fmt, c, bgra=True)
         if dec_u8 is not None:
             dec_u8[rows] = d8
         n_dec = decode(d8, rows)
-        angles[rows] = angle_deg(n_dec, ref[rows])
         n_raw = decode(q[rows], rows)
+        if ref is not None:
+            angles[rows] = angle_deg(n_dec, ref[rows])
         angles_c[rows] = angle_deg(n_dec, n_raw)
+        return squared_errors(q[rows], d8)
 
-    map_rows(work, h, w)
-    err = error_stats(angles)
+    # squared errors per channel, summed over the bands (exact integers: any order)
+    sse = np.sum(map_rows(work, h, w), axis=0, dtype=np.int64)
     cerr = error_stats(angles_c)
-    decoded = dec_u8 if dec_u8 is not None else unpack_u8(bgra, fmt, c, bgra=True)
+    err = cerr if ref is None else error_stats(angles)
     check = FormatCheck(
         format=fmt,
         width=w,
@@ -450,13 +479,14 @@ def compress_and_check(
         bytes=len(data),
         error=err,
         compression_error=cerr,
-        psnr_db=psnr(q, decoded),
+        psnr_db=psnr_of(sse, h * w),
         padded=padded,
         data=data,
-        decoded=dec_u8,
+        decoded=dec_u8 if keep_decoded else None,
     )
     if blend is not None:
-        n_all = decode(decoded, slice(0, h))
+        assert dec_u8 is not None
+        n_all = decode(dec_u8, slice(0, h))
         for wgt in BLEND_WEIGHTS:
             got, want = blend(n_all, wgt)
             check.blended[f"{wgt:g}"] = angular_error_stats(got, want)

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 import OpenImageIO as oiio
@@ -31,6 +31,7 @@ from wrinklepipe.metrics import Budget, Stats
 from wrinklepipe.model import blend, normal_to_pd, normalize, pd_to_normal
 from wrinklepipe.normals.compress import angular_error_stats
 from wrinklepipe.reuse import reused
+from wrinklepipe.workset import band_rows
 
 _F = np.float32
 
@@ -68,6 +69,44 @@ def resize(
             t = cols @ np.ascontiguousarray(t.transpose(1, 0, 2)).reshape(W, h * C)  # ... x
             out = np.ascontiguousarray(t.reshape(w, h, C).transpose(1, 0, 2), dtype=_F)
     return out[..., 0] if squeeze else out
+
+
+def resize_bands(
+    read: Callable[[slice], np.ndarray],
+    shape: tuple[int, int, int],
+    size: tuple[int, int],
+    filter: str = DEFAULT_FILTER,
+    rows: int | None = None,
+) -> Iterator[tuple[slice, np.ndarray]]:
+    """:func:`resize` of an image ``shape`` = (H, W, C) that is never whole: ``read(rows)``
+    gives the float32 source rows ``[rows, W, C]`` it is asked for. Yields ``(output rows,
+    values)`` band by band of at most ``rows`` output rows (default: a band of
+    :func:`wrinklepipe.workset.band_rows`), each band the rows :func:`resize` of the whole
+    image gives, bit for bit: every output texel is the same sum of the same weighted source
+    texels in the same order (the y weights of a band are its rows of the whole image's, taken
+    over the source rows they reach; the x pass is per row). A size that needs OpenImageIO's
+    own 2-D loop (an odd x magnification) is resized whole."""
+    H, W, C = shape
+    h, w = size
+    x_ratio = _magnification(W, w)
+    if x_ratio is None or (h, w) == (H, W):
+        whole = resize(read(slice(0, H)), (h, w), filter)
+        yield slice(0, h), whole.reshape(h, w, C)
+        return
+    ys = axis_weights(H, h, filter, 0, x_ratio)
+    cols = axis_weights(W, w, filter, 1)
+    step = max(1, rows if rows is not None else band_rows(W, 8 * C))
+    for r0 in range(0, h, step):
+        r1 = min(h, r0 + step)
+        part = ys[r0:r1]
+        s0, s1 = (int(part.indices.min()), int(part.indices.max()) + 1) if part.nnz else (0, 1)
+        src = np.asarray(read(slice(s0, s1)), dtype=_F)
+        t = (part[:, s0:s1] @ src.reshape(s1 - s0, W * C)).reshape(r1 - r0, W, C)
+        t = cols @ np.ascontiguousarray(t.transpose(1, 0, 2)).reshape(W, (r1 - r0) * C)
+        yield (
+            slice(r0, r1),
+            np.ascontiguousarray(t.reshape(w, r1 - r0, C).transpose(1, 0, 2), dtype=_F),
+        )
 
 
 def oiio_resize(a: np.ndarray, h: int, w: int, filter: str = DEFAULT_FILTER) -> np.ndarray:
