@@ -206,6 +206,34 @@ def test_batch_has_a_watchdog_by_default():
     assert LocalEngine(timeout=0).timeout is None
 
 
+def _killed_while_writing(job, conn, threads=None) -> None:  # noqa: ANN001
+    """A worker killed (SIGKILL, as the OOM killer does) while it builds asset ``b``'s output:
+    its lock and marked staging folder, with a file in it, are on disk; asset ``a`` is done."""
+    if job.id.startswith("a/"):
+        conn.send(("done", batch_worker._judged(job, "a", "converted", "ran", [])))
+        conn.close()
+        return
+    conn.send(("stage", "started"))
+    with atomic.staged_folder(job.output) as tmp:
+        (tmp / "half.gltf").write_text("{")
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_killed_workers_staging_folder_and_lock_are_removed_at_once(sources, tmp_path):
+    """The batch sees the worker die and removes what it left beside its output (its staging
+    folder, its lock, the folder made for it), not leaving them for a later run there."""
+    src = _copy(sources, tmp_path)
+    plan = plan_batch([str(src)], tmp_path / "out", force=True)
+    run = run_plan(plan, LocalEngine(jobs=1, target=_killed_while_writing), None)
+    by_id = {r.id: r for r in run.results}
+    assert by_id["a/manifest"].status != "error"
+    lost = by_id["b/manifest"]
+    assert lost.status == "error", lost
+    assert lost.problems[0]["message"] == "the worker process died (killed by SIGKILL)"
+    assert not _leftovers(tmp_path / "out")
+    assert not (tmp_path / "out" / "b").exists()  # made for the asset, empty: removed too
+
+
 # ------------------------------------------------------------------------------------------------
 # a Dask cluster whose worker pool is killed
 

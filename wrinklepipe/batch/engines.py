@@ -40,6 +40,7 @@ from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
+from wrinklepipe import staging
 from wrinklepipe.batch import worker
 from wrinklepipe.batch.fingerprint import tool_fingerprint
 from wrinklepipe.batch.plan import Job
@@ -122,6 +123,20 @@ def _quiet_distributed() -> Iterator[None]:
             logger.setLevel(level)
 
 
+def _remove_leftovers(job: Job, made_parent: bool = False) -> None:
+    """What a worker process killed mid-asset (SIGKILL, the OOM killer, a crash) left beside
+    its output: its staging folder and lock, removed now rather than by the next run there
+    (:func:`wrinklepipe.staging.remove_dead_leftovers`: only a dead run's, marked as ours);
+    with ``made_parent`` (the folder did not exist before this asset, and no other asset
+    running writes into it) that folder too, if nothing else is in it."""
+    parent = job.output.parent
+    with contextlib.suppress(OSError):
+        staging.remove_dead_leftovers(parent)
+    if made_parent:
+        with contextlib.suppress(OSError):
+            parent.rmdir()  # (only when empty)
+
+
 def _lost(job: Job, message: str) -> AssetResult:
     return AssetResult.could_not_run(
         job, [{"file": job.manifest_rel, "key": "", "message": message}]
@@ -174,10 +189,17 @@ class LocalEngine:
         ctx = self._context()
         pending = deque(jobs)
         running: dict[Any, tuple[Any, Job, float]] = {}
+        fresh: dict[str, bool] = {}  # a job's output folder's parent did not exist before it
+
+        def made(job: Job) -> bool:
+            others = {j.output.parent for _, j, _ in running.values() if j is not job}
+            return fresh.get(job.id, False) and job.output.parent not in others
+
         try:
             while pending or running:
                 while pending and len(running) < self.jobs:
                     job = pending.popleft()
+                    fresh[job.id] = not job.output.parent.exists()
                     recv, send = ctx.Pipe(duplex=False)
                     proc = ctx.Process(
                         target=self.target,
@@ -197,6 +219,7 @@ class LocalEngine:
                         proc.join()
                         del running[conn]
                         conn.close()
+                        _remove_leftovers(job, made(job))
                         yield _lost(job, f"the worker process died ({_exit_text(proc.exitcode)})")
                         continue
                     if kind == "stage":
@@ -208,16 +231,20 @@ class LocalEngine:
                         del running[conn]
                         conn.close()
                         yield payload
-                yield from self._overdue(running)
+                yield from self._overdue(running, made)
         finally:
             for conn, (proc, _, _) in running.items():
                 _stop(proc)
                 conn.close()
+            for _, job, _ in running.values():  # (every one stopped: none writes any more)
+                _remove_leftovers(job, fresh.get(job.id, False))
 
     def _wait(self) -> float | None:
         return None if self.timeout is None else 0.5
 
-    def _overdue(self, running: dict[Any, tuple[Any, Job, float]]) -> Iterator[AssetResult]:
+    def _overdue(
+        self, running: dict[Any, tuple[Any, Job, float]], made: Callable[[Job], bool]
+    ) -> Iterator[AssetResult]:
         if self.timeout is None:
             return
         now = time.monotonic()
@@ -225,6 +252,7 @@ class LocalEngine:
             proc, job, _ = running.pop(conn)
             _stop(proc)
             conn.close()
+            _remove_leftovers(job, made(job))  # (SIGKILLed when SIGTERM did not end it)
             yield _lost(
                 job,
                 f"stopped by the watchdog after {self.timeout:g} s (--timeout S sets it, "
