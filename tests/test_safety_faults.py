@@ -228,3 +228,28 @@ def test_a_kill_while_a_staging_folder_is_removed_leaves_nothing_unowned(source,
     assert main(["convert", str(source), "-o", str(parent / "out2"), "--no-validate"]) == 0
     assert main([*args, "--force"]) == 0
     assert sorted(p.name for p in parent.iterdir()) == ["out1", "out2"]
+
+
+def test_a_kill_between_the_renames_of_force_keeps_the_previous_output(source, tmp_path):
+    """``--force`` moves the previous output into its staging folder, then renames the new one
+    in. Killed between the two, the run left no output and the previous one only inside its
+    staging folder, which the next run there removed as a dead run's: the output was lost.
+    Now it is put back when that staging folder is removed."""
+    parent = tmp_path / "runs"
+    parent.mkdir()
+    out = parent / "out"
+    args = ["convert", str(source), "-o", str(out), "--no-validate", "--force"]
+    assert main(args) == 0
+    previous = _tree(out)
+    (out / "mine.txt").write_text("the previous output, as it was\n")  # tell it apart
+    previous["mine.txt"] = (out / "mine.txt").read_bytes()
+    steps = _steps(args, tmp_path / "steps.json")  # (replaces it: the same, without mine.txt)
+    (out / "mine.txt").write_text("the previous output, as it was\n")
+    aside = next(i for i, (op, p) in enumerate(steps, 1) if op == "rename" and p == str(out))
+    publish = next(i for i, (op, _) in enumerate(steps, 1) if op == "rename" and i > aside)
+    assert CliRun(args, publish).wait() == -signal.SIGKILL  # killed before the new one is in
+    assert not out.exists()
+    # the next run beside it meets the dead run's lock and staging folder
+    assert main(["convert", str(source), "-o", str(parent / "out2"), "--no-validate"]) == 0
+    assert _tree(out) == previous
+    assert sorted(p.name for p in parent.iterdir()) == ["out", "out2"]

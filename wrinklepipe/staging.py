@@ -291,10 +291,27 @@ def _in_open_staging(path: Path) -> bool:
         return any(p.startswith(d) for d in _OPEN_STAGING)
 
 
+def _put_back_previous(folder: Path) -> None:
+    """``--force`` moves the output it replaces into its staging folder as ``NAME.previous``,
+    then renames the new output in: a run stopped between the two (``kill -9``, a signal) left
+    no output but the previous one in here. Rename it back, if the output's place is still
+    free, before the staging folder goes; once the new output is in place it is removed."""
+    stem = folder.name[1:].removesuffix(STAGING_SUFFIX).removesuffix(STAGING_NEW_SUFFIX)
+    name = stem.rpartition(".")[0]  # ".NAME.<random>.wrinklepipe-partial" -> NAME
+    previous = folder / f"{name}.previous"
+    if not name or previous.is_symlink() or not previous.is_dir():
+        return
+    with contextlib.suppress(OSError):  # (taken meanwhile: it goes with the staging folder)
+        if not os.path.lexists(folder.parent / name):
+            os.rename(previous, folder.parent / name)
+
+
 def _remove_staging(folder: Path, fd: int) -> None:
     """Remove a staging folder: its contents first, the marker last (a kill part-way through
-    leaves a folder still marked as a dead run's, which the next run removes)."""
+    leaves a folder still marked as a dead run's, which the next run removes); a previous
+    output that ``--force`` had moved into it and not yet replaced is put back first."""
     try:
+        _put_back_previous(folder)
         try:
             children = list(folder.iterdir())
         except FileNotFoundError:  # another run removing the same dead run's folder was first
