@@ -16,7 +16,7 @@ from hypothesis.extra import numpy as hnp
 from wrinklepipe import codec
 from wrinklepipe.demo import character
 from wrinklepipe.metrics import angle_deg
-from wrinklepipe.normals import bc4
+from wrinklepipe.normals import bc4, bc4_block, bc4_search
 
 SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "data" / "gltf-samples"
 
@@ -269,3 +269,39 @@ def test_palette_entries_by_reciprocal_multiply_are_exact():
         j = np.arange(n + 1, dtype=f)[:, None]
         want = (np.arange(n + 1)[:, None] * np.arange(256)[None, :]) // n
         assert np.array_equal(np.floor(j * (r * (f(1) / f(n)))), want.astype(f))
+
+
+def _every_round(x: np.ndarray, hard_step: int) -> np.ndarray:
+    """BC4 blocks of target blocks ``x`` [N, 16] by the encoder's kernels run as plain Python
+    with every round of steps 2-3 run (no round is skipped: ``_moved`` always answers yes, so
+    the exact positions are recomputed after the search too)."""
+    bc4_search.compiled()
+    out = np.empty((x.shape[0], 8), np.uint8)
+    with pytest.MonkeyPatch.context() as mp:
+        for mod in (bc4_search, bc4_block):
+            for name, fn in list(vars(mod).items()):
+                if hasattr(fn, "py_func"):  # a compiled kernel: back to its Python
+                    mp.setattr(mod, name, fn.py_func)
+        mp.setattr(bc4_search, "_moved", lambda s, c: True)
+        bc4_search._encode(x, hard_step, 0, out)
+    return out
+
+
+@settings(max_examples=8, deadline=None)
+@given(
+    hnp.arrays(np.uint8, (4, 16)),
+    st.sampled_from(["raw", "smooth", "float"]),
+    st.sampled_from([1, 4]),
+)
+def test_skipped_rounds_and_kept_positions_change_no_block(values, kind, hard_step):
+    """The compiled search skips a Lloyd or neighbour round after one that changed no lane's
+    best, and packs each block with the exact positions computed when its pair was chosen:
+    the same blocks as every round run and the positions computed again (random blocks: flat,
+    smooth and wild ones, hard blocks and the tail windows)."""
+    v = values.astype(np.float32)
+    if kind == "smooth":
+        v = np.clip(100 + np.cumsum(v - 127.5, axis=1) / 16, 0, 255).astype(np.float32)
+    elif kind == "float":
+        v = v * np.float32(0.25) + np.float32(60.37)
+    want = _every_round(bc4._targets(v), hard_step)
+    assert np.array_equal(bc4.bc4_blocks(v, hard_step=hard_step), want)

@@ -246,11 +246,29 @@ def _around(X: np.ndarray, S: np.ndarray, C: np.ndarray, A: np.ndarray, tail: bo
                 _consider(X, A, 0, 1, _F(dl), _F(dh), S, C, tail)
 
 
+@kernel(inline="always")
+def _mark(S: np.ndarray, C: np.ndarray) -> None:
+    """Each lane's best score into ``C[3]`` (for :func:`_moved`)."""
+    for b in range(LANES):
+        C[3, b] = S[0, b]
+
+
+@kernel(inline="always")
+def _moved(S: np.ndarray, C: np.ndarray) -> bool:
+    """Whether any lane's best changed since :func:`_mark` (a new best scores strictly lower
+    than the one it replaces)."""
+    n = 0
+    for b in range(LANES):
+        n += 1 if S[0, b] != C[3, b] else 0
+    return n > 0
+
+
 @kernel()
-def _search(X, S, R, J, E, W, C, A) -> None:  # noqa: ANN001 (numba kernels: arrays)
+def _search(X, S, R, J, E, W, C, A) -> bool:  # noqa: ANN001 (numba kernels: arrays)
     """Steps 1-3 for a group: each lane's 8-value endpoints into ``S``. ``R`` [8, LANES],
-    ``J``, ``E`` [16, LANES], ``W`` [4, LANES], ``C`` [3, LANES], ``A`` [5, LANES] are
-    scratch."""
+    ``J``, ``E`` [16, LANES], ``W`` [4, LANES], ``C`` [4, LANES], ``A`` [5, LANES] are
+    scratch. Returns whether ``J``, ``E``, ``W`` hold :func:`_exact_lanes` of ``S`` (no best
+    changed after the last Lloyd round's)."""
     _range(X, R)
     for b in range(LANES):
         R[2, b] = np.floor(R[0, b])
@@ -273,11 +291,23 @@ def _search(X, S, R, J, E, W, C, A) -> None:  # noqa: ANN001 (numba kernels: arr
             for b in range(LANES):
                 J[i, b] = np.rint(E[i, b] * d) + j0
         _fit(X, J, S, C, A)
-    for _ in range(2):
+    # Two Lloyd rounds, then two rounds around the best. A round after one that changed no
+    # lane's best would score the same pairs again (the same scores, none strictly lower than
+    # the best): it is skipped.
+    _exact_lanes(X, S, J, E, W)
+    _mark(S, C)
+    _fit(X, J, S, C, A)
+    if _moved(S, C):
         _exact_lanes(X, S, J, E, W)
+        _mark(S, C)
         _fit(X, J, S, C, A)
-    for _ in range(2):
+    current = not _moved(S, C)  # J, E, W still hold the exact positions of each lane's best
+    _mark(S, C)
+    _around(X, S, C, A, False)
+    if _moved(S, C):
         _around(X, S, C, A, False)
+        current = False
+    return current
 
 
 @kernel()
@@ -351,6 +381,14 @@ def _gather(x: np.ndarray, ids: np.ndarray, g: int, X: np.ndarray) -> int:
     return n
 
 
+@kernel(inline="always")
+def _keep(J: np.ndarray, W: np.ndarray, b: int, codes: np.ndarray, sse: np.ndarray, k: int):
+    """Lane ``b``'s exact positions ``J`` and squared error ``W[0]`` as block ``k``'s."""
+    for i in range(16):
+        codes[k, i] = J[i, b]
+    sse[k] = W[0, b]
+
+
 @kernel()
 def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
     """BC4 blocks ``out`` [N, 8] of target blocks ``x`` [N, 16]; ``reference`` > 0: the
@@ -371,18 +409,21 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
     whi = np.empty(n, f)
     inside = np.empty(n, f)
     before = np.empty(n, f)  # the search pair's exact tail score
+    codes = np.empty((n, 16), f)  # the exact nearest positions of each block's pair ...
+    sse = np.empty(n, f)  # ... and their squared error (kept: packing needs no second pass)
     hard = np.zeros(n, np.bool_)
     tail = np.zeros(n, np.bool_)
     every = np.arange(n)
     # steps 1-3, and which blocks are hard (a texel 2 levels or more off)
     for g in range(0, n, LANES):
         m = _gather(x, every, g, X)
-        _search(X, S, R, J, E, W, C, A)
-        _exact_lanes(X, S, J, E, W)
+        if not _search(X, S, R, J, E, W, C, A):
+            _exact_lanes(X, S, J, E, W)
         for b in range(m):
             k = g + b
             lo[k] = S[1, b]
             hi[k] = S[2, b]
+            _keep(J, W, b, codes, sse, k)
             hard[k] = W[1, b] >= _TAU
             inside[k] = min(np.sqrt(W[0, b]), _INSIDE)
             before[k] = W[2, b]
@@ -405,6 +446,7 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
             if not tail[k] and W[2, b] < before[k]:  # the scorer's guess, confirmed exactly
                 lo[k] = S[1, b]
                 hi[k] = S[2, b]
+                _keep(J, W, b, codes, sse, k)
             wlo[k] = S[1, b]
             whi[k] = S[2, b]
     # ... and the whole window for the blocks still 3 levels or more off
@@ -423,6 +465,7 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
             if W[2, b] < before[k]:
                 lo[k] = S[1, b]
                 hi[k] = S[2, b]
+                _keep(J, W, b, codes, sse, k)
     # the exhaustive reference: every pair of a wide window, exactly scored
     if reference > 0:
         j = np.empty(16, f)
@@ -432,20 +475,19 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
             xb = x[k]
             st[1] = lo[k]
             st[2] = hi[k]
-            sse = bc4_block.exact8(xb, lo[k], hi[k] - lo[k], j, e)
-            bc4_block.window_exact(xb, st, reference, np.sqrt(sse))
+            s8 = bc4_block.exact8(xb, lo[k], hi[k] - lo[k], j, e)
+            bc4_block.window_exact(xb, st, reference, np.sqrt(s8))
             lo[k] = st[1]
             hi[k] = st[2]
-    # step 5 and packing: exact indices of each block's pair
-    codes = np.empty(16, f)
-    for g in range(0, n, LANES):
-        m = _gather(x, every, g, X)
-        for b in range(LANES):
-            k = g + min(b, m - 1)
-            S[1, b] = lo[k]
-            S[2, b] = hi[k]
-        _exact_lanes(X, S, J, E, W)
-        for b in range(m):
-            for i in range(16):
-                codes[i] = J[i, b]
-            bc4_block.finish(x[g + b], S[1, b], S[2, b], W[0, b], codes, out[g + b])
+        for g in range(0, n, LANES):  # the exact positions of the reference's pairs
+            m = _gather(x, every, g, X)
+            for b in range(LANES):
+                k = g + min(b, m - 1)
+                S[1, b] = lo[k]
+                S[2, b] = hi[k]
+            _exact_lanes(X, S, J, E, W)
+            for b in range(m):
+                _keep(J, W, b, codes, sse, g + b)
+    # step 5 and packing: each block's pair with the exact positions kept when it was chosen
+    for k in range(n):
+        bc4_block.finish(x[k], lo[k], hi[k], sse[k], codes[k], out[k])
