@@ -289,7 +289,7 @@ def _every_round(x: np.ndarray, hard_step: int) -> np.ndarray:
 
 @settings(max_examples=8, deadline=None)
 @given(
-    hnp.arrays(np.uint8, (4, 16)),
+    hnp.arrays(np.uint8, (8, 32)),
     st.sampled_from(["raw", "smooth", "float"]),
     st.sampled_from([1, 4]),
 )
