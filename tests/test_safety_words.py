@@ -115,6 +115,30 @@ def test_a_tiny_pd_scale_is_refused_without_runtime_warnings(source, tmp_path, c
     _one_line(capsys, "[pd_scale]", "0.015625")
 
 
+@pytest.mark.parametrize(
+    "args, flag",
+    [
+        (["--encoding", "pd", "--scale", "1e-300"], "--scale"),
+        (["--encoding", "pd", "--scale", "1e300"], "--scale"),
+        (["--encoding", "diff", "--base", "{base}", "--gain", "1e300"], "--gain"),
+    ],
+)
+def test_encode_normals_scale_and_gain_out_of_range_are_one_line(
+    source, tmp_path, capsys, args, flag
+):
+    """encode-normals' --scale/--gain keep the range a manifest's pd_scale has: beyond it the
+    slopes overflowed float32 (numpy's RuntimeWarnings on the terminal, a 180-degree map
+    written with exit 0)."""
+    base = str(source.parent / "base_normal.png")
+    out = tmp_path / "en.png"
+    argv = ["encode-normals", str(source.parent / "wrinkle_stretch.png"), "-o", str(out)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a RuntimeWarning on the way fails the test
+        assert main(argv + [a.format(base=base) for a in args]) == 2
+    _one_line(capsys, f"{flag}: ", "is out of range; expected auto or a number >= 0.015625")
+    assert not out.exists()
+
+
 def test_a_manifest_with_a_utf8_bom_is_read(source, tmp_path, capsys):
     src = _copy(source.parent, tmp_path) / source.name
     src.write_bytes(b"\xef\xbb\xbf" + src.read_bytes())

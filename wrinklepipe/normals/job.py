@@ -25,6 +25,7 @@ from wrinklepipe.normals import encode as enc
 from wrinklepipe.normals import footprint as fp
 from wrinklepipe.normals import ktx2 as ktx2_mod
 from wrinklepipe.normals import mips, resample, uastc
+from wrinklepipe.normals.encode import MAX_PD_SCALE, MIN_PD_SCALE
 from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
 from wrinklepipe.options import DEFAULT_MAX_P99_DEG
 
@@ -291,8 +292,15 @@ def _checked_format(
         raise input_error(src, "encoding diff needs --base (the neutral face's normal map)")
     if o.encoding == "diff" and fmt in ("bc5", "bc3nm"):
         raise input_error(out, f"a diff map has three channels; {fmt} holds two (use bc1 or bc7)")
-    if isinstance(o.scale, float) and not (o.scale > 0 and math.isfinite(o.scale)):
-        raise input_error(src, f"--scale must be a positive number or auto, got {o.scale}")
+    # the range a manifest's pd_scale has (an auto scale or gain stays inside it too): beyond
+    # it the slopes overflow float32 (numpy's RuntimeWarnings, 180-degree errors)
+    for flag, value in (("--scale", o.scale), ("--gain", o.gain)):
+        if isinstance(value, (int, float)) and not MIN_PD_SCALE <= value <= MAX_PD_SCALE:
+            raise input_error(
+                flag,
+                f"{value:g} is out of range; expected auto or a number >= {MIN_PD_SCALE:g} and "
+                f"<= {MAX_PD_SCALE:g}",
+            )
     return fmt, container
 
 
