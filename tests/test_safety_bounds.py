@@ -250,3 +250,30 @@ def test_a_size_option_is_costed_before_allocation(source, tmp_path, capsys, com
     assert rc == 2 and len(lines) == 1 and lines[0].startswith("error: --size: "), err
     assert needle in lines[0] and "internal error" not in err and "out of memory" not in err
     assert not (tmp_path / "out").exists() and not (tmp_path / "out.png").exists()
+
+
+@pytest.mark.parametrize(
+    "option, needle",
+    [
+        (["--scale", "1e300"], "--blur: 1 x 1e+300 (--scale) makes a blur of 1e+300 pixels"),
+        (["--furrow-sigma", "1e300"], "--furrow-sigma: 1e+300 x 1 (--scale) makes a blur"),
+        (["--blur", "5000"], "--blur: 5000 x 1 (--scale) makes a blur of 5000 pixels"),
+    ],
+)
+def test_a_capture_blur_wider_than_the_photo_is_refused(tmp_path, capsys, option, needle):
+    """capture's blurs (a sigma times --scale) are costed against the photo before they run:
+    a 1e300-pixel sigma was an internal error ('Maximum allowed size exceeded'), a merely huge
+    one minutes of filtering."""
+    s = tmp_path / "session"
+    assert main(["capture", "--example", str(s)]) == 0
+    capsys.readouterr()
+    args = ["capture", str(s / "neutral.png"), str(s / "expression.png")]
+    args += ["--neutral-landmarks", str(s / "neutral.json")]
+    args += ["--expression-landmarks", str(s / "expression.csv"), "-o", str(tmp_path / "out")]
+    with deadline(60):
+        rc = main([*args, *option])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error")]
+    assert rc == 2 and len(lines) == 1 and needle in lines[0], err
+    assert "wider than the photo (192 x 192)" in lines[0]
+    assert not (tmp_path / "out").exists()

@@ -20,7 +20,7 @@ from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.capture import landmarks as L
 from wrinklepipe.capture.evaluate import errors as truth_errors
 from wrinklepipe.capture.orientation import OrientationOptions
-from wrinklepipe.capture.pipeline import CaptureOptions, CaptureResult, capture
+from wrinklepipe.capture.pipeline import CaptureOptions, CaptureResult, capture, sigma_scale
 from wrinklepipe.capture.ratio import RatioOptions
 from wrinklepipe.capture.report import (
     UNOBSERVABLE,
@@ -156,7 +156,8 @@ def check_options(inputs: CaptureInputs, o: CaptureJobOptions) -> None:
     ]
     if missing:
         raise InputError([Problem("<arguments>", f"missing {m}") for m in missing])
-    checks = [("--blur", o.blur), ("--dark", o.dark), ("--nz", o.nz)]
+    checks = [("--blur", o.blur), ("--furrow-sigma", o.furrow_sigma), ("--dark", o.dark)]
+    checks.append(("--nz", o.nz))
     if o.scale is not None:
         checks.append(("--scale", o.scale))
     for flag, val in checks:
@@ -193,6 +194,28 @@ def check_options(inputs: CaptureInputs, o: CaptureJobOptions) -> None:
             "--neutral-mesh needs --texture-landmarks (the UVs that put the landmarks on the "
             "mesh and define the camera)",
         )
+
+
+def _check_sigmas(copts: CaptureOptions, width: int, height: int) -> None:
+    """Every blur the capture runs (its sigma times ``--scale``) at most as wide as the photo,
+    before any runs: a wider one blurs nothing more and costs without bound (a 1e300-pixel
+    sigma was an internal error, 'Maximum allowed size exceeded')."""
+    k = sigma_scale(width, copts)
+    side = max(width, height)
+    for flag, sigma in (
+        ("--blur", copts.ratio.blur_sigma),
+        ("--furrow-sigma", copts.orientation.furrow_sigma),
+        ("--scale", copts.orientation.structure_sigma),
+        ("--scale", copts.ratio.exposure_ring),
+    ):
+        if sigma * k > side:
+            what = f"{sigma:g} x {k:g} (--scale)" if flag != "--scale" else f"{k:g} x {sigma:g}"
+            lower = flag if flag == "--scale" else f"{flag} or --scale"
+            raise input_error(
+                flag,
+                f"{what} makes a blur of {sigma * k:g} pixels, wider than the photo "
+                f"({width} x {height}); lower {lower}",
+            )
 
 
 def _snippet(state: str) -> bytes:
@@ -247,6 +270,7 @@ def run_capture(inputs: CaptureInputs, options: CaptureJobOptions | None = None)
         orientation=OrientationOptions(method=o.orientation, furrow_sigma=o.furrow_sigma),
         scale=o.scale,
     )
+    _check_sigmas(copts, info0.width, info0.height)
     side_img = _side_photo(inputs, o, info1) if inputs.side_lit else None
     res = capture(
         i0,
