@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import shutil
 import signal
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -277,3 +278,30 @@ def test_a_capture_blur_wider_than_the_photo_is_refused(tmp_path, capsys, option
     assert rc == 2 and len(lines) == 1 and needle in lines[0], err
     assert "wider than the photo (192 x 192)" in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "option, needle",
+    [
+        (["--morph", "brow_raise=1e300"], "--morph: brow_raise=1e300: a weight is at most 10"),
+        (["--morph", "brow_raise=1e30"], "--morph: brow_raise=1e30: a weight is at most 10"),
+        (["--morph", "brow_raise=1", "--texture-space", "64", "--blur", "1e300"],
+         "--blur: 1e+300 is out of range; expected 0..64 texels"),
+        (["--morph", "brow_raise=1", "--texture-space", "64", "--blur", "-1"],
+         "--blur: -1 is out of range; expected 0..64 texels"),
+    ],
+)  # fmt: skip
+def test_dynamic_weights_and_blur_out_of_range_are_one_line(
+    source, tmp_path, capsys, option, needle
+):
+    """dynamic's morph weights (1e300: NaN weights, an internal error writing JSON; 1e30: a
+    stray numpy warning line) and texture-space blur (1e300: 'Maximum allowed size exceeded')
+    are checked before anything is computed."""
+    out = tmp_path / "w.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rc = main(["dynamic", str(source.parent / "head.glb"), "-o", str(out), *option])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error")]
+    assert rc == 2 and len(lines) == 1 and needle in lines[0], err
+    assert "Warning" not in err and not out.exists()

@@ -79,6 +79,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
 
 
+#: The largest morph weight ``--morph`` takes, either sign: Blender's shape-key slider range.
+MAX_MORPH_WEIGHT = 10.0
+
+
 def _parse_morphs(items: list[str]) -> dict[str, float]:
     out: dict[str, float] = {}
     for item in items:
@@ -89,6 +93,12 @@ def _parse_morphs(items: list[str]) -> dict[str, float]:
             w = float("nan")
         if not sep or not name or not np.isfinite(w):
             raise input_error("<arguments>", f"--morph expects NAME=WEIGHT, got {item!r}")
+        if abs(w) > MAX_MORPH_WEIGHT:  # (1e30 moved the vertices past float32: NaN weights)
+            raise input_error(
+                "--morph",
+                f"{name}={val}: a weight is at most {MAX_MORPH_WEIGHT:g} either way (Blender's "
+                "shape-key range)",
+            )
         out[name] = w
     return out
 

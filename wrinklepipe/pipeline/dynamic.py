@@ -141,6 +141,12 @@ def dynamic_weights(
     chooses, and the summary (counts, range, seam jump, the texture-space variant's)."""
     if opt.texture_space is not None and not 8 <= opt.texture_space <= 8192:
         raise input_error("<arguments>", "--texture-space must be in 8..8192")
+    if opt.texture_space is not None and not 0 <= opt.blur <= opt.texture_space:
+        raise input_error(  # (wider than the texture: an internal error, or minutes, for nothing)
+            "--blur",
+            f"{opt.blur:g} is out of range; expected 0..{opt.texture_space} texels (at most "
+            "--texture-space)",
+        )
     parts = load_meshes(source, LoadOptions(generate_uvs=opt.texture_space is not None))
     mesh = parts[0] if len(parts) == 1 else merge_meshes(parts)
     rest, deformed = rest_and_deformed(source, mesh, parts, opt)
