@@ -46,6 +46,7 @@ from wrinklepipe.fidelity.sampling import (
     sample_at,
     sample_masks_at,
 )
+from wrinklepipe.masks.stack import float_masks
 from wrinklepipe.metrics import (
     Budget,
     Stats,
@@ -120,7 +121,7 @@ def sample(
         s.raw["states"] = st
         s.readers["states"] = states_reader or Reader()
     if masks is not None:
-        m = np.asarray(masks, _F)
+        m = float_masks(masks)  # masks held as integers stay so (sampled a mask at a time)
         s.masks = sample_masks_at(m, ref.shape, u)
         s.raw["masks"] = m
         if support is not False:

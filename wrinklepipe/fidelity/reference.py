@@ -18,6 +18,7 @@ from wrinklepipe.fidelity.sampling import (
     sample_masks_at,
 )
 from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
+from wrinklepipe.masks.stack import MaskStack
 from wrinklepipe.reuse import reused
 from wrinklepipe.workset import band_rows
 
@@ -361,18 +362,20 @@ def prepare(
     H, W = b.shape[:2]
     if st.shape[1:3] != (H, W):
         raise ValueError(f"source states {st.shape[1:3]} and base {(H, W)} differ in size")
-    m = np.asarray(masks, _F)
+    m = masks if isinstance(masks, MaskStack) else np.asarray(masks, _F)
     if m.shape[1:] != (H, W):
-        m = sample_masks_at(m, (H, W), np.arange(H * W)).reshape(-1, H, W)
-    flat_m = m.reshape(m.shape[0], H * W)
+        m = sample_masks_at(np.asarray(m, _F), (H, W), np.arange(H * W)).reshape(-1, H, W)
     on = [_regions_on(p.weights) for p in poses]
     used = np.flatnonzero(np.any(on, axis=0)) if on else np.zeros(0, np.int64)
-    # texels some weighted region touches: one pass over the masks (then only those texels)
+    # texels some weighted region touches: one pass over the masks (then only those texels),
+    # a mask at a time (a MaskStack's masks as float32 one by one, never all at once)
     any_active = np.zeros(H * W, bool)
     for r in used:
-        any_active |= flat_m[r] > 0
+        any_active |= np.asarray(m[r]).reshape(H * W) > 0
     union = np.flatnonzero(any_active)
-    m_u = flat_m[:, union]
+    m_u = np.empty((m.shape[0], union.size), _F)
+    for r in range(m.shape[0]):
+        m_u[r] = np.asarray(m[r]).reshape(H * W)[union]
     base_u = planes(b.reshape(H * W, 3)[union])  # [3, N]
     states_u = planes(st.reshape(st.shape[0], H * W, -1)[:, union])  # [K, C, N]
     base_pd = _pd_planes(base_u) if encoding == "pd" else None

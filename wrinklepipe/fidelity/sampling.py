@@ -14,6 +14,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from wrinklepipe import model
+from wrinklepipe.masks.stack import MaskStack
 
 _F = np.float32
 
@@ -177,7 +178,14 @@ def taps(shape: tuple[int, int], grid: tuple[int, int], flat: np.ndarray) -> np.
 
 
 def sample_masks_at(masks: np.ndarray, shape: tuple[int, int], flat: np.ndarray) -> np.ndarray:
-    """Masks ``[R, h, w]`` sampled at texels ``flat`` of the ``shape`` grid -> ``[R, n]``."""
+    """Masks ``[R, h, w]`` sampled at texels ``flat`` of the ``shape`` grid -> ``[R, n]``
+    (masks held as integers, a :class:`~wrinklepipe.masks.stack.MaskStack`: a mask at a time,
+    each sampled on its own as every channel is)."""
+    if isinstance(masks, MaskStack):
+        out = np.empty((len(masks), len(flat)), _F)
+        for r in range(len(masks)):
+            out[r] = sample_at(masks[r], shape, flat)[:, 0]
+        return out
     m = np.asarray(masks, _F)
     return np.ascontiguousarray(sample_at(np.moveaxis(m, 0, -1), shape, flat).T)
 

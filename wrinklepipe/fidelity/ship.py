@@ -14,6 +14,7 @@ import numpy as np
 from wrinklepipe import codec, reuse
 from wrinklepipe.fidelity.sampling import CHUNK_TEXELS, Reader, chunks
 from wrinklepipe.masks import resample_masks
+from wrinklepipe.masks.stack import float_masks
 from wrinklepipe.normals import compress as nc
 
 _F = np.float32
@@ -202,7 +203,7 @@ def mask_levels(masks: np.ndarray, min_size: int = 1) -> MaskLevels:
     """``{side: masks as shipped}``: the source masks as given, and every 2 x 2 box halving of
     them down to ``min_size`` (a box of boxes is the box of the whole factor, as
     :func:`wrinklepipe.masks.resample_masks` gives) stored in 8 bits."""
-    m = np.asarray(masks, _F)
+    m = float_masks(masks)  # a MaskStack stays integers: its masks are read a band at a time
     h = m.shape[1]
     out = {h: m}
     acc = m

@@ -16,6 +16,7 @@ import numpy as np
 
 from wrinklepipe.errors import InputError, Problem
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, ImageInfo, read_image
+from wrinklepipe.masks.stack import MaskStack, quantized, to_float
 
 #: Largest difference between the R, G and B channels of a "grey" mask (below one 16-bit step).
 GREY_TOLERANCE = 0.5 / 65535.0
@@ -153,8 +154,13 @@ def read_masks(
     names: Sequence[str] | None = None,
     invert: bool = False,
     max_pixels: int = DEFAULT_MAX_PIXELS,
+    integers: bool = False,
 ) -> MaskSet:
-    """Read several mask files (region names default to the file stems) into a :class:`MaskSet`."""
+    """Read several mask files (region names default to the file stems) into a :class:`MaskSet`.
+
+    ``integers``: hold the stack in its files' integers (a :class:`~wrinklepipe.masks.stack.
+    MaskStack`, 1 or 2 bytes a texel instead of 4) when every mask's float values are its
+    integers' exactly (8- or 16-bit files, not inverted); else, as without it, float32."""
     paths = [Path(p) for p in paths]
     if names is None:
         names = [p.stem for p in paths]
@@ -174,8 +180,16 @@ def read_masks(
             continue
         shapes.append(m.shape)
         if stacked is None:
-            stacked = np.empty((len(paths), *m.shape), np.float32)
+            whole = integers and info.format in ("uint8", "uint16")
+            dtype = np.dtype(info.format) if whole else np.dtype(np.float32)
+            stacked = np.empty((len(paths), *m.shape), dtype)
         if m.shape == stacked.shape[1:]:
+            if stacked.dtype != np.float32:
+                q = quantized(m, 8 * stacked.dtype.itemsize)
+                if q is None:  # not its integers: the stack (exact so far) as float32
+                    stacked = to_float(stacked)
+                else:
+                    m = q
             stacked[i] = m
         del m
         bits = max(bits, _bits_of(info))
@@ -183,4 +197,5 @@ def read_masks(
         raise InputError(problems)
     check_masks(shapes, list(names), paths)
     assert stacked is not None  # check_masks refuses no masks
-    return MaskSet(tuple(names), stacked, tuple(str(p) for p in paths), bits)
+    held: np.ndarray | MaskStack = stacked if stacked.dtype == np.float32 else MaskStack(stacked)
+    return MaskSet(tuple(names), held, tuple(str(p) for p in paths), bits)  # type: ignore[arg-type]

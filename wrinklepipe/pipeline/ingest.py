@@ -180,9 +180,11 @@ def read_maps(
         mask_arr = np.stack(masks).astype(np.float32)
     else:
         ms = wm.read_masks(
-            [r.mask for r in manifest.regions], names=[r.name for r in manifest.regions]
+            [r.mask for r in manifest.regions],
+            names=[r.name for r in manifest.regions],
+            integers=True,  # held in the files' integers for the run (masks/stack.py)
         )
-        mask_arr = np.asarray(ms.masks, np.float32)
+        mask_arr = ms.masks
     return base, np.stack(states), mask_arr, notes
 
 
@@ -267,7 +269,7 @@ def check_masks_on_mesh(masks: np.ndarray, mesh: Mesh, manifest: Any) -> None:
     vx = np.clip(np.floor(uv[ok, 0] * w), 0, w - 1).astype(np.int64)
     covered[vy, vx] = True
     # one mask at a time (no flags of every mask at full size)
-    touched = [bool(np.logical_and(m > 0, covered).any()) for m in np.asarray(masks)]
+    touched = [bool(np.logical_and(masks[i] > 0, covered).any()) for i in range(r)]
     missing = [reg.name for reg, t in zip(manifest.regions, touched) if not t]
     if missing:
         where = ", ".join(p.name for p in mesh.parts) or mesh.name

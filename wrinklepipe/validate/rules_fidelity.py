@@ -22,6 +22,7 @@ import numpy as np
 from wrinklepipe import fidelity as fd
 from wrinklepipe import model
 from wrinklepipe.masks import infer_side
+from wrinklepipe.masks.stack import float_masks
 from wrinklepipe.metrics import Budget, Stats, angle_deg, weighted_stats
 from wrinklepipe.names import noun
 from wrinklepipe.normals import alignment as al
@@ -445,7 +446,7 @@ def render_fidelity(
     states_src = np.stack([tx.bilinear(s, uv) for s in enc])
     if a.encoding in ("full", "composite"):
         states_src = model.normalize(states_src)
-    masks_src = tx.bilinear_planes(np.asarray(a.masks, np.float32), uv).T
+    masks_src = tx.bilinear_planes(float_masks(a.masks), uv).T
     texture_budget, which = budgets(ctx)
     o = ctx.options
     # the GPU's own filtering error (WP-RND-001 bounds it) is allowed on top of the budget

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wrinklepipe.masks.stack import float_masks
 from wrinklepipe.names import plural
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
@@ -119,7 +120,7 @@ def check_channel_table(ctx: Context) -> list[Issue]:
 
 def _masks_for_rules(ctx: Context) -> list[tuple[np.ndarray, str]]:
     """(masks, label) pairs: the source masks, and the shipped ones when they differ."""
-    out = [(np.asarray(ctx.asset.masks, np.float32), "source")]
+    out = [(float_masks(ctx.asset.masks), "source")]  # used a mask at a time
     if ctx.shipped_masks is not None:
         out.append((ctx.shipped_masks, "shipped"))
     return out

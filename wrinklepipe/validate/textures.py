@@ -169,10 +169,9 @@ def bilinear_planes(planes: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """``bilinear(np.moveaxis(planes, 0, -1), uv)`` of planes ``[R, H, W]`` (masks) -> ``[N, R]``,
     the same values (every channel is sampled on its own), sampled plane by plane: no
     channels-last copy of every plane at full size (2 GB for eight 8192² masks)."""
-    p = np.asarray(planes)
-    out = np.empty((len(uv), p.shape[0]), np.float32)
-    for i, plane in enumerate(p):
-        out[:, i] = bilinear(plane[..., None], uv)[:, 0]
+    out = np.empty((len(uv), len(planes)), np.float32)
+    for i in range(len(planes)):  # a plane at a time (a MaskStack's as float32, one by one)
+        out[:, i] = bilinear(np.asarray(planes[i])[..., None], uv)[:, 0]
     return out
 
 
