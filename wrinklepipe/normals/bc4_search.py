@@ -36,6 +36,9 @@ from wrinklepipe.normals.bc4_jit import (
     kernel,
 )
 
+#: Offsets of each lane's lo and hi in the state ``S`` (its best score at 0).
+_LO, _HI = LANES, 2 * LANES
+
 
 def compiled() -> Callable[..., None]:
     """The compiled block encoder :func:`_encode` (every kernel compiled on first use)."""
@@ -45,7 +48,9 @@ def compiled() -> Callable[..., None]:
 
 # --- LANES blocks side by side: the search (steps 1-4) ---------------------------------------
 # A group's texels are X [16, LANES] (texel i of lane b's block at X[i, b]); its state is
-# S [3, LANES]: each lane's best score, lo, hi. Every loop over the lanes is straight-line
+# S [3 * LANES]: each lane's best score, lo (from ``_LO``), hi (from ``_HI``): one flat array,
+# so that the loop keeping a better pair stores at constant offsets (no aliasing checks between
+# its three stores: it vectorises). Every loop over the lanes is straight-line
 # code (the per-texel work written out four texels per helper, selects instead of branches),
 # which LLVM vectorises: one candidate pair for 16 blocks per pass, each lane summing its
 # block's texels in order, as the numpy encoder did per block.
@@ -152,10 +157,10 @@ def _consider(
         lo = bc4_block.clamp(B[il, b] + dl, _0, _255)
         hi = bc4_block.clamp(B[ih, b] + dh, _0, _255)
         s = C[0, b]
-        keep = (hi >= lo) & (s < S[0, b])
-        S[0, b] = s if keep else S[0, b]
-        S[1, b] = lo if keep else S[1, b]
-        S[2, b] = hi if keep else S[2, b]
+        keep = (hi >= lo) & (s < S[b])
+        S[b] = s if keep else S[b]
+        S[_LO + b] = lo if keep else S[_LO + b]
+        S[_HI + b] = hi if keep else S[_HI + b]
 
 
 @kernel()
@@ -174,12 +179,12 @@ def _range(X: np.ndarray, R: np.ndarray) -> None:
 @kernel()
 def _exact_lanes(X: np.ndarray, S: np.ndarray, J: np.ndarray, E: np.ndarray, W: np.ndarray):
     """Exact nearest positions ``J`` [16, LANES] and squared errors ``E`` of each lane's pair
-    ``S[1:3]``; ``W[0]`` their sum (texel order), ``W[1]`` the largest, ``W[2]`` the sum plus
-    ``HARD_PENALTY`` times each texel's excess over ``HARD_TEXEL_ERROR``."""
+    (lo, hi) in ``S``; ``W[0]`` their sum (texel order), ``W[1]`` the largest, ``W[2]`` the
+    sum plus ``HARD_PENALTY`` times each texel's excess over ``HARD_TEXEL_ERROR``."""
     for i in range(16):
         for b in range(LANES):
-            lo = S[1, b]
-            r = S[2, b] - lo
+            lo = S[_LO + b]
+            r = S[_HI + b] - lo
             rr = r if r > _1 else _1
             E[i, b], J[i, b] = bc4_block.nearest(X[i, b] - lo, _7, rr, _7 / rr, r * _RECIP7)
     for b in range(LANES):
@@ -191,7 +196,7 @@ def _exact_lanes(X: np.ndarray, S: np.ndarray, J: np.ndarray, E: np.ndarray, W: 
             W[0, b] += E[i, b]
             W[3, b] += _excess(E[i, b])
             # the error of the exact index as the numpy encoder measured it: x - (lo + entry)
-            d = X[i, b] - (S[1, b] + np.floor(J[i, b] * (S[2, b] - S[1, b]) * _RECIP7))
+            d = X[i, b] - (S[_LO + b] + np.floor(J[i, b] * (S[_HI + b] - S[_LO + b]) * _RECIP7))
             d = d * d
             W[1, b] = d if d > W[1, b] else W[1, b]
     for b in range(LANES):
@@ -221,8 +226,8 @@ def _fit(X: np.ndarray, J: np.ndarray, S: np.ndarray, C: np.ndarray, A: np.ndarr
         det = a * c - bb * bb
         ok = det > _DET_MIN
         dd = det if ok else _1
-        A[0, b] = ((c * p - bb * q) / dd if ok else S[1, b]) + _TRUNC
-        A[1, b] = ((a * q - bb * p) / dd if ok else S[2, b]) + _TRUNC
+        A[0, b] = ((c * p - bb * q) / dd if ok else S[_LO + b]) + _TRUNC
+        A[1, b] = ((a * q - bb * p) / dd if ok else S[_HI + b]) + _TRUNC
     for b in range(LANES):
         lo = A[0, b]
         hi = A[1, b]
@@ -238,8 +243,8 @@ def _fit(X: np.ndarray, J: np.ndarray, S: np.ndarray, C: np.ndarray, A: np.ndarr
 def _around(X: np.ndarray, S: np.ndarray, C: np.ndarray, A: np.ndarray, tail: bool) -> None:
     """The eight pairs one level around each lane's best (either endpoint moved by -1, 0, 1)."""
     for b in range(LANES):
-        A[0, b] = S[1, b]
-        A[1, b] = S[2, b]
+        A[0, b] = S[_LO + b]
+        A[1, b] = S[_HI + b]
     for dl in range(-1, 2):
         for dh in range(-1, 2):
             if dl or dh:
@@ -250,7 +255,7 @@ def _around(X: np.ndarray, S: np.ndarray, C: np.ndarray, A: np.ndarray, tail: bo
 def _mark(S: np.ndarray, C: np.ndarray) -> None:
     """Each lane's best score into ``C[3]`` (for :func:`_moved`)."""
     for b in range(LANES):
-        C[3, b] = S[0, b]
+        C[3, b] = S[b]
 
 
 @kernel(inline="always")
@@ -259,7 +264,7 @@ def _moved(S: np.ndarray, C: np.ndarray) -> bool:
     than the one it replaces)."""
     n = 0
     for b in range(LANES):
-        n += 1 if S[0, b] != C[3, b] else 0
+        n += 1 if S[b] != C[3, b] else 0
     return n > 0
 
 
@@ -275,9 +280,9 @@ def _search(X, S, R, J, E, W, C, A) -> bool:  # noqa: ANN001 (numba kernels: arr
         R[3, b] = np.ceil(R[1, b])
         span = R[1, b] - R[0, b]
         R[4, b] = span if span > _RANGE_MIN else _RANGE_MIN
-        S[0, b] = _INF
-        S[1, b] = R[2, b]
-        S[2, b] = R[3, b]
+        S[b] = _INF
+        S[_LO + b] = R[2, b]
+        S[_HI + b] = R[3, b]
     for a in range(3):
         for c in range(3):
             _consider(X, R, 2, 3, _F(a), -_F(c), S, C, False)
@@ -323,9 +328,9 @@ def _window(X, S, R, step: int, C) -> None:  # noqa: ANN001 (numba kernels: arra
         R[6, b] = np.ceil(top / _F(step)) * _F(step)  # the lane's own reach inside its range
         R[2, b] = np.floor(R[0, b])
         R[3, b] = np.ceil(R[1, b])
-        S[0, b] = _INF
-        C[1, b] = S[1, b]
-        C[2, b] = S[2, b]
+        S[b] = _INF
+        C[1, b] = S[_LO + b]
+        C[2, b] = S[_HI + b]
     _consider(X, C, 1, 2, _0, _0, S, C, True)  # the current pair: a pair must beat it
     top = -(-_TOP // step) * step
     out = -(-HARD_OUTSIDE // step) * step
@@ -363,10 +368,10 @@ def _consider_window(X, R, dl: float, dh: float, S, C) -> None:  # noqa: ANN001 
         lo = bc4_block.clamp(R[2, b] + dl, _0, _255)
         hi = bc4_block.clamp(R[3, b] + dh, _0, _255)
         s = C[0, b]
-        keep = _valid(R, b, dl, dh) & (s < S[0, b])
-        S[0, b] = s if keep else S[0, b]
-        S[1, b] = lo if keep else S[1, b]
-        S[2, b] = hi if keep else S[2, b]
+        keep = _valid(R, b, dl, dh) & (s < S[b])
+        S[b] = s if keep else S[b]
+        S[_LO + b] = lo if keep else S[_LO + b]
+        S[_HI + b] = hi if keep else S[_HI + b]
 
 
 @kernel()
@@ -396,7 +401,7 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
     n = x.shape[0]
     f = np.float32
     X = np.empty((16, LANES), f)
-    S = np.empty((3, LANES), f)
+    S = np.empty(3 * LANES, f)
     R = np.empty((8, LANES), f)
     J = np.empty((16, LANES), f)
     E = np.empty((16, LANES), f)
@@ -421,8 +426,8 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
             _exact_lanes(X, S, J, E, W)
         for b in range(m):
             k = g + b
-            lo[k] = S[1, b]
-            hi[k] = S[2, b]
+            lo[k] = S[_LO + b]
+            hi[k] = S[_HI + b]
             _keep(J, W, b, codes, sse, k)
             hard[k] = W[1, b] >= _TAU
             inside[k] = min(np.sqrt(W[0, b]), _INSIDE)
@@ -433,8 +438,8 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
         m = _gather(x, ids, g, X)
         for b in range(LANES):
             k = ids[g + min(b, m - 1)]
-            S[1, b] = lo[k]
-            S[2, b] = hi[k]
+            S[_LO + b] = lo[k]
+            S[_HI + b] = hi[k]
             R[5, b] = inside[k]
         _window(X, S, R, step, C)
         if step > 1:
@@ -444,27 +449,27 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
             k = ids[g + b]
             tail[k] = step > 1 and W[1, b] >= _TAIL
             if not tail[k] and W[2, b] < before[k]:  # the scorer's guess, confirmed exactly
-                lo[k] = S[1, b]
-                hi[k] = S[2, b]
+                lo[k] = S[_LO + b]
+                hi[k] = S[_HI + b]
                 _keep(J, W, b, codes, sse, k)
-            wlo[k] = S[1, b]
-            whi[k] = S[2, b]
+            wlo[k] = S[_LO + b]
+            whi[k] = S[_HI + b]
     # ... and the whole window for the blocks still 3 levels or more off
     ids = np.flatnonzero(tail)
     for g in range(0, ids.size, LANES):
         m = _gather(x, ids, g, X)
         for b in range(LANES):
             k = ids[g + min(b, m - 1)]
-            S[1, b] = wlo[k]
-            S[2, b] = whi[k]
+            S[_LO + b] = wlo[k]
+            S[_HI + b] = whi[k]
             R[5, b] = inside[k]
         _window(X, S, R, 1, C)
         _exact_lanes(X, S, J, E, W)
         for b in range(m):
             k = ids[g + b]
             if W[2, b] < before[k]:
-                lo[k] = S[1, b]
-                hi[k] = S[2, b]
+                lo[k] = S[_LO + b]
+                hi[k] = S[_HI + b]
                 _keep(J, W, b, codes, sse, k)
     # the exhaustive reference: every pair of a wide window, exactly scored
     if reference > 0:
@@ -483,8 +488,8 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
             m = _gather(x, every, g, X)
             for b in range(LANES):
                 k = g + min(b, m - 1)
-                S[1, b] = lo[k]
-                S[2, b] = hi[k]
+                S[_LO + b] = lo[k]
+                S[_HI + b] = hi[k]
             _exact_lanes(X, S, J, E, W)
             for b in range(m):
                 _keep(J, W, b, codes, sse, g + b)
