@@ -84,22 +84,34 @@ def blocks_of(plane: np.ndarray) -> np.ndarray:
     )
 
 
-def _block_rows(plane: np.ndarray) -> np.ndarray:
-    """[H, W] (multiples of 4) -> [N, 16] float32 blocks (row-major block order)."""
-    h, w = plane.shape
-    return np.ascontiguousarray(
-        plane.reshape(h // 4, 4, w // 4, 4).transpose(0, 2, 1, 3).reshape(-1, 16), dtype=_F
-    )
-
-
-def _targets(values: np.ndarray) -> np.ndarray:
-    v = np.asarray(values)
+def _shape(v: np.ndarray) -> tuple[int, int]:
     if v.ndim != 2:
         raise ValueError(f"BC4 encodes one channel [H, W], got shape {v.shape}")
     h, w = v.shape
     if h % 4 or w % 4 or h == 0 or w == 0:
         raise ValueError(f"block formats need sizes that are multiples of 4, got {w} x {h}")
-    return _block_rows(np.clip(v.astype(_F), _F(0), _F(255)))
+    return h, w
+
+
+def _stack(planes: list[np.ndarray]) -> np.ndarray:
+    """Target blocks [N, 16] (float32, clipped to 0..255; row-major block order) of each plane
+    [H, W] (multiples of 4) in turn: one pass over each plane, written in place (the same
+    values as clipping its float32 copy)."""
+    vs = [np.asarray(p) for p in planes]
+    shapes = [_shape(v) for v in vs]
+    out = np.empty((sum(h * w // 16 for h, w in shapes), 16), _F)
+    k = 0
+    for v, (h, w) in zip(vs, shapes, strict=True):
+        n = h * w // 16
+        blocks = v.reshape(h // 4, 4, w // 4, 4).transpose(0, 2, 1, 3)
+        np.clip(blocks, _F(0), _F(255), out=out[k : k + n].reshape(h // 4, w // 4, 4, 4))
+        k += n
+    return out
+
+
+def _targets(values: np.ndarray) -> np.ndarray:
+    """[H, W] (multiples of 4) -> [N, 16] float32 target blocks (row-major block order)."""
+    return _stack([values])
 
 
 def _encode_blocks(x: np.ndarray, hard_step: int = HARD_STEP, reference: int = 0) -> np.ndarray:
@@ -140,20 +152,19 @@ def encode_bc5(x: np.ndarray, y: np.ndarray, hard_step: int = HARD_STEP) -> byte
     """BC5 data of two channels [H, W] (R = ``x``, G = ``y``; texels or float targets), both
     channels' blocks in one pass over the worker threads. ``hard_step``: see
     :func:`bc4_blocks`."""
-    tx, ty = _targets(x), _targets(y)
-    n = tx.shape[0]
-    both = _encode_blocks(np.concatenate([tx, ty]), hard_step)
+    both = _encode_blocks(_stack([x, y]), hard_step)
+    n = both.shape[0] // 2
     return np.concatenate([both[:n], both[n:]], axis=1).tobytes()
 
 
 def encode_bc5_many(maps: list[tuple[np.ndarray, np.ndarray]]) -> list[bytes]:
     """:func:`encode_bc5` of each ``(x, y)`` pair (e.g. the levels of a mip chain), every
     block of every map in one pass: the same bytes as one call each."""
-    planes = [_targets(c) for xy in maps for c in xy]
+    planes = [c for xy in maps for c in xy]
     if not planes:
         return []
-    ends = np.cumsum([p.shape[0] for p in planes])
-    blocks = np.split(_encode_blocks(np.concatenate(planes)), ends[:-1])
+    ends = np.cumsum([np.asarray(p).size // 16 for p in planes])
+    blocks = np.split(_encode_blocks(_stack(planes)), ends[:-1])
     return [
         np.concatenate([blocks[2 * i], blocks[2 * i + 1]], axis=1).tobytes()
         for i in range(len(maps))
