@@ -273,16 +273,19 @@ def test_palette_entries_by_reciprocal_multiply_are_exact():
 
 def _every_round(x: np.ndarray, hard_step: int) -> np.ndarray:
     """BC4 blocks of target blocks ``x`` [N, 16] by the encoder's kernels run as plain Python
-    with every round of steps 2-3 run (no round is skipped: ``_moved`` always answers yes, so
-    the exact positions are recomputed after the search too)."""
+    with nothing skipped: every round of steps 2-3 (``_moved`` always answers yes, so the
+    exact positions are recomputed after the search too) and every pair of the tail window
+    (no coarse grid left out)."""
     bc4_search.compiled()
     out = np.empty((x.shape[0], 8), np.uint8)
+    window = bc4_search._window.py_func
     with pytest.MonkeyPatch.context() as mp:
         for mod in (bc4_search, bc4_block):
             for name, fn in list(vars(mod).items()):
                 if hasattr(fn, "py_func"):  # a compiled kernel: back to its Python
                     mp.setattr(mod, name, fn.py_func)
         mp.setattr(bc4_search, "_moved", lambda s, c: True)
+        mp.setattr(bc4_search, "_window", lambda *a: window(*a[:-1], 0))
         bc4_search._encode(x, hard_step, 0, out)
     return out
 
@@ -295,9 +298,10 @@ def _every_round(x: np.ndarray, hard_step: int) -> np.ndarray:
 )
 def test_skipped_rounds_and_kept_positions_change_no_block(values, kind, hard_step):
     """The compiled search skips a Lloyd or neighbour round after one that changed no lane's
-    best, and packs each block with the exact positions computed when its pair was chosen:
-    the same blocks as every round run and the positions computed again (random blocks: flat,
-    smooth and wild ones, hard blocks and the tail windows)."""
+    best and, in the tail window, the coarse window's pairs; it packs each block with the
+    exact positions computed when its pair was chosen: the same blocks as every round and
+    every pair run and the positions computed again (random blocks: flat, smooth and wild
+    ones, hard blocks and the tail windows)."""
     v = values.astype(np.float32)
     if kind == "smooth":
         v = np.clip(100 + np.cumsum(v - 127.5, axis=1) / 16, 0, 255).astype(np.float32)

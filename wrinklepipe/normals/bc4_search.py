@@ -316,12 +316,17 @@ def _search(X, S, R, J, E, W, C, A) -> bool:  # noqa: ANN001 (numba kernels: arr
 
 
 @kernel()
-def _window(X, S, R, step: int, C) -> None:  # noqa: ANN001 (numba kernels: arrays)
+def _window(X, S, R, step: int, C, coarse: int) -> None:  # noqa: ANN001 (numba kernels: arrays)
     """Step 4's window for a group, scored by the tail score: every pair with ``lo`` in
     ``[min - HARD_OUTSIDE, min + inside]`` and ``hi`` in ``[max - inside, max + HARD_OUTSIDE]``
     (every ``step``-th level of each, on a grid anchored at floor(min) and ceil(max)); keeps
     the first best in ``S`` (``lo`` offsets outer, ``hi`` offsets inner). ``R[5]`` holds each
-    lane's ``inside``; the lanes run the union of their windows, each taking only its own."""
+    lane's ``inside``; the lanes run the union of their windows, each taking only its own.
+
+    ``coarse`` > 1: ``S`` holds the best of this window searched every ``coarse``-th level
+    (and around it). The pairs on that grid are skipped: each was scored there (a lane's own
+    window only grows with the step) and is not below that best, which is the first pair
+    scored here, so none of them could replace it."""
     _range(X, R)
     for b in range(LANES):
         top = np.ceil(R[5, b])
@@ -336,6 +341,8 @@ def _window(X, S, R, step: int, C) -> None:  # noqa: ANN001 (numba kernels: arra
     out = -(-HARD_OUTSIDE // step) * step
     for dl in range(-out, top + 1, step):
         for dh in range(-top, HARD_OUTSIDE + 1, step):
+            if coarse > 1 and dl % coarse == 0 and dh % coarse == 0:
+                continue
             _consider_window(X, R, _F(dl), _F(dh), S, C)
 
 
@@ -441,7 +448,7 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
             S[_LO + b] = lo[k]
             S[_HI + b] = hi[k]
             R[5, b] = inside[k]
-        _window(X, S, R, step, C)
+        _window(X, S, R, step, C, 0)
         if step > 1:
             _around(X, S, C, A, True)
         _exact_lanes(X, S, J, E, W)
@@ -463,7 +470,7 @@ def _encode(x: np.ndarray, step: int, reference: int, out: np.ndarray) -> None:
             S[_LO + b] = wlo[k]
             S[_HI + b] = whi[k]
             R[5, b] = inside[k]
-        _window(X, S, R, 1, C)
+        _window(X, S, R, 1, C, step)
         _exact_lanes(X, S, J, E, W)
         for b in range(m):
             k = ids[g + b]
