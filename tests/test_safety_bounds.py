@@ -305,3 +305,18 @@ def test_dynamic_weights_and_blur_out_of_range_are_one_line(
     lines = [ln for ln in err.splitlines() if ln.startswith("error")]
     assert rc == 2 and len(lines) == 1 and needle in lines[0], err
     assert "Warning" not in err and not out.exists()
+
+
+@pytest.mark.parametrize("blur", ["5000", "1e300", "-1"])
+def test_a_regions_blur_out_of_range_is_one_line(source, tmp_path, capsys, blur):
+    """regions' mask blur is checked before anything is rendered: --blur 5000 on 64² masks
+    filtered for minutes (1024²: over ten), 1e300 was an internal error."""
+    out = tmp_path / "regions"
+    args = ["regions", str(source.parent / "head.glb"), "-o", str(out), "--size", "64"]
+    with deadline(60):
+        rc = main([*args, "--blur", blur])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error")]
+    assert rc == 2 and len(lines) == 1, err
+    assert lines[0].startswith(f"error: --blur: {float(blur):g} is out of range; expected 0..64 ")
+    assert not out.exists()

@@ -56,6 +56,12 @@ NAME = "regions"
 STATES: tuple[str, ...] = ("stretch", "compress")
 
 
+#: The widest mask blur (sigma, texels) the commands take: a Gaussian costs its width per texel
+#: (--blur 5000 on 1024² masks ran over ten minutes; 1e300 was an internal error), and a blur
+#: wider than this smears a wrinkle region over a sixteenth of a 1024² texture.
+MAX_BLUR_TEXELS = 64.0
+
+
 @dataclass(frozen=True)
 class TargetRegionsOptions:
     """Options of :func:`regions_from_targets`.
@@ -180,6 +186,9 @@ def regions_from_targets(
         raise input_error(src, "the mesh has no UVs (masks need a UV layout)")
     if o.regions is not None and o.regions < 1:
         raise input_error(src, f"--regions must be at least 1, got {o.regions}", "--regions")
+    top = min(MAX_BLUR_TEXELS, o.size)
+    if not 0 <= o.blur <= top:  # (a wider one: an internal error, or many minutes of filtering)
+        raise input_error("--blur", f"{o.blur:g} is out of range; expected 0..{top:g} texels")
     names, change = target_changes(mesh, src)
     scaled = _scaled(change, o)
     moved = np.abs(scaled).max(axis=1) > 0

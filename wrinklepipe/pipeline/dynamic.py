@@ -27,6 +27,7 @@ from wrinklepipe.geometry.dynamic import (
 )
 from wrinklepipe.geometry.vertex_ids import compute_vertex_ids
 from wrinklepipe.gltf.meshes import gltf_joint_world_matrices_at, gltf_morph_weights
+from wrinklepipe.masks.targets import MAX_BLUR_TEXELS
 from wrinklepipe.readers.meshes import LoadOptions, load_mesh, load_meshes, merge_meshes
 from wrinklepipe.readers.registry import format_of
 from wrinklepipe.usd.meshes import open_stage
@@ -141,11 +142,10 @@ def dynamic_weights(
     chooses, and the summary (counts, range, seam jump, the texture-space variant's)."""
     if opt.texture_space is not None and not 8 <= opt.texture_space <= 8192:
         raise input_error("<arguments>", "--texture-space must be in 8..8192")
-    if opt.texture_space is not None and not 0 <= opt.blur <= opt.texture_space:
-        raise input_error(  # (wider than the texture: an internal error, or minutes, for nothing)
-            "--blur",
-            f"{opt.blur:g} is out of range; expected 0..{opt.texture_space} texels (at most "
-            "--texture-space)",
+    top = None if opt.texture_space is None else min(MAX_BLUR_TEXELS, opt.texture_space)
+    if top is not None and not 0 <= opt.blur <= top:
+        raise input_error(  # (a wider one: an internal error, or minutes of filtering)
+            "--blur", f"{opt.blur:g} is out of range; expected 0..{top:g} texels"
         )
     parts = load_meshes(source, LoadOptions(generate_uvs=opt.texture_space is not None))
     mesh = parts[0] if len(parts) == 1 else merge_meshes(parts)
