@@ -35,7 +35,9 @@ The search is the one the earlier vectorised numpy encoder ran (the same candida
 same order, the same float32 arithmetic operation by operation): its blocks are byte-identical
 (a test holds digests of that encoder's output). It is compiled by numba
 (:mod:`wrinklepipe.normals.bc4_search`) and searches 16 blocks side by side, one per SIMD
-lane: about 11 times the numpy encoder's speed on one core (``wrinklepipe bench normals``).
+lane: about 12 times the numpy encoder's speed on one core (``wrinklepipe bench normals``).
+Work that cannot change a block is skipped (a round after one that changed no best, the tail
+window's pairs the coarse window scored, a second exact pass for the indices: docs/scale.md).
 Blocks are encoded on the worker threads of :mod:`wrinklepipe.normals._chunks` (the compiled
 kernel releases the GIL).
 """
