@@ -3,6 +3,7 @@ resize (OpenImageIO's weights, rows then columns) against OpenImageIO's own resi
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -99,13 +100,17 @@ def counted():
     return _double
 
 
-def test_reuse_computes_each_content_once_and_hands_out_private_copies(counted):
+def test_reuse_computes_each_content_once_and_hands_out_shared_read_only_results(counted):
     a = np.arange(1 << 15, dtype=np.float32)  # 128 KB, over MIN_INPUT_BYTES
     with reuse.reuse() as memo:
         first = counted(a)
         again = counted(a.copy())  # another object, the same bytes
         assert counted.calls == 1 and np.array_equal(first, again)
-        again[:] = -1  # the caller's own copy
+        # one stored array, handed out as read-only views (no copy per hit)
+        assert np.shares_memory(first, again) and first is not again
+        assert not first.flags.writeable and not again.flags.writeable
+        with pytest.raises(ValueError, match="read-only"):
+            again[:] = -1
         assert np.array_equal(counted(a), a * 2) and counted.calls == 1
         counted(a, k=3)  # other arguments, another result
         counted(a.astype(np.float64))  # same values, another dtype
@@ -115,6 +120,38 @@ def test_reuse_computes_each_content_once_and_hands_out_private_copies(counted):
     counted(a)
     assert counted.calls == 5  # outside reuse(): it just runs
     assert reuse.active() is None
+
+
+@reuse.reused
+def _halves(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return a, a[: len(a) // 2] * 2  # the argument itself, and a new array
+
+
+@dataclasses.dataclass
+class _Pair:
+    x: np.ndarray
+    cache: dict = dataclasses.field(default_factory=dict)
+
+
+@reuse.reused
+def _pair(a: np.ndarray) -> _Pair:
+    return _Pair(a + 1)
+
+
+def test_reuse_copies_a_result_that_is_its_argument_and_shares_dataclasses():
+    a = np.arange(1 << 15, dtype=np.float32)
+    with reuse.reuse():
+        same, half = _halves(a)
+        assert not np.shares_memory(same, a)  # stored as a copy: the caller's a may change
+        a[:] = 7
+        assert np.array_equal(_halves(np.arange(1 << 15, dtype=np.float32))[0], np.arange(1 << 15))
+        assert np.array_equal(half, np.arange(1 << 14, dtype=np.float32) * 2)
+        p, q = _pair(a), _pair(a.copy())
+        assert p is not q and p.cache is not q.cache and np.shares_memory(p.x, q.x)
+        p.cache["k"] = 1  # a caller's own container
+        p.x = np.zeros(3)  # and its own attribute
+        r = _pair(a)
+        assert r.cache == {} and np.array_equal(r.x, a + 1) and not r.x.flags.writeable
 
 
 def test_reuse_skips_small_unkeyable_and_bounds_its_memory(counted):
@@ -168,7 +205,7 @@ def test_warm_fills_the_memo_for_the_later_calls(counted, monkeypatch):
         assert counted.calls == 2 and memo.hits[f"{__name__}._double"] == 2
 
 
-def test_dataclass_arguments_are_keyed_by_content_and_results_deep_copied():
+def test_dataclass_arguments_are_keyed_by_content_and_results_shared_read_only():
     from dataclasses import dataclass
 
     @dataclass
@@ -188,8 +225,11 @@ def test_dataclass_arguments_are_keyed_by_content_and_results_deep_copied():
         first = wrap(Box("a", v))
         again = wrap(Box("a", v.copy()))  # equal content: a hit
         assert len(calls) == 1 and again.name == "a!" and np.array_equal(again.values, v + 1)
-        again.values[:] = 7  # a deep copy: the next caller's result is untouched
+        with pytest.raises(ValueError, match="read-only"):
+            again.values[:] = 7  # shared with the next caller: read-only
+        again.name = "mine"  # the caller's own dataclass
         assert np.array_equal(wrap(Box("a", v)).values, v + 1) and first.values[0] == 1
+        assert wrap(Box("a", v)).name == "a!" and np.shares_memory(first.values, again.values)
         wrap(Box("b", v))
         assert len(calls) == 2
 
@@ -239,7 +279,8 @@ def test_tangents_of_one_mesh_are_computed_once_whatever_the_index_dtype():
     plain, plain_rep = mikktspace_tangents_report(*args, mesh.indices.astype(np.int64))
     with reuse.reuse() as memo:
         t64, _ = mikktspace_tangents_report(*args, mesh.indices.astype(np.int64))
-        t64[:] = 0  # the caller's own copy
+        with pytest.raises(ValueError, match="read-only"):
+            t64[:] = 0  # shared with the next caller
         t32, rep = mikktspace_tangents_report(*args, mesh.indices.astype(np.uint32))
     assert memo.misses == {"wrinklepipe.geometry.tangents._mikktspace": 1}
     assert memo.hits == {"wrinklepipe.geometry.tangents._mikktspace": 1}

@@ -10,8 +10,11 @@ and the ``repr`` of the other arguments, so a hit is the result of exactly those
 asks (a validator reading back a written file gets the result of the bytes in that file).
 
 Arguments may be arrays, bytes, plain values, tuples / lists of them and dataclasses of them.
-Only pure, deterministic functions may be decorated. Results are kept as private copies: an
-array returned is the caller's own (mutating it never changes what a later call gets). Outside
+Only pure, deterministic functions may be decorated. Results are shared, not copied: every array
+of a result is handed out as a read-only view of the one stored array (a caller that needs to
+change one copies it first; a result's arrays that share memory with an argument are copied
+once, when stored), and containers (tuples, lists, dicts, dataclasses) are new for each caller,
+so an attribute or item a caller sets stays its own. Outside
 ``reuse()``, or in a thread that did not enter it (context variables do not follow work into a
 thread pool), a decorated function simply runs. The memo is bounded (least recently used entries
 are dropped past ``max_bytes``) and ends with the block.
@@ -169,17 +172,52 @@ def _result_bytes(value: Any) -> int:
     return 64
 
 
-def _private(value: Any) -> Any:
-    """A copy no caller holds (arrays copied; bytes and scalars are immutable)."""
+def _arrays(value: Any, out: list[np.ndarray]) -> list[np.ndarray]:
+    """The arrays ``value`` holds (arguments of a call: arrays, sequences, dicts, dataclasses
+    and objects keyed by ``memo_key``, e.g. a MaskStack)."""
     if isinstance(value, np.ndarray):
-        return value.copy()
-    if isinstance(value, tuple):
-        return tuple(_private(v) for v in value)
-    if isinstance(value, list):
-        return [_private(v) for v in value]
-    if value is None or isinstance(value, bytes | str | int | float | bool):
+        out.append(value)
+    elif isinstance(value, tuple | list):
+        for v in value:
+            _arrays(v, out)
+    elif isinstance(value, dict):
+        for v in value.values():
+            _arrays(v, out)
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        for f in dataclasses.fields(value):
+            _arrays(getattr(value, f.name), out)
+    elif getattr(type(value), "memo_key", None) is not None:
+        _arrays(type(value).memo_key(value), out)
+        _arrays(list(getattr(value, "__dict__", {}).values()), out)
+    return out
+
+
+def _shared(value: Any, inputs: Sequence[np.ndarray] = ()) -> Any:
+    """``value`` as the memo stores and hands it out: every array a read-only view of the one
+    stored result (shared, never copied: a caller cannot change what a later call gets), an
+    array that shares memory with an argument (``inputs``) copied first (the caller's own array
+    may change); tuples, lists, dicts and dataclasses of them as new containers around those
+    views (a caller's attribute or item set stays its own); bytes and scalars as they are."""
+    if isinstance(value, np.ndarray):
+        if any(np.may_share_memory(value, a) for a in inputs):
+            value = value.copy()
+        view = value.view()
+        view.flags.writeable = False
+        return view
+    if value is None or isinstance(value, bytes | str | int | float | bool | np.generic):
         return value
-    return copy.deepcopy(value)  # any other result (a dataclass of arrays): a deep copy
+    if isinstance(value, tuple):
+        return tuple(_shared(v, inputs) for v in value)
+    if isinstance(value, list):
+        return [_shared(v, inputs) for v in value]
+    if isinstance(value, dict):
+        return {k: _shared(v, inputs) for k, v in value.items()}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        out = copy.copy(value)
+        for f in dataclasses.fields(value):
+            object.__setattr__(out, f.name, _shared(getattr(value, f.name), inputs))
+        return out
+    return copy.deepcopy(value)  # any other result: a private copy
 
 
 def _key(name: str, args: tuple, kwargs: dict[str, Any]) -> tuple[tuple, int]:
@@ -206,7 +244,7 @@ def remember(fn: Callable[..., Any], result: Any, *args: Any, **kwargs: Any) -> 
     except _Unkeyable:
         return
     if size >= MIN_INPUT_BYTES:
-        memo.put(key, _private(result))
+        memo.put(key, _shared(result, _arrays(args, _arrays(kwargs, []))))
 
 
 def known_rows(
@@ -290,11 +328,11 @@ def reused(fn: F) -> F:
         found, value = memo.get(key)
         if found:
             memo.count(memo.hits, name)
-            return _private(value)
+            return _shared(value)
         memo.count(memo.misses, name)
-        out = fn(*args, **kwargs)
-        memo.put(key, _private(out))
-        return out
+        out = _shared(fn(*args, **kwargs), _arrays(args, _arrays(kwargs, [])))
+        memo.put(key, out)
+        return _shared(out)
 
     return wrapper  # type: ignore[return-value]
 
