@@ -16,7 +16,7 @@ meshes, and convert writes a layer over the source. OBJ comes through
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -151,10 +151,14 @@ def read_maps(
     if base is None:
         base, n = _read_normals(manifest.base, manifest.convention, stats, "base", read)
         notes += n
-    states = []
-    for s in manifest.states:
+    if not manifest.states:
+        np.stack([])  # no states: the error np.stack of them always raised
+    # every state read into its place in one stack (one map beside it while it is read, not
+    # every map twice)
+    states = np.empty((len(manifest.states), *base.shape), np.float32)
+    for i, s in enumerate(manifest.states):
         if s.map is None:  # a colour-only state: its normal is the base (it adds nothing)
-            states.append(base)
+            states[i] = base
             continue
         st, n = _read_normals(s.map, manifest.convention, stats, f"state {s.name}", read)
         notes += n
@@ -165,12 +169,16 @@ def read_maps(
                 f"{base.shape[1]}x{base.shape[0]}"
                 + ("" if manifest.base is not None else " (the wrinkled material's normalTexture)"),
             )
+        if manifest.states_include_base and read.get(s.map) is not None:
+            # the convention check reads the map as read: its place in the stack (not a copy)
+            read[s.map] = replace(read[s.map], normals=states[i])
         if not manifest.states_include_base:  # wrinkle-only normals: add the base in PD space
             st = model.pd_to_normal(model.normal_to_pd(base) + model.normal_to_pd(st))
-        states.append(st)
+        states[i] = st
+        del st
     check_conventions(read, manifest.convention, manifest.base, manifest.states_include_base)
     if not manifest.regions:  # one UDIM tile without masks (pipeline.ingest_tiles)
-        return base, np.stack(states), np.zeros((0, 1, 1), np.float32), notes
+        return base, states, np.zeros((0, 1, 1), np.float32), notes
     channels = [r.channel for r in manifest.regions]
     if any(c is not None for c in channels):
         masks = []
@@ -185,7 +193,7 @@ def read_maps(
             integers=True,  # held in the files' integers for the run (masks/stack.py)
         )
         mask_arr = ms.masks
-    return base, np.stack(states), mask_arr, notes
+    return base, states, mask_arr, notes
 
 
 @dataclass
