@@ -138,6 +138,22 @@ def test_mask_levels_and_plane_sampling_of_integer_masks():
     assert np.array_equal(tx.bilinear_planes(stack, uv), tx.bilinear_planes(np.asarray(stack), uv))
 
 
+@pytest.mark.parametrize("size", [None, 12, 6, 3, 5])
+def test_shipped_mask_values_of_integer_masks_a_mask_at_a_time(size):
+    """The masks as shipped (the chosen size: as given, a halving, a resample) from a MaskStack
+    are those of the float32 stack, bit for bit, and each texel the 8-bit rounding."""
+    from wrinklepipe.fidelity import ship
+
+    stack = _stack(16, shape=(12, 12))
+    got, want = ship.mask_values(stack, size), ship.mask_values(np.asarray(stack), size)
+    assert got.dtype == want.dtype == np.float32
+    assert got.shape == (len(stack), size or 12, size or 12)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    if size is None:  # as given: every texel the nearest of 256 levels
+        f = np.asarray(stack, np.float64)
+        assert np.array_equal(got, (np.rint(f * 255) / 255).astype(np.float32))
+
+
 @pytest.mark.parametrize("grid", [(12, 10), (30, 25)])
 def test_masks_sampled_at_texels_a_mask_at_a_time(grid):
     """The measure's samples of masks held as integers (a mask at a time, on their own grid

@@ -230,11 +230,17 @@ def _u8_values(m: np.ndarray) -> np.ndarray:
 
 def mask_values(masks: np.ndarray, size: int | None = None) -> np.ndarray:
     """Masks as shipped at ``size`` (None: as given): :func:`mask_levels` for a halving of the
-    source, else :func:`wrinklepipe.masks.resample_masks`; stored in 8 bits."""
-    m = np.asarray(masks, _F)
+    source, else :func:`wrinklepipe.masks.resample_masks`; stored in 8 bits.
+
+    A :class:`~wrinklepipe.masks.stack.MaskStack` is read a mask (or a band) at a time: the
+    float32 stack of every source mask is made only for a resample that is not a halving."""
+    m = float_masks(masks)
     if size is None or size == m.shape[1]:
-        return _u8_values(m)
+        out = np.empty(m.shape, _F)
+        for i in range(m.shape[0]):  # per texel: the whole stack's values, a mask's temporaries
+            out[i] = _u8_values(np.asarray(m[i], _F))
+        return out
     levels = mask_levels(m, size)
     if size in levels:
         return levels[size]
-    return _u8_values(resample_masks(m, size))
+    return _u8_values(resample_masks(np.asarray(m, _F), size))
