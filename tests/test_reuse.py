@@ -285,3 +285,27 @@ def test_tangents_of_one_mesh_are_computed_once_whatever_the_index_dtype():
     assert memo.misses == {"wrinklepipe.geometry.tangents._mikktspace": 1}
     assert memo.hits == {"wrinklepipe.geometry.tangents._mikktspace": 1}
     assert np.array_equal(t32, plain) and rep == plain_rep
+
+
+def test_footprint_is_kept_as_flags_and_shared_whatever_the_index_dtype():
+    """The search's UV footprint and the validator's (indices read back as uint32) are one memo
+    entry, a flag map (1 byte a texel), not the int64 triangle ids it is drawn from."""
+    from wrinklepipe.fidelity.reference import footprint
+    from wrinklepipe.geometry.rasterise import triangle_ids
+
+    n = 41  # a 40 x 40 grid of quads over the lower-left quarter of the UV square
+    g = np.linspace(0.0, 0.5, n)
+    uvs = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    q = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).reshape(-1)
+    idx = np.concatenate([np.stack([q, q + 1, q + n], 1), np.stack([q + 1, q + n + 1, q + n], 1)])
+    plain = footprint(uvs, idx, (64, 64))
+    with reuse.reuse() as memo:
+        a = footprint(uvs, idx.astype(np.int64), (64, 64))
+        b = footprint(uvs, idx.astype(np.uint32), (64, 64))
+    assert memo.misses == {"wrinklepipe.fidelity.reference._footprint": 1}
+    assert memo.hits == {"wrinklepipe.fidelity.reference._footprint": 1}
+    assert [v.dtype for v in memo.entries.values()] == [np.dtype(bool)]
+    assert np.array_equal(a, plain) and np.array_equal(b, plain)
+    # texel centres (x + 0.5) / 64 inside [0, 0.5]: the 32 x 32 texels of that quarter
+    assert plain[:32, :32].all() and plain.sum() == 32 * 32
+    assert np.array_equal(plain, triangle_ids(uvs, idx, 64) >= 0)

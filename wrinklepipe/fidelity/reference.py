@@ -17,7 +17,7 @@ from wrinklepipe.fidelity.sampling import (
     planes,
     sample_masks_at,
 )
-from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
+from wrinklepipe.geometry.rasterise import triangle_ids
 from wrinklepipe.masks.stack import MaskStack
 from wrinklepipe.reuse import reused
 from wrinklepipe.workset import band_rows
@@ -428,7 +428,13 @@ def footprint(uvs: np.ndarray, indices: np.ndarray, shape: tuple[int, int]) -> n
     H, W = shape
     if H != W:
         raise ValueError("footprint needs a square grid")
-    tri = np.asarray(uvs, np.float64)[np.asarray(indices, np.int64)]  # [T, 3, 2]
+    return _footprint(np.asarray(uvs, np.float64)[np.asarray(indices, np.int64)], H)
+
+
+@reused  # the search's UV footprint and the validator's (fidelity rules) are the same
+def _footprint(tri: np.ndarray, size: int) -> np.ndarray:
+    """:func:`footprint` of the UV triangles ``tri`` [T, 3, 2] (float64) on a ``size`` grid;
+    the memo keeps this flag map (1 byte a texel), not the triangle ids it is made from."""
     # Repeat wrapping, as samplers do by default, per triangle (not per vertex: a vertex on
     # u = 1 wrapped alone would stretch its triangle over the whole texture): each triangle
     # moves whole into the tile of its centroid, and one that crosses a tile edge is also
@@ -443,4 +449,4 @@ def footprint(uvs: np.ndarray, indices: np.ndarray, shape: tuple[int, int]) -> n
             copies.append(tri[keep] + shift)
     drawn = np.concatenate(copies)
     ids = np.arange(3 * len(drawn), dtype=np.int64).reshape(-1, 3)
-    return rasterise_triangle_ids(drawn.reshape(-1, 2), ids, H) >= 0
+    return triangle_ids(drawn.reshape(-1, 2), ids, size) >= 0

@@ -16,9 +16,10 @@ from wrinklepipe.reuse import reused
 CHUNK_TEXELS = 4_000_000
 
 
-@reused  # the search's UV footprint and the validator's (fidelity rules) are the same
-def rasterise_triangle_ids(uvs: np.ndarray, indices: np.ndarray, size: int) -> np.ndarray:
-    """Triangle index per texel ``[size, size]`` int64, -1 where no triangle covers it.
+def triangle_ids(uvs: np.ndarray, indices: np.ndarray, size: int) -> np.ndarray:
+    """Triangle index per texel ``[size, size]`` int64, -1 where no triangle covers it
+    (:func:`rasterise_triangle_ids` without the run's memo: for a raster used once, which the
+    memo would keep at 8 bytes a texel).
 
     Candidates are, per triangle and texel row of its bounding box, the texels of that row's
     span (each edge function is linear along the row: the span is where all three are on the
@@ -108,3 +109,8 @@ def _inside(tri: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     pos = (e0 >= -eps) & (e1 >= -eps) & (e2 >= -eps)
     neg = (e0 <= eps) & (e1 <= eps) & (e2 <= eps)
     return (pos | neg) & (area != 0)
+
+
+#: :func:`triangle_ids` through the run's memo (:mod:`wrinklepipe.reuse`): a raster asked again in
+#: one conversion is computed once.
+rasterise_triangle_ids = reused(triangle_ids)

@@ -26,7 +26,7 @@ from wrinklepipe import masks as wm
 from wrinklepipe import model
 from wrinklepipe.asset import Mesh, Region, WrinkleAsset
 from wrinklepipe.errors import input_error
-from wrinklepipe.geometry.rasterise import rasterise_triangle_ids
+from wrinklepipe.geometry.rasterise import triangle_ids
 from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.images import texture_normals
 from wrinklepipe.gltf.render_mesh import wrinkled_mesh
@@ -266,7 +266,7 @@ def check_masks_on_mesh(masks: np.ndarray, mesh: Mesh, manifest: Any) -> None:
         return
     r, h, w = masks.shape
     size = max(h, w)
-    covered = rasterise_triangle_ids(mesh.uvs, mesh.indices, size) >= 0
+    covered = triangle_ids(mesh.uvs, mesh.indices, size) >= 0  # once: not kept by the memo
     if (h, w) != (size, size):  # the texel of the square grid under each mask texel's centre
         rows = np.minimum((np.arange(h) + 0.5) / h * size, size - 1).astype(np.int64)
         cols = np.minimum((np.arange(w) + 0.5) / w * size, size - 1).astype(np.int64)
