@@ -140,6 +140,15 @@ def test_decode_by_bands_is_the_whole_image(
     assert np.array_equal(band.view(np.uint32), whole.view(np.uint32))  # NaN payloads too
     assert bs == ws
     assert ws.first_nan == (3, 4) and ws.nan == 1 and ws.texels == 37 * 23
+    # into a given array (a map's place in a stack), banded and whole: the same bits
+    stack = np.full((2, 37, 23, 3), 9.0, np.float32)
+    got, gs = nr.decode_texels(v, layout, signed, 0.05, bits, keep_short, out=stack[1])
+    assert np.shares_memory(got, stack) and gs == ws and (stack[0] == 9.0).all()
+    assert np.array_equal(stack[1].view(np.uint32), whole.view(np.uint32))
+    monkeypatch.setattr(nr, "band_rows", lambda width, per: 100)
+    stack[1] = 9.0
+    nr.decode_texels(v, layout, signed, 0.05, bits, keep_short, out=stack[1])
+    assert np.array_equal(stack[1].view(np.uint32), whole.view(np.uint32))
 
 
 def test_masks_read_into_one_stack(tmp_path):
@@ -251,3 +260,34 @@ def test_masks_sampled_plane_by_plane_are_the_channels_last_samples(dtype):
     assert got.dtype == want.dtype == np.float32 and got.shape == (300, 5)
     assert np.array_equal(got, want)
     assert np.allclose(got[0], masks[:, 7, 4], atol=1e-6)
+
+
+@pytest.mark.parametrize("convention", ["opengl", "directx"])
+def test_states_read_into_one_stack_are_each_file_read_alone(tmp_path, convention):
+    """read_maps decodes each full-face state into its place in the stack (a flipped green
+    channel put in place too): every state's bits are its file's read alone."""
+    from types import SimpleNamespace
+
+    from wrinklepipe.io.images import write_image
+    from wrinklepipe.normals.read import ReadOptions, read_normal_map
+    from wrinklepipe.pipeline.ingest import read_maps
+
+    rng = np.random.default_rng(7)
+    paths = []
+    for name in ("base", "a", "b"):
+        n = rng.normal(0.0, 0.3, (24, 20, 3))
+        n[..., 2] = 1.0
+        n /= np.linalg.norm(n, axis=-1, keepdims=True)
+        paths.append(write_image(tmp_path / f"{name}.png", n * 0.5 + 0.5, 16))
+    states = [SimpleNamespace(name=p.stem, map=p) for p in paths[1:]]
+    states.append(SimpleNamespace(name="colour only", map=None))
+    manifest = SimpleNamespace(
+        base=paths[0], convention=convention, states=states, states_include_base=True, regions=[]
+    )
+    base, stack, masks, _ = read_maps(manifest)
+    o = ReadOptions(convention=convention)
+    assert stack.shape == (3, 24, 20, 3) and stack.dtype == np.float32 and masks.shape[0] == 0
+    for got, p in zip([base, stack[0], stack[1]], paths):
+        want = read_normal_map(p, o).normals
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    assert np.array_equal(stack[2], base)  # a colour-only state's normal is the base

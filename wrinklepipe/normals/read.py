@@ -156,6 +156,7 @@ def decode_texels(
     unit_tolerance: float = 0.05,
     bits: int = 0,
     keep_short: bool = False,
+    out: np.ndarray | None = None,
 ) -> tuple[np.ndarray, NormalStats]:
     """Texel values [H, W, C] -> (vectors [H, W, 3] float32, :class:`NormalStats`).
 
@@ -163,6 +164,8 @@ def decode_texels(
     ``keep_short`` those shorter than :data:`MIN_LENGTH`; see :func:`repair_normals`).
     ``signed``: values are already in [-1, 1]. ``bits`` (8 or 16): the values are
     ``q / (2^bits - 1)`` of integer texels, decoded exactly as ``(2 q - top) / top``.
+    ``out``: a float32 ``[H, W, 3]`` array to decode into (e.g. the map's place in a stack of
+    maps), returned as the vectors; the same values.
     """
     v = np.asarray(values, dtype=_F)
     if v.ndim == 2:
@@ -184,11 +187,18 @@ def decode_texels(
         raise ValueError(f"layout 'ag' (DXT5nm) needs 4 channels, the map has {c}")
     h, w = v.shape[:2]
     rows = band_rows(w, BAND_BYTES_PER_TEXEL) if v.ndim == 3 else h
+    if out is not None and (out.shape != (h, w, 3) or out.dtype != _F):
+        raise ValueError(f"decode_texels: out is {out.dtype} {out.shape}, not float32 {(h, w, 3)}")
     if h <= rows:
-        return _decode(v, lay, signed, unit_tolerance, bits, keep_short)
+        n, st = _decode(v, lay, signed, unit_tolerance, bits, keep_short)
+        if out is None:
+            return n, st
+        out[...] = n
+        return out, st
     # band by band: every step is per texel, so the vectors are the whole image's, and the
     # temporaries are one band's (a whole 8192² map's are about 2.5 GB)
-    out = np.empty((h, w, 3), _F)
+    if out is None:
+        out = np.empty((h, w, 3), _F)
     stats = NormalStats()
     for r0 in range(0, h, rows):
         n, st = _decode(v[r0 : r0 + rows], lay, signed, unit_tolerance, bits, keep_short)
@@ -312,8 +322,14 @@ def _pad4(x: int) -> int:
     return (x + 3) // 4 * 4
 
 
-def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> NormalMap:
-    """Read a normal map file into unit +Y normals. Raises :class:`InputError` on bad input."""
+def read_normal_map(
+    path: str | Path, options: ReadOptions | None = None, out: np.ndarray | None = None
+) -> NormalMap:
+    """Read a normal map file into unit +Y normals. Raises :class:`InputError` on bad input.
+
+    ``out``: a float32 ``[H, W, 3]`` array the normals are written into (the map's place in a
+    stack of maps: no second copy of the map), used when the file is that size (else the
+    normals are a new array, and the caller sees the size)."""
     o = options or ReadOptions()
     path = Path(path)
     if o.convention not in ("auto", "opengl", "directx"):
@@ -337,9 +353,12 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
             f"has {channels} channel{'s' if channels != 1 else ''}; a normal map needs 2 (RG), "
             "3 (RGB) or 4 (RGBA, or DXT5nm with x in alpha)",
         )
+    h0, w0 = values.shape[:2]
+    if out is not None and (out.shape != (h0, w0, 3) or out.dtype != _F):
+        out = None
     try:
         normals, stats = decode_texels(
-            values, o.layout, signed, o.unit_tolerance, bits, keep_short=o.repair
+            values, o.layout, signed, o.unit_tolerance, bits, keep_short=o.repair, out=out
         )
     except ValueError as exc:
         raise input_error(path, str(exc)) from None
@@ -351,6 +370,7 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
     # integer texels only: a float image holds signed or encoded vectors, which its values
     # alone cannot always tell (the reader's rule above), so their lengths say nothing sure
     what = looks_like(values, layout) if bits else ""
+    del values  # the texels as read: not needed past this point (a map's worth of float32)
     if what and not (too_short and stats.short == stats.texels):
         # a colour or grey image, or no tangent-space map: refused, whatever repair says
         hint = f"; {o.refusal_hint}" if o.refusal_hint else ""
@@ -409,6 +429,9 @@ def read_normal_map(path: str | Path, options: ReadOptions | None = None) -> Nor
     if conv == "directx":
         normals = flip_green(normals)
     h, w = normals.shape[:2]
+    if out is not None and normals is not out:  # repaired or flipped: a new array, put in place
+        out[...] = normals
+        normals = out
     return NormalMap(
         normals=np.ascontiguousarray(normals, dtype=_F),
         stats=stats,

@@ -16,7 +16,7 @@ meshes, and convert writes a layer over the source. OBJ comes through
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -114,12 +114,14 @@ def _read_normals(
     stats: dict[str, Any] | None = None,
     role: str = "",
     read: dict[Path, NormalMap] | None = None,
+    out: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes (wrinklepipe.normals.read);
-    the reader's counts of problem texels go into ``stats[role]``."""
+    the reader's counts of problem texels go into ``stats[role]``. ``out``: where to decode
+    them when the map is that size (:func:`read_normal_map`)."""
     hint = "a state's colour map goes in color = FILE" if role.startswith("state") else ""
     o = ReadOptions(convention=convention, refusal_hint=hint)
-    nm = read_normal_map(path, o)
+    nm = read_normal_map(path, o, out)
     notes = [f"{path.name}: {nm.source_format}, convention {nm.convention}"]
     notes += [f"{path.name}: {n}" for n in nm.notes if "convention" not in n]
     if stats is not None:
@@ -160,7 +162,10 @@ def read_maps(
         if s.map is None:  # a colour-only state: its normal is the base (it adds nothing)
             states[i] = base
             continue
-        st, n = _read_normals(s.map, manifest.convention, stats, f"state {s.name}", read)
+        # a full-face state decodes straight into its place in the stack (a wrinkle-only one is
+        # combined with the base first)
+        slot = states[i] if manifest.states_include_base else None
+        st, n = _read_normals(s.map, manifest.convention, stats, f"state {s.name}", read, slot)
         notes += n
         if st.shape != base.shape:
             raise input_error(
@@ -169,12 +174,10 @@ def read_maps(
                 f"{base.shape[1]}x{base.shape[0]}"
                 + ("" if manifest.base is not None else " (the wrinkled material's normalTexture)"),
             )
-        if manifest.states_include_base and read.get(s.map) is not None:
-            # the convention check reads the map as read: its place in the stack (not a copy)
-            read[s.map] = replace(read[s.map], normals=states[i])
         if not manifest.states_include_base:  # wrinkle-only normals: add the base in PD space
             st = model.pd_to_normal(model.normal_to_pd(base) + model.normal_to_pd(st))
-        states[i] = st
+        if st is not slot:
+            states[i] = st
         del st
     check_conventions(read, manifest.convention, manifest.base, manifest.states_include_base)
     if not manifest.regions:  # one UDIM tile without masks (pipeline.ingest_tiles)
