@@ -322,14 +322,21 @@ def _pad4(x: int) -> int:
     return (x + 3) // 4 * 4
 
 
+def _put(normals: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+    """``normals`` in ``out`` (a float32 ``[H, W, 3]`` array: the map's place in a stack of
+    maps, no second copy of the map) when given: decoded there, or put there when repaired or
+    flipped (a new array); else ``normals``."""
+    if out is None or normals is out:
+        return normals
+    out[...] = normals
+    return out
+
+
 def read_normal_map(
     path: str | Path, options: ReadOptions | None = None, out: np.ndarray | None = None
 ) -> NormalMap:
     """Read a normal map file into unit +Y normals. Raises :class:`InputError` on bad input.
-
-    ``out``: a float32 ``[H, W, 3]`` array the normals are written into (the map's place in a
-    stack of maps: no second copy of the map), used when the file is that size (else the
-    normals are a new array, and the caller sees the size)."""
+    ``out``: where to put the normals when it fits the map (:func:`_put`)."""
     o = options or ReadOptions()
     path = Path(path)
     if o.convention not in ("auto", "opengl", "directx"):
@@ -353,9 +360,8 @@ def read_normal_map(
             f"has {channels} channel{'s' if channels != 1 else ''}; a normal map needs 2 (RG), "
             "3 (RGB) or 4 (RGBA, or DXT5nm with x in alpha)",
         )
-    h0, w0 = values.shape[:2]
-    if out is not None and (out.shape != (h0, w0, 3) or out.dtype != _F):
-        out = None
+    fits = out is not None and out.shape == (*values.shape[:2], 3) and out.dtype == _F
+    out = out if fits else None
     try:
         normals, stats = decode_texels(
             values, o.layout, signed, o.unit_tolerance, bits, keep_short=o.repair, out=out
@@ -429,9 +435,7 @@ def read_normal_map(
     if conv == "directx":
         normals = flip_green(normals)
     h, w = normals.shape[:2]
-    if out is not None and normals is not out:  # repaired or flipped: a new array, put in place
-        out[...] = normals
-        normals = out
+    normals = _put(normals, out)
     return NormalMap(
         normals=np.ascontiguousarray(normals, dtype=_F),
         stats=stats,
