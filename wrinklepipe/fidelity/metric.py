@@ -170,6 +170,49 @@ class PoseFidelity:
         }
 
 
+@dataclass(frozen=True)
+class TexelErrors:
+    """A pose's error map on the source grid as the texels the measure judges (its active
+    texels and its leaks): their flat indices, sorted, and their errors; every other texel of
+    the ``shape`` grid is 0. The map without the grid: a few percent of it on a face, not a
+    float per texel of the UV square (384 MiB for six poses at 4096²)."""
+
+    shape: tuple[int, int]
+    flat: np.ndarray  # [n] int64, sorted, unique
+    values: np.ndarray  # [n] float32
+
+    @classmethod
+    def of(
+        cls, shape: tuple[int, int], parts: Sequence[tuple[np.ndarray, np.ndarray]]
+    ) -> TexelErrors:
+        """The map that writing each part's ``(flat, values)`` in turn onto a grid of zeros
+        makes (a texel written twice keeps the later value)."""
+        idx = np.concatenate([np.asarray(f, np.int64) for f, _ in parts])
+        val = np.concatenate([np.asarray(v, _F) for _, v in parts])
+        order = np.argsort(idx, kind="stable")  # equal indices keep their order
+        idx, val = idx[order], val[order]
+        last = np.ones(idx.size, bool)
+        last[:-1] = idx[1:] != idx[:-1]
+        return cls((int(shape[0]), int(shape[1])), idx[last], val[last])
+
+    def at(self, flat: np.ndarray) -> np.ndarray:
+        """The map's values at grid texels ``flat`` (0 where nothing was judged)."""
+        flat = np.asarray(flat, np.int64)
+        out = np.zeros(flat.shape, _F)
+        if self.flat.size == 0:
+            return out
+        pos = np.minimum(np.searchsorted(self.flat, flat), self.flat.size - 1)
+        hit = self.flat[pos] == flat
+        out[hit] = self.values[pos[hit]]
+        return out
+
+    def dense(self) -> np.ndarray:
+        """The whole ``[H, W]`` map."""
+        out = np.zeros(self.shape[0] * self.shape[1], _F)
+        out[self.flat] = self.values
+        return out.reshape(self.shape)
+
+
 @dataclass
 class Fidelity:
     """Every pose's fidelity and the base's own over the face."""
@@ -177,7 +220,8 @@ class Fidelity:
     poses: list[PoseFidelity]
     base: Stats | None = None
     active_fraction: float = 0.0
-    errors: dict[str, np.ndarray] = field(default_factory=dict)  # pose -> [H, W] (on request)
+    #: pose -> its error map as judged texels (on request: ``evaluate(error_maps=True)``)
+    errors: dict[str, TexelErrors] = field(default_factory=dict)
     #: on request (``evaluate(samples=True)``): per pose its texels' errors and weights, and
     #: under :data:`BASE_SAMPLES` the base's over the face (weights None: unweighted), to pool the
     #: stats of several grids (UDIM tiles: :func:`pooled`)
@@ -320,7 +364,7 @@ def evaluate(
     base_pd = _pd_planes(base_u) if ref.encoding == "pd" else None
     states = planes(s.states)
     out = []
-    maps: dict[str, np.ndarray] = {}
+    maps: dict[str, TexelErrors] = {}
     kept: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
     leak_at = None
     if leaks and s.leaks is not None and any(lk is not None for lk in s.leaks):
@@ -355,11 +399,10 @@ def evaluate(
                     per_region[ref.region_names[r]] = st
         out.append(PoseFidelity(pr.pose.name, overall, per_region, n_leak))
         if error_maps:
-            emap = np.zeros(H * W, _F)
-            emap[ref.union[pr.sel]] = err
+            parts = [(ref.union[pr.sel], err)]
             if leak is not None:
-                emap[leak[0]] = lerr
-            maps[pr.pose.name] = emap.reshape(H, W)
+                parts.append((leak[0], lerr))
+            maps[pr.pose.name] = TexelErrors.of((H, W), parts)
     fid = Fidelity(out, None, ref.active_fraction, maps, kept, ref.step)
     if base_over_face and "base" in s.raw:
         base_err: list[np.ndarray] | None = [] if samples else None

@@ -11,10 +11,15 @@ from wrinklepipe import model
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.fidelity.reference import source_states
 from wrinklepipe.masks import resample_masks
+from wrinklepipe.masks.stack import MaskStack, float_masks
 from wrinklepipe.pipeline.package import resize_normals_pd
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.inputs import Texture, ValidationInput
+from wrinklepipe.workset import map_rows
 
+#: Bytes of temporaries per texel while decoding a shipped normal map's texels (float32 values
+#: of four channels, their squares and the unit vectors).
+DECODE_BYTES = 64
 #: The render target's side when the options do not set one follows the base map's largest
 #: side, within these bounds: at most 512 (the comparison samples the shipped texels at each
 #: pixel's UV: a larger target adds pixels, not texels), at least 160 so a small region of a
@@ -90,9 +95,17 @@ def resize_normals(normals: np.ndarray, h: int, w: int) -> np.ndarray:
 
 
 def resize_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:
-    """Masks ``[R, H, W]`` resampled as ``convert`` does (box down, bilinear up)."""
-
-    return np.asarray(resample_masks(np.asarray(masks, np.float32), (h, w)), np.float32)
+    """Masks ``[R, H, W]`` resampled as ``convert`` does (box down, bilinear up), a mask at a
+    time (each is resampled on its own: the values of the whole stack's resample, without a
+    float32 copy of every mask at full size). Masks with a NaN or an infinity are resampled
+    whole, as before: the bilinear zoom spreads them to the neighbouring masks."""
+    m = float_masks(masks)
+    if not isinstance(m, MaskStack) and not all(np.isfinite(x).all() for x in m):
+        return np.asarray(resample_masks(m, (h, w)), np.float32)
+    out = np.empty((len(m), h, w), np.float32)
+    for r in range(len(m)):
+        out[r] = resample_masks(np.asarray(m[r], np.float32)[None], (h, w))[0]
+    return out
 
 
 def encode_source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.ndarray:
@@ -117,16 +130,39 @@ class Context:
     def asset(self) -> WrinkleAsset:
         return self.inp.asset
 
-    def values(self, tex: Texture, apply_srgb: bool = False) -> np.ndarray | None:
+    def values(
+        self, tex: Texture, apply_srgb: bool = False, keep: bool = True
+    ) -> np.ndarray | None:
         """Stored values of a texture in [0, 1] as a sampler returns them (no convention flip:
-        that happens after decoding), or None when its bytes cannot be decoded."""
+        that happens after decoding), or None when its bytes cannot be decoded. ``keep``: hold
+        them for the next call (``False``: made from the held texels for this call only, for
+        a large map read once: 256 MiB of float32 RGBA for a 4096² base)."""
         key = f"{tex.name}|{apply_srgb}"
-        if key not in self._values:
-            try:
-                self._values[key] = tx.decode_values(tex, apply_srgb)
-            except (ValueError, KeyError):
-                self._values[key] = None
-        return self._values[key]
+        if key in self._values:
+            return self._values[key]
+        q = self.texels(tex)  # (None: undecodable)
+        got = None if q is None else tx.decode_values(tex, apply_srgb, q)
+        if keep:
+            self._values[key] = got
+        return got
+
+    def decodable(self, tex: Texture) -> bool:
+        """Its texels (and so its values) can be decoded."""
+        return self.texels(tex) is not None
+
+    def sample_values(self, tex: Texture, uv: np.ndarray) -> np.ndarray:
+        """``tx.bilinear(self.values(tex), uv)`` (the texture's values sampled as the GPU
+        does), made from the held texels: each tap's texels are turned into values as
+        :func:`wrinklepipe.validate.textures.decode_values` turns every texel (the same float32
+        per texel), without the values of the whole map. The texture must be decodable."""
+        key = f"{tex.name}|False"
+        v = self._values.get(key)
+        if v is not None:
+            return tx.bilinear(v, uv)
+        q = self.texels(tex)
+        if q is None:
+            raise ValueError(f"{tex.name}: its texels cannot be decoded")
+        return tx.bilinear(q, uv, tx.unorm_values)
 
     def texels(self, tex: Texture) -> np.ndarray | None:
         """Level-0 integer (or float) texels of a texture, or None when undecodable."""
@@ -165,7 +201,13 @@ class Context:
         q = self.texels(t)
         if q is None:
             return None
-        return tx.decode_texels(q, "base", tx.xy_layout(t), 1.0, flip_y=self.flips(t))
+        # band by band of rows (the codec decodes each texel on its own: the same values),
+        # into one C-ordered array (the whole map's decode is not C-ordered: every resample
+        # of it copied it first)
+        layout, flip = tx.xy_layout(t), self.flips(t)
+        return map_rows(
+            lambda b: tx.decode_texels(b, "base", layout, 1.0, flip_y=flip), q, DECODE_BYTES
+        )
 
     @cached_property
     def shipped_states(self) -> list[np.ndarray] | None:
@@ -278,11 +320,12 @@ class Context:
             "states": np.stack([resize_normals(st, hs, ws) for st in a.states]),
             "base_at_states": resize_normals(a.base, hs, ws),
         }
-        masks = np.asarray(a.masks, np.float32)
+        masks = a.masks
         ship = self.shipped_masks
         if ship is not None and masks.shape[0] and ship.shape[1:] != masks.shape[1:]:
-            masks = resize_masks(masks, *ship.shape[1:])
-        out["masks"] = masks
+            out["masks"] = resize_masks(masks, *ship.shape[1:])
+        else:
+            out["masks"] = np.asarray(masks, np.float32)
         return out
 
     @cached_property

@@ -96,7 +96,7 @@ def pose_pictures(
         out[f"fidelity_shipped/{name}"] = normal_picture(got).reshape(h, w, 3)
         err = fid.errors.get(name)
         if err is not None:
-            out[f"fidelity_error/{name}"] = np.asarray(err, _F).reshape(-1)[flat].reshape(h, w)
+            out[f"fidelity_error/{name}"] = err.at(flat).reshape(h, w)
     return out
 
 

@@ -95,10 +95,10 @@ def sample_reference(ctx: Context, uv: np.ndarray) -> Samples:
     inp, a = ctx.inp, ctx.asset
     bt = ctx.base_tex
     # filter the stored values, then decode (as the sampler and the shader do)
-    base = tx.values_to_normals(tx.bilinear(ctx.values(bt), uv), tx.xy_layout(bt), ctx.flips(bt))
+    base = tx.values_to_normals(ctx.sample_values(bt, uv), tx.xy_layout(bt), ctx.flips(bt))
     states = []
     for t in inp.state_textures():
-        v = tx.bilinear(ctx.values(t), uv)
+        v = ctx.sample_values(t, uv)
         states.append(
             tx.decode_state(
                 v, a.encoding, tx.xy_layout(t), a.pd_scale, t.mapping, t.bits, ctx.flips(t)
@@ -237,10 +237,10 @@ def can_render(ctx: Context) -> str:
         return "unknown encoding or policy"
     if a.policy == "signed" and len(a.state_names) != 2:
         return "policy 'signed' needs two states"
-    if not inp.by_role("base") or ctx.values(ctx.base_tex) is None:
+    if not inp.by_role("base") or not ctx.decodable(ctx.base_tex):
         return "no decodable base texture"
     sts = inp.state_textures()
-    if not sts or any(t is None or ctx.values(t) is None for t in sts):
+    if not sts or any(t is None or not ctx.decodable(t) for t in sts):
         return "a state texture is missing or undecodable"
     if len({(t.fmt, t.width, t.height, t.convention) for t in sts}) > 1:
         return "state textures differ in size, format or declared convention"

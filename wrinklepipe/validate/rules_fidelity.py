@@ -89,15 +89,35 @@ def footprint(ctx: Context, shape: tuple[int, int]) -> np.ndarray | None:
 
 def source_encoded(ctx: Context) -> tuple[np.ndarray, np.ndarray]:
     """The source base at the source states' size and the source states in combine's
-    representation (cached on the context: the measure and the render pass both use them)."""
-    c = _cache(ctx)
-    if "source_encoded" not in c:
-        a = ctx.asset
-        H, W = a.states.shape[1:3]
-        base = resize_normals(a.base, H, W)
-        states = encode_source_states(base, np.asarray(a.states, np.float32), a.encoding)
-        c["source_encoded"] = (base, states)
-    return c["source_encoded"]
+    representation (made for the call, not held: the reference is made from them once, and the
+    render pass samples them from the source maps' texels, :func:`source_sampled`)."""
+    a = ctx.asset
+    H, W = a.states.shape[1:3]
+    base = resize_normals(a.base, H, W)
+    return base, encode_source_states(base, np.asarray(a.states, np.float32), a.encoding)
+
+
+def source_sampled(ctx: Context, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`source_encoded`'s base and states sampled at ``uv`` by
+    :func:`~wrinklepipe.validate.textures.bilinear` (``[N, 3]``, ``[K, N, C]``), the states
+    encoded at the texels the taps read only (the encoding is per texel: the same floats), not
+    over the whole map."""
+    a = ctx.asset
+    H, W = a.states.shape[1:3]
+    base = resize_normals(a.base, H, W)
+    states = np.asarray(a.states, np.float32)
+    K = states.shape[0]
+    base_flat = base.reshape(H * W, 3)
+    states_flat = states.reshape(K, H * W, -1)
+
+    def encoded(i: np.ndarray) -> np.ndarray:  # [n, K * C]: the K states side by side
+        e = encode_source_states(base_flat[i], states_flat[:, i], a.encoding)
+        return np.moveaxis(e, 0, 1).reshape(i.size, -1)
+
+    got = tx.bilinear_at(encoded, (H, W), uv)
+    return tx.bilinear(base, uv), np.ascontiguousarray(
+        np.moveaxis(got.reshape(len(uv), K, -1), 1, 0)
+    )
 
 
 def reference(ctx: Context) -> fd.Reference | None:
@@ -139,7 +159,8 @@ def shipped_samples(ctx: Context, states: np.ndarray) -> fd.Samples | None:
 
 def shipped_fidelity(ctx: Context) -> fd.Fidelity | None:
     """The shipped textures' fidelity (per pose and region, the base over the face, error maps
-    on the source grid), or None when it cannot be measured."""
+    as the texels judged: :class:`wrinklepipe.fidelity.TexelErrors`), or None when it cannot be
+    measured."""
     c = _cache(ctx)
     if "fidelity" not in c:
         c["fidelity"] = None
@@ -224,17 +245,25 @@ def check_fidelity(ctx: Context) -> list[Issue]:
 
 
 def _outside(masks: np.ndarray, shape: tuple[int, int], fp: np.ndarray | None) -> np.ndarray:
-    """Texels of the ``shape`` grid where every mask is zero (inside the footprint)."""
+    """Texels of the ``shape`` grid where every mask is zero (inside the footprint). The masks
+    are read a mask at a time (no float32 copy of every mask: 512 MiB for eight 4096² masks)."""
     H, W = shape
-    m = np.asarray(masks, np.float32)
-    if m.shape[1:] == (H, W):
-        inside = (m > 0).any(axis=0)
-    elif m.size and m.min() >= 0:
+    m = float_masks(masks)
+    R, h, w = len(m), *m.shape[1:]
+    some = np.zeros((h, w), bool)  # some mask > 0, and every mask >= 0 (NaN is not)
+    nonneg = R > 0
+    for r in range(R):
+        mr = np.asarray(m[r], np.float32)
+        some |= mr > 0
+        nonneg = nonneg and bool(mr.min() >= 0) if mr.size else False
+    if (h, w) == (H, W):
+        inside = some
+    elif nonneg:
         # Bilinear weights are >= 0: a sampled mask is > 0 exactly where one of its taps with
         # a weight > 0 is, so sampling "some mask > 0" once gives what sampling every mask
         # does (one channel instead of R)
-        some = (m > 0).any(axis=0).astype(np.float32)
-        inside = fd.sample_masks_at(some[None], (H, W), np.arange(H * W)).reshape(H, W) > 0
+        flags = some.astype(np.float32)[None]
+        inside = fd.sample_masks_at(flags, (H, W), np.arange(H * W)).reshape(H, W) > 0
     else:
         inside = (fd.sample_masks_at(m, (H, W), np.arange(H * W)) > 0).any(axis=0)
         inside = inside.reshape(H, W)
@@ -441,9 +470,8 @@ def render_fidelity(
     a = ctx.asset
     if not _measurable(ctx) or not gpu:
         return [], {}
-    base_hw, enc = source_encoded(ctx)
-    base_src = model.normalize(tx.bilinear(base_hw, uv))
-    states_src = np.stack([tx.bilinear(s, uv) for s in enc])
+    base_at, states_src = source_sampled(ctx, uv)
+    base_src = model.normalize(base_at)
     if a.encoding in ("full", "composite"):
         states_src = model.normalize(states_src)
     masks_src = tx.bilinear_planes(float_masks(a.masks), uv).T

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from wrinklepipe import codec, model
@@ -10,6 +12,7 @@ from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context, resize_normals
 from wrinklepipe.validate.inputs import Texture
+from wrinklepipe.workset import band_rows
 
 
 def check_declarations(ctx: Context) -> list[Issue]:
@@ -88,36 +91,73 @@ def _state_slopes(ctx: Context, k: int, state: np.ndarray) -> np.ndarray | None:
     return model.normal_to_pd(model.normalize(base + model.diff_to_delta(state)))
 
 
-def _normal_map_texture_checks(ctx: Context, t: Texture, normals_raw: np.ndarray) -> list[Issue]:
+#: Bytes of temporaries per texel of the unit-length and z checks (float32 values, raw
+#: normals, their squares and lengths, flags).
+CHECK_BYTES = 64
+
+
+def _texel_counts(
+    values: np.ndarray, tol: float, read: Callable[[np.ndarray], np.ndarray] | None = None
+) -> tuple[int, int, int, int | None, int | None]:
+    """Over a three-channel normal map's texels (stored ``values`` ``[H, W, C]``, or texels
+    ``read`` turns into them, per texel): the counts of texels NaN or not unit, NaN, z < 0, and
+    the flat index of the first texel not unit and of the first with z < 0. Band by band of
+    rows: every test is per texel, so the counts and indices of the whole map at once."""
+    h, w = values.shape[:2]
+    rows = band_rows(w, CHECK_BYTES)
+    n_bad = n_nan = n_neg = 0
+    first_bad: int | None = None
+    first_neg: int | None = None
+    for r0 in range(0, h, rows):
+        v = values[r0 : r0 + rows]
+        n = tx.raw_normals(v if read is None else read(v), "rgb").reshape(-1, 3)
+        nan = ~np.isfinite(n).all(axis=1)
+        length = np.linalg.norm(np.nan_to_num(n), axis=1)
+        bad = nan | (np.abs(length - 1.0) > tol)
+        neg = np.nan_to_num(n[:, 2]) < 0
+        if first_bad is None and bad.any():
+            first_bad = r0 * w + int(np.flatnonzero(bad)[0])
+        if first_neg is None and neg.any():
+            first_neg = r0 * w + int(np.flatnonzero(neg)[0])
+        n_bad += int(bad.sum())
+        n_nan += int(nan.sum())
+        n_neg += int(neg.sum())
+    return n_bad, n_nan, n_neg, first_bad, first_neg
+
+
+def _normal_map_texture_checks(
+    ctx: Context,
+    t: Texture,
+    values: np.ndarray,
+    read: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> list[Issue]:
+    """Unit length and z >= 0 of a three-channel normal map's stored ``values`` (or of the
+    texels ``read`` turns into them)."""
     o = ctx.options
     out = []
-    n = normals_raw.reshape(-1, 3)
-    total = max(n.shape[0], 1)
-    nan = ~np.isfinite(n).all(axis=1)
-    length = np.linalg.norm(np.nan_to_num(n), axis=1)
     tol = o.unit_tolerance
-    bad = nan | (np.abs(length - 1.0) > tol)
-    if bad.sum() > o.max_bad_fraction * total:
-        first = int(np.flatnonzero(bad)[0])
+    n_bad, n_nan, n_neg, first_bad, first_neg = _texel_counts(values, tol, read)
+    total = max(values.shape[0] * values.shape[1], 1)
+    if n_bad > o.max_bad_fraction * total:
+        first = int(first_bad)  # type: ignore[arg-type]
         out.append(
             make_issue(
                 "WP-MAP-001",
-                f"{int(bad.sum())} of {total} texels are NaN ({int(nan.sum())}) or not unit "
+                f"{n_bad} of {total} texels are NaN ({n_nan}) or not unit "
                 f"(| |n| - 1 | > {tol}); first at texel ({first % t.width}, {first // t.width})",
                 t.where,
-                texels=int(bad.sum()),
+                texels=n_bad,
             )
         )
-    neg = np.nan_to_num(n[:, 2]) < 0
-    if neg.sum() > o.max_bad_fraction * total:
-        first = int(np.flatnonzero(neg)[0])
+    if n_neg > o.max_bad_fraction * total:
+        first = int(first_neg)  # type: ignore[arg-type]
         out.append(
             make_issue(
                 "WP-MAP-002",
-                f"{int(neg.sum())} of {total} texels have z < 0; first at texel "
+                f"{n_neg} of {total} texels have z < 0; first at texel "
                 f"({first % t.width}, {first // t.width})",
                 t.where,
-                texels=int(neg.sum()),
+                texels=n_neg,
             )
         )
     return out
@@ -147,11 +187,10 @@ def check_maps(ctx: Context) -> list[Issue]:
     o = ctx.options
     out: list[Issue] = []
     bt = ctx.base_tex
-    if bt is not None and ctx.values(bt) is not None:
-        v = ctx.values(bt)
+    if bt is not None and ctx.decodable(bt):
         layout = tx.xy_layout(bt)
-        if layout == "rgb":
-            out += _normal_map_texture_checks(ctx, bt, tx.raw_normals(v, layout))
+        if layout == "rgb":  # the base's values from its texels, band by band (not held)
+            out += _normal_map_texture_checks(ctx, bt, ctx.texels(bt), tx.unorm_values)
         if ctx.shipped_base is not None:
             issue = _convention_issue(ctx, bt, model.normal_to_pd(ctx.shipped_base))
             if issue:
@@ -164,7 +203,7 @@ def check_maps(ctx: Context) -> list[Issue]:
         v = ctx.values(t)
         layout = tx.xy_layout(t)
         if a.encoding in ("full", "composite") and layout == "rgb":
-            out += _normal_map_texture_checks(ctx, t, tx.raw_normals(v, layout))
+            out += _normal_map_texture_checks(ctx, t, v)
         slopes = _state_slopes(ctx, k, st)
         if slopes is not None:
             issue = _convention_issue(ctx, t, slopes)

@@ -11,6 +11,8 @@ sees the texels the shader sees.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import texture2ddecoder as t2d
 
@@ -49,12 +51,21 @@ def texels(tex: Texture) -> np.ndarray:
     return np.ascontiguousarray(bgra[..., [2, 1, 0, 3]][..., :ch])
 
 
-def decode_values(tex: Texture, apply_srgb: bool = False) -> np.ndarray:
-    """Stored values of level 0 as float32 ``[H, W, C]`` in [0, 1] (C = the format's channels).
+def unorm_values(q: np.ndarray) -> np.ndarray:
+    """Stored texels as values in [0, 1] (float32), each on its own: :func:`decode_values`
+    without the sRGB step (so of any subset of the texels, the same floats)."""
+    return codec.dequantize_unorm(q)
+
+
+def decode_values(
+    tex: Texture, apply_srgb: bool = False, q: np.ndarray | None = None
+) -> np.ndarray:
+    """Stored values of level 0 as float32 ``[H, W, C]`` in [0, 1] (C = the format's channels);
+    ``q``: its :func:`texels` when they are at hand.
 
     Raises ``ValueError`` when the byte count does not match the format and size.
     """
-    out = codec.dequantize_unorm(texels(tex))
+    out = unorm_values(texels(tex) if q is None else q)
     if apply_srgb and tex.srgb and FORMATS[tex.fmt][2] != "float":
         rgb = min(out.shape[-1], 3)
         out = out.copy()
@@ -142,9 +153,28 @@ def decode_texels(
     return e.combine_input(_flip(x, flip_y))
 
 
-def bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Sample ``img [H, W, C]`` at ``uv [N, 2]`` like GL_LINEAR + CLAMP_TO_EDGE -> ``[N, C]``."""
+def bilinear(
+    img: np.ndarray, uv: np.ndarray, read: Callable[[np.ndarray], np.ndarray] | None = None
+) -> np.ndarray:
+    """Sample ``img [H, W, C]`` at ``uv [N, 2]`` like GL_LINEAR + CLAMP_TO_EDGE -> ``[N, C]``.
+    ``read``: a per-texel function of ``img``'s texels (stored integers -> values), applied to
+    the texels each tap reads: ``bilinear(read(img), uv)`` without ``read`` of the whole map."""
     h, w = img.shape[:2]
+    flat = img.reshape(h * w, -1)
+
+    def gather(rows: np.ndarray) -> np.ndarray:  # np.take: the same rows, ~5x faster than flat[i]
+        got = np.take(flat, rows, axis=0)
+        return got if read is None else read(got)
+
+    return bilinear_at(gather, (h, w), uv)
+
+
+def bilinear_at(
+    gather: Callable[[np.ndarray], np.ndarray], shape: tuple[int, int], uv: np.ndarray
+) -> np.ndarray:
+    """:func:`bilinear` of the ``[H, W, C]`` map whose texels ``gather`` gives (flat indices
+    ``[n]`` -> ``[n, C]``): a map made per texel is sampled from the texels the taps read."""
+    h, w = shape
     x = uv[:, 0].astype(np.float64) * w - 0.5
     y = uv[:, 1].astype(np.float64) * h - 0.5
     x0 = np.floor(x)
@@ -155,13 +185,8 @@ def bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
     y0 = y0.astype(np.int64)
     xa, xb = np.clip(x0, 0, w - 1), np.clip(x0 + 1, 0, w - 1)
     ya, yb = np.clip(y0, 0, h - 1), np.clip(y0 + 1, 0, h - 1)
-    flat = img.reshape(h * w, -1)
-
-    def tap(rows: np.ndarray) -> np.ndarray:  # np.take: the same rows, ~5x faster than flat[i]
-        return np.take(flat, rows, axis=0)
-
-    top = tap(ya * w + xa) * (1 - fx) + tap(ya * w + xb) * fx
-    bot = tap(yb * w + xa) * (1 - fx) + tap(yb * w + xb) * fx
+    top = gather(ya * w + xa) * (1 - fx) + gather(ya * w + xb) * fx
+    bot = gather(yb * w + xa) * (1 - fx) + gather(yb * w + xb) * fx
     return (top * (1 - fy) + bot * fy).astype(np.float32)
 
 

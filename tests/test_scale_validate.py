@@ -1,0 +1,227 @@
+"""Film scale: the validator's memory (issue 42). Each bounded step gives what the whole-map
+computation gives, bit for bit (docs/scale.md, "Memory")."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wrinklepipe import fidelity as fd
+from wrinklepipe import workset
+from wrinklepipe.demo.source import write_demo_source
+from wrinklepipe.fidelity.metric import TexelErrors
+from wrinklepipe.masks import resample_masks
+from wrinklepipe.masks.stack import MaskStack
+from wrinklepipe.sources.validation import load_input
+from wrinklepipe.validate import rules_fidelity, rules_maps
+from wrinklepipe.validate import textures as tx
+from wrinklepipe.validate.context import Context, resize_masks
+from wrinklepipe.validate.rules_fidelity import _outside
+
+U32 = np.uint32
+
+
+def _case(seed: int, H: int = 48, hm: int = 12):
+    """A random source (two PD states, three regions, masks at ``hm``²) and shipped maps whose
+    masks differ from the source's (so poses leak onto texels the source leaves alone)."""
+    rng = np.random.default_rng(seed)
+    base = rng.normal(size=(H, H, 3)).astype(np.float32)
+    base[..., 2] = np.abs(base[..., 2]) + 2.0
+    base /= np.linalg.norm(base, axis=-1, keepdims=True)
+    states = (0.2 * rng.normal(size=(2, H, H, 2))).astype(np.float32)
+    masks = rng.random((3, hm, hm)).astype(np.float32)
+    masks *= rng.random((3, hm, hm)) < 0.3
+    poses = [
+        fd.Pose("a", np.array([[1, 0], [0, 0], [0, 1]], np.float32)),
+        fd.Pose("b", np.array([[0, 0], [1, 1], [0, 0]], np.float32)),
+    ]
+    ref = fd.prepare(base, states, masks, poses, ["r0", "r1", "r2"])
+    shipped_masks = np.clip(masks + (rng.random(masks.shape) < 0.2) * 0.5, 0, 1)
+    shipped_states = states + (0.01 * rng.normal(size=states.shape)).astype(np.float32)
+    s = fd.sample(ref, base, shipped_states, shipped_masks.astype(np.float32))
+    return ref, s
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_error_maps_as_texels_are_the_whole_maps(seed):
+    """The judged texels' errors (``TexelErrors``) against the map the measure wrote on the
+    whole grid (zeros, the pose's active texels' errors, then its leaks'): every bit, whole and
+    at any texel, and the same statistics."""
+    ref, s = _case(seed)
+    fid = fd.evaluate(ref, s, error_maps=True, samples=True)
+    assert fid.to_json() == fd.evaluate(ref, s).to_json()
+    H, W = ref.shape
+    leaked = 0
+    for pi, pr in enumerate(ref.poses):
+        e, _ = fid.samples[pr.pose.name]
+        n = pr.sel.size
+        whole = np.zeros(H * W, np.float32)  # the whole-map computation
+        whole[ref.union[pr.sel]] = e[:n]
+        written = ref.union[pr.sel]
+        if s.leaks[pi] is not None:
+            whole[s.leaks[pi][0]] = e[n:]
+            written = np.union1d(written, s.leaks[pi][0])
+            leaked += e.size - n
+        got = fid.errors[pr.pose.name]
+        assert isinstance(got, TexelErrors) and got.shape == (H, W)
+        assert np.array_equal(got.dense().view(U32), whole.reshape(H, W).view(U32))
+        flat = np.random.default_rng(seed).integers(0, H * W, 500)
+        assert np.array_equal(got.at(flat).view(U32), whole[flat].view(U32))
+        assert np.array_equal(got.flat, written)  # sorted, unique: the texels judged
+    assert leaked > 0  # the case has leaks
+
+
+def test_texel_errors_later_writes_win():
+    t = TexelErrors.of((2, 3), [(np.array([4, 1]), np.array([1.0, 2.0])), (np.array([1]), [5.0])])
+    assert t.flat.tolist() == [1, 4] and t.values.tolist() == [5.0, 1.0]
+    assert t.dense().tolist() == [[0.0, 5.0, 0.0], [0.0, 1.0, 0.0]]
+    assert t.at(np.array([0, 1, 4, 5])).tolist() == [0.0, 5.0, 1.0, 0.0]
+    empty = TexelErrors.of((2, 2), [(np.zeros(0, np.int64), np.zeros(0, np.float32))])
+    assert empty.at(np.arange(4)).tolist() == [0.0] * 4
+
+
+def _mask_cases(rng):
+    q = rng.integers(0, 256, (3, 24, 24)).astype(np.uint8)
+    q[q < 180] = 0
+    f = rng.random((4, 24, 24)).astype(np.float32)
+    f[f < 0.7] = 0
+    f[0, :3] = 1e-30  # tiny values: a float file's
+    neg = f.copy()
+    neg[1, 5, 5] = -0.25
+    nan = f.copy()
+    nan[2, 7, 1] = np.nan
+    return {"stack": MaskStack(q), "float": f, "negative": neg, "nan": nan}
+
+
+@pytest.mark.parametrize("size", [(24, 24), (6, 6), (8, 12), (10, 10), (40, 33)])
+def test_masks_resized_a_mask_at_a_time_are_the_whole_resample(size):
+    """The validator's source masks at the shipped size, a mask at a time: the whole stack's
+    resample (box down, bilinear up, the same size) bit for bit."""
+    for name, m in _mask_cases(np.random.default_rng(7)).items():
+        whole = resample_masks(np.asarray(m, np.float32), size)
+        got = resize_masks(m, *size)
+        assert got.dtype == np.float32 and got.shape == whole.shape, name
+        assert np.array_equal(got.view(U32), whole.view(U32)), name
+
+
+def _outside_whole(masks, shape, fp):
+    """The rule's texels outside every mask as computed before, on every mask at once."""
+    H, W = shape
+    m = np.asarray(masks, np.float32)
+    if m.shape[1:] == (H, W):
+        inside = (m > 0).any(axis=0)
+    elif m.size and m.min() >= 0:
+        some = (m > 0).any(axis=0).astype(np.float32)
+        inside = fd.sample_masks_at(some[None], (H, W), np.arange(H * W)).reshape(H, W) > 0
+    else:
+        inside = (fd.sample_masks_at(m, (H, W), np.arange(H * W)) > 0).any(axis=0)
+        inside = inside.reshape(H, W)
+    out = ~inside
+    return out & fp if fp is not None else out
+
+
+@pytest.mark.parametrize("shape", [(24, 24), (48, 48), (37, 37), (12, 12)])
+def test_outside_a_mask_at_a_time_is_the_whole_computation(shape):
+    rng = np.random.default_rng(3)
+    fp = rng.random(shape) < 0.8
+    cases = _mask_cases(rng)
+    cases["none"] = np.zeros((0, 24, 24), np.float32)
+    for name, m in cases.items():
+        for f in (None, fp):
+            want = _outside_whole(m, shape, f)
+            assert np.array_equal(_outside(m, shape, f), want), name
+
+
+def test_bilinear_of_texels_read_per_tap_is_bilinear_of_the_values():
+    """The render pass samples a texture's values from its integer texels, each tap's texels
+    turned into values: ``bilinear(values, uv)`` bit for bit, without the values of the map."""
+    rng = np.random.default_rng(5)
+    for dtype, shape in ((np.uint8, (37, 21, 4)), (np.uint16, (16, 16, 2)), (np.uint8, (8, 8, 3))):
+        q = rng.integers(0, np.iinfo(dtype).max + 1, shape).astype(dtype)
+        uv = rng.random((300, 2)).astype(np.float32) * 1.2 - 0.1  # clamped at the edges too
+        want = tx.bilinear(tx.unorm_values(q), uv)
+        got = tx.bilinear(q, uv, tx.unorm_values)
+        assert got.dtype == np.float32 and np.array_equal(got.view(U32), want.view(U32))
+
+
+def test_texel_counts_in_bands_are_the_whole_maps(monkeypatch):
+    """The unit-length and z checks of a normal map band by band (bands of 3 rows): the counts
+    and first texels of the whole map's arrays."""
+    rng = np.random.default_rng(9)
+    v = rng.random((23, 17, 4)).astype(np.float32)
+    v[4, 5] = np.nan
+    v[10:12, :, 2] = 0.1  # z < 0
+    monkeypatch.setattr(rules_maps, "band_rows", lambda w, b: 3)
+    n = tx.raw_normals(v, "rgb").reshape(-1, 3)  # the whole map at once, as before
+    nan = ~np.isfinite(n).all(axis=1)
+    bad = nan | (np.abs(np.linalg.norm(np.nan_to_num(n), axis=1) - 1.0) > 0.05)
+    neg = np.nan_to_num(n[:, 2]) < 0
+    want = (
+        int(bad.sum()),
+        int(nan.sum()),
+        int(neg.sum()),
+        int(np.flatnonzero(bad)[0]),
+        int(np.flatnonzero(neg)[0]),
+    )
+    assert rules_maps._texel_counts(v, 0.05) == want
+    assert want[2] >= 2 * 17 and want[1] == 1
+    q = (rng.random((23, 17, 4)) * 255).astype(np.uint8)
+    whole = tx.raw_normals(tx.unorm_values(q), "rgb").reshape(-1, 3)
+    lengths = np.linalg.norm(whole, axis=1)
+    got = rules_maps._texel_counts(q, 0.05, tx.unorm_values)
+    assert got[0] == int((np.abs(lengths - 1.0) > 0.05).sum()) and got[1] == 0
+    assert got[2] == int((whole[:, 2] < 0).sum())
+
+
+@pytest.mark.parametrize("encoding", ["pd", "diff", "full", "composite"])
+def test_source_sampled_from_the_taps_is_the_encoded_maps_sampled(encoding):
+    """The render pass's source: the states encoded at the texels the taps read, then sampled,
+    is the whole encoded maps sampled (what the validator held before) bit for bit."""
+    rng = np.random.default_rng(11)
+    H = W = 24
+    base = rng.normal(size=(H, W, 3)).astype(np.float32)
+    base[..., 2] = np.abs(base[..., 2]) + 1.5
+    base /= np.linalg.norm(base, axis=-1, keepdims=True)
+    states = base[None] + (0.3 * rng.normal(size=(2, H, W, 3))).astype(np.float32)
+    states /= np.linalg.norm(states, axis=-1, keepdims=True)
+
+    class Asset:
+        pass
+
+    a = Asset()
+    a.base, a.states, a.encoding = base, states.astype(np.float32), encoding
+
+    class Ctx:
+        asset = a
+
+    uv = rng.random((400, 2)).astype(np.float32)
+    b, enc = rules_fidelity.source_encoded(Ctx())
+    want_base = tx.bilinear(b, uv)
+    want = np.stack([tx.bilinear(s, uv) for s in enc])
+    got_base, got = rules_fidelity.source_sampled(Ctx(), uv)
+    assert np.array_equal(got_base.view(U32), want_base.view(U32))
+    assert got.shape == want.shape and got.flags.c_contiguous
+    assert np.array_equal(got.view(U32), want.view(U32))
+
+
+def test_shipped_base_decoded_in_bands_is_the_whole_decode(monkeypatch):
+    """The shipped base's normals decoded band by band (bands of 5 rows) into one C-ordered
+    array: the codec's decode of the whole map bit for bit."""
+    rng = np.random.default_rng(13)
+    q = rng.integers(0, 256, (29, 19, 4)).astype(np.uint8)
+    whole = tx.decode_texels(q, "base", "rgb", 1.0)
+    monkeypatch.setattr(workset, "band_rows", lambda w, b: 5)
+    got = workset.map_rows(lambda b: tx.decode_texels(b, "base", "rgb", 1.0), q, 64)
+    assert got.flags.c_contiguous and np.array_equal(got.view(U32), whole.view(U32))
+
+
+def test_the_contexts_shipped_base_is_the_whole_decode(tmp_path, monkeypatch):
+    """A demo's shipped base as the validator's context decodes it (bands of 7 rows) against
+    the codec's decode of all its texels at once."""
+    manifest = write_demo_source(tmp_path / "demo", size=64)
+    ctx = Context(load_input(manifest))
+    bt = ctx.base_tex
+    whole = tx.decode_texels(ctx.texels(bt), "base", tx.xy_layout(bt), 1.0, flip_y=ctx.flips(bt))
+    monkeypatch.setattr(workset, "band_rows", lambda w, b: 7)
+    got = ctx.shipped_base
+    assert got.flags.c_contiguous and np.array_equal(got.view(U32), whole.view(U32))
