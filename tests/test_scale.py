@@ -291,3 +291,35 @@ def test_states_read_into_one_stack_are_each_file_read_alone(tmp_path, conventio
         want = read_normal_map(p, o).normals
         assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
     assert np.array_equal(stack[2], base)  # a colour-only state's normal is the base
+
+
+@pytest.mark.parametrize("rows", [1, 2, 5])
+@pytest.mark.parametrize("kind", ["opengl", "directx", "seams", "masked", "hostile"])
+def test_convention_detected_by_bands_is_the_whole_maps(monkeypatch, rows, kind):
+    """The curl test made band by band of rows (each band reading a row either side) gives the
+    whole map's report to the last bit: the same texels, differences, seam limit and means."""
+    from wrinklepipe.normals import convention as cv
+
+    rng = np.random.default_rng(11)
+    h, w = 29, 23
+    f = rng.normal(0.0, 1.0, (h + 2, w + 2)).cumsum(0).cumsum(1) * 0.01  # a height field
+    px, py = np.diff(f, axis=1)[1:-1, :-1], np.diff(f, axis=0)[:-1, 1:-1]  # [h, w] each
+    if kind != "directx":  # rows run down the image (v), so +Y up is the other sign
+        py = -py
+    n = np.stack([-px, -py, np.ones_like(px)], -1)
+    n = (n / np.linalg.norm(n, axis=-1, keepdims=True)).astype(np.float32)
+    mask = None
+    if kind == "seams":
+        n[:, 11:] = n[:, 11:, [1, 0, 2]]  # an island edge: a jump far beyond the texture
+    if kind == "masked":
+        mask = rng.random((h, w)) > 0.2
+    if kind == "hostile":
+        n[3, 4] = np.nan
+        n[10:12, 5:9, 2] = 0.1  # below the z limit
+    whole = cv.detect_convention(n, mask)
+    monkeypatch.setattr(cv, "band_rows", lambda width, per: rows)
+    band = cv.detect_convention(n, mask)
+    assert band == whole  # every float of the report equal
+    assert whole.texels_used > 0
+    if kind in ("opengl", "directx"):
+        assert whole.convention == kind and whole.confidence > cv.MIN_CONFIDENCE

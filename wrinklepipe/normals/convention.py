@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wrinklepipe.workset import band_rows
+
 _F = np.float32
 
 CONVENTIONS: tuple[str, ...] = ("opengl", "directx")
@@ -71,26 +73,35 @@ def detect_convention(normals: np.ndarray, mask: np.ndarray | None = None) -> Co
     n = np.asarray(normals, dtype=_F)
     if n.ndim != 3 or n.shape[-1] != 3 or n.shape[0] < 3 or n.shape[1] < 3:
         return ConventionReport("undetermined", 0.0, 0.0, 0.0, 0, "map too small (< 3 x 3)")
-    z = n[..., 2]
-    ok = np.isfinite(n).all(axis=-1) & (z > 0.2)
-    if mask is not None:
-        ok &= np.asarray(mask, dtype=bool)
-    zs = np.where(ok, z, _F(1.0))
-    px = np.where(ok, n[..., 0] / zs, _F(0.0))
-    py = np.where(ok, n[..., 1] / zs, _F(0.0))
-    # central differences on the interior
-    a = (py[1:-1, 2:] - py[1:-1, :-2]) * _F(0.5)  # d(py)/dcol
-    b = (px[2:, 1:-1] - px[:-2, 1:-1]) * _F(0.5)  # d(px)/drow
-    valid = ok[1:-1, 2:] & ok[1:-1, :-2] & ok[2:, 1:-1] & ok[:-2, 1:-1] & ok[1:-1, 1:-1]
+    m = None if mask is None else np.asarray(mask, dtype=bool)
+    # band by band of interior rows (each band reads one row either side): the slopes'
+    # differences at the usable texels, in the whole map's order; the map's own temporaries
+    # are one band's (about 50 bytes a texel for the whole map: 3.4 GB at 8192²)
+    H = n.shape[0]
+    rows = band_rows(n.shape[1], DETECT_BYTES_PER_TEXEL)
+    a_, b_, j_ = [], [], []
+    for r0 in range(1, H - 1, rows):
+        r1 = min(H - 1, r0 + rows)
+        a, b, valid, jump = _curl_terms(
+            n[r0 - 1 : r1 + 1], None if m is None else m[r0 - 1 : r1 + 1]
+        )
+        a_.append(a[valid])
+        b_.append(b[valid])
+        j_.append(jump[valid])
+        del a, b, valid, jump
+    jumps = np.concatenate(j_)
+    del j_
     # seams: a slope jump between neighbours far beyond the local texture is an island edge
-    jump = np.maximum(np.abs(a), np.abs(b))
-    if valid.any():
-        limit = max(float(np.percentile(jump[valid], 99.0)) * 4.0, 1e-6)
-        valid &= jump <= limit
-    used = int(np.count_nonzero(valid))
+    keep = None
+    if jumps.size:
+        limit = max(float(np.percentile(jumps, 99.0)) * 4.0, 1e-6)
+        keep = jumps <= limit
+    del jumps
+    used = int(np.count_nonzero(keep)) if keep is not None else 0
     if used == 0:
         return ConventionReport("undetermined", 0.0, 0.0, 0.0, 0, "no usable texels")
-    av, bv = a[valid], b[valid]
+    av, bv = np.concatenate(a_)[keep], np.concatenate(b_)[keep]
+    del a_, b_
     curl_gl = float(np.mean(np.abs(av + bv), dtype=np.float64))
     curl_dx = float(np.mean(np.abs(av - bv), dtype=np.float64))
     signal = float(np.mean(np.abs(av) + np.abs(bv), dtype=np.float64)) * 0.5
@@ -119,3 +130,28 @@ def detect_convention(normals: np.ndarray, mask: np.ndarray | None = None) -> Co
         used,
         f"curl of the slope field vanishes for {conv} (residual {lo:.3g} vs {hi:.3g})",
     )
+
+
+#: Bytes of temporaries per texel of a band while detecting the convention.
+DETECT_BYTES_PER_TEXEL = 64
+
+
+def _curl_terms(
+    n: np.ndarray, mask: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Of rows of unit normals ``n`` [h, W, 3] (h >= 3): the central differences ``a``
+    (d(py)/dcol) and ``b`` (d(px)/drow) at the interior texels (rows 1..h-2, columns 1..W-2),
+    where all five texels are usable, and the larger of the two's magnitudes (``jump``)."""
+    z = n[..., 2]
+    ok = np.isfinite(n).all(axis=-1) & (z > 0.2)
+    if mask is not None:
+        ok &= mask
+    zs = np.where(ok, z, _F(1.0))
+    px = np.where(ok, n[..., 0] / zs, _F(0.0))
+    py = np.where(ok, n[..., 1] / zs, _F(0.0))
+    # central differences on the interior
+    a = (py[1:-1, 2:] - py[1:-1, :-2]) * _F(0.5)  # d(py)/dcol
+    b = (px[2:, 1:-1] - px[:-2, 1:-1]) * _F(0.5)  # d(px)/drow
+    valid = ok[1:-1, 2:] & ok[1:-1, :-2] & ok[2:, 1:-1] & ok[:-2, 1:-1] & ok[1:-1, 1:-1]
+    jump = np.maximum(np.abs(a), np.abs(b))
+    return a, b, valid, jump
