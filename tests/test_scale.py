@@ -323,3 +323,21 @@ def test_convention_detected_by_bands_is_the_whole_maps(monkeypatch, rows, kind)
     assert whole.texels_used > 0
     if kind in ("opengl", "directx"):
         assert whole.convention == kind and whole.confidence > cv.MIN_CONFIDENCE
+
+
+def test_rasterised_in_small_chunks_is_the_whole_raster(monkeypatch):
+    """The UV rasteriser's chunks of candidate texels (a band's share of the working set)
+    change no triangle id: overlapping triangles keep the highest index whatever the chunk."""
+    from wrinklepipe.geometry import rasterise as ra
+
+    rng = np.random.default_rng(2)
+    uvs = rng.random((60, 2))
+    idx = rng.integers(0, 60, (40, 3))
+    whole = ra.triangle_ids(uvs, idx, 48)
+    monkeypatch.setattr(ra, "band_rows", lambda width, per: 7)
+    assert np.array_equal(ra.triangle_ids(uvs, idx, 48), whole)
+    assert (whole >= 0).sum() > 500 and whole.max() == 39  # overlaps: many texels, top id
+    # a texel's id is the highest triangle whose test passes at its centre
+    y, x = np.argwhere(whole >= 0)[0]
+    hits = [t for t in range(40) if ra.triangle_ids(uvs, idx[t : t + 1], 48)[y, x] == 0]
+    assert whole[y, x] == max(hits)

@@ -11,9 +11,12 @@ from __future__ import annotations
 import numpy as np
 
 from wrinklepipe.reuse import reused
+from wrinklepipe.workset import band_rows
 
-#: Candidate texels processed per chunk (bounds memory on large triangles).
-CHUNK_TEXELS = 4_000_000
+#: Bytes of temporaries per candidate texel (its triangle's corners, coordinates and edge
+#: functions in float64, indices): a chunk of candidates takes a band's share of the working set
+#: (:func:`wrinklepipe.workset.band_rows`; 4M candidates took about 500 MiB).
+CANDIDATE_BYTES = 192
 
 
 def triangle_ids(uvs: np.ndarray, indices: np.ndarray, size: int) -> np.ndarray:
@@ -53,9 +56,11 @@ def triangle_ids(uvs: np.ndarray, indices: np.ndarray, size: int) -> np.ndarray:
     ends = np.cumsum(count)
     starts = ends - count
     total = int(ends[-1]) if len(ends) else 0
-    # Chunks of spans with about CHUNK_TEXELS candidate texels (a loop over chunks only).
+    # Chunks of spans with about `chunk` candidate texels (a loop over chunks only; each
+    # candidate is tested on its own and the highest index kept: any chunking, the same ids).
     n_s = len(rows_t)
-    cuts = np.searchsorted(ends, np.arange(1, total // CHUNK_TEXELS + 1) * CHUNK_TEXELS) + 1
+    chunk = band_rows(1, CANDIDATE_BYTES)
+    cuts = np.searchsorted(ends, np.arange(1, total // chunk + 1) * chunk) + 1
     edges = np.unique(np.concatenate([[0], np.minimum(cuts, n_s), [n_s]]))
     for s0, s1 in zip(edges[:-1], edges[1:]):
         sel = np.arange(s0, s1)
