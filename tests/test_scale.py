@@ -341,3 +341,36 @@ def test_rasterised_in_small_chunks_is_the_whole_raster(monkeypatch):
     y, x = np.argwhere(whole >= 0)[0]
     hits = [t for t in range(40) if ra.triangle_ids(uvs, idx[t : t + 1], 48)[y, x] == 0]
     assert whole[y, x] == max(hits)
+
+
+def test_base_normalised_band_by_band_is_the_whole_maps(monkeypatch):
+    """The package's unit base, made band by band of rows, is model.normalize of the whole
+    map bit for bit (zero vectors stay zero, NaN stays NaN)."""
+    from wrinklepipe import model, workset
+
+    rng = np.random.default_rng(9)
+    v = rng.normal(0.0, 1.0, (37, 23, 3)).astype(np.float32)
+    v[2, 3] = 0.0
+    v[5, 6, 1] = np.nan
+    whole = model.normalize(v)
+    monkeypatch.setattr(workset, "band_rows", lambda width, per: 5)
+    band = workset.map_rows(model.normalize, v, 20)
+    assert np.array_equal(band.view(np.uint32), whole.view(np.uint32))
+    assert (band[2, 3] == 0).all() and np.isnan(band[5, 6]).all()
+
+
+def test_pd_slopes_of_a_resample_made_band_by_band(monkeypatch):
+    """resize_normals in PD space takes the slopes band by band: the resampled normals are
+    those of the whole map's slopes, bit for bit."""
+    from wrinklepipe import model, workset
+    from wrinklepipe.normals import resample as rs
+
+    rng = np.random.default_rng(4)
+    n = rng.normal(0.0, 0.3, (40, 40, 3)).astype(np.float32)
+    n[..., 2] = np.abs(n[..., 2]) + 0.2
+    n[7, 8, 2] = 0.0  # a horizon texel: a large finite slope
+    n = model.normalize(n)
+    want = model.pd_to_normal(rs.resize(model.normal_to_pd(n), (10, 10)))
+    monkeypatch.setattr(workset, "band_rows", lambda width, per: 3)
+    got = rs.resize_normals(n, (10, 10), space="pd")
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))

@@ -31,7 +31,7 @@ from wrinklepipe.metrics import Budget, Stats
 from wrinklepipe.model import blend, normal_to_pd, normalize, pd_to_normal
 from wrinklepipe.normals.compress import angular_error_stats
 from wrinklepipe.reuse import reused
-from wrinklepipe.workset import band_rows
+from wrinklepipe.workset import band_rows, map_rows
 
 _F = np.float32
 
@@ -175,6 +175,10 @@ def axis_weights(
     return sparse.hstack(blocks, format="csr")
 
 
+#: Bytes of temporaries per texel while making PD slopes of normals (1 / z, its clamp, x/z, y/z).
+PD_BYTES_PER_TEXEL = 16
+
+
 def resize_normals(
     normals: np.ndarray,
     size: tuple[int, int] | int,
@@ -183,8 +187,8 @@ def resize_normals(
 ) -> np.ndarray:
     """Resize unit normals [H, W, 3]: filter PD slopes (linear) or the vectors, renormalise."""
     n = np.asarray(normals, dtype=_F)
-    if space == "pd":
-        return pd_to_normal(resize(normal_to_pd(n), size, filter))
+    if space == "pd":  # the slopes band by band (per texel: the same values, a band's temporaries)
+        return pd_to_normal(resize(map_rows(normal_to_pd, n, PD_BYTES_PER_TEXEL), size, filter))
     if space == "normal":
         return normalize(resize(n, size, filter))
     raise ValueError(f"space must be 'pd' or 'normal', got {space!r}")

@@ -140,6 +140,7 @@ def auto_choices(
     )
     png_budget, comp_budget = budgets(asset.budget)
     choice = fs.search(src, png_budget, comp_budget, fixed)
+    del src, slopes  # the full-size slopes (unless shipped: then the choice holds them)
     notes = list(choice.notes)
     size, m = choice.wrinkle_size, choice.mask_size
     states = asset.states

@@ -115,6 +115,10 @@ def decode_state(
     return e.to_normal(x, base)
 
 
+#: Bytes of temporaries per texel while normalising (float32 lengths, their clamp, the result).
+NORMALIZE_BYTES_PER_TEXEL = 20
+
+
 def resize_normals_pd(normals: np.ndarray, h: int, w: int) -> np.ndarray:
     """Unit normals resampled to ``h`` x ``w`` in PD space (linear, so wrinkle slopes add up).
 
@@ -185,7 +189,8 @@ def package_from_asset(
         raise input_error(asset.name, "the asset has no mesh; glTF and USD output need one")
     # pd: the slope range; diff is stored with gain 1 (what shaders and the validator assume)
     scale = float(asset.pd_scale) if asset.encoding == "pd" else 1.0
-    base = model.normalize(asset.base)
+    # band by band (per texel: the same vectors), not the whole map's temporaries beside it
+    base = map_rows(model.normalize, asset.base, NORMALIZE_BYTES_PER_TEXEL)
     textures = [PackedTexture("base_normal", encode_base(base, opt.bits), "base_normal")]
     taken = {"base_normal"}
     cache: dict[tuple[int, ...], np.ndarray] = {}
