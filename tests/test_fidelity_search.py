@@ -243,3 +243,29 @@ def test_compressed_copies_are_judged_at_the_sizes_the_confirmation_raised_to():
 
     assert measured(64) == pytest.approx(c.compressed.score(), abs=1e-6)
     assert measured(32) != pytest.approx(c.compressed.score(), abs=1e-3)
+
+
+def test_what_the_search_made_goes_when_it_returns(monkeypatch):
+    """The search's own arrays (the slopes' pyramid, the mask levels, the judge's samples) are
+    let go when it returns, not whenever the garbage collector next breaks the reference
+    cycles its candidate factories make: of the smaller levels only the one shipped is left."""
+    import gc
+    import weakref
+
+    made = []
+    original = pyramid.levels
+
+    def levels(img, min_size=1):
+        out = original(img, min_size)
+        made.extend(weakref.ref(v) for k, v in out.items() if k < img.shape[1])
+        return out
+
+    monkeypatch.setattr(pyramid, "levels", levels)
+    gc.disable()
+    try:
+        choice = fs.search(scene(width=16.0), Budget(mean=0.5, p99=1.0))
+        alive = [r() for r in made if r() is not None]
+    finally:
+        gc.enable()
+    assert len(made) >= 2 and choice.wrinkle_size < 64
+    assert len(alive) == 1 and alive[0] is choice.states

@@ -28,6 +28,7 @@ the base's), down to no compressed copy.
 
 from __future__ import annotations
 
+import gc
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -158,7 +159,14 @@ def search(
     options: SearchOptions | None = None,
 ) -> Choice:
     """Choose state size, mask size, PD scale and block formats by fidelity (module doc)."""
-    return _Search(src, budget, compressed_budget, fixed, options).run()
+    try:
+        return _Search(src, budget, compressed_budget, fixed, options).run()
+    finally:
+        # what the search made (the slopes' pyramid, the mask levels, the base's texels, the
+        # judge's samples: about twice the source states at full size) goes now: its candidate
+        # factories and closures hold the search's objects in reference cycles, which only the
+        # garbage collector frees, whenever it next runs
+        gc.collect()
 
 
 class _Search:
