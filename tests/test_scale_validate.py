@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from wrinklepipe import fidelity as fd
-from wrinklepipe import workset
+from wrinklepipe import model, workset
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.fidelity.metric import TexelErrors
 from wrinklepipe.masks import resample_masks
@@ -225,3 +225,32 @@ def test_the_contexts_shipped_base_is_the_whole_decode(tmp_path, monkeypatch):
     monkeypatch.setattr(workset, "band_rows", lambda w, b: 7)
     got = ctx.shipped_base
     assert got.flags.c_contiguous and np.array_equal(got.view(U32), whole.view(U32))
+
+
+def _convention_score_whole(slopes):
+    """The curl score as computed before: a float64 copy of both slope channels at once."""
+    s = np.asarray(slopes, np.float64)
+    a = np.gradient(s[..., 0], axis=0)
+    b = np.gradient(s[..., 1], axis=1)
+    den = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    if not np.isfinite(den) or den < 1e-12:
+        return 0.0
+    return float(-np.sum(a * b) / den)
+
+
+@pytest.mark.parametrize("shape", [(64, 64), (37, 129), (300, 300)])
+def test_convention_score_a_channel_at_a_time_is_the_whole_computation(shape):
+    """The green-convention score of the shipped base from its normals a slope channel at a
+    time (and of slopes): the whole computation's float bit for bit."""
+    rng = np.random.default_rng(17)
+    h = np.cumsum(np.cumsum(rng.normal(size=shape), axis=0), axis=1)  # a height field
+    n = np.stack([-np.gradient(h, axis=1), np.gradient(h, axis=0), np.full(shape, 4.0)], -1)
+    n = (n / np.linalg.norm(n, axis=-1, keepdims=True)).astype(np.float32)
+    want = _convention_score_whole(model.normal_to_pd(n))
+    assert want != 0.0
+    assert rules_maps.normals_convention_score(n) == want
+    assert rules_maps.convention_score(model.normal_to_pd(n)) == want
+    flipped = n * np.array([1, -1, 1], np.float32)
+    assert rules_maps.normals_convention_score(flipped) == _convention_score_whole(
+        model.normal_to_pd(flipped)
+    )

@@ -7,6 +7,7 @@ from collections.abc import Callable
 import numpy as np
 
 from wrinklepipe import codec, model
+from wrinklepipe.codec.vectors import EPS
 from wrinklepipe.metrics import angle_deg, weighted_stats
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
@@ -63,11 +64,28 @@ def convention_score(slopes: np.ndarray, weight: np.ndarray | None = None) -> fl
     With ``px = -dh/dcol`` and ``py = +dh/drow`` (rows run down, +Y up) the mixed derivatives
     satisfy ``d(px)/drow = -d(py)/dcol``; the score is the normalised correlation of the two.
     """
-    s = np.asarray(slopes, np.float64)
+    s = np.asarray(slopes)
     if s.ndim != 3 or s.shape[0] < 3 or s.shape[1] < 3:
         return 0.0
-    a = np.gradient(s[..., 0], axis=0)
-    b = np.gradient(s[..., 1], axis=1)
+    return _curl_score(lambda c: s[..., c], weight)
+
+
+def normals_convention_score(normals: np.ndarray) -> float:
+    """:func:`convention_score` of the PD slopes of unit normals ``[H, W, 3]``
+    (:func:`wrinklepipe.model.normal_to_pd`'s float32 operations), a slope channel at a time:
+    the same score, without the slopes of both channels and their float64 copy at once."""
+    n = np.asarray(normals, np.float32)
+    if n.ndim != 3 or n.shape[0] < 3 or n.shape[1] < 3:
+        return 0.0
+    inv_z = np.reciprocal(np.maximum(n[..., 2], EPS))
+    return _curl_score(lambda c: n[..., c] * inv_z, None)
+
+
+def _curl_score(channel: Callable[[int], np.ndarray], weight: np.ndarray | None) -> float:
+    """The score of slopes whose channel ``c`` ``[H, W]`` is ``channel(c)``, each read when it
+    is differentiated (in float64)."""
+    a = np.gradient(np.asarray(channel(0), np.float64), axis=0)
+    b = np.gradient(np.asarray(channel(1), np.float64), axis=1)
     if weight is not None:
         a, b = a * weight, b * weight
     den = np.sqrt(np.sum(a * a) * np.sum(b * b))
@@ -163,8 +181,8 @@ def _normal_map_texture_checks(
     return out
 
 
-def _convention_issue(ctx: Context, t: Texture, slopes: np.ndarray) -> Issue | None:
-    score = convention_score(slopes)
+def _convention_issue(ctx: Context, t: Texture, score: float) -> Issue | None:
+    """WP-MAP-003 of a map whose slopes score ``score`` (:func:`convention_score`)."""
     ctx.metrics.setdefault("convention_score", {})[t.name] = round(score, 4)
     # the slopes were read as declared (context.values flips a DirectX map), so a negative
     # score means the map is in the other convention than declared
@@ -192,7 +210,7 @@ def check_maps(ctx: Context) -> list[Issue]:
         if layout == "rgb":  # the base's values from its texels, band by band (not held)
             out += _normal_map_texture_checks(ctx, bt, ctx.texels(bt), tx.unorm_values)
         if ctx.shipped_base is not None:
-            issue = _convention_issue(ctx, bt, model.normal_to_pd(ctx.shipped_base))
+            issue = _convention_issue(ctx, bt, normals_convention_score(ctx.shipped_base))
             if issue:
                 out.append(issue)
     states = ctx.shipped_states
@@ -206,7 +224,7 @@ def check_maps(ctx: Context) -> list[Issue]:
             out += _normal_map_texture_checks(ctx, t, v)
         slopes = _state_slopes(ctx, k, st)
         if slopes is not None:
-            issue = _convention_issue(ctx, t, slopes)
+            issue = _convention_issue(ctx, t, convention_score(slopes))
             if issue:
                 out.append(issue)
         if a.encoding == "pd":
