@@ -8,11 +8,15 @@ import pytest
 
 from wrinklepipe import fidelity as fd
 from wrinklepipe import model, workset
+from wrinklepipe.cli import main
 from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.fidelity.metric import TexelErrors
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.masks.stack import MaskStack
-from wrinklepipe.sources.validation import load_input
+from wrinklepipe.normals import compress as cmp
+from wrinklepipe.normals.dds import mip_dims
+from wrinklepipe.sources import copies
+from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import rules_fidelity, rules_maps
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.context import Context, resize_masks
@@ -254,3 +258,83 @@ def test_convention_score_a_channel_at_a_time_is_the_whole_computation(shape):
     assert rules_maps.normals_convention_score(flipped) == _convention_score_whole(
         model.normal_to_pd(flipped)
     )
+
+
+def _damaged_block_whole(decoded, reference):
+    """The block check as computed before, on the whole maps at once."""
+    d = np.abs(decoded - reference).max(axis=-1, keepdims=True)
+    err = copies._block_view(d, np.nan)[..., 0]
+    ref = copies._block_view(reference, np.nan)
+    spread = (np.nanmax(ref, axis=2) - np.nanmin(ref, axis=2)).max(axis=-1)
+    mean = np.nanmean(err, axis=2)
+    excess = mean - np.maximum(spread, copies.BLOCK_TOLERANCE)
+    i = int(np.argmax(excess))
+    if excess.flat[i] <= 0:
+        return None
+    wb = excess.shape[1]
+    return float(mean.flat[i]), (i % wb) * 4, (i // wb) * 4
+
+
+@pytest.mark.parametrize("band", [4, 8, 1000])
+@pytest.mark.parametrize("shape", [(37, 29), (64, 64), (13, 7)])
+def test_damaged_blocks_in_bands_are_the_whole_check(monkeypatch, band, shape):
+    """A copy's block check in bands of block rows: the whole maps' worst block (its mean
+    and place) bit for bit, damaged or not, on sizes that are not whole blocks too."""
+    monkeypatch.setattr(copies, "band_rows", lambda w, b: band)
+    rng = np.random.default_rng(shape[0] * band)
+    yy, xx = np.mgrid[: shape[0], : shape[1]]
+    ref = np.stack([100 + 0.5 * yy, 80 + 0.7 * xx], -1).round().astype(np.float32)
+    dec = ref + np.round(rng.normal(size=ref.shape) * 3).astype(np.float32)
+    assert copies.damaged_block(dec, ref) is None is _damaged_block_whole(dec, ref)
+    for y, x in ((shape[0] - 3, 1), (5, 2), (shape[0] - 1, shape[1] - 1), (0, 0)):
+        dec[max(y - 3, 0) : y + 1, max(x - 3, 0) : x + 1] = 255.0  # damage
+        want = _damaged_block_whole(dec, ref)
+        assert want is not None and copies.damaged_block(dec, ref) == want
+
+
+def test_a_copys_levels_judged_in_turn_are_the_whole_levels_judged(tmp_path, monkeypatch):
+    """Every level of a demo's copies decoded in turn (the level above held as integers,
+    bands of 4 rows): the findings of all levels decoded as float and judged whole, with
+    damage in level 0 and in level 2."""
+    src = write_demo_source(tmp_path / "src", 64)
+    out = tmp_path / "out"
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    inp = load_input(out, LoadOptions(textures="png"))
+    monkeypatch.setattr(copies, "band_rows", lambda w, b: 4)
+    checked = 0
+    for t in inp.textures:
+        path = out / "compressed" / f"{t.name}.dds"
+        if t.role not in ("base", "state") or not path.is_file():
+            continue
+        c = copies._read(path, "dds")
+        fmt = copies._decoder_format(c.format, None)
+        for damage in (None, 0, 2):
+            if damage is not None:
+                lv = bytearray(c.levels[damage])
+                lv[: len(lv) // 2] = np.random.default_rng(damage).bytes(len(lv) // 2)
+                c.levels[damage] = bytes(lv)
+            dims = mip_dims(c.width, c.height, len(c.levels))
+            levels = [  # as before: every level decoded to float32 codes first
+                cmp.unpack_u8(cmp.decode_bc(d, w, h, fmt), fmt, channels=2).astype(np.float32)
+                for (w, h), d in zip(dims, c.levels)
+            ]
+            png = copies._xy_of_png(t)
+            want = []
+            if png is not None and png.shape[:2] == levels[0].shape[:2]:
+                bad = _damaged_block_whole(levels[0], png)
+                if bad is not None:
+                    want.append(bad)
+            for k in range(1, len(levels)):
+                h, w = levels[k].shape[:2]
+                if levels[k - 1].shape[:2] == (2 * h, 2 * w):
+                    half = levels[k - 1].reshape(h, 2, w, 2, 2).mean(axis=(1, 3))
+                    bad = _damaged_block_whole(levels[k], half)
+                    if bad is not None:
+                        want.append(bad)
+            found, refused = copies._judge_copy(c, fmt, copies._png_xy_rows(t), png.shape[:2])
+            assert refused is None and len(found) == len(want)
+            for msg, (worst, x, y) in zip(found, want):
+                assert f"texel ({x}, {y}) is {worst:.0f} codes away" in msg
+            assert (damage is None) == (not found)
+            checked += 1
+    assert checked >= 3

@@ -20,6 +20,7 @@ Each finding is one problem ``{"file", "message"}`` (the validator's WP-TEX-004)
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,10 +35,14 @@ from wrinklepipe.normals.dds import container_format, mip_dims, read_dds
 from wrinklepipe.normals.ktx2 import read_ktx2
 from wrinklepipe.normals.mips import level_count
 from wrinklepipe.validate.inputs import Texture, ValidationInput
+from wrinklepipe.workset import band_rows
 
 #: Mean |difference| (8-bit codes) over a 4 x 4 block that no block is refused below
 #: (:func:`damaged_block`: a block is damaged beyond this and beyond its own spread).
 BLOCK_TOLERANCE = 16.0
+#: Bytes of temporaries per texel while a band of blocks is judged (float32 codes of both maps,
+#: their difference, the blocks padded and regrouped, NaN-free copies of them).
+BLOCK_BYTES = 96
 
 
 @dataclass
@@ -63,16 +68,29 @@ def _decoder_format(fmt: str, layout: str | None) -> str:
     return fmt
 
 
-def _xy_of_png(t: Texture) -> np.ndarray | None:
-    """The PNG texture's stored x, y as 8-bit codes [H, W, 2] (float), or None."""
+def _png_xy_rows(t: Texture) -> Callable[[int, int], np.ndarray] | None:
+    """The PNG texture's stored x, y as 8-bit codes (float32), rows ``r0:r1`` at a time
+    (``[r1 - r0, W, 2]``, from its bytes: no float copy of the whole image), or None."""
     ch = t.channels
     if t.is_block or t.bits == 0 or ch < 2:
         return None
     dtype = np.uint16 if t.bits == 16 else np.uint8
-    a = np.frombuffer(t.data, dtype).reshape(t.height, t.width, ch).astype(np.float32)
-    if t.bits == 16:
-        a /= 257.0
-    return a[..., [3, 1]] if t.layout == "ag" and ch == 4 else a[..., :2]
+    a = np.frombuffer(t.data, dtype, count=t.height * t.width * ch).reshape(t.height, t.width, ch)
+    idx = [3, 1] if t.layout == "ag" and ch == 4 else [0, 1]
+
+    def rows(r0: int, r1: int) -> np.ndarray:
+        x = a[r0:r1][..., idx].astype(np.float32)
+        if t.bits == 16:
+            x /= 257.0
+        return x
+
+    return rows
+
+
+def _xy_of_png(t: Texture) -> np.ndarray | None:
+    """The PNG texture's stored x, y as 8-bit codes [H, W, 2] (float), or None."""
+    rows = _png_xy_rows(t)
+    return None if rows is None else rows(0, t.height)
 
 
 def _block_view(a: np.ndarray, fill: float) -> np.ndarray:
@@ -84,6 +102,17 @@ def _block_view(a: np.ndarray, fill: float) -> np.ndarray:
     return padded.reshape(hb, 4, wb, 4, c).transpose(0, 2, 1, 3, 4).reshape(hb, wb, 16, c)
 
 
+def _block_excess(decoded: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per 4 x 4 block of rows of ``decoded`` and ``reference`` (:func:`damaged_block`): how far
+    its mean difference exceeds what is allowed, and that mean ``[hb, wb]`` each."""
+    d = np.abs(decoded - reference).max(axis=-1, keepdims=True)
+    err = _block_view(d, np.nan)[..., 0]
+    ref = _block_view(reference, np.nan)
+    spread = (np.nanmax(ref, axis=2) - np.nanmin(ref, axis=2)).max(axis=-1)
+    mean = np.nanmean(err, axis=2)
+    return mean - np.maximum(spread, BLOCK_TOLERANCE), mean
+
+
 def damaged_block(decoded: np.ndarray, reference: np.ndarray) -> tuple[float, int, int] | None:
     """The worst damaged 4 x 4 block of ``decoded`` against ``reference`` (both [H, W, 2],
     8-bit codes): its mean difference and texel x, y; None when no block is damaged.
@@ -93,12 +122,26 @@ def damaged_block(decoded: np.ndarray, reference: np.ndarray) -> tuple[float, in
     a channel): any block format that encodes a block at all stays within the block's own
     range on average (its endpoints span it), whatever the format's error on busy content;
     random or zeroed bytes over smooth content land far outside it."""
-    d = np.abs(decoded - reference).max(axis=-1, keepdims=True)
-    err = _block_view(d, np.nan)[..., 0]
-    ref = _block_view(reference, np.nan)
-    spread = (np.nanmax(ref, axis=2) - np.nanmin(ref, axis=2)).max(axis=-1)
-    mean = np.nanmean(err, axis=2)
-    excess = mean - np.maximum(spread, BLOCK_TOLERANCE)
+    h, w = decoded.shape[:2]
+    return damaged_block_rows(lambda a, b: decoded[a:b], lambda a, b: reference[a:b], h, w)
+
+
+def damaged_block_rows(
+    decoded: Callable[[int, int], np.ndarray],
+    reference: Callable[[int, int], np.ndarray],
+    h: int,
+    w: int,
+) -> tuple[float, int, int] | None:
+    """:func:`damaged_block` of two ``[h, w, 2]`` maps given as rows ``r0:r1`` at a time
+    (float32 codes), taken in bands of whole block rows: every block is judged on its own, so
+    the blocks' numbers are the whole maps', and the worst is the first of the largest excess
+    over all of them, as in one pass (the float temporaries are a band's)."""
+    rows = max(4, band_rows(max(w, 1), BLOCK_BYTES) // 4 * 4)
+    parts = [
+        _block_excess(decoded(r0, r0 + rows), reference(r0, r0 + rows)) for r0 in range(0, h, rows)
+    ]
+    excess = np.concatenate([e for e, _ in parts])
+    mean = np.concatenate([m for _, m in parts])
     i = int(np.argmax(excess))
     if excess.flat[i] <= 0:
         return None
@@ -106,40 +149,57 @@ def damaged_block(decoded: np.ndarray, reference: np.ndarray) -> tuple[float, in
     return float(mean.flat[i]), (i % wb) * 4, (i // wb) * 4
 
 
-def _decoded_levels(copy: Copy, fmt: str) -> list[np.ndarray]:
-    """Every level decoded with the codec: stored x, y as 8-bit codes [h, w, 2] (float)."""
-    out = []
-    for (w, h), data in zip(mip_dims(copy.width, copy.height, len(copy.levels)), copy.levels):
-        rgba = cmp.decode_bc(data, w, h, fmt)
-        out.append(cmp.unpack_u8(rgba, fmt, channels=2).astype(np.float32))
-    return out
+def _decoded_level(data: bytes, w: int, h: int, fmt: str) -> np.ndarray:
+    """One level decoded with the codec: its stored x, y as 8-bit codes [h, w, 2] (the
+    decoder's integers: float32 where a band of it is compared)."""
+    return np.ascontiguousarray(cmp.unpack_u8(cmp.decode_bc(data, w, h, fmt), fmt, channels=2))
 
 
-def _judge_levels(copy: Copy, levels: list[np.ndarray], png: np.ndarray | None) -> list[str]:
-    """Level 0 against the PNG, each level against the halving of the one above."""
+def _judge_copy(
+    copy: Copy, fmt: str, png: Callable[[int, int], np.ndarray] | None, png_shape: tuple[int, int]
+) -> tuple[list[str], str | None]:
+    """Every level decoded in turn (the one above held as its integers): level 0 against the
+    PNG (rows ``png``, of ``png_shape``), each level against the halving of the one above.
+    Returns what was found, or the decoder's refusal of a level (then nothing is judged)."""
     found = []
-    if png is not None and png.shape[:2] == levels[0].shape[:2]:
-        bad = damaged_block(levels[0], png)
-        if bad is not None:
-            worst, x, y = bad
-            found.append(
-                f"level 0 does not decode to the texture it copies: the block at texel ({x}, {y}) "
-                f"is {worst:.0f} codes away on average (damaged blocks)"
-            )
-    for k in range(1, len(levels)):
-        above, here = levels[k - 1], levels[k]
-        h, w = here.shape[:2]
-        if above.shape[0] != 2 * h or above.shape[1] != 2 * w:
-            continue  # an odd size: its halving is not a plain 2 x 2 mean
-        half = above.reshape(h, 2, w, 2, 2).mean(axis=(1, 3))
-        bad = damaged_block(here, half)
-        if bad is not None:
-            worst, x, y = bad
-            found.append(
-                f"mip level {k} ({w} x {h}) is not the halving of level {k - 1}: the block at "
-                f"texel ({x}, {y}) is {worst:.0f} codes away on average (damaged blocks)"
-            )
-    return found
+    above: np.ndarray | None = None
+    dims = mip_dims(copy.width, copy.height, len(copy.levels))
+    for k, ((w, h), data) in enumerate(zip(dims, copy.levels)):
+        try:
+            here = _decoded_level(data, w, h, fmt)
+        except ValueError as exc:
+            return [], f"cannot be decoded: {exc}"
+
+        def at(a: int, b: int, x: np.ndarray = here) -> np.ndarray:
+            return x[a:b].astype(np.float32)
+
+        if k == 0:
+            bad = None
+            if png is not None and png_shape == here.shape[:2]:
+                bad = damaged_block_rows(at, png, h, w)
+            if bad is not None:
+                worst, x, y = bad
+                found.append(
+                    f"level 0 does not decode to the texture it copies: the block at texel "
+                    f"({x}, {y}) is {worst:.0f} codes away on average (damaged blocks)"
+                )
+        elif above is not None and above.shape[0] == 2 * h and above.shape[1] == 2 * w:
+
+            def half(a: int, b: int, x: np.ndarray = above, h: int = h, w: int = w) -> np.ndarray:
+                b = min(b, h)
+                return (
+                    x[2 * a : 2 * b].astype(np.float32).reshape(b - a, 2, w, 2, 2).mean(axis=(1, 3))
+                )
+
+            bad = damaged_block_rows(at, half, h, w)
+            if bad is not None:
+                worst, x, y = bad
+                found.append(
+                    f"mip level {k} ({w} x {h}) is not the halving of level {k - 1}: the block "
+                    f"at texel ({x}, {y}) is {worst:.0f} codes away on average (damaged blocks)"
+                )
+        above = here
+    return found, None
 
 
 def _read(path: Path, kind: str) -> Copy:
@@ -184,12 +244,11 @@ def check_copies(inp: ValidationInput, folder: Path) -> list[dict[str, str]]:
         for _kind, c in sorted(copies.items()):
             problems += [_problem(c.file, m) for m in _agreement(c, t, rec)]
             fmt = _decoder_format(c.format, rec.get("layout") if rec else None)
-            try:
-                levels = _decoded_levels(c, fmt)
-            except ValueError as exc:
-                problems.append(_problem(c.file, f"cannot be decoded: {exc}"))
+            found, refused = _judge_copy(c, fmt, _png_xy_rows(t), (t.height, t.width))
+            if refused is not None:
+                problems.append(_problem(c.file, refused))
                 continue
-            problems += [_problem(c.file, m) for m in _judge_levels(c, levels, _xy_of_png(t))]
+            problems += [_problem(c.file, m) for m in found]
         if len(copies) == 2:
             a, b = copies["dds"], copies["ktx2"]
             differ = [k for k, (x, y) in enumerate(zip(a.levels, b.levels)) if x != y]
