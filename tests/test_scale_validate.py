@@ -242,10 +242,12 @@ def _convention_score_whole(slopes):
     return float(-np.sum(a * b) / den)
 
 
-@pytest.mark.parametrize("shape", [(64, 64), (37, 129), (300, 300)])
-def test_convention_score_a_channel_at_a_time_is_the_whole_computation(shape):
-    """The green-convention score of the shipped base from its normals a slope channel at a
-    time (and of slopes): the whole computation's float bit for bit."""
+@pytest.mark.parametrize("band", [1, 2, 5, 10000])
+@pytest.mark.parametrize("shape", [(64, 64), (37, 129), (300, 300), (3, 5)])
+def test_convention_score_a_channel_at_a_time_is_the_whole_computation(shape, band, monkeypatch):
+    """The green-convention score of the shipped base from its normals a slope channel and a
+    band of rows at a time (and of slopes): the whole computation's float bit for bit."""
+    monkeypatch.setattr(rules_maps, "band_rows", lambda w, b: band)
     rng = np.random.default_rng(17)
     h = np.cumsum(np.cumsum(rng.normal(size=shape), axis=0), axis=1)  # a height field
     n = np.stack([-np.gradient(h, axis=1), np.gradient(h, axis=0), np.full(shape, 4.0)], -1)

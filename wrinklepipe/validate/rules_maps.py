@@ -67,31 +67,66 @@ def convention_score(slopes: np.ndarray, weight: np.ndarray | None = None) -> fl
     s = np.asarray(slopes)
     if s.ndim != 3 or s.shape[0] < 3 or s.shape[1] < 3:
         return 0.0
-    return _curl_score(lambda c: s[..., c], weight)
+    return _curl_score(lambda c, r0, r1: s[r0:r1, :, c], s.shape[:2], weight)
 
 
 def normals_convention_score(normals: np.ndarray) -> float:
     """:func:`convention_score` of the PD slopes of unit normals ``[H, W, 3]``
-    (:func:`wrinklepipe.model.normal_to_pd`'s float32 operations), a slope channel at a time:
-    the same score, without the slopes of both channels and their float64 copy at once."""
+    (:func:`wrinklepipe.model.normal_to_pd`'s float32 operations), a slope channel and a band
+    of rows at a time: the same score, without the slopes of both channels and their float64
+    copy at once."""
     n = np.asarray(normals, np.float32)
     if n.ndim != 3 or n.shape[0] < 3 or n.shape[1] < 3:
         return 0.0
-    inv_z = np.reciprocal(np.maximum(n[..., 2], EPS))
-    return _curl_score(lambda c: n[..., c] * inv_z, None)
+
+    def slope(c: int, r0: int, r1: int) -> np.ndarray:
+        return n[r0:r1, :, c] * np.reciprocal(np.maximum(n[r0:r1, :, 2], EPS))
+
+    return _curl_score(slope, n.shape[:2], None)
 
 
-def _curl_score(channel: Callable[[int], np.ndarray], weight: np.ndarray | None) -> float:
-    """The score of slopes whose channel ``c`` ``[H, W]`` is ``channel(c)``, each read when it
-    is differentiated (in float64)."""
-    a = np.gradient(np.asarray(channel(0), np.float64), axis=0)
-    b = np.gradient(np.asarray(channel(1), np.float64), axis=1)
+#: Bytes of temporaries per texel of a band of the curl score (float32 slopes, their float64
+#: copy and its gradient).
+CURL_BYTES = 32
+
+
+def _gradient(
+    channel: Callable[[int, int, int], np.ndarray], c: int, shape: tuple[int, ...], axis: int
+) -> np.ndarray:
+    """``np.gradient(channel c in float64, axis=axis)`` of the ``[H, W]`` slope channel whose
+    rows ``r0:r1`` are ``channel(c, r0, r1)``, band by band of rows (a band and the rows on
+    either side of it: numpy's central and edge differences are per texel, so the whole
+    channel's values), without the float64 channel of the whole map."""
+    h, w = int(shape[0]), int(shape[1])
+    out = np.empty((h, w), np.float64)
+    rows = band_rows(w, CURL_BYTES)
+    for r0 in range(0, h, rows):
+        r1 = min(r0 + rows, h)
+        lo, hi = (max(r0 - 1, 0), min(r1 + 1, h)) if axis == 0 else (r0, r1)
+        g = np.gradient(np.asarray(channel(c, lo, hi), np.float64), axis=axis)
+        out[r0:r1] = g[r0 - lo : r1 - lo]
+    return out
+
+
+def _curl_score(
+    channel: Callable[[int, int, int], np.ndarray],
+    shape: tuple[int, ...],
+    weight: np.ndarray | None,
+) -> float:
+    """The score of slopes whose channel ``c``, rows ``r0:r1``, is ``channel(c, r0, r1)``: the
+    sums of numpy's whole-array products (``a * b``, ``a * a``, ``b * b``), one product at a
+    time."""
+    a = _gradient(channel, 0, shape, 0)
+    b = _gradient(channel, 1, shape, 1)
     if weight is not None:
         a, b = a * weight, b * weight
-    den = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    ab = np.sum(a * b)
+    np.multiply(a, a, out=a)  # (a no longer needed as itself)
+    np.multiply(b, b, out=b)
+    den = np.sqrt(np.sum(a) * np.sum(b))
     if not np.isfinite(den) or den < 1e-12:
         return 0.0
-    return float(-np.sum(a * b) / den)
+    return float(-ab / den)
 
 
 def _state_slopes(ctx: Context, k: int, state: np.ndarray) -> np.ndarray | None:
