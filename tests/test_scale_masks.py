@@ -167,3 +167,30 @@ def test_masks_sampled_at_texels_a_mask_at_a_time(grid):
     assert got.shape == (3, 40) and np.array_equal(got.view(np.uint32), want.view(np.uint32))
     if grid == (12, 10):  # the same grid: a plain gather of the reader's floats
         assert np.array_equal(got[1], np.asarray(stack)[1].reshape(-1)[flat])
+
+
+def test_mask_levels_held_in_8_bits_read_as_the_float_levels():
+    """The search's mask levels (2 x 2 box halvings rounded to 8 bits) are held as uint8 and
+    read as the float32 the rounding gives (k / 255, not the reader's k * (1 / 255)), bit for
+    bit; masks whose levels are not 8-bit values (NaN) stay float32."""
+    from wrinklepipe.fidelity import ship
+
+    stack = _stack(8, shape=(12, 12))
+    lv = ship.mask_levels(stack, 3)
+    f = np.asarray(stack, np.float64)
+    for size, level in ((6, lv[6]), (3, lv[3])):
+        assert isinstance(level, ship.U8Masks) and level.q.dtype == np.uint8
+        k = 12 // size
+        box = f.reshape(3, size, k, size, k).mean(axis=(2, 4)).astype(np.float32)
+        if size == 3:  # a box of boxes, each rounded to float32 once (as the halving does)
+            half = f.reshape(3, 6, 2, 6, 2).mean(axis=(2, 4)).astype(np.float32)
+            box = half.astype(np.float64).reshape(3, 3, 2, 3, 2).mean(axis=(2, 4))
+            box = box.astype(np.float32)
+        want = (np.rint(np.clip(box, 0.0, 1.0) * 255.0) / 255.0).astype(np.float32)
+        assert np.array_equal(np.asarray(level).view(np.uint32), want.view(np.uint32))
+        assert np.array_equal(level[1].view(np.uint32), want[1].view(np.uint32))
+    assert np.asarray(ship.mask_values(stack, 6)).dtype == np.float32
+    nan = np.asarray(stack).copy()
+    nan[0, 0, 0] = np.nan
+    held = ship.mask_levels(nan, 6)[6]
+    assert isinstance(held, np.ndarray) and np.isnan(held[0, 0, 0])

@@ -8,13 +8,14 @@ and decoded by its independent decoder (texture2ddecoder), exactly as the compre
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from wrinklepipe import codec, reuse
 from wrinklepipe.fidelity.sampling import CHUNK_TEXELS, Reader, chunks
 from wrinklepipe.masks import resample_masks
-from wrinklepipe.masks.stack import float_masks
+from wrinklepipe.masks.stack import MaskStack, float_masks
 from wrinklepipe.normals import compress as nc
 
 _F = np.float32
@@ -183,12 +184,14 @@ def block_roundtrip_many(
 
 class MaskLevels(dict):
     """``{side: masks as shipped}`` (see :func:`mask_levels`); a level is stored in 8 bits the
-    first time it is read."""
+    first time it is read (:func:`mask_levels` stores its halvings so as it makes them)."""
 
-    def __init__(self, levels: dict[int, np.ndarray], source: int) -> None:
+    def __init__(
+        self, levels: dict[int, np.ndarray], source: int, stored: set[int] | None = None
+    ) -> None:
         super().__init__(levels)
         self.source = source
-        self._stored: set[int] = {source}
+        self._stored: set[int] = {source, *(stored or ())}
 
     def __getitem__(self, size: int) -> np.ndarray:
         v = super().__getitem__(size)
@@ -207,6 +210,7 @@ def mask_levels(masks: np.ndarray, min_size: int = 1) -> MaskLevels:
     h = m.shape[1]
     out = {h: m}
     acc = m
+    stored: set[int] = set()
     while h % 2 == 0 and h // 2 >= min_size and acc.shape[2] % 2 == 0:
         r, w = acc.shape[0], acc.shape[2]
         half = np.empty((r, h // 2, w // 2), _F)
@@ -218,10 +222,50 @@ def mask_levels(masks: np.ndarray, min_size: int = 1) -> MaskLevels:
                 quad = np.add(rows[..., 0], rows[..., 1])  # the 2x2 sum in float64 (exact for
                 quad *= 0.25  # 4 float32 values of a mask's range), rounded to float32 once
                 half[i, sl] = quad
+        if h != m.shape[1]:  # the level halved from: made, now stored in 8 bits
+            out[h] = _u8_level(acc)
+            stored.add(h)
         acc = half
         h //= 2
         out[h] = acc
-    return MaskLevels(out, int(m.shape[1]))
+    if h != m.shape[1]:
+        out[h] = _u8_level(acc)
+        stored.add(h)
+    return MaskLevels(out, int(m.shape[1]), stored)
+
+
+#: The float32 of every 8-bit level of a shipped mask: ``k / 255`` as :func:`_u8_values` divides.
+_U8_TABLE = np.arange(256, dtype=_F) / 255.0
+
+
+class U8Masks(MaskStack):
+    """Masks as shipped in 8 bits (a search's mask level): integers ``k`` seen as the float32
+    ``k / 255`` that :func:`_u8_values` gives (not the image reader's ``k * (1 / 255)``: the
+    two differ in the last bit for half the levels). A quarter of float32's memory."""
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        return _U8_TABLE[np.asarray(self.q[key])]
+
+    def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
+        a = _U8_TABLE[self.q]
+        return a if dtype is None else a.astype(dtype, copy=False)
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> U8Masks:
+        return U8Masks(self.q.copy())
+
+
+def _u8_level(m: np.ndarray) -> np.ndarray:
+    """:func:`_u8_values` of masks ``[R, h, w]``, held as :class:`U8Masks` (a mask at a time;
+    each mask checked to read back bit for bit, else the float32 values)."""
+    q = np.empty(m.shape, np.uint8)
+    for i in range(m.shape[0]):
+        f = _u8_values(np.asarray(m[i], _F))
+        k = np.rint(f * _F(255.0))  # the level f came from (NaN: no level, the check fails)
+        with np.errstate(invalid="ignore"):
+            q[i] = k.astype(np.uint8)
+        if not np.array_equal(_U8_TABLE[q[i]].view(np.uint32), f.view(np.uint32)):
+            return _u8_values(np.asarray(m, _F))
+    return U8Masks(q)
 
 
 def _u8_values(m: np.ndarray) -> np.ndarray:
@@ -242,5 +286,5 @@ def mask_values(masks: np.ndarray, size: int | None = None) -> np.ndarray:
         return out
     levels = mask_levels(m, size)
     if size in levels:
-        return levels[size]
+        return np.asarray(levels[size], _F)
     return _u8_values(resample_masks(np.asarray(m, _F), size))
