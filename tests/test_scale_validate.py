@@ -13,6 +13,7 @@ from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.fidelity.metric import TexelErrors
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.masks.stack import MaskStack
+from wrinklepipe.metrics import angle_deg
 from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals.dds import mip_dims
 from wrinklepipe.sources import copies
@@ -340,3 +341,22 @@ def test_a_copys_levels_judged_in_turn_are_the_whole_levels_judged(tmp_path, mon
             assert (damage is None) == (not found)
             checked += 1
     assert checked >= 3
+
+
+@pytest.mark.parametrize("band", [1, 3, 10000])
+def test_spread_in_bands_is_the_whole_computation(monkeypatch, band):
+    """The misalignment rule's share of texels outside the masks where a state differs from
+    the base, band by band of rows: the whole maps' share bit for bit."""
+    monkeypatch.setattr(rules_fidelity, "band_rows", lambda w, b: band)
+    rng = np.random.default_rng(band)
+    base = rng.normal(size=(23, 19, 3)).astype(np.float32)
+    states = base[None] + (0.03 * rng.normal(size=(2, 23, 19, 3))).astype(np.float32)
+    outside = rng.random((23, 19)) < 0.6
+    b = base[outside]  # the whole computation, as before
+    far = np.zeros(b.shape[0], bool)
+    for s in states:
+        far |= angle_deg(s[outside], b) > rules_fidelity.MISALIGNED_DEG
+    want = float(far.mean())
+    assert 0 < want < 1
+    assert rules_fidelity._spread(base, states, outside) == want
+    assert rules_fidelity._spread(base, states, np.zeros((23, 19), bool)) == 0.0

@@ -31,6 +31,7 @@ from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
 from wrinklepipe.validate.context import Context, encode_source_states, resize_normals
 from wrinklepipe.validate.poses import fidelity_poses
+from wrinklepipe.workset import band_rows
 
 #: A texel outside every mask "differs" when its state and base normals are this far apart.
 MISALIGNED_DEG = 1.0
@@ -272,14 +273,28 @@ def _outside(masks: np.ndarray, shape: tuple[int, int], fp: np.ndarray | None) -
 
 
 def _spread(base: np.ndarray, states: np.ndarray, outside: np.ndarray) -> float:
-    """Fraction of ``outside`` texels where some state differs from the base."""
-    if not outside.any():
+    """Fraction of ``outside`` texels where some state differs from the base, band by band of
+    rows (the angle is per texel: the whole map's count, without the texels outside gathered
+    from every map at once)."""
+    n = int(np.count_nonzero(outside))
+    if n == 0:
         return 0.0
-    b = base[outside]
-    far = np.zeros(b.shape[0], bool)
-    for s in states:
-        far |= angle_deg(s[outside], b) > MISALIGNED_DEG
-    return float(far.mean())
+    h, w = outside.shape
+    rows = band_rows(w, SPREAD_BYTES * (1 + len(states)))
+    count = 0
+    for r0 in range(0, h, rows):
+        o = outside[r0 : r0 + rows]
+        b = base[r0 : r0 + rows][o]
+        far = np.zeros(b.shape[0], bool)
+        for s in states:
+            far |= angle_deg(s[r0 : r0 + rows][o], b) > MISALIGNED_DEG
+        count += int(np.count_nonzero(far))
+    return float(np.float64(count) / np.float64(n))
+
+
+#: Bytes of temporaries per texel and map of :func:`_spread` (the gathered vectors and the
+#: angle's float32 planes).
+SPREAD_BYTES = 32
 
 
 def estimate_shift(a: np.ndarray, b: np.ndarray) -> tuple[int, int, float]:
