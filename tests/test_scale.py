@@ -374,3 +374,36 @@ def test_pd_slopes_of_a_resample_made_band_by_band(monkeypatch):
     monkeypatch.setattr(workset, "band_rows", lambda width, per: 3)
     got = rs.resize_normals(n, (10, 10), space="pd")
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
+def test_reference_base_is_the_callers_map_normalised_where_read():
+    """The reference's unit base is no normalised copy of the map: rows read from it are the
+    whole map normalised, bit for bit (zero and NaN vectors too), and two references of one
+    source share the memo's work while each holds its caller's own map."""
+    from wrinklepipe import reuse
+    from wrinklepipe.fidelity import reference as fre
+    from wrinklepipe.fidelity.sampling import normalize_rows
+
+    rng = np.random.default_rng(12)
+    base = rng.normal(0.0, 0.2, (64, 64, 3)).astype(np.float32)
+    base[..., 2] += 1.0
+    base[3, 4] = 0.0
+    base[5, 6, 0] = np.nan
+    whole = normalize_rows(base).reshape(-1, 3)
+    rows = fre.UnitRows(base).reshape(-1, 3)
+    idx = rng.choice(64 * 64, 500)
+    for at in (idx, np.array([3 * 64 + 4, 5 * 64 + 6]), np.arange(64 * 64)):
+        assert np.array_equal(rows[at].view(np.uint32), whole[at].view(np.uint32))
+    assert np.array_equal(np.asarray(rows).view(np.uint32), whole.view(np.uint32))
+    states = rng.normal(0.0, 0.1, (1, 64, 64, 2)).astype(np.float32)
+    masks = np.zeros((1, 64, 64), np.float32)
+    masks[0, 10:50, 10:50] = 1.0
+    poses = [fre.Pose("on", np.ones((1, 1), np.float32))]
+    with reuse.reuse() as memo:
+        a = fre.prepare(base, states, masks, poses, ["r"])
+        b = fre.prepare(base.copy(), states, masks, poses, ["r"])
+    assert memo.hits == {"wrinklepipe.fidelity.reference._prepare": 1}
+    assert a.base.v is base and not np.shares_memory(b.base.v, base)
+    assert np.shares_memory(a.poses[0].normal, b.poses[0].normal)  # the memo's one result
+    flat = a.union[:50]
+    assert np.array_equal(a.base.reshape(-1, 3)[flat], whole[flat])

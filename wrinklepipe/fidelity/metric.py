@@ -39,7 +39,6 @@ from wrinklepipe.fidelity.reference import (
 from wrinklepipe.fidelity.sampling import (
     CHUNK_TEXELS,
     Reader,
-    _gather_planes,
     chunks,
     one_blas_thread,
     planes,
@@ -444,7 +443,7 @@ def base_fidelity(
     at = 0
     for f in bands:
         got = planes(model.normalize(sample_at(base, ref.shape, f, reader)))
-        err[at : at + f.size] = angle_deg_planes(got, _gather_planes(src, f))
+        err[at : at + f.size] = angle_deg_planes(got, planes(src[f]))
         at += f.size
     if errors is not None:
         errors.append(err)

@@ -96,7 +96,7 @@ class Reference:
     encoding: str
     policy: str
     region_names: tuple[str, ...]
-    base: np.ndarray  # [H, W, 3] source base (unit)
+    base: np.ndarray  # [H, W, 3] source base (unit: a UnitRows of the base prepare was given)
     union: np.ndarray  # flat indices: texels active in some pose
     poses: list[PoseReference]
     footprint: np.ndarray | None = None  # [H, W] bool: the mesh's UV footprint (the face)
@@ -338,8 +338,36 @@ def _source_states(base: np.ndarray, states: np.ndarray, encoding: str) -> np.nd
     return model.pd_to_normal(model.normal_to_pd(states) - model.normal_to_pd(base)[None])
 
 
-@reused  # the search's full-resolution reference is the validator's (fidelity rules)
-@one_blas_thread
+class UnitRows:
+    """Vectors ``[..., 3]`` seen as their unit vectors (:func:`normalize_rows` of them),
+    normalised where they are read: ``rows.reshape(-1, 3)[idx]`` is ``model.normalize`` of
+    those vectors, the same bits as the whole map normalised (each vector on its own). Holds the
+    vectors it is given (the caller's map, held for the run), not a normalised copy of the map
+    (192 MiB at 4096²); ``np.asarray`` of it normalises the whole map."""
+
+    def __init__(self, vectors: np.ndarray) -> None:
+        self.v = np.asarray(vectors, _F)
+
+    shape = property(lambda self: self.v.shape)
+    ndim = property(lambda self: self.v.ndim)
+    dtype = property(lambda self: np.dtype(_F))
+
+    def reshape(self, *shape: int) -> UnitRows:
+        return UnitRows(self.v.reshape(*shape))
+
+    def __getitem__(self, key: object) -> np.ndarray:
+        if isinstance(key, tuple) and len(key) >= self.v.ndim:
+            raise IndexError("UnitRows: index whole vectors (the last axis is normalised)")
+        return model.normalize(self.v[key])
+
+    def __array__(self, dtype: object = None, copy: bool | None = None) -> np.ndarray:
+        a = normalize_rows(self.v)
+        return a if dtype is None else a.astype(dtype, copy=False)
+
+    def __deepcopy__(self, memo: dict[int, object]) -> UnitRows:
+        return self  # never changed: its vectors are the caller's
+
+
 def prepare(
     base: np.ndarray,
     states: np.ndarray,
@@ -355,9 +383,36 @@ def prepare(
     ``[R, h, w]`` (magnified to the grid when smaller), the poses and the UV footprint.
 
     Active texels come from the source masks at full resolution; the source's blended normal
-    is computed there once per pose (the one full-resolution pass).
+    is computed there once per pose (the one full-resolution pass). The reference's ``base`` is
+    ``base`` seen as unit vectors (:class:`UnitRows`: no normalised copy of the map); the rest
+    is the run's memo's, shared by every caller with the same source (the searches', the
+    validator's).
     """
-    b = normalize_rows(base)
+    ref = _prepare(base, states, masks, poses, region_names, encoding, policy, footprint)
+    return replace(ref, base=UnitRows(base))
+
+
+@reused  # the search's full-resolution reference is the validator's (fidelity rules)
+@one_blas_thread
+def _prepare(
+    base: np.ndarray,
+    states: np.ndarray,
+    masks: np.ndarray,
+    poses: Sequence[Pose],
+    region_names: Sequence[str],
+    encoding: str = "pd",
+    policy: str = "clamp01",
+    footprint: np.ndarray | None = None,
+) -> Reference:
+    """The full-resolution source on its own grid: ``base`` ``[H, W, 3]``, ``states`` in the
+    representation :func:`wrinklepipe.model.combine` takes (``[K, H, W, C]``), ``masks``
+    ``[R, h, w]`` (magnified to the grid when smaller), the poses and the UV footprint.
+
+    Active texels come from the source masks at full resolution; the source's blended normal
+    is computed there once per pose (the one full-resolution pass). Its ``base`` is None:
+    :func:`prepare` sets it (the memo keeps no map the caller holds).
+    """
+    b = np.asarray(base, _F)
     st = np.asarray(states, _F)
     H, W = b.shape[:2]
     if st.shape[1:3] != (H, W):
@@ -376,7 +431,7 @@ def prepare(
     m_u = np.empty((m.shape[0], union.size), _F)
     for r in range(m.shape[0]):
         m_u[r] = np.asarray(m[r]).reshape(H * W)[union]
-    base_u = planes(b.reshape(H * W, 3)[union])  # [3, N]
+    base_u = planes(model.normalize(b.reshape(H * W, 3)[union]))  # [3, N] unit
     states_u = planes(st.reshape(st.shape[0], H * W, -1)[:, union])  # [K, C, N]
     base_pd = _pd_planes(base_u) if encoding == "pd" else None
     positive = m_u > 0  # [R, N]: where each mask touches, for every pose
@@ -415,7 +470,7 @@ def prepare(
         encoding=encoding,
         policy=policy,
         region_names=tuple(region_names),
-        base=b,
+        base=None,  # type: ignore[arg-type]  # prepare's caller's base, as UnitRows
         union=union,
         poses=out,
         footprint=fp,
