@@ -407,3 +407,22 @@ def test_reference_base_is_the_callers_map_normalised_where_read():
     assert np.shares_memory(a.poses[0].normal, b.poses[0].normal)  # the memo's one result
     flat = a.union[:50]
     assert np.array_equal(a.base.reshape(-1, 3)[flat], whole[flat])
+
+
+@pytest.mark.parametrize("size", [48, 12])
+def test_package_unit_base_made_band_by_band(monkeypatch, size):
+    """The package's base texels and its base at the states' size, made from the base band by
+    band (no whole unit map when the sizes differ), are those of the whole unit map."""
+    from wrinklepipe import model, workset
+    from wrinklepipe.pipeline import package as pk
+
+    rng = np.random.default_rng(13)
+    base = rng.normal(0.0, 0.3, (48, 48, 3)).astype(np.float32)
+    base[..., 2] = np.abs(base[..., 2]) + 0.5
+    unit = model.normalize(base)
+    want_tex = pk.encode_base(unit, 8)
+    want_at = pk._base_at(unit, (size, size), {})
+    monkeypatch.setattr(workset, "band_rows", lambda width, per: 5)
+    assert np.array_equal(pk.encode_base(base, 8, normalize=True), want_tex)
+    got = pk._unit_base_at(base, (size, size), {})
+    assert got.dtype == np.float32 and np.array_equal(got.view(np.uint32), want_at.view(np.uint32))

@@ -25,7 +25,7 @@ from wrinklepipe.metadata import (
     WrinkleMeta,
     table_from_json,
 )
-from wrinklepipe.normals.resample import resize_normals
+from wrinklepipe.normals.resample import DEFAULT_FILTER, resize, resize_normals
 from wrinklepipe.package import PackedTexture, WeightCurves, WrinklePackage, safe_name
 from wrinklepipe.workset import map_rows
 
@@ -60,11 +60,17 @@ def _dq(q: np.ndarray) -> np.ndarray:
     return codec.dequantize_unorm(q)
 
 
-def encode_base(base: np.ndarray, bits: int = 8) -> np.ndarray:
+def encode_base(base: np.ndarray, bits: int = 8, normalize: bool = False) -> np.ndarray:
     """The base normal map's texels ``[H, W, 3]`` (glTF ``normalTexture``: xyz in RGB), made
-    band by band (per texel: the whole map's texels; float64 temporaries of one band only)."""
+    band by band (per texel: the whole map's texels; float64 temporaries of one band only).
+    ``normalize``: each band's vectors made unit first (``model.normalize``: the texels of the
+    whole map normalised, without the unit map)."""
     fmt = _plain_format(bits)
-    return map_rows(lambda b: codec.encode("full", b, fmt, channels=3)[0], base, CODEC_BYTES)
+
+    def band(b: np.ndarray) -> np.ndarray:
+        return codec.encode("full", model.normalize(b) if normalize else b, fmt, channels=3)[0]
+
+    return map_rows(band, base, CODEC_BYTES)
 
 
 def decode_base(texels: np.ndarray) -> np.ndarray:
@@ -115,6 +121,8 @@ def decode_state(
     return e.to_normal(x, base)
 
 
+_F32 = np.float32
+
 #: Bytes of temporaries per texel while normalising (float32 lengths, their clamp, the result).
 NORMALIZE_BYTES_PER_TEXEL = 20
 
@@ -139,6 +147,24 @@ def _base_at(
     if tuple(shape) not in cache:
         cache[tuple(shape)] = resize_normals_pd(base, int(shape[0]), int(shape[1]))
     return cache[tuple(shape)]
+
+
+def _unit_base_at(
+    base: np.ndarray, shape: tuple[int, ...], cache: dict[tuple[int, ...], np.ndarray]
+) -> np.ndarray:
+    """:func:`_base_at` of ``model.normalize(base)``, without the whole unit map when the size
+    differs: the PD slopes of the unit vectors band by band, resampled (what
+    :func:`resize_normals_pd` of the unit map computes, bit for bit)."""
+    key = tuple(int(x) for x in shape)
+    if key not in cache:
+        if base.shape[:2] == key:
+            cache[key] = map_rows(model.normalize, base, NORMALIZE_BYTES_PER_TEXEL)
+        else:
+            pd = map_rows(
+                lambda r: model.normal_to_pd(model.normalize(r)), base, NORMALIZE_BYTES_PER_TEXEL
+            )
+            cache[key] = np.asarray(model.pd_to_normal(resize(pd, key, DEFAULT_FILTER)), _F32)
+    return cache[key]
 
 
 def pack_masks(
@@ -189,15 +215,16 @@ def package_from_asset(
         raise input_error(asset.name, "the asset has no mesh; glTF and USD output need one")
     # pd: the slope range; diff is stored with gain 1 (what shaders and the validator assume)
     scale = float(asset.pd_scale) if asset.encoding == "pd" else 1.0
-    # band by band (per texel: the same vectors), not the whole map's temporaries beside it
-    base = map_rows(model.normalize, asset.base, NORMALIZE_BYTES_PER_TEXEL)
-    textures = [PackedTexture("base_normal", encode_base(base, opt.bits), "base_normal")]
+    # the unit base band by band (per texel: the same vectors), made whole only for states of
+    # its own size
+    base_tex = encode_base(asset.base, opt.bits, normalize=True)
+    textures = [PackedTexture("base_normal", base_tex, "base_normal")]
     taken = {"base_normal"}
     cache: dict[tuple[int, ...], np.ndarray] = {}
     states_meta = []
     for k, name in enumerate(asset.state_names):
         st = model.normalize(asset.states[k])
-        b = _base_at(base, st.shape[:2], cache)
+        b = _unit_base_at(asset.base, st.shape[:2], cache)
         tex = PackedTexture(
             safe_name(f"wrinkle_{name}", taken),
             encode_state(b, st, asset.encoding, scale, opt.bits, codec.CURRENT_VERSION),
