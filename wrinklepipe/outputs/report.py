@@ -8,13 +8,15 @@ import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from wrinklepipe import __version__
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.atomic import dumps_json, write_bytes
 from wrinklepipe.metrics import angle_deg, weighted_stats
 from wrinklepipe.names import file_stems
 from wrinklepipe.package import WrinklePackage
-from wrinklepipe.pipeline.package import asset_from_package
+from wrinklepipe.pipeline.package import decode_state, decoded_base_at, mapping_version
 
 #: The validator's own page, written beside report.html (with ``validation_files/``).
 VALIDATION_HTML = "validation.html"
@@ -47,11 +49,26 @@ def output_rows(folder: Path) -> list[dict[str, Any]]:
 
 
 def decode_errors(asset: WrinkleAsset, pkg: WrinklePackage) -> dict[str, dict[str, float]]:
-    """Angular error (degrees) between each state as given and as decoded from what is stored."""
-    back = asset_from_package(pkg)
+    """Angular error (degrees) between each state as given and as decoded from what is stored.
+
+    Each state is decoded on its own over the base at its size, resampled band by band from
+    the base's texels (:func:`~wrinklepipe.pipeline.package.decoded_base_at`): the values
+    :func:`~wrinklepipe.pipeline.package.asset_from_package` decodes, bit for bit, without
+    the whole package decoded (the base's normals at full size, every state, the masks)."""
+    meta = pkg.meta
+    enc, scale = meta.encoding, float(meta.scale)
+    version = mapping_version(meta)
+    texels = pkg.texture(pkg.base_name).pixels
+    bases: dict[tuple[int, ...], np.ndarray] = {}
     out = {}
     for k, name in enumerate(asset.state_names):
-        st = weighted_stats(angle_deg(asset.states[k], back.states[k]))
+        stored = pkg.texture(meta.states[k].texture).pixels
+        shape = tuple(stored.shape[:2])
+        if shape not in bases:
+            bases[shape] = decoded_base_at(texels, shape)
+        back = decode_state(bases[shape], stored, enc, scale, version)
+        st = weighted_stats(angle_deg(asset.states[k], back))
+        del back
         out[name] = {k: v for k, v in st.to_json().items() if k.endswith("_deg")}
     return out
 

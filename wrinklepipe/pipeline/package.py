@@ -25,9 +25,15 @@ from wrinklepipe.metadata import (
     WrinkleMeta,
     table_from_json,
 )
-from wrinklepipe.normals.resample import DEFAULT_FILTER, resize, resize_normals
+from wrinklepipe.normals.resample import (
+    DEFAULT_FILTER,
+    PD_BYTES_PER_TEXEL,
+    resize,
+    resize_bands,
+    resize_normals,
+)
 from wrinklepipe.package import PackedTexture, WeightCurves, WrinklePackage, safe_name
-from wrinklepipe.workset import map_rows
+from wrinklepipe.workset import band_rows, map_rows
 
 
 @dataclass(frozen=True)
@@ -165,6 +171,28 @@ def _unit_base_at(
             )
             cache[key] = np.asarray(model.pd_to_normal(resize(pd, key, DEFAULT_FILTER)), _F32)
     return cache[key]
+
+
+def decoded_base_at(texels: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """:func:`decode_base` of stored base texels resampled to ``shape`` (``[h, w]``) as
+    :func:`_base_at` resamples the decoded base (PD space), made band by band: each band of
+    output rows reads the texels' rows it reaches, decoded and turned into slopes there (per
+    texel: the whole map's values), so the base's normals at full size are never whole
+    (192 MiB at 4096²). The same floats bit for bit (:func:`resize_bands`)."""
+    q = np.asarray(texels)
+    H, W = q.shape[:2]
+    h, w = int(shape[0]), int(shape[1])
+    if (h, w) == (H, W):
+        return decode_base(q)
+
+    def slopes(rows: slice) -> np.ndarray:
+        return map_rows(lambda b: model.normal_to_pd(decode_base(b)), q[rows], PD_BYTES_PER_TEXEL)
+
+    out = np.empty((h, w, 3), np.float32)
+    step = max(1, band_rows(W, PD_BYTES_PER_TEXEL) * h // H)  # a band's share of source rows
+    for rows, band in resize_bands(slopes, (H, W, 2), (h, w), rows=step):
+        out[rows] = model.pd_to_normal(band)
+    return out
 
 
 def pack_masks(
