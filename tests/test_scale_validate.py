@@ -3,6 +3,8 @@ computation gives, bit for bit (docs/scale.md, "Memory")."""
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 import pytest
 
@@ -22,6 +24,7 @@ from wrinklepipe.validate import rules_fidelity, rules_maps
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.context import Context, resize_masks
 from wrinklepipe.validate.rules_fidelity import _outside
+from wrinklepipe.validate.run import CHECKS
 
 U32 = np.uint32
 
@@ -360,3 +363,28 @@ def test_spread_in_bands_is_the_whole_computation(monkeypatch, band):
     assert 0 < want < 1
     assert rules_fidelity._spread(base, states, outside) == want
     assert rules_fidelity._spread(base, states, np.zeros((23, 19), bool)) == 0.0
+
+
+def test_the_shipped_base_decoded_where_asked_gives_the_held_bases_findings(tmp_path):
+    """The validator decodes the shipped base where a rule asks for it (not held from the map
+    rules to the compression rule): every rule's findings and metrics are those of a context
+    that decodes it once and holds it, and the context holds no decoded base afterwards."""
+
+    class Held(Context):
+        @cached_property
+        def shipped_base(self):
+            return Context.shipped_base.fget(self)
+
+    src = write_demo_source(tmp_path / "src", 64)
+    out = tmp_path / "out"
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    inp = load_input(out, LoadOptions(textures="png", source=str(src)))
+    runs = []
+    for cls in (Held, Context):
+        ctx = cls(inp)
+        issues = [i for _, check in CHECKS for i in check(ctx)]
+        runs.append(([(i.code, i.pointer, i.message) for i in issues], repr(ctx.metrics)))
+    assert runs[0] == runs[1]
+    assert "shipped_base" not in vars(ctx) and ctx.has_shipped_base
+    a, b = ctx.shipped_base, ctx.shipped_base
+    assert a is not b and np.array_equal(a.view(U32), b.view(U32))

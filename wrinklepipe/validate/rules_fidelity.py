@@ -149,12 +149,12 @@ def shipped_samples(ctx: Context, states: np.ndarray) -> fd.Samples | None:
     base and masks are gathered once per validation (cached on the context). None when
     fidelity cannot be measured."""
     ref = reference(ctx)
-    base, masks = ctx.shipped_base, ctx.shipped_masks
-    if ref is None or base is None or masks is None:
+    masks = ctx.shipped_masks
+    if ref is None or not ctx.has_shipped_base or masks is None:
         return None
     c = _cache(ctx)
-    if "base_masks" not in c:
-        c["base_masks"] = fd.sample(ref, base, None, masks)
+    if "base_masks" not in c:  # the base decoded for this only (not held)
+        c["base_masks"] = fd.sample(ref, ctx.shipped_base, None, masks)
     return fd.merge(c["base_masks"], fd.sample(ref, states=np.asarray(states)))
 
 
@@ -328,7 +328,7 @@ def check_alignment(ctx: Context) -> list[Issue]:
         what = "source"
     else:
         sts = ctx.shipped_states
-        if sts is None or ctx.shipped_base is None or a.encoding not in model.ENCODINGS:
+        if sts is None or not ctx.has_shipped_base or a.encoding not in model.ENCODINGS:
             return []
         H, W = sts[0].shape[:2]
         flat = np.arange(H * W)

@@ -244,8 +244,10 @@ def check_maps(ctx: Context) -> list[Issue]:
         layout = tx.xy_layout(bt)
         if layout == "rgb":  # the base's values from its texels, band by band (not held)
             out += _normal_map_texture_checks(ctx, bt, ctx.texels(bt), tx.unorm_values)
-        if ctx.shipped_base is not None:
-            issue = _convention_issue(ctx, bt, normals_convention_score(ctx.shipped_base))
+        shipped = ctx.shipped_base
+        if shipped is not None:
+            issue = _convention_issue(ctx, bt, normals_convention_score(shipped))
+            del shipped
             if issue:
                 out.append(issue)
     states = ctx.shipped_states
@@ -324,15 +326,16 @@ def _as_full(
 
 def _encoding_match(ctx: Context) -> list[Issue]:
     a, inp = ctx.asset, ctx.inp
-    if not inp.has_source or ctx.shipped_base is None or a.encoding not in model.ENCODINGS:
+    if not inp.has_source or not ctx.has_shipped_base or a.encoding not in model.ENCODINGS:
         return []
+    shipped = ctx.shipped_base
     out = []
     for k, t in enumerate(inp.state_textures()):
         v = ctx.values(t) if t is not None else None
         if v is None or k >= len(a.states):
             continue
         h, w = v.shape[:2]
-        base = resize_normals(ctx.shipped_base, h, w)
+        base = resize_normals(shipped, h, w)
         ref = ctx.source_at_shipped_size
         if ref is None or ref["states"].shape[1:3] != (h, w):
             continue
