@@ -112,7 +112,7 @@ def sample(
         s.raw["base"] = np.asarray(base)
         s.readers["base"] = base_reader or Reader()
     if states is not None:
-        st = np.asarray(states)
+        st = states if hasattr(states, "at") else np.asarray(states)  # a PdLevel: gathered
         s.states = np.stack([planes(sample_at(x, ref.shape, u, states_reader)) for x in st])
         s.states = np.swapaxes(s.states, 1, 2)  # [K, n, C], a view of the planes
         if ref.encoding in ("full", "composite"):

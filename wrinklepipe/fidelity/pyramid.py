@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from wrinklepipe.fidelity.level import PdLevel
+
 _F = np.float32
 
 
@@ -92,24 +94,63 @@ def halve(img: np.ndarray, chunk_bytes: int = CHUNK_BYTES) -> np.ndarray:
     a = np.asarray(img, _F)
     rows = halve_axis(a, a.ndim - 3)
     h2, w, c = rows.shape[-3:]
-    lead = rows.shape[:-3]
-    out = np.empty(lead + (h2, w // 2, c), _F)
+    out = np.empty(rows.shape[:-3] + (h2, w // 2, c), _F)
+    _halve_columns(rows, out, chunk_bytes)
+    return out
+
+
+def _halve_columns(rows: np.ndarray, out: np.ndarray, chunk_bytes: int) -> None:
+    """The column pass of :func:`halve`: ``rows`` ``[..., h2, W, C]`` halved along ``W`` into
+    ``out``, on transposed copies of bands of about ``chunk_bytes``."""
+    h2 = rows.shape[-3]
     per_row = max(1, rows.size // max(h2, 1) * rows.itemsize)  # bytes of one halved row
     step = max(1, chunk_bytes // per_row)
     for r0 in range(0, h2, step):
         band = np.ascontiguousarray(np.swapaxes(rows[..., r0 : r0 + step, :, :], -2, -3))
-        out[..., r0 : r0 + step, :, :] = np.swapaxes(halve_axis(band, a.ndim - 3), -2, -3)
+        out[..., r0 : r0 + step, :, :] = np.swapaxes(halve_axis(band, rows.ndim - 3), -2, -3)
+
+
+def halve_level(level: PdLevel, chunk_bytes: int = CHUNK_BYTES) -> np.ndarray:
+    """:func:`halve` of a :class:`~wrinklepipe.fidelity.level.PdLevel` ``[K, H, W, C]`` made
+    band by band of output rows: each band's input rows (5 before, 6 after, edge rows
+    repeated) made, halved along rows, then along columns. The same operations on the same
+    values for every output as :func:`halve` of the whole array; the level is never whole."""
+    K, H, W, C = level.shape
+    if H % 2 or W % 2:
+        raise ValueError(f"halving needs an even size, got {W} x {H}")
+    m = H // 2
+    out = np.empty((K, m, W // 2, C), _F)
+    step = max(1, level.band() // 2)  # output rows a band
+    for i0 in range(0, m, step):
+        i1 = min(m, i0 + step)
+        lo, hi = 2 * i0 - 5, 2 * i1 + 6
+        a, b = max(lo, 0), min(hi, H)
+        win = level.rows(a, b)
+        if a != lo or b != hi:  # at an end: the edge rows repeated, as clamp to edge reads them
+            win = np.take(win, np.clip(np.arange(lo, hi), 0, H - 1) - a, axis=1)
+        rows = _halve_window(win, 1, i1 - i0)
+        del win
+        _halve_columns(rows, out[:, i0:i1], chunk_bytes)
     return out
 
 
-def levels(img: np.ndarray, min_size: int = 1) -> dict[int, np.ndarray]:
+def levels(img: np.ndarray | PdLevel, min_size: int = 1) -> dict[int, np.ndarray]:
     """``{side: map}`` for the input and every halving down to ``min_size`` (square maps whose
-    side is a power of two times an odd number stop at the odd factor)."""
-    a = np.asarray(img, _F)
-    h, w = a.shape[-3], a.shape[-2]
+    side is a power of two times an odd number stop at the odd factor). A
+    :class:`~wrinklepipe.fidelity.level.PdLevel` is kept as it is (the first halving made band
+    by band from it: :func:`halve_level`)."""
+    if not isinstance(img, PdLevel):
+        img = np.asarray(img, _F)
+    h, w = img.shape[-3], img.shape[-2]
     if h != w:
         raise ValueError(f"the pyramid needs square maps, got {w} x {h}")
-    out = {h: a}
+    out: dict[int, np.ndarray] = {h: img}  # type: ignore[dict-item]
+    if isinstance(img, PdLevel):
+        if not (h % 2 == 0 and h // 2 >= min_size):
+            return out
+        h //= 2
+        out[h] = halve_level(img)
+    a = np.asarray(out[h], _F)
     while h % 2 == 0 and h // 2 >= min_size:
         a = halve(a)
         h //= 2

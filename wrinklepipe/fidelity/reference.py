@@ -413,7 +413,8 @@ def _prepare(
     :func:`prepare` sets it (the memo keeps no map the caller holds).
     """
     b = np.asarray(base, _F)
-    st = np.asarray(states, _F)
+    # a level made where it is read (fidelity.level.PdLevel) is gathered at the union only
+    st = states if hasattr(states, "at") else np.asarray(states, _F)
     H, W = b.shape[:2]
     if st.shape[1:3] != (H, W):
         raise ValueError(f"source states {st.shape[1:3]} and base {(H, W)} differ in size")
@@ -432,7 +433,8 @@ def _prepare(
     for r in range(m.shape[0]):
         m_u[r] = np.asarray(m[r]).reshape(H * W)[union]
     base_u = planes(model.normalize(b.reshape(H * W, 3)[union]))  # [3, N] unit
-    states_u = planes(st.reshape(st.shape[0], H * W, -1)[:, union])  # [K, C, N]
+    at_u = st.at(union) if hasattr(st, "at") else st.reshape(st.shape[0], H * W, -1)[:, union]
+    states_u = planes(at_u)  # [K, C, N]
     base_pd = _pd_planes(base_u) if encoding == "pd" else None
     positive = m_u > 0  # [R, N]: where each mask touches, for every pose
     out = []

@@ -103,6 +103,8 @@ def sample_at(
     and sums in the same order as four taps at a time, so the same values), with ``store`` on
     the whole map once.
     """
+    if hasattr(img, "at") and tuple(img.shape[:2]) == tuple(shape):
+        return _gathered(img, np.asarray(flat, np.int64), reader)
     a = np.asarray(img)
     if a.ndim == 2:
         a = a[..., None]
@@ -146,6 +148,17 @@ def sample_at(
             bot = p[2 * n : 3 * n] * (1 - tx) + p[3 * n :] * tx
             res[c] = top * (1 - ty) + bot * ty
         out = res.T
+    return np.asarray(out if read is None else read(out), _F)
+
+
+def _gathered(img: Any, flat: np.ndarray, reader: Reader | None) -> np.ndarray:
+    """:func:`sample_at` on the map's own grid of a map made where it is read (e.g.
+    :class:`wrinklepipe.fidelity.level.PdState`: ``img.at(flat)`` its ``[n, C]`` values): the
+    gather's values in the gather's layout, then the reader's steps."""
+    v = np.asarray(img.at(flat), _F)
+    store = reader.store if reader is not None and reader.store is not None else None
+    read = reader.read if reader is not None and reader.read is not None else None
+    out = np.asarray(store(v), _F) if store is not None else np.ascontiguousarray(v.T).T
     return np.asarray(out if read is None else read(out), _F)
 
 

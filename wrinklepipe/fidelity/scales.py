@@ -14,6 +14,7 @@ import numpy as np
 
 from wrinklepipe.fidelity import sampling as fsa
 from wrinklepipe.fidelity import ship
+from wrinklepipe.fidelity.level import PdLevel, row_bands
 from wrinklepipe.normals.encode import MAX_PD_SCALE
 
 
@@ -30,14 +31,17 @@ def scale_candidates(max_slope: float, factors: Sequence[float]) -> list[float]:
 def clipped_texels(level: np.ndarray, scale: float) -> list[int]:
     """Per state: texels stored at the end of the range at ``scale`` (:func:`ship.edge_texels`,
     the one clipped count)."""
-    return [ship.edge_texels(ship.pd_texels(x, scale)[0]) for x in level]
+    return [ship.edge_texels(ship.pd_texels(np.asarray(x), scale)[0]) for x in level]
 
 
-def largest_held(x: np.ndarray) -> float:
+def largest_held(x: np.ndarray | PdLevel) -> float:
     """The largest |component| of slopes ``x`` that some PD scale holds (at most
     :data:`~wrinklepipe.normals.encode.MAX_PD_SCALE`); 0 when none. Without temporaries when
     every texel is held (at full size a map is 4M texels); horizon texels (slopes up to 1e12)
-    are left out."""
+    are left out. A :class:`~wrinklepipe.fidelity.level.PdLevel` band by band (the largest of
+    the bands' is the whole map's)."""
+    if isinstance(x, PdLevel):
+        return max((largest_held(b) for _, b in row_bands(x)), default=0.0)
     big = max(float(np.max(x, initial=0.0)), -float(np.min(x, initial=0.0)))
     if big <= MAX_PD_SCALE:
         return big
@@ -45,7 +49,7 @@ def largest_held(x: np.ndarray) -> float:
     return float(a[a <= MAX_PD_SCALE].max(initial=0.0))
 
 
-def tails(level: np.ndarray, smallest: float) -> list[np.ndarray]:
+def tails(level: np.ndarray | PdLevel, smallest: float) -> list[np.ndarray]:
     """Per state of ``level`` ``[K, s, s, 2]``: its texels ``[n, 1, 2]`` (in map order) whose
     larger |component| is at least 0.99 of scale ``smallest`` (the only ones that can clip at
     a scale of at least that). In chunks of rows (:func:`~wrinklepipe.fidelity.sampling.chunks`:

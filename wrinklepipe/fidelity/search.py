@@ -51,6 +51,7 @@ from wrinklepipe.fidelity.judge import (
     _smallest_passing,
     pick_format,
 )
+from wrinklepipe.fidelity.level import PdLevel
 from wrinklepipe.fidelity.scales import clipped_texels, largest_held, scale_candidates
 from wrinklepipe.metrics import Budget
 from wrinklepipe.normals.encode import MAX_PD_SCALE
@@ -185,7 +186,9 @@ class _Search:
         fx = self.fx = fixed or Fixed()
         self.src, self.budget = src, budget
         self.cbudget = compressed_budget or budget
-        self.slopes = slopes = np.asarray(src.slopes, _F)
+        # a PdLevel (the full-size slopes made where they are read) stays one
+        slopes = src.slopes if isinstance(src.slopes, PdLevel) else np.asarray(src.slopes, _F)
+        self.slopes = slopes
         K, H, W = slopes.shape[:3]
         if H != W:
             raise ValueError(f"the searches need square state maps, got {W} x {H}")
@@ -360,7 +363,7 @@ class _Search:
             clipped_texels=clipped_texels(self.levels[size], scale),
             png=png,
             compressed=compressed,
-            states=self.levels[size],
+            states=np.asarray(self.levels[size], _F),
             tried=self.tried,
             notes=self.notes,
             budget=self.budget,
@@ -482,7 +485,7 @@ class _FormatSearch:
         self.s, self.scale = s, scale
         self.found: list[Tried] = []
         self.kept = dict(s.judge.parts)
-        self.state_q = np.stack([ship.pd_texels(x, scale)[0] for x in s.levels[size]])
+        self.state_q = np.stack([ship.pd_texels(np.asarray(x), scale)[0] for x in s.levels[size]])
         self.trips = _RoundTrips(
             {
                 **{f"state {k}": q for k, q in enumerate(self.state_q)},

@@ -23,6 +23,7 @@ from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.fidelity import formats as ff
 from wrinklepipe.fidelity import search as fs
 from wrinklepipe.fidelity import ship
+from wrinklepipe.fidelity.level import PdLevel
 from wrinklepipe.metrics import Budget
 from wrinklepipe.options import BudgetOptions, FormatOptions
 from wrinklepipe.package import WrinklePackage
@@ -111,11 +112,11 @@ def auto_choices(
     formats = formats or FormatOptions()
     auto = set(asset.provenance.get("auto_resolution", ()))
     res = asset.resolution
-    # PD slopes of the wrinkles alone (band by band: the same values, a band's temporaries)
-    slopes = fd.source_states(
-        resize_normals_pd(asset.base, *asset.states.shape[1:3]), asset.states, "pd"
-    )
+    # PD slopes of the wrinkles alone, made where the searches read them (a band, or the
+    # reference's texels: the same values, never the whole level)
     H = asset.states.shape[1]
+    grid_base = resize_normals_pd(asset.base, H, H)
+    slopes = PdLevel(grid_base, asset.states)
     if poses is None:
         poses = fd.expression_poses(
             asset.region_names, asset.region_state_matrix(), asset.expressions, asset.policy
@@ -129,7 +130,7 @@ def auto_choices(
         region_names=asset.region_names,
         policy=asset.policy,
         footprint=fd.footprint(mesh.uvs, mesh.indices, (H, H)),
-        source_base=resize_normals_pd(asset.base, H, H),
+        source_base=grid_base,
     )
     fixed = fs.Fixed(
         wrinkle=None if "wrinkle" in auto else int(res.get("wrinkle", H)),
@@ -140,7 +141,7 @@ def auto_choices(
     )
     png_budget, comp_budget = budgets(asset.budget)
     choice = fs.search(src, png_budget, comp_budget, fixed)
-    del src, slopes  # the full-size slopes (unless shipped: then the choice holds them)
+    del src, slopes, grid_base
     notes = list(choice.notes)
     size, m = choice.wrinkle_size, choice.mask_size
     states = asset.states
