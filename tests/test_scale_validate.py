@@ -20,6 +20,7 @@ from wrinklepipe.normals import compress as cmp
 from wrinklepipe.normals.dds import mip_dims
 from wrinklepipe.sources import copies
 from wrinklepipe.sources.validation import LoadOptions, load_input
+from wrinklepipe.validate import fidelity_pictures as fp
 from wrinklepipe.validate import rules_fidelity, rules_maps
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.context import Context, resize_masks
@@ -388,3 +389,31 @@ def test_the_shipped_base_decoded_where_asked_gives_the_held_bases_findings(tmp_
     assert "shipped_base" not in vars(ctx) and ctx.has_shipped_base
     a, b = ctx.shipped_base, ctx.shipped_base
     assert a is not b and np.array_equal(a.view(U32), b.view(U32))
+
+
+def test_the_shipped_base_read_from_its_texels_is_the_decoded_maps(tmp_path):
+    """The measure's samples, the base over the face and the pose pictures made from the
+    shipped base's texels (decoded where read): those of the decoded map, to the last bit."""
+    src = write_demo_source(tmp_path / "src", 64)
+    out = tmp_path / "out"
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    ctx = Context(load_input(out, LoadOptions(textures="png", source=str(src))))
+    ref = rules_fidelity.reference(ctx)
+    q, reader = ctx.shipped_base_texels()
+    whole, masks = ctx.shipped_base, ctx.shipped_masks
+    states = np.stack(ctx.shipped_states)
+    got, want = (
+        fd.sample(ref, b, states, masks, base_reader=r) for b, r in ((q, reader), (whole, None))
+    )
+    assert np.array_equal(got.base.view(U32), want.base.view(U32))
+    fids = [
+        fd.evaluate(ref, s, base_over_face=True, error_maps=True, samples=True) for s in (got, want)
+    ]
+    assert fids[0].to_json() == fids[1].to_json() and fids[0].base is not None
+    pics = [
+        fp.pose_pictures(ref, fids[1], b, states, masks, base_reader=r)
+        for b, r in ((q, reader), (whole, None))
+    ]
+    assert pics[0].keys() == pics[1].keys() and pics[0]
+    for k in pics[1]:
+        assert np.array_equal(pics[0][k].view(U32), pics[1][k].view(U32)), k

@@ -405,7 +405,7 @@ def evaluate(
     fid = Fidelity(out, None, ref.active_fraction, maps, kept, ref.step)
     if base_over_face and "base" in s.raw:
         base_err: list[np.ndarray] | None = [] if samples else None
-        fid.base = base_fidelity(ref, s.raw["base"], errors=base_err)
+        fid.base = base_fidelity(ref, s.raw["base"], reader=s.readers.get("base"), errors=base_err)
         if base_err:
             kept[BASE_SAMPLES] = (base_err[0], None)
     return fid

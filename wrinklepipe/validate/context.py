@@ -10,6 +10,7 @@ import numpy as np
 from wrinklepipe import model
 from wrinklepipe.asset import WrinkleAsset
 from wrinklepipe.fidelity.reference import source_states
+from wrinklepipe.fidelity.sampling import Reader
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.masks.stack import MaskStack, float_masks
 from wrinklepipe.pipeline.package import resize_normals_pd
@@ -216,6 +217,23 @@ class Context:
         return map_rows(
             lambda b: tx.decode_texels(b, "base", layout, 1.0, flip_y=flip), q, DECODE_BYTES
         )
+
+    def shipped_base_texels(self) -> tuple[np.ndarray, Reader] | None:
+        """The shipped base as its held texels and the :class:`~wrinklepipe.fidelity.Reader`
+        whose ``store`` decodes the texels a sampler reads into :attr:`shipped_base`'s unit
+        normals (per texel: the same floats), for the samplers that read a few texels of it
+        (the measure's gather at the reference's texels, the pictures' crops): no decoded
+        map (192 MiB at 4096²). None without a usable base texture."""
+        t = self.base_tex
+        q = None if t is None else self.texels(t)
+        if t is None or q is None:
+            return None
+        layout, flip = tx.xy_layout(t), self.flips(t)
+
+        def store(v: np.ndarray) -> np.ndarray:  # [n, C] texels -> [n, 3] unit normals
+            return tx.decode_texels(v[None], "base", layout, 1.0, flip_y=flip)[0]
+
+        return q, Reader(store=store)
 
     @cached_property
     def shipped_states(self) -> list[np.ndarray] | None:

@@ -19,6 +19,7 @@ import numpy as np
 
 from wrinklepipe import fidelity as fd
 from wrinklepipe import model
+from wrinklepipe.fidelity.sampling import Reader
 
 _F = np.float32
 
@@ -64,10 +65,12 @@ def pose_pictures(
     states: np.ndarray,
     masks: np.ndarray,
     crop_max: int = CROP_MAX,
+    base_reader: Reader | None = None,
 ) -> dict[str, np.ndarray]:
     """Source, shipped and error pictures of every pose (module doc). ``base``, ``states``,
     ``masks``: the shipped maps as decoded (unit normals, combine's representation, 0..1), at
-    their own sizes; ``fid``: :func:`wrinklepipe.fidelity.measure` of them with error maps."""
+    their own sizes (``base``: or what ``base_reader`` turns into them, texel by texel);
+    ``fid``: :func:`wrinklepipe.fidelity.measure` of them with error maps."""
     H, W = ref.shape
     out: dict[str, np.ndarray] = {}
     src_base = ref.base.reshape(-1, 3)
@@ -84,7 +87,7 @@ def pose_pictures(
         hit = (at < active.size) & (active[np.minimum(at, active.size - 1)] == flat)
         src[hit] = np.asarray(pr.normal)[at[hit]]
         # the shipped maps, magnified to the grid as a GPU samples them, blended
-        b = model.normalize(fd.sample_at(base, ref.shape, flat))
+        b = model.normalize(fd.sample_at(base, ref.shape, flat, base_reader))
         st = np.stack([fd.sample_at(x, ref.shape, flat) for x in np.asarray(states)])
         if ref.encoding in ("full", "composite"):
             st = model.normalize(st)

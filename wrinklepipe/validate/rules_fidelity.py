@@ -150,11 +150,12 @@ def shipped_samples(ctx: Context, states: np.ndarray) -> fd.Samples | None:
     fidelity cannot be measured."""
     ref = reference(ctx)
     masks = ctx.shipped_masks
-    if ref is None or not ctx.has_shipped_base or masks is None:
+    base = ctx.shipped_base_texels()
+    if ref is None or base is None or masks is None:
         return None
     c = _cache(ctx)
-    if "base_masks" not in c:  # the base decoded for this only (not held)
-        c["base_masks"] = fd.sample(ref, ctx.shipped_base, None, masks)
+    if "base_masks" not in c:  # the base's texels, decoded where they are read (not held)
+        c["base_masks"] = fd.sample(ref, base[0], None, masks, base_reader=base[1])
     return fd.merge(c["base_masks"], fd.sample(ref, states=np.asarray(states)))
 
 
@@ -187,9 +188,11 @@ def check_fidelity(ctx: Context) -> list[Issue]:
     where = ctx.inp.pointer("textures")
     ctx.metrics["fidelity"] = {**fid.to_json(), "budget": budget.to_json(), "applies": which}
     ref = reference(ctx)
-    base, states = ctx.shipped_base, ctx.shipped_states
+    base, states = ctx.shipped_base_texels(), ctx.shipped_states
     if ref is not None and base is not None and states is not None and masks is not None:
-        pictures.update(fp.pose_pictures(ref, fid, base, np.stack(states), masks))
+        pictures.update(
+            fp.pose_pictures(ref, fid, base[0], np.stack(states), masks, base_reader=base[1])
+        )
     out: list[Issue] = []
     for p in sorted(fid.over(budget), key=lambda p: -p.overall.p99):
         o = p.overall
