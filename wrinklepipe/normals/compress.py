@@ -228,7 +228,9 @@ def _quicktex_band(a: np.ndarray, fmt: str) -> np.ndarray:
     for level in QUICKTEX_LEVELS:
         with _quicktex_encoder(fmt, level) as encoder:
             data = bytes(encoder.encode(tex).tobytes())
-        d = decode_bc_bgra(data, w, h, fmt)[..., :3].astype(np.int32) - want
+        # not the memo's decode: a candidate level's band is decoded once, never asked again
+        # (the memo kept every level's decoded band, about 128 MiB at 4096²)
+        d = _decode_bgra(data, w, h, fmt)[..., :3].astype(np.int32) - want
         errors.append((d * d).reshape(h // 4, 4, w // 4, 4, 3).sum(axis=(1, 3, 4)).ravel())
         blocks.append(np.frombuffer(data, np.uint8).reshape(errors[-1].size, -1))
     pick = np.argmin(np.stack(errors), axis=0)  # the first of equal errors
@@ -252,6 +254,11 @@ _DECODERS = {
 @reused
 def decode_bc_bgra(data: bytes, width: int, height: int, fmt: str) -> np.ndarray:
     """texture2ddecoder's output as is: [H, W, 4] uint8 in B, G, R, A order."""
+    return _decode_bgra(data, width, height, fmt)
+
+
+def _decode_bgra(data: bytes, width: int, height: int, fmt: str) -> np.ndarray:
+    """:func:`decode_bc_bgra` without the memo (a decode asked once)."""
     check_format(fmt)
     need = block_data_size(fmt, width, height)
     if len(data) < need:
