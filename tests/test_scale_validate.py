@@ -417,3 +417,23 @@ def test_the_shipped_base_read_from_its_texels_is_the_decoded_maps(tmp_path):
     assert pics[0].keys() == pics[1].keys() and pics[0]
     for k in pics[1]:
         assert np.array_equal(pics[0][k].view(U32), pics[1][k].view(U32)), k
+
+
+@pytest.mark.parametrize("band", [1, 2, 5])
+def test_convention_score_of_texels_by_rows_is_the_decoded_maps(tmp_path, monkeypatch, band):
+    """The shipped base's convention score from its texels decoded a band of rows at a time
+    (the context's reader) against the score of the whole decoded map: the same float."""
+    src = write_demo_source(tmp_path / "src", 64)
+    out = tmp_path / "out"
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    ctx = Context(load_input(out, LoadOptions(textures="png")))
+    want = rules_maps.normals_convention_score(ctx.shipped_base)
+    assert want != 0.0
+    q, reader = ctx.shipped_base_texels()
+    h, w = q.shape[:2]
+    monkeypatch.setattr(rules_maps, "band_rows", lambda w, b: band)
+
+    def rows(r0, r1):
+        return reader.store(q[r0:r1].reshape((r1 - r0) * w, -1)).reshape(r1 - r0, w, 3)
+
+    assert rules_maps.normal_rows_convention_score(rows, (h, w)) == want

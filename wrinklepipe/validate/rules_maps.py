@@ -76,13 +76,25 @@ def normals_convention_score(normals: np.ndarray) -> float:
     of rows at a time: the same score, without the slopes of both channels and their float64
     copy at once."""
     n = np.asarray(normals, np.float32)
-    if n.ndim != 3 or n.shape[0] < 3 or n.shape[1] < 3:
+    if n.ndim != 3:
+        return 0.0
+    return normal_rows_convention_score(lambda r0, r1: n[r0:r1], n.shape[:2])
+
+
+def normal_rows_convention_score(
+    rows: Callable[[int, int], np.ndarray], shape: tuple[int, ...]
+) -> float:
+    """:func:`normals_convention_score` of the ``shape`` (``[H, W]``) map of unit normals whose
+    rows ``r0:r1`` are ``rows(r0, r1)`` (e.g. decoded from their texels there: the map is
+    never whole)."""
+    if shape[0] < 3 or shape[1] < 3:
         return 0.0
 
     def slope(c: int, r0: int, r1: int) -> np.ndarray:
-        return n[r0:r1, :, c] * np.reciprocal(np.maximum(n[r0:r1, :, 2], EPS))
+        n = np.asarray(rows(r0, r1), np.float32)
+        return n[..., c] * np.reciprocal(np.maximum(n[..., 2], EPS))
 
-    return _curl_score(slope, n.shape[:2], None)
+    return _curl_score(slope, shape, None)
 
 
 #: Bytes of temporaries per texel of a band of the curl score (float32 slopes, their float64
@@ -244,10 +256,15 @@ def check_maps(ctx: Context) -> list[Issue]:
         layout = tx.xy_layout(bt)
         if layout == "rgb":  # the base's values from its texels, band by band (not held)
             out += _normal_map_texture_checks(ctx, bt, ctx.texels(bt), tx.unorm_values)
-        shipped = ctx.shipped_base
-        if shipped is not None:
-            issue = _convention_issue(ctx, bt, normals_convention_score(shipped))
-            del shipped
+        shipped = ctx.shipped_base_texels()
+        if shipped is not None:  # its normals decoded a band of rows at a time (not held)
+            q, store = shipped[0], shipped[1].store
+            h, w = q.shape[:2]
+
+            def rows(r0: int, r1: int) -> np.ndarray:
+                return store(q[r0:r1].reshape((r1 - r0) * w, -1)).reshape(r1 - r0, w, 3)
+
+            issue = _convention_issue(ctx, bt, normal_rows_convention_score(rows, (h, w)))
             if issue:
                 out.append(issue)
     states = ctx.shipped_states
