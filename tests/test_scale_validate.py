@@ -23,7 +23,7 @@ from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import fidelity_pictures as fp
 from wrinklepipe.validate import rules_fidelity, rules_maps
 from wrinklepipe.validate import textures as tx
-from wrinklepipe.validate.context import Context, resize_masks
+from wrinklepipe.validate.context import Context, ValidateOptions, resize_masks
 from wrinklepipe.validate.rules_fidelity import _outside
 from wrinklepipe.validate.run import CHECKS
 
@@ -437,3 +437,21 @@ def test_convention_score_of_texels_by_rows_is_the_decoded_maps(tmp_path, monkey
         return reader.store(q[r0:r1].reshape((r1 - r0) * w, -1)).reshape(r1 - r0, w, 3)
 
     assert rules_maps.normal_rows_convention_score(rows, (h, w)) == want
+
+
+@pytest.mark.parametrize("grid", [24, 40, 512])
+def test_the_shipped_base_on_the_grid_from_its_texels_is_the_decoded_maps(tmp_path, grid):
+    """The compression rule's shipped base on the comparison grid, its texels decoded where the
+    grid's taps read them: the decoded map resampled to the grid (and at its own size), every
+    bit; the states and masks on the grid unchanged."""
+    src = write_demo_source(tmp_path / "src", 64)
+    out = tmp_path / "out"
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    ctx = Context(load_input(out, LoadOptions(textures="png")), ValidateOptions(grid=grid))
+    base, states, masks = ctx.shipped_on_grid
+    want = model.normalize(ctx.to_grid(ctx.shipped_base))
+    assert base.shape == (min(grid, 64), min(grid, 64), 3)
+    assert np.array_equal(base.view(U32), want.view(U32))
+    st = np.stack([ctx.to_grid(s) for s in ctx.shipped_states]).astype(np.float32)
+    assert np.array_equal(states.view(U32), st.view(U32))
+    assert np.array_equal(masks, ctx.masks_to_grid(ctx.shipped_masks))

@@ -374,12 +374,13 @@ class Context:
     @cached_property
     def shipped_on_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Shipped base, states (combine representation) and masks on the grid."""
-        shipped = self.shipped_base
+        shipped = self.shipped_base_texels()
         if shipped is None or self.shipped_states is None:
             return None
         masks = self.shipped_masks if self.shipped_masks is not None else self.asset.masks
-        base = model.normalize(self.to_grid(shipped))
-        del shipped
+        # the base's texels the grid's taps read, decoded there (no decoded map of the base)
+        h, w = self.grid_shape
+        base = model.normalize(tx.resize_bilinear(shipped[0], h, w, shipped[1].store))
         st = []
         for s in self.shipped_states:
             g = self.to_grid(s)

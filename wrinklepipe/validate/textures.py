@@ -200,12 +200,18 @@ def bilinear_planes(planes: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return out
 
 
-def resize_bilinear(img: np.ndarray, h: int, w: int) -> np.ndarray:
-    """Resample ``[H, W, C]`` to ``[h, w, C]`` by bilinear sampling at texel centres."""
+def resize_bilinear(
+    img: np.ndarray, h: int, w: int, read: Callable[[np.ndarray], np.ndarray] | None = None
+) -> np.ndarray:
+    """Resample ``[H, W, C]`` to ``[h, w, C]`` by bilinear sampling at texel centres.
+    ``read``: a per-texel function of ``img``'s texels ``[n, C]`` (as :func:`bilinear`'s),
+    applied to the texels the taps read (every texel at the same size)."""
     if img.shape[0] == h and img.shape[1] == w:
-        return img
+        if read is None:
+            return img
+        return np.asarray(read(img.reshape(h * w, -1))).reshape(h, w, -1)
     cu = (np.arange(w) + 0.5) / w
     cv = (np.arange(h) + 0.5) / h
     uu, vv = np.meshgrid(cu, cv, indexing="xy")
     uv = np.stack([uu.ravel(), vv.ravel()], axis=-1)
-    return bilinear(img, uv).reshape(h, w, -1)
+    return bilinear(img, uv, read).reshape(h, w, -1)
