@@ -455,3 +455,37 @@ def test_the_shipped_base_on_the_grid_from_its_texels_is_the_decoded_maps(tmp_pa
     st = np.stack([ctx.to_grid(s) for s in ctx.shipped_states]).astype(np.float32)
     assert np.array_equal(states.view(U32), st.view(U32))
     assert np.array_equal(masks, ctx.masks_to_grid(ctx.shipped_masks))
+
+
+def test_the_validators_reference_from_a_pd_level_is_the_whole_arrays(tmp_path):
+    """The validator's reference made from the source states' slopes where it reads them (a
+    PdLevel, pd): the reference made from the whole array (no memo: computed twice), every
+    array bit for bit, and the same fidelity of the shipped maps."""
+    src = write_demo_source(tmp_path / "src", 64)
+    out = tmp_path / "out"
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    ctx = Context(load_input(out, LoadOptions(textures="png", source=str(src))))
+    assert ctx.asset.encoding == "pd"
+    got = rules_fidelity.reference(ctx)
+    base, states = rules_fidelity.source_encoded(ctx)
+    a = ctx.asset
+    want = fd.prepare(
+        base,
+        states,
+        a.masks,
+        rules_fidelity.poses(ctx),
+        a.region_names,
+        a.encoding,
+        a.policy,
+        rules_fidelity.footprint(ctx, a.states.shape[1:3]),
+    )
+    assert np.array_equal(got.union, want.union) and len(got.poses) == len(want.poses) > 0
+    for p, q in zip(got.poses, want.poses):
+        for name in ("sel", "act", "normal", "weight", "masks", "active"):
+            x, y = getattr(p, name), getattr(q, name)
+            assert (x is None) == (y is None), name
+            if x is not None:
+                x, y = np.ascontiguousarray(x), np.ascontiguousarray(y)
+                assert x.dtype == y.dtype and np.array_equal(x.view(np.uint8), y.view(np.uint8))
+    s = rules_fidelity.shipped_samples(ctx, np.stack(ctx.shipped_states))
+    assert fd.evaluate(got, s).to_json() == fd.evaluate(want, s).to_json()

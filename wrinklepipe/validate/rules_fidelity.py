@@ -21,6 +21,7 @@ import numpy as np
 
 from wrinklepipe import fidelity as fd
 from wrinklepipe import model
+from wrinklepipe.fidelity.level import PdLevel
 from wrinklepipe.masks import infer_side
 from wrinklepipe.masks.stack import float_masks
 from wrinklepipe.metrics import Budget, Stats, angle_deg, weighted_stats
@@ -98,6 +99,19 @@ def source_encoded(ctx: Context) -> tuple[np.ndarray, np.ndarray]:
     return base, encode_source_states(base, np.asarray(a.states, np.float32), a.encoding)
 
 
+def source_level(ctx: Context) -> tuple[np.ndarray, np.ndarray | PdLevel]:
+    """:func:`source_encoded` for the reference: under ``pd`` the states' slopes as a
+    :class:`~wrinklepipe.fidelity.level.PdLevel` (made where the reference reads them, the
+    memo keyed as the whole array: the searches' reference, 256 MiB at 4096² never whole),
+    else :func:`source_encoded`'s array."""
+    a = ctx.asset
+    if a.encoding != "pd":
+        return source_encoded(ctx)
+    H, W = a.states.shape[1:3]
+    base = resize_normals(a.base, H, W)
+    return base, PdLevel(base, np.asarray(a.states, np.float32))
+
+
 def source_sampled(ctx: Context, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`source_encoded`'s base and states sampled at ``uv`` by
     :func:`~wrinklepipe.validate.textures.bilinear` (``[N, 3]``, ``[K, N, C]``), the states
@@ -129,7 +143,7 @@ def reference(ctx: Context) -> fd.Reference | None:
         if _measurable(ctx):
             a = ctx.asset
             H, W = a.states.shape[1:3]
-            base, states = source_encoded(ctx)
+            base, states = source_level(ctx)
             c["reference"] = fd.prepare(
                 base,
                 states,
