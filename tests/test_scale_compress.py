@@ -204,10 +204,10 @@ def test_distinct_blocks_checked_in_slices(monkeypatch):
     """The hash check compares the rows a slice at a time: a collision is still found."""
     monkeypatch.setattr(blocks, "_CHECK_ROWS", 3)
     rows = np.arange(40, dtype=np.uint8).reshape(10, 4)
-    assert blocks._same_rows(rows, np.arange(10))
+    assert blocks._same_rows(rows.__getitem__, np.arange(10))
     src = np.arange(10)
     src[8] = 7
-    assert not blocks._same_rows(rows, src)
+    assert not blocks._same_rows(rows.__getitem__, src)
 
 
 @pytest.mark.parametrize("fmt", ["bc1", "bc3nm"])
@@ -235,3 +235,40 @@ def test_quicktex_candidates_are_not_kept_by_the_memo(fmt):
     picked = (d * d).reshape(h // 4, 4, w // 4, 4, 3).sum(axis=(1, 3, 4)).ravel()
     if fmt == "bc1":  # BC3's alpha half is the caller's: only BC1's blocks are whole here
         assert np.array_equal(picked, np.min(err, axis=0))
+
+
+@pytest.mark.parametrize("band", [1, 3, 1000])
+@pytest.mark.parametrize("channels", [4, 2, 1])
+def test_encode_distinct_gathers_blocks_from_the_map(monkeypatch, band, channels):
+    """encode_distinct hashes the blocks a band of block rows at a time and gathers the rows it
+    needs from the map (no block-order copy of the map): the same hashes, rows, groups, tile
+    and bytes as the whole block array's, and the memo stores the same rows."""
+    rng = np.random.default_rng(8)
+    pal = rng.integers(0, 256, (5, 4, 4, channels), dtype=np.uint8)
+    bh, bw = 7, 9
+    pick = pal[rng.integers(0, 5, bh * bw)]
+    a = np.ascontiguousarray(
+        pick.reshape(bh, bw, 4, 4, channels).transpose(0, 2, 1, 3, 4).reshape(4 * bh, 4 * bw, -1)
+    )
+    whole = blocks.to_blocks(a)
+    rows, h = blocks._rows(whole)
+    monkeypatch.setattr(blocks, "HASH_BLOCK_ROWS", band)
+    assert np.array_equal(blocks._hashes(a), h)
+    idx = rng.permutation(bh * bw)[:20]
+    assert np.array_equal(blocks._blocks_at(a, idx), whole[idx])
+    assert np.array_equal(blocks._padded(blocks._blocks_at(a, idx)), rows[idx])
+    first, inverse = blocks.distinct(whole)
+    assert first.size == 5 and np.array_equal(whole[first][inverse], whole)
+    calls = []
+
+    def enc(t: np.ndarray) -> bytes:  # a stand-in encoder: each block's bytes, one per block
+        calls.append(t.shape)
+        return blocks._padded(blocks.to_blocks(t))[:, :8].tobytes()
+
+    want = rows[:, :8].tobytes()
+    with reuse.reuse():
+        assert blocks.encode_distinct(a, enc, 8, "t") == want
+        assert blocks.encode_distinct(a, enc, 8, "t") == want  # every block known
+        found, known = reuse.known_rows("t", h[first], rows[first])
+        assert found.all() and np.array_equal(known, rows[first, :8])  # the rows stored
+    assert calls == [(12, 12, channels)]  # 5 distinct blocks in a 3 x 3 tile, encoded once

@@ -42,12 +42,38 @@ def tile(blocks: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(t.reshape(side * 4, side * 4, c))
 
 
+def _padded(blocks: np.ndarray) -> np.ndarray:
+    """Each block's bytes as a row [N, K] (K a multiple of 8: zeros after the bytes)."""
+    rows = np.ascontiguousarray(blocks.reshape(blocks.shape[0], -1))
+    if rows.shape[1] % 8:
+        rows = np.pad(rows, ((0, 0), (0, -rows.shape[1] % 8)))
+    return rows
+
+
+def _blocks_at(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Blocks ``idx`` (row-major block order) of ``a`` ``[H, W, C]`` as ``[k, 4, 4, C]``,
+    gathered from a view of the map (``to_blocks(a)[idx]`` without a copy of every block)."""
+    h, w, c = a.shape
+    v = a.reshape(h // 4, 4, w // 4, 4, c).transpose(0, 2, 1, 3, 4)
+    return v[idx // (w // 4), idx % (w // 4)]
+
+
+#: Block rows hashed at a time by :func:`encode_distinct` (a band's blocks copied, not all).
+HASH_BLOCK_ROWS = 256
+
+
+def _hashes(a: np.ndarray) -> np.ndarray:
+    """:func:`_rows`' hashes of every block of ``a``, a band of block rows at a time."""
+    step = 4 * HASH_BLOCK_ROWS
+    return np.concatenate(
+        [_rows(to_blocks(a[r : r + step]))[1] for r in range(0, a.shape[0], step)]
+    )
+
+
 def _rows(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each block's bytes as a row [N, K] (K a multiple of 8) and a 64-bit hash of them."""
     n = blocks.shape[0]
-    rows = np.ascontiguousarray(blocks.reshape(n, -1))
-    if rows.shape[1] % 8:
-        rows = np.pad(rows, ((0, 0), (0, -rows.shape[1] % 8)))
+    rows = _padded(blocks)
     words = rows.view(np.uint64)
     h = np.zeros(n, np.uint64)
     for k in range(words.shape[1]):
@@ -56,10 +82,15 @@ def _rows(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return rows, h
 
 
-def _group(rows: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _group(
+    rows: np.ndarray | Callable[[np.ndarray], np.ndarray], h: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, inverse)`` of the blocks' ``rows`` (or a function giving the rows of given
+    blocks) with hashes ``h``."""
     n = len(h)
     _, first, inverse = np.unique(h, return_index=True, return_inverse=True)
-    if not _same_rows(rows, first[inverse]):  # a hash collision: no regrouping
+    rows_at = rows if callable(rows) else rows.__getitem__
+    if not _same_rows(rows_at, first[inverse]):  # a hash collision: no regrouping
         return np.arange(n), np.arange(n)
     order = np.argsort(first, kind="stable")  # distinct blocks in order of first occurrence
     rank = np.empty_like(order)
@@ -71,12 +102,12 @@ def _group(rows: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 _CHECK_ROWS = 1 << 16
 
 
-def _same_rows(rows: np.ndarray, source: np.ndarray) -> bool:
-    """Whether ``rows[source]`` equals ``rows``, compared a slice of rows at a time (no copy of
-    every row)."""
-    for r0 in range(0, len(rows), _CHECK_ROWS):
-        r = slice(r0, r0 + _CHECK_ROWS)
-        if not np.array_equal(rows[source[r]], rows[r]):
+def _same_rows(rows_at: Callable[[np.ndarray], np.ndarray], source: np.ndarray) -> bool:
+    """Whether the rows ``rows_at(source)`` equal the rows of every block in order, compared a
+    slice of rows at a time (no copy of every row)."""
+    for r0 in range(0, len(source), _CHECK_ROWS):
+        r = np.arange(r0, min(len(source), r0 + _CHECK_ROWS))
+        if not np.array_equal(rows_at(source[r]), rows_at(r)):
             return False
     return True
 
@@ -99,18 +130,20 @@ def encode_distinct(
     ``memo_name``: the encoder's name in this run's memo (:func:`wrinklepipe.reuse.known_rows`):
     blocks an earlier call of this run encoded (the searches' partial round trips, a map's
     other levels) are taken from it, and the ones encoded here are stored in it."""
-    blocks = to_blocks(a)
-    n = blocks.shape[0]
-    rows, h = _rows(blocks)
-    first, inverse = _group(rows, h)
+    # the blocks' rows gathered where they are needed, hashed a band at a time (no block-order
+    # copy of the map: 64 MiB for a 4096² RGBA map); the same rows, hashes and groups
+    h = _hashes(a)
+    n = h.size
+    k = (16 * a.shape[2] + 7) // 8 * 8  # a row's bytes (padded)
+
+    def rows_at(idx: np.ndarray) -> np.ndarray:
+        return _padded(_blocks_at(a, idx))
+
+    first, inverse = _group(rows_at, h)
     d_h = h[first]
     # the distinct rows are copied only when the memo has room for them
-    memo_name = (
-        memo_name
-        if memo_name and reuse.rows_room(memo_name, rows[:1].nbytes * first.size)
-        else None
-    )
-    d_rows = rows[first] if memo_name else rows[:0]
+    memo_name = memo_name if memo_name and reuse.rows_room(memo_name, k * first.size) else None
+    d_rows = rows_at(first) if memo_name else np.zeros((0, k), np.uint8)
     found, known = np.zeros(first.size, bool), None
     if memo_name:
         found, known = reuse.known_rows(memo_name, d_h, d_rows)
@@ -123,7 +156,7 @@ def encode_distinct(
         return data
     values = known if known is not None else np.zeros((first.size, block_bytes), np.uint8)
     if todo.size:
-        got = np.frombuffer(encode(tile(blocks[first[todo]])), np.uint8)
+        got = np.frombuffer(encode(tile(_blocks_at(a, first[todo]))), np.uint8)
         values[todo] = got.reshape(-1, block_bytes)[: todo.size]
         if memo_name:
             reuse.remember_rows(memo_name, d_h[todo], d_rows[todo], values[todo])
