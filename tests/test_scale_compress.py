@@ -272,3 +272,27 @@ def test_encode_distinct_gathers_blocks_from_the_map(monkeypatch, band, channels
         found, known = reuse.known_rows("t", h[first], rows[first])
         assert found.all() and np.array_equal(known, rows[first, :8])  # the rows stored
     assert calls == [(12, 12, channels)]  # 5 distinct blocks in a 3 x 3 tile, encoded once
+
+
+def test_resize_bands_default_band_counts_the_source_rows_read(monkeypatch):
+    """By default a band's share of the working set counts the source rows each output row
+    reads and what the reader makes from them (a 2:1 halving: twice the output rows, with a
+    decode's temporaries), not the output rows alone; the values are the whole resize's."""
+    from wrinklepipe.normals import resample
+
+    monkeypatch.setattr(resample, "band_rows", lambda width, per: (1 << 20) // (width * per))
+    shape, size = (256, 64, 3), (128, 32)
+    a = np.random.default_rng(3).standard_normal(shape).astype(np.float32)
+    read_rows: list[int] = []
+
+    def read(r: slice) -> np.ndarray:
+        read_rows.append(r.stop - r.start)
+        return a[r]
+
+    got = np.full((*size, 3), np.nan, np.float32)
+    for r, band in resize_bands(read, shape, size, "box"):
+        got[r] = band
+    assert np.array_equal(got.view(np.uint32), resize(a, size, "box").view(np.uint32))
+    per = 8 * 3 + (resample.READ_BYTES_PER_TEXEL + 12) * 2  # 144 bytes per output texel
+    out_rows = (1 << 20) // (64 * per)  # 113 output rows a band: 226 source rows
+    assert read_rows[0] == 2 * out_rows and len(read_rows) == -(-128 // out_rows)

@@ -71,6 +71,11 @@ def resize(
     return out[..., 0] if squeeze else out
 
 
+#: Bytes of temporaries a :func:`resize_bands` reader may make per source texel (a codec's
+#: decode of stored texels to unit normals: float32 components, lengths and quotients).
+READ_BYTES_PER_TEXEL = 48
+
+
 def resize_bands(
     read: Callable[[slice], np.ndarray],
     shape: tuple[int, int, int],
@@ -95,7 +100,10 @@ def resize_bands(
         return
     ys = axis_weights(H, h, filter, 0, x_ratio)
     cols = axis_weights(W, w, filter, 1)
-    step = max(1, rows if rows is not None else band_rows(W, 8 * C))
+    # a band's bytes: its output rows' float64 sums and the source rows they read, with what
+    # the reader makes to give them (a codec decode of normals: its float32 temporaries)
+    per = 8 * C + (READ_BYTES_PER_TEXEL + 4 * C) * max(1, -(-H // max(h, 1)))
+    step = max(1, rows if rows is not None else band_rows(W, per))
     for r0 in range(0, h, step):
         r1 = min(h, r0 + step)
         part = ys[r0:r1]
