@@ -489,3 +489,17 @@ def test_the_validators_reference_from_a_pd_level_is_the_whole_arrays(tmp_path):
                 assert x.dtype == y.dtype and np.array_equal(x.view(np.uint8), y.view(np.uint8))
     s = rules_fidelity.shipped_samples(ctx, np.stack(ctx.shipped_states))
     assert fd.evaluate(got, s).to_json() == fd.evaluate(want, s).to_json()
+
+
+@pytest.mark.parametrize("limit", [1, 128, 1000, 4096, 1 << 20])
+@pytest.mark.parametrize("n", [1, 7, 8, 129, 1000, 65_537, 2_000_003])
+def test_pairwise_sums_are_numpys_whole_array_sums(n, limit):
+    """The curl score's sums made piece by piece split as numpy's pairwise summation does: the
+    same float64 as ``np.sum`` of the whole contiguous array, to the last bit (values of mixed
+    signs and magnitudes, and their squares)."""
+    rng = np.random.default_rng(n)
+    x = rng.standard_normal(n) * 10.0 ** rng.integers(-6, 6, n)
+    sq = x * x
+    got = rules_maps._pairwise_sums(n, lambda lo, hi: (x[lo:hi], sq[lo:hi]), limit)
+    want = (np.sum(x), np.sum(sq))
+    assert [(0.0 + g).tobytes() for g in got] == [np.float64(v).tobytes() for v in want]

@@ -98,26 +98,42 @@ def normal_rows_convention_score(
 
 
 #: Bytes of temporaries per texel of a band of the curl score (float32 slopes, their float64
-#: copy and its gradient).
-CURL_BYTES = 32
+#: copies, gradients and products).
+CURL_BYTES = 64
 
 
-def _gradient(
-    channel: Callable[[int, int, int], np.ndarray], c: int, shape: tuple[int, ...], axis: int
+#: numpy's pairwise summation sums blocks of at most this many values without splitting them.
+PAIRWISE_BLOCK = 128
+
+
+def _gradient_rows(
+    channel: Callable[[int, int, int], np.ndarray], c: int, h: int, axis: int, r0: int, r1: int
 ) -> np.ndarray:
-    """``np.gradient(channel c in float64, axis=axis)`` of the ``[H, W]`` slope channel whose
-    rows ``r0:r1`` are ``channel(c, r0, r1)``, band by band of rows (a band and the rows on
-    either side of it: numpy's central and edge differences are per texel, so the whole
-    channel's values), without the float64 channel of the whole map."""
-    h, w = int(shape[0]), int(shape[1])
-    out = np.empty((h, w), np.float64)
-    rows = band_rows(w, CURL_BYTES)
-    for r0 in range(0, h, rows):
-        r1 = min(r0 + rows, h)
-        lo, hi = (max(r0 - 1, 0), min(r1 + 1, h)) if axis == 0 else (r0, r1)
-        g = np.gradient(np.asarray(channel(c, lo, hi), np.float64), axis=axis)
-        out[r0:r1] = g[r0 - lo : r1 - lo]
-    return out
+    """Rows ``r0:r1`` of ``np.gradient(channel c in float64, axis=axis)`` of the ``[h, W]``
+    slope channel whose rows ``r0:r1`` are ``channel(c, r0, r1)``: made from those rows and the
+    row on either side of them (numpy's central and edge differences are per texel, so the
+    whole channel's values)."""
+    lo, hi = (max(r0 - 1, 0), min(r1 + 1, h)) if axis == 0 else (r0, r1)
+    g = np.gradient(np.asarray(channel(c, lo, hi), np.float64), axis=axis)
+    return g[r0 - lo : r1 - lo]
+
+
+def _pairwise_sums(
+    n: int, leaf: Callable[[int, int], tuple[np.ndarray, ...]], limit: int, lo: int = 0
+) -> tuple[np.float64, ...]:
+    """``np.sum`` of each of several contiguous float64 arrays of ``n`` values whose flat
+    values ``lo:hi`` are ``leaf(lo, hi)``, bit for bit, without the arrays: numpy sums a
+    contiguous array pairwise (halves rounded down to a multiple of 8, down to blocks of 128),
+    so this splits the same way down to pieces of at most ``limit`` values and sums each with
+    numpy (a piece's pairwise sum; ``-0.0`` is the exact identity) and the halves as numpy adds
+    them. The whole sum is numpy's ``0.0 + pairwise(all)``: the caller adds the ``0.0``."""
+    if n <= max(limit, PAIRWISE_BLOCK):  # numpy splits no block of 128 values or fewer
+        return tuple(np.add.reduce(x, initial=-0.0) for x in leaf(lo, lo + n))
+    n2 = n // 2
+    n2 -= n2 % 8
+    left = _pairwise_sums(n2, leaf, limit, lo)
+    right = _pairwise_sums(n - n2, leaf, limit, lo + n2)
+    return tuple(x + y for x, y in zip(left, right, strict=True))
 
 
 def _curl_score(
@@ -125,17 +141,27 @@ def _curl_score(
     shape: tuple[int, ...],
     weight: np.ndarray | None,
 ) -> float:
-    """The score of slopes whose channel ``c``, rows ``r0:r1``, is ``channel(c, r0, r1)``: the
-    sums of numpy's whole-array products (``a * b``, ``a * a``, ``b * b``), one product at a
-    time."""
-    a = _gradient(channel, 0, shape, 0)
-    b = _gradient(channel, 1, shape, 1)
-    if weight is not None:
-        a, b = a * weight, b * weight
-    ab = np.sum(a * b)
-    np.multiply(a, a, out=a)  # (a no longer needed as itself)
-    np.multiply(b, b, out=b)
-    den = np.sqrt(np.sum(a) * np.sum(b))
+    """The score of slopes whose channel ``c``, rows ``r0:r1``, is ``channel(c, r0, r1)``:
+    ``-sum(a b) / sqrt(sum(a a) sum(b b))`` of the gradients ``a`` (channel 0 down the rows) and
+    ``b`` (channel 1 along them), weighted, as numpy's whole-array sums give it bit for bit
+    (:func:`_pairwise_sums`), with the gradients of a band of rows at a time (no float64
+    gradients or products of the whole map: 2 GiB at 8192²)."""
+    h, w = int(shape[0]), int(shape[1])
+    wt = None if weight is None else np.asarray(weight)
+
+    def products(lo: int, hi: int) -> tuple[np.ndarray, ...]:
+        r0, r1 = lo // w, (hi - 1) // w + 1
+        a = _gradient_rows(channel, 0, h, 0, r0, r1)
+        b = _gradient_rows(channel, 1, h, 1, r0, r1)
+        if wt is not None:
+            a, b = a * wt[r0:r1], b * wt[r0:r1]
+        a = a.reshape(-1)[lo - r0 * w : hi - r0 * w]
+        b = b.reshape(-1)[lo - r0 * w : hi - r0 * w]
+        return a * b, a * a, b * b
+
+    limit = band_rows(w, CURL_BYTES) * w
+    ab, aa, bb = (0.0 + s for s in _pairwise_sums(h * w, products, limit))
+    den = np.sqrt(aa * bb)
     if not np.isfinite(den) or den < 1e-12:
         return 0.0
     return float(-ab / den)
