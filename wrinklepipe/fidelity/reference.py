@@ -404,14 +404,8 @@ def _prepare(
     policy: str = "clamp01",
     footprint: np.ndarray | None = None,
 ) -> Reference:
-    """The full-resolution source on its own grid: ``base`` ``[H, W, 3]``, ``states`` in the
-    representation :func:`wrinklepipe.model.combine` takes (``[K, H, W, C]``), ``masks``
-    ``[R, h, w]`` (magnified to the grid when smaller), the poses and the UV footprint.
-
-    Active texels come from the source masks at full resolution; the source's blended normal
-    is computed there once per pose (the one full-resolution pass). Its ``base`` is None:
-    :func:`prepare` sets it (the memo keeps no map the caller holds).
-    """
+    """:func:`prepare` without its ``base`` (None: :func:`prepare` sets it, so the memo keeps
+    no map the caller holds)."""
     b = np.asarray(base, _F)
     # a level made where it is read (fidelity.level.PdLevel) is gathered at the union only
     st = states if hasattr(states, "at") else np.asarray(states, _F)

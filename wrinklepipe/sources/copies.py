@@ -173,17 +173,13 @@ def _judge_copy(
         def at(a: int, b: int, x: np.ndarray = here) -> np.ndarray:
             return x[a:b].astype(np.float32)
 
+        bad = None
         if k == 0:
-            bad = None
+            what = "level 0 does not decode to the texture it copies"
             if png is not None and png_shape == here.shape[:2]:
                 bad = damaged_block_rows(at, png, h, w)
-            if bad is not None:
-                worst, x, y = bad
-                found.append(
-                    f"level 0 does not decode to the texture it copies: the block at texel "
-                    f"({x}, {y}) is {worst:.0f} codes away on average (damaged blocks)"
-                )
         elif above is not None and above.shape[0] == 2 * h and above.shape[1] == 2 * w:
+            what = f"mip level {k} ({w} x {h}) is not the halving of level {k - 1}"
 
             def half(a: int, b: int, x: np.ndarray = above, h: int = h, w: int = w) -> np.ndarray:
                 b = min(b, h)
@@ -192,12 +188,12 @@ def _judge_copy(
                 )
 
             bad = damaged_block_rows(at, half, h, w)
-            if bad is not None:
-                worst, x, y = bad
-                found.append(
-                    f"mip level {k} ({w} x {h}) is not the halving of level {k - 1}: the block "
-                    f"at texel ({x}, {y}) is {worst:.0f} codes away on average (damaged blocks)"
-                )
+        if bad is not None:
+            worst, x, y = bad
+            found.append(
+                f"{what}: the block at texel ({x}, {y}) is {worst:.0f} codes away on average "
+                "(damaged blocks)"
+            )
         above = here
     return found, None
 
