@@ -17,13 +17,14 @@ from wrinklepipe.masks import resample_masks
 from wrinklepipe.masks.stack import MaskStack
 from wrinklepipe.metrics import angle_deg
 from wrinklepipe.normals import compress as cmp
+from wrinklepipe.normals import resample
 from wrinklepipe.normals.dds import mip_dims
 from wrinklepipe.sources import copies
 from wrinklepipe.sources.validation import LoadOptions, load_input
 from wrinklepipe.validate import fidelity_pictures as fp
 from wrinklepipe.validate import rules_fidelity, rules_maps
 from wrinklepipe.validate import textures as tx
-from wrinklepipe.validate.context import Context, ValidateOptions, resize_masks
+from wrinklepipe.validate.context import Context, ValidateOptions, resize_masks, resize_normals
 from wrinklepipe.validate.rules_fidelity import _outside
 from wrinklepipe.validate.run import CHECKS
 
@@ -503,3 +504,59 @@ def test_pairwise_sums_are_numpys_whole_array_sums(n, limit):
     got = rules_maps._pairwise_sums(n, lambda lo, hi: (x[lo:hi], sq[lo:hi]), limit)
     want = (np.sum(x), np.sum(sq))
     assert [(0.0 + g).tobytes() for g in got] == [np.float64(v).tobytes() for v in want]
+
+
+class _WholeBaseAt(Context):
+    """The shipped base at a state's size as computed before: the whole decoded map resampled
+    whole (``resize_normals``), then picked."""
+
+    def shipped_base_at(self, h, w, where):
+        return resize_normals(self.shipped_base, h, w)[where]
+
+
+@pytest.mark.parametrize("band", [1, 3, 1000])
+@pytest.mark.parametrize("size", [(64, 64), (32, 32), (37, 23), (16, 64), (100, 80)])
+def test_the_shipped_base_at_a_states_size_by_bands_is_the_whole_resample(
+    tmp_path, monkeypatch, size, band
+):
+    """The shipped base at another size, picked where a mask says, made band by band of output
+    rows from the source rows the filter reaches (bands of 1, 3, all rows; down, up, mixed and
+    the base's own size): the whole decoded map resampled whole and picked, every bit, in the
+    same order."""
+    src = write_demo_source(tmp_path / "src", 64)
+    out = tmp_path / "out"
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    ctx = Context(load_input(out, LoadOptions(textures="png")))
+    h, w = size
+    where = np.random.default_rng(h * w).random((h, w)) < 0.4
+    where[h // 2] = True  # a whole row
+    want = resize_normals(ctx.shipped_base, h, w)[where]
+    monkeypatch.setattr(resample, "band_rows", lambda w, b: band)
+    monkeypatch.setattr(workset, "band_rows", lambda w, b: band)
+    got = ctx.shipped_base_at(h, w, where)
+    assert got.shape == (int(where.sum()), 3) and got.dtype == np.float32
+    assert np.array_equal(got.view(U32), want.view(U32))
+    none = ctx.shipped_base_at(h, w, np.zeros((h, w), bool))
+    assert none.shape == (0, 3)
+
+
+@pytest.mark.parametrize("states_size", [64, 32])
+def test_the_encoding_rule_from_the_picked_base_is_the_whole_maps(tmp_path, states_size):
+    """The encoding rule (WP-MAP-006) with the shipped base decoded and resampled only where it
+    compares (at the states' own size and at half the base's): the same findings and the same
+    fit metrics as from the whole resampled map."""
+    src = write_demo_source(tmp_path / "src", 64)
+    out = tmp_path / "out"
+    text = src.read_text().replace('wrinkle = "auto"', f"wrinkle = {states_size}")
+    src.write_text(text)
+    assert f"wrinkle = {states_size}" in text
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    inp = load_input(out, LoadOptions(textures="png", source=str(src)))
+    runs = []
+    for cls in (_WholeBaseAt, Context):
+        ctx = cls(inp)
+        issues = rules_maps._encoding_match(ctx)
+        runs.append(([(i.code, i.message) for i in issues], repr(ctx.metrics)))
+    assert "encoding_fit_mean_deg" in runs[1][1]
+    assert ctx.inp.state_textures()[0].height == states_size
+    assert runs[0] == runs[1]

@@ -13,6 +13,7 @@ from wrinklepipe.fidelity.reference import source_states
 from wrinklepipe.fidelity.sampling import Reader
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.masks.stack import MaskStack, float_masks
+from wrinklepipe.normals.resample import resize_bands
 from wrinklepipe.pipeline.package import resize_normals_pd
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.inputs import Texture, ValidationInput
@@ -234,6 +235,44 @@ class Context:
             return tx.decode_texels(v[None], "base", layout, 1.0, flip_y=flip)[0]
 
         return q, Reader(store=store)
+
+    def shipped_base_at(self, h: int, w: int, where: np.ndarray) -> np.ndarray | None:
+        """``resize_normals(self.shipped_base, h, w)[where]`` (``where``: a boolean ``[h, w]``
+        mask): the shipped base at a state's size, as the rules resample it (PD space), at the
+        texels ``where`` picks, in row-major order; None without a usable base texture.
+
+        Never whole: at the base's own size the picked texels are decoded (per texel: the same
+        floats); else the resample is made band by band of output rows
+        (:func:`~wrinklepipe.normals.resample.resize_bands`, which reads the decoded PD slopes
+        of the source rows a band's filter taps reach) and each band keeps its picked texels:
+        the whole map's values, bit for bit, without its decoded map (768 MiB at 8192²) or its
+        resampled copy."""
+        t = self.base_tex
+        q = None if t is None else self.texels(t)
+        if t is None or q is None:
+            return None
+        layout, flip = tx.xy_layout(t), self.flips(t)
+
+        def decode(v: np.ndarray) -> np.ndarray:  # stored texels -> unit normals, per texel
+            return tx.decode_texels(v, "base", layout, 1.0, flip_y=flip)
+
+        pick = np.asarray(where, bool)
+        if q.shape[:2] == (h, w):
+            return np.asarray(decode(q[pick][None])[0], np.float32)
+        H, W = q.shape[:2]
+
+        def read(rows: slice) -> np.ndarray:  # the PD slopes of decoded source rows
+            return map_rows(
+                lambda b: model.normal_to_pd(np.asarray(decode(b), np.float32)),
+                q[rows],
+                DECODE_BYTES,
+            )
+
+        out = [
+            np.asarray(model.pd_to_normal(band), np.float32)[pick[rows]]
+            for rows, band in resize_bands(read, (H, W, 2), (h, w))
+        ]
+        return np.concatenate(out) if out else np.zeros((0, 3), np.float32)
 
     @cached_property
     def shipped_states(self) -> list[np.ndarray] | None:

@@ -11,7 +11,7 @@ from wrinklepipe.codec.vectors import EPS
 from wrinklepipe.metrics import angle_deg, weighted_stats
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
-from wrinklepipe.validate.context import Context, resize_normals
+from wrinklepipe.validate.context import Context
 from wrinklepipe.validate.inputs import Texture
 from wrinklepipe.workset import band_rows
 
@@ -371,14 +371,12 @@ def _encoding_match(ctx: Context) -> list[Issue]:
     a, inp = ctx.asset, ctx.inp
     if not inp.has_source or not ctx.has_shipped_base or a.encoding not in model.ENCODINGS:
         return []
-    shipped = ctx.shipped_base
     out = []
     for k, t in enumerate(inp.state_textures()):
         v = ctx.values(t) if t is not None else None
         if v is None or k >= len(a.states):
             continue
         h, w = v.shape[:2]
-        base = resize_normals(shipped, h, w)
         ref = ctx.source_at_shipped_size
         if ref is None or ref["states"].shape[1:3] != (h, w):
             continue
@@ -388,8 +386,12 @@ def _encoding_match(ctx: Context) -> list[Issue]:
         relief = angle_deg(src, src_base) > 2.0
         if relief.sum() < 16:
             continue
-        # decoding is per texel: decode the wrinkled texels only, as a [1, n] image
-        v_r, base_r, src_r = v[relief][None], base[relief][None], src[relief]
+        # decoding is per texel: decode the wrinkled texels only, as a [1, n] image (the
+        # shipped base at the state's size at those texels only: no decoded or resampled map)
+        base_r = ctx.shipped_base_at(h, w, relief)
+        if base_r is None:
+            continue
+        v_r, base_r, src_r = v[relief][None], base_r[None], src[relief]
         errs = {}
         for enc in model.ENCODINGS:
             if enc == "diff" and v.shape[-1] < 3:
