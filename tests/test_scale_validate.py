@@ -560,3 +560,26 @@ def test_the_encoding_rule_from_the_picked_base_is_the_whole_maps(tmp_path, stat
     assert "encoding_fit_mean_deg" in runs[1][1]
     assert ctx.inp.state_textures()[0].height == states_size
     assert runs[0] == runs[1]
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_planes_of_integer_masks_sampled_at_the_taps_are_the_float_planes(bits, monkeypatch):
+    """A MaskStack's planes sampled (bilinear, clamped) from its integers made float32 at the
+    taps only: the float32 stack's planes sampled, every bit (UVs inside, on and past the
+    edges); no plane of it is made float32 whole."""
+    rng = np.random.default_rng(bits)
+    top = (1 << bits) - 1
+    q = rng.integers(0, top + 1, (3, 37, 29)).astype(np.uint8 if bits == 8 else np.uint16)
+    stack = MaskStack(q)
+    uv = rng.uniform(-0.1, 1.1, (2000, 2)).astype(np.float32)
+    uv[:4] = [[0, 0], [1, 1], [0.5 / 29, 0.5 / 37], [1, 0]]
+    want = tx.bilinear_planes(np.asarray(stack), uv)
+    assert want.dtype == np.float32 and want.shape == (2000, 3)
+    assert want[0, 1] == np.float32(q[1, 0, 0]) * np.float32(1.0 / top)  # the corner texel
+
+    def whole(self, key):
+        raise AssertionError("a whole float plane")
+
+    monkeypatch.setattr(MaskStack, "__getitem__", whole)
+    got = tx.bilinear_planes(stack, uv)
+    assert np.array_equal(got.view(U32), want.view(U32))

@@ -17,6 +17,7 @@ import numpy as np
 import texture2ddecoder as t2d
 
 from wrinklepipe import codec
+from wrinklepipe.masks.stack import MaskStack, to_float
 from wrinklepipe.validate.inputs import FORMATS, Texture
 
 
@@ -193,10 +194,15 @@ def bilinear_at(
 def bilinear_planes(planes: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """``bilinear(np.moveaxis(planes, 0, -1), uv)`` of planes ``[R, H, W]`` (masks) -> ``[N, R]``,
     the same values (every channel is sampled on its own), sampled plane by plane: no
-    channels-last copy of every plane at full size (2 GB for eight 8192² masks)."""
+    channels-last copy of every plane at full size (2 GB for eight 8192² masks). A
+    :class:`~wrinklepipe.masks.stack.MaskStack`'s integers are read at the taps and made float32
+    there (per texel: the float32 plane's values), without a float32 plane (256 MiB at 8192²)."""
     out = np.empty((len(uv), len(planes)), np.float32)
-    for i in range(len(planes)):  # a plane at a time (a MaskStack's as float32, one by one)
-        out[:, i] = bilinear(np.asarray(planes[i])[..., None], uv)[:, 0]
+    for i in range(len(planes)):  # a plane at a time
+        if isinstance(planes, MaskStack):  # its integers, made float32 at the taps only
+            out[:, i] = bilinear(planes.q[i][..., None], uv, to_float)[:, 0]
+        else:
+            out[:, i] = bilinear(np.asarray(planes[i])[..., None], uv)[:, 0]
     return out
 
 
