@@ -583,3 +583,67 @@ def test_planes_of_integer_masks_sampled_at_the_taps_are_the_float_planes(bits, 
     monkeypatch.setattr(MaskStack, "__getitem__", whole)
     got = tx.bilinear_planes(stack, uv)
     assert np.array_equal(got.view(U32), want.view(U32))
+
+
+def _unit_normals(shape, seed):
+    rng = np.random.default_rng(seed)
+    n = rng.normal(size=(*shape, 3)).astype(np.float32)
+    n[..., 2] = np.abs(n[..., 2]) + 0.5
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+@pytest.mark.parametrize("band", [1, 3, 1000])
+@pytest.mark.parametrize(
+    "shape, size",
+    [((40, 36), (20, 18)), ((40, 36), (13, 50)), ((21, 30), (64, 64)), ((8, 8), (8, 8))],
+)
+def test_source_normals_resampled_by_bands_are_the_whole_resample(shape, size, band, monkeypatch):
+    """The validator's PD-space resample of source normals made band by band of output rows
+    from the rows each band's filter reaches (bands of 1, 3, all rows; down, mixed, up, none):
+    convert's whole resample (``resize_normals_pd`` of the whole map), every bit; reading the
+    rows only (the map is never asked for whole)."""
+    from wrinklepipe.normals import resample
+    from wrinklepipe.pipeline.package import resize_normals_pd
+    from wrinklepipe.validate import context
+
+    n = _unit_normals(shape, band)
+    h, w = size
+    want = np.asarray(resize_normals_pd(n, h, w), np.float32)
+    monkeypatch.setattr(resample, "band_rows", lambda w, b: band)
+    monkeypatch.setattr(workset, "band_rows", lambda w, b: band)
+    asked = []
+
+    class Rows:  # a map that gives its rows (a held map decodes a band)
+        shape = n.shape
+
+        def __getitem__(self, rows):
+            asked.append(rows)
+            assert isinstance(rows, slice) and rows != slice(None)
+            return n[rows]
+
+    got = context.resize_normals(Rows() if shape != size else n, h, w)
+    assert got.shape == (h, w, 3) and got.dtype == np.float32
+    assert np.array_equal(got.view(U32), want.view(U32))
+    assert shape == size or (asked and band >= 1000) or len(asked) > 1
+
+
+def test_the_source_states_at_the_shipped_size_are_each_resampled_whole(tmp_path, monkeypatch):
+    """The validator's source states at the states' shipped size (32² of a 64² demo), a state's
+    band of rows at a time: each state resampled whole (``resize_normals_pd``), stacked."""
+    from wrinklepipe.normals import resample
+    from wrinklepipe.pipeline.package import resize_normals_pd
+
+    src = write_demo_source(tmp_path / "src", 64)
+    src.write_text(src.read_text().replace('wrinkle = "auto"', "wrinkle = 32"))
+    out = tmp_path / "out"
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    ctx = Context(load_input(out, LoadOptions(textures="png", source=str(src))))
+    a = ctx.asset
+    assert a.states.shape[1:3] == (64, 64)
+    want = np.stack([np.asarray(resize_normals_pd(s, 32, 32), np.float32) for s in a.states])
+    base = np.asarray(resize_normals_pd(np.asarray(a.base, np.float32), 32, 32), np.float32)
+    monkeypatch.setattr(resample, "band_rows", lambda w, b: 5)
+    ref = ctx.source_at_shipped_size
+    assert ref["states"].shape == (2, 32, 32, 3)
+    assert np.array_equal(ref["states"].view(U32), want.view(U32))
+    assert np.array_equal(ref["base_at_states"].view(U32), base.view(U32))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -14,7 +15,6 @@ from wrinklepipe.fidelity.sampling import Reader
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.masks.stack import MaskStack, float_masks
 from wrinklepipe.normals.resample import resize_bands
-from wrinklepipe.pipeline.package import resize_normals_pd
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.inputs import Texture, ValidationInput
 from wrinklepipe.workset import map_rows
@@ -87,13 +87,39 @@ def expression_weights(asset: WrinkleAsset, expr: str | None) -> np.ndarray:
     return per_region[:, None] * asset.region_state_matrix()
 
 
-def resize_normals(normals: np.ndarray, h: int, w: int) -> np.ndarray:
-    """Unit normals resampled in PD space as ``convert`` does."""
+#: Bytes of temporaries per source texel while reading a band of normals as PD slopes (float32
+#: normals, 1 / z, its clamp, the slopes).
+PD_READ_BYTES = 28
 
-    n = np.asarray(normals, np.float32)
-    if n.shape[:2] == (h, w):
-        return n
-    return np.asarray(resize_normals_pd(n, h, w), np.float32)
+
+def resize_normals(normals: np.ndarray, h: int, w: int) -> np.ndarray:
+    """Unit normals ``[H, W, 3]`` resampled in PD space as ``convert`` does
+    (:func:`~wrinklepipe.pipeline.package.resize_normals_pd`), bit for bit, made band by band
+    of output rows (:func:`resize_rows`): the normals' rows a band's filter reaches are read
+    (``normals[rows]``: a band of a held map is decoded there) and made slopes, never the whole
+    map's slopes (512 MiB at 8192²) or float32 normals. At their own size: the normals as
+    float32."""
+    if tuple(normals.shape[:2]) == (h, w):
+        return np.asarray(normals, np.float32)
+    return resize_rows(lambda rows: normals[rows], tuple(normals.shape[:2]), h, w)
+
+
+def resize_rows(
+    read: Callable[[slice], np.ndarray], shape: tuple[int, int], h: int, w: int
+) -> np.ndarray:
+    """:func:`resize_normals` of the ``shape`` = (H, W) map of unit normals whose rows
+    ``read(rows)`` gives (``[rows, W, 3]``): its PD slopes resampled band by band of output rows
+    (:func:`~wrinklepipe.normals.resample.resize_bands`, each band the rows of the whole
+    resample, bit for bit) and turned back into unit normals (per texel)."""
+    H, W = int(shape[0]), int(shape[1])
+
+    def slopes(rows: slice) -> np.ndarray:
+        return map_rows(model.normal_to_pd, np.asarray(read(rows), np.float32), PD_READ_BYTES)
+
+    out = np.empty((h, w, 3), np.float32)
+    for rows, band in resize_bands(slopes, (H, W, 2), (h, w)):
+        out[rows] = model.pd_to_normal(band)
+    return out
 
 
 def resize_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:
@@ -382,7 +408,7 @@ class Context:
         hs, ws = (sts[0].height, sts[0].width) if sts else a.states.shape[1:3]
         out = {
             "base": resize_normals(a.base, hb, wb),
-            "states": np.stack([resize_normals(st, hs, ws) for st in a.states]),
+            "states": self._source_states_at(hs, ws),
             "base_at_states": resize_normals(a.base, hs, ws),
         }
         masks = a.masks
@@ -391,6 +417,18 @@ class Context:
             out["masks"] = resize_masks(masks, *ship.shape[1:])
         else:
             out["masks"] = np.asarray(masks, np.float32)
+        return out
+
+    def _source_states_at(self, h: int, w: int) -> np.ndarray:
+        """The source states ``[K, h, w, 3]`` each resampled as :func:`resize_normals` does,
+        into one array, a state's band of rows read at a time (``states[k, rows]``)."""
+        states = self.asset.states
+        K, H, W = (int(x) for x in states.shape[:3])
+        if (H, W) == (h, w):
+            return np.stack([np.asarray(states[k], np.float32) for k in range(K)])
+        out = np.empty((K, h, w, 3), np.float32)
+        for k in range(K):
+            out[k] = resize_rows(lambda rows, k=k: states[k, rows], (H, W), h, w)
         return out
 
     @cached_property
