@@ -647,3 +647,19 @@ def test_the_source_states_at_the_shipped_size_are_each_resampled_whole(tmp_path
     assert ref["states"].shape == (2, 32, 32, 3)
     assert np.array_equal(ref["states"].view(U32), want.view(U32))
     assert np.array_equal(ref["base_at_states"].view(U32), base.view(U32))
+
+
+@pytest.mark.parametrize("fmt", cmp.FORMATS)
+def test_a_copys_level_decoded_from_the_decoders_texels_is_the_rgba_pick(fmt):
+    """A copy's level read back as its stored x, y codes picked from the decoder's BGRA texels
+    (no RGBA copy of the level): the codes picked from the RGBA decode, every byte, at sizes of
+    whole blocks and of partial blocks (a mip level)."""
+    rng = np.random.default_rng(len(fmt))
+    for w, h in ((16, 8), (10, 6), (2, 2)):
+        data = rng.integers(0, 256, cmp.block_data_size(fmt, w, h), dtype=np.uint8).tobytes()
+        want = np.ascontiguousarray(cmp.unpack_u8(cmp.decode_bc(data, w, h, fmt), fmt, channels=2))
+        got = copies._decoded_level(data, w, h, fmt)
+        assert got.dtype == np.uint8 and got.shape == want.shape and got.flags.c_contiguous
+        assert np.array_equal(got, want)
+        ix = 3 if fmt == "bc3nm" else 0  # x: R (alpha in DXT5nm)
+        assert np.array_equal(got[..., 0], cmp.decode_bc(data, w, h, fmt)[..., ix])
