@@ -663,3 +663,48 @@ def test_a_copys_level_decoded_from_the_decoders_texels_is_the_rgba_pick(fmt):
         assert np.array_equal(got, want)
         ix = 3 if fmt == "bc3nm" else 0  # x: R (alpha in DXT5nm)
         assert np.array_equal(got[..., 0], cmp.decode_bc(data, w, h, fmt)[..., ix])
+
+
+@pytest.mark.parametrize("grid", [24, 40, 512])
+def test_the_source_base_on_the_grid_from_its_texels_is_the_whole_maps(tmp_path, grid):
+    """The compression rule's source base on the comparison grid read at the grid's taps from
+    the source base's texels: the whole map resampled to the grid (and at its own size), every
+    bit; the taps ask for texels only, never the whole map."""
+    src = write_demo_source(tmp_path / "src", 64)
+    out = tmp_path / "out"
+    assert main(["convert", str(src), "-o", str(out), "--no-render", "--no-validate", "-q"]) == 0
+    inp = load_input(out, LoadOptions(textures="png", source=str(src)))
+    ctx = Context(inp, ValidateOptions(grid=grid))
+    n = np.asarray(ctx.asset.base, np.float32)
+    want = model.normalize(ctx.to_grid(resize_normals(n, 64, 64)))
+    asked = []
+
+    class Texels:  # a held map: gives the texels it is asked for
+        shape = n.shape
+
+        def __getitem__(self, key):
+            assert isinstance(key, tuple) and all(isinstance(k, np.ndarray) for k in key)
+            asked.append(key[0].size)
+            return n[key]
+
+        def __array__(self, dtype=None, copy=None):
+            assert grid >= 64, "the whole map"
+            return n
+
+    assert "base" not in ctx.source_at_shipped_size  # (made first: the states' size here)
+    ctx.asset.base = Texels()
+    base, states, masks = ctx.source_on_grid
+    assert base.shape == (min(grid, 64), min(grid, 64), 3)
+    assert np.array_equal(base.view(U32), want.view(U32))
+    assert grid >= 64 or (asked and max(asked) <= grid * grid)
+
+
+@pytest.mark.parametrize("size", [(5, 7), (16, 16), (40, 3)])
+def test_a_map_resized_by_its_taps_is_the_bilinear_resize(size):
+    """A map resized by bilinear sampling at the new grid's texel centres from the texels its
+    taps gather: ``resize_bilinear`` of the whole map, every bit."""
+    img = np.random.default_rng(size[0]).normal(size=(16, 12, 3)).astype(np.float32)
+    flat = img.reshape(-1, 3)
+    got = tx.resize_bilinear_at(lambda i: flat[i], (16, 12), *size)
+    want = tx.resize_bilinear(img, *size)
+    assert got.shape == (*size, 3) and np.array_equal(got.view(U32), want.view(U32))

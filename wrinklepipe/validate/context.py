@@ -396,18 +396,16 @@ class Context:
         PD space, masks box-down / bilinear-up), so comparisons measure what encoding,
         quantisation and compression lost, not the chosen resolution (WP-TEX-006 covers that).
 
-        Keys: ``base`` (at the base texture's size), ``states`` and ``base_at_states`` (at the
-        state textures' size), ``masks`` (at the mask textures' size).
+        Keys: ``states`` and ``base_at_states`` (at the state textures' size), ``masks`` (at
+        the mask textures' size). The base at the base texture's size is not held
+        (:attr:`source_on_grid` reads it where the grid's taps fall).
         """
         a = self.asset
         if not self.inp.has_source or len(a.states) == 0:
             return None
-        bt = self.base_tex
-        hb, wb = (bt.height, bt.width) if bt is not None else a.base.shape[:2]
         sts = [t for t in self.inp.state_textures() if t is not None]
         hs, ws = (sts[0].height, sts[0].width) if sts else a.states.shape[1:3]
         out = {
-            "base": resize_normals(a.base, hb, wb),
             "states": self._source_states_at(hs, ws),
             "base_at_states": resize_normals(a.base, hs, ws),
         }
@@ -445,8 +443,30 @@ class Context:
             if a.encoding in ("full", "composite"):
                 g = model.normalize(g)
             st.append(g)
-        base = model.normalize(self.to_grid(src["base"]))
+        base = model.normalize(self._source_base_on_grid())
         return base, np.stack(st).astype(np.float32), self.masks_to_grid(src["masks"])
+
+    def _source_base_on_grid(self) -> np.ndarray:
+        """``to_grid(resize_normals(asset.base, *base texture's size))``: the source base at the
+        shipped base's size on the grid. At the source's own size the grid's taps read the
+        source base's texels (``base[rows, cols]``: a held map decodes those), never the
+        whole map as float32 (768 MiB at 8192²); the same floats (the taps' texels are the
+        map's, the same sums)."""
+        a = self.asset
+        base = a.base
+        H, W = (int(x) for x in base.shape[:2])
+        bt = self.base_tex
+        hb, wb = (bt.height, bt.width) if bt is not None else (H, W)
+        h, w = self.grid_shape
+        if (hb, wb) != (H, W):
+            return self.to_grid(resize_normals(base, hb, wb))
+        if (h, w) == (H, W):
+            return np.asarray(base, np.float32)
+
+        def gather(flat: np.ndarray) -> np.ndarray:  # [n] -> the texels' [n, 3] normals
+            return np.asarray(base[flat // W, flat % W], np.float32)
+
+        return tx.resize_bilinear_at(gather, (H, W), h, w)
 
     @cached_property
     def shipped_on_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:

@@ -216,8 +216,21 @@ def resize_bilinear(
         if read is None:
             return img
         return np.asarray(read(img.reshape(h * w, -1))).reshape(h, w, -1)
+    return bilinear(img, _centres(h, w), read).reshape(h, w, -1)
+
+
+def _centres(h: int, w: int) -> np.ndarray:
+    """The UVs ``[h * w, 2]`` of an ``h`` x ``w`` grid's texel centres, row by row."""
     cu = (np.arange(w) + 0.5) / w
     cv = (np.arange(h) + 0.5) / h
     uu, vv = np.meshgrid(cu, cv, indexing="xy")
-    uv = np.stack([uu.ravel(), vv.ravel()], axis=-1)
-    return bilinear(img, uv, read).reshape(h, w, -1)
+    return np.stack([uu.ravel(), vv.ravel()], axis=-1)
+
+
+def resize_bilinear_at(
+    gather: Callable[[np.ndarray], np.ndarray], shape: tuple[int, int], h: int, w: int
+) -> np.ndarray:
+    """:func:`resize_bilinear` of the ``shape`` = (H, W) map whose texels ``gather`` gives
+    (flat indices ``[n]`` -> ``[n, C]``, as :func:`bilinear_at`'s) to another size: only the
+    texels the taps read are asked for."""
+    return bilinear_at(gather, shape, _centres(h, w)).reshape(h, w, -1)
