@@ -708,3 +708,25 @@ def test_a_map_resized_by_its_taps_is_the_bilinear_resize(size):
     got = tx.resize_bilinear_at(lambda i: flat[i], (16, 12), *size)
     want = tx.resize_bilinear(img, *size)
     assert got.shape == (*size, 3) and np.array_equal(got.view(U32), want.view(U32))
+
+
+@pytest.mark.parametrize("fmt", ["bc1", "bc3", "bc4", "bc5", "bc7"])
+@pytest.mark.parametrize("band", [1, 8, 10000])
+def test_block_texels_decoded_by_block_rows_are_the_whole_decode(fmt, band, monkeypatch):
+    """A block-compressed texture's level-0 texels decoded band by band of block rows into one
+    array (bands of 4, 8, all rows): texture2ddecoder's decode of the whole level picked to RGBA
+    as before, every byte, at sizes of whole and partial blocks."""
+    from wrinklepipe.validate.inputs import FORMATS
+
+    ch, nbytes, _ = FORMATS[fmt]
+    rng = np.random.default_rng(nbytes + band)
+    monkeypatch.setattr(tx, "band_rows", lambda w, b: band)
+    for w, h in ((16, 24), (13, 17), (4, 4)):
+        pw, ph = -(-w // 4) * 4, -(-h // 4) * 4
+        data = rng.integers(0, 256, pw * ph // 16 * nbytes, dtype=np.uint8).tobytes()
+        fn = getattr(tx.t2d, f"decode_{fmt}")
+        whole = np.frombuffer(fn(data, pw, ph), np.uint8).reshape(ph, pw, 4)[:h, :w]
+        want = np.ascontiguousarray(whole[..., [2, 1, 0, 3]][..., :ch])
+        got = tx.block_texels(data, fmt, w, h, ch)
+        assert got.shape == (h, w, ch) and got.dtype == np.uint8 and got.flags.c_contiguous
+        assert np.array_equal(got, want)

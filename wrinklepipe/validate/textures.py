@@ -19,6 +19,7 @@ import texture2ddecoder as t2d
 from wrinklepipe import codec
 from wrinklepipe.masks.stack import MaskStack, to_float
 from wrinklepipe.validate.inputs import FORMATS, Texture
+from wrinklepipe.workset import band_rows
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -46,10 +47,30 @@ def texels(tex: Texture) -> np.ndarray:
         return np.frombuffer(tex.data, "<u2", count=h * w * ch).reshape(h, w, ch).astype(np.uint16)
     if kind == "float":
         return np.frombuffer(tex.data, "<f4", count=h * w * ch).reshape(h, w, ch)
+    return block_texels(tex.data, tex.fmt, w, h, ch)
+
+
+#: Bytes per texel of a band while decoding blocks (texture2ddecoder's BGRA, its RGBA pick).
+BLOCK_DECODE_BYTES = 8
+
+
+def block_texels(data: bytes, fmt: str, w: int, h: int, ch: int) -> np.ndarray:
+    """Level-0 texels ``[h, w, ch]`` (RGBA order) of ``fmt`` block data decoded by
+    texture2ddecoder, band by band of block rows into one array: every block decodes on its
+    own, so each band's texels are the whole decode's (no whole BGRA decode and RGBA copy
+    besides the texels: 512 MiB at 8192²)."""
     pw, ph = (w + 3) // 4 * 4, (h + 3) // 4 * 4
-    fn = getattr(t2d, f"decode_{tex.fmt}")
-    bgra = np.frombuffer(fn(tex.data, pw, ph), np.uint8).reshape(ph, pw, 4)[:h, :w]
-    return np.ascontiguousarray(bgra[..., [2, 1, 0, 3]][..., :ch])
+    fn = getattr(t2d, f"decode_{fmt}")
+    row_bytes = (pw // 4) * FORMATS[fmt][1]  # one row of blocks
+    rows = max(4, band_rows(pw, BLOCK_DECODE_BYTES) // 4 * 4)
+    pick = [2, 1, 0, 3][:ch]
+    out = np.empty((h, w, ch), np.uint8)
+    for r0 in range(0, h, rows):
+        r1 = min(ph, r0 + rows)
+        part = fn(bytes(data[r0 // 4 * row_bytes : r1 // 4 * row_bytes]), pw, r1 - r0)
+        bgra = np.frombuffer(part, np.uint8).reshape(r1 - r0, pw, 4)
+        out[r0 : min(r1, h)] = bgra[: min(r1, h) - r0, :w][..., pick]
+    return out
 
 
 def unorm_values(q: np.ndarray) -> np.ndarray:
