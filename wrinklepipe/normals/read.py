@@ -113,6 +113,9 @@ class NormalMap:
     convention: str  # the convention the file was read as (flipped to +Y when "directx")
     detection: ConventionReport | None = None
     notes: list[str] = field(default_factory=list)
+    #: the file's integer texels ``[H, W, C]`` (uint8 / uint16) the normals decode from texel
+    #: by texel (:mod:`wrinklepipe.normals.held`); None for a float file or a repaired map
+    integers: np.ndarray | None = None
 
     def to_json(self) -> dict[str, object]:
         return {
@@ -376,6 +379,13 @@ def read_normal_map(
     # integer texels only: a float image holds signed or encoded vectors, which its values
     # alone cannot always tell (the reader's rule above), so their lengths say nothing sure
     what = looks_like(values, layout) if bits else ""
+    integers = None
+    if bits and not o.repair:  # the values are q / top: q back exactly (decode_texels does)
+        top = _F((1 << bits) - 1)
+        integers = np.empty(values.shape, np.uint8 if bits == 8 else np.uint16)
+        rows = band_rows(values.shape[1], 8)
+        for r0 in range(0, values.shape[0], rows):
+            integers[r0 : r0 + rows] = np.rint(values[r0 : r0 + rows] * top)
     del values  # the texels as read: not needed past this point (a map's worth of float32)
     if what and not (too_short and stats.short == stats.texels):
         # a colour or grey image, or no tangent-space map: refused, whatever repair says
@@ -448,4 +458,5 @@ def read_normal_map(
         convention=conv,
         detection=detection,
         notes=notes,
+        integers=integers,
     )

@@ -16,7 +16,7 @@ meshes, and convert writes a layer over the source. OBJ comes through
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +39,7 @@ from wrinklepipe.io.images import read_image
 from wrinklepipe.names import noun
 from wrinklepipe.normals import alignment as al
 from wrinklepipe.normals.convention import BEYOND_DOUBT, CONVENTIONS
+from wrinklepipe.normals.held import HeldMap, NormalStack
 from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
 from wrinklepipe.pipeline.character import open_wrinkled_document
 from wrinklepipe.pipeline.ingest_color import MaterialColor, material_color, read_colors
@@ -114,14 +115,14 @@ def _read_normals(
     stats: dict[str, Any] | None = None,
     role: str = "",
     read: dict[Path, NormalMap] | None = None,
-    out: np.ndarray | None = None,
-) -> tuple[np.ndarray, list[str]]:
-    """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes (wrinklepipe.normals.read);
-    the reader's counts of problem texels go into ``stats[role]``. ``out``: where to decode
-    them when the map is that size (:func:`read_normal_map`)."""
+) -> tuple[np.ndarray | HeldMap, list[str]]:
+    """A normal map file -> unit normals ``[H, W, 3]`` (+Y) and notes (wrinklepipe.normals.read):
+    the file's integers with how they decode (:class:`HeldMap`) when it has them, else float32.
+    The reader's counts of problem texels go into ``stats[role]``; ``read[path]``: the map as
+    read, its normals held as the returned value."""
     hint = "a state's colour map goes in color = FILE" if role.startswith("state") else ""
     o = ReadOptions(convention=convention, refusal_hint=hint)
-    nm = read_normal_map(path, o, out)
+    nm = read_normal_map(path, o)
     notes = [f"{path.name}: {nm.source_format}, convention {nm.convention}"]
     notes += [f"{path.name}: {n}" for n in nm.notes if "convention" not in n]
     if stats is not None:
@@ -130,9 +131,30 @@ def _read_normals(
             "stats": nm.stats.to_json(),
             "tolerance": o.unit_tolerance,
         }
+    got: np.ndarray | HeldMap = np.asarray(nm.normals, np.float32)
+    if nm.integers is not None:  # held as the file's integers (6 bytes a texel, not 12)
+        got = HeldMap(nm.integers, nm.layout, nm.convention == "directx")
+        nm = replace(nm, normals=NormalStack([got], single=True), integers=None)
     if read is not None:
         read[path] = nm
-    return np.asarray(nm.normals, np.float32), notes
+    return got, notes
+
+
+def _held_stack(parts: list[np.ndarray | HeldMap], shape: tuple[int, ...]) -> Any:
+    """The states ``[K, H, W, 3]``: held as integers (:class:`NormalStack`) when every state
+    is, else float32 (the held ones decoded into their place)."""
+    if parts and all(isinstance(p, HeldMap) for p in parts):
+        return NormalStack(parts)  # type: ignore[arg-type]
+    states = np.empty((len(parts), *shape), np.float32)
+    for k, p in enumerate(parts):
+        states[k] = p.decode() if isinstance(p, HeldMap) else p
+        parts[k] = states[k]  # the part's float copy freed as soon as it is in place
+    return states
+
+
+def _as_normals(m: np.ndarray | HeldMap) -> Any:
+    """A map as read, seen as unit normals ``[H, W, 3]`` (a held map: a one-map stack)."""
+    return NormalStack([m], single=True) if isinstance(m, HeldMap) else m
 
 
 def _load_mesh(path: Path) -> Mesh:
@@ -150,35 +172,40 @@ def read_maps(
     problem-texel counts per map file."""
     notes: list[str] = []
     read: dict[Path, NormalMap] = {}
+    base_part: np.ndarray | HeldMap = np.asarray(base, np.float32) if base is not None else None
     if base is None:
-        base, n = _read_normals(manifest.base, manifest.convention, stats, "base", read)
+        base_part, n = _read_normals(manifest.base, manifest.convention, stats, "base", read)
         notes += n
+    base = _as_normals(base_part)
     if not manifest.states:
         np.stack([])  # no states: the error np.stack of them always raised
-    # every state read into its place in one stack (one map beside it while it is read, not
-    # every map twice)
-    states = np.empty((len(manifest.states), *base.shape), np.float32)
-    for i, s in enumerate(manifest.states):
+    # every state held as its file's integers when it can be (normals/held.py), one float map
+    # beside it while it is read
+    parts: list[np.ndarray | HeldMap] = []
+    for s in manifest.states:
         if s.map is None:  # a colour-only state: its normal is the base (it adds nothing)
-            states[i] = base
+            parts.append(base_part)
             continue
-        # a full-face state decodes straight into its place in the stack (a wrinkle-only one is
-        # combined with the base first)
-        slot = states[i] if manifest.states_include_base else None
-        st, n = _read_normals(s.map, manifest.convention, stats, f"state {s.name}", read, slot)
+        st, n = _read_normals(s.map, manifest.convention, stats, f"state {s.name}", read)
         notes += n
-        if st.shape != base.shape:
+        shape = st.q.shape[:2] if isinstance(st, HeldMap) else st.shape[:2]
+        if shape != base.shape[:2]:
             raise input_error(
                 s.map,
-                f"size {st.shape[1]}x{st.shape[0]} differs from the base map "
+                f"size {shape[1]}x{shape[0]} differs from the base map "
                 f"{base.shape[1]}x{base.shape[0]}"
                 + ("" if manifest.base is not None else " (the wrinkled material's normalTexture)"),
             )
         if not manifest.states_include_base:  # wrinkle-only normals: add the base in PD space
-            st = model.pd_to_normal(model.normal_to_pd(base) + model.normal_to_pd(st))
-        if st is not slot:
-            states[i] = st
+            wrinkle = np.asarray(_as_normals(st))
+            st = model.pd_to_normal(
+                model.normal_to_pd(np.asarray(base)) + model.normal_to_pd(wrinkle)
+            )
+            del wrinkle
+        parts.append(st)
         del st
+    states = _held_stack(parts, base.shape)
+    del parts
     check_conventions(read, manifest.convention, manifest.base, manifest.states_include_base)
     if not manifest.regions:  # one UDIM tile without masks (pipeline.ingest_tiles)
         return base, states, np.zeros((0, 1, 1), np.float32), notes

@@ -1,0 +1,171 @@
+"""Normal maps held as the integers of their files, read as float32 unit normals where used.
+
+A conversion holds its source normal maps (the base and every wrinkled state) for the whole run:
+the searches, the encoders and the validator read them. As float32 unit normals that is 12 bytes
+a texel per map (805 MB per map at 8192²); a 16-bit PNG's texels are 6 bytes (8-bit: 3).
+:class:`NormalStack` keeps the files' integer texels and decodes unit normals only where they
+are asked for: a map (``stack[k]``), a band (``stack[k, r0:r1]``), texels (``stack[k][rows,
+cols]``) or the whole stack (``np.asarray(stack)``, for a stage that needs it at once).
+
+The float values are those the reader gives, bit for bit: :func:`wrinklepipe.normals.read.
+decode_texels` of integer texels works texel by texel from ``(2 q - top) / top`` (the values it
+is given are re-quantised to ``q`` first), so decoding a band of ``q`` gives that band of the
+whole map's normals, and a map read as DirectX is flipped after decoding exactly as the reader
+flips it. :func:`held` builds a stack from maps read that way and keeps a map float32 when it
+was not (a float file, a repaired map, a wrinkle-only state combined with the base).
+
+It behaves as the float32 array for what the stages do with normals, as
+:class:`wrinklepipe.masks.stack.MaskStack` does for masks: ``shape``, ``ndim``, ``dtype``
+(float32), ``len``, indexing, iteration, numpy functions and ufuncs on the float32 values, any
+other array attribute of the float32 array made for the call. Nothing changes it in place.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.lib.mixins import NDArrayOperatorsMixin
+
+from wrinklepipe.normals.read import decode_texels
+
+_F = np.float32
+
+
+@dataclass(frozen=True)
+class HeldMap:
+    """One map's integer texels and how they decode: ``q`` ``[H, W, C]`` uint8 / uint16, the
+    layout the reader resolved (``rgb``, ``rg``, ``ag``) and whether green is flipped after
+    decoding (a DirectX map)."""
+
+    q: np.ndarray
+    layout: str
+    flip: bool
+
+    def decode(self, rows: Any = slice(None), cols: Any = slice(None)) -> np.ndarray:
+        """Unit normals (float32 ``[..., 3]``) of the texels ``q[rows, cols]``."""
+        part = np.asarray(self.q[rows, cols])
+        bits = 8 if self.q.dtype == np.uint8 else 16
+        values = part.astype(_F) * _F(1.0 / ((1 << bits) - 1))
+        if values.ndim != 3:  # texels picked by index: decoded as one row of them
+            values = values.reshape(1, -1, part.shape[-1])
+        n, _ = decode_texels(values, self.layout, False, 0.05, bits)
+        n = n.reshape(part.shape[:-1] + (3,))
+        if self.flip:
+            n[..., 1] *= -1
+        return n
+
+
+def _spatial(key: tuple[Any, ...]) -> bool:
+    """True when ``key`` indexes only rows and columns (ints, slices, integer or boolean
+    arrays): the integers can be indexed first, the channel axis is the decoded one."""
+
+    def rc(k: Any) -> bool:
+        if isinstance(k, np.ndarray):
+            return k.dtype.kind in "iub"
+        return isinstance(k, int | np.integer | slice)
+
+    return len(key) <= 2 and all(rc(k) for k in key)
+
+
+class NormalStack(NDArrayOperatorsMixin):
+    """Unit normals held as their files' integers: ``[K, H, W, 3]`` (``maps``: K held maps) or,
+    with ``single``, one map ``[H, W, 3]``."""
+
+    __array_priority__ = 20.0
+
+    def __init__(self, maps: list[HeldMap], single: bool = False) -> None:
+        if not maps or (single and len(maps) != 1):
+            raise ValueError(f"a normal stack holds 1 map (single) or K >= 1, got {len(maps)}")
+        sizes = {m.q.shape[:2] for m in maps}
+        if len(sizes) != 1 or any(m.q.ndim != 3 or m.q.dtype.kind != "u" for m in maps):
+            raise ValueError("a normal stack holds integer maps [H, W, C] of one size")
+        self.maps = maps
+        self.single = single
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        h, w = self.maps[0].q.shape[:2]
+        return (h, w, 3) if self.single else (len(self.maps), h, w, 3)
+
+    ndim = property(lambda self: len(self.shape))
+    size = property(lambda self: int(np.prod(self.shape)))
+    dtype = property(lambda self: np.dtype(_F))
+    #: what the float32 array would take (the stack itself takes :attr:`held_bytes`)
+    nbytes = property(lambda self: self.size * 4)
+    held_bytes = property(lambda self: sum(m.q.nbytes for m in self.maps))
+
+    def memo_key(self) -> tuple[Any, ...]:
+        """What the run's memo keys a call on this stack by (:mod:`wrinklepipe.reuse`): the
+        integers and how they decode (the float values are a function of them)."""
+        return (self.single, *((m.q, m.layout, m.flip) for m in self.maps))
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def map(self, k: int) -> NormalStack:
+        """State ``k`` as a one-map stack (still integers)."""
+        return NormalStack([self.maps[k]], single=True)
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        key = key if isinstance(key, tuple) else (key,)
+        if self.single:
+            if _spatial(key):
+                return self.maps[0].decode(*key)
+            return np.asarray(self)[key]
+        first, rest = key[0], key[1:]
+        if isinstance(first, int | np.integer) and _spatial(rest):
+            return self.maps[int(first)].decode(*rest)
+        if isinstance(first, slice) and _spatial(rest):
+            chosen = self.maps[first]
+            if not chosen:
+                return np.empty((0, *self.shape[1:]), _F)[rest if rest else ()]
+            return np.stack([m.decode(*rest) for m in chosen])
+        return np.asarray(self)[key]
+
+    def __iter__(self) -> Any:
+        return (self[i] for i in range(len(self)))
+
+    def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
+        if self.single:
+            a = self.maps[0].decode()
+        else:
+            a = np.empty(self.shape, _F)
+            for k, m in enumerate(self.maps):
+                a[k] = m.decode()
+        return a if dtype is None else a.astype(dtype, copy=False)
+
+    def __array_ufunc__(self, ufunc: Any, method: str, *inputs: Any, **kwargs: Any) -> Any:
+        def plain(x: Any) -> Any:
+            return np.asarray(x) if isinstance(x, NormalStack) else x
+
+        if "out" in kwargs:
+            kwargs["out"] = tuple(plain(o) for o in kwargs["out"])
+        return getattr(ufunc, method)(*(plain(x) for x in inputs), **kwargs)
+
+    def __array_function__(self, func: Any, types: Any, args: Any, kwargs: Any) -> Any:
+        def plain(x: Any) -> Any:
+            if isinstance(x, NormalStack):
+                return np.asarray(x)
+            if isinstance(x, list | tuple):
+                return type(x)(plain(v) for v in x)
+            return x
+
+        return func(*(plain(a) for a in args), **{k: plain(v) for k, v in kwargs.items()})
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__") or name in ("maps", "single"):  # copy / pickle protocols
+            raise AttributeError(name)
+        return getattr(np.asarray(self), name)
+
+    def __copy__(self) -> NormalStack:
+        return self  # never changed in place: a copy is the stack itself
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> NormalStack:
+        return NormalStack([HeldMap(m.q.copy(), m.layout, m.flip) for m in self.maps], self.single)
+
+    def __repr__(self) -> str:
+        h, w = self.shape[-3:-1]
+        kind = "1 map" if self.single else f"{len(self.maps)} maps"
+        return f"NormalStack({kind} {w}x{h}, {self.maps[0].q.dtype})"
