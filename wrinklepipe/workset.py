@@ -65,13 +65,15 @@ def map_rows(
 ) -> np.ndarray:
     """``fn(x)`` for a per-texel ``fn`` of an image ``x`` ``[H, W, ...]``, made band by band of
     rows (:func:`band_rows`): the whole image's result, with one band's temporaries."""
-    a = np.asarray(x)
+    # an image made where it is read (normals held as integers: ``x[r0:r1]`` decodes those
+    # rows) is read a band at a time, never made whole
+    a = x if getattr(type(x), "reads_rows", False) else np.asarray(x)
     if a.ndim < 2:
         return fn(a)
     h = a.shape[0]
     rows = band_rows(a.shape[1], bytes_per_texel)
     if h <= rows:
-        return fn(a)
+        return fn(np.asarray(a))
     out: np.ndarray | None = None
     for r0 in range(0, h, rows):
         band = fn(a[r0 : r0 + rows])

@@ -17,6 +17,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from wrinklepipe.fidelity.reference import SOURCE_BYTES_PER_TEXEL, _source_states, source_states
+from wrinklepipe.normals.held import one_map, texels_at
 from wrinklepipe.workset import band_rows
 
 _F = np.float32
@@ -57,9 +58,8 @@ class PdLevel:
 
     def at(self, flat: np.ndarray) -> np.ndarray:
         """Every state's slopes at texels ``flat`` (flat indices) ``[K, n, 2]``."""
-        K, H, W = self.shape[:3]
-        b = self.base.reshape(H * W, -1)[flat]
-        s = self.states.reshape(K, H * W, -1)[:, flat]
+        b = texels_at(self.base, flat)
+        s = texels_at(self.states, flat)
         return np.asarray(_source_states(b, s, "pd"), _F)
 
     def memo_digest(self) -> bytes:
@@ -103,9 +103,8 @@ class PdState:
     def at(self, flat: np.ndarray) -> np.ndarray:
         """The slopes at texels ``flat`` (flat indices) ``[n, 2]``."""
         lv, k = self.level, self.k
-        H, W = self.shape[:2]
-        b = lv.base.reshape(H * W, -1)[flat]
-        s = lv.states[k].reshape(H * W, -1)[flat]
+        b = texels_at(lv.base, flat)
+        s = texels_at(one_map(lv.states, k), flat)
         return np.asarray(_source_states(b, s[None], "pd")[0], _F)
 
     def __array__(self, dtype: object = None, copy: bool | None = None) -> np.ndarray:

@@ -19,6 +19,7 @@ from wrinklepipe.fidelity.sampling import (
 )
 from wrinklepipe.geometry.rasterise import triangle_ids
 from wrinklepipe.masks.stack import MaskStack
+from wrinklepipe.normals.held import rows_of, texels_at
 from wrinklepipe.reuse import reused
 from wrinklepipe.workset import band_rows
 
@@ -346,7 +347,7 @@ class UnitRows:
     (192 MiB at 4096²); ``np.asarray`` of it normalises the whole map."""
 
     def __init__(self, vectors: np.ndarray) -> None:
-        self.v = np.asarray(vectors, _F)
+        self.v = rows_of(vectors)  # normals held as integers stay so (decoded where read)
 
     shape = property(lambda self: self.v.shape)
     ndim = property(lambda self: self.v.ndim)
@@ -406,9 +407,9 @@ def _prepare(
 ) -> Reference:
     """:func:`prepare` without its ``base`` (None: :func:`prepare` sets it, so the memo keeps
     no map the caller holds)."""
-    b = np.asarray(base, _F)
+    b = rows_of(base)
     # a level made where it is read (fidelity.level.PdLevel) is gathered at the union only
-    st = states if hasattr(states, "at") else np.asarray(states, _F)
+    st = states if hasattr(states, "at") else rows_of(states)
     H, W = b.shape[:2]
     if st.shape[1:3] != (H, W):
         raise ValueError(f"source states {st.shape[1:3]} and base {(H, W)} differ in size")
@@ -426,8 +427,8 @@ def _prepare(
     m_u = np.empty((m.shape[0], union.size), _F)
     for r in range(m.shape[0]):
         m_u[r] = np.asarray(m[r]).reshape(H * W)[union]
-    base_u = planes(model.normalize(b.reshape(H * W, 3)[union]))  # [3, N] unit
-    at_u = st.at(union) if hasattr(st, "at") else st.reshape(st.shape[0], H * W, -1)[:, union]
+    base_u = planes(model.normalize(texels_at(b, union)))  # [3, N] unit
+    at_u = st.at(union) if hasattr(st, "at") else texels_at(st, union)
     states_u = planes(at_u)  # [K, C, N]
     base_pd = _pd_planes(base_u) if encoding == "pd" else None
     positive = m_u > 0  # [R, N]: where each mask touches, for every pose

@@ -55,6 +55,7 @@ from wrinklepipe.fidelity.level import PdLevel
 from wrinklepipe.fidelity.scales import clipped_texels, largest_held, scale_candidates
 from wrinklepipe.metrics import Budget
 from wrinklepipe.normals.encode import MAX_PD_SCALE
+from wrinklepipe.normals.held import rows_of
 
 _F = np.float32
 
@@ -222,7 +223,7 @@ class _Search:
     def _reference(self) -> fre.Reference:
         src = self.src
         return fre.prepare(
-            np.asarray(self.grid_base, _F),
+            rows_of(self.grid_base),  # held as integers: read at the texels used
             self.slopes,
             src.masks,
             src.poses,

@@ -17,6 +17,7 @@ from wrinklepipe.fidelity.sampling import CHUNK_TEXELS, Reader, chunks
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.masks.stack import MaskStack, float_masks
 from wrinklepipe.normals import compress as nc
+from wrinklepipe.normals.held import rows_of
 
 _F = np.float32
 
@@ -30,9 +31,9 @@ def base_texels(base: np.ndarray) -> np.ndarray:
     """8-bit RGB texels of the base normal map (``0.5 + 0.5 n``), encoded in chunks of rows
     (:data:`~wrinklepipe.fidelity.sampling.CHUNK_TEXELS`: every step is per texel, so the bytes
     are those of one pass; the temporaries stay small and are reused)."""
-    b = np.asarray(base, _F)
+    b = rows_of(base)  # normals held as integers: decoded a band of rows at a time
     if b.ndim != 3 or b.shape[0] * b.shape[1] <= CHUNK_TEXELS:
-        return _base_texels(b)
+        return _base_texels(np.asarray(b, _F))
     out = np.empty(b.shape[:2] + (3,), np.uint8)
     for sl in chunks(b.shape[0], max(1, CHUNK_TEXELS // b.shape[1])):
         out[sl] = _base_texels(b[sl])

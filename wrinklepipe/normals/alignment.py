@@ -25,6 +25,7 @@ from collections.abc import Callable
 import numpy as np
 
 from wrinklepipe.codec.vectors import EPS
+from wrinklepipe.normals.held import rows_of
 
 #: rms PD slope of the base's detail (~0.6 degrees) below which it carries nothing to compare.
 MIN_DETAIL = 0.01
@@ -83,7 +84,7 @@ def kept(
     first."""
     if rows.size == 0:
         return None
-    b_img = np.asarray(base)
+    b_img = rows_of(base)  # held as integers: only the texels compared are decoded
     h, w = b_img.shape[:2]
     br, bc, sy = (rows, cols, 1.0) if transform is None else transform(rows, cols, (h, w))
     br = (br + shift[0]) % h
@@ -93,5 +94,5 @@ def kept(
     energy = float((b * b).sum())
     if np.sqrt(energy / rows.size) < MIN_DETAIL:
         return None
-    s = _slopes(np.asarray(state)[rows, cols])
+    s = _slopes(rows_of(state)[rows, cols])
     return float((s * b).sum() / energy)

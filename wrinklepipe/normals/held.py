@@ -74,6 +74,8 @@ class NormalStack(NDArrayOperatorsMixin):
     with ``single``, one map ``[H, W, 3]``."""
 
     __array_priority__ = 20.0
+    #: ``stack[r0:r1]`` of a one-map stack decodes those rows (workset.map_rows reads bands)
+    reads_rows = True
 
     def __init__(self, maps: list[HeldMap], single: bool = False) -> None:
         if not maps or (single and len(maps) != 1):
@@ -127,6 +129,16 @@ class NormalStack(NDArrayOperatorsMixin):
     def __iter__(self) -> Any:
         return (self[i] for i in range(len(self)))
 
+    def reshape(self, *shape: Any) -> Any:
+        """A one-map stack as ``[H * W, 3]`` texels (``reshape(-1, 3)``): a
+        :class:`FlatTexels` that decodes only the texels indexed; any other shape of the
+        float32 array made for the call."""
+        want = tuple(shape[0]) if len(shape) == 1 and isinstance(shape[0], tuple) else shape
+        h, w = self.shape[-3:-1]
+        if self.single and want in ((-1, 3), (h * w, 3), (h * w, -1)):
+            return FlatTexels(self)
+        return np.asarray(self).reshape(*shape)
+
     def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
         if self.single:
             a = self.maps[0].decode()
@@ -169,3 +181,58 @@ class NormalStack(NDArrayOperatorsMixin):
         h, w = self.shape[-3:-1]
         kind = "1 map" if self.single else f"{len(self.maps)} maps"
         return f"NormalStack({kind} {w}x{h}, {self.maps[0].q.dtype})"
+
+
+class FlatTexels:
+    """A one-map :class:`NormalStack` seen as ``[H * W, 3]`` texels: indexing with flat
+    texel indices (an integer or boolean array, a slice) decodes those texels only."""
+
+    def __init__(self, stack: NormalStack) -> None:
+        self.stack = stack
+        h, w = stack.shape[:2]
+        self.shape = (h * w, 3)
+
+    ndim = 2
+    dtype = np.dtype(_F)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        if isinstance(key, slice):
+            return texels_at(self.stack, np.arange(*key.indices(self.shape[0])))
+        if isinstance(key, np.ndarray) and key.dtype == bool and key.ndim == 1:
+            return texels_at(self.stack, np.flatnonzero(key))
+        if isinstance(key, np.ndarray) and key.dtype.kind in "iu":
+            return texels_at(self.stack, key.reshape(-1)).reshape(*key.shape, 3)
+        return np.asarray(self)[key]
+
+    def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
+        a = np.asarray(self.stack).reshape(self.shape)
+        return a if dtype is None else a.astype(dtype, copy=False)
+
+
+def rows_of(a: Any) -> Any:
+    """Normals to be read a band of rows (or some texels) at a time: a :class:`NormalStack`
+    as it is (its rows decode where read), anything else as a float32 array."""
+    return a if isinstance(a, NormalStack | FlatTexels) else np.asarray(a, _F)
+
+
+def texels_at(a: Any, flat: np.ndarray) -> np.ndarray:
+    """The texels at flat indices ``flat`` of a map ``[H, W, C]`` (-> ``[n, C]``) or of every
+    map of a stack ``[K, H, W, C]`` (-> ``[K, n, C]``): an array's gathered, a
+    :class:`NormalStack`'s decoded at those texels only."""
+    if not isinstance(a, NormalStack):
+        a = np.asarray(a)
+        h, w = a.shape[-3:-1]
+        return a.reshape(*a.shape[:-3], h * w, a.shape[-1])[..., flat, :]
+    w = a.shape[-2]
+    rows, cols = np.divmod(np.asarray(flat, np.int64), w)
+    got = [m.decode(rows, cols) for m in a.maps]
+    return got[0] if a.single else np.stack(got)
+
+
+def one_map(a: Any, k: int) -> Any:
+    """Map ``k`` of a stack ``[K, H, W, C]``: a :class:`NormalStack`'s still held as integers
+    (:meth:`NormalStack.map`), an array's as a view."""
+    return a.map(k) if isinstance(a, NormalStack) else a[k]

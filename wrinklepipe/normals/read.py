@@ -335,6 +335,17 @@ def _put(normals: np.ndarray, out: np.ndarray | None) -> np.ndarray:
     return out
 
 
+def _integers(values: np.ndarray, bits: int) -> np.ndarray:
+    """The integer texels ``q`` of values read as ``q / (2^bits - 1)``, exactly as
+    :func:`decode_texels` re-quantises them (band by band: small temporaries)."""
+    top = _F((1 << bits) - 1)
+    q = np.empty(values.shape, np.uint8 if bits == 8 else np.uint16)
+    rows = band_rows(values.shape[1], 8)
+    for r0 in range(0, values.shape[0], rows):
+        q[r0 : r0 + rows] = np.rint(values[r0 : r0 + rows] * top)
+    return q
+
+
 def read_normal_map(
     path: str | Path, options: ReadOptions | None = None, out: np.ndarray | None = None
 ) -> NormalMap:
@@ -379,13 +390,7 @@ def read_normal_map(
     # integer texels only: a float image holds signed or encoded vectors, which its values
     # alone cannot always tell (the reader's rule above), so their lengths say nothing sure
     what = looks_like(values, layout) if bits else ""
-    integers = None
-    if bits and not o.repair:  # the values are q / top: q back exactly (decode_texels does)
-        top = _F((1 << bits) - 1)
-        integers = np.empty(values.shape, np.uint8 if bits == 8 else np.uint16)
-        rows = band_rows(values.shape[1], 8)
-        for r0 in range(0, values.shape[0], rows):
-            integers[r0 : r0 + rows] = np.rint(values[r0 : r0 + rows] * top)
+    integers = _integers(values, bits) if bits and not o.repair else None
     del values  # the texels as read: not needed past this point (a map's worth of float32)
     if what and not (too_short and stats.short == stats.texels):
         # a colour or grey image, or no tangent-space map: refused, whatever repair says

@@ -30,6 +30,7 @@ from scipy import sparse
 from wrinklepipe.metrics import Budget, Stats
 from wrinklepipe.model import blend, normal_to_pd, normalize, pd_to_normal
 from wrinklepipe.normals.compress import angular_error_stats
+from wrinklepipe.normals.held import rows_of
 from wrinklepipe.reuse import reused
 from wrinklepipe.workset import band_rows, map_rows
 
@@ -194,7 +195,7 @@ def resize_normals(
     filter: str = DEFAULT_FILTER,
 ) -> np.ndarray:
     """Resize unit normals [H, W, 3]: filter PD slopes (linear) or the vectors, renormalise."""
-    n = np.asarray(normals, dtype=_F)
+    n = rows_of(normals)  # normals held as integers: their slopes made a band at a time
     if space == "pd":  # the slopes band by band (per texel: the same values, a band's temporaries)
         return pd_to_normal(resize(map_rows(normal_to_pd, n, PD_BYTES_PER_TEXEL), size, filter))
     if space == "normal":

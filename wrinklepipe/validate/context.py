@@ -14,6 +14,7 @@ from wrinklepipe.fidelity.reference import source_states
 from wrinklepipe.fidelity.sampling import Reader
 from wrinklepipe.masks import resample_masks
 from wrinklepipe.masks.stack import MaskStack, float_masks
+from wrinklepipe.normals.held import rows_of
 from wrinklepipe.normals.resample import resize_bands
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.inputs import Texture, ValidationInput
@@ -97,10 +98,10 @@ def resize_normals(normals: np.ndarray, h: int, w: int) -> np.ndarray:
     (:func:`~wrinklepipe.pipeline.package.resize_normals_pd`), bit for bit, made band by band
     of output rows (:func:`resize_rows`): the normals' rows a band's filter reaches are read
     (``normals[rows]``: a band of a held map is decoded there) and made slopes, never the whole
-    map's slopes (512 MiB at 8192²) or float32 normals. At their own size: the normals as
-    float32."""
+    map's slopes (512 MiB at 8192²) or float32 normals. At their own size: the normals
+    themselves (held ones stay held: their rows or texels decoded where read)."""
     if tuple(normals.shape[:2]) == (h, w):
-        return np.asarray(normals, np.float32)
+        return rows_of(normals)  # normals held as integers: decoded where read
     return resize_rows(lambda rows: normals[rows], tuple(normals.shape[:2]), h, w)
 
 

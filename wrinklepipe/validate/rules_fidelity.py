@@ -27,6 +27,7 @@ from wrinklepipe.masks.stack import float_masks
 from wrinklepipe.metrics import Budget, Stats, angle_deg, weighted_stats
 from wrinklepipe.names import noun
 from wrinklepipe.normals import alignment as al
+from wrinklepipe.normals.held import one_map, rows_of, texels_at
 from wrinklepipe.validate import fidelity_pictures as fp
 from wrinklepipe.validate import textures as tx
 from wrinklepipe.validate.catalogue import Issue, make_issue
@@ -109,7 +110,7 @@ def source_level(ctx: Context) -> tuple[np.ndarray, np.ndarray | PdLevel]:
         return source_encoded(ctx)
     H, W = a.states.shape[1:3]
     base = resize_normals(a.base, H, W)
-    return base, PdLevel(base, np.asarray(a.states, np.float32))
+    return base, PdLevel(base, rows_of(a.states))
 
 
 def source_sampled(ctx: Context, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -120,13 +121,11 @@ def source_sampled(ctx: Context, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray
     a = ctx.asset
     H, W = a.states.shape[1:3]
     base = resize_normals(a.base, H, W)
-    states = np.asarray(a.states, np.float32)
+    states = rows_of(a.states)  # held as integers: decoded at the texels the taps read
     K = states.shape[0]
-    base_flat = base.reshape(H * W, 3)
-    states_flat = states.reshape(K, H * W, -1)
 
     def encoded(i: np.ndarray) -> np.ndarray:  # [n, K * C]: the K states side by side
-        e = encode_source_states(base_flat[i], states_flat[:, i], a.encoding)
+        e = encode_source_states(texels_at(base, i), texels_at(states, i), a.encoding)
         return np.moveaxis(e, 0, 1).reshape(i.size, -1)
 
     got = tx.bilinear_at(encoded, (H, W), uv)
@@ -303,8 +302,8 @@ def _spread(base: np.ndarray, states: np.ndarray, outside: np.ndarray) -> float:
         o = outside[r0 : r0 + rows]
         b = base[r0 : r0 + rows][o]
         far = np.zeros(b.shape[0], bool)
-        for s in states:
-            far |= angle_deg(s[r0 : r0 + rows][o], b) > MISALIGNED_DEG
+        for k in range(len(states)):  # a map held as integers decodes this band only
+            far |= angle_deg(one_map(states, k)[r0 : r0 + rows][o], b) > MISALIGNED_DEG
         count += int(np.count_nonzero(far))
     return float(np.float64(count) / np.float64(n))
 
@@ -340,7 +339,7 @@ def check_alignment(ctx: Context) -> list[Issue]:
     if ctx.inp.has_source and len(a.states) and a.encoding in model.ENCODINGS:
         H, W = a.states.shape[1:3]
         base = resize_normals(a.base, H, W)
-        states = np.asarray(a.states, np.float32)
+        states = rows_of(a.states)  # held as integers: read a band or some texels at a time
         masks = a.masks
         what = "source"
     else:
@@ -360,7 +359,7 @@ def check_alignment(ctx: Context) -> list[Issue]:
     outside = _outside(masks, (H, W), fp)
     spread = _spread(base, states, outside)
     rows, cols = al.lattice(outside)
-    kept = [al.kept(base, s, rows, cols) for s in states]
+    kept = [al.kept(base, one_map(states, k), rows, cols) for k in range(len(states))]
     ctx.metrics["base_state_spread"] = round(spread, 5)
     ctx.metrics["base_detail_kept"] = [None if k is None else round(k, 4) for k in kept]
     lost = [k for k, v in enumerate(kept) if v is not None and v < al.KEPT]
@@ -379,7 +378,7 @@ def check_alignment(ctx: Context) -> list[Issue]:
     )
     data: dict[str, Any] = {"spread": round(spread, 4), "detail_kept": round(share, 4)}
     for label, tf in al.TRANSFORMS.items():
-        if all(_keeps(al.kept(base, states[k], rows, cols, tf)) for k in lost):
+        if all(_keeps(al.kept(base, one_map(states, k), rows, cols, tf)) for k in lost):
             if "green" in label and _convention_said(ctx):
                 return []  # WP-MAP-003 named the flipped green channel
             if "green" not in label and ctx.base_tex is not None:
@@ -398,7 +397,7 @@ def check_alignment(ctx: Context) -> list[Issue]:
     dy, dx, peak = estimate_shift(p(base)[..., 0], p(states[lost[0]])[..., 0])
     if (dy, dx) != (0, 0) and peak > 0.05:
         # the base's texel (r + dy, c + dx) is the states' (r, c)
-        if all(_keeps(al.kept(base, states[k], rows, cols, shift=(dy, dx))) for k in lost):
+        if all(_keeps(al.kept(base, one_map(states, k), rows, cols, shift=(dy, dx))) for k in lost):
             return [
                 make_issue(
                     "WP-FID-006",

@@ -185,7 +185,8 @@ def bilinear(
     flat = img.reshape(h * w, -1)
 
     def gather(rows: np.ndarray) -> np.ndarray:  # np.take: the same rows, ~5x faster than flat[i]
-        got = np.take(flat, rows, axis=0)
+        # (normals held as integers: their texels decoded where the taps read)
+        got = np.take(flat, rows, axis=0) if isinstance(flat, np.ndarray) else flat[rows]
         return got if read is None else read(got)
 
     return bilinear_at(gather, (h, w), uv)
