@@ -11,7 +11,7 @@ import pytest
 
 from wrinklepipe.io.images import read_image, write_image
 from wrinklepipe.masks.read import read_masks
-from wrinklepipe.masks.stack import MaskStack, quantized, to_float
+from wrinklepipe.masks.stack import CroppedMasks, MaskStack, quantized, to_float
 
 
 @pytest.mark.parametrize("bits", [8, 16])
@@ -194,3 +194,39 @@ def test_mask_levels_held_in_8_bits_read_as_the_float_levels():
     nan[0, 0, 0] = np.nan
     held = ship.mask_levels(nan, 6)[6]
     assert isinstance(held, np.ndarray) and np.isnan(held[0, 0, 0])
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_masks_mostly_zero_are_held_in_their_boxes(tmp_path, bits):
+    """Region masks zero over most of the face are held as the integers inside each mask's box
+    of non-zero texels (an all-zero mask holds nothing), and read back as the float stack bit
+    for bit, however they are read."""
+    top = (1 << bits) - 1
+    rng = np.random.default_rng(11)
+    ms = np.zeros((4, 48, 40), np.uint8 if bits == 8 else np.uint16)
+    ms[0, 3:9, 30:39] = rng.integers(1, top + 1, (6, 9))
+    ms[1, 20:47, 0:5] = rng.integers(0, top + 1, (27, 5))
+    ms[3, 0, 0] = top  # one texel in a corner
+    paths = [write_image(tmp_path / f"c{i}.png", m / top, bits) for i, m in enumerate(ms)]
+    want = read_masks(paths).masks
+    got = read_masks(paths, integers=True).masks
+    assert isinstance(got, CroppedMasks)
+    assert got.held_bytes == (6 * 9 + 27 * 5 + 0 + 1) * ms.itemsize  # the boxes only
+    assert got.shape == want.shape and got.dtype == np.float32 and len(got) == 4
+    b = np.uint32
+    assert np.array_equal(np.asarray(got).view(b), want.view(b))
+    for i in range(4):
+        assert np.array_equal(got[i].view(b), want[i].view(b))
+        assert np.array_equal(got[i, 5:25].view(b), want[i, 5:25].view(b))
+        assert np.array_equal(got[i, 21].view(b), want[i, 21].view(b))
+        assert np.array_equal(got[i, 2:40, 31:35].view(b), want[i, 2:40, 31:35].view(b))
+    assert np.array_equal(got[-1].view(b), want[-1].view(b))
+    assert np.array_equal(got[[2, 0]], want[[2, 0]])
+    assert np.array_equal(got[:, 2:5], want[:, 2:5])
+    assert np.array_equal(got.max(axis=0), want.max(axis=0))
+    assert np.array_equal(got > 0, want > 0)
+    back = pickle.loads(pickle.dumps(got))
+    assert np.array_equal(np.asarray(back), want) and back.held_bytes == got.held_bytes
+    assert np.array_equal(np.asarray(copy.deepcopy(got)), want)
+    dense = np.ones((2, 8, 8), np.uint8)  # nothing to save: a plain stack
+    assert not CroppedMasks.saves(dense)

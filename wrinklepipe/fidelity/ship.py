@@ -247,6 +247,9 @@ class U8Masks(MaskStack):
     def __getitem__(self, key: Any) -> np.ndarray:
         return _U8_TABLE[np.asarray(self.q[key])]
 
+    def float_of(self, q: np.ndarray) -> np.ndarray:
+        return _U8_TABLE[q]
+
     def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
         a = _U8_TABLE[self.q]
         return a if dtype is None else a.astype(dtype, copy=False)

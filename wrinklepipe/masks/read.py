@@ -16,7 +16,7 @@ import numpy as np
 
 from wrinklepipe.errors import InputError, Problem
 from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, ImageInfo, read_image
-from wrinklepipe.masks.stack import MaskStack, quantized, to_float
+from wrinklepipe.masks.stack import CroppedMasks, MaskStack, quantized, to_float
 
 #: Largest difference between the R, G and B channels of a "grey" mask (below one 16-bit step).
 GREY_TOLERANCE = 0.5 / 65535.0
@@ -197,5 +197,8 @@ def read_masks(
         raise InputError(problems)
     check_masks(shapes, list(names), paths)
     assert stacked is not None  # check_masks refuses no masks
-    held: np.ndarray | MaskStack = stacked if stacked.dtype == np.float32 else MaskStack(stacked)
+    held: np.ndarray | MaskStack = stacked
+    if stacked.dtype != np.float32:  # integers; boxed where most of each mask is zero
+        held = CroppedMasks(stacked) if CroppedMasks.saves(stacked) else MaskStack(stacked)
+    del stacked
     return MaskSet(tuple(names), held, tuple(str(p) for p in paths), bits)  # type: ignore[arg-type]

@@ -80,6 +80,14 @@ class MaskStack(NDArrayOperatorsMixin):
     def __len__(self) -> int:
         return int(self.q.shape[0])
 
+    def integers(self, i: int) -> np.ndarray:
+        """Mask ``i``'s integers ``[H, W]`` (what :meth:`float_of` turns into its values)."""
+        return self.q[i]
+
+    def float_of(self, q: np.ndarray) -> np.ndarray:
+        """The float32 values of some of this stack's integers (per texel)."""
+        return to_float(q)
+
     def __getitem__(self, key: Any) -> np.ndarray:
         return to_float(np.asarray(self.q[key]))
 
@@ -122,3 +130,96 @@ class MaskStack(NDArrayOperatorsMixin):
     def __repr__(self) -> str:
         r, h, w = self.q.shape
         return f"MaskStack({r} masks {w}x{h}, {self.q.dtype})"
+
+
+class CroppedMasks(MaskStack):
+    """A :class:`MaskStack` that holds each mask's integers only inside the box of its non-zero
+    texels (a region's mask is zero over most of the face: 8 region masks at 8192² are 512 MiB
+    as 8-bit stacks, their boxes a fraction of it). The values are the stack's, bit for bit:
+    zero outside a box, the file's integers inside."""
+
+    def __init__(self, q: np.ndarray) -> None:  # noqa: D107 - built from the dense stack
+        super().__init__(q)
+        crops: list[tuple[np.ndarray, int, int]] = []
+        for m in q:
+            rows = np.flatnonzero(m.any(axis=1))
+            cols = np.flatnonzero(m.any(axis=0))
+            if rows.size == 0:
+                crops.append((np.zeros((0, 0), q.dtype), 0, 0))
+                continue
+            r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+            crops.append((np.ascontiguousarray(m[r0:r1, c0:c1]), r0, c0))
+        self.crops = crops
+        self._shape = q.shape
+        self._dtype_q = q.dtype
+        del self.q  # the dense stack is not kept
+
+    shape = property(lambda self: self._shape)
+    size = property(lambda self: int(np.prod(self._shape)))
+    nbytes = property(lambda self: self.size * 4)
+    #: what the held boxes take
+    held_bytes = property(lambda self: sum(c.nbytes for c, _, _ in self.crops))
+
+    @staticmethod
+    def saves(q: np.ndarray) -> bool:
+        """True when boxing ``q``'s masks holds less than 3/4 of it."""
+        held = 0
+        for m in q:
+            rows = np.flatnonzero(m.any(axis=1))
+            cols = np.flatnonzero(m.any(axis=0))
+            if rows.size:
+                held += (rows[-1] + 1 - rows[0]) * (cols[-1] + 1 - cols[0]) * q.itemsize
+        return held < 0.75 * q.nbytes
+
+    def memo_key(self) -> Any:
+        """The boxes and their integers (the float values are a function of them)."""
+        return (self._shape, tuple((c, r0, c0) for c, r0, c0 in self.crops))
+
+    def __len__(self) -> int:
+        return int(self._shape[0])
+
+    def integers(self, i: int) -> np.ndarray:
+        return self.dense(i)
+
+    def dense(self, i: int, rows: Any = slice(None)) -> np.ndarray:
+        """Mask ``i``'s integers at ``rows`` (an int or a slice) ``[r, W]`` (``[W]``)."""
+        h, w = self._shape[1:]
+        rr = np.arange(h)[rows]
+        one = rr.ndim == 0
+        rr = np.atleast_1d(rr)
+        out = np.zeros((rr.size, w), self._dtype_q)
+        crop, r0, c0 = self.crops[i]
+        inside = (rr >= r0) & (rr < r0 + crop.shape[0])
+        if crop.size and inside.any():
+            out[inside, c0 : c0 + crop.shape[1]] = crop[rr[inside] - r0]
+        return out[0] if one else out
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        k = key if isinstance(key, tuple) else (key,)
+        simple = all(isinstance(x, int | np.integer | slice) for x in k[1:3]) and len(k) <= 3
+        if isinstance(k[0], int | np.integer) and simple:
+            rows = k[1] if len(k) > 1 else slice(None)
+            d = self.dense(int(k[0]) % len(self), rows)
+            if len(k) == 3:
+                d = d[..., k[2]]
+            return to_float(d)
+        return to_float(self._dense_all()[key])
+
+    def _dense_all(self) -> np.ndarray:
+        return np.stack([self.dense(i) for i in range(len(self))])
+
+    def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
+        a = to_float(self._dense_all())
+        return a if dtype is None else a.astype(dtype, copy=False)
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__") or name in ("q", "crops", "_shape", "_dtype_q"):
+            raise AttributeError(name)
+        return getattr(np.asarray(self), name)
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> CroppedMasks:
+        return CroppedMasks(self._dense_all())
+
+    def __repr__(self) -> str:
+        r, h, w = self._shape
+        return f"CroppedMasks({r} masks {w}x{h}, {self._dtype_q}, {self.held_bytes} bytes held)"

@@ -17,7 +17,7 @@ import numpy as np
 import texture2ddecoder as t2d
 
 from wrinklepipe import codec
-from wrinklepipe.masks.stack import MaskStack, to_float
+from wrinklepipe.masks.stack import MaskStack
 from wrinklepipe.validate.inputs import FORMATS, Texture
 from wrinklepipe.workset import band_rows
 
@@ -222,7 +222,7 @@ def bilinear_planes(planes: np.ndarray, uv: np.ndarray) -> np.ndarray:
     out = np.empty((len(uv), len(planes)), np.float32)
     for i in range(len(planes)):  # a plane at a time
         if isinstance(planes, MaskStack):  # its integers, made float32 at the taps only
-            out[:, i] = bilinear(planes.q[i][..., None], uv, to_float)[:, 0]
+            out[:, i] = bilinear(planes.integers(i)[..., None], uv, planes.float_of)[:, 0]
         else:
             out[:, i] = bilinear(np.asarray(planes[i])[..., None], uv)[:, 0]
     return out
