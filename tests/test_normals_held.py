@@ -13,6 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from wrinklepipe.normals import held
 from wrinklepipe.normals.held import HeldMap, NormalStack
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
 
@@ -127,3 +128,14 @@ def test_float_and_repaired_maps_keep_no_integers(tmp_path):
     out.write_image(np.ascontiguousarray(q.astype(np.float32) / 65535))
     out.close()
     assert read_normal_map(exr).integers is None
+
+
+@pytest.mark.parametrize("layout", ["rgb", "rg"])
+def test_a_map_larger_than_a_decode_chunk_is_the_readers(tmp_path, layout):
+    """More texels than one chunk of the decode (held.DECODE_TEXELS): the same bits."""
+    q = _texels(np.random.default_rng(9), 600, 520, 16, layout)
+    nm = _read(tmp_path, q, "directx")
+    one = NormalStack([HeldMap(nm.integers, nm.layout, True)], single=True)
+    assert 600 * 520 > held.DECODE_TEXELS
+    assert np.array_equal(np.asarray(one).view(np.uint32), nm.normals.view(np.uint32))
+    assert np.array_equal(one[100:590].view(np.uint32), nm.normals[100:590].view(np.uint32))

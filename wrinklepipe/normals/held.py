@@ -28,8 +28,6 @@ from typing import Any
 import numpy as np
 from numpy.lib.mixins import NDArrayOperatorsMixin
 
-from wrinklepipe.normals.read import decode_texels
-
 _F = np.float32
 
 
@@ -46,15 +44,50 @@ class HeldMap:
     def decode(self, rows: Any = slice(None), cols: Any = slice(None)) -> np.ndarray:
         """Unit normals (float32 ``[..., 3]``) of the texels ``q[rows, cols]``."""
         part = np.asarray(self.q[rows, cols])
-        bits = 8 if self.q.dtype == np.uint8 else 16
-        values = part.astype(_F) * _F(1.0 / ((1 << bits) - 1))
-        if values.ndim != 3:  # texels picked by index: decoded as one row of them
-            values = values.reshape(1, -1, part.shape[-1])
-        n, _ = decode_texels(values, self.layout, False, 0.05, bits)
-        n = n.reshape(part.shape[:-1] + (3,))
+        flat = part.reshape(-1, part.shape[-1])
+        out = np.empty((flat.shape[0], 3), _F)
+        step = max(1, DECODE_TEXELS)
+        for t0 in range(0, flat.shape[0], step):  # a chunk's temporaries at a time
+            out[t0 : t0 + step] = _unit(flat[t0 : t0 + step], self.layout, self.q.dtype)
         if self.flip:
-            n[..., 1] *= -1
-        return n
+            out[:, 1] *= -1
+        return out.reshape(part.shape[:-1] + (3,))
+
+
+#: Texels decoded at once (their float32 temporaries: ~10 MB).
+DECODE_TEXELS = 1 << 18
+
+
+def _unit(q: np.ndarray, layout: str, dtype: np.dtype) -> np.ndarray:
+    """Unit normals ``[n, 3]`` of integer texels ``q`` ``[n, C]``: the operations of
+    :func:`wrinklepipe.normals.read.decode_texels` on integer texels, in its order, so the same
+    bits (``(2 q - top) / top``, z rebuilt for ``rg`` / ``ag``, divided by the length). An
+    integer texel is never zero-length (every component is at least ``1 / top`` from 0), so no
+    texel is left undivided and the reader's counts are not needed here."""
+    top = _F(255 if dtype == np.uint8 else 65535)
+
+    def sig(c: np.ndarray) -> np.ndarray:
+        x = c.astype(_F)
+        x *= _F(2.0)
+        x -= top
+        x /= top
+        return x
+
+    if layout == "rgb":
+        n = np.ascontiguousarray(sig(q[:, :3]))
+    else:
+        x = sig(q[:, 3] if layout == "ag" else q[:, 0])
+        y = sig(q[:, 1])
+        n = np.empty(x.shape + (3,), dtype=_F)
+        n[:, 0] = x
+        n[:, 1] = y
+        z2 = _F(1.0) - x * x - y * y
+        np.maximum(z2, _F(0.0), out=z2)
+        np.sqrt(z2, out=n[:, 2])
+    l2 = np.einsum("...c,...c->...", n, n)
+    length = np.sqrt(l2, out=l2)
+    n /= length[..., None]
+    return n
 
 
 def _spatial(key: tuple[Any, ...]) -> bool:
