@@ -104,11 +104,25 @@ def _check_size(path: Path, width: int, height: int, max_pixels: int) -> None:
         )
 
 
+def texel_values(q: np.ndarray) -> np.ndarray:
+    """Integer texels (uint8 / uint16) as the float32 in [0, 1] OpenImageIO reads them as:
+    ``float32(q) * float32(1 / (2^bits - 1))``, bit for bit."""
+    top = 255 if q.dtype == np.uint8 else 65535
+    return q.astype(np.float32) * np.float32(1.0 / top)
+
+
+_NATIVE = {"uint8": oiio.UINT8, "uint16": oiio.UINT16}
+
+
 def read_image(
-    path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS
+    path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS, integers: bool = False
 ) -> tuple[np.ndarray, ImageInfo]:
-    """Read an image as float32 ``[H, W, C]`` (integers scaled to [0, 1]) and its header."""
+    """Read an image as float32 ``[H, W, C]`` (integers scaled to [0, 1]) and its header.
+    ``integers``: an 8- or 16-bit file's texels as stored (uint8 / uint16 ``[H, W, C]``, half
+    the bytes of float32 or less; :func:`texel_values` gives the float32 read bit for bit);
+    any other file's as float32 still."""
     info = read_header(path, max_pixels)
+    pixel_type = _NATIVE.get(info.format, oiio.FLOAT) if integers else oiio.FLOAT
     # Keep alpha unassociated: masks and data textures must not be premultiplied on read.
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
@@ -117,7 +131,7 @@ def read_image(
         if inp is None:
             raise input_error(path, f"cannot read image: {oiio_message(oiio.geterror())}")
         try:
-            data = inp.read_image(0, 0, 0, info.channels, oiio.FLOAT)
+            data = inp.read_image(0, 0, 0, info.channels, pixel_type)
             err = inp.geterror()
         finally:
             inp.close()
@@ -125,7 +139,9 @@ def read_image(
         raise input_error(
             path, f"cannot decode pixels (truncated or corrupt?): {oiio_message(err)}"
         )
-    arr = np.asarray(data, dtype=np.float32)
+    arr = np.asarray(data)
+    if pixel_type == oiio.FLOAT:
+        arr = np.asarray(arr, dtype=np.float32)
     if arr.ndim == 2:
         arr = arr[..., None]
     arr = arr.reshape(info.height, info.width, info.channels)

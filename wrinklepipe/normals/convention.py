@@ -70,7 +70,9 @@ def detect_convention(normals: np.ndarray, mask: np.ndarray | None = None) -> Co
     ``mask`` ([H, W] bool) restricts the test to texels that belong to the map (e.g. UV
     islands). Returns a :class:`ConventionReport`.
     """
-    n = np.asarray(normals, dtype=_F)
+    # normals made where they are read (``reads_rows``: integer texels decoded a band at a
+    # time) are read band by band below, never made whole
+    n = normals if getattr(type(normals), "reads_rows", False) else np.asarray(normals, _F)
     if n.ndim != 3 or n.shape[-1] != 3 or n.shape[0] < 3 or n.shape[1] < 3:
         return ConventionReport("undetermined", 0.0, 0.0, 0.0, 0, "map too small (< 3 x 3)")
     m = None if mask is None else np.asarray(mask, dtype=bool)

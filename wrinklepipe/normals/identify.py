@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from wrinklepipe.io.images import texel_values
+
 _F = np.float32
 
 #: A texel is grey when its channels differ by at most this much (1.5 8-bit levels).
@@ -55,6 +57,8 @@ def _share(n: int, of: int) -> str:
 def looks_like(values: np.ndarray, layout: str = "rgb", signed: bool = False) -> str:
     """What texels ``values`` ``[H, W, C]`` (in [0, 1], or in [-1, 1] when ``signed``) look
     like when they are not a tangent-space normal map, in a few words; '' when they are one.
+    Integer texels (uint8 / uint16) are judged by the float32 values OpenImageIO reads them as
+    (:func:`wrinklepipe.io.images.texel_values`), made for the sampled lattice only.
 
     ``layout``: ``rgb`` (x, y, z stored) or ``rg`` / ``ag`` (z rebuilt: only the grey test
     and the length of ``(x, y)`` can tell)."""
@@ -62,7 +66,8 @@ def looks_like(values: np.ndarray, layout: str = "rgb", signed: bool = False) ->
     if v.ndim == 2:
         v = v[..., None]
     step = max(1, int(np.ceil(np.sqrt(v.shape[0] * v.shape[1] / SAMPLE_TEXELS))))
-    v = np.asarray(v[::step, ::step], _F)
+    v = v[::step, ::step]
+    v = texel_values(v) if v.dtype.kind == "u" else np.asarray(v, _F)
     h, w, c = v.shape
     n = h * w
     if n == 0 or c < 2:

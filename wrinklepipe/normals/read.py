@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from wrinklepipe.errors import input_error
-from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image
+from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image, texel_values
 from wrinklepipe.names import plural
 from wrinklepipe.normals import compress, dds
 from wrinklepipe.normals.convention import ConventionReport, detect_convention, flip_green
@@ -102,7 +102,8 @@ class NormalStats:
 class NormalMap:
     """A decoded normal map and how it was read."""
 
-    normals: np.ndarray  # [H, W, 3] float32, unit, +Y
+    #: [H, W, 3] float32, unit, +Y; None for a map read ``held`` (made from ``integers``)
+    normals: np.ndarray | None
     stats: NormalStats
     path: str
     width: int
@@ -141,15 +142,34 @@ def _first(mask: np.ndarray) -> tuple[int, int] | None:
 
 
 def guess_layout(values: np.ndarray) -> str:
-    """The layout ``auto`` resolves to for texels [H, W, C] in [0, 1]."""
+    """The layout ``auto`` resolves to for texels [H, W, C] in [0, 1]: float32 values, or
+    integer texels (uint8 / uint16) judged by the float32 values they read as
+    (:func:`wrinklepipe.io.images.texel_values`) without making them."""
     c = values.shape[-1]
     if c == 2:
         return "rg"
-    if c == 4 and np.all(values[..., 0] >= 254.5 / 255) and np.all(values[..., 2] <= 0.5 / 255):
+    if c == 4 and _all(values, 0, 254.5 / 255, True) and _all(values, 2, 0.5 / 255, False):
         return "ag"
-    if c >= 3 and np.all(values[..., 2] <= 0.5 / 255):
+    if c >= 3 and _all(values, 2, 0.5 / 255, False):
         return "rg"
     return "rgb"
+
+
+def _all(values: np.ndarray, channel: int, limit: float, above: bool) -> bool:
+    """``np.all(v >= limit)`` (``above``, else ``v <= limit``) of the float32 values ``v`` of
+    channel ``channel``. Integer texels' values rise with ``q``, so the test holds from (up to)
+    one integer on: that integer is found among the values of every ``q`` and the texels'
+    least (greatest) ``q`` compared with it; the float32 values are never made."""
+    ch = values[..., channel]
+    if values.dtype.kind != "u":
+        return bool(np.all(ch >= limit) if above else np.all(ch <= limit))
+    if ch.size == 0:
+        return True
+    every = texel_values(np.arange(np.iinfo(values.dtype).max + 1, dtype=values.dtype))
+    ok = np.flatnonzero(every >= limit if above else every <= limit)
+    if ok.size == 0:
+        return False
+    return bool(ch.min() >= ok[0]) if above else bool(ch.max() <= ok[-1])
 
 
 def decode_texels(
@@ -173,21 +193,7 @@ def decode_texels(
     v = np.asarray(values, dtype=_F)
     if v.ndim == 2:
         v = v[..., None]
-    c = v.shape[-1]
-    if c not in (2, 3, 4):
-        raise ValueError(
-            f"has {c} channel{'s' if c != 1 else ''}; a normal map needs 2 (RG), 3 (RGB) or 4 "
-            "(RGBA, or DXT5nm with x in alpha)"
-        )
-    lay = guess_layout(v) if layout == "auto" and not signed else layout
-    if lay == "auto":
-        lay = "rg" if c == 2 else "rgb"
-    if lay not in LAYOUTS[1:]:
-        raise ValueError(f"unknown layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
-    if lay == "rgb" and c < 3:
-        raise ValueError(f"layout 'rgb' needs 3 channels, the map has {c}")
-    if lay == "ag" and c < 4:
-        raise ValueError(f"layout 'ag' (DXT5nm) needs 4 channels, the map has {c}")
+    lay = resolved_layout(v, layout, signed)
     h, w = v.shape[:2]
     rows = band_rows(w, BAND_BYTES_PER_TEXEL) if v.ndim == 3 else h
     if out is not None and (out.shape != (h, w, 3) or out.dtype != _F):
@@ -209,6 +215,76 @@ def decode_texels(
         del n
         stats = _merged(stats, st, r0)
     return out, stats
+
+
+def resolved_layout(values: np.ndarray, layout: str, signed: bool = False) -> str:
+    """The layout (``rgb``, ``rg``, ``ag``) :func:`decode_texels` decodes texels ``values``
+    [H, W, C] in when asked for ``layout``: float32 values or integer texels (as they read,
+    :func:`guess_layout`). Raises ValueError for a channel count or layout that cannot be."""
+    c = values.shape[-1]
+    if c not in (2, 3, 4):
+        raise ValueError(
+            f"has {c} channel{'s' if c != 1 else ''}; a normal map needs 2 (RG), 3 (RGB) or 4 "
+            "(RGBA, or DXT5nm with x in alpha)"
+        )
+    lay = guess_layout(values) if layout == "auto" and not signed else layout
+    if lay == "auto":
+        lay = "rg" if c == 2 else "rgb"
+    if lay not in LAYOUTS[1:]:
+        raise ValueError(f"unknown layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
+    if lay == "rgb" and c < 3:
+        raise ValueError(f"layout 'rgb' needs 3 channels, the map has {c}")
+    if lay == "ag" and c < 4:
+        raise ValueError(f"layout 'ag' (DXT5nm) needs 4 channels, the map has {c}")
+    return lay
+
+
+def decode_integers(
+    q: np.ndarray,
+    layout: str,
+    unit_tolerance: float = 0.05,
+    out: np.ndarray | None = None,
+) -> tuple[np.ndarray | None, NormalStats]:
+    """:func:`decode_texels` of integer texels ``q`` [H, W, C] (uint8 / uint16) read as their
+    float32 values (:func:`wrinklepipe.io.images.texel_values`), in the resolved ``layout``,
+    band by band: the float values are one band's, never the whole map's. The vectors go to
+    ``out`` (a float32 ``[H, W, 3]`` array) when given, else nowhere (None: the counts alone);
+    the counts are the whole map's, bit for bit (every step is per texel)."""
+    bits = 8 if q.dtype == np.uint8 else 16
+    h, w = q.shape[:2]
+    rows = band_rows(w, BAND_BYTES_PER_TEXEL + 4 * q.shape[-1])
+    total = NormalStats()
+    for r0 in range(0, h, rows):
+        n, st = _decode(texel_values(q[r0 : r0 + rows]), layout, False, unit_tolerance, bits, False)
+        if out is not None:
+            out[r0 : r0 + rows] = n
+        del n
+        total = _merged(total, st, r0)
+    return out, total
+
+
+class DecodedRows:
+    """Integer texels ``q`` [H, W, C] seen as their unit normals [H, W, 3] (as
+    :func:`decode_texels` makes them, before any green flip), decoded a band of rows at a time
+    where read (``rows[r0:r1]``; ``reads_rows``: :func:`wrinklepipe.normals.convention.
+    detect_convention` reads bands), never whole."""
+
+    reads_rows = True
+    ndim = 3
+    dtype = np.dtype(_F)
+
+    def __init__(self, q: np.ndarray, layout: str) -> None:
+        self.q = q
+        self.layout = layout
+        self.shape = (*q.shape[:2], 3)
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        if not isinstance(rows, slice):
+            raise TypeError("DecodedRows reads a band of rows (a slice)")
+        part = self.q[rows]
+        out = np.empty((*part.shape[:2], 3), _F)
+        decode_integers(part, self.layout, out=out)
+        return out
 
 
 #: Bytes of temporaries per texel while decoding (float32 vectors, lengths, flags).
@@ -310,15 +386,14 @@ def repair_normals(normals: np.ndarray) -> np.ndarray:
     return n / length[..., None]
 
 
-def _read_dds_values(path: Path, max_pixels: int) -> tuple[np.ndarray, str, int]:
+def _read_dds_integers(path: Path, max_pixels: int) -> tuple[np.ndarray, str, int]:
+    """A DDS file's decoded 8-bit texels (its float values are ``q / 255``, as read)."""
     img = dds.read_dds(path, max_pixels)
     fmt = "bc3nm" if img.format == "bc3" else img.format
     rgba = compress.decode_bc(img.levels[0], _pad4(img.width), _pad4(img.height), fmt)
-    rgba = rgba[: img.height, : img.width]
-    values = rgba.astype(_F) * _F(1.0 / 255.0)
-    if img.format == "bc5":
-        values = values[..., :2]
-    return values, f"dds:{img.format}", values.shape[-1]
+    q = rgba[: img.height, : img.width]
+    q = np.ascontiguousarray(q[..., :2] if img.format == "bc5" else q)
+    return q, f"dds:{img.format}", q.shape[-1]
 
 
 def _pad4(x: int) -> int:
@@ -335,36 +410,37 @@ def _put(normals: np.ndarray, out: np.ndarray | None) -> np.ndarray:
     return out
 
 
-def _integers(values: np.ndarray, bits: int) -> np.ndarray:
-    """The integer texels ``q`` of values read as ``q / (2^bits - 1)``, exactly as
-    :func:`decode_texels` re-quantises them (band by band: small temporaries)."""
-    top = _F((1 << bits) - 1)
-    q = np.empty(values.shape, np.uint8 if bits == 8 else np.uint16)
-    rows = band_rows(values.shape[1], 8)
-    for r0 in range(0, values.shape[0], rows):
-        q[r0 : r0 + rows] = np.rint(values[r0 : r0 + rows] * top)
-    return q
-
-
 def read_normal_map(
-    path: str | Path, options: ReadOptions | None = None, out: np.ndarray | None = None
+    path: str | Path,
+    options: ReadOptions | None = None,
+    out: np.ndarray | None = None,
+    held: bool = False,
 ) -> NormalMap:
     """Read a normal map file into unit +Y normals. Raises :class:`InputError` on bad input.
-    ``out``: where to put the normals when it fits the map (:func:`_put`)."""
+    ``out``: where to put the normals when it fits the map (:func:`_put`). ``held``: a map
+    with integers (:attr:`NormalMap.integers`) is returned without its normals (``normals``
+    None: the caller holds the integers, :class:`wrinklepipe.normals.held.HeldMap`), and its
+    float32 values and normals are never made whole (a band at a time where needed)."""
     o = options or ReadOptions()
     path = Path(path)
     if o.convention not in ("auto", "opengl", "directx"):
         raise input_error(path, f"unknown convention {o.convention!r} (auto, opengl, directx)")
     signed = False
     bits = 0
+    # an 8- or 16-bit file's texels as stored (uint8 / uint16: what the map is held as); their
+    # float32 values (texel_values) made a band at a time where needed, or whole for a repair
+    q: np.ndarray | None = None
     if path.suffix.lower() == ".dds":
-        values, source_format, channels = _read_dds_values(path, o.max_pixels)
+        q, source_format, channels = _read_dds_integers(path, o.max_pixels)
         bits = 8
     else:
-        values, info = read_image(path, o.max_pixels)
+        values, info = read_image(path, o.max_pixels, integers=True)
         channels = info.channels
         source_format = info.file_format
         bits = {"uint8": 8, "uint16": 16}.get(info.format, 0)
+        if values.dtype.kind == "u":
+            q = values
+            del values
         if info.format in ("half", "float", "double"):
             finite = values[np.isfinite(values)]
             signed = bool(finite.size and finite.min() < -1e-3)
@@ -374,24 +450,36 @@ def read_normal_map(
             f"has {channels} channel{'s' if channels != 1 else ''}; a normal map needs 2 (RG), "
             "3 (RGB) or 4 (RGBA, or DXT5nm with x in alpha)",
         )
-    fits = out is not None and out.shape == (*values.shape[:2], 3) and out.dtype == _F
+    if q is not None and o.repair:  # repaired as float32 normals: no integers kept
+        values = texel_values(q)
+        q = None
+    shape = q.shape if q is not None else values.shape
+    fits = out is not None and out.shape == (*shape[:2], 3) and out.dtype == _F
     out = out if fits else None
     try:
-        normals, stats = decode_texels(
-            values, o.layout, signed, o.unit_tolerance, bits, keep_short=o.repair, out=out
-        )
+        if q is None:
+            normals, stats = decode_texels(
+                values, o.layout, signed, o.unit_tolerance, bits, keep_short=o.repair, out=out
+            )
+        else:  # banded: the counts alone when held, else the normals too
+            lay = resolved_layout(q, o.layout)
+            dest = None if held else out if out is not None else np.empty((*shape[:2], 3), _F)
+            normals, stats = decode_integers(q, lay, o.unit_tolerance, out=dest)
     except ValueError as exc:
         raise input_error(path, str(exc)) from None
-    layout = o.layout if o.layout != "auto" else (guess_layout(values) if not signed else "rgb")
+    texels = q if q is not None else values
+    layout = o.layout if o.layout != "auto" else (guess_layout(texels) if not signed else "rgb")
     if signed and channels == 2:
         layout = "rg"
     notes: list[str] = []
     too_short = stats.short > MAX_SHORT_FRACTION * stats.texels
     # integer texels only: a float image holds signed or encoded vectors, which its values
     # alone cannot always tell (the reader's rule above), so their lengths say nothing sure
-    what = looks_like(values, layout) if bits else ""
-    integers = _integers(values, bits) if bits and not o.repair else None
-    del values  # the texels as read: not needed past this point (a map's worth of float32)
+    what = looks_like(texels, layout) if bits else ""
+    integers = q
+    del texels
+    if q is None:
+        del values  # the texels as read: not needed past this point (a map's worth of float32)
     if what and not (too_short and stats.short == stats.texels):
         # a colour or grey image, or no tangent-space map: refused, whatever repair says
         hint = f"; {o.refusal_hint}" if o.refusal_hint else ""
@@ -432,7 +520,10 @@ def read_normal_map(
         notes.append(f"{stats.non_unit} texels were not unit length (renormalised)")
     if stats.z_negative and not o.repair:
         notes.append(f"{stats.z_negative} texels point below the surface (z < 0)")
-    detection = detect_convention(normals) if (o.detect or o.convention == "auto") else None
+    # a held map's normals decoded a band at a time for the curl test (the same rows)
+    seen = normals if normals is not None else DecodedRows(integers, layout)  # type: ignore[arg-type]
+    detection = detect_convention(seen) if (o.detect or o.convention == "auto") else None
+    del seen
     conv = o.convention
     if conv == "auto":
         conv = (
@@ -447,12 +538,13 @@ def read_normal_map(
             f"convention given as {conv} but the map looks like {detection.convention} "
             f"(confidence {detection.confidence:.2f})"
         )
-    if conv == "directx":
-        normals = flip_green(normals)
-    h, w = normals.shape[:2]
-    normals = _put(normals, out)
+    h, w = shape[:2]
+    if normals is not None:
+        if conv == "directx":
+            normals = flip_green(normals)
+        normals = np.ascontiguousarray(_put(normals, out), dtype=_F)
     return NormalMap(
-        normals=np.ascontiguousarray(normals, dtype=_F),
+        normals=normals,  # type: ignore[arg-type]
         stats=stats,
         path=str(path),
         width=w,

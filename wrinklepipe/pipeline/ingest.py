@@ -122,7 +122,7 @@ def _read_normals(
     read, its normals held as the returned value."""
     hint = "a state's colour map goes in color = FILE" if role.startswith("state") else ""
     o = ReadOptions(convention=convention, refusal_hint=hint)
-    nm = read_normal_map(path, o)
+    nm = read_normal_map(path, o, held=True)  # integers: never made whole as float32
     notes = [f"{path.name}: {nm.source_format}, convention {nm.convention}"]
     notes += [f"{path.name}: {n}" for n in nm.notes if "convention" not in n]
     if stats is not None:
@@ -131,10 +131,12 @@ def _read_normals(
             "stats": nm.stats.to_json(),
             "tolerance": o.unit_tolerance,
         }
-    got: np.ndarray | HeldMap = np.asarray(nm.normals, np.float32)
+    got: np.ndarray | HeldMap
     if nm.integers is not None:  # held as the file's integers (6 bytes a texel, not 12)
         got = HeldMap(nm.integers, nm.layout, nm.convention == "directx")
         nm = replace(nm, normals=NormalStack([got], single=True), integers=None)
+    else:
+        got = np.asarray(nm.normals, np.float32)
     if read is not None:
         read[path] = nm
     return got, notes
