@@ -410,6 +410,46 @@ def _put(normals: np.ndarray, out: np.ndarray | None) -> np.ndarray:
     return out
 
 
+def _read_texels(path: Path, max_pixels: int) -> tuple[np.ndarray, str, int, int, bool]:
+    """A normal map file's texels ``[H, W, C]`` (an 8- or 16-bit file's and a DDS file's as
+    integers, a float file's as float32), its format, channels, bits (0: float) and whether
+    its float values are signed (some below -1e-3)."""
+    if path.suffix.lower() == ".dds":
+        q, source_format, channels = _read_dds_integers(path, max_pixels)
+        return q, source_format, channels, 8, False
+    texels, info = read_image(path, max_pixels, integers=True)
+    signed = False
+    if info.format in ("half", "float", "double"):
+        finite = texels[np.isfinite(texels)]
+        signed = bool(finite.size and finite.min() < -1e-3)
+        del finite
+    bits = {"uint8": 8, "uint16": 16}.get(info.format, 0)
+    return texels, str(info.file_format), int(info.channels), bits, signed
+
+
+def _texel_problems(stats: NormalStats, too_short: bool) -> str:
+    """Why a map's texels stop the read (NaN, zero-length, too many short texels)."""
+    where = []
+    if stats.nan:
+        where.append(
+            f"{plural(stats.nan, 'NaN texel')}, first at row {stats.first_nan[0]}, "
+            f"col {stats.first_nan[1]}"
+        )
+    if stats.zero:
+        where.append(
+            f"{plural(stats.zero, 'zero-length texel')}, first at row "
+            f"{stats.first_zero[0]}, col {stats.first_zero[1]}"
+        )
+    if too_short:
+        flat = " (a flat mid-grey image is no normal map: flat is (128, 128, 255))"
+        where.append(
+            f"{stats.short} of {plural(stats.texels, 'texel')} too short to be normals "
+            f"(length < {MIN_LENGTH}), first at row {stats.first_short[0]}, col "
+            f"{stats.first_short[1]}" + (flat if stats.short == stats.texels else "")
+        )
+    return "; ".join(where) + "; fix the map (encode-normals --repair replaces them with (0, 0, 1))"
+
+
 def read_normal_map(
     path: str | Path,
     options: ReadOptions | None = None,
@@ -425,25 +465,13 @@ def read_normal_map(
     path = Path(path)
     if o.convention not in ("auto", "opengl", "directx"):
         raise input_error(path, f"unknown convention {o.convention!r} (auto, opengl, directx)")
-    signed = False
-    bits = 0
+    texels, source_format, channels, bits, signed = _read_texels(path, o.max_pixels)
     # an 8- or 16-bit file's texels as stored (uint8 / uint16: what the map is held as); their
     # float32 values (texel_values) made a band at a time where needed, or whole for a repair
-    q: np.ndarray | None = None
-    if path.suffix.lower() == ".dds":
-        q, source_format, channels = _read_dds_integers(path, o.max_pixels)
-        bits = 8
-    else:
-        values, info = read_image(path, o.max_pixels, integers=True)
-        channels = info.channels
-        source_format = info.file_format
-        bits = {"uint8": 8, "uint16": 16}.get(info.format, 0)
-        if values.dtype.kind == "u":
-            q = values
-            del values
-        if info.format in ("half", "float", "double"):
-            finite = values[np.isfinite(values)]
-            signed = bool(finite.size and finite.min() < -1e-3)
+    q = texels if texels.dtype.kind == "u" else None
+    if q is None:
+        values = texels
+    del texels
     if channels not in (2, 3, 4):
         raise input_error(
             path,
@@ -486,29 +514,7 @@ def read_normal_map(
         raise input_error(path, f"is not a tangent-space normal map: it looks like {what}{hint}")
     if stats.nan or stats.zero or too_short:
         if not o.repair:
-            where = []
-            if stats.nan:
-                where.append(
-                    f"{plural(stats.nan, 'NaN texel')}, first at row {stats.first_nan[0]}, "
-                    f"col {stats.first_nan[1]}"
-                )
-            if stats.zero:
-                where.append(
-                    f"{plural(stats.zero, 'zero-length texel')}, first at row "
-                    f"{stats.first_zero[0]}, col {stats.first_zero[1]}"
-                )
-            if too_short:
-                flat = " (a flat mid-grey image is no normal map: flat is (128, 128, 255))"
-                where.append(
-                    f"{stats.short} of {plural(stats.texels, 'texel')} too short to be normals "
-                    f"(length < {MIN_LENGTH}), first at row {stats.first_short[0]}, col "
-                    f"{stats.first_short[1]}" + (flat if stats.short == stats.texels else "")
-                )
-            raise input_error(
-                path,
-                "; ".join(where) + "; fix the map (encode-normals --repair replaces them with "
-                "(0, 0, 1))",
-            )
+            raise input_error(path, _texel_problems(stats, too_short))
     if o.repair and (stats.nan or stats.zero or stats.short or stats.z_negative):
         normals = repair_normals(normals)
         stats.repaired = True
