@@ -259,3 +259,63 @@ def test_the_reader_answers_as_before(tmp_path, monkeypatch, bits, kind, convent
     assert np.array_equal(plain.normals.view(np.uint32), want.view(np.uint32))
     one = NormalStack([HeldMap(held.integers, held.layout, held.convention == "directx")], True)
     assert np.array_equal(np.asarray(one).view(np.uint32), plain.normals.view(np.uint32))
+
+
+def _detect_whole(n: np.ndarray, mask: np.ndarray | None) -> tuple[float, float, float, int]:
+    """The curl test's numbers as first written, on the whole map at once (every difference,
+    jump and kept term gathered whole): (curl_opengl, curl_directx, signal, used)."""
+    a, b, valid, jump = nc._curl_terms(n, mask)
+    jumps = jump[valid]
+    if jumps.size == 0:
+        return 0.0, 0.0, 0.0, 0
+    keep = jumps <= max(float(np.percentile(jumps, 99.0)) * 4.0, 1e-6)
+    av, bv = a[valid][keep], b[valid][keep]
+    if av.size == 0:
+        return 0.0, 0.0, 0.0, 0
+    return (
+        float(np.mean(np.abs(av + bv), dtype=np.float64)),
+        float(np.mean(np.abs(av - bv), dtype=np.float64)),
+        float(np.mean(np.abs(av) + np.abs(bv), dtype=np.float64)) * 0.5,
+        int(av.size),
+    )
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    h=st.integers(3, 60),
+    w=st.integers(3, 60),
+    rows=st.integers(1, 9),
+    kind=st.sampled_from(["opengl", "directx", "seams", "masked", "hostile", "noise", "flat"]),
+)
+def test_convention_numbers_are_the_whole_maps(seed, h, w, rows, kind):
+    """Banded, with the jumps made for the percentile alone and the kept terms gathered band by
+    band: the same seam limit, texels and means, to the last bit, as gathering all at once."""
+    rng = np.random.default_rng(seed)
+    f = rng.normal(0.0, 1.0, (h + 2, w + 2)).cumsum(0).cumsum(1) * 0.01
+    px, py = np.diff(f, axis=1)[1:-1, :-1], np.diff(f, axis=0)[:-1, 1:-1]
+    if kind != "directx":
+        py = -py
+    n = np.stack([-px, -py, np.ones_like(px)], -1)
+    if kind == "noise":
+        n = rng.normal(0.0, 0.3, (h, w, 3)) + [0, 0, 1]
+    if kind == "flat":
+        n = np.zeros((h, w, 3)) + [0, 0, 1]
+    n = (n / np.linalg.norm(n, axis=-1, keepdims=True)).astype(np.float32)
+    mask = rng.random((h, w)) > 0.2 if kind == "masked" else None
+    if kind == "seams":
+        n[:, w // 2 :] = n[:, w // 2 :, [1, 0, 2]]
+    if kind == "hostile":
+        n[rng.random((h, w)) < 0.05] = np.nan
+        n[rng.random((h, w)) < 0.2, 2] = 0.1
+    gl, dx, signal, used = _detect_whole(n, mask)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(nc, "band_rows", lambda width, per: rows)
+        got = detect_convention(n, mask)
+    assert got.texels_used == used
+    assert (got.curl_opengl, got.curl_directx) == (gl, dx)
+    if used:
+        hi, lo = max(gl, dx), min(gl, dx)
+        assert got.confidence == (0.0 if hi <= 0 else 1.0 - lo / hi)
+        flat = got.reason == "map is flat: no evidence"
+        assert flat == (signal < nc.MIN_SIGNAL)
