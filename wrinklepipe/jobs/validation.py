@@ -48,7 +48,8 @@ def validate_output(
     the whole face (``fidelity``: the validator's ``fidelity_by_tile``).
     """
     if source is not None and manifest_path is not None:
-        inp = attach_source(load_input(folder, LoadOptions()), source, manifest_path)
+        shipped = load_input(folder, LoadOptions(shipped_maps=False))  # the source's replace them
+        inp = attach_source(shipped, source, manifest_path)
     else:
         src = str(manifest_path) if manifest_path is not None else None
         inp = load_input(folder, LoadOptions(source=src))

@@ -316,15 +316,21 @@ def mapping_version(meta: WrinkleMeta) -> int:
     return codec.mapping(int(meta.mapping)).version
 
 
-def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
-    """Decode a package into float maps and masks (what validation and rendering work on)."""
+def asset_from_package(pkg: WrinklePackage, maps: bool = True) -> WrinkleAsset:
+    """Decode a package into float maps and masks (what validation and rendering work on).
+    ``maps=False``: the normal maps are not decoded (base ``[0, 0, 3]``, states ``[K, 0, 0,
+    3]``): for a caller that replaces them with the source's (the validator given a source:
+    at 8192² the decode and its resample take 1.3 GB and seconds)."""
     meta = pkg.meta
     enc, scale = meta.encoding, float(meta.scale)
     version = mapping_version(meta)
-    base = decode_base(pkg.texture(pkg.base_name).pixels)
+    if not maps:
+        base = np.zeros((0, 0, 3), np.float32)
+    else:
+        base = decode_base(pkg.texture(pkg.base_name).pixels)
     states = []
     cache: dict[tuple[int, ...], np.ndarray] = {}
-    for s in meta.states:
+    for s in meta.states if maps else ():
         stored = pkg.texture(s.texture).pixels
         b = _base_at(base, stored.shape[:2], cache)
         states.append(decode_state(b, stored, enc, scale, version))
@@ -334,7 +340,9 @@ def asset_from_package(pkg: WrinklePackage) -> WrinkleAsset:
     return WrinkleAsset(
         name=pkg.name,
         base=base,
-        states=np.stack(states) if states else np.zeros((0,) + base.shape, np.float32),
+        states=np.stack(states)
+        if states
+        else np.zeros((0 if maps else len(meta.states),) + base.shape, np.float32),
         state_names=tuple(meta.state_names),
         masks=masks,
         regions=tuple(Region(r.name, r.side, r.states) for r in meta.regions),

@@ -62,11 +62,14 @@ from wrinklepipe.validate.ship import ShipOptions, ship_asset
 class LoadOptions:
     """``textures``: ``"auto"`` uses compressed copies when a folder has them, ``"png"`` never,
     ``"compressed"`` requires them. ``source``: a manifest whose maps are the source to compare
-    the shipped textures with (enables the shipping-error rules on converted outputs)."""
+    the shipped textures with (enables the shipping-error rules on converted outputs).
+    ``shipped_maps``: decode the shipped normal maps into the input's asset; False when a
+    source's maps replace them (:func:`attach_source`; implied by ``source``)."""
 
     textures: str = "auto"
     source: str | None = None
     max_gltf_bytes: int = 512 * 1024 * 1024
+    shipped_maps: bool = True
 
 
 # ------------------------------------------------------------------------------------------------
@@ -76,6 +79,8 @@ class LoadOptions:
 def load_input(path: str | Path, options: LoadOptions | None = None) -> ValidationInput:
     """Load PATH (see the module docstring) for validation."""
     o = options or LoadOptions()
+    if o.source:  # the source's maps replace the shipped ones: not decoded for nothing
+        o = replace(o, shipped_maps=False)
     text = str(path)
     if text == "demo" or text.startswith("demo:") or text.startswith("demo@"):
         inp = demo_input(text)
@@ -160,7 +165,7 @@ def _from_written(p: Path, fmt: Format, o: LoadOptions) -> ValidationInput:
     folder = p.parent
     files = {t.name: str(folder / "textures" / f"{t.name}.png") for t in pkg.textures}
     files = {k: v for k, v in files.items() if Path(v).exists()}
-    inp = input_from_package(pkg, str(p), kind, files)
+    inp = input_from_package(pkg, str(p), kind, files, o.shipped_maps)
     if kind == "usd":
         _usd_pointers(inp, p)
     else:

@@ -67,14 +67,16 @@ def _fmt_for(pixels: np.ndarray) -> str:
 
 
 def input_from_package(
-    pkg: Any, path: str, kind: str, file_of: dict[str, str] | None = None
+    pkg: Any, path: str, kind: str, file_of: dict[str, str] | None = None, maps: bool = True
 ) -> ValidationInput:
     """A :class:`ValidationInput` from a :class:`wrinklepipe.package.WrinklePackage`; a UDIM
     package's has one input per tile (:func:`wrinklepipe.udim.tile_package`) and describes
-    the whole (its textures every tile's, its mesh the whole mesh)."""
+    the whole (its textures every tile's, its mesh the whole mesh). ``maps=False``: the
+    asset's normal maps are not decoded (:func:`asset_from_package`; a source replaces them)."""
     if pkg.tiles:
         tiles = {
-            t: input_from_package(udim.tile_package(pkg, t), path, kind, file_of) for t in pkg.tiles
+            t: input_from_package(udim.tile_package(pkg, t), path, kind, file_of, maps)
+            for t in pkg.tiles
         }
         for t, one in tiles.items():
             one.extra["tile"] = t
@@ -85,7 +87,7 @@ def input_from_package(
             textures=[x for one in tiles.values() for x in one.textures],
             tiles=tiles,
         )
-    asset = guard_reader(lambda: asset_from_package(pkg), Path(path), "the wrinkle data")
+    asset = guard_reader(lambda: asset_from_package(pkg, maps), Path(path), "the wrinkle data")
     meta = pkg.meta
     version = guard_reader(lambda: mapping_version(meta), Path(path), "the mapping version")
     state_of = {s.texture: s.name for s in meta.states}
