@@ -184,7 +184,7 @@ def test_banded_counts_and_normals_are_the_whole_maps(monkeypatch, seed, kind, b
     assert np.array_equal(out.view(np.uint32), want.view(np.uint32))
     none, ns = nr.decode_integers(q, lay, 0.05)
     assert none is None and ns == ws
-    rows_of = nr.DecodedRows(q, lay)
+    rows_of = NormalStack([HeldMap(q, lay, False)], single=True)  # as detection reads it
     r0, r1 = sorted(int(x) for x in rng.integers(0, q.shape[0] + 1, 2))
     assert np.array_equal(rows_of[r0:r1].view(np.uint32), want[r0:r1].view(np.uint32))
     assert detect_convention(rows_of) == detect_convention(want)

@@ -33,6 +33,7 @@ from wrinklepipe.io.images import DEFAULT_MAX_PIXELS, read_image, texel_values
 from wrinklepipe.names import plural
 from wrinklepipe.normals import compress, dds
 from wrinklepipe.normals.convention import ConventionReport, detect_convention, flip_green
+from wrinklepipe.normals.held import HeldMap, NormalStack
 from wrinklepipe.normals.identify import looks_like
 from wrinklepipe.workset import band_rows
 
@@ -261,30 +262,6 @@ def decode_integers(
         del n
         total = _merged(total, st, r0)
     return out, total
-
-
-class DecodedRows:
-    """Integer texels ``q`` [H, W, C] seen as their unit normals [H, W, 3] (as
-    :func:`decode_texels` makes them, before any green flip), decoded a band of rows at a time
-    where read (``rows[r0:r1]``; ``reads_rows``: :func:`wrinklepipe.normals.convention.
-    detect_convention` reads bands), never whole."""
-
-    reads_rows = True
-    ndim = 3
-    dtype = np.dtype(_F)
-
-    def __init__(self, q: np.ndarray, layout: str) -> None:
-        self.q = q
-        self.layout = layout
-        self.shape = (*q.shape[:2], 3)
-
-    def __getitem__(self, rows: slice) -> np.ndarray:
-        if not isinstance(rows, slice):
-            raise TypeError("DecodedRows reads a band of rows (a slice)")
-        part = self.q[rows]
-        out = np.empty((*part.shape[:2], 3), _F)
-        decode_integers(part, self.layout, out=out)
-        return out
 
 
 #: Bytes of temporaries per texel while decoding (float32 vectors, lengths, flags).
@@ -526,8 +503,11 @@ def read_normal_map(
         notes.append(f"{stats.non_unit} texels were not unit length (renormalised)")
     if stats.z_negative and not o.repair:
         notes.append(f"{stats.z_negative} texels point below the surface (z < 0)")
-    # a held map's normals decoded a band at a time for the curl test (the same rows)
-    seen = normals if normals is not None else DecodedRows(integers, layout)  # type: ignore[arg-type]
+    # a held map's normals decoded a band of rows at a time for the curl test (the same bits;
+    # green unflipped, as the reader's normals are here)
+    seen = normals
+    if seen is None:
+        seen = NormalStack([HeldMap(integers, layout, False)], single=True)  # type: ignore[arg-type]
     detection = detect_convention(seen) if (o.detect or o.convention == "auto") else None
     del seen
     conv = o.convention
