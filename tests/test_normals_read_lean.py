@@ -319,3 +319,26 @@ def test_convention_numbers_are_the_whole_maps(seed, h, w, rows, kind):
         assert got.confidence == (0.0 if hi <= 0 else 1.0 - lo / hi)
         flat = got.reason == "map is flat: no evidence"
         assert flat == (signal < nc.MIN_SIGNAL)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    a=st.floats(-8, 8, width=32, allow_subnormal=True),
+    b=st.floats(-8, 8, width=32, allow_subnormal=True),
+)
+def test_abs_sum_is_the_larger_of_sum_and_difference(a, b):
+    """The detection's signal |a| + |b| made as max(|a + b|, |a - b|) in float32: the same
+    bits (round to nearest is symmetric in sign, and monotonic)."""
+    x, y = np.float32(a), np.float32(b)
+    want = np.abs(x) + np.abs(y)
+    got = np.maximum(np.abs(x + y), np.abs(x - y))
+    assert want.view(np.uint32) == got.view(np.uint32) or (want == 0 and got == 0)
+
+
+def test_abs_sum_identity_on_many_slopes():
+    rng = np.random.default_rng(0)
+    a = (rng.standard_normal(1 << 20) * 10.0 ** rng.integers(-8, 1, 1 << 20)).astype(np.float32)
+    b = (rng.standard_normal(1 << 20) * 10.0 ** rng.integers(-8, 1, 1 << 20)).astype(np.float32)
+    want = np.abs(a) + np.abs(b)
+    got = np.maximum(np.abs(a + b), np.abs(a - b))
+    assert np.array_equal(want.view(np.uint32), got.view(np.uint32))

@@ -12,6 +12,7 @@ out so UV-island edges of baked maps do not drown the signal.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,42 +82,35 @@ def detect_convention(normals: np.ndarray, mask: np.ndarray | None = None) -> Co
     # are one band's (about 50 bytes a texel for the whole map: 3.4 GB at 8192²)
     H = n.shape[0]
     rows = band_rows(n.shape[1], DETECT_BYTES_PER_TEXEL)
-    a_: list[np.ndarray] = []
-    b_: list[np.ndarray] = []
-    for r0 in range(1, H - 1, rows):
-        r1 = min(H - 1, r0 + rows)
-        a, b, valid, jump = _curl_terms(
-            n[r0 - 1 : r1 + 1], None if m is None else m[r0 - 1 : r1 + 1]
-        )
-        a_.append(a[valid])
-        b_.append(b[valid])
-        del a, b, valid, jump
-    # seams: a slope jump between neighbours far beyond the local texture is an island edge;
-    # the jumps (max(|a|, |b|) of a usable texel) are made for the percentile and let go, and
-    # each band's kept differences gathered as its own let go: 12 bytes a usable texel at most,
-    # the same values and the same arrays summed as gathering every term whole
-    limit = _seam_limit(a_, b_)
-    keeps = [np.maximum(np.abs(a), np.abs(b)) <= limit for a, b in zip(a_, b_)]
-    used = sum(int(np.count_nonzero(k)) for k in keeps)
+
+    def terms() -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """The differences ``a``, ``b`` at the usable texels of each band, in the map's order."""
+        for r0 in range(1, H - 1, rows):
+            r1 = min(H - 1, r0 + rows)
+            a, b, valid, _ = _curl_terms(
+                n[r0 - 1 : r1 + 1], None if m is None else m[r0 - 1 : r1 + 1]
+            )
+            yield a[valid], b[valid]
+
+    # two passes over the bands, so that at most 8 bytes a usable texel are held: the seam
+    # jumps (max(|a|, |b|)) for their percentile, then the kept terms |a + b| and |a - b|
+    # (|a| + |b| is the larger of the two, to the last bit: rounding is symmetric), the
+    # same values in the same order, summed as the whole map's
+    limit, used = _seam_limit(terms(), (H - 2) * (n.shape[1] - 2))
     if used == 0:
         return ConventionReport("undetermined", 0.0, 0.0, 0.0, 0, "no usable texels")
-    av, bv = np.empty(used, _F), np.empty(used, _F)
+    gl, dx = np.empty(used, _F), np.empty(used, _F)
     o = 0
-    for k in keeps:
-        a, b = a_.pop(0), b_.pop(0)
-        got = int(np.count_nonzero(k))
-        av[o : o + got], bv[o : o + got] = a[k], b[k]
-        o += got
-    del keeps
-    s = np.add(av, bv)
-    curl_gl = float(np.mean(np.abs(s, out=s), dtype=np.float64))
-    np.subtract(av, bv, out=s)
-    curl_dx = float(np.mean(np.abs(s, out=s), dtype=np.float64))
-    del s
-    np.abs(av, out=av)
-    av += np.abs(bv, out=bv)
-    signal = float(np.mean(av, dtype=np.float64)) * 0.5
-    del av, bv
+    for a, b in terms():
+        k = np.maximum(np.abs(a), np.abs(b)) <= limit
+        a, b = a[k], b[k]
+        np.abs(np.add(a, b, out=gl[o : o + a.size]), out=gl[o : o + a.size])
+        np.abs(np.subtract(a, b, out=dx[o : o + a.size]), out=dx[o : o + a.size])
+        o += a.size
+    curl_gl = float(np.mean(gl, dtype=np.float64))
+    curl_dx = float(np.mean(dx, dtype=np.float64))
+    signal = float(np.mean(np.maximum(gl, dx, out=gl), dtype=np.float64)) * 0.5
+    del gl, dx
     hi, lo = max(curl_gl, curl_dx), min(curl_gl, curl_dx)
     confidence = 0.0 if hi <= 0 else 1.0 - lo / hi
     if signal < MIN_SIGNAL:
@@ -144,20 +138,21 @@ def detect_convention(normals: np.ndarray, mask: np.ndarray | None = None) -> Co
     )
 
 
-def _seam_limit(a_: list[np.ndarray], b_: list[np.ndarray]) -> float:
-    """The slope jump above which a texel sits on a seam: 4 x the 99th percentile of the jumps
-    ``max(|a|, |b|)`` of every usable texel (bands ``a_``, ``b_``), at least 1e-6; +inf when
-    there are none (nothing is left out, nothing is used)."""
-    total = sum(a.size for a in a_)
-    if total == 0:
-        return float("inf")
-    jumps = np.empty(total, _F)
+def _seam_limit(terms: Iterator[tuple[np.ndarray, np.ndarray]], most: int) -> tuple[float, int]:
+    """The slope jump above which a texel sits on a seam, 4 x the 99th percentile of the jumps
+    ``max(|a|, |b|)`` of every usable texel (at least 1e-6), and how many texels it keeps; the
+    bands' ``terms`` hold at most ``most`` texels. (inf, 0) when none is usable."""
+    jumps = np.empty(most, _F)  # pages never written are never held
     o = 0
-    for a, b in zip(a_, b_):
+    for a, b in terms:
         np.maximum(np.abs(a), np.abs(b), out=jumps[o : o + a.size])
         o += a.size
+    if o == 0:
+        return float("inf"), 0
+    j = jumps[:o]
     # partitioned in place: the same order statistics as a partitioned copy, no second array
-    return max(float(np.percentile(jumps, 99.0, overwrite_input=True)) * 4.0, 1e-6)
+    limit = max(float(np.percentile(j, 99.0, overwrite_input=True)) * 4.0, 1e-6)
+    return limit, int(np.count_nonzero(j <= limit))
 
 
 #: Bytes of temporaries per texel of a band while detecting the convention.
