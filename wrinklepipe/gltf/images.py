@@ -32,6 +32,7 @@ from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.write import mime_type
 from wrinklepipe.io.images import read_image
 from wrinklepipe.io.png import png_pixels
+from wrinklepipe.normals.held import HeldMap
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
 
 BASISU = "KHR_texture_basisu"
@@ -154,17 +155,22 @@ def texture_texels(doc: Document, texture: int) -> np.ndarray:
 
 
 def texture_normals(
-    doc: Document, texture: int, key: str, stats: dict[str, Any] | None = None
-) -> tuple[np.ndarray, list[str]]:
+    doc: Document,
+    texture: int,
+    key: str,
+    stats: dict[str, Any] | None = None,
+    held: bool = False,
+) -> tuple[np.ndarray | HeldMap, list[str]]:
     """Texture ``texture`` as unit normals ``[H, W, 3]`` (+Y: glTF normal textures are OpenGL
     tangent space by the spec) and notes on what was read. ``stats``: filled with the reader's
     counts of problem texels (off unit length, z < 0: ``file``, ``stats``, ``tolerance``), as
-    ingest records a manifest's own map files."""
+    ingest records a manifest's own map files. ``held``: an 8- or 16-bit image's normals as its
+    integers (:class:`wrinklepipe.normals.held.HeldMap`, decoded where read), never made whole."""
     image = texture_source(doc, texture)
     data, suffix = _decodable(doc, image)
     options = ReadOptions(convention="opengl", detect=False, max_pixels=doc.options.max_pixels)
     try:
-        nm = _with_file(data, suffix, lambda p: read_normal_map(p, options))
+        nm = _with_file(data, suffix, lambda p: read_normal_map(p, options, held=held))
     except InputError as exc:
         raise _renamed(exc, doc, key) from None
     img = doc.array("images")[image]
@@ -178,4 +184,6 @@ def texture_normals(
                 "tolerance": options.unit_tolerance,
             }
         )
+    if nm.integers is not None and held:
+        return HeldMap(nm.integers, nm.layout, False), notes  # read as OpenGL: never flipped
     return np.asarray(nm.normals, np.float32), notes

@@ -165,7 +165,7 @@ def _load_mesh(path: Path) -> Mesh:
 
 
 def read_maps(
-    manifest: Any, base: np.ndarray | None = None, stats: dict[str, Any] | None = None
+    manifest: Any, base: np.ndarray | HeldMap | None = None, stats: dict[str, Any] | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """The manifest's maps as read: base ``[H, W, 3]``, wrinkled-face states ``[K, H, W, 3]``
     (unit normals, +Y; wrinkle-only maps get the base added in PD space), masks ``[R, h, w]``,
@@ -174,7 +174,9 @@ def read_maps(
     problem-texel counts per map file."""
     notes: list[str] = []
     read: dict[Path, NormalMap] = {}
-    base_part: np.ndarray | HeldMap = np.asarray(base, np.float32) if base is not None else None
+    base_part: np.ndarray | HeldMap | None = None
+    if base is not None:  # the material's normalTexture: held as its integers when it has them
+        base_part = base if isinstance(base, HeldMap) else np.asarray(base, np.float32)
     if base is None:
         base_part, n = _read_normals(manifest.base, manifest.convention, stats, "base", read)
         notes += n
@@ -248,7 +250,7 @@ class SourceDocument:
     doc: Document
     target: WrinkleTarget
     mesh: Mesh
-    base: np.ndarray | None
+    base: np.ndarray | HeldMap | None
     notes: list[str]
     #: the reader's problem-texel counts of the material's normalTexture (when it is the base)
     base_stats: dict[str, Any] | None = None
@@ -270,7 +272,7 @@ def read_source_document(manifest: Any) -> SourceDocument:
         base_texture = int(info["index"])
         key = f"/materials/{sel.materials[0]}/normalTexture"
         base_stats = {}
-        base, n = texture_normals(doc, base_texture, key, base_stats)
+        base, n = texture_normals(doc, base_texture, key, base_stats, held=True)
         notes += n
     for part in add_wrinkle_attributes(doc, sel.refs):
         where = f"{doc.mesh_name(part.ref.mesh)}/{part.ref.primitive}"
