@@ -61,7 +61,7 @@ class Texture:
     fmt: str
     width: int
     height: int
-    data: bytes
+    data: bytes | np.ndarray  # the texels' bytes (or a flat uint8 view of them)
     srgb: bool = False
     file: str = ""
     pointer: str = ""
