@@ -309,3 +309,20 @@ def test_footprint_is_kept_as_flags_and_shared_whatever_the_index_dtype():
     # texel centres (x + 0.5) / 64 inside [0, 0.5]: the 32 x 32 texels of that quarter
     assert plain[:32, :32].all() and plain.sum() == 32 * 32
     assert np.array_equal(plain, triangle_ids(uvs, idx, 64) >= 0)
+
+
+def test_forget_rows_drops_the_row_stores_only():
+    """After ``forget_rows`` no row is found (a miss computes it), and the memo's entries stay."""
+    keys = np.arange(24, dtype=np.uint8).reshape(4, 6)
+    hashes = np.array([3, 1, 4, 2], np.uint64)
+    values = keys[:, :2].astype(np.float32) * 2
+    with reuse.reuse() as memo:
+        reuse.remember_rows("rows", hashes, keys, values)
+        found, got = reuse.known_rows("rows", hashes, keys)
+        assert found.all() and np.array_equal(got, values)
+        memo.put(("k",), np.ones(3))
+        reuse.forget_rows()
+        found, got = reuse.known_rows("rows", hashes, keys)
+        assert not found.any() and got is None
+        assert memo.get(("k",))[0]
+    reuse.forget_rows()  # outside a run: nothing to drop

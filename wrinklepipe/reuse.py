@@ -314,6 +314,16 @@ def remember_rows(name: str, hashes: np.ndarray, keys: np.ndarray, values: np.nd
         memo.rows[name] = Rows(h, np.ascontiguousarray(k), np.ascontiguousarray(v))
 
 
+def forget_rows() -> None:
+    """Drop this run's row stores (:func:`remember_rows`): for a run past the last step that
+    asks them (``convert``'s block encodes, before its validation reads the folder back: up to
+    a quarter of the memo per store). Nothing changes a result: a row not found is computed."""
+    memo = _MEMO.get()
+    if memo is not None:
+        with memo.lock:
+            memo.rows.clear()
+
+
 def reused(fn: F) -> F:
     """Decorate a pure function of arrays / bytes / plain values (see the module doc)."""
     name = f"{fn.__module__}.{fn.__qualname__}"

@@ -57,7 +57,7 @@ from wrinklepipe.pipeline.ingest_tiles import ingest_tiles
 from wrinklepipe.pipeline.package import PackOptions, package_from_asset
 from wrinklepipe.pipeline.prepare import prepare_mesh, run_stages
 from wrinklepipe.pipeline.tiles import run_tile_stages
-from wrinklepipe.reuse import reuse
+from wrinklepipe.reuse import forget_rows, reuse
 from wrinklepipe.sources.manifest import load_manifest
 from wrinklepipe.sources.manifest_tiles import tile_notes
 
@@ -218,6 +218,7 @@ def convert(
                     tmp, files, pkg, opt.usd_format, document, got.usd, output, opt.png_level
                 )
             del files  # written: the validator reads the folder back (no second copy held)
+            forget_rows()  # the block encoder's row stores: validation encodes no block
             validation: dict[str, Any] = {"status": "skipped", "reason": "--no-validate"}
             if opt.validate:
                 with console.status("validating"):
