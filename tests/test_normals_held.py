@@ -12,19 +12,11 @@ import OpenImageIO as oiio
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_normals_read_lean import _write  # the 8/16-bit file writer
 
 from wrinklepipe.normals import held
 from wrinklepipe.normals.held import HeldMap, NormalStack
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
-
-
-def _write(path: Path, q: np.ndarray) -> Path:
-    fmt = oiio.UINT8 if q.dtype == np.uint8 else oiio.UINT16
-    out = oiio.ImageOutput.create(str(path))
-    out.open(str(path), oiio.ImageSpec(q.shape[1], q.shape[0], q.shape[2], fmt))
-    out.write_image(np.ascontiguousarray(q))
-    out.close()
-    return path
 
 
 def _texels(rng: np.random.Generator, h: int, w: int, bits: int, layout: str) -> np.ndarray:

@@ -44,6 +44,7 @@ LAYERS: tuple[Layer, ...] = (
             "wrinklepipe.layers",
             "wrinklepipe.reuse",
             "wrinklepipe.workset",
+            "wrinklepipe.arrayview",
             "wrinklepipe.package",
             "wrinklepipe.options",
             "wrinklepipe.palette",

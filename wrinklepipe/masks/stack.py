@@ -23,7 +23,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numpy.lib.mixins import NDArrayOperatorsMixin
+
+from wrinklepipe.arrayview import FloatView
 
 _F = np.float32
 
@@ -53,10 +54,8 @@ def float_masks(masks: Any) -> Any:
     return masks if isinstance(masks, MaskStack) else np.asarray(masks, _F)
 
 
-class MaskStack(NDArrayOperatorsMixin):
+class MaskStack(FloatView):
     """Masks ``[R, H, W]`` held as integers (``q``: uint8 or uint16), seen as float32."""
-
-    __array_priority__ = 20.0
 
     def __init__(self, q: np.ndarray) -> None:
         if q.dtype not in (np.uint8, np.uint16) or q.ndim != 3:
@@ -97,24 +96,6 @@ class MaskStack(NDArrayOperatorsMixin):
     def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
         a = to_float(self.q)
         return a if dtype is None else a.astype(dtype, copy=False)
-
-    def __array_ufunc__(self, ufunc: Any, method: str, *inputs: Any, **kwargs: Any) -> Any:
-        def plain(x: Any) -> Any:
-            return np.asarray(x) if isinstance(x, MaskStack) else x
-
-        if "out" in kwargs:
-            kwargs["out"] = tuple(plain(o) for o in kwargs["out"])
-        return getattr(ufunc, method)(*(plain(x) for x in inputs), **kwargs)
-
-    def __array_function__(self, func: Any, types: Any, args: Any, kwargs: Any) -> Any:
-        def plain(x: Any) -> Any:
-            if isinstance(x, MaskStack):
-                return np.asarray(x)
-            if isinstance(x, list | tuple):
-                return type(x)(plain(v) for v in x)
-            return x
-
-        return func(*(plain(a) for a in args), **{k: plain(v) for k, v in kwargs.items()})
 
     def __getattr__(self, name: str) -> Any:
         if name.startswith("__") or name == "q":  # copy / pickle protocols, an unset stack

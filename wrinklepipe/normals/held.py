@@ -26,7 +26,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.lib.mixins import NDArrayOperatorsMixin
+
+from wrinklepipe.arrayview import FloatView
 
 _F = np.float32
 
@@ -102,11 +103,10 @@ def _spatial(key: tuple[Any, ...]) -> bool:
     return len(key) <= 2 and all(rc(k) for k in key)
 
 
-class NormalStack(NDArrayOperatorsMixin):
+class NormalStack(FloatView):
     """Unit normals held as their files' integers: ``[K, H, W, 3]`` (``maps``: K held maps) or,
     with ``single``, one map ``[H, W, 3]``."""
 
-    __array_priority__ = 20.0
     #: ``stack[r0:r1]`` of a one-map stack decodes those rows (workset.map_rows reads bands)
     reads_rows = True
 
@@ -180,24 +180,6 @@ class NormalStack(NDArrayOperatorsMixin):
             for k, m in enumerate(self.maps):
                 a[k] = m.decode()
         return a if dtype is None else a.astype(dtype, copy=False)
-
-    def __array_ufunc__(self, ufunc: Any, method: str, *inputs: Any, **kwargs: Any) -> Any:
-        def plain(x: Any) -> Any:
-            return np.asarray(x) if isinstance(x, NormalStack) else x
-
-        if "out" in kwargs:
-            kwargs["out"] = tuple(plain(o) for o in kwargs["out"])
-        return getattr(ufunc, method)(*(plain(x) for x in inputs), **kwargs)
-
-    def __array_function__(self, func: Any, types: Any, args: Any, kwargs: Any) -> Any:
-        def plain(x: Any) -> Any:
-            if isinstance(x, NormalStack):
-                return np.asarray(x)
-            if isinstance(x, list | tuple):
-                return type(x)(plain(v) for v in x)
-            return x
-
-        return func(*(plain(a) for a in args), **{k: plain(v) for k, v in kwargs.items()})
 
     def __getattr__(self, name: str) -> Any:
         if name.startswith("__") or name in ("maps", "single"):  # copy / pickle protocols
