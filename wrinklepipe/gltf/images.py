@@ -32,6 +32,7 @@ from wrinklepipe.gltf.document import Document
 from wrinklepipe.gltf.write import mime_type
 from wrinklepipe.io.images import read_image
 from wrinklepipe.io.png import png_pixels
+from wrinklepipe.io.scratch import hold
 from wrinklepipe.normals.held import HeldMap
 from wrinklepipe.normals.read import ReadOptions, read_normal_map
 
@@ -185,5 +186,5 @@ def texture_normals(
             }
         )
     if nm.integers is not None and held:
-        return HeldMap(nm.integers, nm.layout, False), notes  # read as OpenGL: never flipped
+        return HeldMap(hold(nm.integers), nm.layout, False), notes  # read as OpenGL: never flipped
     return np.asarray(nm.normals, np.float32), notes

@@ -28,17 +28,19 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.arrayview import FloatView
+from wrinklepipe.io.scratch import ScratchArray
 
 _F = np.float32
 
 
 @dataclass(frozen=True)
 class HeldMap:
-    """One map's integer texels and how they decode: ``q`` ``[H, W, C]`` uint8 / uint16, the
-    layout the reader resolved (``rgb``, ``rg``, ``ag``) and whether green is flipped after
-    decoding (a DirectX map)."""
+    """One map's integer texels and how they decode: ``q`` ``[H, W, C]`` uint8 / uint16 (in
+    memory, or in a scratch file: :class:`wrinklepipe.io.scratch.ScratchArray`, which reads the
+    rows and texels indexed), the layout the reader resolved (``rgb``, ``rg``, ``ag``) and
+    whether green is flipped after decoding (a DirectX map)."""
 
-    q: np.ndarray
+    q: np.ndarray | ScratchArray
     layout: str
     flip: bool
 

@@ -36,6 +36,7 @@ from wrinklepipe.gltf.wrinkled import (
     material_normal_texture,
 )
 from wrinklepipe.io.images import read_image
+from wrinklepipe.io.scratch import hold
 from wrinklepipe.names import noun
 from wrinklepipe.normals import alignment as al
 from wrinklepipe.normals.convention import BEYOND_DOUBT, CONVENTIONS
@@ -133,7 +134,7 @@ def _read_normals(
         }
     got: np.ndarray | HeldMap
     if nm.integers is not None:  # held as the file's integers (6 bytes a texel, not 12)
-        got = HeldMap(nm.integers, nm.layout, nm.convention == "directx")
+        got = HeldMap(hold(nm.integers), nm.layout, nm.convention == "directx")
         nm = replace(nm, normals=NormalStack([got], single=True), integers=None)
     else:
         got = np.asarray(nm.normals, np.float32)
