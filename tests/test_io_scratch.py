@@ -12,11 +12,14 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from output_hashes import assert_unchanged
 
 from wrinklepipe import reuse
+from wrinklepipe.demo import avatar
 from wrinklepipe.errors import InputError
 from wrinklepipe.io import scratch
 from wrinklepipe.io.scratch import ScratchArray, hold
+from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.normals.held import HeldMap, NormalStack, texels_at
 
 
@@ -157,3 +160,31 @@ def test_a_normal_stack_over_scratch_decodes_as_over_memory() -> None:
     assert np.array_equal(disk.reshape(-1, 3)[flat > 2000], mem.reshape(-1, 3)[flat > 2000])
     mask = rng.random((80, 60)) < 0.5
     assert np.array_equal(disk[mask], mem[mask])
+
+
+def test_a_conversion_with_every_map_spilled_writes_the_recorded_bytes(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # every source map held in a scratch file (its share of the working set set to 0): the
+    # avatar (its base the glTF material's own normal texture, its states manifest files)
+    # converts to the very bytes recorded for it, and the scratch directory is left empty
+    monkeypatch.delenv("WRINKLEPIPE_WORKING_SET")
+    where = tmp_path / "scratch"
+    where.mkdir()
+    monkeypatch.setenv("WRINKLEPIPE_SCRATCH", str(where))
+    monkeypatch.setattr(scratch, "SPILL_SHARE", 0.0)
+    made: list[ScratchArray] = []
+    real_init = ScratchArray.__init__
+
+    def counted(self: ScratchArray, a: np.ndarray, directory: Path) -> None:
+        real_init(self, a, directory)
+        made.append(self)
+
+    monkeypatch.setattr(ScratchArray, "__init__", counted)
+    res = convert(
+        avatar.avatar_source_dir(), tmp_path / "out", ConvertOptions(glb=True, render=False)
+    )
+    assert res.exit_code == 0
+    assert len(made) >= 2 and all(s.ndim == 3 for s in made)  # the base and the states
+    assert_unchanged("avatar", tmp_path / "out")
+    assert list(where.iterdir()) == []
