@@ -12,12 +12,14 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from output_hashes import assert_unchanged
+from output_hashes import assert_unchanged, folder_hashes
 
 from wrinklepipe import reuse
 from wrinklepipe.demo import avatar
+from wrinklepipe.demo.source import write_demo_source
 from wrinklepipe.errors import InputError
 from wrinklepipe.io import scratch
+from wrinklepipe.io.images import read_image, write_image
 from wrinklepipe.io.scratch import ScratchArray, hold
 from wrinklepipe.jobs.convert import ConvertOptions, convert
 from wrinklepipe.normals.held import HeldMap, NormalStack, texels_at
@@ -188,3 +190,42 @@ def test_a_conversion_with_every_map_spilled_writes_the_recorded_bytes(
     assert len(made) >= 2 and all(s.ndim == 3 for s in made)  # the base and the states
     assert_unchanged("avatar", tmp_path / "out")
     assert list(where.iterdir()) == []
+
+
+def _float_demo(folder: Path) -> Path:
+    """The 64² demo with its base and first state saved as float32 EXR (read as float32 unit
+    normals, not integers)."""
+    manifest = write_demo_source(folder, 64)
+    text = manifest.read_text(encoding="utf-8")
+    for name in ("base_normal", "wrinkle_stretch"):
+        values, _ = read_image(folder / f"{name}.png")
+        write_image(folder / f"{name}.exr", values, 32)
+        text = text.replace(f"{name}.png", f"{name}.exr")
+    manifest.write_text(text, encoding="utf-8")
+    return manifest
+
+
+def test_float_maps_held_in_scratch_convert_to_the_same_bytes(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # float32 maps (EXR files) go to a scratch file as unit normals: the folder converted with
+    # every map spilled is byte for byte the one converted with every map in memory
+    monkeypatch.delenv("WRINKLEPIPE_WORKING_SET")
+    manifest = _float_demo(tmp_path / "src")
+    monkeypatch.setenv("WRINKLEPIPE_SCRATCH", "off")
+    kept = convert(manifest, tmp_path / "memory", ConvertOptions(render=False))
+    assert kept.exit_code == 0, kept.report["validation"]
+    monkeypatch.setenv("WRINKLEPIPE_SCRATCH", str(tmp_path))
+    monkeypatch.setattr(scratch, "SPILL_SHARE", 0.0)
+    made: list[ScratchArray] = []
+    real_init = ScratchArray.__init__
+
+    def counted(self: ScratchArray, a: np.ndarray, directory: Path) -> None:
+        real_init(self, a, directory)
+        made.append(self)
+
+    monkeypatch.setattr(ScratchArray, "__init__", counted)
+    spilled = convert(manifest, tmp_path / "scratch", ConvertOptions(render=False))
+    assert spilled.exit_code == 0
+    assert sum(s.dtype == np.float32 for s in made) >= 2  # the EXR base and state at least
+    assert folder_hashes(tmp_path / "scratch") == folder_hashes(tmp_path / "memory")

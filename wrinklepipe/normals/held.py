@@ -11,8 +11,9 @@ The float values are those the reader gives, bit for bit: :func:`wrinklepipe.nor
 decode_texels` of integer texels works texel by texel from ``(2 q - top) / top`` (the values it
 is given are re-quantised to ``q`` first), so decoding a band of ``q`` gives that band of the
 whole map's normals, and a map read as DirectX is flipped after decoding exactly as the reader
-flips it. :func:`held` builds a stack from maps read that way and keeps a map float32 when it
-was not (a float file, a repaired map, a wrinkle-only state combined with the base).
+flips it. A map read as float32 (a float file, a repaired map, a wrinkle-only state combined
+with the base) stays float32 unit normals: an array, or, when it is large, a :data:`UNIT` map
+in a scratch file (:func:`held_floats`), read as it is.
 
 It behaves as the float32 array for what the stages do with normals, as
 :class:`wrinklepipe.masks.stack.MaskStack` does for masks: ``shape``, ``ndim``, ``dtype``
@@ -28,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from wrinklepipe.arrayview import FloatView
-from wrinklepipe.io.scratch import ScratchArray
+from wrinklepipe.io.scratch import ScratchArray, hold
 
 _F = np.float32
 
@@ -38,7 +39,9 @@ class HeldMap:
     """One map's integer texels and how they decode: ``q`` ``[H, W, C]`` uint8 / uint16 (in
     memory, or in a scratch file: :class:`wrinklepipe.io.scratch.ScratchArray`, which reads the
     rows and texels indexed), the layout the reader resolved (``rgb``, ``rg``, ``ag``) and
-    whether green is flipped after decoding (a DirectX map)."""
+    whether green is flipped after decoding (a DirectX map). Layout :data:`UNIT`: ``q`` is
+    float32 unit normals ``[H, W, 3]`` already (a float file, a repaired map, a state made in
+    PD space), held in a scratch file by :func:`held_floats`; they are read as they are."""
 
     q: np.ndarray | ScratchArray
     layout: str
@@ -59,6 +62,17 @@ class HeldMap:
 
 #: Texels decoded at once (their float32 temporaries: ~10 MB).
 DECODE_TEXELS = 1 << 18
+#: The layout of a held map whose texels are float32 unit normals already.
+UNIT = "unit"
+
+
+def held_floats(a: np.ndarray) -> np.ndarray | HeldMap:
+    """Float32 unit normals ``[H, W, 3]`` as a run holds them: in a scratch file, as a
+    :data:`UNIT` map, when :func:`wrinklepipe.io.scratch.hold` takes them there (larger than
+    its share of the working set), else the array as it is."""
+    a = np.asarray(a, _F)
+    kept = hold(a)
+    return a if kept is a else HeldMap(kept, UNIT, False)
 
 
 def _unit(q: np.ndarray, layout: str, dtype: np.dtype) -> np.ndarray:
@@ -67,6 +81,8 @@ def _unit(q: np.ndarray, layout: str, dtype: np.dtype) -> np.ndarray:
     bits (``(2 q - top) / top``, z rebuilt for ``rg`` / ``ag``, divided by the length). An
     integer texel is never zero-length (every component is at least ``1 / top`` from 0), so no
     texel is left undivided and the reader's counts are not needed here."""
+    if layout == UNIT:
+        return q  # float32 unit normals as they were made
     top = _F(255 if dtype == np.uint8 else 65535)
 
     def sig(c: np.ndarray) -> np.ndarray:
@@ -93,6 +109,14 @@ def _unit(q: np.ndarray, layout: str, dtype: np.dtype) -> np.ndarray:
     return n
 
 
+def _stored(m: HeldMap) -> bool:
+    """True when ``m``'s texels are of a kind a stack holds: integers, or float32 unit normals
+    of layout :data:`UNIT`."""
+    if m.layout == UNIT:
+        return m.q.dtype == _F and m.q.shape[-1] == 3
+    return m.q.dtype.kind == "u"
+
+
 def _spatial(key: tuple[Any, ...]) -> bool:
     """True when ``key`` indexes only rows and columns (ints, slices, integer or boolean
     arrays): the integers can be indexed first, the channel axis is the decoded one."""
@@ -116,8 +140,8 @@ class NormalStack(FloatView):
         if not maps or (single and len(maps) != 1):
             raise ValueError(f"a normal stack holds 1 map (single) or K >= 1, got {len(maps)}")
         sizes = {m.q.shape[:2] for m in maps}
-        if len(sizes) != 1 or any(m.q.ndim != 3 or m.q.dtype.kind != "u" for m in maps):
-            raise ValueError("a normal stack holds integer maps [H, W, C] of one size")
+        if len(sizes) != 1 or any(m.q.ndim != 3 or not _stored(m) for m in maps):
+            raise ValueError("a normal stack holds integer or unit maps [H, W, C] of one size")
         self.maps = maps
         self.single = single
 

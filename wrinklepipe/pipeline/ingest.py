@@ -40,7 +40,7 @@ from wrinklepipe.io.scratch import hold
 from wrinklepipe.names import noun
 from wrinklepipe.normals import alignment as al
 from wrinklepipe.normals.convention import BEYOND_DOUBT, CONVENTIONS
-from wrinklepipe.normals.held import HeldMap, NormalStack
+from wrinklepipe.normals.held import HeldMap, NormalStack, held_floats
 from wrinklepipe.normals.read import NormalMap, ReadOptions, read_normal_map
 from wrinklepipe.pipeline.character import open_wrinkled_document
 from wrinklepipe.pipeline.ingest_color import MaterialColor, material_color, read_colors
@@ -136,16 +136,19 @@ def _read_normals(
     if nm.integers is not None:  # held as the file's integers (6 bytes a texel, not 12)
         got = HeldMap(hold(nm.integers), nm.layout, nm.convention == "directx")
         nm = replace(nm, normals=NormalStack([got], single=True), integers=None)
-    else:
-        got = np.asarray(nm.normals, np.float32)
+    else:  # float32 normals: in a scratch file when they are large (held_floats)
+        got = held_floats(nm.normals)
+        if isinstance(got, HeldMap):
+            nm = replace(nm, normals=NormalStack([got], single=True))
     if read is not None:
         read[path] = nm
     return got, notes
 
 
 def _held_stack(parts: list[np.ndarray | HeldMap], shape: tuple[int, ...]) -> Any:
-    """The states ``[K, H, W, 3]``: held as integers (:class:`NormalStack`) when every state
-    is, else float32 (the held ones decoded into their place)."""
+    """The states ``[K, H, W, 3]``: a :class:`NormalStack` when every state is a held map
+    (integers, or float32 in a scratch file), else float32 (the held ones decoded into their
+    place)."""
     if parts and all(isinstance(p, HeldMap) for p in parts):
         return NormalStack(parts)  # type: ignore[arg-type]
     states = np.empty((len(parts), *shape), np.float32)
@@ -177,7 +180,7 @@ def read_maps(
     read: dict[Path, NormalMap] = {}
     base_part: np.ndarray | HeldMap | None = None
     if base is not None:  # the material's normalTexture: held as its integers when it has them
-        base_part = base if isinstance(base, HeldMap) else np.asarray(base, np.float32)
+        base_part = base if isinstance(base, HeldMap) else held_floats(base)
     if base is None:
         base_part, n = _read_normals(manifest.base, manifest.convention, stats, "base", read)
         notes += n
@@ -203,8 +206,10 @@ def read_maps(
             )
         if not manifest.states_include_base:  # wrinkle-only normals: add the base in PD space
             wrinkle = np.asarray(_as_normals(st))
-            st = model.pd_to_normal(
-                model.normal_to_pd(np.asarray(base)) + model.normal_to_pd(wrinkle)
+            st = held_floats(
+                model.pd_to_normal(
+                    model.normal_to_pd(np.asarray(base)) + model.normal_to_pd(wrinkle)
+                )
             )
             del wrinkle
         parts.append(st)
