@@ -229,3 +229,16 @@ def test_float_maps_held_in_scratch_convert_to_the_same_bytes(
     assert spilled.exit_code == 0
     assert sum(s.dtype == np.float32 for s in made) >= 2  # the EXR base and state at least
     assert folder_hashes(tmp_path / "scratch") == folder_hashes(tmp_path / "memory")
+
+
+def test_without_preadv_rows_are_read_by_seek_and_read(monkeypatch: pytest.MonkeyPatch) -> None:
+    # a system without os.preadv (Windows): the same rows and texels, read under a lock
+    monkeypatch.setattr(scratch, "_PREADV", False)
+    rng = np.random.default_rng(11)
+    a = _array(rng, 900, 300, 3, np.uint16)
+    s = ScratchArray(a, scratch.scratch_dir())
+    rows, cols = rng.integers(0, 900, 50_000), rng.integers(0, 300, 50_000)
+    got = reuse.map_threads(lambda k: s[rows[k::4], cols[k::4]], range(4), workers=4)
+    for k in range(4):
+        assert np.array_equal(got[k], a[rows[k::4], cols[k::4]])
+    assert np.array_equal(s[100:700], a[100:700])

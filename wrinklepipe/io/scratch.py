@@ -24,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import os
 import tempfile
+import threading
 from pathlib import Path
 from typing import IO, Any
 
@@ -38,6 +39,8 @@ ENV = "WRINKLEPIPE_SCRATCH"
 SPILL_SHARE = 1 / 8
 #: Bytes written to the scratch file at a time.
 _WRITE_BYTES = 1 << 24
+#: Positional reads (Linux, BSD, macOS): rows are read without the file's shared position.
+_PREADV = hasattr(os, "preadv")
 
 
 def scratch_dir() -> Path | None:
@@ -64,7 +67,8 @@ def hold(a: np.ndarray) -> np.ndarray | ScratchArray:
 
 class ScratchArray:
     """A read-only array ``[H, ...]`` kept in an unnamed scratch file under ``directory``;
-    indexing reads the rows it needs (``os.preadv``; safe from several threads at once)."""
+    indexing reads the rows it needs (``os.preadv``, or a locked seek and read where the system
+    has no ``preadv``; safe from several threads at once)."""
 
     def __init__(self, a: np.ndarray, directory: Path) -> None:
         a = np.ascontiguousarray(a)
@@ -73,6 +77,7 @@ class ScratchArray:
         self.shape: tuple[int, ...] = a.shape
         self.dtype = a.dtype
         self._digest: bytes | None = None
+        self._lock = threading.Lock()
         try:
             self._file: IO[bytes] = tempfile.TemporaryFile(dir=directory, buffering=0)
             flat = memoryview(a.reshape(-1).view(np.uint8))
@@ -107,11 +112,19 @@ class ScratchArray:
         view = memoryview(out.reshape(-1).view(np.uint8))
         offset, done = r0 * self._row_bytes(), 0
         while done < len(view):
-            got = os.preadv(self._file.fileno(), [view[done:]], offset + done)
+            got = self._read_into(view[done:], offset + done)
             if got <= 0:
                 raise OSError(f"the scratch file ended {len(view) - done} bytes early")
             done += got
         return out
+
+    def _read_into(self, view: memoryview, offset: int) -> int:
+        """Bytes of the file from ``offset`` into ``view``; how many were read."""
+        if _PREADV:  # no shared file position: threads read at once
+            return os.preadv(self._file.fileno(), [view], offset)
+        with self._lock:  # a system without preadv: one seek and read at a time
+            self._file.seek(offset)
+            return self._file.readinto(view) or 0
 
     def _band(self) -> int:
         """Rows read at a time when gathering (a band of the working set)."""
