@@ -164,15 +164,9 @@ def test_a_normal_stack_over_scratch_decodes_as_over_memory() -> None:
     assert np.array_equal(disk[mask], mem[mask])
 
 
-def test_a_conversion_with_every_map_spilled_writes_the_recorded_bytes(
-    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
-) -> None:
-    # every source map held in a scratch file (its share of the working set set to 0): the
-    # avatar (its base the glTF material's own normal texture, its states manifest files)
-    # converts to the very bytes recorded for it, and the scratch directory is left empty
-    monkeypatch.delenv("WRINKLEPIPE_WORKING_SET")
-    where = tmp_path / "scratch"
-    where.mkdir()
+def _spill_everything(monkeypatch: pytest.MonkeyPatch, where: Path) -> list[ScratchArray]:
+    """Every source map held in a scratch file under ``where`` from now on (its share of the
+    working set set to 0); the list fills with each scratch array made."""
     monkeypatch.setenv("WRINKLEPIPE_SCRATCH", str(where))
     monkeypatch.setattr(scratch, "SPILL_SHARE", 0.0)
     made: list[ScratchArray] = []
@@ -183,6 +177,19 @@ def test_a_conversion_with_every_map_spilled_writes_the_recorded_bytes(
         made.append(self)
 
     monkeypatch.setattr(ScratchArray, "__init__", counted)
+    return made
+
+
+def test_a_conversion_with_every_map_spilled_writes_the_recorded_bytes(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # every source map held in a scratch file (its share of the working set set to 0): the
+    # avatar (its base the glTF material's own normal texture, its states manifest files)
+    # converts to the very bytes recorded for it, and the scratch directory is left empty
+    monkeypatch.delenv("WRINKLEPIPE_WORKING_SET")
+    where = tmp_path / "scratch"
+    where.mkdir()
+    made = _spill_everything(monkeypatch, where)
     res = convert(
         avatar.avatar_source_dir(), tmp_path / "out", ConvertOptions(glb=True, render=False)
     )
@@ -215,16 +222,7 @@ def test_float_maps_held_in_scratch_convert_to_the_same_bytes(
     monkeypatch.setenv("WRINKLEPIPE_SCRATCH", "off")
     kept = convert(manifest, tmp_path / "memory", ConvertOptions(render=False))
     assert kept.exit_code == 0, kept.report["validation"]
-    monkeypatch.setenv("WRINKLEPIPE_SCRATCH", str(tmp_path))
-    monkeypatch.setattr(scratch, "SPILL_SHARE", 0.0)
-    made: list[ScratchArray] = []
-    real_init = ScratchArray.__init__
-
-    def counted(self: ScratchArray, a: np.ndarray, directory: Path) -> None:
-        real_init(self, a, directory)
-        made.append(self)
-
-    monkeypatch.setattr(ScratchArray, "__init__", counted)
+    made = _spill_everything(monkeypatch, tmp_path)
     spilled = convert(manifest, tmp_path / "scratch", ConvertOptions(render=False))
     assert spilled.exit_code == 0
     assert sum(s.dtype == np.float32 for s in made) >= 2  # the EXR base and state at least
