@@ -110,7 +110,7 @@ def robot_converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dic
 LONGEST_FIRST = [  # share of the summed test durations in those runs
     "test_docs_examples.py",  # every shell example of the README and docs/ (a few converts)
     "test_help_examples.py",  # every example of every command's --help
-    "test_cli_progress.py",  # a 2048² convert, piped, and two interrupted ones
+    "test_cli_progress.py",  # a 1024² convert, piped, and two interrupted ones
     "test_report_pictures.py",  # chromium: report.html, validation.html, the viewer
     "test_batch_run.py",  # 9 % (the isolation test: converts, a LocalCluster)
     "test_safety_faults.py",  # 7.9 % (22 killed CLI runs and their reruns)
