@@ -50,7 +50,8 @@ def _run(argv: list[str]) -> tuple[float, float, int, int]:
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
     wall = time.perf_counter() - t0
-    return wall, usage.ru_utime + usage.ru_stime, int(usage.ru_maxrss * 1024 // 10**6), proc.returncode
+    peak_mb = int(usage.ru_maxrss * 1024 // 10**6)
+    return wall, usage.ru_utime + usage.ru_stime, peak_mb, proc.returncode
 
 
 def _sizes(quick: bool) -> tuple[int, ...]:
