@@ -14,11 +14,13 @@ Bad input raises :class:`wrinklepipe.errors.InputError` naming the file (and key
 
 from __future__ import annotations
 
+import io
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import xatlas
 
 from wrinklepipe.asset import Mesh
 from wrinklepipe.geometry.merge import merge_meshes
@@ -46,13 +48,47 @@ def load_mesh(path: str | Path, options: LoadOptions | None = None) -> Mesh:
     return merged
 
 
+#: The child that runs xatlas (a script: it imports only numpy and xatlas).
+UV_LAYOUT_CHILD = Path(__file__).with_name("uv_layout_child.py")
+#: Seconds the child may take: this plus :data:`UV_LAYOUT_SECONDS_PER_TRIANGLE` a triangle.
+UV_LAYOUT_SECONDS = 120.0
+UV_LAYOUT_SECONDS_PER_TRIANGLE = 1e-3
+
+
+def _uv_layout(positions: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, ...]:
+    """xatlas's layout (``vmap``, ``indices``, ``uvs``: what ``xatlas.parametrize`` returns),
+    made in a child process that leaves before xatlas shuts its threads down (they can hang
+    there: :mod:`wrinklepipe.readers.uv_layout_child`). A child that does not answer in time
+    is stopped and tried once more; a child that fails raises its last line."""
+    given = io.BytesIO()
+    np.savez(given, positions=positions, indices=indices)
+    limit = UV_LAYOUT_SECONDS + UV_LAYOUT_SECONDS_PER_TRIANGLE * len(indices)
+    for _ in range(2):
+        try:
+            done = subprocess.run(
+                [sys.executable, str(UV_LAYOUT_CHILD)],
+                input=given.getvalue(),
+                capture_output=True,
+                timeout=limit,
+                check=False,
+            )
+        except subprocess.TimeoutExpired:
+            continue  # the child is killed; one more try
+        if done.returncode != 0:
+            last = (done.stderr.decode("utf-8", "replace").strip().splitlines() or ["?"])[-1]
+            raise RuntimeError(f"xatlas could not lay out UVs ({len(indices)} triangles): {last}")
+        with np.load(io.BytesIO(done.stdout)) as got:
+            return got["vmap"], got["indices"], got["uvs"]
+    raise RuntimeError(f"xatlas did not lay out UVs ({len(indices)} triangles) in {limit:.0f} s")
+
+
 def ensure_uvs(mesh: Mesh) -> Mesh:
     """Give a mesh without UVs an xatlas parametrisation (splits vertices along chart seams;
     every per-vertex attribute follows). Noted in ``mesh.notes``."""
     if mesh.uvs is not None:
         return mesh
 
-    vmap, idx, uvs = xatlas.parametrize(
+    vmap, idx, uvs = _uv_layout(
         np.ascontiguousarray(mesh.positions, np.float32),
         np.ascontiguousarray(mesh.indices, np.uint32),
     )
