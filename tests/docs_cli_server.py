@@ -5,8 +5,9 @@ Python's and the CLI's import time (~1 s) for each of the examples' many command
 each client, forks a child that takes the client's standard input, output and error (passed
 over the socket), working folder, environment and arguments, runs :func:`wrinklepipe.cli.main`
 exactly as the console script does, and sends back its exit code. ``client`` is what the
-sandbox's ``wrinklepipe`` script runs: it exits with that code. The server is single-threaded,
-so forking it is safe; each run is a process of its own, as on the command line.
+sandbox's ``wrinklepipe`` script runs: it exits with that code. The server forks from its one
+Python thread (importing USD starts a thread of USD's own, as in the batch fork server; a child
+runs only the forking thread); each run is a process of its own, as on the command line.
 """
 
 from __future__ import annotations
@@ -20,24 +21,11 @@ import sys
 
 _HEADER = 4
 
-#: Modules the commands import where they first need them, imported here once so that each
-#: child starts warm, as the batch fork server's (``wrinklepipe.batch.engines._PRELOAD``): the
-#: writers, the validator's renderer and report, USD, colour science (CIEDE2000, ~0.5 s), and
-#: numba with the BC4 / BC5 kernels loaded from its cache (~0.7 s). Importing them starts no GL
-#: context; the children still run every command's whole code.
-PRELOAD = (
-    "wrinklepipe.batch.engines",
-    "wrinklepipe.batch.forkserver_warm",
-    "wrinklepipe.gltf.package_write",
-    "wrinklepipe.usd.package_write",
-    "wrinklepipe.validate.render",
-    "wrinklepipe.validate.report",
-    "moderngl",
-    "pxr.Usd",
-    "pxr.UsdGeom",
-    "pxr.UsdShade",
-    "pxr.UsdSkel",
-)
+# Each child starts warm, as the batch fork server's do: the server imports once what the
+# commands import where they first need them (``wrinklepipe.batch.engines._PRELOAD``: the
+# writers, the validator's renderer and report, USD), colour science (CIEDE2000, ~0.5 s), and
+# numba with the BC4 / BC5 kernels loaded from its cache (~0.7 s). Importing them starts no GL
+# context; the children still run every command's whole code.
 
 
 def _recv_request(conn: socket.socket) -> tuple[dict, list[int]]:
@@ -85,9 +73,10 @@ def _preload() -> None:
 
     import numpy as np
 
+    from wrinklepipe.batch.engines import _PRELOAD
     from wrinklepipe.normals import bc4
 
-    for name in PRELOAD:
+    for name in _PRELOAD:
         importlib.import_module(name)
     importlib.import_module("wrinklepipe.metrics.delta_e")._colour()
     bc4.encode_bc4(np.zeros((4, 4), np.uint8))  # numba's kernels, from its cache
