@@ -34,7 +34,7 @@ def load_meshes(path: str | Path, options: LoadOptions | None = None) -> list[Me
     opts = options or LoadOptions()
     meshes = read_meshes(path, opts)
     if opts.generate_uvs:
-        meshes = [ensure_uvs(m) if m.uvs is None else m for m in meshes]
+        meshes = ensure_uvs_all(meshes)
     return meshes
 
 
@@ -53,16 +53,24 @@ UV_LAYOUT_CHILD = Path(__file__).with_name("uv_layout_child.py")
 #: Seconds the child may take: this plus :data:`UV_LAYOUT_SECONDS_PER_TRIANGLE` a triangle.
 UV_LAYOUT_SECONDS = 120.0
 UV_LAYOUT_SECONDS_PER_TRIANGLE = 1e-3
+#: The arrays given to the child per part, and those it makes (``NAME_K`` for part ``K``).
+_GIVEN = ("positions", "indices")
+_MADE = ("vmap", "indices", "uvs")
 
 
-def _uv_layout(positions: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, ...]:
-    """xatlas's layout (``vmap``, ``indices``, ``uvs``: what ``xatlas.parametrize`` returns),
-    made in a child process that leaves before xatlas shuts its threads down (they can hang
-    there: :mod:`wrinklepipe.readers.uv_layout_child`). A child that does not answer in time
-    is stopped and tried once more; a child that fails raises its last line."""
+def _uv_layouts(parts: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, ...]]:
+    """xatlas's layout of each ``(positions, indices)`` part (``vmap``, ``indices``, ``uvs``:
+    what ``xatlas.parametrize`` returns for it), made in one child process that leaves before
+    xatlas shuts its threads down (they can hang there:
+    :mod:`wrinklepipe.readers.uv_layout_child`). A child that does not answer in time is
+    stopped and tried once more; a child that fails raises its last line."""
+    if not parts:
+        return []
     given = io.BytesIO()
-    np.savez(given, positions=positions, indices=indices)
-    limit = UV_LAYOUT_SECONDS + UV_LAYOUT_SECONDS_PER_TRIANGLE * len(indices)
+    arrays = {f"{name}_{k}": a for k, part in enumerate(parts) for name, a in zip(_GIVEN, part)}
+    np.savez(given, **arrays)
+    triangles = sum(len(indices) for _, indices in parts)
+    limit = UV_LAYOUT_SECONDS + UV_LAYOUT_SECONDS_PER_TRIANGLE * triangles
     for _ in range(2):
         try:
             done = subprocess.run(
@@ -76,22 +84,40 @@ def _uv_layout(positions: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, 
             continue  # the child is killed; one more try
         if done.returncode != 0:
             last = (done.stderr.decode("utf-8", "replace").strip().splitlines() or ["?"])[-1]
-            raise RuntimeError(f"xatlas could not lay out UVs ({len(indices)} triangles): {last}")
+            raise RuntimeError(f"xatlas could not lay out UVs ({triangles} triangles): {last}")
         with np.load(io.BytesIO(done.stdout)) as got:
-            return got["vmap"], got["indices"], got["uvs"]
-    raise RuntimeError(f"xatlas did not lay out UVs ({len(indices)} triangles) in {limit:.0f} s")
+            return [tuple(got[f"{name}_{k}"] for name in _MADE) for k in range(len(parts))]
+    raise RuntimeError(f"xatlas did not lay out UVs ({triangles} triangles) in {limit:.0f} s")
+
+
+def ensure_uvs_all(meshes: list[Mesh]) -> list[Mesh]:
+    """Every mesh without UVs given an xatlas parametrisation (:func:`ensure_uvs`), all of
+    them laid out by one child process; meshes with UVs as they are."""
+    todo = [k for k, m in enumerate(meshes) if m.uvs is None]
+    layouts = _uv_layouts(
+        [
+            (
+                np.ascontiguousarray(meshes[k].positions, np.float32),
+                np.ascontiguousarray(meshes[k].indices, np.uint32),
+            )
+            for k in todo
+        ]
+    )
+    out = list(meshes)
+    for k, layout in zip(todo, layouts, strict=True):
+        out[k] = _laid_out(meshes[k], *layout)
+    return out
 
 
 def ensure_uvs(mesh: Mesh) -> Mesh:
     """Give a mesh without UVs an xatlas parametrisation (splits vertices along chart seams;
     every per-vertex attribute follows). Noted in ``mesh.notes``."""
-    if mesh.uvs is not None:
-        return mesh
+    return ensure_uvs_all([mesh])[0]
 
-    vmap, idx, uvs = _uv_layout(
-        np.ascontiguousarray(mesh.positions, np.float32),
-        np.ascontiguousarray(mesh.indices, np.uint32),
-    )
+
+def _laid_out(mesh: Mesh, vmap: np.ndarray, idx: np.ndarray, uvs: np.ndarray) -> Mesh:
+    """``mesh`` with xatlas's layout: vertices split along chart seams (``vmap``: each new
+    vertex's old one), every per-vertex attribute following, and a note."""
     vmap = vmap.astype(np.int64)
 
     def take(a: np.ndarray | None) -> np.ndarray | None:
