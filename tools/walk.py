@@ -41,6 +41,7 @@ class Module:
     functions: dict[str, ast.FunctionDef] = field(default_factory=dict)
     classes: dict[str, dict[str, ast.FunctionDef]] = field(default_factory=dict)
     names: dict[str, tuple[str, str | None]] = field(default_factory=dict)  # alias -> (mod, attr)
+    others: set[str] = field(default_factory=set)  # names bound to modules outside the project
 
 
 def _modules() -> dict[str, Module]:
@@ -69,6 +70,8 @@ def _modules() -> dict[str, Module]:
                 for a in node.names:
                     if a.name.startswith(PACKAGE) and a.asname:
                         m.names[a.asname] = (a.name, None)
+                    elif not a.name.startswith(PACKAGE):  # numpy as np, os, json ...
+                        m.others.add(a.asname or a.name.split(".")[0])
     return out
 
 
@@ -114,6 +117,8 @@ def _resolve(m: Module, cls: str | None, call: ast.Call) -> tuple[Target | None,
                 return (mod, None, f.attr), False
         if isinstance(v, ast.Name) and v.id == "self" and cls and f.attr in m.classes[cls]:
             return (m.name, cls, f.attr), True
+        if isinstance(v, ast.Name) and v.id in m.others and v.id not in m.names:
+            return None, False  # np.where(...): the other module's function, not a method here
         owners = [
             (n, c) for n, mm in MODULES.items() for c, fs in mm.classes.items() if f.attr in fs
         ]
