@@ -76,6 +76,23 @@ def _named_command(argv: Sequence[str]) -> str | None:
     return argv[0] if argv and argv[0] in _module_names() else None
 
 
+#: The environment variables every command reads, as ``wrinklepipe --help`` lists them.
+ENVIRONMENT = """environment:
+  WRINKLEPIPE_WORKING_SET  memory a run may spend beyond the source maps it holds (default 1G;
+                           e.g. 512M): smaller costs time, never a byte of output
+  WRINKLEPIPE_SCRATCH      where source maps larger than an eighth of the working set wait
+                           (default /var/tmp); off keeps them in memory
+  WRINKLEPIPE_THREADS      threads one run may use at once (default: the CPU count; batch
+                           sets each worker's share)
+  WRINKLEPIPE_CACHE        where generated sources (demo, fixtures, head cases) are kept
+                           (default $XDG_CACHE_HOME/wrinklepipe, else ~/.cache/wrinklepipe)
+  WRINKLEPIPE_NODE_MODULES the npm folder holding gltf-validator (default tools/node)
+  WRINKLEPIPE_THREE        the three.js package folder `view` serves (default tools/node)
+  WRINKLEPIPE_DEBUG=1      show the traceback of an internal error
+
+docs/scale.md explains the first two."""
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The parser of every command, or (``only``) of that one command alone: running one
     command imports its module only, not the other commands' stages (``wrinklepipe convert``
@@ -83,6 +100,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser = Parser(
         prog="wrinklepipe",
         description="Process and validate animated facial wrinkle maps.",
+        epilog=ENVIRONMENT,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"wrinklepipe {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
