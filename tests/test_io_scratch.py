@@ -53,6 +53,8 @@ def _keys(rng: np.random.Generator, h: int, w: int) -> list:
         (rows.reshape(5, 10), cols.reshape(5, 10)),
         (rows[:10], slice(None)),
         (rows[:10],),
+        (rows.reshape(5, 10),),
+        (rows.reshape(5, 10), slice(1, 3)),
         [3, 3, 0],
         (mask,),
         (mask, slice(0, 2)),

@@ -154,12 +154,12 @@ class ScratchArray:
                 r, c = np.nonzero(first)
                 return self[(r, c, *rest)]
         if isinstance(first, np.ndarray) and first.dtype.kind in "iu" and self.ndim >= 2:
-            second = np.asarray(rest[0]) if rest and isinstance(rest[0], list) else None
-            second = rest[0] if second is None and rest else second
+            second = rest[0] if rest else None
+            second = np.asarray(second) if isinstance(second, list) else second
             if isinstance(second, np.ndarray) and second.dtype.kind in "iu":
                 return self._gather_texels(first, second)[(Ellipsis, *rest[1:])]
             if not rest or isinstance(second, slice | int | np.integer):
-                return self._gather_rows(first)[(slice(None), *rest)]
+                return self._gather_rows(first)[(*(slice(None),) * first.ndim, *rest)]
         return np.asarray(self)[key]
 
     def _runs(self, rows: np.ndarray) -> Any:
@@ -174,7 +174,8 @@ class ScratchArray:
             i0 = i1
 
     def _gather_rows(self, rows: np.ndarray) -> np.ndarray:
-        """Whole rows ``rows`` (any order, repeats allowed) -> ``[len(rows), ...]``."""
+        """Whole rows ``rows`` (any shape and order, repeats allowed) -> ``[*rows.shape, ...]``."""
+        shape = np.shape(rows)
         rows = np.asarray(rows, np.int64).reshape(-1)
         rows = np.where(rows < 0, rows + self.shape[0], rows)
         if rows.size and (rows.min() < 0 or rows.max() >= self.shape[0]):
@@ -184,7 +185,7 @@ class ScratchArray:
         out = np.empty((len(rows), *self.shape[1:]), self.dtype)
         for b0, b1, i0, i1 in self._runs(ordered):
             out[order[i0:i1]] = self.rows(b0, b1)[ordered[i0:i1] - b0]
-        return out
+        return out.reshape(*shape, *self.shape[1:])
 
     def _gather_texels(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Texels at broadcast ``rows``, ``cols`` -> ``[*shape, ...]`` (numpy's fancy
